@@ -1,0 +1,62 @@
+"""The install files agree with each other: pyproject.toml, requirements.txt, environment.yml."""
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _name(req: str) -> str:
+    return re.split(r"[<>=!~\[; ]", req.strip(), maxsplit=1)[0].lower().replace("_", "-")
+
+
+def _requirements() -> dict[str, str]:
+    out = {}
+    for line in (ROOT / "requirements.txt").read_text().splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line:
+            out[_name(line)] = line
+    return out
+
+
+def _environment_pip() -> dict[str, str]:
+    lines = (ROOT / "environment.yml").read_text().splitlines()
+    out, in_pip = {}, False
+    for line in lines:
+        s = line.strip()
+        if s == "- pip:":
+            in_pip = True
+            continue
+        if in_pip and s.startswith("- "):
+            item = s[2:].strip()
+            if not item.startswith("-e"):
+                out[_name(item)] = item
+    return out
+
+
+def test_environment_yml_matches_requirements():
+    req, env = _requirements(), _environment_pip()
+    assert req == env, f"only in requirements.txt: {sorted(set(req) - set(env))}; only in environment.yml: {sorted(set(env) - set(req))}; differing pins: {[k for k in req if k in env and req[k] != env[k]]}"
+
+
+def test_environment_yml_python_311():
+    text = (ROOT / "environment.yml").read_text()
+    assert re.search(r"^\s*-\s*python=3\.11\s*$", text, re.M)
+
+
+def test_pyproject_dependencies_are_pinned_in_requirements():
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    deps = [_name(d) for d in meta["dependencies"]]
+    extras = [_name(d) for group in meta["optional-dependencies"].values() for d in group]
+    req = _requirements()
+    missing = [d for d in deps + extras if d not in req]
+    assert not missing, f"pyproject dependencies not pinned in requirements.txt: {missing}"
+    # torch must be the CPU build on this machine: the exact version on its disk
+    assert req["torch"] == "torch==2.13.0"
+
+
+def test_console_script_declared():
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert meta["scripts"]["salad"] == "salad_core.cli:main"
