@@ -1,0 +1,352 @@
+"""Named attention sites with swappable processors (the contract capture and editing build on).
+
+Every attention module of the denoiser is a *site* with a stable name, e.g.
+``"layers.2.cross"``. The module owns the projections ``Wq, Wk, Wv, Wo`` (official key names)
+and hands the core computation ``softmax(q k^T / sqrt(d)) v`` to a swappable *processor*, as in
+diffusers' ``attention_processor.py``:
+
+* :class:`SDPAProcessor` (default) calls ``torch.nn.functional.scaled_dot_product_attention``;
+* :class:`EagerProcessor` computes the softmax explicitly and passes the post-softmax
+  probabilities to an optional ``controller(site, probs) -> probs``. Whatever the controller
+  returns is used to mix the values, so one mechanism serves capture (record and return the
+  input) and editing (return modified maps; SALAD §3.3, supplement B).
+
+A controller learns *where* it is from a :class:`SiteInfo`: the site name, its kind, the layer
+index and the call's sizes, with helpers that view the flat probability tensor in named axes:
+
+=========  ==========================  ==============================
+kind       probs (flat)                :meth:`SiteInfo.to_named`
+=========  ==========================  ==============================
+temporal   ``(B*P, H, N', N')``        ``(B, P, H, N', N')``
+skeletal   ``(B*N', H, P, P)``         ``(B, N', H, P, P)``
+cross      ``(B, H, N'*P, W)``         ``(B, H, N', P, W)``
+sentence   ``(B, H, N'*P, 1+N'*P)``    ``(B, H, N', P, 1+N'*P)``
+=========  ==========================  ==============================
+
+Queries of cross attention are flattened with index ``t * P + j`` (frame ``t``, part ``j``).
+``sentence`` sites exist only in the "w/o CrossAttn" ablation (key 0 is the sentence token).
+
+:func:`use_processors` installs processors for one block of code and always restores the
+previous ones, also after an exception (TransformerLens-style scoped hooks).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Optional, Union
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+__all__ = [
+    "SITE_KINDS",
+    "CallDims",
+    "SiteInfo",
+    "Controller",
+    "AttentionProcessor",
+    "SDPAProcessor",
+    "EagerProcessor",
+    "Attention",
+    "AttnProcessorMixin",
+    "use_processors",
+    "site_names",
+    "cross_probs_by_part",
+]
+
+#: The kinds of attention site. ``sentence`` only exists in the "w/o CrossAttn" ablation.
+SITE_KINDS: tuple[str, ...] = ("temporal", "skeletal", "cross", "sentence")
+
+
+def site_names(num_layers: int, cross_attention: bool = True) -> list[str]:
+    """The site names of a denoiser with ``num_layers`` layers, in execution order.
+
+    Layer ``i`` runs temporal, then skeletal, then cross (or sentence) attention; layer 0 is the
+    first input block and ``num_layers - 1`` the last output block.
+    """
+    third = "cross" if cross_attention else "sentence"
+    return [f"layers.{i}.{kind}" for i in range(num_layers) for kind in ("temporal", "skeletal", third)]
+
+
+@dataclass(frozen=True)
+class CallDims:
+    """Sizes of one denoiser call, shared by every site of that call."""
+
+    batch: int    # B: samples in the call (2B under batched classifier-free guidance)
+    frames: int   # N': latent frames
+    parts: int    # P: latent body parts
+    tokens: int   # W: text tokens (cross sites); 1 + N'*P for sentence sites
+
+
+@dataclass(frozen=True)
+class SiteInfo:
+    """Where a processor is called: site identity plus the call's sizes.
+
+    ``probs_shape`` is the flat shape of the post-softmax probabilities at this site and
+    :meth:`to_named` / :meth:`from_named` convert to and from the named-axis view (see the module
+    docstring for the table).
+    """
+
+    name: str        # stable site name, e.g. "layers.3.cross"
+    kind: str        # one of SITE_KINDS
+    layer: int       # layer index in execution order (0 = input_blocks.0)
+    num_layers: int  # L, layers of the denoiser
+    heads: int       # H
+    batch: int       # B
+    frames: int      # N'
+    parts: int       # P
+    tokens: int      # key length of cross / sentence sites (W or 1 + N'*P); 0 otherwise
+
+    @property
+    def probs_shape(self) -> tuple[int, int, int, int]:
+        """Flat shape of the probabilities ``(rows, H, Lq, Lk)`` at this site."""
+        b, h, n, p = self.batch, self.heads, self.frames, self.parts
+        if self.kind == "temporal":
+            return (b * p, h, n, n)
+        if self.kind == "skeletal":
+            return (b * n, h, p, p)
+        return (b, h, n * p, self.tokens)
+
+    @property
+    def named_axes(self) -> tuple[str, ...]:
+        """Axis names of :meth:`to_named`'s output."""
+        return {
+            "temporal": ("batch", "part", "head", "query_frame", "key_frame"),
+            "skeletal": ("batch", "frame", "head", "query_part", "key_part"),
+            "cross": ("batch", "head", "frame", "part", "token"),
+            "sentence": ("batch", "head", "frame", "part", "key"),
+        }[self.kind]
+
+    def to_named(self, probs: torch.Tensor) -> torch.Tensor:
+        """View flat ``probs`` in named axes (no copy); see :attr:`named_axes`."""
+        self._check(probs)
+        b, h, n, p = self.batch, self.heads, self.frames, self.parts
+        if self.kind == "temporal":
+            return probs.view(b, p, h, n, n)
+        if self.kind == "skeletal":
+            return probs.view(b, n, h, p, p)
+        return probs.view(b, h, n, p, self.tokens)
+
+    def from_named(self, named: torch.Tensor) -> torch.Tensor:
+        """Inverse of :meth:`to_named`: back to :attr:`probs_shape` (a copy if needed)."""
+        return named.reshape(self.probs_shape)
+
+    def _check(self, probs: torch.Tensor) -> None:
+        if tuple(probs.shape) != self.probs_shape:
+            raise ValueError(
+                f"probs at site {self.name!r} ({self.kind}) must have shape {self.probs_shape}, "
+                f"got {tuple(probs.shape)}"
+            )
+
+
+def cross_probs_by_part(probs: torch.Tensor, frames: int, parts: int) -> torch.Tensor:
+    """Cross-attention probabilities ``(B, H, N'*P, W)`` -> ``(B, H, N', P, W)``.
+
+    Query index ``t * P + j`` becomes axes (frame ``t``, part ``j``).
+    """
+    if probs.dim() != 4 or probs.shape[2] != frames * parts:
+        raise ValueError(
+            f"cross probs must be (B, H, frames*parts={frames * parts}, W), got {tuple(probs.shape)}"
+        )
+    b, h, _, w = probs.shape
+    return probs.reshape(b, h, frames, parts, w)
+
+
+#: ``controller(site, probs) -> probs``: may record ``probs`` and/or return modified ones
+#: (same shape). Returning ``None`` keeps the probabilities unchanged.
+Controller = Callable[[SiteInfo, torch.Tensor], Optional[torch.Tensor]]
+
+
+class AttentionProcessor:
+    """Core attention ``(q, k, v) -> out``; subclasses decide how.
+
+    ``__call__(site, q, k, v, key_mask, dropout_p)`` receives per-head tensors
+    ``q (R, H, Lq, dh)``, ``k, v (R, H, Lk, dh)``, an optional boolean ``key_mask (R, Lk)``
+    (True = the key may be attended; every row has at least one True) and the attention
+    dropout probability (0 in eval mode), and returns ``(R, H, Lq, dh)``.
+    """
+
+    def __call__(self, site: SiteInfo, q: torch.Tensor, k: torch.Tensor, v: torch.Tensor,
+                 key_mask: torch.Tensor | None, dropout_p: float) -> torch.Tensor:
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+
+class SDPAProcessor(AttentionProcessor):
+    """Fast default: ``torch.nn.functional.scaled_dot_product_attention``."""
+
+    def __call__(self, site, q, k, v, key_mask, dropout_p):
+        mask = None if key_mask is None else key_mask[:, None, None, :]
+        return F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=dropout_p)
+
+
+class EagerProcessor(AttentionProcessor):
+    """Explicit softmax; exposes the probabilities to an optional controller.
+
+    Parameters
+    ----------
+    controller : callable, optional
+        ``controller(site, probs) -> probs | None`` called with the post-softmax probabilities
+        (flat shape :attr:`SiteInfo.probs_shape`). A returned tensor of the same shape replaces
+        them (SALAD supplement B: ``Denoise(z_t, t, c){M <- M_hat}``, values still computed from
+        the current prompt); ``None`` keeps them. Attention dropout, if any, is applied after the
+        controller, so recorded maps are the clean ones.
+    """
+
+    def __init__(self, controller: Controller | None = None) -> None:
+        self.controller = controller
+
+    def __call__(self, site, q, k, v, key_mask, dropout_p):
+        scores = torch.matmul(q, k.transpose(-1, -2)) * (1.0 / math.sqrt(q.shape[-1]))
+        if key_mask is not None:
+            scores = scores.masked_fill(~key_mask[:, None, None, :], float("-inf"))
+        probs = scores.softmax(dim=-1)
+        if self.controller is not None:
+            new = self.controller(site, probs)
+            if new is not None:
+                if tuple(new.shape) != tuple(probs.shape):
+                    raise ValueError(
+                        f"controller returned probs of shape {tuple(new.shape)} at site {site.name!r}; "
+                        f"expected {tuple(probs.shape)}"
+                    )
+                probs = new.to(v.dtype)
+        if dropout_p > 0.0:
+            probs = F.dropout(probs, p=dropout_p, training=True)
+        return torch.matmul(probs, v)
+
+    def __repr__(self) -> str:
+        return f"EagerProcessor(controller={self.controller!r})"
+
+
+_DEFAULT_PROCESSOR = SDPAProcessor()
+
+
+class Attention(nn.Module):
+    """Multi-head attention site with official parameter names ``Wq, Wk, Wv, Wo`` (all with bias).
+
+    Parameters
+    ----------
+    width : int
+        Model width ``w`` (queries, keys and values all have ``w`` channels).
+    heads : int
+        Number of heads ``H`` (``w`` divisible by ``H``).
+    dropout : float
+        Dropout on the attention probabilities during training (official: 0.1).
+    kind : str
+        One of :data:`SITE_KINDS`.
+    """
+
+    def __init__(self, width: int, heads: int, dropout: float, kind: str) -> None:
+        super().__init__()
+        if kind not in SITE_KINDS:
+            raise ValueError(f"kind must be one of {SITE_KINDS}, got {kind!r}")
+        if width % heads:
+            raise ValueError(f"width ({width}) must be divisible by heads ({heads})")
+        self.width, self.heads, self.dropout, self.kind = width, heads, dropout, kind
+        self.Wq = nn.Linear(width, width)
+        self.Wk = nn.Linear(width, width)
+        self.Wv = nn.Linear(width, width)
+        self.Wo = nn.Linear(width, width)
+        self.processor: AttentionProcessor = _DEFAULT_PROCESSOR
+        # set by the owning model (bind_site) so that the name travels with the module
+        self.site_name = kind
+        self.layer = 0
+        self.num_layers = 1
+
+    def bind_site(self, name: str, layer: int, num_layers: int) -> None:
+        """Record this module's stable site name and layer index (called by the owner)."""
+        self.site_name, self.layer, self.num_layers = name, layer, num_layers
+
+    def set_processor(self, processor: AttentionProcessor) -> None:
+        if not callable(processor):
+            raise TypeError(f"processor for site {self.site_name!r} must be callable, got {processor!r}")
+        self.processor = processor
+
+    def _split(self, x: torch.Tensor) -> torch.Tensor:
+        # (R, L, w) -> (R, H, L, dh)
+        r, length, _ = x.shape
+        return x.view(r, length, self.heads, self.width // self.heads).transpose(1, 2)
+
+    def project_kv(self, context: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per-head keys and values ``(R, H, Lk, dh)`` of ``context`` ``(R, Lk, w)``."""
+        return self._split(self.Wk(context)), self._split(self.Wv(context))
+
+    def forward(self, query: torch.Tensor, context: torch.Tensor | None = None, *,
+                key_mask: torch.Tensor | None = None,
+                kv: tuple[torch.Tensor, torch.Tensor] | None = None,
+                dims: CallDims) -> torch.Tensor:
+        """Attend ``query`` ``(R, Lq, w)`` to ``context`` (itself if None) -> ``(R, Lq, w)``.
+
+        ``kv`` (precomputed :meth:`project_kv` output) replaces ``context`` when given, so the
+        text keys/values can be computed once per sampling call. ``key_mask`` ``(R, Lk)`` bool,
+        True = valid key.
+        """
+        q = self._split(self.Wq(query))
+        if kv is None:
+            k, v = self.project_kv(query if context is None else context)
+        else:
+            k, v = kv
+        site = SiteInfo(self.site_name, self.kind, self.layer, self.num_layers, self.heads,
+                        dims.batch, dims.frames, dims.parts, k.shape[2] if self.kind in ("cross", "sentence") else 0)
+        out = self.processor(site, q, k, v, key_mask, self.dropout if self.training else 0.0)
+        r, _, lq, _ = out.shape
+        return self.Wo(out.transpose(1, 2).reshape(r, lq, self.width))
+
+
+ProcessorSpec = Union[AttentionProcessor, Mapping[str, AttentionProcessor]]
+
+
+class AttnProcessorMixin:
+    """diffusers-style processor management for a module exposing ``attention_sites``.
+
+    The owner implements ``attention_sites -> dict[name, Attention]`` in execution order.
+    """
+
+    @property
+    def attention_sites(self) -> dict[str, Attention]:  # pragma: no cover - provided by the owner
+        raise NotImplementedError
+
+    @property
+    def attn_processors(self) -> dict[str, AttentionProcessor]:
+        """The processor of every site, by site name (execution order)."""
+        return {name: mod.processor for name, mod in self.attention_sites.items()}
+
+    def set_attn_processor(self, processor: ProcessorSpec) -> None:
+        """Install one processor on every site, or a ``{site name: processor}`` dict.
+
+        A dict may name a subset of the sites; the others keep their processor. Unknown names
+        raise ``KeyError`` listing the valid ones.
+        """
+        sites = self.attention_sites
+        if isinstance(processor, Mapping):
+            unknown = sorted(set(processor) - set(sites))
+            if unknown:
+                raise KeyError(f"unknown attention site(s) {unknown}; valid sites: {list(sites)}")
+            for name, proc in processor.items():
+                sites[name].set_processor(proc)
+        else:
+            for mod in sites.values():
+                mod.set_processor(processor)
+
+
+@contextmanager
+def use_processors(model: AttnProcessorMixin, processors: ProcessorSpec) -> Iterator[AttnProcessorMixin]:
+    """Install ``processors`` on ``model`` for the ``with`` block; restore the previous ones on exit.
+
+    The previous processors are restored even if the block raises.
+
+    Examples
+    --------
+    >>> with use_processors(denoiser, EagerProcessor(recorder)):   # doctest: +SKIP
+    ...     latents = denoise(denoiser, scheduler, cond, uncond, noise, mask)
+    """
+    saved = model.attn_processors
+    try:
+        model.set_attn_processor(processors)
+        yield model
+    finally:
+        model.set_attn_processor(saved)
