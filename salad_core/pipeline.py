@@ -199,7 +199,7 @@ class SaladPipeline:
         root = Path(path)
         root.mkdir(parents=True, exist_ok=True)
         save_checkpoint(root / "vae", self.vae, model_type="salad_vae", config=self.vae.config, dtype=dtype, meta=meta)
-        save_checkpoint(root / "denoiser", self.denoiser, model_type="salad_denoiser", config=self.denoiser.config,
+        save_checkpoint(root / "denoiser", self.denoiser, model_type="denoiser", config=self.denoiser.config,
                         dtype=dtype, meta=meta)
         save_tensors(root / "stats.safetensors", {"mean": torch.from_numpy(self.mean), "std": torch.from_numpy(self.std)})
         doc = {"vae": "vae", "denoiser": "denoiser", "stats": "stats.safetensors",
