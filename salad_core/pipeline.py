@@ -243,13 +243,16 @@ class SaladPipeline:
     def decode(self, latents: torch.Tensor, lengths: Sequence[int]) -> tuple[np.ndarray, list[np.ndarray]]:
         """Latents ``(B, N', P, Dz)`` -> de-normalised features ``(B, 4N', D)`` (zero past each
         length) and per-sample joints ``(N_b, J, 3)``."""
-        with torch.inference_mode():
-            feats = self.vae.decode(latents.float())
-        feats = denormalize(feats.cpu().numpy(), self.mean, self.std).astype(np.float32)
+        unit = self.skeleton.unit_length
+        feats = np.zeros((latents.shape[0], latents.shape[1] * unit, self.skeleton.feature_dim), np.float32)
         joints = []
-        for b, length in enumerate(lengths):
-            feats[b, length:] = 0.0
-            joints.append(features_to_joints(feats[b, :length], self.skeleton).astype(np.float32))
+        with torch.inference_mode():
+            for b, length in enumerate(lengths):
+                # decode each motion at its own length: the VAE's temporal convolutions would
+                # otherwise see the batch's zero padding near the end of shorter motions
+                dec = self.vae.decode(latents[b:b + 1, : length // unit].float())[0].cpu().numpy()
+                feats[b, :length] = denormalize(dec, self.mean, self.std)
+                joints.append(features_to_joints(feats[b, :length], self.skeleton).astype(np.float32))
         return feats, joints
 
     def encode_motion(self, features: np.ndarray, *, sample: bool = False) -> torch.Tensor:
