@@ -1,0 +1,27 @@
+"""Trainers for the SALAD VAE and denoiser: atomic checkpoints, exact resume, ``torchrun``/DDP.
+
+Entry points: :func:`train_vae`, :func:`train_denoiser`, their configs, and :func:`main` (the
+``salad train`` command line). The shared loop and the out-folder layout are described in
+:mod:`salad_core.train.common`.
+"""
+from .cli import main
+from .common import TrainResult, TrainTask, fit
+from .config import DenoiserTrainConfig, TrainConfig, VAETrainConfig, load_train_config, save_train_config
+from .denoiser_trainer import train_denoiser
+from .schedules import lr_at_step
+from .vae_trainer import train_vae
+
+__all__ = [
+    "train_vae",
+    "train_denoiser",
+    "TrainConfig",
+    "VAETrainConfig",
+    "DenoiserTrainConfig",
+    "load_train_config",
+    "save_train_config",
+    "TrainResult",
+    "TrainTask",
+    "fit",
+    "lr_at_step",
+    "main",
+]

@@ -1,0 +1,106 @@
+"""``salad train vae|denoiser ...``: the command line of the trainers (also ``python -m salad_core.train``).
+
+Under ``torchrun --nproc_per_node=N -m salad_core.train ...`` the same command trains with DDP.
+
+The ``--config`` file is JSON, either a bare training config (the fields of
+:class:`~salad_core.train.config.VAETrainConfig` / ``DenoiserTrainConfig``) or a document with any
+of the keys ``"train"``, ``"model"`` (the model config), ``"diffusion"`` and ``"text_encoder"``,
+which is the shape of a run's own ``config.json``. With ``--resume`` and no ``--config`` the run's
+``config.json`` is used.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+from salad_core.io import config_from_dict
+
+from .config import DenoiserTrainConfig, VAETrainConfig
+
+__all__ = ["main", "build_parser"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="salad train", description="Train the SALAD VAE or denoiser.")
+    parser.add_argument("what", choices=("vae", "denoiser"), help="which model to train")
+    parser.add_argument("--data", required=True, help="HumanML3D-layout data folder")
+    parser.add_argument("--out", required=True, help="run folder (checkpoints, logs)")
+    parser.add_argument("--config", help="JSON file: a training config or {train, model, diffusion, text_encoder}")
+    parser.add_argument("--resume", action="store_true", help="continue the run in --out exactly where it stopped")
+    parser.add_argument("--steps", type=int, help="max optimiser steps (overrides the config)")
+    parser.add_argument("--batch-size", type=int, help="global batch size (overrides the config)")
+    parser.add_argument("--vae", help="denoiser only: VAE run folder or checkpoint")
+    parser.add_argument("--text-encoder", help="denoiser only: 'minilm' (default) or a local CLIP folder")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    return parser
+
+
+def _read_doc(args: argparse.Namespace) -> dict[str, Any]:
+    path = Path(args.config) if args.config else None
+    if path is None and args.resume and (Path(args.out) / "config.json").is_file():
+        path = Path(args.out) / "config.json"
+    if path is None:
+        return {}
+    doc = json.loads(path.read_text())
+    if not isinstance(doc, dict):
+        raise SystemExit(f"--config {path}: expected a JSON object")
+    return {**doc, "_path": str(path)}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the trainer; returns the process exit code (130 when stopped by a signal)."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    doc = _read_doc(args)
+    cls = VAETrainConfig if args.what == "vae" else DenoiserTrainConfig
+    train_doc = doc.get("train", {k: v for k, v in doc.items() if k not in ("model", "diffusion", "text_encoder", "model_type", "task", "_path")})
+    overrides = {"max_steps": args.steps, "batch_size": args.batch_size}
+    if args.no_progress:
+        overrides["progress"] = False
+    train_config = config_from_dict(cls, {**train_doc, **{k: v for k, v in overrides.items() if v is not None}})
+
+    from .distributed import init_distributed, shutdown_distributed
+
+    env = init_distributed(train_config.device)
+    if not env.is_main:
+        logging.getLogger().setLevel(logging.WARNING)
+    try:
+        if args.what == "vae":
+            from salad_core.models.vae import VAEConfig
+
+            from .vae_trainer import train_vae
+
+            model_config = config_from_dict(VAEConfig, doc["model"]) if "model" in doc else None
+            result = train_vae(args.data, args.out, model_config, train_config, resume=args.resume, env=env)
+        else:
+            from salad_core.models.denoiser import DenoiserConfig
+            from salad_core.sampling import DiffusionConfig
+
+            from .denoiser_trainer import train_denoiser
+
+            task_doc = doc.get("task", {})
+            vae_path = args.vae or task_doc.get("vae")
+            if not vae_path:
+                raise SystemExit("salad train denoiser needs --vae (a VAE run folder or checkpoint)")
+            model_config = config_from_dict(DenoiserConfig, doc["model"]) if "model" in doc else None
+            diff = doc.get("diffusion", task_doc.get("diffusion"))
+            diffusion_config = config_from_dict(DiffusionConfig, diff) if diff else None
+            text_encoder = args.text_encoder or doc.get("text_encoder", task_doc.get("text_encoder", "minilm"))
+            result = train_denoiser(args.data, args.out, vae_path, model_config, train_config, text_encoder,
+                                    resume=args.resume, diffusion_config=diffusion_config, env=env)
+    finally:
+        shutdown_distributed()
+    if env.is_main:
+        print(f"{args.what}: step {result.step}, last loss {result.last_loss}, best val {result.best_val} "
+              f"(step {result.best_step}), {result.steps_per_s:.3f} steps/s -> {result.out_dir}")
+    return 130 if result.interrupted else 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,290 @@
+"""Training of the latent denoiser (paper §3.2, eqs. 7-8; official ``DenoiserTrainer.train_forward``).
+
+One step, for a batch of motions ``(B, N, D)`` with lengths ``L``:
+
+1. ``z = mu + eps * exp(logvar / 2)`` from the **frozen** VAE (sampled, as the official code
+   does), masked to the ``L // 4`` valid latent frames;
+2. ``t ~ U{0..T-1}``, masked noise, ``x_t = add_noise(z, noise, t)`` (diffusers scheduler);
+3. each caption is replaced by the null text ``""`` with probability ``cond_drop_prob``
+   (classifier-free guidance, eq. 9), and encoded by the frozen text encoder without gradients;
+4. the target is ``v``, ``eps`` or ``z`` by prediction type; the loss is the MSE over valid
+   latent elements.
+
+All random draws come from the trainer's shared generator for the global batch, so the run is
+reproducible and independent of the number of processes. Motions are encoded at the padded
+``max_length`` (as the official loader pads to 196; ``vae_pad_to_max``), which makes a sample's
+latent independent of the other samples in its batch; latents are then trimmed to the longest
+sample of the batch, which the denoiser's key-padding masks make exact. Motions are normalised
+with the statistics the VAE was trained with (``mean_std.safetensors`` of its run folder).
+"""
+from __future__ import annotations
+
+import logging
+import os
+from functools import partial
+from pathlib import Path
+from typing import Any, Callable
+
+import torch
+from torch import nn
+
+from salad_core.io import CheckpointError, config_to_dict
+from salad_core.sampling import training_target
+
+from .common import StepContext, TrainResult, TrainTask, fit
+from .config import DenoiserTrainConfig
+from .distributed import DistEnv, all_reduce_sum, init_distributed
+
+__all__ = ["DenoiserObjective", "CaptionFeatureCache", "train_denoiser", "build_denoiser_task", "load_frozen_vae", "resolve_checkpoint"]
+
+log = logging.getLogger(__name__)
+
+
+class DenoiserObjective(nn.Module):
+    """``forward(...) -> dict(loss)``: masked MSE between the denoiser output and the target.
+
+    A module so that DDP can wrap it (see :class:`~salad_core.train.vae_trainer.VAEObjective`).
+    """
+
+    def __init__(self, denoiser: nn.Module) -> None:
+        super().__init__()
+        self.denoiser = denoiser
+
+    def forward(self, noisy: torch.Tensor, timesteps: torch.Tensor, text: torch.Tensor, text_mask: torch.Tensor,
+                frame_mask: torch.Tensor, target: torch.Tensor, denom: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Loss for one batch.
+
+        Parameters
+        ----------
+        noisy, target : Tensor ``(B, N', P, Dz)``
+        timesteps : Tensor ``(B,)`` long
+        text : Tensor ``(B, W, C)``; text_mask : Tensor ``(B, W)`` bool (True = real token)
+        frame_mask : Tensor ``(B, N')`` bool (True = valid latent frame)
+        denom : Tensor ``()``
+            Number of valid elements the squared errors are divided by (under DDP the global
+            count divided by the world size, so that DDP's gradient average is the global mean).
+        """
+        pred = self.denoiser(noisy, timesteps, text, text_mask, frame_mask)      # (B, N', P, Dz)
+        sq = (pred - target).pow(2) * frame_mask[:, :, None, None].to(pred.dtype)
+        return {"loss": sq.sum() / denom}
+
+
+class CaptionFeatureCache:
+    """Token features per caption, computed once and kept (LRU) for later batches.
+
+    Each caption is encoded *alone*, so its features never depend on which other captions share
+    its batch (padding can change the floating-point result of a batched forward); a cached run
+    is therefore exactly reproducible and resumable whatever the cache holds. Only the valid tokens
+    are kept; a batch is re-padded to its longest caption with a False mask, which cross-attention
+    ignores.
+
+    Parameters
+    ----------
+    encoder : TextEncoder
+        ``encode(prompts, allow_empty=True) -> TextBatch``.
+    max_entries : int
+        Captions kept (least recently used are evicted); 0 disables the cache and encodes each
+        batch in one call.
+    """
+
+    def __init__(self, encoder: Any, max_entries: int) -> None:
+        from collections import OrderedDict
+
+        self.encoder = encoder
+        self.max_entries = max_entries
+        self._store: "OrderedDict[str, torch.Tensor]" = OrderedDict()
+        self.hits = 0
+        self.misses = 0
+
+    def _one(self, caption: str) -> torch.Tensor:
+        feats = self._store.get(caption)
+        if feats is not None:
+            self._store.move_to_end(caption)
+            self.hits += 1
+            return feats
+        self.misses += 1
+        tb = self.encoder.encode([caption], allow_empty=True)
+        feats = tb.features[0, tb.mask[0]].clone()                     # (W_valid, C)
+        self._store[caption] = feats
+        if len(self._store) > self.max_entries:
+            self._store.popitem(last=False)
+        return feats
+
+    def encode(self, captions: list[str]) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(features (B, W, C), mask (B, W) bool)`` on the CPU."""
+        if self.max_entries <= 0:
+            tb = self.encoder.encode(captions, allow_empty=True)
+            return tb.features, tb.mask
+        rows = [self._one(c) for c in captions]
+        w = max(r.shape[0] for r in rows)
+        feats = rows[0].new_zeros((len(rows), w, rows[0].shape[1]))
+        mask = torch.zeros((len(rows), w), dtype=torch.bool)
+        for i, r in enumerate(rows):
+            feats[i, : r.shape[0]] = r
+            mask[i, : r.shape[0]] = True
+        return feats, mask
+
+
+def resolve_checkpoint(path: str | os.PathLike) -> Path:
+    """A checkpoint stem from a run folder (``best`` if present, else ``latest``), a stem, or a file."""
+    p = Path(path)
+    if p.is_dir():
+        for stem in ("best", "latest"):
+            if (p / f"{stem}.safetensors").is_file():
+                return p / stem
+        raise CheckpointError(f"{p} holds no best.safetensors or latest.safetensors (is it a training run folder?)")
+    return p.with_suffix("") if p.suffix in (".json", ".safetensors") else p
+
+
+def load_frozen_vae(path: str | os.PathLike, device: str | torch.device = "cpu") -> nn.Module:
+    """Load a trained VAE checkpoint in eval mode with gradients off."""
+    import salad_core.models.vae  # noqa: F401  (registers the "salad_vae" type)
+    from salad_core.io import load_model
+
+    stem = resolve_checkpoint(path)
+    vae, _, _ = load_model(stem)
+    vae = vae.to(device).eval()
+    for p in vae.parameters():
+        p.requires_grad_(False)
+    return vae
+
+
+def _vae_stats(vae_path: str | os.PathLike) -> tuple[Any, Any]:
+    """The normalisation the VAE was trained with (its run's ``mean_std.safetensors``), else ``(None, None)``:
+    the latents only mean what the VAE learned if the motions are normalised the same way."""
+    from salad_core.io import load_tensors
+
+    path = resolve_checkpoint(vae_path).parent / "mean_std.safetensors"
+    if not path.is_file():
+        log.info("no %s: normalising with the data folder's Mean.npy/Std.npy", path)
+        return None, None
+    stats = load_tensors(path)
+    return stats["mean"].numpy(), stats["std"].numpy()
+
+
+def _prepare(batch: dict[str, Any], ctx: StepContext, *, vae: nn.Module, text: CaptionFeatureCache, scheduler: Any,
+             config: DenoiserTrainConfig, prediction_type: str, latent_shape: tuple[int, int, int]) -> dict[str, Any]:
+    env, rand, dev = ctx.env, ctx.rand, ctx.env.device
+    motion = batch["motion"].to(dev, non_blocking=True)                 # (B, max_length, D)
+    length = batch["length"].to(dev)
+    b = motion.shape[0]
+    ds = vae.downsample
+    lat_len = length // ds                                               # valid latent frames
+    n_lat = int(lat_len.max())                                           # trimmed N'
+    frame_mask = torch.arange(n_lat, device=dev)[None, :] < lat_len[:, None]   # (B, N')
+    m = frame_mask[:, :, None, None].to(motion.dtype)
+
+    # draws for the global batch (sliced to this rank), always in the same order and full size
+    eps = rand.randn(b, latent_shape)[:, :n_lat]                         # VAE reparameterisation
+    t = rand.randint(b, scheduler.config.num_train_timesteps)            # t ~ U{0..T-1}
+    noise = rand.randn(b, latent_shape)[:, :n_lat] * m
+    drop = rand.rand(b) < config.cond_drop_prob                          # CFG caption dropping
+    if not ctx.train and not config.val_cond_drop:
+        drop = torch.zeros_like(drop)
+
+    if not config.vae_pad_to_max:
+        motion = motion[:, : n_lat * ds]                                 # faster; latents then depend on the batch
+    with torch.no_grad():
+        enc = vae.encode(motion, sample=False)                           # (B, N/4, P, Dz)
+        z = (enc.mu[:, :n_lat] + eps * torch.exp(0.5 * enc.logvar[:, :n_lat])) * m
+        noisy = scheduler.add_noise(z, noise, t)
+        target = training_target(scheduler, z, noise, t, prediction_type)
+        captions = ["" if d else c for d, c in zip(drop.tolist(), batch["caption"])]
+        text_feats, text_mask = text.encode(captions)                    # (B, W, C), (B, W)
+    count = frame_mask.sum().to(torch.float64) * (latent_shape[1] * latent_shape[2])
+    if ctx.train and env.distributed:
+        count = all_reduce_sum(count, env) / env.world_size
+    return {"noisy": noisy, "timesteps": t, "text": text_feats.to(dev), "text_mask": text_mask.to(dev),
+            "frame_mask": frame_mask, "target": target, "denom": count.clamp_min(1.0).to(motion.dtype)}
+
+
+def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, model_config: Any,
+                        train_config: DenoiserTrainConfig, env: DistEnv, text_encoder: Any = "minilm",
+                        diffusion_config: Any = None) -> TrainTask:
+    """The :class:`TrainTask` of a denoiser run (model built with ``train_config.seed``)."""
+    from salad_core.data.dataset import MotionTextDataset, collate_motion_text
+    from salad_core.models.denoiser import Denoiser, DenoiserConfig
+    from salad_core.sampling import DiffusionConfig, make_scheduler
+    from salad_core.text import load_text_encoder
+
+    diffusion_config = diffusion_config or DiffusionConfig()
+    if not isinstance(diffusion_config, DiffusionConfig):
+        raise TypeError(f"diffusion_config must be a DiffusionConfig, got {type(diffusion_config).__name__}")
+    vae = load_frozen_vae(vae_path, env.device)
+    encoder = load_text_encoder(text_encoder, device=env.device) if isinstance(text_encoder, (str, Path)) else text_encoder
+    encoder_name = str(text_encoder) if isinstance(text_encoder, (str, Path)) else getattr(encoder, "source", type(encoder).__name__)
+    if model_config is None:
+        model_config = DenoiserConfig(latent_dim=vae.latent_dim, num_parts=vae.num_parts, text_dim=encoder.dim)
+    if not isinstance(model_config, DenoiserConfig):
+        raise TypeError(f"model_config must be a DenoiserConfig, got {type(model_config).__name__}")
+    for name, want in (("latent_dim", vae.latent_dim), ("num_parts", vae.num_parts), ("text_dim", encoder.dim)):
+        if getattr(model_config, name) != want:
+            raise ValueError(f"DenoiserConfig.{name}={getattr(model_config, name)} does not fit: the "
+                             f"{'text encoder' if name == 'text_dim' else 'VAE'} gives {want}; set {name}={want}")
+    if train_config.max_length % vae.downsample:
+        raise ValueError(f"DenoiserTrainConfig.max_length={train_config.max_length} must be a multiple of the "
+                         f"VAE's temporal down-sampling {vae.downsample}")
+
+    skeleton = vae.config.skeleton
+    mean, std = _vae_stats(vae_path)
+    train_set = MotionTextDataset(data_dir, "train", skeleton=skeleton, max_length=train_config.max_length,
+                                  unit_length=vae.downsample, mean=mean, std=std, random_crop=True,
+                                  seed=train_config.seed)
+    try:
+        val_set = MotionTextDataset(data_dir, "val", skeleton=skeleton, max_length=train_config.max_length,
+                                    unit_length=vae.downsample, mean=train_set.mean, std=train_set.std,
+                                    random_crop=False)
+    except (FileNotFoundError, ValueError) as exc:
+        log.warning("no validation items (%s)", exc)
+        val_set = None
+
+    torch.manual_seed(train_config.seed)  # same initial weights on every rank and every run
+    denoiser = Denoiser(model_config).to(env.device)
+    scheduler = make_scheduler(diffusion_config, "ddim")
+    latent_shape = (train_config.max_length // vae.downsample, vae.num_parts, vae.latent_dim)
+    prepare = partial(_prepare, vae=vae, text=CaptionFeatureCache(encoder, train_config.text_cache_size),
+                      scheduler=scheduler, config=train_config,
+                      prediction_type=diffusion_config.prediction_type, latent_shape=latent_shape)
+    meta = {"diffusion": config_to_dict(diffusion_config), "text_encoder": encoder_name,
+            "vae": str(resolve_checkpoint(vae_path)), "data": str(Path(data_dir))}
+    return TrainTask(
+        model=denoiser, model_type="denoiser", model_config=model_config, objective=DenoiserObjective(denoiser),
+        train_set=train_set, val_set=val_set, collate=partial(collate_motion_text, trim=False), prepare=prepare,
+        meta=meta, extra_config={"kind": "denoiser", **meta, "data": str(Path(data_dir).resolve())},
+        extra_files={"mean_std.safetensors": {"mean": torch.as_tensor(train_set.mean, dtype=torch.float32),
+                                              "std": torch.as_tensor(train_set.std, dtype=torch.float32)}},
+    )
+
+
+def train_denoiser(data_dir: str | os.PathLike, out_dir: str | os.PathLike, vae_path: str | os.PathLike,
+                   model_config: Any = None, train_config: DenoiserTrainConfig | None = None,
+                   text_encoder: Any = "minilm", resume: bool = False, *, diffusion_config: Any = None,
+                   env: DistEnv | None = None, on_step: Callable[[int], None] | None = None) -> TrainResult:
+    """Train a :class:`~salad_core.models.denoiser.Denoiser` on the latents of a frozen VAE.
+
+    Parameters
+    ----------
+    data_dir : path
+        HumanML3D-layout folder (``new_joint_vecs/``, ``texts/``, splits, ``Mean.npy``/``Std.npy``).
+    out_dir : path
+        Run folder (layout in :mod:`salad_core.train.common`).
+    vae_path : path
+        A VAE run folder (``best`` is used if present, else ``latest``) or a checkpoint stem/file.
+    model_config : DenoiserConfig, optional
+        Default: the paper's architecture sized to the VAE latent and the text encoder.
+    train_config : DenoiserTrainConfig, optional
+        Default: the official recipe.
+    text_encoder : str, path or encoder
+        ``"minilm"`` (default), a local CLIP folder, or an object with ``encode(prompts,
+        allow_empty=True) -> TextBatch`` and ``dim``.
+    resume : bool
+        Continue the run in ``out_dir`` exactly where it stopped.
+    diffusion_config : DiffusionConfig, optional
+        Noise schedule and prediction type (default: the paper's; stored in checkpoint meta).
+    env, on_step
+        As in :func:`salad_core.train.common.fit`.
+    """
+    train_config = train_config or DenoiserTrainConfig()
+    env = env or init_distributed(train_config.device)
+    task = build_denoiser_task(data_dir, vae_path, model_config, train_config, env, text_encoder, diffusion_config)
+    return fit(task, out_dir, train_config, resume=resume, env=env, on_step=on_step)

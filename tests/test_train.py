@@ -1,0 +1,539 @@
+"""Trainers: schedule, configs, run-folder layout, best vs latest, exact resume, SIGINT, disk full.
+
+Everything runs on a tiny fake corpus (random smooth features of width 263, two captions per
+clip) written to a temporary folder, with tiny models and one CPU thread.
+"""
+from __future__ import annotations
+
+import errno
+import json
+import os
+import signal
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from torch import nn
+
+from salad_core.io import CheckpointError, load_model, load_tensors, read_checkpoint
+from salad_core.skeleton import get_skeleton
+from salad_core.train import (
+    DenoiserTrainConfig,
+    TrainTask,
+    VAETrainConfig,
+    fit,
+    load_train_config,
+    lr_at_step,
+    save_train_config,
+    train_denoiser,
+    train_vae,
+)
+from salad_core.train.distributed import DistEnv, GlobalBatchRandom
+from salad_core.train.state import capture_rng, load_train_state, optimizer_from_flat, optimizer_to_flat, restore_rng
+
+SK = get_skeleton("humanml3d")
+WORDS = ("walks", "jumps", "runs", "waves", "kicks", "turns")
+
+
+# ----------------------------------------------------------------------------- fixtures
+def make_fake_corpus(root: Path, n_train: int = 8, n_val: int = 3, lengths=(64, 72), seed: int = 0) -> Path:
+    """A HumanML3D-layout folder with random smooth features (width from the skeleton)."""
+    rng = np.random.default_rng(seed)
+    d = SK.feature_dim
+    (root / "new_joint_vecs").mkdir(parents=True)
+    (root / "texts").mkdir()
+    ids = [f"{i:06d}" for i in range(n_train + n_val)]
+    feats = []
+    for i, mid in enumerate(ids):
+        n = int(rng.integers(*lengths))
+        t = np.linspace(0.0, 1.0, n)[:, None]
+        x = np.sin(2 * np.pi * (t * rng.uniform(0.5, 2.0, d) + rng.uniform(0.0, 1.0, d)))
+        x = (x + 0.1 * rng.standard_normal((n, d))).astype(np.float32)
+        np.save(root / "new_joint_vecs" / f"{mid}.npy", x)
+        feats.append(x)
+        w = WORDS[i % len(WORDS)]
+        (root / "texts" / f"{mid}.txt").write_text(
+            f"a person {w}#a/DET person/NOUN {w}/VERB#0.0#0.0\n"
+            f"someone {w} slowly#someone/PRON {w}/VERB slowly/ADV#0.0#0.0\n")
+    (root / "train.txt").write_text("\n".join(ids[:n_train]) + "\n")
+    (root / "val.txt").write_text("\n".join(ids[n_train:]) + "\n")
+    (root / "test.txt").write_text("\n".join(ids[n_train:]) + "\n")
+    cat = np.concatenate(feats)
+    np.save(root / "Mean.npy", cat.mean(0).astype(np.float32))
+    np.save(root / "Std.npy", (cat.std(0) + 1e-3).astype(np.float32))
+    return root
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory) -> Path:
+    return make_fake_corpus(tmp_path_factory.mktemp("corpus"))
+
+
+def tiny_vae_config(dropout: float = 0.1):
+    from salad_core.models.vae import VAEConfig
+
+    return VAEConfig(latent_dim=8, n_extra_layers=0, dropout=dropout)
+
+
+def vae_train_config(**kw) -> VAETrainConfig:
+    base = dict(batch_size=8, max_steps=6, lr=3e-3, warmup_steps=2, milestones=(4,), gamma=0.5, window=64,
+                val_every=0, ckpt_every=0, log_every=1, num_threads=1, progress=False, seed=3)
+    base.update(kw)
+    return VAETrainConfig(**base)
+
+
+def weights(path: Path) -> dict[str, torch.Tensor]:
+    return load_tensors(path)
+
+
+def assert_same_tensors(a: dict[str, torch.Tensor], b: dict[str, torch.Tensor]) -> None:
+    assert sorted(a) == sorted(b)
+    for k in a:
+        assert torch.equal(a[k], b[k]), f"tensor {k} differs (max abs diff {(a[k].float() - b[k].float()).abs().max()})"
+
+
+@pytest.fixture(scope="module")
+def straight_vae(corpus, tmp_path_factory) -> Path:
+    """Reference: 6 steps in one go (26 windows: 3 batches of 8 per epoch, so 2 epochs)."""
+    out = tmp_path_factory.mktemp("straight")
+    res = train_vae(corpus, out, tiny_vae_config(), vae_train_config())
+    assert res.step == 6 and not res.interrupted
+    return out
+
+
+# ------------------------------------------------------------------------ schedule/config
+def test_lr_schedule_warmup_then_steps():
+    base, warm = 2e-4, 4
+    got = [lr_at_step(s, base, warm, (3, 6), 0.1) for s in range(12)]
+    want = [base * 1 / 5, base * 2 / 5, base * 3 / 5, base * 4 / 5,        # lr*(it+1)/(warm+1)
+            base, base, base,                                               # it - warm < 3
+            base * 0.1, base * 0.1, base * 0.1,                             # 3 <= it - warm < 6
+            base * 0.01, base * 0.01]
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    assert lr_at_step(0, 1.0, 0, (), 0.5) == 1.0
+    with pytest.raises(ValueError, match="step=-1"):
+        lr_at_step(-1, 1.0, 0, (), 0.5)
+
+
+def test_config_defaults_are_the_official_recipe_and_round_trip(tmp_path):
+    v, d = VAETrainConfig(), DenoiserTrainConfig()
+    assert (v.batch_size, v.lr, v.warmup_steps, v.milestones, v.gamma, v.weight_decay, v.window, v.max_epochs) == \
+        (256, 2e-4, 2000, (150_000, 250_000), 0.05, 0.0, 64, 50)
+    assert (d.batch_size, d.lr, d.warmup_steps, d.milestones, d.gamma, d.weight_decay, d.cond_drop_prob, d.max_length) == \
+        (64, 5e-4, 2000, (50_000,), 0.1, 1e-6, 0.1, 196)
+    assert v.betas == d.betas == (0.9, 0.99)
+    cfg = d.replace(batch_size=12, milestones=(5, 9), grad_clip=1.0)
+    save_train_config(tmp_path / "c.json", cfg)
+    assert load_train_config(tmp_path / "c.json", DenoiserTrainConfig) == cfg
+    assert load_train_config(tmp_path / "c.json", DenoiserTrainConfig, max_steps=7).max_steps == 7
+    with pytest.raises(ValueError, match="batch_size=0"):
+        VAETrainConfig(batch_size=0)
+    with pytest.raises(ValueError, match="cond_drop_prob=1.5"):
+        DenoiserTrainConfig(cond_drop_prob=1.5)
+    with pytest.raises(ValueError, match="milestones"):
+        VAETrainConfig(milestones=(5, 3))
+    with pytest.raises(CheckpointError, match="unknown config keys"):
+        (tmp_path / "bad.json").write_text(json.dumps({"batch_sise": 3}))
+        load_train_config(tmp_path / "bad.json", VAETrainConfig)
+
+
+# --------------------------------------------------------------------- randomness / state
+def test_global_batch_random_gives_each_rank_its_rows_of_the_global_draw():
+    full = GlobalBatchRandom(torch.Generator().manual_seed(5), DistEnv()).randn(6, (2, 3))
+    for rank in range(2):
+        env = DistEnv(rank=rank, world_size=2)
+        part = GlobalBatchRandom(torch.Generator().manual_seed(5), env).randn(3, (2, 3))
+        assert torch.equal(part, full[rank::2])
+    ints = GlobalBatchRandom(torch.Generator().manual_seed(1), DistEnv()).randint(1000, 10)
+    assert ints.min() >= 0 and ints.max() < 10 and len(set(ints.tolist())) == 10
+
+
+def test_optimizer_and_rng_state_round_trip_exactly():
+    torch.manual_seed(0)
+    model = nn.Linear(4, 3)
+    opt = torch.optim.AdamW(model.parameters(), lr=0.1, betas=(0.9, 0.99))
+    for _ in range(2):
+        opt.zero_grad()
+        model(torch.randn(5, 4)).pow(2).sum().backward()
+        opt.step()
+    tensors, doc = optimizer_to_flat(opt)
+    json.dumps(doc)  # the scalar part is JSON
+    opt2 = torch.optim.AdamW(model.parameters(), lr=0.5)
+    optimizer_from_flat(opt2, tensors, doc)
+    a, b = opt.state_dict(), opt2.state_dict()
+    assert a["param_groups"][0]["betas"] == b["param_groups"][0]["betas"] and b["param_groups"][0]["lr"] == 0.1
+    for i in a["state"]:
+        for k in a["state"][i]:
+            assert torch.equal(a["state"][i][k], b["state"][i][k])
+
+    import random
+
+    snap = capture_rng()
+    draws = (torch.rand(3), np.random.rand(3), random.random())
+    restore_rng(snap)
+    again = (torch.rand(3), np.random.rand(3), random.random())
+    assert torch.equal(draws[0], again[0]) and np.array_equal(draws[1], again[1]) and draws[2] == again[2]
+
+
+def test_resumable_batch_sampler_skips_used_batches():
+    from salad_core.train.common import ResumableBatchSampler
+
+    idx = list(range(10))
+    assert list(ResumableBatchSampler(idx, 3, drop_last=True)) == [[0, 1, 2], [3, 4, 5], [6, 7, 8]]
+    assert list(ResumableBatchSampler(idx, 3, drop_last=True, start=1)) == [[3, 4, 5], [6, 7, 8]]
+    assert list(ResumableBatchSampler(idx, 3, drop_last=False, start=3)) == [[9]]
+    for drop in (True, False):
+        for start in range(5):
+            sampler = ResumableBatchSampler(idx, 3, drop_last=drop, start=start)
+            assert len(list(sampler)) == len(sampler)
+
+
+# ------------------------------------------------------------------ a stand-in scalar task
+@dataclass(frozen=True)
+class ScalarConfig:
+    init: float = 0.2     # initial value of the single weight
+
+
+class ScalarModel(nn.Module):
+    def __init__(self, config: ScalarConfig) -> None:
+        super().__init__()
+        self.w = nn.Parameter(torch.tensor([config.init]))
+
+
+class ScalarObjective(nn.Module):
+    def __init__(self, model: ScalarModel) -> None:
+        super().__init__()
+        self.model = model
+
+    def forward(self, c: torch.Tensor) -> dict[str, torch.Tensor]:
+        return {"loss": (self.model.w - c).pow(2).mean()}
+
+
+def scalar_task(train_target: float = 1.0, val_target: float = 0.5) -> TrainTask:
+    model = ScalarModel(ScalarConfig())
+    return TrainTask(
+        model=model, model_type="test_scalar", model_config=ScalarConfig(), objective=ScalarObjective(model),
+        train_set=[{"c": train_target}] * 8, val_set=[{"c": val_target}] * 4,
+        collate=lambda items: {"c": torch.tensor([it["c"] for it in items])},
+        prepare=lambda batch, ctx: {"c": batch["c"]},
+    )
+
+
+def test_best_checkpoint_is_kept_apart_from_latest(tmp_path):
+    # training pulls w from 0.2 towards 1.0; validation wants 0.5, so the best step lies mid-run
+    seen: dict[int, float] = {}
+    task = scalar_task()
+    cfg = VAETrainConfig(batch_size=4, max_steps=16, lr=0.05, warmup_steps=0, val_every=1, ckpt_every=5,
+                         log_every=1, num_threads=1, progress=False)
+    res = fit(task, tmp_path, cfg, on_step=lambda s: seen.__setitem__(s, task.model.w.item()))
+    assert 2 <= res.best_step < 16
+    best_doc, best = read_checkpoint(tmp_path / "best")
+    latest_doc, latest = read_checkpoint(tmp_path / "latest")
+    assert best_doc["meta"]["step"] == res.best_step and latest_doc["meta"]["step"] == 16
+    assert float(best["w"]) == pytest.approx(seen[res.best_step], abs=0)
+    assert float(latest["w"]) == pytest.approx(seen[16], abs=0)
+    assert abs(float(best["w"]) - 0.5) < abs(float(latest["w"]) - 0.5)
+    val = [json.loads(l) for l in (tmp_path / "log.jsonl").read_text().splitlines() if "val_loss" in l]
+    assert len(val) == 16
+    assert min(val, key=lambda e: e["val_loss"])["step"] == res.best_step
+    assert best_doc["meta"]["val_loss"] == pytest.approx(min(e["val_loss"] for e in val), abs=0)
+
+
+def test_logged_learning_rate_follows_the_schedule(tmp_path):
+    cfg = VAETrainConfig(batch_size=2, max_steps=9, lr=0.01, warmup_steps=3, milestones=(2, 4), gamma=0.5,
+                         val_every=0, log_every=1, num_threads=1, progress=False)
+    fit(scalar_task(), tmp_path, cfg)
+    rows = [json.loads(l) for l in (tmp_path / "log.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in rows] == list(range(1, 10))
+    for r in rows:  # the lr logged at step s was used for iteration s - 1
+        assert r["lr"] == pytest.approx(lr_at_step(r["step"] - 1, 0.01, 3, (2, 4), 0.5), rel=1e-12)
+    assert not (tmp_path / "best.safetensors").exists()  # val_every=0: no validation
+
+
+# ------------------------------------------------------------------------------ VAE runs
+def test_vae_run_folder_layout(straight_vae):
+    out = straight_vae
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted(["config.json", "latest.json", "latest.safetensors", "log.jsonl", "mean_std.safetensors",
+                            "train_state.json", "train_state.safetensors"])  # val_every=0: no best.*
+    model, config, meta = load_model(out / "latest")
+    assert config == tiny_vae_config() and meta["step"] == 6 and meta["window"] == 64
+    state = json.loads((out / "train_state.json").read_text())
+    assert state["step"] == 6 and state["world_size"] == 1 and state["optimizer"]["class"] == "AdamW"
+    assert state["lr"] == pytest.approx(lr_at_step(5, 3e-3, 2, (4,), 0.5))
+    ts = load_train_state(out)
+    assert_same_tensors(ts.model_state, dict(model.state_dict()))  # the train state holds the same weights
+    assert any(k.endswith(".exp_avg_sq") for k in ts.optim_tensors)
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["model_type"] == "salad_vae" and cfg["train"]["batch_size"] == 8 and cfg["model"]["latent_dim"] == 8
+    rows = [json.loads(l) for l in (out / "log.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in rows] == [1, 2, 3, 4, 5, 6]
+    assert {"loss", "rec", "pos", "vel", "kl", "lr"} <= set(rows[0])
+    ms = load_tensors(out / "mean_std.safetensors")
+    assert ms["mean"].shape == (SK.feature_dim,)
+
+
+def test_vae_loss_decreases_on_tiny_overfit(corpus, tmp_path):
+    from salad_core.models.vae import VAEConfig
+
+    cfg = vae_train_config(max_steps=30, lr=1e-2, warmup_steps=0, milestones=(), log_every=5)
+    res = train_vae(corpus, tmp_path, VAEConfig(latent_dim=16, n_extra_layers=0, dropout=0.0), cfg)
+    rows = [json.loads(l) for l in (tmp_path / "log.jsonl").read_text().splitlines()]
+    first, last = rows[0]["rec"], rows[-1]["rec"]
+    assert last < 0.8 * first, (first, last)
+    assert res.last_loss == pytest.approx(rows[-1]["loss"])
+    assert res.steps_per_s > 0
+
+
+def test_vae_resume_is_bit_identical(corpus, straight_vae, tmp_path):
+    first = train_vae(corpus, tmp_path, tiny_vae_config(), vae_train_config(max_steps=4))
+    st = load_train_state(tmp_path)
+    assert first.step == 4 and (st.epoch, st.batch_in_epoch) == (1, 1)  # stopped mid-epoch
+    res = train_vae(corpus, tmp_path, tiny_vae_config(), vae_train_config(), resume=True)
+    assert res.step == 6 and res.epoch == 2
+    assert_same_tensors(weights(tmp_path / "latest.safetensors"), weights(straight_vae / "latest.safetensors"))
+    a, b = load_train_state(tmp_path), load_train_state(straight_vae)
+    assert_same_tensors(a.optim_tensors, b.optim_tensors)
+    assert_same_tensors(a.rng[0].tensors, b.rng[0].tensors)
+    rows = [json.loads(l) for l in (tmp_path / "log.jsonl").read_text().splitlines()]
+    ref = [json.loads(l) for l in (straight_vae / "log.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in rows] == [1, 2, 3, 4, 5, 6]
+    assert [r["loss"] for r in rows] == [r["loss"] for r in ref]
+
+
+def test_sigint_writes_a_consistent_checkpoint_then_resume_matches(corpus, straight_vae, tmp_path):
+    def interrupt(step: int) -> None:
+        if step == 3:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    # step 3 ends epoch 0: the resumed run starts with an exhausted epoch and must move on
+    handler = signal.getsignal(signal.SIGINT)
+    res = train_vae(corpus, tmp_path, tiny_vae_config(), vae_train_config(), on_step=interrupt)
+    assert res.interrupted and res.step == 3
+    assert signal.getsignal(signal.SIGINT) is handler  # the caller's handler is back
+    ts = load_train_state(tmp_path)
+    latest_doc, latest = read_checkpoint(tmp_path / "latest")
+    assert ts.step == 3 and ts.extra["reason"] == "interrupt" and latest_doc["meta"]["step"] == 3
+    assert_same_tensors(ts.model_state, latest)
+    load_model(tmp_path / "latest")  # rebuilds
+    res = train_vae(corpus, tmp_path, tiny_vae_config(), vae_train_config(), resume=True)
+    assert res.step == 6 and not res.interrupted
+    assert_same_tensors(weights(tmp_path / "latest.safetensors"), weights(straight_vae / "latest.safetensors"))
+
+
+def test_disk_full_keeps_the_previous_checkpoint(corpus, tmp_path, monkeypatch):
+    train_vae(corpus, tmp_path, tiny_vae_config(), vae_train_config(max_steps=2))
+    kept = ("latest.json", "latest.safetensors", "train_state.json", "train_state.safetensors", "mean_std.safetensors")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.name in kept}
+    assert len(before) == len(kept)
+    import safetensors.torch
+
+    real = safetensors.torch.save_file
+
+    def full_disk(tensors, filename, metadata=None):
+        Path(filename).write_bytes(b"\0" * 100)  # a partial write, then the disk is full
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(safetensors.torch, "save_file", full_disk)
+    with pytest.raises(OSError) as info:
+        train_vae(corpus, tmp_path, tiny_vae_config(), vae_train_config(max_steps=4), resume=True)
+    assert info.value.errno == errno.ENOSPC
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.name in kept} == before  # nothing replaced
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name not in kept) == ["config.json", "log.jsonl"]  # no temp file
+    monkeypatch.setattr(safetensors.torch, "save_file", real)
+    assert load_train_state(tmp_path).step == 2
+    res = train_vae(corpus, tmp_path, tiny_vae_config(), vae_train_config(max_steps=4), resume=True)
+    assert res.step == 4
+
+
+def test_refuses_to_overwrite_a_run_and_resume_without_state_starts_fresh(corpus, straight_vae, tmp_path):
+    with pytest.raises(FileExistsError, match="resume=True"):
+        train_vae(corpus, straight_vae, tiny_vae_config(), vae_train_config())
+    res = train_vae(corpus, tmp_path, tiny_vae_config(), vae_train_config(max_steps=1), resume=True)
+    assert res.step == 1 and (tmp_path / "train_state.safetensors").is_file()
+
+
+def test_batch_size_must_split_evenly_and_fit_the_data(corpus, tmp_path):
+    with pytest.raises(ValueError, match="not divisible"):
+        fit(scalar_task(), tmp_path, VAETrainConfig(batch_size=3, max_steps=1, progress=False),
+            env=DistEnv(rank=0, world_size=2))
+    with pytest.raises(ValueError, match="fewer than one batch"):
+        train_vae(corpus, tmp_path / "b", tiny_vae_config(), vae_train_config(batch_size=4096))
+
+
+# ---------------------------------------------------------------------------- denoiser
+class HashTextEncoder:
+    """A deterministic stand-in text encoder: [CLS] word... [SEP], one seeded vector per word."""
+
+    dim = 16
+
+    def encode(self, prompts, allow_empty=False):
+        from salad_core.data.texts import split_words
+        from salad_core.text import TextBatch
+
+        self.calls = getattr(self, "calls", []) + [list(prompts)]
+        words = [split_words(p) for p in prompts]
+        w = max(len(ws) for ws in words) + 2
+        feats = torch.zeros(len(prompts), w, self.dim)
+        mask = torch.zeros(len(prompts), w, dtype=torch.bool)
+        for i, ws in enumerate(words):
+            toks = ["[CLS]", *ws, "[SEP]"]
+            for j, tok in enumerate(toks):
+                g = torch.Generator().manual_seed(zlib.crc32(tok.encode()))
+                feats[i, j] = torch.randn(self.dim, generator=g)
+            mask[i, : len(toks)] = True
+        return TextBatch(feats, mask, [["[CLS]", *ws, "[SEP]"] for ws in words],
+                         [[None, *range(len(ws)), None] for ws in words], words, list(prompts))
+
+
+@pytest.fixture(scope="module")
+def tiny_vae_run(corpus, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("vae_for_denoiser")
+    train_vae(corpus, out, tiny_vae_config(), vae_train_config(max_steps=0))  # initial weights suffice
+    return out
+
+
+def tiny_denoiser_config():
+    from salad_core.models.denoiser import DenoiserConfig
+
+    return DenoiserConfig(latent_dim=8, width=16, heads=2, ff_dim=32, layers=1, text_dim=HashTextEncoder.dim)
+
+
+def den_train_config(**kw) -> DenoiserTrainConfig:
+    base = dict(batch_size=4, max_steps=4, lr=2e-3, warmup_steps=1, max_length=72, cond_drop_prob=0.3,
+                val_every=2, ckpt_every=0, log_every=1, num_threads=1, progress=False, seed=11)
+    base.update(kw)
+    return DenoiserTrainConfig(**base)
+
+
+def test_denoiser_resume_is_bit_identical(corpus, tiny_vae_run, tmp_path):
+    ref = tmp_path / "ref"
+    res = train_denoiser(corpus, ref, tiny_vae_run, tiny_denoiser_config(), den_train_config(), HashTextEncoder())
+    assert res.step == 4 and res.best_step is not None
+    doc, _ = read_checkpoint(ref / "latest")
+    assert doc["type"] == "denoiser" and doc["meta"]["diffusion"]["prediction_type"] == "v_prediction"
+    assert (ref / "best.safetensors").is_file()
+    run = tmp_path / "run"
+    train_denoiser(corpus, run, tiny_vae_run, tiny_denoiser_config(), den_train_config(max_steps=1), HashTextEncoder())
+    res2 = train_denoiser(corpus, run, tiny_vae_run, tiny_denoiser_config(), den_train_config(), HashTextEncoder(),
+                          resume=True)
+    assert res2.step == 4 and res2.best_val == res.best_val
+    assert_same_tensors(weights(run / "latest.safetensors"), weights(ref / "latest.safetensors"))
+    assert_same_tensors(weights(run / "best.safetensors"), weights(ref / "best.safetensors"))
+
+
+def test_denoiser_batch_prep_drops_captions_masks_and_targets(corpus, tiny_vae_run):
+    from salad_core.data.dataset import MotionTextDataset, collate_motion_text
+    from salad_core.sampling import make_scheduler
+    from salad_core.train.common import StepContext
+    from salad_core.train.denoiser_trainer import CaptionFeatureCache, DenoiserObjective, _prepare, load_frozen_vae
+
+    vae = load_frozen_vae(tiny_vae_run)
+    assert not any(p.requires_grad for p in vae.parameters()) and not vae.training
+    ds = MotionTextDataset(corpus, "train", max_length=72, seed=0)
+    batch = collate_motion_text([ds[i] for i in range(len(ds))] * 25, trim=False)   # 200 samples
+    batch["length"][0] = 40                                                         # one short motion
+    enc = HashTextEncoder()
+    sched = make_scheduler()
+    cfg = den_train_config(cond_drop_prob=0.25)
+    ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(0), DistEnv()), DistEnv(), train=True, step=0)
+    inp = _prepare(batch, ctx, vae=vae, text=CaptionFeatureCache(enc, 100), scheduler=sched, config=cfg,
+                   prediction_type="v_prediction", latent_shape=(18, 7, 8))
+    n_lat = int(batch["length"].max()) // 4
+    assert inp["noisy"].shape == (200, n_lat, 7, 8) and inp["frame_mask"].shape == (200, n_lat)
+    assert torch.equal(inp["frame_mask"], torch.arange(n_lat)[None] < (batch["length"] // 4)[:, None])
+    assert inp["frame_mask"][0].sum() == 10
+    assert torch.all(inp["noisy"][0, 10:] == 0) and torch.all(inp["target"][0, 10:] == 0)  # padded frames masked
+    frac = float(((inp["text_mask"].sum(1) == 2)).float().mean())  # [CLS] [SEP] only: the null text ""
+    assert 0.15 < frac < 0.35, frac                                       # about cond_drop_prob
+    assert int(inp["timesteps"].min()) >= 0 and int(inp["timesteps"].max()) < 1000
+    # same seed, same draws; validation keeps every caption
+    ctx2 = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(0), DistEnv()), DistEnv(), train=False, step=0)
+    val = _prepare(batch, ctx2, vae=vae, text=CaptionFeatureCache(enc, 0), scheduler=sched, config=cfg,
+                   prediction_type="v_prediction", latent_shape=(18, 7, 8))
+    assert torch.equal(val["noisy"], inp["noisy"]) and bool((val["text_mask"].sum(1) > 2).all())
+
+    class Zero(nn.Module):
+        def forward(self, x, t, text, text_mask, frame_mask):
+            return torch.zeros_like(x)
+
+    loss = DenoiserObjective(Zero())(**inp)["loss"]
+    m = inp["frame_mask"][:, :, None, None]
+    assert float(loss) == pytest.approx(float(inp["target"][m.expand_as(inp["target"])].pow(2).mean()), rel=1e-5)
+
+
+def test_caption_cache_gives_the_features_of_single_encoding():
+    from salad_core.train.denoiser_trainer import CaptionFeatureCache
+
+    enc = HashTextEncoder()
+    cache = CaptionFeatureCache(enc, max_entries=2)
+    f1, m1 = cache.encode(["a person walks", "", "a person walks"])
+    assert cache.misses == 2 and cache.hits == 1 and f1.shape == (3, 5, 16)
+    assert m1.sum(1).tolist() == [5, 2, 5]
+    alone = enc.encode(["a person walks"]).features[0]
+    assert torch.equal(f1[0], alone) and torch.equal(f1[2], alone)
+    cache.encode(["someone runs"])                       # evicts the oldest entry
+    assert len(cache._store) == 2
+
+
+def test_denoiser_with_the_real_minilm_encoder(corpus, tiny_vae_run, tmp_path):
+    from salad_core.models.denoiser import DenoiserConfig
+
+    cfg = DenoiserConfig(latent_dim=8, width=16, heads=2, ff_dim=32, layers=1, text_dim=384)
+    res = train_denoiser(corpus, tmp_path, tiny_vae_run, cfg, den_train_config(max_steps=2, val_every=0))
+    assert res.step == 2 and np.isfinite(res.last_loss)
+    doc, _ = read_checkpoint(tmp_path / "latest")
+    assert doc["meta"]["text_encoder"] == "minilm"
+    with pytest.raises(ValueError, match="text_dim=16 does not fit"):
+        train_denoiser(corpus, tmp_path / "x", tiny_vae_run, tiny_denoiser_config(), den_train_config())
+
+
+def test_cli_main_trains_and_resumes(corpus, tmp_path, capsys):
+    from salad_core.train import main
+
+    conf = tmp_path / "conf.json"
+    conf.write_text(json.dumps({"model": {"latent_dim": 8, "n_extra_layers": 0},
+                                "train": {"batch_size": 8, "max_steps": 2, "warmup_steps": 0, "num_threads": 1,
+                                          "val_every": 0, "log_every": 1}}))
+    out = tmp_path / "run"
+    assert main(["vae", "--data", str(corpus), "--out", str(out), "--config", str(conf), "--no-progress"]) == 0
+    assert load_train_state(out).step == 2
+    assert main(["vae", "--data", str(corpus), "--out", str(out), "--resume", "--steps", "3", "--no-progress"]) == 0
+    assert load_train_state(out).step == 3
+    assert json.loads((out / "config.json").read_text())["model"]["latent_dim"] == 8
+    assert "step 3" in capsys.readouterr().out
+
+
+def test_denoiser_normalises_with_the_vae_statistics(corpus, tiny_vae_run, tmp_path):
+    import shutil
+
+    from salad_core.io import save_tensors
+
+    vae_dir = tmp_path / "vae"
+    shutil.copytree(tiny_vae_run, vae_dir)
+    stats = load_tensors(vae_dir / "mean_std.safetensors")
+    shifted = {"mean": stats["mean"] + 1.0, "std": stats["std"] * 2.0}
+    save_tensors(vae_dir / "mean_std.safetensors", shifted)
+    train_denoiser(corpus, tmp_path / "den", vae_dir, tiny_denoiser_config(), den_train_config(max_steps=0),
+                   HashTextEncoder())
+    got = load_tensors(tmp_path / "den" / "mean_std.safetensors")
+    assert torch.equal(got["mean"], shifted["mean"]) and torch.equal(got["std"], shifted["std"])
+
+
+def test_vae_then_denoiser_on_the_procedural_corpus(tmp_path):
+    from salad_core.data.procedural import build_corpus
+
+    root = tmp_path / "corpus"
+    build_corpus(root, size="tiny", seed=0, progress=False)
+    vae = train_vae(root, tmp_path / "vae", tiny_vae_config(),
+                    vae_train_config(batch_size=16, max_steps=3, val_every=3, val_batches=2))
+    assert vae.step == 3 and vae.best_step == 3 and np.isfinite(vae.best_val)
+    den = train_denoiser(root, tmp_path / "den", tmp_path / "vae", tiny_denoiser_config(),
+                         den_train_config(batch_size=8, max_steps=3, max_length=196, val_every=3, val_batches=2),
+                         HashTextEncoder())
+    assert den.step == 3 and den.best_step == 3 and np.isfinite(den.best_val)
+    doc, _ = read_checkpoint(tmp_path / "den" / "best")
+    assert doc["meta"]["vae"] == str(tmp_path / "vae" / "best")  # the denoiser used the VAE's best weights
