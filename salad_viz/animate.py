@@ -1,0 +1,248 @@
+"""Animations: frames of one or several motions (side by side or overlaid) as GIF or MP4.
+
+MP4 uses the ffmpeg binary shipped by the PyPI package ``imageio-ffmpeg`` (H.264, yuv420p, so it
+plays in browsers and Jupyter); GIF uses Pillow through imageio. :func:`show_animation` embeds
+either in a notebook.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from salad_core.skeleton import Skeleton, get_skeleton
+
+from ._arrays import as_joints_list, atomic_output, check_size
+from ._style import THEME_HUES
+from .raster import hstack_images
+from .render import SkeletonRenderer
+
+__all__ = ["LAYOUTS", "render_frames", "animate", "write_video", "show_animation"]
+
+LAYOUTS = ("side", "overlay")
+_FORMATS = (".gif", ".mp4")
+
+
+def _theme_text_color(k: int) -> tuple[float, float, float]:
+    import colorsys
+
+    return colorsys.hls_to_rgb(THEME_HUES[k % len(THEME_HUES)] / 360.0, 0.38, 0.8)
+
+
+def render_frames(
+    joints,
+    skeleton: str | Skeleton = "humanml3d",
+    *,
+    layout: str = "side",
+    titles: Sequence[str] | None = None,
+    size: Sequence[int] = (320, 320),
+    frames: Sequence[int] | None = None,
+    view: str | float = "three_quarter",
+    elevation: float | None = None,
+    follow: bool = True,
+    colors=None,
+    joint_colors=None,
+    floor: bool = True,
+    trajectory: bool = True,
+    backend: str = "auto",
+    bone_shape: str = "capsule",
+) -> np.ndarray:
+    """Render every frame of one or several motions.
+
+    Parameters
+    ----------
+    joints : array (N, J, 3) or list of arrays (N_k, J, 3)
+        Motions in metres. Shorter motions hold their last pose until the longest ends.
+    skeleton : str or Skeleton
+    layout : {"side", "overlay"}
+        ``"side"``: one panel per motion, side by side, each with its own following camera and its
+        chain colours. ``"overlay"``: all motions in one scene, one colour theme each.
+    titles : sequence of str, optional
+        One per motion: panel titles (``"side"``) or a legend in the theme colours (``"overlay"``).
+    size : (width, height)
+        Size of one panel in pixels.
+    frames : sequence of int, optional
+        Which frames to render (default all).
+    view, elevation, follow, colors, joint_colors, floor, trajectory, backend, bone_shape
+        As in :func:`salad_viz.render.render_skeleton`; ``colors`` and ``joint_colors`` take one
+        entry per motion.
+
+    Returns
+    -------
+    ndarray (T, H, W, 3) uint8
+    """
+    skel = get_skeleton(skeleton)
+    motions = as_joints_list(joints, skel)
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
+    if titles is not None and len(titles) != len(motions):
+        raise ValueError(f"titles must have one entry per motion ({len(motions)}), got {len(titles)}")
+    w, h = check_size(size)
+    n = max(len(m) for m in motions)
+    idx = range(n) if frames is None else [int(f) for f in frames]
+    if not len(idx):
+        raise ValueError("frames is empty")
+    jc = joint_colors
+    if jc is not None and not isinstance(jc, (list, tuple)):
+        jc = [jc] + [None] * (len(motions) - 1) if len(motions) > 1 else jc
+    out = []
+    with SkeletonRenderer(skel, size=(w, h), backend=backend, bone_shape=bone_shape) as r:
+        for f in idx:
+            if layout == "overlay" or len(motions) == 1:
+                img = r.render(motions, f, view=view, elevation=elevation, follow=follow, colors=colors,
+                               joint_colors=jc, floor=floor, trajectory=trajectory)
+                if titles:
+                    img = _legend(img, titles, themed=len(motions) > 1)
+            else:
+                panels = []
+                for k, m in enumerate(motions):
+                    panel = r.render(m, min(f, len(m) - 1), view=view, elevation=elevation, follow=follow,
+                                     colors=None if colors is None else [colors[k]],
+                                     joint_colors=None if jc is None else jc[k], floor=floor,
+                                     trajectory=trajectory)
+                    if titles:
+                        panel = _legend(panel, [titles[k]], themed=False)
+                    panels.append(panel)
+                img = hstack_images(panels, gap=4)
+            out.append(img)
+    return np.stack(out)
+
+
+def _legend(img: np.ndarray, titles: Sequence[str], *, themed: bool) -> np.ndarray:
+    from PIL import Image, ImageDraw, ImageFont
+
+    h = img.shape[0]
+    try:
+        font = ImageFont.load_default(size=max(10, min(20, h // 16)))
+    except TypeError:
+        font = ImageFont.load_default()
+    pil = Image.fromarray(np.ascontiguousarray(img))
+    draw = ImageDraw.Draw(pil)
+    y = 4
+    for k, text in enumerate(titles):
+        col = _theme_text_color(k) if themed else (0.1, 0.1, 0.1)
+        draw.text((6, y), str(text), fill=tuple(int(round(c * 255)) for c in col), font=font)
+        box = draw.textbbox((6, y), str(text), font=font)
+        y = box[3] + 3
+    return np.asarray(pil).copy()
+
+
+def write_video(frames, path: str | os.PathLike, fps: float = 20.0, *, loop: bool = True) -> Path:
+    """Write ``(T, H, W, 3)`` uint8 frames as ``.gif`` or ``.mp4`` (chosen by the suffix), atomically.
+
+    MP4 frames are padded with white to even sizes (H.264 with yuv420p needs them).
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in _FORMATS:
+        raise ValueError(f"path must end in one of {_FORMATS}, got {path.name!r}")
+    arr = np.asarray(frames)
+    if arr.ndim != 4 or arr.shape[-1] != 3 or arr.dtype != np.uint8:
+        raise ValueError(f"frames must be (T, H, W, 3) uint8, got {arr.shape} {arr.dtype}")
+    if fps <= 0:
+        raise ValueError(f"fps must be positive, got {fps}")
+    with atomic_output(path) as tmp:
+        if suffix == ".gif":
+            import imageio.v3 as iio
+
+            # GIF delays are whole centiseconds; 20 fps -> 50 ms is exact
+            iio.imwrite(tmp, arr, extension=".gif", duration=1000.0 / fps, loop=0 if loop else 1)
+        else:
+            import imageio.v2 as iio2
+
+            t, hh, ww, _ = arr.shape
+            if hh % 2 or ww % 2:
+                arr = np.pad(arr, ((0, 0), (0, hh % 2), (0, ww % 2), (0, 0)), constant_values=255)
+            writer = iio2.get_writer(tmp, format="FFMPEG", mode="I", fps=fps, codec="libx264",
+                                     pixelformat="yuv420p", macro_block_size=1, quality=8,
+                                     ffmpeg_log_level="error")
+            try:
+                for fr in arr:
+                    writer.append_data(fr)
+            finally:
+                writer.close()
+    return path
+
+
+def animate(
+    joints,
+    skeleton: str | Skeleton,
+    path: str | os.PathLike,
+    fps: float | None = None,
+    *,
+    layout: str = "side",
+    titles: Sequence[str] | None = None,
+    size: Sequence[int] = (320, 320),
+    stride: int = 1,
+    view: str | float = "three_quarter",
+    elevation: float | None = None,
+    follow: bool = True,
+    colors=None,
+    joint_colors=None,
+    floor: bool = True,
+    trajectory: bool = True,
+    backend: str = "auto",
+    bone_shape: str = "capsule",
+) -> Path:
+    """Animate one or several motions to a GIF or MP4 file.
+
+    Parameters
+    ----------
+    joints : array (N, J, 3) or list of arrays (N_k, J, 3)
+        Motions in metres (e.g. ``[source, edited]`` or ``[original, mirrored]``).
+    skeleton : str or Skeleton
+    path : str or PathLike
+        ``.gif`` or ``.mp4``.
+    fps : float, optional
+        Playback rate; default the skeleton's (20 for HumanML3D). With ``stride`` > 1 the rate is
+        divided so that the animation keeps real time.
+    layout : {"side", "overlay"}
+        Panels side by side, or one scene with a colour theme per motion.
+    titles : sequence of str, optional
+        One per motion.
+    size : (width, height)
+        One panel, in pixels.
+    stride : int
+        Render every ``stride``-th frame (smaller files, faster).
+    view, elevation, follow, colors, joint_colors, floor, trajectory, backend, bone_shape
+        As in :func:`render_frames`.
+
+    Returns
+    -------
+    Path
+    """
+    skel = get_skeleton(skeleton)
+    if Path(path).suffix.lower() not in _FORMATS:
+        raise ValueError(f"path must end in one of {_FORMATS}, got {Path(path).name!r}")
+    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1:
+        raise ValueError(f"stride must be a positive int, got {stride!r}")
+    motions = as_joints_list(joints, skel)
+    n = max(len(m) for m in motions)
+    frames = render_frames(motions, skel, layout=layout, titles=titles, size=size, frames=range(0, n, stride),
+                           view=view, elevation=elevation, follow=follow, colors=colors,
+                           joint_colors=joint_colors, floor=floor, trajectory=trajectory, backend=backend,
+                           bone_shape=bone_shape)
+    rate = (skel.fps if fps is None else float(fps)) / stride
+    return write_video(frames, path, rate)
+
+
+def show_animation(path: str | os.PathLike, *, width: int | None = None):
+    """An IPython display object that shows a GIF or MP4 inline (the data is embedded).
+
+    Returns
+    -------
+    IPython.display.Image (GIF) or IPython.display.Video (MP4)
+    """
+    from IPython.display import Image, Video
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no animation at {path}")
+    suffix = path.suffix.lower()
+    if suffix == ".gif":
+        return Image(data=path.read_bytes(), format="gif", width=width)
+    if suffix == ".mp4":
+        return Video(str(path), embed=True, mimetype="video/mp4", width=width)
+    raise ValueError(f"path must be a .gif or .mp4 file, got {path.name!r}")

@@ -1,0 +1,121 @@
+"""salad_viz.animate: GIF/MP4 files (frame count, timing, layout, content) and inline display."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from salad_core.skeleton import get_skeleton
+from salad_viz._style import to_uint8
+from salad_viz.animate import animate, render_frames, show_animation, write_video
+from salad_viz.raster import rasterize_skeleton
+from salad_viz.synthetic import synthetic_motion
+
+SKEL = get_skeleton("humanml3d")
+
+
+@pytest.fixture(scope="module")
+def walk() -> np.ndarray:
+    return synthetic_motion(SKEL, 12)
+
+
+def test_gif_frames_timing_and_content(tmp_path, walk):
+    before = walk.copy()
+    path = animate(walk, SKEL, tmp_path / "walk.gif", size=(64, 80), backend="raster")
+    np.testing.assert_array_equal(walk, before)
+    from PIL import Image
+
+    with Image.open(path) as im:
+        assert im.n_frames == 12
+        assert im.info["duration"] == 50  # 20 fps -> 50 ms per frame
+        assert im.size == (64, 80)
+        first = np.asarray(im.convert("RGB"))
+        im.seek(11)
+        last = np.asarray(im.convert("RGB"))
+    ref = rasterize_skeleton(walk, SKEL, 0, size=(64, 80))
+    assert np.abs(first.astype(int) - ref).mean() < 8  # GIF palette quantisation only
+    assert np.abs(first.astype(int) - last).mean() > 1  # the figure moves
+
+
+def test_mp4_reads_back_with_its_frame_rate(tmp_path, walk):
+    import imageio.v3 as iio
+
+    path = animate(walk, SKEL, tmp_path / "walk.mp4", size=(63, 81), stride=2, backend="raster")
+    frames = iio.imread(path)
+    assert frames.shape == (6, 82, 64, 3)  # odd sizes are padded to even for H.264
+    meta = iio.immeta(path)
+    assert meta["fps"] == pytest.approx(10.0)  # 20 fps with stride 2 keeps real time
+    ref = rasterize_skeleton(walk, SKEL, 2, size=(63, 81))
+    assert np.abs(frames[1, :81, :63].astype(int) - ref).mean() < 10
+
+
+def test_side_by_side_and_overlay_layouts(walk):
+    other = walk + np.array([1.0, 0.0, 0.0])
+    side = render_frames([walk, other[:6]], SKEL, layout="side", titles=["source", "edited"], size=(64, 80),
+                         backend="raster")
+    assert side.shape == (12, 80, 64 * 2 + 4, 3)
+    # the shorter motion holds its last pose
+    np.testing.assert_array_equal(side[8, :, 68:], side[11, :, 68:])
+    assert np.abs(side[8, :, :64].astype(int) - side[11, :, :64]).mean() > 0.5
+    over = render_frames([walk, other], SKEL, layout="overlay", titles=["source", "edited"], size=(96, 80),
+                         backend="raster")
+    assert over.shape == (12, 80, 96, 3)
+    # the legend is written in each motion's theme colour (blue then orange)
+    legend = over[0, :30, :60].reshape(-1, 3).astype(int)
+    blueish = (legend[:, 2] > legend[:, 0] + 60).sum()
+    orangeish = (legend[:, 0] > legend[:, 2] + 60).sum()
+    assert blueish > 5 and orangeish > 5
+
+
+def test_joint_colors_follow_time(tmp_path, walk):
+    cols = np.zeros((12, SKEL.num_joints, 3))
+    cols[:6, :, 0] = 1.0  # red for the first half
+    cols[6:, :, 1] = 1.0  # green afterwards
+    frames = render_frames(walk, SKEL, size=(64, 80), joint_colors=cols, backend="raster", floor=False,
+                           trajectory=False)
+    fig0 = frames[0].reshape(-1, 3).astype(int)
+    fig9 = frames[9].reshape(-1, 3).astype(int)
+    assert ((fig0[:, 0] > 200) & (fig0[:, 1] < 60)).sum() > 20
+    assert ((fig9[:, 1] > 200) & (fig9[:, 0] < 60)).sum() > 20
+    assert ((fig9[:, 0] > 200) & (fig9[:, 1] < 60)).sum() == 0
+
+
+def test_show_animation_embeds_gif_and_mp4(tmp_path):
+    from IPython.display import Image, Video
+
+    frames = np.zeros((3, 16, 16, 3), np.uint8)
+    frames[:, 4:12, 4:12] = to_uint8((1.0, 0.0, 0.0))
+    gif = write_video(frames, tmp_path / "a.gif")
+    mp4 = write_video(frames, tmp_path / "a.mp4")
+    shown = show_animation(gif)
+    assert isinstance(shown, Image) and shown.data[:6] == b"GIF89a"
+    video = show_animation(mp4, width=200)
+    assert isinstance(video, Video) and "data:video/mp4;base64," in video._repr_html_()
+    with pytest.raises(FileNotFoundError):
+        show_animation(tmp_path / "missing.gif")
+
+
+def test_animation_errors(tmp_path, walk):
+    with pytest.raises(ValueError, match=r"must end in one of \('.gif', '.mp4'\)"):
+        animate(walk, SKEL, tmp_path / "walk.avi")
+    with pytest.raises(ValueError, match="layout must be one of"):
+        animate(walk, SKEL, tmp_path / "walk.gif", layout="grid")
+    with pytest.raises(ValueError, match="titles must have one entry per motion"):
+        render_frames([walk, walk], SKEL, titles=["only one"], backend="raster")
+    with pytest.raises(ValueError, match="stride must be a positive int"):
+        animate(walk, SKEL, tmp_path / "walk.gif", stride=0)
+    assert not list(tmp_path.iterdir())  # nothing half-written
+
+
+def test_pyvista_backend_animation_matches_raster_frames(tmp_path, walk):
+    import imageio.v3 as iio
+
+    from salad_viz.render import offscreen_available
+
+    if not offscreen_available():
+        pytest.skip("no off-screen OpenGL on this machine")
+    path = animate(walk[:3], SKEL, tmp_path / "gl.gif", size=(64, 80), backend="pyvista")
+    frames = iio.imread(path)[..., :3]
+    assert frames.shape == (3, 80, 64, 3)
+    for f in range(3):
+        ref = rasterize_skeleton(walk[:3], SKEL, f, size=(64, 80))
+        assert np.abs(frames[f].astype(int) - ref).mean() < 15

@@ -1,0 +1,267 @@
+"""salad_viz.attention: reduction, word selection, heatmap content, grids, comparisons, joint colours."""
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+from salad_core.skeleton import PART_MIRROR, PART_NAMES, get_skeleton
+from salad_viz.attention import (
+    joint_attention,
+    joint_attention_colors,
+    merge_tokens,
+    mirror_attention,
+    plot_attention_by_layer,
+    plot_attention_by_steps,
+    plot_attention_comparison,
+    plot_attention_grid,
+    plot_mirror_comparison,
+    plot_word_attention,
+    reduce_attention,
+    select_words,
+    word_token_ids,
+)
+
+TOKENS = ["[CLS]", "a", "man", "jumps", "forward", "and", "then", "walks", "forward", ",", "while",
+          "waving", "his", "arms", "[SEP]"]
+P = len(PART_NAMES)
+
+
+@pytest.fixture(autouse=True)
+def _close_figures():
+    yield
+    plt.close("all")
+
+
+def _attention(n_lat: int = 25, seed: int = 0) -> np.ndarray:
+    """(P, N', W) softmax maps with 'jumps' early everywhere, 'walks' late on root and legs."""
+    rng = np.random.default_rng(seed)
+    logits = rng.normal(0, 0.3, (P, n_lat, len(TOKENS)))
+    t = np.arange(n_lat)
+    logits[:, :, 3] += 3.0 * np.exp(-((t - 4) / 3.0) ** 2)
+    logits[:3, :, 7] += 3.0 * (t > n_lat // 2)
+    att = np.exp(logits)
+    return att / att.sum(axis=-1, keepdims=True)
+
+
+def _image_of(fig):
+    """The AxesImage arrays of a figure, one per panel that shows a map."""
+    return [ax.images[0] for ax in fig.axes if ax.images]
+
+
+# ----------------------------------------------------------------------------- reduction
+def test_reduce_attention_matches_manual_mean_and_selects_steps_layers_heads():
+    rng = np.random.default_rng(1)
+    arr = rng.random((6, 3, 2, 5, P, 4))  # s l h n p w
+    before = arr.copy()
+    out = reduce_attention(arr, "slhnpw")
+    assert out.shape == (P, 5, 4)
+    np.testing.assert_allclose(out, arr.mean(axis=(0, 1, 2)).transpose(1, 0, 2))
+    sel = reduce_attention(arr, "slhnpw", steps=(2, 5), layers=[0, 2], heads=1)
+    np.testing.assert_allclose(sel, arr[2:5][:, [0, 2]][:, :, [1]].mean(axis=(0, 1, 2)).transpose(1, 0, 2))
+    np.testing.assert_array_equal(arr, before)  # input untouched
+
+
+def test_reduce_attention_batch_axis_and_errors():
+    rng = np.random.default_rng(2)
+    arr = rng.random((2, 3, 5, P, 4))  # b h n p w
+    np.testing.assert_allclose(reduce_attention(arr, "bhnpw", batch=1), arr[1].mean(axis=0).transpose(1, 0, 2))
+    with pytest.raises(ValueError, match="batch=<index>"):
+        reduce_attention(arr, "bhnpw")
+    with pytest.raises(ValueError, match="names 4 axes"):
+        reduce_attention(arr, "hnpw")
+    with pytest.raises(ValueError, match="must contain 'w'"):
+        reduce_attention(arr[..., 0], "bhnp")
+    with pytest.raises(ValueError, match="no layer axis"):
+        reduce_attention(arr, "bhnpw", batch=0, layers=1)
+    with pytest.raises(ValueError, match="out of range"):
+        reduce_attention(arr, "bhnpw", batch=0, heads=7)
+
+
+def test_reduce_attention_accepts_torch_tensors():
+    torch = pytest.importorskip("torch")
+    arr = torch.rand(2, 5, P, 4)
+    out = reduce_attention(arr, "snpw")
+    np.testing.assert_allclose(out, arr.numpy().mean(axis=0).transpose(1, 0, 2), rtol=1e-6)
+
+
+# ----------------------------------------------------------------------------- words
+def test_merge_tokens_wordpiece_and_clip_pieces():
+    assert merge_tokens(["[CLS]", "a", "tread", "##mill", "[SEP]"]) == [("a", (1,)), ("treadmill", (2, 3))]
+    clip = ["<|startoftext|>", "a</w>", "tread", "mill</w>", "walk</w>", "<|endoftext|>"]
+    assert merge_tokens(clip) == [("a", (1,)), ("treadmill", (2, 3)), ("walk", (4,))]
+
+
+def test_word_token_ids_by_text_index_and_list():
+    assert word_token_ids(TOKENS, "walks forward") == (7, 8)
+    assert word_token_ids(TOKENS, "JUMPS") == (3,)
+    assert word_token_ids(TOKENS, -2) == (13,)
+    assert word_token_ids(TOKENS, ["waving", "arms"]) == (11, 13)
+    with pytest.raises(ValueError, match=r"occurs 2 times.*\[4\].*\[8\]"):
+        word_token_ids(TOKENS, "forward")
+    with pytest.raises(ValueError, match="not in the tokens; words are: a man jumps"):
+        word_token_ids(TOKENS, "runs")
+    with pytest.raises(ValueError, match="out of range"):
+        word_token_ids(TOKENS, 15)
+
+
+def test_select_words_sums_pairs_and_skips_specials_and_punctuation():
+    att = _attention()
+    maps, labels = select_words(att, TOKENS, ["jumps forward", 7, ["waving", "arms"]])
+    assert labels == ["jumps forward", "walks", "waving arms"]
+    np.testing.assert_allclose(maps[0], att[:, :, 3] + att[:, :, 4])
+    np.testing.assert_allclose(maps[1], att[:, :, 7])
+    np.testing.assert_allclose(maps[2], att[:, :, 11] + att[:, :, 13])
+    _, all_labels = select_words(att, TOKENS)
+    assert all_labels == ["a", "man", "jumps", "forward", "and", "then", "walks", "forward", "while",
+                          "waving", "his", "arms"]
+    with pytest.raises(ValueError, match="W = 15"):
+        select_words(att, TOKENS[:-1])
+
+
+# ----------------------------------------------------------------------------- heatmaps
+def test_word_heatmap_rows_labels_time_axis_and_normalisation():
+    m = np.full((P, 10), 0.1)
+    m[PART_NAMES.index("left arm"), 3] = 0.5
+    before = m.copy()
+    fig = plot_word_attention(m, "waving")
+    ax = fig.axes[0]
+    im = ax.images[0]
+    np.testing.assert_allclose(im.get_array(), m / 0.5)  # divided by the max, as the official plots
+    assert [t.get_text() for t in ax.get_yticklabels()] == list(PART_NAMES)
+    assert im.get_extent()[:2] == [0, 40]  # 10 latent frames x 4 motion frames
+    assert ax.get_title() == "waving" and im.get_cmap().name == "viridis"
+    np.testing.assert_array_equal(m, before)
+
+    # the brightest cell is drawn where the data says: left-arm row, motion frames 12-16
+    fig.canvas.draw()
+    rgba = np.asarray(fig.canvas.buffer_rgba())
+    x, y = ax.transData.transform((14.0, PART_NAMES.index("left arm")))
+    px = rgba[int(round(rgba.shape[0] - y)), int(round(x)), :3].astype(int)
+    top = (np.asarray(plt.get_cmap("viridis")(1.0)[:3]) * 255).astype(int)
+    assert np.abs(px - top).max() <= 3
+    x2, y2 = ax.transData.transform((30.0, PART_NAMES.index("root")))
+    low = (np.asarray(plt.get_cmap("viridis")(0.2)[:3]) * 255).astype(int)
+    assert np.abs(rgba[int(round(rgba.shape[0] - y2)), int(round(x2)), :3].astype(int) - low).max() <= 3
+
+
+def test_word_heatmap_into_given_axes_and_frame_cursor():
+    fig, ax = plt.subplots()
+    out = plot_word_attention(np.ones((P, 5)), ax=ax, frame=7, colorbar=False)
+    assert out is fig
+    assert len(ax.lines) == 2 and ax.lines[0].get_xdata()[0] == pytest.approx(7.5)
+    with pytest.raises(ValueError, match=r"\(P, N'\) with P = 7"):
+        plot_word_attention(np.ones((6, 5)))
+
+
+def test_attention_grid_layout_of_fig6():
+    att = _attention()
+    words = ["jumps forward", "walks forward", ["waving", "arms"]]
+    prompt = "a man jumps forward and then walks forward, while waving his arms"
+    fig = plot_attention_grid(att, TOKENS, words, prompt=prompt)
+    images = _image_of(fig)
+    assert len(images) == 3
+    panels = [ax for ax in fig.axes if ax.images]
+    assert [ax.get_title() for ax in panels][:2] == ["jumps forward", "walks forward"]
+    assert fig._suptitle.get_text() == prompt
+    # part labels on the left panel only
+    assert [t.get_text() for t in panels[0].get_yticklabels()] == list(PART_NAMES)
+    assert all(t.get_text() == "" for t in panels[1].get_yticklabels())
+    walks = att[:, :, 7] + att[:, :, 8]
+    np.testing.assert_allclose(images[1].get_array(), walks / walks.max())
+    # 'walks forward' peaks on root/legs in the second half: the heatmap shows it
+    shown = np.asarray(images[1].get_array())
+    assert shown[:3, 13:].mean() > 2 * shown[3:, 13:].mean()
+
+
+def test_attention_grid_all_words_wraps_rows():
+    fig = plot_attention_grid(_attention(), TOKENS, ncols=5)
+    assert len(_image_of(fig)) == 12  # every word, no specials or punctuation
+    assert sum(1 for ax in fig.axes if not ax.images and not ax.axison) == 3  # empty cells hidden
+
+
+def test_by_layer_and_by_steps_views():
+    rng = np.random.default_rng(3)
+    arr = rng.random((8, 3, 2, 6, P, len(TOKENS)))  # s l h n p w
+    fig = plot_attention_by_layer(arr, TOKENS, "walks", axes="slhnpw")
+    images = _image_of(fig)
+    assert len(images) == 4  # 3 layers + mean
+    per_layer = [reduce_attention(arr, "slhnpw", layers=i)[:, :, 7] for i in range(3)]
+    mean = reduce_attention(arr, "slhnpw")[:, :, 7]
+    top = max(m.max() for m in per_layer + [mean])  # shared scale
+    for im, expect in zip(images, per_layer + [mean]):
+        np.testing.assert_allclose(im.get_array(), expect / top)
+
+    fig = plot_attention_by_steps(arr, TOKENS, 7, axes="slhnpw", step_ranges=[(0, 2), (2, 8)])
+    images = _image_of(fig)
+    assert [ax.get_title() for ax in fig.axes if ax.images] == ["steps 0-1", "steps 2-7"]
+    a = reduce_attention(arr, "slhnpw", steps=(0, 2))[:, :, 7]
+    b = reduce_attention(arr, "slhnpw", steps=(2, 8))[:, :, 7]
+    top = max(a.max(), b.max())
+    np.testing.assert_allclose(images[0].get_array(), a / top)
+    np.testing.assert_allclose(images[1].get_array(), b / top)
+    with pytest.raises(ValueError, match="needs a step axis"):
+        plot_attention_by_steps(arr[0], TOKENS, 7, axes="lhnpw")
+
+
+# ----------------------------------------------------------------------------- comparisons
+def test_comparison_difference_and_absent_words():
+    src = _attention(seed=4)
+    edit_tokens = TOKENS[:-1] + ["high", "[SEP]"]
+    edit = np.concatenate([_attention(seed=5), _attention(seed=6)[:, :, :1]], axis=2)
+    fig = plot_attention_comparison(src, edit, TOKENS, ["walks", "high"], edited_tokens=edit_tokens)
+    panels = [ax for ax in fig.axes if ax.images]
+    # row 'walks': source, edited, difference; row 'high': edited only + nothing else
+    assert len(panels) == 4
+    top = max(src[:, :, 7].max(), edit[:, :, 7].max())
+    np.testing.assert_allclose(panels[0].images[0].get_array(), src[:, :, 7] / top)
+    np.testing.assert_allclose(panels[2].images[0].get_array(), (edit[:, :, 7] - src[:, :, 7]) / top)
+    lo, hi = panels[2].images[0].get_clim()
+    assert lo == pytest.approx(-hi)  # diverging scale centred on zero
+    texts = [t.get_text() for ax in fig.axes for t in ax.texts]
+    assert "'high' absent" in texts
+    with pytest.raises(ValueError, match="neither token list"):
+        plot_attention_comparison(src, edit, TOKENS, ["runs"], edited_tokens=edit_tokens)
+
+
+def test_mirror_attention_swaps_sides_and_is_an_involution():
+    att = _attention()
+    mir = mirror_attention(att)
+    np.testing.assert_array_equal(mir[PART_NAMES.index("left leg")], att[PART_NAMES.index("right leg")])
+    np.testing.assert_array_equal(mir[PART_NAMES.index("right arm")], att[PART_NAMES.index("left arm")])
+    np.testing.assert_array_equal(mir[0], att[0])
+    np.testing.assert_array_equal(mirror_attention(mir), att)
+    assert PART_MIRROR[PART_MIRROR[1]] == 1
+    # a perfectly mirrored generation shows an all-zero third column
+    fig = plot_mirror_comparison(att, mir, TOKENS, ["jumps", "walks"])
+    diffs = [ax.images[0].get_array() for ax in fig.axes if ax.images][2::3]
+    assert len(diffs) == 2 and all(np.abs(d).max() < 1e-12 for d in diffs)
+
+
+# ----------------------------------------------------------------------------- joints
+def test_joint_attention_follows_parts_and_time():
+    skel = get_skeleton("humanml3d")
+    maps = np.arange(P * 5, dtype=float).reshape(P, 5)
+    vals = joint_attention(maps, skel, n_frames=23)
+    assert vals.shape == (23, skel.num_joints)
+    wrist = skel.joint_names.index("left_wrist")
+    assert vals[13, wrist] == maps[PART_NAMES.index("left arm"), 3]  # frame 13 -> latent 3
+    assert vals[22, 0] == maps[PART_NAMES.index("root"), 4]  # past the end: last latent column
+    head = skel.joint_names.index("head")
+    np.testing.assert_array_equal(vals[:, head], maps[PART_NAMES.index("head")][np.minimum(np.arange(23) // 4, 4)])
+
+
+def test_joint_attention_colors_use_heatmap_colormap():
+    skel = get_skeleton("humanml3d")
+    maps = np.zeros((P, 4))
+    maps[PART_NAMES.index("right leg"), 2] = 2.0
+    cols = joint_attention_colors(maps, skel)
+    assert cols.shape == (16, skel.num_joints, 3)
+    knee = skel.joint_names.index("right_knee")
+    np.testing.assert_allclose(cols[9, knee], plt.get_cmap("viridis")(1.0)[:3])
+    np.testing.assert_allclose(cols[9, 0], plt.get_cmap("viridis")(0.0)[:3])
+    np.testing.assert_allclose(cols[2, knee], plt.get_cmap("viridis")(0.0)[:3])
