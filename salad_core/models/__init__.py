@@ -22,7 +22,8 @@ def _register_extras() -> None:
     # the evaluator and KeyMotion live in their own packages but load through the same registry
     import importlib
 
-    for mod in ("salad_core.eval.t2m", "salad_core.keymotion.models"):
+    for mod in ("salad_core.eval.t2m", "salad_core.keymotion.kf_vae", "salad_core.keymotion.pst",
+                "salad_core.keymotion.mmae"):
         try:
             importlib.import_module(mod)
         except ModuleNotFoundError as exc:  # optional pieces of a partial install

@@ -1,0 +1,355 @@
+"""The keyframe VAE of KeyMotion (paper §III-B, eqs. 2-6).
+
+Data flow (default sizes; HumanML3D ``D = 263``)::
+
+    keyframes (B, K, D) normalised --Linear--> (B, K, 120) ┐ concatenated
+    positions (B, K) in [0, 1] --[u, SPE(u (Nmax-1))]--Linear--> (B, K, 8) ┘ -> (B, K, 128)
+    [latent tokens (Lz, 128) ; keyframe tokens] + SPE over the token order
+      --transformer encoder x layers--> latent-token outputs --LN, Linear--> mu, logvar (B, Lz, Dz)
+    z = mu + eps * exp(logvar / 2)
+    queries SPE(0..K-1) (B, K, 128), memory Linear(z) + SPE(0..Lz-1)
+      --transformer decoder x layers (self-attn, cross-attn to the memory, FFN)-->
+      --LN--> Linear -> keyframes (B, K, D)
+              Linear -> gap logits (B, K-1) --softmax, cumsum--> positions (B, K), 0 = u_0 < ... < u_K-1 = 1
+
+Choices where the paper is silent (its equations were lost in our copy) or that we changed:
+
+* **Number of keyframes** ``K`` is fixed per model (``num_keyframes``, default 20, about the
+  paper's 10 % of the 196-frame maximum). Every motion, whatever its length ``L >= K``, is
+  represented by ``K`` keyframes, so all tensors are dense and no masks are needed; short motions
+  simply get denser keyframes.
+* **Index representation**: the keyframe index ``i_k`` of a motion of length ``L`` is encoded by
+  its normalised position ``u_k = i_k / (L - 1)`` in ``[0, 1]`` (first keyframe 0, last 1). The
+  index embedding (``index_dim`` channels, the paper's 16 of 272) is a linear map of
+  ``[u_k, SPE(u_k (max_length - 1))]``, concatenated to the keyframe embedding (``frame_dim``).
+* **Index decoding**: the decoder regresses the *gaps* between consecutive positions: the query
+  tokens ``1 .. K-1`` give one logit each, a softmax turns them into positive gaps summing to 1,
+  and their cumulative sum is ``u_1 .. u_K-1`` (``u_0 = 0``). The decoded positions are thus
+  increasing, start at 0 and end at 1 by construction, so the decoded keyframes never need
+  reordering (plain regression of ``u_k`` mis-ordered keyframes whose positions were close).
+  :func:`positions_to_indices` turns positions into frames: ``round(u (L - 1))``, sort, clamp to
+  ``[0, L - 1]``, make strictly increasing, and force the first and last keyframes to frames
+  ``0`` and ``L - 1``.
+* **Losses** (eq. 2): ``L = L_rec + λ_kl L_kl + λ_bone L_bone + λ_index L_index`` with
+  ``L_rec`` the MSE of the normalised keyframe features (eq. 3), ``L_kl`` the mean over latent
+  elements of ``0.5 (mu^2 + sigma^2 - log sigma^2 - 1)`` (eq. 4), ``L_bone`` the mean absolute
+  bone-length error in metres of each keyframe pose recovered alone (eq. 5,
+  :func:`~salad_core.keymotion.models.pose_joints`), and ``L_index`` the mean absolute error of
+  ``u`` (eq. 6; L1 rather than MSE, whose gradient vanishes at the one-frame errors that matter).
+  Weights: ``λ_kl = 1e-4`` (as MLD), ``λ_bone = 1``, ``λ_index = 3`` (chosen on overfit runs:
+  keyframes and indices are both recovered, the latter within one or two frames).
+* **Latent**: ``Lz = 2`` tokens (the paper's best latent size for generation, supplement C) of
+  ``Dz = 64`` channels, i.e. 128 numbers for ``K x D = 5260`` keyframe numbers; the encoder reads
+  them off ``Lz`` learnable tokens prepended to the keyframe tokens, the decoder's queries are the
+  fixed sinusoids of the keyframe slots ``0 .. K-1`` and its keys/values the projected latent.
+* **Blocks** are pre-norm (more stable for tiny models trained briefly) with ReLU feed-forward
+  as the paper's vanilla layers. Default sizes are small for a 2-core CPU (2 + 2 layers of
+  width 128 instead of the paper's 8 + 8 of width 272).
+* The normalisation statistics live inside the model (:class:`~salad_core.keymotion.models.Normalizer`)
+  because the bone-length loss needs de-normalised features.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from salad_core.io import register_model
+from salad_core.models.layers import ACTIVATIONS
+from salad_core.skeleton import available_skeletons, get_skeleton
+
+from .models import (
+    Normalizer,
+    TransformerBlock,
+    bone_length_loss,
+    check_non_negative,
+    check_positive_int,
+    check_unit_interval,
+    pose_joints,
+    position_sinusoid,
+)
+
+__all__ = [
+    "KeyframeVAEConfig",
+    "KeyframeEncoding",
+    "KeyframeDecoding",
+    "KeyframeVAE",
+    "indices_to_positions",
+    "positions_to_indices",
+    "gather_keyframes",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class KeyframeVAEConfig:
+    """Configuration of :class:`KeyframeVAE` (small CPU defaults; paper values in comments)."""
+
+    skeleton: str = "humanml3d"   # "humanml3d" or "kit": sets the feature width D and the bones
+    num_keyframes: int = 20       # K keyframes per motion (paper: 10 % of the frames)
+    max_length: int = 196         # longest motion (frames); scales the index sinusoid
+    frame_dim: int = 120          # keyframe embedding channels (paper 256)
+    index_dim: int = 8            # keyframe-index embedding channels, even (paper 16)
+    latent_size: int = 2          # Lz latent tokens (paper's best for generation: 2)
+    latent_dim: int = 64          # Dz channels per latent token
+    num_layers: int = 2           # encoder layers = decoder layers (paper 8)
+    num_heads: int = 4            # attention heads (paper 4)
+    ff_dim: int = 256             # feed-forward hidden width (paper 1024)
+    dropout: float = 0.1          # dropout (paper 0.1)
+    activation: str = "relu"      # feed-forward activation (paper: ReLU)
+    lambda_kl: float = 1e-4       # weight of the KL term (eq. 4)
+    lambda_bone: float = 1.0      # weight of the bone-length term (eq. 5), metres
+    lambda_index: float = 3.0     # weight of the keyframe-position term (eq. 6, L1 on u)
+
+    def __post_init__(self) -> None:
+        name = type(self).__name__
+        if not isinstance(self.skeleton, str):
+            raise TypeError(f"{name}.skeleton must be a skeleton name {available_skeletons()}, "
+                            f"got {type(self.skeleton).__name__}")
+        object.__setattr__(self, "skeleton", get_skeleton(self.skeleton).name)
+        for f in ("num_keyframes", "max_length", "frame_dim", "index_dim", "latent_size", "latent_dim",
+                  "num_layers", "num_heads", "ff_dim"):
+            check_positive_int(name, f, getattr(self, f))
+        if self.num_keyframes < 2:
+            raise ValueError(f"{name}.num_keyframes={self.num_keyframes} is invalid; use >= 2 (first and last frame)")
+        if self.num_keyframes > self.max_length:
+            raise ValueError(f"{name}.num_keyframes={self.num_keyframes} exceeds max_length={self.max_length}")
+        if self.index_dim % 2:
+            raise ValueError(f"{name}.index_dim={self.index_dim} is invalid; use an even integer (sin/cos pairs)")
+        if self.width % self.num_heads:
+            raise ValueError(f"{name}: width frame_dim + index_dim = {self.width} must be divisible by "
+                             f"num_heads={self.num_heads}")
+        if self.width % 2:
+            raise ValueError(f"{name}: width frame_dim + index_dim = {self.width} must be even")
+        check_unit_interval(name, "dropout", self.dropout)
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(f"{name}.activation={self.activation!r} is invalid; choose one of {ACTIVATIONS}")
+        for f in ("lambda_kl", "lambda_bone", "lambda_index"):
+            check_non_negative(name, f, getattr(self, f))
+
+    @property
+    def width(self) -> int:
+        """Token channels of the transformer: ``frame_dim + index_dim`` (paper 272)."""
+        return self.frame_dim + self.index_dim
+
+
+class KeyframeEncoding(NamedTuple):
+    """Posterior of a batch of keyframe sets; each ``(B, Lz, Dz)``."""
+
+    z: torch.Tensor       # sample (or mu when not sampling)
+    mu: torch.Tensor
+    logvar: torch.Tensor
+
+
+class KeyframeDecoding(NamedTuple):
+    """Decoded keyframes: ``keyframes (B, K, D)`` normalised, ``positions (B, K)`` increasing ``u`` in [0, 1]."""
+
+    keyframes: torch.Tensor
+    positions: torch.Tensor
+
+
+# ------------------------------------------------------------------------- index helpers
+def _check_lengths(lengths: torch.Tensor, minimum: int, why: str) -> torch.Tensor:
+    lengths = torch.as_tensor(lengths).long().reshape(-1)
+    if bool((lengths < minimum).any()):
+        raise ValueError(f"lengths must all be >= {minimum} ({why}), got {lengths.tolist()}")
+    return lengths
+
+
+def indices_to_positions(indices: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+    """Normalised positions ``u = i / (L - 1)``: ``indices (B, K)`` long, ``lengths (B,)`` -> ``(B, K)`` float."""
+    lengths = _check_lengths(lengths, 2, "a first and a last frame").to(indices.device)
+    return indices.float() / (lengths[:, None] - 1).float()
+
+
+def positions_to_indices(positions: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+    """Frame indices from decoded positions: ``(B, K)`` float, ``lengths (B,)`` -> ``(B, K)`` long.
+
+    ``round(u (L - 1))``, sorted, then made strictly increasing inside ``[0, L - 1]`` with the
+    first keyframe at frame 0 and the last at ``L - 1``. Requires ``L >= K``.
+
+    Strictness is solved on ``c_k = i_k - k``: the indices are strictly increasing in ``[0, L-1]``
+    exactly when ``c`` is non-decreasing in ``[0, L - K]``, which a running maximum and a clamp
+    give while moving each index as little as that order allows.
+    """
+    if positions.dim() != 2:
+        raise ValueError(f"positions must be (B, K), got shape {tuple(positions.shape)}")
+    b, k = positions.shape
+    lengths = _check_lengths(lengths, k, "the number of keyframes").to(positions.device)
+    if lengths.shape[0] != b:
+        raise ValueError(f"lengths has {lengths.shape[0]} entries for a batch of {b}")
+    last = (lengths - 1)[:, None].float()
+    idx = torch.round(positions.detach().float() * last).clamp(min=0).minimum(last).long()
+    idx, _ = torch.sort(idx, dim=1)
+    ramp = torch.arange(k, device=positions.device)[None]
+    c = torch.cummax(idx - ramp, dim=1).values
+    c = c.clamp(min=0).minimum((lengths - k)[:, None])
+    c[:, 0] = 0
+    c[:, -1] = lengths - k
+    return c + ramp
+
+
+def gather_keyframes(motion: torch.Tensor, indices: torch.Tensor) -> torch.Tensor:
+    """Rows of ``motion (B, N, D)`` at ``indices (B, K)`` -> ``(B, K, D)``."""
+    return torch.gather(motion, 1, indices[..., None].expand(-1, -1, motion.shape[-1]))
+
+
+# ---------------------------------------------------------------------------------- model
+class KeyframeVAE(nn.Module):
+    """Keyframes and their positions <-> a small latent ``(B, Lz, Dz)`` (paper §III-B).
+
+    Parameters
+    ----------
+    config : KeyframeVAEConfig, optional
+    """
+
+    def __init__(self, config: KeyframeVAEConfig | None = None) -> None:
+        super().__init__()
+        self.config = cfg = config or KeyframeVAEConfig()
+        self.skeleton = get_skeleton(cfg.skeleton)
+        d, w = self.skeleton.feature_dim, cfg.width
+        self.feature_dim = d
+        self.norm = Normalizer(d)
+        self.frame_embed = nn.Linear(d, cfg.frame_dim)
+        self.index_embed = nn.Linear(cfg.index_dim + 1, cfg.index_dim)
+        self.latent_tokens = nn.Parameter(torch.randn(cfg.latent_size, w) * 0.02)
+        self.encoder = nn.ModuleList(
+            TransformerBlock(w, cfg.num_heads, cfg.ff_dim, cfg.dropout, activation=cfg.activation)
+            for _ in range(cfg.num_layers))
+        self.encoder_norm = nn.LayerNorm(w)
+        self.to_dist = nn.Linear(w, 2 * cfg.latent_dim)
+        self.latent_in = nn.Linear(cfg.latent_dim, w)
+        self.decoder = nn.ModuleList(
+            TransformerBlock(w, cfg.num_heads, cfg.ff_dim, cfg.dropout, cross_attention=True,
+                             activation=cfg.activation)
+            for _ in range(cfg.num_layers))
+        self.decoder_norm = nn.LayerNorm(w)
+        self.to_keyframes = nn.Linear(w, d)
+        self.to_positions = nn.Linear(w, 1)
+        self.drop = nn.Dropout(cfg.dropout)
+        n_tok = cfg.latent_size + cfg.num_keyframes
+        self.register_buffer("token_pe", position_sinusoid(torch.arange(n_tok), w), persistent=False)
+        self.register_buffer("query_pe", position_sinusoid(torch.arange(cfg.num_keyframes), w), persistent=False)
+        self.register_buffer("memory_pe", position_sinusoid(torch.arange(cfg.latent_size), w), persistent=False)
+
+    # ------------------------------------------------------------------------ properties
+    @property
+    def num_keyframes(self) -> int:
+        return self.config.num_keyframes
+
+    @property
+    def latent_shape(self) -> tuple[int, int]:
+        """``(Lz, Dz)``."""
+        return (self.config.latent_size, self.config.latent_dim)
+
+    def set_normalization(self, mean, std) -> None:
+        """Store the dataset statistics ``(D,)`` the model's inputs are normalised with."""
+        self.norm.set(mean, std)
+
+    # ----------------------------------------------------------------------- encode/decode
+    def _check_inputs(self, keyframes: torch.Tensor, positions: torch.Tensor) -> None:
+        k, d = self.config.num_keyframes, self.feature_dim
+        if keyframes.dim() != 3 or keyframes.shape[1:] != (k, d):
+            raise ValueError(f"keyframes must be (B, {k}, {d}) normalised {self.skeleton.name} features, "
+                             f"got {tuple(keyframes.shape)}")
+        if positions.shape != keyframes.shape[:2]:
+            raise ValueError(f"positions must be (B, K) = {tuple(keyframes.shape[:2])}, got {tuple(positions.shape)}")
+
+    def encode(self, keyframes: torch.Tensor, positions: torch.Tensor, sample: bool = True,
+               generator: torch.Generator | None = None) -> KeyframeEncoding:
+        """Posterior of keyframes.
+
+        Parameters
+        ----------
+        keyframes : Tensor ``(B, K, D)``
+            Normalised keyframe features, in time order.
+        positions : Tensor ``(B, K)``
+            Normalised positions ``u = i / (L - 1)`` (:func:`indices_to_positions`).
+        sample : bool
+            Return ``z = mu + eps sigma`` (else ``z = mu``).
+        generator : torch.Generator, optional
+            For ``eps``.
+        """
+        self._check_inputs(keyframes, positions)
+        cfg = self.config
+        b = keyframes.shape[0]
+        pos = positions.to(keyframes.dtype)
+        idx_feat = torch.cat([pos[..., None], position_sinusoid(pos * (cfg.max_length - 1), cfg.index_dim)], -1)
+        tokens = torch.cat([self.frame_embed(keyframes), self.index_embed(idx_feat)], -1)   # (B, K, w)
+        h = torch.cat([self.latent_tokens.expand(b, -1, -1), tokens], 1)                  # (B, Lz + K, w)
+        h = self.drop(h + self.token_pe)
+        for block in self.encoder:
+            h = block(h)
+        mu, logvar = self.to_dist(self.encoder_norm(h[:, : cfg.latent_size])).chunk(2, dim=-1)  # (B, Lz, Dz)
+        if sample:
+            eps = torch.randn(mu.shape, generator=generator, device=mu.device, dtype=mu.dtype)
+            z = mu + eps * torch.exp(0.5 * logvar)
+        else:
+            z = mu
+        return KeyframeEncoding(z, mu, logvar)
+
+    def decode(self, z: torch.Tensor) -> KeyframeDecoding:
+        """Latent ``z (B, Lz, Dz)`` -> keyframes ``(B, K, D)`` (normalised) and positions ``(B, K)``."""
+        if z.dim() != 3 or tuple(z.shape[1:]) != self.latent_shape:
+            raise ValueError(f"z must be (B, {self.latent_shape[0]}, {self.latent_shape[1]}), got {tuple(z.shape)}")
+        b = z.shape[0]
+        memory = self.latent_in(z) + self.memory_pe                       # (B, Lz, w)
+        h = self.query_pe.to(z.dtype).expand(b, -1, -1)                   # (B, K, w) SPE queries
+        for block in self.decoder:
+            h = block(h, context=memory)
+        h = self.decoder_norm(h)
+        # positions as cumulated softmax gaps: increasing, first exactly 0 and last 1 by construction
+        gaps = torch.softmax(self.to_positions(h[:, 1:])[..., 0], dim=-1)            # (B, K-1)
+        positions = torch.cat([gaps.new_zeros(b, 1), torch.cumsum(gaps, -1)], -1)   # (B, K)
+        return KeyframeDecoding(self.to_keyframes(h), positions)
+
+    def forward(self, keyframes: torch.Tensor, positions: torch.Tensor, eps: torch.Tensor | None = None
+                ) -> tuple[KeyframeDecoding, torch.Tensor, torch.Tensor]:
+        """Sampled reconstruction: ``(decoding, mu, logvar)``; ``eps (B, Lz, Dz)`` optional noise."""
+        enc = self.encode(keyframes, positions, sample=False)
+        if eps is None:
+            eps = torch.randn_like(enc.mu)
+        z = enc.mu + eps * torch.exp(0.5 * enc.logvar)
+        return self.decode(z), enc.mu, enc.logvar
+
+    # ----------------------------------------------------------------------------- loss
+    def loss(self, keyframes: torch.Tensor, positions: torch.Tensor, decoding: KeyframeDecoding,
+             mu: torch.Tensor, logvar: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Eq. 2: ``L = L_rec + λ_kl L_kl + λ_bone L_bone + λ_index L_index``.
+
+        Parameters
+        ----------
+        keyframes, positions : Tensor ``(B, K, D)``, ``(B, K)``
+            The targets (normalised features, normalised positions).
+        decoding : KeyframeDecoding
+            The reconstruction.
+        mu, logvar : Tensor ``(B, Lz, Dz)``
+
+        Returns
+        -------
+        dict of scalar tensors ``loss``, ``rec``, ``kl``, ``bone``, ``index``.
+        """
+        self._check_inputs(keyframes, positions)
+        cfg = self.config
+        rec = F.mse_loss(decoding.keyframes, keyframes)
+        kl = 0.5 * (mu.pow(2) + logvar.exp() - logvar - 1.0).mean()
+        index = F.l1_loss(decoding.positions, positions.to(decoding.positions.dtype))
+        if cfg.lambda_bone > 0:
+            pred_j = pose_joints(self.norm.denormalize(decoding.keyframes), self.skeleton)   # (B, K, J, 3)
+            true_j = pose_joints(self.norm.denormalize(keyframes), self.skeleton)
+            bone = bone_length_loss(pred_j, true_j, self.skeleton)
+        else:
+            bone = rec.new_zeros(())
+        total = rec + cfg.lambda_kl * kl + cfg.lambda_bone * bone + cfg.lambda_index * index
+        return {"loss": total, "rec": rec, "kl": kl, "bone": bone, "index": index}
+
+    def num_parameters(self) -> int:
+        return sum(p.numel() for p in self.parameters())
+
+
+register_model("keymotion_kf_vae", KeyframeVAEConfig, KeyframeVAE)

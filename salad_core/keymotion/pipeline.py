@@ -1,0 +1,335 @@
+"""KeyMotion text-to-motion generation: keyframe latents -> keyframes -> in-filled motion.
+
+The pipeline only orchestrates (models know nothing of sampling, the loop is
+:func:`~salad_core.keymotion.pst.sample_latents`)::
+
+    prompts --text encoder--> token features (B, W, C)
+    noise (B, Lz, Dz) --PST + scheduler, CFG--> keyframe latents z0 (B, Lz, Dz)
+    z0 --keyframe VAE decoder--> keyframes (B, K, D), positions (B, K) --> frame indices (B, K)
+    keyframes at their frames --MMAE (text-conditioned)--> motion (B, N, D) normalised
+    --de-normalise (MMAE's statistics)--> features --features_to_joints--> joints (N_b, J, 3)
+
+:class:`KeyMotionPipeline` has the interface of ``SaladPipeline``: ``from_pretrained(path=None)``
+and ``pipe(prompts, lengths=None, seed=0, guidance_scale=7.5, num_steps=50)`` returning an output
+with ``features``, ``joints``, ``texts``, ``lengths`` (and here ``keyframes``).
+
+Choices: motion lengths are given by the caller (as in the T2M protocol, where the evaluation
+uses the ground-truth lengths) and may be any ``num_keyframes <= L <= max_length``; without them
+every motion gets ``default_length`` (120) frames. The empty prompt ``""`` is the unconditional
+text of classifier-free guidance; ``guidance_scale`` defaults to 7.5 as SALAD's (the KeyMotion
+paper's value was lost in our copy). The MMAE output is the motion (it may correct the decoded
+keyframes); ``keep_keyframes=True`` pastes the decoded keyframes back. Padded rows of
+``features`` (``t >= length``) are zero.
+
+A pretrained folder holds::
+
+    keymotion.json                      {"format": "keymotion_pipeline", "text_encoder", "diffusion", ...}
+    kf_vae.safetensors / kf_vae.json    the keyframe VAE (salad_core.io checkpoint)
+    pst.safetensors / pst.json          the PST denoiser
+    mmae.safetensors / mmae.json        the MMAE
+
+A training root written by :func:`salad_core.keymotion.train.train_keymotion` (run folders
+``kf_vae/``, ``pst/``, ``mmae/``, each with ``best.*`` or ``latest.*``) loads the same way.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import torch
+
+from salad_core.io import atomic_write_text, config_from_dict, config_to_dict, load_model, save_checkpoint
+from salad_core.motion import features_to_joints
+from salad_core.sampling import DiffusionConfig, make_scheduler
+
+from .kf_vae import KeyframeVAE, positions_to_indices
+from .mmae import MotionMaskedAutoencoder
+from .pst import PST_DIFFUSION, ParallelSkipTransformer, sample_latents
+
+__all__ = ["KeyMotionPipeline", "KeyMotionOutput", "decode_keyframes", "DEFAULT_WEIGHTS_DIR", "COMPONENTS"]
+
+log = logging.getLogger(__name__)
+
+#: Where the shipped KeyMotion weights live (package data).
+DEFAULT_WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights" / "keymotion"
+#: Component stems of a pretrained folder, and their model types.
+COMPONENTS: dict[str, str] = {"kf_vae": "keymotion_kf_vae", "pst": "keymotion_pst", "mmae": "keymotion_mmae"}
+_FORMAT = "keymotion_pipeline"
+
+
+@dataclass
+class KeyMotionOutput:
+    """Generated motions (numpy, de-normalised); sample ``b`` has ``lengths[b]`` frames."""
+
+    features: np.ndarray              # (B, N, D) features, N = max(lengths); rows t >= lengths[b] are 0
+    joints: list[np.ndarray]          # per sample (N_b, J, 3) joint positions (features_to_joints)
+    texts: list[str]                  # the prompts
+    lengths: list[int]                # N_b, frames per sample
+    keyframes: list[np.ndarray]       # per sample (K,) int64 frame indices of the keyframes, increasing
+    keyframe_features: np.ndarray     # (B, K, D) decoded keyframes (de-normalised), in keyframe order
+    latents: np.ndarray               # (B, Lz, Dz) denoised keyframe latents
+
+
+def decode_keyframes(vae: KeyframeVAE, z: torch.Tensor, lengths: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Decode latents into time-ordered keyframes and their frames.
+
+    Parameters
+    ----------
+    vae : KeyframeVAE
+    z : Tensor ``(B, Lz, Dz)``
+    lengths : Tensor ``(B,)``
+        Motion lengths (``>= K``).
+
+    Returns
+    -------
+    keyframes : Tensor ``(B, K, D)`` normalised, sorted by decoded position
+    indices : Tensor ``(B, K)`` long, strictly increasing, first 0 and last ``L - 1``
+    """
+    dec = vae.decode(z)
+    order = torch.argsort(dec.positions, dim=1, stable=True)          # keep features with their positions
+    keyframes = torch.gather(dec.keyframes, 1, order[..., None].expand(-1, -1, dec.keyframes.shape[-1]))
+    positions = torch.gather(dec.positions, 1, order)
+    return keyframes, positions_to_indices(positions, lengths)
+
+
+def _resolve_component(root: Path, name: str) -> Path:
+    """Checkpoint stem of component ``name`` in a pretrained folder or a training root."""
+    if (root / f"{name}.json").is_file():
+        return root / name
+    run = root / name
+    for stem in ("best", "latest"):
+        if (run / f"{stem}.json").is_file():
+            return run / stem
+    raise FileNotFoundError(f"{root} holds no {name}.json / {name}.safetensors and no run folder {run} "
+                            "with best.* or latest.*")
+
+
+class KeyMotionPipeline:
+    """Text -> motion with KeyMotion (keyframe VAE, PST denoiser, MMAE).
+
+    Parameters
+    ----------
+    kf_vae : KeyframeVAE
+    pst : ParallelSkipTransformer
+    mmae : MotionMaskedAutoencoder
+    text_encoder : TextEncoder
+        ``encode(prompts, allow_empty=...) -> TextBatch`` and ``dim``.
+    diffusion : DiffusionConfig, optional
+        The PST's schedule (default :data:`~salad_core.keymotion.pst.PST_DIFFUSION`).
+    solver : str
+        Sampler name for :func:`salad_core.sampling.make_scheduler` (``"ddim"``).
+    default_length : int
+        Frames generated when ``lengths`` is None.
+    text_encoder_name : str, optional
+        Recorded by :meth:`save_pretrained` (default: the encoder's ``name``).
+    """
+
+    def __init__(self, kf_vae: KeyframeVAE, pst: ParallelSkipTransformer, mmae: MotionMaskedAutoencoder,
+                 text_encoder: Any, *, diffusion: DiffusionConfig | None = None, solver: str = "ddim",
+                 default_length: int = 120, text_encoder_name: str | None = None) -> None:
+        self.kf_vae = kf_vae.eval()
+        self.pst = pst.eval()
+        self.mmae = mmae.eval()
+        self.text_encoder = text_encoder
+        self.diffusion = diffusion or PST_DIFFUSION
+        if self.diffusion.prediction_type != "epsilon":
+            log.warning("KeyMotion's PST predicts epsilon; diffusion.prediction_type=%r", self.diffusion.prediction_type)
+        self.solver = solver
+        self.text_encoder_name = text_encoder_name or getattr(text_encoder, "name", type(text_encoder).__name__)
+        self._check_compatible()
+        self.default_length = self._check_length(default_length, "default_length")
+
+    # ------------------------------------------------------------------------ checks
+    def _check_compatible(self) -> None:
+        vc, pc, mc = self.kf_vae.config, self.pst.config, self.mmae.config
+        if (vc.latent_size, vc.latent_dim) != (pc.latent_size, pc.latent_dim):
+            raise ValueError(f"the PST denoises latents ({pc.latent_size}, {pc.latent_dim}) but the keyframe VAE's "
+                             f"are ({vc.latent_size}, {vc.latent_dim})")
+        if vc.skeleton != mc.skeleton:
+            raise ValueError(f"the keyframe VAE is for skeleton {vc.skeleton!r} but the MMAE for {mc.skeleton!r}")
+        dim = getattr(self.text_encoder, "dim", None)
+        for name, cfg in (("PST", pc), ("MMAE", mc)):
+            if dim is not None and cfg.text_dim != dim:
+                raise ValueError(f"the {name} expects {cfg.text_dim}-d text features but the text encoder "
+                                 f"gives {dim}-d; use the encoder it was trained with")
+        if not (torch.equal(self.kf_vae.norm.mean, self.mmae.norm.mean)
+                and torch.equal(self.kf_vae.norm.std, self.mmae.norm.std)):
+            log.warning("the keyframe VAE and the MMAE were trained with different normalisation statistics; "
+                        "the MMAE's are used")
+
+    @property
+    def skeleton(self):
+        return self.mmae.skeleton
+
+    @property
+    def num_keyframes(self) -> int:
+        return self.kf_vae.config.num_keyframes
+
+    @property
+    def max_length(self) -> int:
+        """Longest motion all three models support."""
+        return min(self.kf_vae.config.max_length, self.mmae.config.max_length, self.pst.config.max_length)
+
+    def _check_length(self, value: Any, name: str) -> int:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise TypeError(f"{name} must be an int number of frames, got {value!r}")
+        if not self.num_keyframes <= int(value) <= self.max_length:
+            raise ValueError(f"{name}={int(value)} is out of range: use {self.num_keyframes} (the number of keyframes) "
+                             f"to {self.max_length} frames")
+        return int(value)
+
+    @property
+    def device(self) -> torch.device:
+        return next(self.pst.parameters()).device
+
+    def to(self, device: str | torch.device) -> "KeyMotionPipeline":
+        """Move the three models (the text encoder stays where it was built)."""
+        for m in (self.kf_vae, self.pst, self.mmae):
+            m.to(device)
+        return self
+
+    # -------------------------------------------------------------------------- loading
+    @classmethod
+    def from_pretrained(cls, path: str | os.PathLike | None = None, *, text_encoder: Any = None,
+                        device: str | torch.device = "cpu", solver: str = "ddim",
+                        default_length: int | None = None) -> "KeyMotionPipeline":
+        """Load a pretrained folder or a training root; ``path=None`` loads the shipped weights.
+
+        Parameters
+        ----------
+        path : path, optional
+            Folder described in the module docstring (default :data:`DEFAULT_WEIGHTS_DIR`).
+        text_encoder : str or encoder, optional
+            Overrides the encoder named in ``keymotion.json`` (``"minilm"`` or a CLIP folder) with a
+            name or an already built encoder.
+        device : str or torch.device
+        solver : str
+            Sampler name (:data:`salad_core.sampling.SOLVERS`).
+        default_length : int, optional
+            Overrides the stored default length.
+        """
+        root = Path(path) if path is not None else DEFAULT_WEIGHTS_DIR
+        if not root.is_dir():
+            if path is None:
+                raise FileNotFoundError(
+                    f"no shipped KeyMotion weights at {root}; train them with "
+                    "salad_core.keymotion.train.train_keymotion(data_dir, out_dir) and pass out_dir as path")
+            raise FileNotFoundError(f"KeyMotion folder {root} does not exist")
+        doc: dict[str, Any] = {}
+        if (root / "keymotion.json").is_file():
+            doc = json.loads((root / "keymotion.json").read_text())
+            if doc.get("format") != _FORMAT:
+                raise ValueError(f"{root / 'keymotion.json'} is not a KeyMotion pipeline description "
+                                 f"(format {doc.get('format')!r}, expected {_FORMAT!r})")
+        models = {}
+        metas = {}
+        for name, model_type in COMPONENTS.items():
+            stem = _resolve_component(root, name)
+            kind = json.loads(stem.with_suffix(".json").read_text()).get("type")
+            if kind != model_type:
+                raise ValueError(f"{stem}.json holds a {kind!r} model, expected {model_type!r}")
+            model, _, meta = load_model(stem)
+            models[name] = model.to(device).eval()
+            metas[name] = meta
+        diffusion = doc.get("diffusion") or metas["pst"].get("diffusion")
+        diffusion = config_from_dict(DiffusionConfig, diffusion) if diffusion else PST_DIFFUSION
+        enc_name = doc.get("text_encoder") or metas["pst"].get("text_encoder") or "minilm"
+        if text_encoder is None or isinstance(text_encoder, (str, os.PathLike)):
+            from salad_core.text import load_text_encoder
+
+            enc_name = str(text_encoder) if text_encoder is not None else enc_name
+            encoder = load_text_encoder(enc_name, device=device)
+        else:
+            encoder = text_encoder
+            enc_name = getattr(encoder, "name", type(encoder).__name__)
+        length = default_length if default_length is not None else int(doc.get("default_length", 120))
+        return cls(models["kf_vae"], models["pst"], models["mmae"], encoder, diffusion=diffusion, solver=solver,
+                   default_length=length, text_encoder_name=enc_name)
+
+    def save_pretrained(self, path: str | os.PathLike, *, dtype: torch.dtype | None = None) -> Path:
+        """Write the three checkpoints and ``keymotion.json`` into ``path`` (created); returns it.
+
+        ``dtype`` (e.g. ``torch.float16``) stores floating weights compactly.
+        """
+        root = Path(path)
+        root.mkdir(parents=True, exist_ok=True)
+        for name, model in (("kf_vae", self.kf_vae), ("pst", self.pst), ("mmae", self.mmae)):
+            save_checkpoint(root / name, model, model_type=COMPONENTS[name], config=model.config, dtype=dtype)
+        doc = {"format": _FORMAT, "version": 1, "text_encoder": self.text_encoder_name,
+               "diffusion": config_to_dict(self.diffusion), "default_length": self.default_length}
+        atomic_write_text(root / "keymotion.json", json.dumps(doc, indent=2) + "\n")
+        return root
+
+    # ---------------------------------------------------------------------- generation
+    def _lengths(self, lengths: int | Sequence[int] | None, b: int) -> list[int]:
+        if lengths is None:
+            return [self.default_length] * b
+        if isinstance(lengths, (int, np.integer)) and not isinstance(lengths, bool):
+            return [self._check_length(lengths, "lengths")] * b
+        out = [self._check_length(v, f"lengths[{i}]") for i, v in enumerate(lengths)]
+        if len(out) != b:
+            raise ValueError(f"lengths has {len(out)} entries for {b} prompts")
+        return out
+
+    def __call__(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None = None, seed: int = 0,
+                 guidance_scale: float = 7.5, num_steps: int = 50, *, keep_keyframes: bool = False,
+                 progress: bool = False) -> KeyMotionOutput:
+        """Generate one motion per prompt.
+
+        Parameters
+        ----------
+        prompts : str or list of str
+        lengths : int or list of int, optional
+            Frames per motion (``num_keyframes .. max_length``; default :attr:`default_length`).
+        seed : int
+            Seeds the initial noise; the same call with the same seed returns the same motions.
+        guidance_scale : float
+            Classifier-free guidance weight (eq. 8); 1 disables guidance.
+        num_steps : int
+            Denoising steps.
+        keep_keyframes : bool
+            Paste the decoded keyframes over the MMAE's output at their frames (by default the MMAE
+            may correct them, as in the paper).
+        progress : bool
+            Show a progress bar over the denoising steps.
+
+        Returns
+        -------
+        KeyMotionOutput
+        """
+        texts = [prompts] if isinstance(prompts, str) else list(prompts)
+        if not texts:
+            raise ValueError("prompts must hold at least one prompt, got none")
+        b = len(texts)
+        lens = self._lengths(lengths, b)
+        dev = self.device
+        len_t = torch.tensor(lens, dtype=torch.long, device=dev)
+        tb = self.text_encoder.encode(texts)
+        text, text_mask = tb.features.to(dev), tb.mask.to(dev)
+        null_text = null_mask = None
+        if guidance_scale != 1.0:
+            nb = self.text_encoder.encode([""], allow_empty=True)
+            null_text, null_mask = nb.features.to(dev), nb.mask.to(dev)
+        gen = torch.Generator().manual_seed(int(seed))
+        lz, dz = self.pst.config.latent_size, self.pst.config.latent_dim
+        dtype = next(self.pst.parameters()).dtype
+        noise = torch.randn((b, lz, dz), generator=gen).to(device=dev, dtype=dtype)
+        scheduler = make_scheduler(self.diffusion, self.solver)
+        z = sample_latents(self.pst, scheduler, text, text_mask, null_text, null_mask, noise, lengths=len_t,
+                           guidance_scale=guidance_scale, num_steps=num_steps, progress=progress, generator=gen)
+        with torch.inference_mode():
+            keyframes, indices = decode_keyframes(self.kf_vae, z, len_t)
+            motion = self.mmae.infill(keyframes, indices, len_t, text, text_mask, keep_keyframes=keep_keyframes)
+            feats = self.mmae.norm.denormalize(motion)
+            valid = (torch.arange(feats.shape[1], device=dev)[None] < len_t[:, None])[..., None]
+            feats = (feats * valid.to(feats.dtype)).float().cpu().numpy()
+            kf_feats = self.mmae.norm.denormalize(keyframes).float().cpu().numpy()
+        joints = [features_to_joints(feats[i, :n], self.skeleton) for i, n in enumerate(lens)]
+        return KeyMotionOutput(features=feats, joints=joints, texts=texts, lengths=lens,
+                               keyframes=[row for row in indices.cpu().numpy().astype(np.int64)],
+                               keyframe_features=kf_feats, latents=z.float().cpu().numpy())

@@ -1,0 +1,468 @@
+"""Training of the three KeyMotion models on the shared trainer (:func:`salad_core.train.fit`).
+
+Each model is a :class:`~salad_core.train.TrainTask` (objective module, data, ``prepare``), so
+KeyMotion gets the same progress bar, atomic checkpoints, exact resume, validation/best, SIGINT
+handling and ``torchrun`` DDP as the SALAD trainers. The stages:
+
+1. **keyframe VAE** (:func:`train_kf_vae`): keyframes of each training item (selected with
+   :func:`~salad_core.keymotion.selection.select_keyframes` on its normalised features, MDO by
+   default), their positions ``u = i / (L - 1)``; loss eq. 2.
+2. **PST** (:func:`train_pst`): the frozen VAE's posterior sample ``z`` of the keyframes, noised
+   on the scaled-linear schedule; ε-prediction MSE (eq. 7); captions replaced by ``""`` with
+   probability ``cond_drop_prob`` for classifier-free guidance.
+3. **MMAE** (:func:`train_mmae`): the motion with everything but its keyframes masked, the
+   caption; loss eq. 9. Optional Gaussian noise on the input keyframes (``keyframe_noise``, in
+   normalised units) makes the in-filling robust to imperfect generated keyframes (paper Table VII).
+
+:func:`train_keymotion` runs the three stages into ``out/kf_vae``, ``out/pst``, ``out/mmae`` and
+writes ``out/keymotion.json``, so ``KeyMotionPipeline.from_pretrained(out)`` loads the result.
+
+Items come from :class:`~salad_core.data.dataset.MotionTextDataset` (random crops and captions,
+lengths multiples of 4); every item keeps ``K = num_keyframes`` keyframes whatever its length.
+All random draws of a step come from the trainer's shared generator for the global batch.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+from torch.utils.data import Dataset
+
+from salad_core.io import atomic_write_text, config_to_dict
+from salad_core.train.common import StepContext, TrainResult, TrainTask, fit
+from salad_core.train.config import TrainConfig
+from salad_core.train.denoiser_trainer import CaptionFeatureCache, resolve_checkpoint
+from salad_core.train.distributed import DistEnv, init_distributed
+
+from .kf_vae import KeyframeVAE, KeyframeVAEConfig, gather_keyframes, indices_to_positions
+from .mmae import MMAEConfig, MotionMaskedAutoencoder, scatter_keyframes
+from .pst import PST_DIFFUSION, ParallelSkipTransformer, PSTConfig
+from .selection import KEYFRAME_METHODS, select_keyframes
+
+__all__ = [
+    "KeyMotionTrainConfig",
+    "KeyframeDataset",
+    "collate_keyframes",
+    "KeyframeVAEObjective",
+    "PSTObjective",
+    "MMAEObjective",
+    "build_kf_vae_task",
+    "build_pst_task",
+    "build_mmae_task",
+    "train_kf_vae",
+    "train_pst",
+    "train_mmae",
+    "train_keymotion",
+    "load_frozen_kf_vae",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class KeyMotionTrainConfig(TrainConfig):
+    """Recipe of the KeyMotion stages (the paper trains with Adam at a constant rate)."""
+
+    batch_size: int = 32
+    max_epochs: int = 200
+    lr: float = 2e-4                           # constant after warm-up (no milestones)
+    warmup_steps: int = 200
+    milestones: tuple[int, ...] = ()
+    weight_decay: float = 0.0
+    val_every: int = 500
+    max_length: int = 196                      # motions are cropped/padded to this many frames
+    keyframe_method: str = "mdo"               # "mdo" (paper), "uniform" or "mieo"
+    cond_drop_prob: float = 0.1                # PST: captions replaced by "" (classifier-free guidance)
+    text_cache_size: int = 8192                # captions whose token features are kept (0: encode every batch)
+    keyframe_noise: float = 0.0                # MMAE: std of noise added to the input keyframes (normalised units)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        name = type(self).__name__
+        if self.keyframe_method not in KEYFRAME_METHODS:
+            raise ValueError(f"{name}.keyframe_method={self.keyframe_method!r} is invalid; choose one of {KEYFRAME_METHODS}")
+        if not 0.0 <= self.cond_drop_prob <= 1.0:
+            raise ValueError(f"{name}.cond_drop_prob={self.cond_drop_prob!r} is invalid; use a float in [0, 1]")
+        if not isinstance(self.max_length, int) or self.max_length < 2:
+            raise ValueError(f"{name}.max_length={self.max_length!r} is invalid; use an integer >= 2")
+        if not isinstance(self.text_cache_size, int) or self.text_cache_size < 0:
+            raise ValueError(f"{name}.text_cache_size={self.text_cache_size!r} is invalid; use an integer >= 0")
+        if not self.keyframe_noise >= 0.0:
+            raise ValueError(f"{name}.keyframe_noise={self.keyframe_noise!r} is invalid; use a float >= 0")
+
+
+# ----------------------------------------------------------------------------------- data
+class KeyframeDataset(Dataset):
+    """A :class:`MotionTextDataset` whose items also hold ``keyframes``: ``(K,)`` int64 frame indices.
+
+    Keyframes are selected on the item's normalised features (its random crop), and cached per
+    ``(motion_id, offset, length)`` because the MDO dynamic programme costs ~10 ms per item.
+
+    Parameters
+    ----------
+    base : MotionTextDataset
+    num_keyframes : int
+        ``K``; every item must have at least ``K`` frames.
+    method : str
+        Selection method (:data:`~salad_core.keymotion.selection.KEYFRAME_METHODS`).
+    cache_size : int
+        Selections kept (the oldest are dropped beyond it; ~200 bytes each).
+    """
+
+    def __init__(self, base: Any, num_keyframes: int, method: str = "mdo", cache_size: int = 200_000) -> None:
+        if method not in KEYFRAME_METHODS:
+            raise ValueError(f"method={method!r} is invalid; choose one of {KEYFRAME_METHODS}")
+        u = base.unit_length
+        shortest = (base.min_length // u) * u - u   # a floored length, shortened by one unit 1 time in 3
+        if shortest < num_keyframes:
+            raise ValueError(f"items of {base.root} may have only {shortest} frames (min_length={base.min_length}), "
+                             f"fewer than num_keyframes={num_keyframes}; raise min_length or lower num_keyframes")
+        self.base = base
+        self.num_keyframes = num_keyframes
+        self.method = method
+        self.cache_size = cache_size
+        self._cache: dict[tuple[str, int, int], np.ndarray] = {}
+
+    @property
+    def mean(self) -> np.ndarray:
+        return self.base.mean
+
+    @property
+    def std(self) -> np.ndarray:
+        return self.base.std
+
+    def __len__(self) -> int:
+        return len(self.base)
+
+    def set_epoch(self, epoch: int) -> None:
+        self.base.set_epoch(epoch)
+
+    def __getitem__(self, index: int) -> dict[str, Any]:
+        item = self.base[index]
+        n = int(item["length"])
+        key = (item["motion_id"], int(item["offset"]), n)
+        idx = self._cache.get(key)
+        if idx is None:
+            idx = select_keyframes(item["motion"][:n], self.num_keyframes, self.method).astype(np.int64)
+            self._cache[key] = idx
+            if len(self._cache) > self.cache_size:
+                self._cache.pop(next(iter(self._cache)))   # dicts keep insertion order: drop the oldest
+        item["keyframes"] = idx.copy()
+        return item
+
+
+def collate_keyframes(items: list[dict[str, Any]]) -> dict[str, Any]:
+    """:func:`collate_motion_text` (trimmed to the longest item) plus ``keyframes`` ``(B, K)`` long."""
+    from salad_core.data.dataset import collate_motion_text
+
+    batch = collate_motion_text(items, trim=True)
+    batch["keyframes"] = torch.as_tensor(np.stack([it["keyframes"] for it in items]), dtype=torch.long)
+    return batch
+
+
+def _datasets(data_dir: str | os.PathLike, skeleton: str, num_keyframes: int, config: KeyMotionTrainConfig
+              ) -> tuple[KeyframeDataset, KeyframeDataset | None]:
+    from salad_core.data.dataset import MotionTextDataset
+
+    train = MotionTextDataset(data_dir, "train", skeleton=skeleton, max_length=config.max_length,
+                              random_crop=True, seed=config.seed)
+    train_set = KeyframeDataset(train, num_keyframes, config.keyframe_method)
+    try:
+        val = MotionTextDataset(data_dir, "val", skeleton=skeleton, max_length=config.max_length,
+                                mean=train.mean, std=train.std, random_crop=False)
+        val_set = KeyframeDataset(val, num_keyframes, config.keyframe_method)
+    except (FileNotFoundError, ValueError) as exc:
+        log.warning("no validation items (%s)", exc)
+        val_set = None
+    return train_set, val_set
+
+
+def _mean_std_file(dataset: KeyframeDataset) -> dict[str, torch.Tensor]:
+    return {"mean": torch.as_tensor(dataset.mean, dtype=torch.float32),
+            "std": torch.as_tensor(dataset.std, dtype=torch.float32)}
+
+
+def _keyframe_inputs(batch: dict[str, Any], device: str) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    motion = batch["motion"].to(device, non_blocking=True)            # (B, N, D) normalised
+    length = batch["length"].to(device)
+    idx = batch["keyframes"].to(device)                               # (B, K)
+    return motion, length, idx, gather_keyframes(motion, idx)
+
+
+def _text_encoder(text_encoder: Any, device: str) -> tuple[Any, str]:
+    from salad_core.text import load_text_encoder
+
+    if isinstance(text_encoder, (str, Path)):
+        return load_text_encoder(text_encoder, device=device), str(text_encoder)
+    return text_encoder, getattr(text_encoder, "name", type(text_encoder).__name__)
+
+
+# ------------------------------------------------------------------------------ objectives
+class KeyframeVAEObjective(nn.Module):
+    """``forward(keyframes, positions, eps) -> dict(loss, rec, kl, bone, index)`` (eq. 2)."""
+
+    def __init__(self, vae: KeyframeVAE) -> None:
+        super().__init__()
+        self.vae = vae
+
+    def forward(self, keyframes: torch.Tensor, positions: torch.Tensor, eps: torch.Tensor) -> dict[str, torch.Tensor]:
+        """``keyframes (B, K, D)``, ``positions (B, K)``, ``eps (B, Lz, Dz)`` standard normal."""
+        decoding, mu, logvar = self.vae(keyframes, positions, eps)
+        return self.vae.loss(keyframes, positions, decoding, mu, logvar)
+
+
+class PSTObjective(nn.Module):
+    """``forward(noisy, timesteps, text, text_mask, lengths, target, denom) -> dict(loss)`` (eq. 7)."""
+
+    def __init__(self, pst: ParallelSkipTransformer) -> None:
+        super().__init__()
+        self.pst = pst
+
+    def forward(self, noisy: torch.Tensor, timesteps: torch.Tensor, text: torch.Tensor, text_mask: torch.Tensor,
+                lengths: torch.Tensor, target: torch.Tensor) -> dict[str, torch.Tensor]:
+        """``noisy, target (B, Lz, Dz)``, ``timesteps (B,)``, ``text (B, W, C)``, ``text_mask (B, W)``."""
+        pred = self.pst(noisy, timesteps, text, text_mask, lengths)
+        return {"loss": F.mse_loss(pred, target)}
+
+
+class MMAEObjective(nn.Module):
+    """``forward(motion, inputs, keyframe_mask, frame_mask, text, text_mask) -> dict(loss, rec, bone, vel)`` (eq. 9)."""
+
+    def __init__(self, mmae: MotionMaskedAutoencoder) -> None:
+        super().__init__()
+        self.mmae = mmae
+
+    def forward(self, motion: torch.Tensor, inputs: torch.Tensor, keyframe_mask: torch.Tensor,
+                frame_mask: torch.Tensor, text: torch.Tensor, text_mask: torch.Tensor) -> dict[str, torch.Tensor]:
+        """``motion (B, N, D)`` target, ``inputs (B, N, D)`` (keyframe rows read), masks ``(B, N)``."""
+        pred = self.mmae(inputs, keyframe_mask, frame_mask, text, text_mask)
+        return self.mmae.loss(pred, motion, frame_mask)
+
+
+# ------------------------------------------------------------------------------- prepare
+def _prepare_vae(batch: dict[str, Any], ctx: StepContext, *, latent_shape: tuple[int, int]) -> dict[str, torch.Tensor]:
+    _, length, idx, keyframes = _keyframe_inputs(batch, ctx.env.device)
+    return {"keyframes": keyframes, "positions": indices_to_positions(idx, length),
+            "eps": ctx.rand.randn(keyframes.shape[0], latent_shape)}
+
+
+def _prepare_pst(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, text: CaptionFeatureCache,
+                 scheduler: Any, config: KeyMotionTrainConfig, latent_shape: tuple[int, int]) -> dict[str, Any]:
+    dev = ctx.env.device
+    _, length, idx, keyframes = _keyframe_inputs(batch, dev)
+    b = keyframes.shape[0]
+    eps = ctx.rand.randn(b, latent_shape)                             # VAE reparameterisation
+    t = ctx.rand.randint(b, scheduler.config.num_train_timesteps)     # t ~ U{0..T-1}
+    noise = ctx.rand.randn(b, latent_shape)
+    drop = ctx.rand.rand(b) < config.cond_drop_prob                   # classifier-free guidance
+    if not ctx.train:
+        drop = torch.zeros_like(drop)
+    with torch.no_grad():
+        enc = vae.encode(keyframes, indices_to_positions(idx, length), sample=False)
+        z = enc.mu + eps * torch.exp(0.5 * enc.logvar)
+        noisy = scheduler.add_noise(z, noise, t)
+        captions = ["" if d else c for d, c in zip(drop.tolist(), batch["caption"])]
+        feats, mask = text.encode(captions)
+    return {"noisy": noisy, "timesteps": t, "text": feats.to(dev), "text_mask": mask.to(dev), "lengths": length,
+            "target": noise}
+
+
+def _prepare_mmae(batch: dict[str, Any], ctx: StepContext, *, text: CaptionFeatureCache,
+                  config: KeyMotionTrainConfig) -> dict[str, Any]:
+    dev = ctx.env.device
+    motion, length, idx, keyframes = _keyframe_inputs(batch, dev)
+    b, n, d = motion.shape
+    noise = ctx.rand.randn(b, (idx.shape[1], d)) * config.keyframe_noise
+    inputs, kf_mask = scatter_keyframes(keyframes + noise, idx, n)
+    frame_mask = torch.arange(n, device=dev)[None] < length[:, None]
+    with torch.no_grad():
+        feats, mask = text.encode(list(batch["caption"]))
+    return {"motion": motion, "inputs": inputs, "keyframe_mask": kf_mask, "frame_mask": frame_mask,
+            "text": feats.to(dev), "text_mask": mask.to(dev)}
+
+
+# --------------------------------------------------------------------------------- tasks
+def build_kf_vae_task(data_dir: str | os.PathLike, model_config: KeyframeVAEConfig | None,
+                      train_config: KeyMotionTrainConfig, env: DistEnv) -> TrainTask:
+    """The :class:`TrainTask` of a keyframe-VAE run (model built with ``train_config.seed``)."""
+    model_config = model_config or KeyframeVAEConfig(max_length=train_config.max_length)
+    if not isinstance(model_config, KeyframeVAEConfig):
+        raise TypeError(f"model_config must be a KeyframeVAEConfig, got {type(model_config).__name__}")
+    _check_max_length(model_config.max_length, train_config)
+    train_set, val_set = _datasets(data_dir, model_config.skeleton, model_config.num_keyframes, train_config)
+    torch.manual_seed(train_config.seed)  # same initial weights on every rank and every run
+    vae = KeyframeVAE(model_config).to(env.device)
+    vae.set_normalization(train_set.mean, train_set.std)
+    meta = {"data": str(Path(data_dir)), "keyframe_method": train_config.keyframe_method}
+    return TrainTask(
+        model=vae, model_type="keymotion_kf_vae", model_config=model_config, objective=KeyframeVAEObjective(vae),
+        train_set=train_set, val_set=val_set, collate=collate_keyframes,
+        prepare=partial(_prepare_vae, latent_shape=vae.latent_shape), meta=meta,
+        extra_config={"kind": "keymotion_kf_vae", **meta, "data": str(Path(data_dir).resolve())},
+        extra_files={"mean_std.safetensors": _mean_std_file(train_set)},
+    )
+
+
+def load_frozen_kf_vae(path: str | os.PathLike, device: str | torch.device = "cpu") -> KeyframeVAE:
+    """A trained keyframe VAE (run folder, stem or file) in eval mode with gradients off."""
+    from salad_core.io import load_model
+
+    stem = resolve_checkpoint(path)
+    vae, _, _ = load_model(stem)
+    if not isinstance(vae, KeyframeVAE):
+        raise TypeError(f"{stem} holds a {type(vae).__name__}, not a KeyframeVAE")
+    vae = vae.to(device).eval()
+    for p in vae.parameters():
+        p.requires_grad_(False)
+    return vae
+
+
+def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, model_config: PSTConfig | None,
+                   train_config: KeyMotionTrainConfig, env: DistEnv, text_encoder: Any = "minilm",
+                   diffusion_config: Any = None) -> TrainTask:
+    """The :class:`TrainTask` of a PST run on the latents of a frozen keyframe VAE."""
+    from salad_core.sampling import DiffusionConfig, make_scheduler
+
+    diffusion_config = diffusion_config or PST_DIFFUSION
+    if not isinstance(diffusion_config, DiffusionConfig):
+        raise TypeError(f"diffusion_config must be a DiffusionConfig, got {type(diffusion_config).__name__}")
+    if diffusion_config.prediction_type != "epsilon":
+        raise ValueError("the PST is trained with epsilon prediction (paper eq. 7); "
+                         f"diffusion_config.prediction_type={diffusion_config.prediction_type!r}")
+    vae = load_frozen_kf_vae(vae_path, env.device)
+    encoder, encoder_name = _text_encoder(text_encoder, env.device)
+    vc = vae.config
+    if model_config is None:
+        model_config = PSTConfig(latent_size=vc.latent_size, latent_dim=vc.latent_dim, text_dim=encoder.dim,
+                                 max_length=train_config.max_length)
+    if not isinstance(model_config, PSTConfig):
+        raise TypeError(f"model_config must be a PSTConfig, got {type(model_config).__name__}")
+    for name, want in (("latent_size", vc.latent_size), ("latent_dim", vc.latent_dim), ("text_dim", encoder.dim)):
+        if getattr(model_config, name) != want:
+            raise ValueError(f"PSTConfig.{name}={getattr(model_config, name)} does not fit: the "
+                             f"{'text encoder' if name == 'text_dim' else 'keyframe VAE'} gives {want}; set {name}={want}")
+    _check_max_length(vc.max_length, train_config)
+    train_set, val_set = _datasets(data_dir, vc.skeleton, vc.num_keyframes, train_config)
+    if not (np.allclose(train_set.mean, vae.norm.mean.cpu().numpy()) and np.allclose(train_set.std, vae.norm.std.cpu().numpy())):
+        log.warning("the keyframe VAE was trained with other normalisation statistics than %s's", data_dir)
+    torch.manual_seed(train_config.seed)
+    pst = ParallelSkipTransformer(model_config).to(env.device)
+    scheduler = make_scheduler(diffusion_config, "ddim")
+    prepare = partial(_prepare_pst, vae=vae, text=CaptionFeatureCache(encoder, train_config.text_cache_size),
+                      scheduler=scheduler, config=train_config, latent_shape=vae.latent_shape)
+    meta = {"diffusion": config_to_dict(diffusion_config), "text_encoder": encoder_name,
+            "kf_vae": str(resolve_checkpoint(vae_path)), "data": str(Path(data_dir))}
+    return TrainTask(
+        model=pst, model_type="keymotion_pst", model_config=model_config, objective=PSTObjective(pst),
+        train_set=train_set, val_set=val_set, collate=collate_keyframes, prepare=prepare, meta=meta,
+        extra_config={"kind": "keymotion_pst", **meta, "data": str(Path(data_dir).resolve())},
+        extra_files={"mean_std.safetensors": _mean_std_file(train_set)},
+    )
+
+
+def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None, train_config: KeyMotionTrainConfig,
+                    env: DistEnv, text_encoder: Any = "minilm", num_keyframes: int = 20) -> TrainTask:
+    """The :class:`TrainTask` of an MMAE run (``num_keyframes`` must match the keyframe VAE's)."""
+    encoder, encoder_name = _text_encoder(text_encoder, env.device)
+    if model_config is None:
+        model_config = MMAEConfig(text_dim=encoder.dim, max_length=train_config.max_length)
+    if not isinstance(model_config, MMAEConfig):
+        raise TypeError(f"model_config must be an MMAEConfig, got {type(model_config).__name__}")
+    if model_config.text_dim != encoder.dim:
+        raise ValueError(f"MMAEConfig.text_dim={model_config.text_dim} does not fit: the text encoder gives "
+                         f"{encoder.dim}; set text_dim={encoder.dim}")
+    _check_max_length(model_config.max_length, train_config)
+    train_set, val_set = _datasets(data_dir, model_config.skeleton, num_keyframes, train_config)
+    torch.manual_seed(train_config.seed)
+    mmae = MotionMaskedAutoencoder(model_config).to(env.device)
+    mmae.set_normalization(train_set.mean, train_set.std)
+    prepare = partial(_prepare_mmae, text=CaptionFeatureCache(encoder, train_config.text_cache_size), config=train_config)
+    meta = {"text_encoder": encoder_name, "num_keyframes": num_keyframes,
+            "keyframe_method": train_config.keyframe_method, "data": str(Path(data_dir))}
+    return TrainTask(
+        model=mmae, model_type="keymotion_mmae", model_config=model_config, objective=MMAEObjective(mmae),
+        train_set=train_set, val_set=val_set, collate=collate_keyframes, prepare=prepare, meta=meta,
+        extra_config={"kind": "keymotion_mmae", **meta, "data": str(Path(data_dir).resolve())},
+        extra_files={"mean_std.safetensors": _mean_std_file(train_set)},
+    )
+
+
+def _check_max_length(model_max: int, config: KeyMotionTrainConfig) -> None:
+    if config.max_length > model_max:
+        raise ValueError(f"KeyMotionTrainConfig.max_length={config.max_length} exceeds the model's "
+                         f"max_length={model_max}")
+
+
+# ------------------------------------------------------------------------------- entry points
+def train_kf_vae(data_dir: str | os.PathLike, out_dir: str | os.PathLike, model_config: KeyframeVAEConfig | None = None,
+                 train_config: KeyMotionTrainConfig | None = None, resume: bool = False, *,
+                 env: DistEnv | None = None, on_step: Callable[[int], None] | None = None) -> TrainResult:
+    """Train a :class:`KeyframeVAE` on a HumanML3D-layout folder (run folder layout of :func:`fit`)."""
+    train_config = train_config or KeyMotionTrainConfig()
+    env = env or init_distributed(train_config.device)
+    return fit(build_kf_vae_task(data_dir, model_config, train_config, env), out_dir, train_config,
+               resume=resume, env=env, on_step=on_step)
+
+
+def train_pst(data_dir: str | os.PathLike, out_dir: str | os.PathLike, vae_path: str | os.PathLike,
+              model_config: PSTConfig | None = None, train_config: KeyMotionTrainConfig | None = None,
+              text_encoder: Any = "minilm", resume: bool = False, *, diffusion_config: Any = None,
+              env: DistEnv | None = None, on_step: Callable[[int], None] | None = None) -> TrainResult:
+    """Train a :class:`ParallelSkipTransformer` on the latents of the frozen VAE at ``vae_path``."""
+    train_config = train_config or KeyMotionTrainConfig()
+    env = env or init_distributed(train_config.device)
+    task = build_pst_task(data_dir, vae_path, model_config, train_config, env, text_encoder, diffusion_config)
+    return fit(task, out_dir, train_config, resume=resume, env=env, on_step=on_step)
+
+
+def train_mmae(data_dir: str | os.PathLike, out_dir: str | os.PathLike, model_config: MMAEConfig | None = None,
+               train_config: KeyMotionTrainConfig | None = None, text_encoder: Any = "minilm",
+               resume: bool = False, *, num_keyframes: int = 20, env: DistEnv | None = None,
+               on_step: Callable[[int], None] | None = None) -> TrainResult:
+    """Train a :class:`MotionMaskedAutoencoder` (in-filling from ``num_keyframes`` keyframes)."""
+    train_config = train_config or KeyMotionTrainConfig()
+    env = env or init_distributed(train_config.device)
+    task = build_mmae_task(data_dir, model_config, train_config, env, text_encoder, num_keyframes)
+    return fit(task, out_dir, train_config, resume=resume, env=env, on_step=on_step)
+
+
+def train_keymotion(data_dir: str | os.PathLike, out_dir: str | os.PathLike, *,
+                    vae_config: KeyframeVAEConfig | None = None, pst_config: PSTConfig | None = None,
+                    mmae_config: MMAEConfig | None = None, vae_train: KeyMotionTrainConfig | None = None,
+                    pst_train: KeyMotionTrainConfig | None = None, mmae_train: KeyMotionTrainConfig | None = None,
+                    text_encoder: Any = "minilm", resume: bool = False, env: DistEnv | None = None
+                    ) -> dict[str, TrainResult]:
+    """Train the keyframe VAE, then the PST on its latents, then the MMAE; returns the results by stage.
+
+    Writes ``out_dir/{kf_vae,pst,mmae}/`` (run folders) and ``out_dir/keymotion.json``, so that
+    :meth:`KeyMotionPipeline.from_pretrained(out_dir) <salad_core.keymotion.pipeline.KeyMotionPipeline.from_pretrained>`
+    loads the trained pipeline (each stage's ``best`` checkpoint if it was validated, else
+    ``latest``). With ``resume`` a finished stage is skipped and an interrupted one continues.
+    """
+    out = Path(out_dir)
+    vae_train = vae_train or KeyMotionTrainConfig()
+    env = env or init_distributed(vae_train.device)
+    encoder, encoder_name = _text_encoder(text_encoder, env.device)   # loaded once for both text stages
+    results: dict[str, TrainResult] = {}
+    results["kf_vae"] = train_kf_vae(data_dir, out / "kf_vae", vae_config, vae_train, resume, env=env)
+    # the MMAE in-fills from as many keyframes as the trained VAE generates
+    vae_doc = json.loads(resolve_checkpoint(out / "kf_vae").with_suffix(".json").read_text())
+    num_keyframes = int(vae_doc["config"]["num_keyframes"])
+    results["pst"] = train_pst(data_dir, out / "pst", out / "kf_vae", pst_config, pst_train or vae_train, encoder,
+                               resume, env=env)
+    results["mmae"] = train_mmae(data_dir, out / "mmae", mmae_config, mmae_train or vae_train, encoder, resume,
+                                 num_keyframes=num_keyframes, env=env)
+    if env.is_main:
+        doc = {"format": "keymotion_pipeline", "version": 1, "text_encoder": encoder_name,
+               "diffusion": config_to_dict(PST_DIFFUSION), "default_length": 120}
+        atomic_write_text(out / "keymotion.json", json.dumps(doc, indent=2) + "\n")
+    return results
