@@ -171,9 +171,21 @@ def register_model(model_type: str, config_cls: type, builder: Callable[[Any], t
     _REGISTRY[model_type] = (config_cls, builder)
 
 
+_REGISTRY_MODULES = ("salad_core.models", "salad_core.eval.t2m", "salad_core.keymotion.kf_vae",
+                     "salad_core.keymotion.pst", "salad_core.keymotion.mmae")
+
+
+def _import_model_registries() -> None:
+    """Import every module that registers model types (lazily, to avoid import cycles)."""
+    import importlib
+
+    for mod in _REGISTRY_MODULES:
+        importlib.import_module(mod)
+
+
 def load_model(stem_or_path: str | os.PathLike) -> tuple[torch.nn.Module, Any, dict[str, Any]]:
     """Rebuild a model from our checkpoint alone; returns ``(model in eval mode, config, meta)``."""
-    import salad_core.models  # noqa: F401  (registers the model types)
+    _import_model_registries()
 
     doc, state = read_checkpoint(stem_or_path)
     if doc["type"] not in _REGISTRY:

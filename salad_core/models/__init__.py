@@ -1,7 +1,7 @@
 """SALAD's networks: the skeleto-temporal VAE and the skeleton-aware denoiser.
 
-Importing this package registers every model type our checkpoints can rebuild
-(:func:`salad_core.io.load_model`).
+Importing this package registers the SALAD model types; :func:`salad_core.io.load_model` also
+imports the evaluator and KeyMotion modules, which register theirs.
 """
 from __future__ import annotations
 
@@ -16,22 +16,6 @@ from salad_core.models.vae import MotionVAE, VAEConfig
 __all__ = ["MotionVAE", "VAEConfig", "Denoiser", "DenoiserConfig", "load_official_checkpoint"]
 
 _OFFICIAL_KEYS = {"vae": ("vae",), "denoiser": ("denoiser",)}
-
-
-def _register_extras() -> None:
-    # the evaluator and KeyMotion live in their own packages but load through the same registry
-    import importlib
-
-    for mod in ("salad_core.eval.t2m", "salad_core.keymotion.kf_vae", "salad_core.keymotion.pst",
-                "salad_core.keymotion.mmae"):
-        try:
-            importlib.import_module(mod)
-        except ModuleNotFoundError as exc:  # optional pieces of a partial install
-            if exc.name != mod:
-                raise
-
-
-_register_extras()
 
 
 def load_official_checkpoint(path_or_state_dict: str | Path | Mapping[str, torch.Tensor], kind: str = "denoiser",

@@ -1,0 +1,365 @@
+"""Composing actions into clips: sequences, layering, repetition, and the plan sampler.
+
+A :class:`Plan` is a sequence of :class:`Step` s ("X, then Y"); each step has a main action and
+optionally a gesture layered on it ("X while Y"); an optional overlay gesture spans the whole
+sequence ("X and then Y, while Z"). :func:`realise` turns a plan into joints: base segments are
+chained (each starts where the previous one left the feet), standing idles fill the gaps, and
+gestures replace the base arm motion with cross-fades and add head motion. Every action's frame
+interval and body parts are recorded as an :class:`Event`: the ground truth of the captions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .footwork import Persona, Stance
+from .gestures import Gesture
+from .kinematics import FPS, BodyModel, Pose, assemble, body_model
+from .primitives import PRIMITIVES, Action, build_base, build_gesture, primitive_parts
+from .segment import Segment, standing_pose
+
+__all__ = ["Step", "Plan", "Event", "Clip", "realise", "sample_action", "sample_plan", "generate_clip",
+           "MIN_FRAMES", "MAX_FRAMES", "PLAN_TYPES"]
+
+#: Joint frames of a clip: features have one row fewer, and HumanML3D keeps 40..196 rows.
+MIN_FRAMES, MAX_FRAMES = 41, 197
+#: Plan shapes and how often the sampler draws them (short clips dominate).
+PLAN_TYPES = {"single": 0.35, "gesture": 0.19, "layered": 0.25, "sequence": 0.15, "sequence3": 0.02,
+              "overlay": 0.04}
+
+
+@dataclass(frozen=True)
+class Step:
+    """One element of a sequence: a main action and an optional gesture layered on it."""
+
+    main: Action
+    layer: Action | None = None
+
+    def __post_init__(self) -> None:
+        if self.layer is None:
+            return
+        layer, main = self.layer.spec, self.main.spec
+        if layer.track != "gesture":
+            raise ValueError(f"Step.layer must be a gesture, got {self.layer.kind!r} ({layer.track})")
+        if main.track == "base" and layer.category not in main.accepts:
+            raise ValueError(f"a {layer.category} gesture ({self.layer.kind!r}) cannot be layered on "
+                             f"{self.main.kind!r}; it accepts {main.accepts or 'nothing'}")
+        if main.track == "gesture" and (main.category == layer.category):
+            raise ValueError(f"Step: {self.main.kind!r} and {self.layer.kind!r} drive the same parts")
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a clip shows."""
+
+    steps: tuple[Step, ...]
+    overlay: Action | None = None   # a gesture spanning the whole sequence
+
+    def __post_init__(self) -> None:
+        if not self.steps:
+            raise ValueError("Plan.steps must hold at least one step")
+        for i, s in enumerate(self.steps[:-1]):
+            if s.main.spec.terminal:
+                raise ValueError(f"Plan step {i} ({s.main.kind!r}) must end the plan")
+        if self.overlay is not None:
+            if self.overlay.spec.category != "arms":
+                raise ValueError(f"Plan.overlay must be an arm gesture, got {self.overlay.kind!r}")
+            bad = [s.main.kind for s in self.steps if s.layer is not None or "arms" not in s.main.spec.accepts]
+            if bad:
+                raise ValueError(f"an overlay needs steps that take arm gestures and have no layer; not {bad}")
+
+    def actions(self) -> list[tuple[str, int, Action]]:
+        """``(role, step, action)`` in caption order: main and layer per step, then the overlay."""
+        out = []
+        for i, s in enumerate(self.steps):
+            out.append(("main", i, s.main))
+            if s.layer is not None:
+                out.append(("layer", i, s.layer))
+        if self.overlay is not None:
+            out.append(("overlay", -1, self.overlay))
+        return out
+
+    def mirrored(self) -> "Plan":
+        steps = tuple(Step(s.main.mirrored(), None if s.layer is None else s.layer.mirrored()) for s in self.steps)
+        return Plan(steps, None if self.overlay is None else self.overlay.mirrored())
+
+
+@dataclass(frozen=True)
+class Event:
+    """Where and what one action of a clip is."""
+
+    role: str                       # "main", "layer" or "overlay"
+    step: int                       # step index (-1 for the overlay)
+    action: Action
+    frames: tuple[int, int]         # joint frames [f0, f1)
+    parts: tuple[str, ...]          # body parts the action drives
+    secondary: tuple[str, ...]      # parts it moves incidentally
+    info: dict
+
+
+@dataclass
+class Clip:
+    """A realised plan."""
+
+    joints: np.ndarray              # (N, J, 3) float64
+    plan: Plan
+    events: list[Event]             # in the order of plan.actions()
+    persona: Persona
+
+    @property
+    def num_frames(self) -> int:
+        return self.joints.shape[0]
+
+
+# ----------------------------------------------------------------------------- realisation
+def _arms_of(action: Action | None) -> set[str]:
+    if action is None or action.spec.category != "arms":
+        return set()
+    return set(primitive_parts(action)[0])
+
+
+def _blend(pose: Pose, g: Gesture, at: int) -> None:
+    """Lay gesture ``g`` over ``pose`` from frame ``at`` (in place)."""
+    sl = slice(at, at + g.num_frames)
+    w = g.arm_weight[:, :, None]
+    pose.arm[sl] = (1.0 - w) * pose.arm[sl] + w * g.arm
+    pole = (1.0 - w) * pose.arm_pole[sl] + w * g.arm_pole
+    pose.arm_pole[sl] = pole / np.linalg.norm(pole, axis=-1, keepdims=True)
+    pose.neck[sl] += g.neck
+    pose.spine[sl] += g.spine
+
+
+def _idle(stance: Stance, persona: Persona, n: int, body: BodyModel, rng) -> Segment:
+    return Segment(standing_pose(stance, persona, n, body, rng, idle=True), stance, (0, n))
+
+
+def _rest_seated(last: Pose, n: int, rng) -> Segment:
+    """Stay seated for ``n`` frames (the last pose, breathing)."""
+    p = last.slice(last.num_frames - 1, last.num_frames)
+    pose = Pose.concat([p] * n)
+    t = np.arange(n) / FPS
+    pose.spine[:, 1] += 0.01 * np.sin(2 * np.pi * rng.uniform(0.2, 0.3) * t)
+    return Segment(pose, None, (0, n), arms_free=False, seated=True)
+
+
+def _frames(seconds: tuple[float, float], rng) -> int:
+    return int(round(rng.uniform(*seconds) * FPS))
+
+
+def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
+            persona: Persona | None = None, min_frames: int = MIN_FRAMES) -> Clip:
+    """Build the joints and events of ``plan`` (random choices from ``rng``).
+
+    The closing stand is stretched so that the clip has at least ``min_frames`` frames.
+    """
+    body = body or body_model("humanml3d")
+    persona = persona or Persona.sample(rng)
+    stance = Stance.at((0.0, 0.0), 0.0, persona)
+    overlay_arms = _arms_of(plan.overlay)
+    poses: list[Pose] = []
+    cursor = 0
+
+    def append(seg: Segment) -> int:
+        """Append a segment (its first frame equals the previous last frame); return its offset."""
+        nonlocal cursor
+        p = seg.pose if not poses else seg.pose.slice(1, seg.num_frames)
+        start = cursor if not poses else cursor - 1
+        poses.append(p)
+        cursor += p.num_frames
+        return start
+
+    append(_idle(stance, persona, 2 + _frames((0.05, 0.25), rng), body, rng))
+    placed: list[tuple[int, Gesture]] = []
+    events: dict[tuple[str, int], tuple[tuple[int, int], dict]] = {}
+    seated = False
+    for i, step in enumerate(plan.steps):
+        if i > 0:
+            gap = _frames((0.0, 0.2), rng)
+            if gap > 1:
+                append(_idle(stance, persona, gap + 1, body, rng))
+        main = step.main
+        if main.spec.track == "base":
+            arm_layer = bool(_arms_of(step.layer) or overlay_arms)
+            seg = build_base(main, stance, persona, body, rng, keep_arms=arm_layer)
+            seated = seg.seated
+            at = append(seg)
+            core = (at + seg.core[0], at + seg.core[1])
+            events[("main", i)] = (core, seg.info)
+            stance = seg.end
+            if step.layer is not None:
+                span = (core[1] - core[0]) / FPS
+                g = build_gesture(step.layer, persona, body, rng, duration=span * rng.uniform(0.75, 0.92))
+                slack = max(0, core[1] - core[0] - g.num_frames)
+                g_at = core[0] + int(rng.integers(0, slack + 1))
+                placed.append((g_at, g))
+                events[("layer", i)] = ((g_at, g_at + g.num_frames), g.info)
+        else:
+            g = build_gesture(main, persona, body, rng)
+            seg = _idle(stance, persona, g.num_frames + 2, body, rng)
+            at = append(seg)
+            placed.append((at + 1, g))
+            events[("main", i)] = ((at + 1, at + 1 + g.num_frames), g.info)
+            if step.layer is not None:
+                span = g.num_frames / FPS
+                h = build_gesture(step.layer, persona, body, rng, duration=span * rng.uniform(0.7, 0.9))
+                slack = max(0, g.num_frames - h.num_frames)
+                h_at = at + 1 + int(rng.integers(0, slack + 1))
+                placed.append((h_at, h))
+                events[("layer", i)] = ((h_at, h_at + h.num_frames), h.info)
+    if plan.overlay is not None:
+        f0 = events[("main", 0)][0][0]
+        f1 = events[("main", len(plan.steps) - 1)][0][1]
+        g = build_gesture(plan.overlay, persona, body, rng, duration=(f1 - f0) / FPS)
+        placed.append((f0, g))
+        events[("overlay", -1)] = ((f0, f0 + g.num_frames), g.info)
+    # the closing rest: long enough for every gesture and for the shortest clip kept
+    need = max([min_frames] + [at + g.num_frames for at, g in placed])
+    n_tail = max(2 + _frames((0.1, 0.35), rng), need - cursor + 1)
+    if seated:
+        append(_rest_seated(poses[-1], n_tail, rng))
+    else:
+        append(_idle(stance, persona, n_tail, body, rng))
+    pose = Pose.concat(poses)
+    for at, g in placed:
+        _blend(pose, g, at)
+    joints = assemble(pose, body)
+
+    out: list[Event] = []
+    n = joints.shape[0]
+    gestures_at = [(role, i, events[(role, i)][0]) for role, i, a in plan.actions() if a.spec.category == "arms"]
+    for role, i, action in plan.actions():
+        (f0, f1), info = events[(role, i)]
+        parts, secondary = primitive_parts(action)
+        if action.spec.track == "base":
+            # an arm gesture covering most of this action takes its arms over
+            taken: set[str] = set()
+            for g_role, g_i, (g0, g1) in gestures_at:
+                if (g_role == "overlay" or g_i == i) and min(f1, g1) - max(f0, g0) >= 0.5 * (f1 - f0):
+                    taken |= _arms_of(plan.overlay if g_role == "overlay" else plan.steps[g_i].layer)
+            parts = tuple(p for p in parts if p not in taken)
+            secondary = tuple(p for p in secondary if p not in taken)
+        out.append(Event(role, i, action, (max(0, f0), min(n, f1)), parts, secondary, dict(info)))
+    return Clip(joints, plan, out, persona)
+
+
+# ----------------------------------------------------------------------------- sampling
+_HEIGHT = ("high", "low")
+_SPEED = ("quickly", "slowly")
+_VARIANT_P = {"walk": {"in_place": 0.12}, "jog": {"in_place": 0.2}, "march": {"in_place": 0.4},
+              "jump": {"forward": 0.4}, "turn": {"around": 0.4}, "wave": {"arms": 0.3}}
+
+
+def _pick(rng, items, weights=None):
+    items = list(items)
+    if weights is None:
+        return items[int(rng.integers(len(items)))]
+    w = np.asarray(weights, dtype=np.float64)
+    return items[int(rng.choice(len(items), p=w / w.sum()))]
+
+
+def sample_action(rng: np.random.Generator, kinds: list[str]) -> Action:
+    """A random action among ``kinds`` (weighted by the registry), with side, modifiers,
+    repetitions and variant drawn from what the primitive allows."""
+    kind = _pick(rng, kinds, [PRIMITIVES[k].weight for k in kinds])
+    spec = PRIMITIVES[kind]
+    variant = ""
+    for v, p in _VARIANT_P.get(kind, {}).items():
+        if rng.random() < p:
+            variant = v
+    side = _pick(rng, spec.sides)
+    if kind == "wave" and variant == "arms":
+        side = "both"
+    mods = []
+    heights = [m for m in _HEIGHT if m in spec.mods]
+    speeds = [m for m in _SPEED if m in spec.mods]
+    if variant in ("arms", "forward"):
+        heights = []
+    if heights and rng.random() < 0.38:
+        mods.append(_pick(rng, heights, [2.0 if m == "high" else 1.0 for m in heights]))
+    if speeds and rng.random() < 0.25:
+        mods.append(_pick(rng, speeds))
+    reps = spec.reps[0]
+    if len(spec.reps) > 1:
+        reps = _pick(rng, spec.reps, [3.0 if r == spec.reps[0] else 1.0 for r in spec.reps])
+    return Action(kind, side, tuple(sorted(mods)), reps, variant)
+
+
+def _bases(accepting: str | None = None, terminal: bool = True) -> list[str]:
+    return [k for k, s in PRIMITIVES.items() if s.track == "base" and (terminal or not s.terminal)
+            and (accepting is None or accepting in s.accepts)]
+
+
+def _gestures(category: str | None = None) -> list[str]:
+    return [k for k, s in PRIMITIVES.items() if s.track == "gesture" and (category is None or s.category == category)]
+
+
+def _layer_for(rng, base: Action) -> Action | None:
+    cats = base.spec.accepts
+    if not cats:
+        return None
+    cat = _pick(rng, cats, [3.0 if c == "arms" else 1.0 for c in cats])
+    kinds = [k for k in _gestures(cat) if not (base.kind == "spin" and k == "punch")]
+    return sample_action(rng, kinds)
+
+
+def _step(rng, terminal: bool, allow_gesture: bool = True, layer_p: float = 0.15) -> Step:
+    if allow_gesture and rng.random() < 0.25:
+        main = sample_action(rng, _gestures())
+        layer = None
+        if main.spec.category == "arms" and rng.random() < layer_p:
+            layer = sample_action(rng, _gestures("head"))
+        return Step(main, layer)
+    main = sample_action(rng, _bases(terminal=terminal))
+    layer = _layer_for(rng, main) if rng.random() < layer_p else None
+    return Step(main, layer)
+
+
+def sample_plan(rng: np.random.Generator, plan_type: str | None = None) -> Plan:
+    """A random plan; ``plan_type`` one of :data:`PLAN_TYPES` (default: drawn by its weight)."""
+    if plan_type is None:
+        plan_type = _pick(rng, PLAN_TYPES, list(PLAN_TYPES.values()))
+    if plan_type not in PLAN_TYPES:
+        raise ValueError(f"plan_type {plan_type!r} unknown; known: {', '.join(PLAN_TYPES)}")
+    if plan_type == "single":
+        return Plan((Step(sample_action(rng, _bases())),))
+    if plan_type == "gesture":
+        main = sample_action(rng, _gestures())
+        head = main.spec.category == "arms" and rng.random() < 0.2
+        return Plan((Step(main, sample_action(rng, _gestures("head")) if head else None),))
+    if plan_type == "layered":
+        base = sample_action(rng, [k for k in _bases() if PRIMITIVES[k].accepts])
+        return Plan((Step(base, _layer_for(rng, base)),))
+    if plan_type in ("sequence", "sequence3"):
+        n = 2 if plan_type == "sequence" else 3
+        steps: list[Step] = []
+        while len(steps) < n:
+            s = _step(rng, terminal=len(steps) == n - 1)
+            if steps and s.main.kind == steps[-1].main.kind:
+                continue
+            steps.append(s)
+        return Plan(tuple(steps))
+    # overlay: bases that take arm gestures, one arm gesture over all of them
+    steps = []
+    while len(steps) < 2:
+        a = sample_action(rng, _bases("arms", terminal=False))
+        if steps and a.kind == steps[-1].main.kind:
+            continue
+        steps.append(Step(a))
+    over = sample_action(rng, ["wave", "raise", "stretch", "arms_out", "clap"])
+    if over.kind == "clap":
+        over = Action("clap", "both", over.mods, 1, "")   # an overlay lasts the whole sequence
+    return Plan(tuple(steps), over)
+
+
+def generate_clip(rng: np.random.Generator, body: BodyModel | None = None, tries: int = 30,
+                  plan_type: str | None = None) -> Clip:
+    """Sample plans until one realises to at most ``MAX_FRAMES`` joint frames (clips shorter
+    than ``MIN_FRAMES`` are stretched with standing still by :func:`realise`)."""
+    body = body or body_model("humanml3d")
+    for _ in range(tries):
+        plan = sample_plan(rng, plan_type)
+        clip = realise(plan, rng, body)
+        if clip.num_frames <= MAX_FRAMES:
+            return clip
+    raise RuntimeError(f"no plan of type {plan_type!r} fitted in {MAX_FRAMES} frames after {tries} tries")

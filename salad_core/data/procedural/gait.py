@@ -1,0 +1,306 @@
+"""Locomotion: walking, running, jogging, marching, backwards, sidesteps, circles, turns, spins.
+
+A footstep planner places every foot plant on the route at the root position of its own
+mid-stance (plus the lateral stance offset), so the root travels exactly one step length per
+step and a planted foot never moves: the root speed is consistent with the stride by
+construction and there is no foot sliding. Between plants each foot swings along a lifted arc;
+heel-strike and toe-off roll the planted foot about the ankle or the toe. The pelvis bobs,
+sways towards the stance foot and rotates with the legs; shoulders counter-rotate and the arms
+swing in counter-phase. The pelvis height is finally clamped so both hips reach their ankles.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .curves import ease, frame_times, smooth
+from .footwork import ANKLE_HEIGHT, PELVIS_AHEAD, Persona, Plant, Stance, Swing, foot_track, \
+    max_pelvis_height, standing_height
+from .kinematics import FPS, BodyModel, Pose, heading_vectors, rot_y, ypr_matrix
+from .segment import Segment, knee_poles, num_frames
+
+__all__ = ["GaitStyle", "Route", "locomotion", "gait_style", "GAITS"]
+
+#: Gaits that :func:`gait_style` knows.
+GAITS = ("walk", "run", "jog", "march", "backward", "sidestep", "turn", "spin", "circle")
+
+
+@dataclass(frozen=True)
+class GaitStyle:
+    """How a gait moves (all speeds at cruise)."""
+
+    speed: float            # travel speed along the route (m/s); 0 steps in place
+    cadence: float          # steps per second
+    duty: float             # fraction of a stride each foot is planted (walk ~0.6, run ~0.35)
+    swing: Swing            # the swing arc of the feet
+    roll_in: float          # foot pitch at touch-down (rad): + heel strike, - toe first
+    roll_out: float         # foot pitch at lift-off (rad): - toe-off, + heel last
+    width: float            # half distance between the feet while stepping (m)
+    bob: float              # pelvis vertical oscillation (m)
+    drop: float             # pelvis lowered below standing at cruise (m)
+    lean: float             # forward trunk lean at cruise (rad)
+    sway: float             # pelvis sway towards the stance foot (m)
+    twist: float            # pelvic rotation amplitude (rad)
+    arm_swing: float        # shoulder swing amplitude (rad)
+    arm_abd: float          # extra arm abduction (rad)
+    elbow: float            # elbow flexion at cruise (rad)
+    running: bool = False   # flight phases: pelvis lowest in stance, highest in flight
+    ramp_strides: float = 0.8  # strides to speed up and to slow down
+
+    def __post_init__(self) -> None:
+        if not 0.1 <= self.duty <= 0.8:
+            raise ValueError(f"GaitStyle.duty={self.duty} must lie in [0.1, 0.8]")
+        if not self.cadence > 0:
+            raise ValueError(f"GaitStyle.cadence={self.cadence} must be positive")
+        if self.speed < 0:
+            raise ValueError(f"GaitStyle.speed={self.speed} must be >= 0 (use Route.heading to go backwards)")
+
+
+@dataclass(frozen=True)
+class Route:
+    """Where the root goes, in the start body frame."""
+
+    kind: str = "line"      # "line", "arc" or "turn" (in place)
+    heading: float = 0.0    # line: direction of travel (0 forward, pi backward, +pi/2 left)
+    radius: float = 1.0     # arc: radius (m)
+    side: float = 1.0       # arc/turn: +1 turns left (counter-clockwise), -1 right
+    angle: float = 0.0      # turn: heading change (rad, >= 0; the side gives the sign)
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("line", "arc", "turn"):
+            raise ValueError(f"Route.kind={self.kind!r}; allowed: 'line', 'arc', 'turn'")
+        if self.side not in (1.0, -1.0):
+            raise ValueError(f"Route.side={self.side!r} must be +1 (left) or -1 (right)")
+
+
+def _route_local(route: Route, dist: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Local position ``(N, 3)`` and heading change ``(N,)`` after travelling ``dist`` metres."""
+    z = np.zeros_like(dist)
+    if route.kind == "line":
+        return np.stack([np.sin(route.heading) * dist, z, np.cos(route.heading) * dist], -1), z
+    if route.kind == "arc":
+        th = dist / route.radius
+        return np.stack([route.side * route.radius * (1 - np.cos(th)), z, route.radius * np.sin(th)], -1), route.side * th
+    return np.stack([z, z, z], -1), route.side * route.angle * u
+
+
+def _progress(t: np.ndarray, t_s: float, t_e: float, ramp: float) -> np.ndarray:
+    """Normalised speed profile (1 at cruise) and its integral (seconds at cruise speed)."""
+    v = ease(t, t_s, t_s + ramp) * (1.0 - ease(t, t_e - ramp, t_e))
+    dt = np.diff(t, prepend=t[0])
+    s = np.cumsum(0.5 * (v + np.concatenate([[v[0]], v[:-1]])) * dt)
+    return v, s
+
+
+def locomotion(start: Stance, persona: Persona, style: GaitStyle, route: Route, n_steps: int,
+               body: BodyModel, first: int | None = None) -> Segment:
+    """Step ``n_steps`` times along ``route`` from a standing ``start`` to a standing end.
+
+    Parameters
+    ----------
+    start : Stance
+    persona : Persona
+    style : GaitStyle
+    route : Route
+    n_steps : int
+        Number of steps (>= 2); the last two bring the feet side by side.
+    body : BodyModel
+    first : int, optional
+        Foot that steps first (0 left, 1 right); default: the side the route goes to, else left.
+
+    Returns
+    -------
+    Segment with ``info`` holding the cruise ``speed``, ``distance``, ``turn`` and step count.
+    """
+    if n_steps < 2:
+        raise ValueError(f"n_steps={n_steps} must be >= 2")
+    step_t = 1.0 / style.cadence
+    swing_t = max(0.18, (1.0 - style.duty) * 2.0 * step_t)
+    pre, post = 0.25, 0.35
+    lifts = pre + np.arange(n_steps) * step_t
+    lands = lifts + swing_t
+    total = lands[-1] + post
+    n = num_frames(total)
+    t = frame_times(n, FPS)
+    t_s = pre - 0.35 * step_t
+    t_e = lands[-1] + 0.1 * step_t
+    ramp = min(style.ramp_strides * 2 * step_t, (t_e - t_s) / 2)
+
+    # root progress along the route (fine grid so that plants at arbitrary times are exact)
+    fine = np.linspace(0.0, total, int(total * 400) + 2)
+    _, s_fine = _progress(fine, t_s, t_e, ramp)
+    s_total = s_fine[-1]
+    distance = style.speed * s_total
+
+    def along(tq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        s = np.interp(tq, fine, s_fine)
+        u = s / s_total
+        loc, dyaw = _route_local(route, style.speed * s, u)
+        pos = start.ground + loc @ rot_y(start.yaw).T
+        return pos, start.yaw + dyaw
+
+    if first is None:
+        if route.kind == "line" and abs(np.sin(route.heading)) > 0.5:
+            first = 0 if np.sin(route.heading) > 0 else 1
+        elif route.kind in ("arc", "turn"):
+            first = 0 if route.side > 0 else 1
+        else:
+            first = 0
+    feet = [(first + k) % 2 for k in range(n_steps)]
+
+    # ---- foot plants: each at the root position of its own mid-stance
+    end_pos, end_yaw = along(np.array([total]))
+    end_stance = Stance.at((end_pos[0, 0], end_pos[0, 2]), float(end_yaw[0]), persona)
+    plants: list[list[Plant]] = [[], []]
+    airs: list[list[Swing]] = [[], []]
+    first_lift = {f: lifts[feet.index(f)] for f in (0, 1)}
+    for f in (0, 1):
+        # the first foot pushes off from a stand; the other one from behind a moving body, like any step
+        trailing = f != first
+        plants[f].append(Plant(-np.inf, first_lift[f], start.ankles[f], float(start.foot_yaw[f]),
+                               roll_out=style.roll_out if trailing else 0.5 * style.roll_out,
+                               roll_out_time=min(0.25, 0.45 * (first_lift[f] - t_s)) if trailing
+                               else min(0.18, 0.6 * step_t)))
+    for k in range(n_steps):
+        f = feet[k]
+        nxt = lifts[k + 2] if k + 2 < n_steps else np.inf
+        if k >= n_steps - 2:
+            ankle, yaw = end_stance.ankles[f], float(end_stance.foot_yaw[f])
+            roll_out = 0.0
+        else:
+            tm = 0.5 * (lands[k] + nxt)
+            pos, hd = along(np.array([tm]))
+            fwd, left = heading_vectors(hd[0])
+            sign = 1.0 if f == 0 else -1.0
+            ankle = pos[0] + left * (sign * style.width) - fwd * PELVIS_AHEAD
+            ankle[1] = ANKLE_HEIGHT
+            yaw = float(hd[0] + sign * persona.toe_out)
+            roll_out = style.roll_out
+        stance_t = (nxt - lands[k]) if np.isfinite(nxt) else 1.0
+        plants[f].append(Plant(lands[k], nxt, ankle, yaw, roll_in=style.roll_in,
+                               roll_in_time=min(0.12, 0.3 * stance_t), roll_out=roll_out,
+                               roll_out_time=min(0.25, 0.45 * stance_t)))
+        airs[f].append(style.swing)
+    ankle = np.zeros((n, 2, 3))
+    toe = np.zeros((n, 2, 3))
+    planted = np.zeros((n, 2))
+    for f in (0, 1):
+        ankle[:, f], toe[:, f], pl = foot_track(t, plants[f], airs[f], body, f)
+        planted[:, f] = pl
+
+    # ---- root, pelvis and trunk
+    ground, heading = along(t)
+    fwd, left = heading_vectors(heading)
+    act = ease(t, 0.05, pre) * (1.0 - ease(t, lands[-1], lands[-1] + 0.8 * post))
+    # stride phase: the foot that steps at step k goes from behind (-1) to ahead (+1)
+    c = np.clip((t - lifts[0]) / step_t, 0.0, n_steps)
+    lead_first = -np.cos(np.pi * c) * act
+    lead = np.stack([lead_first, -lead_first], 1) if first == 0 else np.stack([-lead_first, lead_first], 1)
+    sig = max(1.0, 0.2 * step_t * FPS)
+    side = smooth(planted[:, 0] - planted[:, 1], sig) * act           # +1: left foot supports
+    pelvis = ground + left * (style.sway * side)[:, None]
+    h_stand = standing_height(start, body, pitch=0.03)
+    if style.running:
+        on_ground = smooth(np.maximum(planted[:, 0], planted[:, 1]), sig)
+        bob = style.bob * (1.0 - 2.0 * on_ground)
+    else:
+        single = smooth(np.abs(planted[:, 0] - planted[:, 1]), sig)
+        bob = style.bob * (2.0 * single - 1.0)
+    height = h_stand - style.drop * act + bob * act
+    twist = -style.twist * lead[:, 0]
+    ypr = np.stack([heading + twist, 0.03 + 0.4 * style.lean * act, -0.05 * side], -1)
+    g0 = ypr_matrix(ypr)
+    pelvis[:, 1] = height
+    for _ in range(2):
+        bound = max_pelvis_height(pelvis, g0, ankle, body, planted=planted > 0.5) - 0.004
+        pelvis[:, 1] = np.minimum(smooth(np.minimum(pelvis[:, 1], bound), 1.0), bound)
+    spine = np.stack([-1.3 * twist, 0.03 + 0.6 * style.lean * act, 0.04 * side], -1)
+    neck = np.stack([np.zeros(n), persona.head_pitch - 0.5 * style.lean * act, np.zeros(n)], -1)
+
+    # ---- arms swing against the legs (the left arm comes forward with the right foot)
+    rest = np.asarray(persona.arm_rest, dtype=np.float64)
+    arm = np.tile(rest, (n, 2, 1))
+    for k in range(2):
+        swing = style.arm_swing * lead[:, 1 - k]
+        arm[:, k, 0] = rest[0] + swing + 0.1 * act
+        arm[:, k, 1] = rest[1] + style.arm_abd * act
+        arm[:, k, 2] = rest[2] + (style.elbow - rest[2]) * act + 0.35 * np.maximum(swing, 0.0)
+    pole = np.tile(np.asarray(persona.arm_pole, dtype=np.float64), (n, 2, 1))
+    foot_yaw = np.stack([heading + persona.toe_out, heading - persona.toe_out], 1)
+    pose = Pose(pelvis, ypr, spine, neck, ankle, toe, knee_poles(foot_yaw), arm, pole)
+
+    f0 = int(np.floor(t_s * FPS))
+    f1 = min(n, int(np.ceil((lands[-1] + 0.1) * FPS)) + 1)
+    turned = float(end_yaw[0] - start.yaw)
+    info = dict(speed=style.speed, distance=float(distance), turn=turned, steps=n_steps,
+                cadence=style.cadence, duration=float(total))
+    return Segment(pose, end_stance, (max(0, f0), f1), info=info)
+
+
+# ----------------------------------------------------------------------------- style presets
+def _pace(mods: tuple[str, ...]) -> int:
+    return -1 if "slowly" in mods else (1 if "quickly" in mods else 0)
+
+
+def gait_style(kind: str, rng: np.random.Generator, mods: tuple[str, ...] = (), tempo: float = 1.0,
+               in_place: bool = False) -> GaitStyle:
+    """A randomised :class:`GaitStyle` of a gait ``kind`` (see :data:`GAITS`).
+
+    ``mods`` may hold "slowly" / "quickly", which change the speed and cadence measurably.
+    """
+    u = rng.uniform
+    pace = _pace(mods)
+    if kind in ("walk", "circle"):
+        speed = [u(0.5, 0.72), u(1.05, 1.4), u(1.65, 1.95)][pace + 1]
+        cadence = [u(1.3, 1.5), u(1.7, 1.9), u(2.0, 2.2)][pace + 1] * tempo
+        st = GaitStyle(speed=speed, cadence=cadence, duty=[0.64, 0.61, 0.58][pace + 1],
+                       swing=Swing(u(0.06, 0.1), u(0.4, 0.5), u(0.05, 0.2)), roll_in=u(0.2, 0.32),
+                       roll_out=-u(0.45, 0.65), width=u(0.07, 0.1), bob=u(0.012, 0.022), drop=u(0.0, 0.02),
+                       lean=u(0.02, 0.06) + 0.03 * pace, sway=u(0.015, 0.03), twist=u(0.04, 0.08),
+                       arm_swing=u(0.22, 0.35) * (1 + 0.3 * pace), arm_abd=u(0.0, 0.06), elbow=u(0.2, 0.45))
+        if in_place:
+            st = replace(st, speed=0.0, swing=replace(st.swing, height=u(0.1, 0.15)), roll_in=0.05, roll_out=-0.3)
+        return st
+    if kind == "run":
+        return GaitStyle(speed=[u(2.6, 3.0), u(3.0, 3.6), u(3.8, 4.4)][pace + 1], cadence=u(2.6, 2.95) * tempo,
+                         duty=u(0.33, 0.37), swing=Swing(u(0.24, 0.32), u(0.35, 0.42), u(0.1, 0.25)),
+                         roll_in=u(0.0, 0.12), roll_out=-u(0.55, 0.7), width=u(0.04, 0.07), bob=u(0.025, 0.04),
+                         drop=u(0.04, 0.07), lean=u(0.14, 0.22), sway=u(0.005, 0.012), twist=u(0.08, 0.12),
+                         arm_swing=u(0.6, 0.8), arm_abd=u(0.0, 0.08), elbow=u(1.35, 1.6), running=True,
+                         ramp_strides=1.2)
+    if kind == "jog":
+        st = GaitStyle(speed=[u(1.4, 1.75), u(1.8, 2.3), u(2.4, 2.7)][pace + 1], cadence=u(2.4, 2.7) * tempo,
+                       duty=u(0.38, 0.42), swing=Swing(u(0.13, 0.19), u(0.38, 0.45), u(0.05, 0.15)),
+                       roll_in=u(0.05, 0.15), roll_out=-u(0.45, 0.6), width=u(0.05, 0.08), bob=u(0.02, 0.03),
+                       drop=u(0.03, 0.05), lean=u(0.08, 0.12), sway=u(0.008, 0.015), twist=u(0.06, 0.1),
+                       arm_swing=u(0.45, 0.6), arm_abd=u(0.0, 0.08), elbow=u(1.3, 1.55), running=True,
+                       ramp_strides=1.0)
+        if in_place:
+            st = replace(st, speed=0.0, roll_in=0.0, roll_out=-0.5, swing=replace(st.swing, height=u(0.15, 0.22)))
+        return st
+    if kind == "march":
+        return GaitStyle(speed=0.0 if in_place else u(0.7, 1.0), cadence=[u(1.3, 1.5), u(1.6, 1.9), u(2.0, 2.2)][pace + 1] * tempo,
+                         duty=0.62, swing=Swing(u(0.2, 0.3), 0.45, -u(0.2, 0.35), lead=u(0.1, 0.16)),
+                         roll_in=0.0, roll_out=-u(0.15, 0.3), width=u(0.08, 0.1), bob=u(0.01, 0.02),
+                         drop=u(0.0, 0.01), lean=u(-0.02, 0.02), sway=u(0.02, 0.03), twist=u(0.02, 0.05),
+                         arm_swing=u(0.7, 0.95), arm_abd=u(0.0, 0.05), elbow=u(0.05, 0.25))
+    if kind == "backward":
+        return GaitStyle(speed=[u(0.35, 0.5), u(0.55, 0.8), u(0.9, 1.1)][pace + 1], cadence=[u(1.2, 1.4), u(1.5, 1.8), u(1.9, 2.1)][pace + 1] * tempo,
+                         duty=0.63, swing=Swing(u(0.06, 0.09), 0.5, u(0.0, 0.1)), roll_in=-u(0.2, 0.35),
+                         roll_out=u(0.05, 0.15), width=u(0.08, 0.11), bob=u(0.008, 0.015), drop=u(0.0, 0.02),
+                         lean=u(-0.05, 0.0), sway=u(0.015, 0.025), twist=u(0.02, 0.05),
+                         arm_swing=u(0.1, 0.2), arm_abd=u(0.0, 0.08), elbow=u(0.25, 0.5))
+    if kind == "sidestep":
+        return GaitStyle(speed=[u(0.3, 0.4), u(0.45, 0.62), u(0.65, 0.8)][pace + 1], cadence=[u(1.2, 1.4), u(1.5, 1.8), u(1.9, 2.1)][pace + 1] * tempo,
+                         duty=0.66, swing=Swing(u(0.05, 0.07), 0.5, 0.0), roll_in=0.0, roll_out=-0.1,
+                         width=u(0.15, 0.18), bob=u(0.005, 0.012), drop=u(0.02, 0.04), lean=u(0.0, 0.04),
+                         sway=u(0.01, 0.02), twist=0.0, arm_swing=0.0, arm_abd=u(0.05, 0.15), elbow=u(0.2, 0.4))
+    if kind in ("turn", "spin"):
+        fast = kind == "spin"
+        cad = (u(2.4, 3.0) if fast else [u(1.2, 1.4), u(1.6, 1.9), u(2.0, 2.3)][pace + 1]) * tempo
+        return GaitStyle(speed=0.0, cadence=cad, duty=0.6, swing=Swing(u(0.05, 0.08), 0.5, 0.0),
+                         roll_in=0.0, roll_out=-0.15, width=u(0.08, 0.11), bob=0.008, drop=u(0.01, 0.03),
+                         lean=0.02, sway=0.012, twist=0.0, arm_swing=0.05,
+                         arm_abd=u(0.35, 0.7) if fast else 0.03, elbow=u(0.3, 0.6))
+    raise ValueError(f"unknown gait {kind!r}; known gaits: {', '.join(GAITS)}")

@@ -1,0 +1,313 @@
+"""Upper-body gestures layered over a base action: arm gestures and head movements.
+
+A :class:`Gesture` holds arm controls with a per-arm blend weight (the gesture replaces the base
+arm motion, e.g. the walking arm swing, and cross-fades in and out) and an additive head
+rotation. Arm poses are authored either as (flex, abd, elbow) angles or as wrist targets in the
+chest frame measured from the shoulder (x outwards, y up, z forward), converted to angles by
+the law of cosines. Every gesture starts and ends in the performer's resting arm pose.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .curves import envelope, frame_times, keyframes
+from .footwork import Persona
+from .kinematics import FPS, BodyModel, arm_angles_for_target, arm_direction
+from .segment import num_frames
+
+__all__ = ["Gesture", "SIDES", "wave", "raise_arm", "punch", "stretch_forward", "clap", "arms_out",
+           "nod", "shake_head", "look"]
+
+#: Which arms a side name drives (0 left, 1 right).
+SIDES = {"left": (0,), "right": (1,), "both": (0, 1)}
+#: Cross-fade between the base arm motion and a gesture (s).
+FADE = 0.3
+
+
+@dataclass
+class Gesture:
+    """An upper-body gesture over ``n`` frames."""
+
+    arm: np.ndarray             # (n, 2, 3) arm controls (flex, abd, elbow), x outwards
+    arm_pole: np.ndarray        # (n, 2, 3) elbow poles, chest frame, x outwards
+    arm_weight: np.ndarray      # (n, 2) blend weight of the gesture over the base arms
+    neck: np.ndarray            # (n, 3) head rotation added to the base (yaw, pitch, roll)
+    spine: np.ndarray           # (n, 3) spine bend added to the base
+    info: dict = field(default_factory=dict)
+
+    @property
+    def num_frames(self) -> int:
+        return self.arm.shape[0]
+
+
+def _pace(mods: tuple[str, ...]) -> float:
+    """Duration factor of "slowly" / "quickly"."""
+    return 1.5 if "slowly" in mods else (0.65 if "quickly" in mods else 1.0)
+
+
+def _empty(n: int, persona: Persona) -> Gesture:
+    arm = np.tile(np.asarray(persona.arm_rest, dtype=np.float64), (n, 2, 1))
+    pole = np.tile(np.asarray(persona.arm_pole, dtype=np.float64), (n, 2, 1))
+    return Gesture(arm, pole, np.zeros((n, 2)), np.zeros((n, 3)), np.zeros((n, 3)))
+
+
+def _rest_target(persona: Persona, body: BodyModel, k: int) -> np.ndarray:
+    flex, abd, elbow = persona.arm_rest
+    up, fo = body.upper_arm[k], body.forearm[k]
+    reach = np.sqrt(up ** 2 + fo ** 2 + 2 * up * fo * np.cos(elbow))
+    return arm_direction(flex, abd) * reach
+
+
+def _set_arms(g: Gesture, arms: tuple[int, ...], angles: np.ndarray, pole, t: np.ndarray) -> None:
+    """Write ``angles`` ``(n, 3)`` (or ``(n, 2, 3)``) to ``arms`` with a faded weight."""
+    w = envelope(t, 0.0, t[-1], FADE)
+    for k in arms:
+        g.arm[:, k] = angles if angles.ndim == 2 else angles[:, k]
+        g.arm_pole[:, k] = pole
+        g.arm_weight[:, k] = w
+
+
+def _hold_time(duration: float | None, fixed: float, default: float) -> float:
+    """Hold length that makes the gesture last ``duration`` (at least 0.2 s)."""
+    return default if duration is None else max(0.2, duration - fixed)
+
+
+# ----------------------------------------------------------------------------- arm gestures
+def wave(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str, *,
+         mods: tuple[str, ...] = (), variant: str = "hand", duration: float | None = None) -> Gesture:
+    """Wave a hand beside the head (``variant="hand"``) or both arms overhead (``"arms"``).
+
+    "high" / "low" raise or lower the waving hand.
+    """
+    u = rng.uniform
+    pace = _pace(mods)
+    arms = SIDES[side]
+    rise, lower = u(0.35, 0.5) * pace, u(0.35, 0.5) * pace
+    if variant == "arms":
+        target = np.array([u(0.18, 0.25), u(0.44, 0.5), u(0.04, 0.1)])
+        freq, amp = u(0.8, 1.1) / pace, u(0.3, 0.4)
+        pole = np.array([1.0, 0.0, -0.3])
+    else:
+        if "high" in mods:
+            target = np.array([u(0.08, 0.14), u(0.46, 0.5), u(0.06, 0.12)])
+        elif "low" in mods:
+            target = np.array([u(0.18, 0.25), u(-0.12, -0.04), u(0.26, 0.32)])
+        else:
+            target = np.array([u(0.14, 0.2), u(0.22, 0.32), u(0.1, 0.18)])
+        freq, amp = u(1.6, 2.4) / pace, u(0.25, 0.35)
+        pole = np.array([1.0, -0.6, 0.0])
+    cycles = rng.integers(2, 4) if duration is None else max(1, int(round((duration - rise - lower) * freq)))
+    wave_t = cycles / freq
+    total = rise + wave_t + lower
+    n = num_frames(total)
+    t = frame_times(n, FPS)
+    g = _empty(n, persona)
+    for k in arms:
+        pose = arm_angles_for_target(target, body.upper_arm[k], body.forearm[k])
+        rest = np.asarray(persona.arm_rest, dtype=np.float64)
+        base = keyframes(t, [0.0, rise, rise + wave_t, total], np.stack([rest, pose, pose, rest]))
+        osc = np.sin(2 * np.pi * freq * (t - rise)) * envelope(t, rise - 0.1, rise + wave_t + 0.1, 0.2)
+        if variant == "arms":
+            sign = 1.0 if k == 0 else -1.0  # both hands sway to the same side of the body
+            base[:, 1] += sign * amp * osc
+        else:
+            base[:, 1] += amp * osc
+            base[:, 2] -= 0.4 * amp * osc
+        _set_arms(g, (k,), base, pole, t)
+    g.info = dict(wrist_target_height=float(target[1]), frequency=float(freq))
+    return g
+
+
+def raise_arm(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str, *,
+              mods: tuple[str, ...] = (), duration: float | None = None) -> Gesture:
+    """Raise one or both arms and hold them up; "high" straight overhead, "low" to shoulder height."""
+    u = rng.uniform
+    pace = _pace(mods)
+    arms = SIDES[side]
+    if "high" in mods:
+        pose = np.array([u(2.8, 3.0), -u(0.05, 0.2), u(0.0, 0.1)])
+    elif "low" in mods:
+        pose = np.array([u(1.3, 1.55), u(0.1, 0.25), u(0.05, 0.2)])
+    else:
+        pose = np.array([u(2.3, 2.55), -u(0.15, 0.3), u(0.15, 0.35)])
+    rise, lower = u(0.45, 0.7) * pace, u(0.45, 0.7) * pace
+    hold = _hold_time(duration, rise + lower, u(0.5, 1.4) * pace)
+    total = rise + hold + lower
+    n = num_frames(total)
+    t = frame_times(n, FPS)
+    g = _empty(n, persona)
+    rest = np.asarray(persona.arm_rest, dtype=np.float64)
+    angles = keyframes(t, [0.0, rise, rise + hold, total], np.stack([rest, pose, pose, rest]))
+    angles[:, 0] += 0.03 * np.sin(2 * np.pi * 0.7 * t) * envelope(t, rise, rise + hold, 0.2)
+    _set_arms(g, arms, angles, np.array([1.0, 0.0, -0.4]), t)
+    g.info = dict(flex=float(pose[0]))
+    return g
+
+
+def punch(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str, *,
+          mods: tuple[str, ...] = (), reps: int = 1, duration: float | None = None) -> Gesture:
+    """Punch straight forward ``reps`` times from a guard near the chin."""
+    u = rng.uniform
+    pace = _pace(mods)
+    arms = SIDES[side]
+    times, targets = [0.0], []
+    guard = np.array([-u(0.06, 0.12), u(0.0, 0.06), u(0.18, 0.24)])
+    hit = np.array([-u(0.05, 0.1), u(0.0, 0.05), u(0.47, 0.5)])
+    t = u(0.3, 0.4) * pace
+    times.append(t)
+    for r in range(reps):
+        times.append(t + 0.12 * pace + u(0.0, 0.04)); t = times[-1]
+        times.append(t + u(0.04, 0.08)); t = times[-1]
+        times.append(t + u(0.18, 0.24) * pace); t = times[-1]
+        if r < reps - 1:
+            times.append(t + u(0.08, 0.2)); t = times[-1]
+    times.append(t + u(0.35, 0.45) * pace)
+    total = times[-1]
+    n = num_frames(total)
+    tt = frame_times(n, FPS)
+    g = _empty(n, persona)
+    for k in arms:
+        rest = _rest_target(persona, body, k)
+        seq = [rest, guard]
+        for r in range(reps):
+            seq += [hit, hit, guard] + ([guard] if r < reps - 1 else [])
+        seq.append(rest)
+        path = keyframes(tt, times, np.stack(seq))
+        angles = arm_angles_for_target(path, body.upper_arm[k], body.forearm[k])
+        _set_arms(g, (k,), angles, np.array([0.6, -1.0, 0.0]), tt)
+    g.info = dict(reach=float(hit[2]))
+    return g
+
+
+def stretch_forward(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str = "both", *,
+                    mods: tuple[str, ...] = (), duration: float | None = None) -> Gesture:
+    """Stretch the arms straight forward at shoulder height and hold."""
+    u = rng.uniform
+    pace = _pace(mods)
+    arms = SIDES[side]
+    pose = np.array([u(1.48, 1.6), u(0.02, 0.1), u(0.02, 0.12)])
+    rise, lower = u(0.45, 0.65) * pace, u(0.45, 0.65) * pace
+    hold = _hold_time(duration, rise + lower, u(0.8, 1.8) * pace)
+    total = rise + hold + lower
+    n = num_frames(total)
+    t = frame_times(n, FPS)
+    g = _empty(n, persona)
+    rest = np.asarray(persona.arm_rest, dtype=np.float64)
+    angles = keyframes(t, [0.0, rise, rise + hold, total], np.stack([rest, pose, pose, rest]))
+    _set_arms(g, arms, angles, np.array([0.5, -1.0, 0.0]), t)
+    return g
+
+
+def clap(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str = "both", *,
+         mods: tuple[str, ...] = (), reps: int = 4, duration: float | None = None) -> Gesture:
+    """Clap the hands ``reps`` times in front of the chest."""
+    u = rng.uniform
+    pace = _pace(mods)
+    period = u(0.38, 0.5) * pace
+    if duration is not None:
+        reps = max(2, int(round((duration - 0.8 * pace) / period)))
+    y, z = -u(0.08, 0.16), u(0.28, 0.34)
+    times = [0.0, u(0.35, 0.45) * pace]
+    closed_at = []
+    for r in range(reps):
+        times.append(times[-1] + 0.5 * period); closed_at.append(len(times) - 1)
+        times.append(times[-1] + 0.5 * period)
+    times.append(times[-1] + u(0.35, 0.45) * pace)
+    total = times[-1]
+    n = num_frames(total)
+    t = frame_times(n, FPS)
+    g = _empty(n, persona)
+    for k in (0, 1):
+        mid = -abs(body.shoulder_offsets[k][0])
+        closed = np.array([mid + 0.035, y, z])
+        opened = np.array([mid + u(0.15, 0.2), y + 0.02, z - 0.03])
+        seq = [_rest_target(persona, body, k)] + [opened] * (len(times) - 2) + [_rest_target(persona, body, k)]
+        for i in closed_at:
+            seq[i] = closed
+        path = keyframes(t, times, np.stack(seq))
+        angles = arm_angles_for_target(path, body.upper_arm[k], body.forearm[k])
+        _set_arms(g, (k,), angles, np.array([1.0, -0.8, -0.2]), t)
+    g.info = dict(claps=reps)
+    return g
+
+
+def arms_out(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str = "both", *,
+             mods: tuple[str, ...] = (), duration: float | None = None) -> Gesture:
+    """Hold the arms straight out to the sides at shoulder height."""
+    u = rng.uniform
+    pace = _pace(mods)
+    arms = SIDES[side]
+    pose = np.array([u(0.0, 0.15), u(1.45, 1.62), u(0.02, 0.1)])
+    rise, lower = u(0.45, 0.65) * pace, u(0.45, 0.65) * pace
+    hold = _hold_time(duration, rise + lower, u(0.8, 1.8) * pace)
+    total = rise + hold + lower
+    n = num_frames(total)
+    t = frame_times(n, FPS)
+    g = _empty(n, persona)
+    rest = np.asarray(persona.arm_rest, dtype=np.float64)
+    angles = keyframes(t, [0.0, rise, rise + hold, total], np.stack([rest, pose, pose, rest]))
+    _set_arms(g, arms, angles, np.array([0.0, -1.0, -0.4]), t)
+    return g
+
+
+# ----------------------------------------------------------------------------- head
+def nod(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str | None = None, *,
+        mods: tuple[str, ...] = (), reps: int = 2, duration: float | None = None) -> Gesture:
+    """Nod ``reps`` times (pitch the head down and back up)."""
+    u = rng.uniform
+    period = u(0.45, 0.6) * _pace(mods)
+    if duration is not None:
+        reps = max(2, int(round((duration - 0.2) / period)))
+    amp = u(0.35, 0.5)
+    total = reps * period + 0.2
+    n = num_frames(total)
+    t = frame_times(n, FPS)
+    g = _empty(n, persona)
+    phase = np.clip((t - 0.1) / period, 0.0, reps)
+    g.neck[:, 1] = amp * 0.5 * (1.0 - np.cos(2 * np.pi * phase))
+    g.info = dict(nods=reps)
+    return g
+
+
+def shake_head(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str | None = None, *,
+               mods: tuple[str, ...] = (), reps: int = 2, duration: float | None = None) -> Gesture:
+    """Shake the head (yaw left and right) ``reps`` times."""
+    u = rng.uniform
+    period = u(0.45, 0.6) * _pace(mods)
+    if duration is not None:
+        reps = max(2, int(round((duration - 0.3) / period)))
+    amp = u(0.45, 0.65)
+    total = reps * period + 0.3
+    n = num_frames(total)
+    t = frame_times(n, FPS)
+    g = _empty(n, persona)
+    phase = np.clip((t - 0.15) / period, 0.0, reps)
+    g.neck[:, 0] = amp * np.sin(2 * np.pi * phase) * envelope(t, 0.05, total - 0.05, 0.15)
+    g.info = dict(shakes=reps)
+    return g
+
+
+def look(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str, *,
+         mods: tuple[str, ...] = (), duration: float | None = None) -> Gesture:
+    """Turn the head to look to one side, hold, and look ahead again."""
+    u = rng.uniform
+    pace = _pace(mods)
+    sign = 1.0 if side == "left" else -1.0
+    amp = u(0.95, 1.25)
+    turn, back = u(0.35, 0.5) * pace, u(0.4, 0.55) * pace
+    hold = _hold_time(duration, turn + back, u(0.5, 1.2) * pace)
+    total = turn + hold + back
+    n = num_frames(total)
+    t = frame_times(n, FPS)
+    g = _empty(n, persona)
+    yaw = keyframes(t, [0.0, turn, turn + hold, total], [0.0, amp, amp * 0.97, 0.0]) * sign
+    # while looking, the gaze wanders a little over that side (a held head is never frozen)
+    scan_f = u(0.35, 0.6) / pace
+    yaw += sign * u(0.1, 0.16) * np.sin(2 * np.pi * scan_f * (t - turn)) * envelope(t, turn, turn + hold, 0.25)
+    g.neck[:, 0] = 0.85 * yaw
+    g.neck[:, 1] = u(-0.1, 0.1) * envelope(t, 0.0, total, turn)
+    g.spine[:, 0] = 0.15 * yaw
+    g.info = dict(yaw=float(sign * amp))
+    return g

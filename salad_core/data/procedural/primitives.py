@@ -1,0 +1,257 @@
+"""The action primitives of the corpus: what each one is, which body parts it drives, which
+sides, modifiers and repetitions it takes, and how to build its motion.
+
+An :class:`Action` names a primitive with its side, modifiers, repetitions and variant.
+Base primitives (locomotion, jumps, leg and whole-body actions) become a
+:class:`~.segment.Segment`; gesture primitives (arms, head) become a :class:`~.gestures.Gesture`
+layered over a base.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from . import actions, gestures
+from .footwork import Persona, Stance
+from .gait import Route, gait_style, locomotion
+from .kinematics import BodyModel
+
+__all__ = ["Action", "PrimitiveSpec", "PRIMITIVES", "MODIFIERS", "SIDE_WORDS", "build_base",
+           "build_gesture", "primitive_parts", "CATEGORIES"]
+
+#: Modifiers a caption may carry; each changes the motion measurably.
+MODIFIERS = ("high", "low", "slowly", "quickly")
+#: Sides an action may take.
+SIDE_WORDS = ("left", "right", "both")
+#: Primitive categories (the body part groups of the issue).
+CATEGORIES = ("locomotion", "jump", "arms", "legs", "whole body", "head")
+
+_LOWER = ("root", "left leg", "right leg")
+_UPPER = ("spine", "left arm", "right arm", "head")
+
+
+@dataclass(frozen=True)
+class Action:
+    """One action of a clip: a primitive with its parameters."""
+
+    kind: str                       # primitive name, a key of PRIMITIVES
+    side: str | None = None         # "left", "right", "both" or None
+    mods: tuple[str, ...] = ()      # subset of MODIFIERS, sorted
+    reps: int = 1                   # repetitions (1 = once)
+    variant: str = ""               # e.g. "in_place", "forward", "around", "arms"
+
+    def __post_init__(self) -> None:
+        spec = PRIMITIVES.get(self.kind)
+        if spec is None:
+            raise ValueError(f"unknown primitive {self.kind!r}; known: {', '.join(sorted(PRIMITIVES))}")
+        if self.side not in spec.sides:
+            raise ValueError(f"{self.kind}: side {self.side!r} not allowed; allowed: {spec.sides}")
+        bad = [m for m in self.mods if m not in spec.mods]
+        if bad:
+            raise ValueError(f"{self.kind}: modifiers {bad} not allowed; allowed: {spec.mods}")
+        if tuple(sorted(self.mods)) != self.mods:
+            raise ValueError(f"{self.kind}: mods must be sorted, got {self.mods}")
+        if self.reps not in spec.reps:
+            raise ValueError(f"{self.kind}: reps={self.reps} not allowed; allowed: {spec.reps}")
+        if self.variant not in spec.variants:
+            raise ValueError(f"{self.kind}: variant {self.variant!r} not allowed; allowed: {spec.variants}")
+        if self.kind == "wave" and self.variant == "arms" and self.side != "both":
+            raise ValueError(f"wave variant 'arms' (both arms overhead) needs side 'both', got {self.side!r}")
+
+    @property
+    def spec(self) -> "PrimitiveSpec":
+        return PRIMITIVES[self.kind]
+
+    def mirrored(self) -> "Action":
+        """The same action with left and right swapped (HumanML3D mirror augmentation)."""
+        side = {"left": "right", "right": "left"}.get(self.side, self.side)
+        return replace(self, side=side)
+
+
+@dataclass(frozen=True)
+class PrimitiveSpec:
+    """What a primitive is and what it may take."""
+
+    name: str                           # key in PRIMITIVES
+    category: str                       # one of CATEGORIES
+    track: str                          # "base" or "gesture"
+    sides: tuple = (None,)              # allowed sides
+    mods: tuple[str, ...] = ()          # allowed modifiers
+    reps: tuple[int, ...] = (1,)        # allowed repetition counts
+    variants: tuple[str, ...] = ("",)   # allowed variants
+    accepts: tuple[str, ...] = ()       # base: gesture categories that may be layered on it
+    weight: float = 1.0                 # sampling weight
+    terminal: bool = False              # base: must end the clip (ends seated)
+
+    def __post_init__(self) -> None:
+        if self.category not in CATEGORIES:
+            raise ValueError(f"{self.name}: category {self.category!r} not in {CATEGORIES}")
+        if self.track not in ("base", "gesture"):
+            raise ValueError(f"{self.name}: track {self.track!r} must be 'base' or 'gesture'")
+
+
+_SPEED = ("quickly", "slowly")
+PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
+    # locomotion
+    PrimitiveSpec("walk", "locomotion", "base", mods=_SPEED, variants=("", "in_place"), accepts=("arms", "head"), weight=2.5),
+    PrimitiveSpec("run", "locomotion", "base", mods=("quickly",), accepts=("arms", "head"), weight=1.2),
+    PrimitiveSpec("jog", "locomotion", "base", mods=_SPEED, variants=("", "in_place"), accepts=("arms", "head"), weight=1.0),
+    PrimitiveSpec("march", "locomotion", "base", mods=_SPEED, variants=("", "in_place"), accepts=("head",), weight=0.8),
+    PrimitiveSpec("walk_backward", "locomotion", "base", mods=_SPEED, accepts=("arms", "head"), weight=1.0),
+    PrimitiveSpec("sidestep", "locomotion", "base", sides=("left", "right"), mods=_SPEED, accepts=("arms", "head"), weight=1.0),
+    PrimitiveSpec("circle", "locomotion", "base", sides=("left", "right"), mods=_SPEED, accepts=("arms", "head"), weight=0.9),
+    PrimitiveSpec("turn", "locomotion", "base", sides=("left", "right"), mods=_SPEED, variants=("", "around"), accepts=("arms", "head"), weight=1.2),
+    # jumps
+    PrimitiveSpec("jump", "jump", "base", mods=("high", "low"), reps=(1, 2, 3), variants=("", "forward"), accepts=("arms", "head"), weight=2.0),
+    # legs
+    PrimitiveSpec("kick", "legs", "base", sides=("left", "right"), mods=("high", "low", "quickly"), reps=(1, 2), accepts=("head",), weight=1.3),
+    PrimitiveSpec("knee_lift", "legs", "base", sides=("left", "right"), mods=("high", "slowly", "quickly"), reps=(1, 2), accepts=("arms", "head"), weight=1.0),
+    # whole body
+    PrimitiveSpec("squat", "whole body", "base", mods=("low", "slowly", "quickly"), reps=(1, 2, 3), accepts=("arms", "head"), weight=1.2),
+    PrimitiveSpec("sit", "whole body", "base", mods=("slowly",), weight=0.8, terminal=True),
+    PrimitiveSpec("bow", "whole body", "base", mods=("low", "slowly"), reps=(1, 2), weight=0.8),
+    PrimitiveSpec("jumping_jacks", "whole body", "base", mods=_SPEED, reps=(2, 3, 4), accepts=("head",), weight=0.9),
+    PrimitiveSpec("spin", "whole body", "base", sides=("left", "right"), accepts=("arms",), weight=0.8),
+    # arms
+    PrimitiveSpec("wave", "arms", "gesture", sides=SIDE_WORDS, mods=("high", "low", "slowly", "quickly"), variants=("", "arms"), weight=2.0),
+    PrimitiveSpec("raise", "arms", "gesture", sides=SIDE_WORDS, mods=("high", "low", "slowly", "quickly"), weight=2.2),
+    PrimitiveSpec("punch", "arms", "gesture", sides=("left", "right"), mods=("quickly",), reps=(1, 2, 3), weight=1.2),
+    PrimitiveSpec("stretch", "arms", "gesture", sides=("both",), mods=_SPEED, weight=1.0),
+    PrimitiveSpec("clap", "arms", "gesture", sides=("both",), mods=_SPEED, reps=(1, 3, 4, 5), weight=0.9),
+    PrimitiveSpec("arms_out", "arms", "gesture", sides=("both",), mods=_SPEED, weight=0.9),
+    # head
+    PrimitiveSpec("nod", "head", "gesture", mods=_SPEED, reps=(2, 3), weight=0.8),
+    PrimitiveSpec("shake_head", "head", "gesture", mods=_SPEED, reps=(2, 3), weight=0.7),
+    PrimitiveSpec("look", "head", "gesture", sides=("left", "right"), mods=_SPEED, weight=0.8),
+]}
+
+
+def primitive_parts(action: Action) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(driven parts, incidentally moved parts) of an action, by the registry's definitions.
+
+    This is what the annotations record (driven) and what the checks discount (incidental).
+    """
+    k, side = action.kind, action.side
+    arms = {"left": ("left arm",), "right": ("right arm",), "both": ("left arm", "right arm")}
+    legs = {"left": ("left leg", "right leg"), "right": ("right leg", "left leg")}
+    if k in ("walk", "jog", "march") and action.variant == "in_place":
+        return ("left leg", "right leg"), ("root",) + _UPPER
+    if k in ("walk", "run", "jog", "march", "walk_backward", "sidestep", "circle", "turn", "spin"):
+        return _LOWER, _UPPER
+    if k == "jump":
+        return _LOWER + _UPPER, ()
+    if k == "jumping_jacks":
+        return _LOWER + ("left arm", "right arm"), ("spine", "head")
+    if k in ("kick", "knee_lift"):
+        leg, other = legs[side]
+        return (leg,), ("root", other, "spine", "left arm", "right arm")
+    if k in ("squat", "sit"):
+        return _LOWER + ("spine",), ("left arm", "right arm", "head")
+    if k == "bow":
+        return ("spine", "head"), _LOWER + ("left arm", "right arm")
+    if k in ("wave", "raise", "punch", "stretch", "clap", "arms_out"):
+        return arms.get(side or "both", arms["both"]), ()
+    if k in ("nod", "shake_head"):
+        return ("head",), ()
+    if k == "look":
+        return ("head",), ("spine",)
+    raise ValueError(f"no parts defined for primitive {k!r}")
+
+
+# ----------------------------------------------------------------------------- builders
+def _steps(rng: np.random.Generator, lo: int, hi: int) -> int:
+    return int(rng.integers(lo, hi + 1))
+
+
+def build_base(action: Action, start: Stance, persona: Persona, body: BodyModel,
+               rng: np.random.Generator, duration: float | None = None, keep_arms: bool = False):
+    """The :class:`~.segment.Segment` of a base action starting from ``start``.
+
+    ``duration`` (seconds) is a hint for stretchable actions (locomotion length);
+    ``keep_arms`` asks for a variant that leaves the arms free (an arm gesture goes on top).
+    """
+    k, mods = action.kind, action.mods
+    sgn = 1.0 if action.side == "left" else -1.0
+    tempo = persona.tempo
+    in_place = action.variant == "in_place"
+
+    def steps_for(style, lo, hi):
+        if duration is None:
+            return _steps(rng, lo, hi)
+        return int(np.clip(round(duration * style.cadence) - 1, 2, 24))
+
+    if k in ("walk", "run", "jog", "march"):
+        style = gait_style(k, rng, mods, tempo, in_place=in_place)
+        lo, hi = {"walk": (4, 7), "run": (4, 7), "jog": (4, 7), "march": (4, 6)}[k]
+        return locomotion(start, persona, style, Route(), steps_for(style, lo, hi), body)
+    if k == "walk_backward":
+        style = gait_style("backward", rng, mods, tempo)
+        return locomotion(start, persona, style, Route(heading=np.pi), steps_for(style, 3, 5), body)
+    if k == "sidestep":
+        style = gait_style("sidestep", rng, mods, tempo)
+        return locomotion(start, persona, style, Route(heading=sgn * np.pi / 2), steps_for(style, 3, 5), body)
+    if k == "circle":
+        style = gait_style("circle", rng, mods, tempo)
+        radius = rng.uniform(0.7, 1.1)
+        # keep the sideways (centripetal) acceleration of walking on a small circle human: v^2/r <= 2.2
+        style = replace(style, speed=min(style.speed, float(np.sqrt(2.2 * radius))))
+        step = style.speed / style.cadence
+        n = int(np.clip(round(rng.uniform(0.8, 1.0) * 2 * np.pi * radius / step) + 2, 6, 16))
+        return locomotion(start, persona, style, Route("arc", radius=radius, side=sgn), n, body)
+    if k == "turn":
+        style = gait_style("turn", rng, mods, tempo)
+        angle = np.pi if action.variant == "around" else rng.uniform(0.45, 0.55) * np.pi
+        n = int(np.ceil(angle / rng.uniform(0.75, 1.0))) + 1
+        return locomotion(start, persona, style, Route("turn", side=sgn, angle=angle), n, body)
+    if k == "spin":
+        style = gait_style("spin", rng, mods, tempo)
+        n = int(np.ceil(2 * np.pi / rng.uniform(0.9, 1.2))) + 1
+        return locomotion(start, persona, style, Route("turn", side=sgn, angle=2 * np.pi), n, body)
+    if k == "jump":
+        return actions.jump(start, persona, body, rng, forward=action.variant == "forward", mods=mods,
+                            reps=action.reps)
+    if k == "jumping_jacks":
+        return actions.jumping_jacks(start, persona, body, rng, mods=mods, reps=action.reps)
+    if k == "kick":
+        return actions.kick(start, persona, body, rng, side=0 if action.side == "left" else 1, mods=mods,
+                            reps=action.reps)
+    if k == "knee_lift":
+        return actions.knee_lift(start, persona, body, rng, side=0 if action.side == "left" else 1, mods=mods,
+                                 reps=action.reps)
+    if k == "squat":
+        return actions.squat(start, persona, body, rng, mods=mods, reps=action.reps,
+                             arms_forward=False if keep_arms else None)
+    if k == "sit":
+        return actions.sit(start, persona, body, rng, mods=mods, hold=rng.uniform(0.6, 1.2))
+    if k == "bow":
+        return actions.bow(start, persona, body, rng, mods=mods, reps=action.reps)
+    raise ValueError(f"primitive {k!r} is not a base action")
+
+
+def build_gesture(action: Action, persona: Persona, body: BodyModel, rng: np.random.Generator,
+                  duration: float | None = None) -> gestures.Gesture:
+    """The :class:`~.gestures.Gesture` of a gesture action (``duration``: fit to this length)."""
+    k, mods, side = action.kind, action.mods, action.side
+    if k == "wave":
+        return gestures.wave(persona, body, rng, side, mods=mods, variant="arms" if action.variant == "arms" else "hand",
+                             duration=duration)
+    if k == "raise":
+        return gestures.raise_arm(persona, body, rng, side, mods=mods, duration=duration)
+    if k == "punch":
+        return gestures.punch(persona, body, rng, side, mods=mods, reps=action.reps)
+    if k == "stretch":
+        return gestures.stretch_forward(persona, body, rng, mods=mods, duration=duration)
+    if k == "clap":
+        reps = action.reps if action.reps > 1 else int(rng.integers(3, 6))
+        return gestures.clap(persona, body, rng, mods=mods, reps=reps,
+                             duration=duration if action.reps == 1 else None)
+    if k == "arms_out":
+        return gestures.arms_out(persona, body, rng, mods=mods, duration=duration)
+    if k == "nod":
+        return gestures.nod(persona, body, rng, mods=mods, reps=action.reps)
+    if k == "shake_head":
+        return gestures.shake_head(persona, body, rng, mods=mods, reps=action.reps)
+    if k == "look":
+        return gestures.look(persona, body, rng, side, mods=mods, duration=duration)
+    raise ValueError(f"primitive {k!r} is not a gesture")
