@@ -43,6 +43,165 @@ def _check_out_dir(path: str | os.PathLike, force: bool) -> Path:
     return out
 
 
+# ----------------------------------------------------------------------------- outputs
+def _outputs(out_dir: Path, names: list[str], force: bool) -> list[Path]:
+    """Paths in ``out_dir``; refuse to overwrite any existing one unless ``force``."""
+    paths = [out_dir / n for n in names]
+    existing = [p.name for p in paths if p.exists()]
+    if existing and not force:
+        raise UserError(f"{out_dir} already holds {', '.join(existing)}; pass --force to overwrite")
+    return paths
+
+
+def _load_pipeline(weights: str | None):
+    from salad_core.pipeline import SaladPipeline
+
+    return SaladPipeline.from_pretrained(weights)
+
+
+def _slug(text: str, n: int = 40) -> str:
+    import re
+
+    return (re.sub(r"[^a-z0-9]+", "_", text.lower()).strip("_")[:n]) or "motion"
+
+
+def _write_motion_files(out: Path, stem: str, features, joints, skeleton, *, force: bool,
+                        gif: bool = True, bvh: bool = True) -> list[Path]:
+    """Features/joints .npy, a GIF and a BVH for one motion (each written atomically)."""
+    import numpy as np
+
+    from salad_core.io import atomic_path
+    from salad_viz import animate, export_bvh
+
+    names = [f"{stem}_features.npy", f"{stem}_joints.npy"] + ([f"{stem}.gif"] if gif else []) + \
+        ([f"{stem}.bvh"] if bvh else [])
+    paths = _outputs(out, names, force)
+    for path, arr in zip(paths[:2], (features, joints)):
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.save(fh, np.asarray(arr, dtype=np.float32))
+    written = paths[:2]
+    if gif:
+        written.append(animate(joints, skeleton, out / f"{stem}.gif", size=(320, 320), stride=2))
+    if bvh:
+        written.append(export_bvh(joints, skeleton, out / f"{stem}.bvh"))
+    return written
+
+
+_FUNCTION_WORDS = frozenset("a an the and then while his her their its is are to of in on up with as".split())
+
+
+def _attention_figure(out: Path, stem: str, result, force: bool) -> Path | None:
+    """The Fig. 6-style per-word heatmap grid of sample 0 (needs captured attention)."""
+    if result.attention is None:
+        return None
+    from salad_viz import plot_attention_grid
+
+    (path,) = _outputs(out, [f"{stem}_attention.png"], force)
+    maps = result.attention
+    words = [w for w in dict.fromkeys(maps.words(0)) if w not in _FUNCTION_WORDS] or None
+    fig = plot_attention_grid(maps.cross_map(0), maps.tokens(0), word_ids=words, prompt=result.texts[0])
+    from salad_core.io import atomic_path
+
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=90, bbox_inches="tight")
+    return path
+
+
+# ----------------------------------------------------------------------------- generate / demo
+DEMO_PROMPT = "a man jumps forward and then walks forward, while waving his arms"
+
+
+def cmd_generate(args: argparse.Namespace) -> int:
+    out = _check_out_dir(args.out, args.force)
+    pipe = _load_pipeline(args.weights)
+    prompts = args.prompt
+    result = pipe(prompts, lengths=args.length, seed=args.seed, guidance_scale=args.guidance,
+                  num_steps=args.steps, solver=args.solver, capture_attention=not args.no_attention,
+                  progress=not args.quiet)
+    for b, text in enumerate(result.texts):
+        stem = f"{b:02d}_{_slug(text)}"
+        n = result.lengths[b]
+        files = _write_motion_files(out, stem, result.features[b, :n], result.joints[b], pipe.skeleton,
+                                    force=args.force, gif=not args.no_render, bvh=True)
+        if b == 0 and not args.no_attention:
+            fig = _attention_figure(out, stem, result, args.force)
+            files += [fig] if fig else []
+        print(f"{text!r} ({n} frames): " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """Generate the paper's Fig. 6 prompt with the shipped weights; render it and its attention."""
+    args.prompt = [args.prompt or DEMO_PROMPT]
+    args.no_attention = False
+    args.no_render = False
+    return cmd_generate(args)
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from salad_core.motion import check_features, features_to_joints
+    from salad_core.skeleton import get_skeleton
+    from salad_viz import animate, keyframe_strip
+
+    sk = get_skeleton(args.skeleton)
+    path = Path(args.motion)
+    if not path.is_file():
+        raise UserError(f"motion file not found: {path}")
+    arr = np.load(path, allow_pickle=False)
+    if arr.ndim == 2:
+        check_features(arr, sk, name=str(path))
+        joints = features_to_joints(arr, sk)
+    elif arr.ndim == 3 and arr.shape[1:] == (sk.num_joints, 3):
+        if not np.isfinite(arr).all():
+            raise UserError(f"{path} contains NaN or infinite values")
+        joints = arr
+    else:
+        raise UserError(f"{path} has shape {arr.shape}; expected features (N, {sk.feature_dim}) or "
+                        f"joints (N, {sk.num_joints}, 3)")
+    out = _check_out_dir(args.out, args.force)
+    stem = path.stem
+    if args.strip:
+        from salad_core.io import atomic_path
+        import imageio.v3 as iio
+
+        (p,) = _outputs(out, [f"{stem}_strip.png"], args.force)
+        img = keyframe_strip(joints, sk, np.linspace(0, len(joints) - 1, 6).astype(int), layout="row")
+        with atomic_path(p) as tmp:
+            iio.imwrite(tmp, img, extension=".png")
+        print(p)
+    (p,) = _outputs(out, [f"{stem}.{args.format}"], args.force)
+    print(animate(joints, sk, p, size=(args.size, args.size)))
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from salad_core.motion import check_features, features_to_joints
+    from salad_core.skeleton import get_skeleton
+    from salad_viz import export_bvh, export_glb, export_npy
+
+    sk = get_skeleton(args.skeleton)
+    path = Path(args.motion)
+    if not path.is_file():
+        raise UserError(f"motion file not found: {path}")
+    arr = np.load(path, allow_pickle=False)
+    if arr.ndim == 2:
+        check_features(arr, sk, name=str(path))
+        arr = features_to_joints(arr, sk)
+    elif not (arr.ndim == 3 and arr.shape[1:] == (sk.num_joints, 3)) or not np.isfinite(arr).all():
+        raise UserError(f"{path}: expected finite features (N, {sk.feature_dim}) or joints (N, {sk.num_joints}, 3), "
+                        f"got shape {arr.shape}")
+    out = _check_out_dir(args.out, args.force)
+    (p,) = _outputs(out, [f"{path.stem}.{args.format}"], args.force)
+    fn = {"bvh": export_bvh, "glb": export_glb, "npy": export_npy}[args.format]
+    print(fn(arr, sk, p))
+    return 0
+
+
 # ----------------------------------------------------------------------------- corpus
 def cmd_corpus(args: argparse.Namespace) -> int:
     from salad_core.data.procedural import build_corpus, corpus_figures
@@ -66,17 +225,59 @@ def cmd_train(args: argparse.Namespace, rest: list[str]) -> int:
     return int(train_main([args.what, *rest]) or 0)
 
 
+def _generation_args(p: argparse.ArgumentParser, length: int) -> None:
+    p.add_argument("--length", type=int, default=length, help=f"frames at 20 fps, multiple of 4, <= 196 (default {length})")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--guidance", type=float, default=7.5, help="classifier-free guidance scale (default 7.5)")
+    p.add_argument("--steps", type=int, default=50, help="sampler steps (default 50)")
+    p.add_argument("--solver", default=None, help="scheduler: ddim (default), dpm++, euler, ...")
+    p.add_argument("--weights", default=None, help="pipeline folder (default: the shipped weights)")
+    p.add_argument("--force", action="store_true", help="overwrite existing files")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="salad", description="salad: text-driven motion generation and attention-based editing")
     p.add_argument("--debug", action="store_true", help="show full tracebacks")
     p.add_argument("-q", "--quiet", action="store_true", help="less output, no progress bars")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
+    d = _sub(sub, "demo", "the main job on the embedded defaults: generate the paper's Fig. 6 prompt, "
+             "render it, draw its attention maps, export a BVH", "salad demo --out demo_out")
+    d.add_argument("--out", default="salad_demo", help="output folder (default: salad_demo)")
+    d.add_argument("--prompt", default=None, help=f"text prompt (default: {DEMO_PROMPT!r})")
+    _generation_args(d, length=120)
+
+    g = _sub(sub, "generate", "generate motions from text prompts",
+             'salad generate "a person jumps" "a man waves his left hand" --length 80 --out gen_out')
+    g.add_argument("prompt", nargs="+", help="one or more text prompts")
+    g.add_argument("--out", required=True, help="output folder")
+    g.add_argument("--no-attention", action="store_true", help="do not capture and plot attention maps")
+    g.add_argument("--no-render", action="store_true", help="skip the GIF animation")
+    _generation_args(g, length=120)
+
+    r = _sub(sub, "render", "animate a motion file (features .npy or joints .npy) as GIF or MP4",
+             "salad render gen_out/00_a_person_jumps_joints.npy --out renders --format mp4")
+    r.add_argument("motion", help="a .npy file: features (N, 263) or joints (N, 22, 3)")
+    r.add_argument("--out", required=True)
+    r.add_argument("--format", choices=["gif", "mp4"], default="gif")
+    r.add_argument("--size", type=int, default=320, help="frame size in pixels")
+    r.add_argument("--strip", action="store_true", help="also write a keyframe strip PNG")
+    r.add_argument("--skeleton", default="humanml3d")
+    r.add_argument("--force", action="store_true", help="overwrite existing files")
+
+    e = _sub(sub, "export", "export a motion file to BVH (Blender), GLB or NPY joints",
+             "salad export gen_out/00_a_person_jumps_features.npy --format bvh --out exports")
+    e.add_argument("motion", help="a .npy file: features (N, 263) or joints (N, 22, 3)")
+    e.add_argument("--out", required=True)
+    e.add_argument("--format", choices=["bvh", "glb", "npy"], default="bvh")
+    e.add_argument("--skeleton", default="humanml3d")
+    e.add_argument("--force", action="store_true", help="overwrite existing files")
+
     c = _sub(sub, "corpus", "build or inspect the procedural motion-language corpus",
              "salad corpus build --out data/procedural --size default --seed 0")
     c.add_argument("action", choices=["build", "check"], help="build a corpus, or print the figures of one")
     c.add_argument("--out", required=True, help="corpus folder (HumanML3D layout)")
-    c.add_argument("--size", default="default", choices=["tiny", "default"])
+    c.add_argument("--size", default="default", choices=["tiny", "small", "default"])
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--force", action="store_true", help="write into a non-empty folder")
 
@@ -86,7 +287,8 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-COMMANDS: dict[str, Callable] = {"corpus": cmd_corpus}
+COMMANDS: dict[str, Callable] = {"corpus": cmd_corpus, "demo": cmd_demo, "generate": cmd_generate,
+                                 "render": cmd_render, "export": cmd_export}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -107,6 +309,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("salad: interrupted", file=sys.stderr)
         return 130
+    except UserError as exc:
+        if args.debug:
+            raise
+        print(f"salad {args.command}: error: {exc}", file=sys.stderr)
+        return 2
     except Exception as exc:  # one clear line unless --debug
         if args.debug:
             raise
