@@ -537,3 +537,21 @@ def test_vae_then_denoiser_on_the_procedural_corpus(tmp_path):
     assert den.step == 3 and den.best_step == 3 and np.isfinite(den.best_val)
     doc, _ = read_checkpoint(tmp_path / "den" / "best")
     assert doc["meta"]["vae"] == str(tmp_path / "vae" / "best")  # the denoiser used the VAE's best weights
+
+
+def test_caption_cache_prefill_matches_single_encoding():
+    """Prefilled (batched) caption features equal one-by-one encoding and leave no misses."""
+    from salad_core.text import load_text_encoder
+    from salad_core.train.denoiser_trainer import CaptionFeatureCache
+
+    enc = load_text_encoder("minilm")
+    caps = ["a person walks forward", "someone waves", "a man jumps high and then sits on the ground", ""]
+    alone = CaptionFeatureCache(enc, 100)
+    ref = {c: alone._one(c) for c in caps}
+    cache = CaptionFeatureCache(enc, 100)
+    assert cache.prefill(caps + caps, batch_size=3) == 4
+    feats, mask = cache.encode(caps)
+    assert cache.misses == 0 and cache.hits == 4
+    for i, c in enumerate(caps):
+        assert torch.allclose(feats[i, mask[i]], ref[c], atol=1e-5)
+    assert CaptionFeatureCache(enc, 2).prefill(caps) == 0       # would not fit: left to the LRU path

@@ -353,6 +353,10 @@ class MotionTextDataset(Dataset):
     def __len__(self) -> int:
         return len(self._entries)
 
+    def all_captions(self) -> list[TextLine]:
+        """Every caption line of every item (for pre-computing text features)."""
+        return [line for e in self._entries for _, line in e.captions]
+
     def set_epoch(self, epoch: int) -> None:
         """Change the random crops/captions of every item (with ``seed``: deterministically)."""
         self.epoch = int(epoch)

@@ -129,7 +129,8 @@ class DenoiserTrainConfig(TrainConfig):
     max_length: int = 196                      # motions are cropped/padded to this many frames
     cond_drop_prob: float = 0.1                # captions replaced by "" for classifier-free guidance
     val_cond_drop: bool = False                # also drop captions during validation
-    text_cache_size: int = 8192                # captions whose token features are kept (0: encode every batch)
+    text_cache_size: int = 32768               # captions whose token features are kept (0: encode every batch);
+                                               # when all fit, they are encoded up front in batches
     vae_pad_to_max: bool = True                # encode motions padded to max_length (official; batch-independent latents)
 
     def __post_init__(self) -> None:

@@ -23,7 +23,7 @@ import logging
 import os
 from functools import partial
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import torch
 from torch import nn
@@ -109,6 +109,25 @@ class CaptionFeatureCache:
         if len(self._store) > self.max_entries:
             self._store.popitem(last=False)
         return feats
+
+    def prefill(self, captions: Sequence[str], batch_size: int = 64) -> int:
+        """Encode every caption of a dataset up front, in fixed batches of similar length.
+
+        Encoding captions one by one costs a text-encoder forward per caption during the first
+        epochs (most of a CPU step); batches are ~20x cheaper. The batches depend only on the set
+        of captions (sorted by length, then text), never on the data order or the cache history,
+        so runs stay exactly reproducible and resumable. Returns the number of captions encoded;
+        nothing is done when they would not all fit in the cache.
+        """
+        todo = sorted({c for c in captions if c not in self._store}, key=lambda c: (len(c), c))
+        if not todo or len(self._store) + len(todo) > self.max_entries:
+            return 0
+        for i in range(0, len(todo), batch_size):
+            chunk = todo[i: i + batch_size]
+            tb = self.encoder.encode(chunk, allow_empty=True)
+            for j, caption in enumerate(chunk):
+                self._store[caption] = tb.features[j, tb.mask[j]].clone()
+        return len(todo)
 
     def encode(self, captions: list[str]) -> tuple[torch.Tensor, torch.Tensor]:
         """``(features (B, W, C), mask (B, W) bool)`` on the CPU."""
@@ -242,7 +261,11 @@ def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike
     denoiser = Denoiser(model_config).to(env.device)
     scheduler = make_scheduler(diffusion_config, "ddim")
     latent_shape = (train_config.max_length // vae.downsample, vae.num_parts, vae.latent_dim)
-    prepare = partial(_prepare, vae=vae, text=CaptionFeatureCache(encoder, train_config.text_cache_size),
+    text_cache = CaptionFeatureCache(encoder, train_config.text_cache_size)
+    captions = [line.caption for ds in (train_set, val_set) if ds is not None for line in ds.all_captions()]
+    if text_cache.prefill(captions):
+        log.info("text features of %d captions computed up front", len(text_cache._store))
+    prepare = partial(_prepare, vae=vae, text=text_cache,
                       scheduler=scheduler, config=train_config,
                       prediction_type=diffusion_config.prediction_type, latent_shape=latent_shape)
     meta = {"diffusion": config_to_dict(diffusion_config), "text_encoder": encoder_name,
