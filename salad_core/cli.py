@@ -139,6 +139,66 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return cmd_generate(args)
 
 
+def _edit_specs(args: argparse.Namespace) -> list:
+    from salad_core.attention import Mirror, Refine, Reweight, WordSwap
+
+    specs = []
+    if args.swap is not None:
+        specs.append(WordSwap(tau=args.swap))
+    if args.refine:
+        specs.append(Refine())
+    for item in args.reweight or []:
+        word, sep, scale = item.rpartition("=")
+        if not sep or not word:
+            raise UserError(f"--reweight takes WORD=SCALE (e.g. high=-1), got {item!r}")
+        try:
+            value = float(scale)
+        except ValueError:
+            raise UserError(f"--reweight {item!r}: the scale {scale!r} is not a number") from None
+        specs.append(Reweight(words=word, scale=value))
+    if args.mirror:
+        specs.append(Mirror(parts=args.mirror))
+    if not specs:
+        raise UserError("give at least one edit: --swap TAU, --refine, --reweight WORD=SCALE or --mirror PARTS")
+    return specs
+
+
+def cmd_edit(args: argparse.Namespace) -> int:
+    """Edit a generated motion (same noise) or, with --motion, a given motion through inversion."""
+    import numpy as np
+
+    out = _check_out_dir(args.out, args.force)
+    specs = _edit_specs(args)
+    pipe = _load_pipeline(args.weights)
+    if args.motion:
+        path = Path(args.motion)
+        if not path.is_file():
+            raise UserError(f"motion file not found: {path}")
+        feats = np.load(path, allow_pickle=False)
+        inv = pipe.invert(feats, args.source, guidance_scale=args.guidance, num_steps=args.steps,
+                          progress=not args.quiet)
+        print("inversion reconstruction error:", {k: round(float(v), 4) for k, v in inv.errors.items()})
+        result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet)
+    else:
+        result = pipe.edit(args.source, args.target, edits=specs, lengths=args.length, seed=args.seed,
+                           guidance_scale=args.guidance, num_steps=args.steps, solver=args.solver,
+                           progress=not args.quiet)
+    src, dst = result.source, result.edited
+    n = src.lengths[0]
+    files = _write_motion_files(out, "source", src.features[0, :n], src.joints[0], pipe.skeleton, force=args.force,
+                                gif=False, bvh=True)
+    files += _write_motion_files(out, "edited", dst.features[0, :n], dst.joints[0], pipe.skeleton, force=args.force,
+                                 gif=False, bvh=True)
+    from salad_viz import animate
+
+    (gif,) = _outputs(out, ["source_vs_edited.gif"], args.force)
+    files.append(animate([src.joints[0], dst.joints[0]], pipe.skeleton, gif, layout="side",
+                         titles=["source", "edited"], size=(240, 240), stride=2))
+    print(f"{src.texts[0]!r} -> {dst.texts[0]!r} with {[type(e).__name__ for e in specs]}: "
+          + ", ".join(str(f) for f in files))
+    return 0
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -255,6 +315,20 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--no-render", action="store_true", help="skip the GIF animation")
     _generation_args(g, length=120)
 
+    ed = _sub(sub, "edit", "edit a motion by modulating its cross-attention (word swap, refinement, "
+              "re-weighting, mirroring); with --motion, edit a given motion through inversion",
+              'salad edit "a man raises his right hand high" --reweight high=-1 --out edit_out')
+    ed.add_argument("source", help="source prompt (for --motion: what the given motion shows)")
+    ed.add_argument("--target", default=None, help="target prompt (word swap, refinement); default: the source")
+    ed.add_argument("--swap", type=float, default=None, metavar="TAU",
+                    help="word swap: source maps while t >= TAU*T (paper: 0.8)")
+    ed.add_argument("--refine", action="store_true", help="prompt refinement (aligned words keep the source maps)")
+    ed.add_argument("--reweight", action="append", metavar="WORD=SCALE", help="scale a word's attention, s in [-3, 3]")
+    ed.add_argument("--mirror", choices=["legs", "arms", "all"], help="swap left/right body-part rows")
+    ed.add_argument("--motion", default=None, help="a features .npy (N, 263) to edit instead of a generated one")
+    ed.add_argument("--out", required=True)
+    _generation_args(ed, length=100)
+
     r = _sub(sub, "render", "animate a motion file (features .npy or joints .npy) as GIF or MP4",
              "salad render gen_out/00_a_person_jumps_joints.npy --out renders --format mp4")
     r.add_argument("motion", help="a .npy file: features (N, 263) or joints (N, 22, 3)")
@@ -288,7 +362,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 COMMANDS: dict[str, Callable] = {"corpus": cmd_corpus, "demo": cmd_demo, "generate": cmd_generate,
-                                 "render": cmd_render, "export": cmd_export}
+                                 "render": cmd_render, "export": cmd_export, "edit": cmd_edit}
 
 
 def main(argv: list[str] | None = None) -> int:

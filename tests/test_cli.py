@@ -114,3 +114,23 @@ def test_corpus_build_refuses_non_empty_folder(tmp_path, capsys):
     (tmp_path / "keep.txt").write_text("x")
     assert cli.main(["-q", "corpus", "build", "--out", str(tmp_path), "--size", "tiny"]) == 2
     assert "--force" in capsys.readouterr().err
+
+
+def test_edit_writes_source_and_edited(tiny_weights, tmp_path):
+    out = tmp_path / "edit"
+    code = cli.main(["-q", "edit", "a man raises his right hand high", "--mirror", "all", "--reweight", "high=-1",
+                     "--length", "40", "--steps", "3", "--weights", str(tiny_weights), "--out", str(out)])
+    assert code == 0
+    src, dst = np.load(out / "source_joints.npy"), np.load(out / "edited_joints.npy")
+    assert src.shape == dst.shape == (40, 22, 3) and not np.allclose(src, dst)
+    assert (out / "source_vs_edited.gif").is_file()
+
+
+@pytest.mark.parametrize("extra, message", [([], "give at least one edit"), (["--reweight", "high"], "WORD=SCALE"),
+                                            (["--reweight", "jumps=2"], "not in the prompt"),
+                                            (["--reweight", "high=9"], "[-3, 3]")])
+def test_edit_errors(tiny_weights, tmp_path, capsys, extra, message):
+    code = cli.main(["-q", "edit", "a man raises his right hand high", *extra, "--steps", "2",
+                     "--weights", str(tiny_weights), "--out", str(tmp_path / "e")])
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and "Traceback" not in err
