@@ -279,6 +279,12 @@ def cmd_corpus(args: argparse.Namespace) -> int:
 
 
 # ----------------------------------------------------------------------------- train
+def cmd_eval(args: argparse.Namespace, rest: list[str]) -> int:
+    from salad_core.eval.cli import main as eval_main
+
+    return int(eval_main(rest) or 0)
+
+
 def cmd_train(args: argparse.Namespace, rest: list[str]) -> int:
     from salad_core.train import main as train_main
 
@@ -358,6 +364,9 @@ def build_parser() -> argparse.ArgumentParser:
     t = _sub(sub, "train", "train the VAE or the denoiser (torchrun-ready)",
              "salad train vae --data data/procedural --out runs/vae")
     t.add_argument("what", choices=["vae", "denoiser"])
+
+    _sub(sub, "eval", "evaluate generators with the T2M protocol (R-precision, FID, MM-Dist, Diversity, "
+         "MultiModality), CFG sweeps", "salad eval --data data/procedural --quick --out eval_out")
     return p
 
 
@@ -374,11 +383,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
-    if rest and args.command != "train":
+    if rest and args.command not in ("train", "eval"):
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
     try:
         if args.command == "train":
             return cmd_train(args, rest)
+        if args.command == "eval":
+            return cmd_eval(args, rest)
         return COMMANDS[args.command](args)
     except KeyboardInterrupt:
         print("salad: interrupted", file=sys.stderr)
