@@ -9,6 +9,11 @@ text or motion formats; this module joins them:
    the batch needs (padded frames are masked, so the result is the same as padding to 196);
 3. denoise with classifier-free guidance; decode with the VAE; de-normalise; recover joints.
 
+Editing (:meth:`SaladPipeline.edit`, SALAD supplement B, Algorithm 1) samples a source and an
+edited motion side by side from the same noise in one batched forward per step; given motions are
+edited after :meth:`SaladPipeline.invert` (DDIM inversion, faithful under guidance), see
+:mod:`salad_core.attention`.
+
 A pretrained folder holds ``pipeline.json`` (text encoder, diffusion config, skeleton, solver),
 ``vae.{safetensors,json}``, ``denoiser.{safetensors,json}`` and ``stats.safetensors`` (Mean/Std).
 ``SaladPipeline.from_pretrained()`` with no path loads the shipped default from
@@ -36,7 +41,8 @@ from salad_core.sampling import DiffusionConfig, denoise, make_scheduler
 from salad_core.skeleton import Skeleton, get_skeleton
 from salad_core.text import TextBatch, load_text_encoder
 
-__all__ = ["SaladPipeline", "MotionOutput", "default_weights_dir", "validate_prompts", "validate_lengths"]
+__all__ = ["SaladPipeline", "MotionOutput", "EditOutput", "default_weights_dir", "validate_prompts",
+           "validate_lengths"]
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +89,35 @@ class MotionOutput:
 
     def __len__(self) -> int:
         return len(self.texts)
+
+
+@dataclass
+class EditOutput:
+    """A source motion and its edit, with everything needed to regenerate both.
+
+    Attributes
+    ----------
+    source : MotionOutput
+        The source motion (for a given motion: its reconstruction from the inverted noise), with
+        ``attention`` = the source maps ``M`` when capture was requested.
+    edited : MotionOutput
+        The edited motion; ``texts`` are the target prompts, ``attention`` the maps it used
+        (``M_hat`` where the edit replaced them).
+    noise : torch.Tensor
+        ``(B, N', P, Dz)`` the initial noise both share (Algorithm 1, line 4).
+    edits : tuple of EditSpec
+        The edit specification, in order.
+    settings : dict
+        Guidance scale, steps, solver, weights, ``probe``, the inversion method if any, and the
+        cost: ``forward_rows`` and ``cost_vs_generation`` (forward rows relative to one plain
+        CFG generation of the source).
+    """
+
+    source: MotionOutput
+    edited: MotionOutput
+    noise: torch.Tensor
+    edits: tuple
+    settings: dict = field(default_factory=dict)
 
 
 def validate_prompts(prompts: str | Sequence[str]) -> list[str]:
@@ -334,6 +369,256 @@ class SaladPipeline:
         feats, joints = self.decode(latents, lengths)
         return MotionOutput(feats, joints, prompts, lengths, latents, noise, seeds, attention, settings)
 
+    # ------------------------------------------------------------------ edit
+    def edit(self, source: str | Sequence[str] | None = None, target: str | Sequence[str] | None = None,
+             edits: Any = (), lengths: int | Sequence[int] | None = None, seed: int | Sequence[int] = 0,
+             guidance_scale: float | None = None, num_steps: int | None = None, solver: str | None = None,
+             noise: torch.Tensor | None = None, inversion: Any = None, capture_attention: bool | Any = False,
+             probe: bool = False, progress: bool = False) -> EditOutput:
+        """Zero-shot editing by attention modulation (SALAD supplement B, Algorithm 1).
+
+        The source and the edited motion are sampled together from the same noise; per step one
+        batched forward serves both branches (and, with ``probe=True``, Algorithm 1's probe).
+
+        Parameters
+        ----------
+        source : str or list of str, optional
+            Source prompts (omit when editing an ``inversion``).
+        target : str or list of str, optional
+            Target prompts, one per source (a single string is used for all); default: the
+            source prompts (re-weighting and mirroring edit the source's own maps).
+        edits : EditSpec or sequence of EditSpec
+            :class:`~salad_core.attention.WordSwap`, :class:`~salad_core.attention.Refine`,
+            :class:`~salad_core.attention.Reweight`, :class:`~salad_core.attention.Mirror`,
+            :class:`~salad_core.attention.InjectSelfAttention`, composed in order; empty: the
+            edited motion is a plain generation of the target from the same noise.
+        lengths, seed, solver, noise
+            As :meth:`__call__`.
+        guidance_scale, num_steps : optional
+            Default 7.5 and 50, or the inversion's.
+        inversion : Inversion, optional
+            From :meth:`invert`: edit a given motion. Its prompts, lengths, noise, guidance,
+            steps and per-step null texts / corrections are used.
+        capture_attention : bool or CaptureConfig
+            Record the source maps and the maps the edited motion used.
+        probe : bool
+            Read the target's own maps from a separate probe row (Algorithm 1's line 7, official)
+            instead of from the edited row itself (Prompt-to-Prompt); see
+            :class:`~salad_core.attention.EditController`.
+
+        Returns
+        -------
+        EditOutput
+        """
+        from salad_core.attention.capture import AttentionStore, TokenInfo, as_capture_config
+        from salad_core.attention.controller import EditController
+        from salad_core.attention.editing import edit_latents
+        from salad_core.attention.edits import validate_edits
+
+        edits = validate_edits(edits)
+        null_schedule = corrections = None
+        if inversion is not None:
+            prompts, lengths, noise, guidance_scale, num_steps = self._from_inversion(
+                inversion, source, lengths, noise, guidance_scale, num_steps, solver)
+            seeds: list[int] = []
+            solver = "ddim"
+            corrections = inversion.corrections
+        else:
+            if source is None:
+                raise ValueError("edit needs source prompts, or inversion=pipe.invert(motion, prompt) to edit a "
+                                 "given motion")
+            prompts = validate_prompts(source)
+            lengths = validate_lengths(lengths, len(prompts), self.skeleton)
+            guidance_scale = _check_scale(7.5 if guidance_scale is None else guidance_scale)
+            num_steps = _check_steps(50 if num_steps is None else num_steps)
+            seeds = _seeds(seed, len(prompts))
+            n_lat = max(lengths) // self.skeleton.unit_length
+            noise = (self.make_noise(seeds, n_lat) if noise is None
+                     else _check_noise(noise, (len(prompts), n_lat, *self.latent_shape)))
+        targets = prompts if target is None else validate_prompts(target)
+        if len(targets) == 1 and len(prompts) > 1:
+            targets = targets * len(prompts)
+        if len(targets) != len(prompts):
+            raise ValueError(f"got {len(targets)} target prompts for {len(prompts)} source prompts; give one each "
+                             "or a single target for all")
+        text_src, null = self.encode_text(prompts)
+        text_tgt = text_src if targets == prompts else self.text_encoder.encode(targets)
+        if inversion is not None and inversion.null_texts is not None:
+            null_schedule = [self.denoiser.prepare_text(f, inversion.null_mask) for f in inversion.null_texts]
+            null_width = inversion.null_mask.shape[1]
+        else:
+            null_schedule = self.denoiser.prepare_text(null.features, null.mask)
+            null_width = null.features.shape[1]
+        width = max(text_src.features.shape[1], text_tgt.features.shape[1], null_width)
+        controller = EditController(edits, TokenInfo.from_batch(text_src), TokenInfo.from_batch(text_tgt), width,
+                                    cfg=guidance_scale != 1.0, probe=probe)
+        if capture_attention:
+            cap = as_capture_config(capture_attention)
+            dc = self.denoiser.config
+            controller.stores = {
+                "source": AttentionStore(text_src, lengths, cap, dc.layers, dc.heads, self.skeleton.unit_length,
+                                         rows=lambda info: controller.layout.source_cond),
+                "edited": AttentionStore(text_tgt, lengths, cap, dc.layers, dc.heads, self.skeleton.unit_length,
+                                         rows=lambda info: controller.layout.edited_cond),
+            }
+        solver = solver or self.solver
+        scheduler = make_scheduler(self.diffusion, solver)
+        mask = self.frame_mask(lengths, noise.shape[1])
+        run = edit_latents(self.denoiser, scheduler, controller,
+                           source=self.denoiser.prepare_text(text_src.features, text_src.mask),
+                           target=self.denoiser.prepare_text(text_tgt.features, text_tgt.mask),
+                           null=null_schedule, noise=noise, frame_mask=mask, guidance_scale=guidance_scale,
+                           num_steps=int(num_steps), corrections=corrections, progress=progress)
+        generation_rows = (2 if guidance_scale != 1.0 else 1) * len(prompts) * int(num_steps)
+        settings = dict(guidance_scale=guidance_scale, num_steps=int(num_steps), solver=solver, weights=self.source)
+        out = []
+        for branch, latents, texts in (("source", run.source, prompts), ("edited", run.edited, targets)):
+            feats, joints = self.decode(latents, lengths)
+            maps = controller.stores[branch].result() if capture_attention else None
+            out.append(MotionOutput(feats, joints, list(texts), list(lengths), latents, noise, seeds, maps,
+                                    dict(settings)))
+        settings.update(probe=bool(probe), forward_rows=run.rows, probe_steps=run.probe_steps,
+                        cost_vs_generation=run.rows / generation_rows,
+                        inversion=None if inversion is None else inversion.method)
+        return EditOutput(out[0], out[1], noise, edits, settings)
+
+    def _from_inversion(self, inversion, source, lengths, noise, guidance_scale, num_steps, solver):
+        prompts = list(inversion.prompts)
+        if source is not None and validate_prompts(source) != prompts:
+            raise ValueError(f"source={source!r} differs from the inversion's prompts {prompts}; omit source when "
+                             "editing an inversion")
+        if lengths is not None and validate_lengths(lengths, len(prompts), self.skeleton) != list(inversion.lengths):
+            raise ValueError(f"lengths={lengths!r} differ from the inverted motions' {inversion.lengths}; omit lengths")
+        if noise is not None:
+            raise ValueError("noise cannot be given with an inversion: the inversion is the noise")
+        if guidance_scale is not None and float(guidance_scale) != inversion.guidance_scale:
+            raise ValueError(f"guidance_scale={guidance_scale} but the inversion is faithful to "
+                             f"{inversion.guidance_scale}; invert again with that scale")
+        if num_steps is not None and int(num_steps) != inversion.num_steps:
+            raise ValueError(f"num_steps={num_steps} but the inversion has {inversion.num_steps} steps")
+        if solver is not None and solver.lower() != "ddim":
+            raise ValueError(f"solver={solver!r}: an inversion is made for the deterministic 'ddim' sampler")
+        return prompts, list(inversion.lengths), inversion.noise, inversion.guidance_scale, inversion.num_steps
+
+    # ------------------------------------------------------------------ inversion
+    def invert(self, motions: Any, prompts: str | Sequence[str], *, method: str = "fixed_point",
+               guidance_scale: float = 7.5, num_steps: int = 50, iterations: int | None = None,
+               exact: bool = False, reconstruct: bool = True, progress: bool = False) -> Any:
+        """Invert given motions to noise under their prompts, so that :meth:`edit` can edit them.
+
+        Parameters
+        ----------
+        motions : array or list of arrays
+            Raw (de-normalised) features ``(N, D)``, ``(B, N, D)`` or a list of ``(N_b, D)``;
+            each is cropped to a multiple of 4 frames (at most ``skeleton.max_length``).
+        prompts : str or list of str
+            One source prompt per motion: what the motion shows.
+        method : str
+            ``"ddim"``, ``"fixed_point"`` (default) or ``"null_text"``: see
+            :mod:`salad_core.attention.inversion`; chosen by the reconstruction errors measured by
+            ``scripts/measure_editing.py``.
+        guidance_scale, num_steps
+            The sampling settings the inversion is made for (edits must use the same).
+        iterations : int, optional
+            Fixed-point updates or null-text optimiser steps per sampling step.
+        exact : bool
+            Add per-step corrections so that the source reconstruction is exact.
+        reconstruct : bool
+            Regenerate the motion from the inverted noise and measure the error
+            (``inversion.errors``, metres: ``mpjpe`` root-aligned and ``mpjpe_global`` against
+            the input; ``vae_mpjpe`` / ``vae_mpjpe_global``: the VAE's own encode/decode error,
+            the floor of any inversion; ``inversion_mpjpe`` / ``inversion_mpjpe_global``: the
+            reconstruction against that VAE decoding, i.e. the inversion's own error).
+
+        Returns
+        -------
+        salad_core.attention.Inversion
+        """
+        from salad_core.attention.inversion import DEFAULT_ITERATIONS, Inversion, invert_latents
+
+        prompts = validate_prompts(prompts)
+        feats = _motion_list(motions, self.skeleton)
+        if len(feats) != len(prompts):
+            raise ValueError(f"got {len(feats)} motions and {len(prompts)} prompts; give one prompt per motion")
+        guidance_scale = _check_scale(guidance_scale)
+        num_steps = _check_steps(num_steps)
+        unit = self.skeleton.unit_length
+        lengths = [f.shape[0] for f in feats]
+        n_lat = max(lengths) // unit
+        p, dz = self.latent_shape
+        latents = torch.zeros(len(feats), n_lat, p, dz)
+        for b, f in enumerate(feats):
+            latents[b, : f.shape[0] // unit] = self.encode_motion(f)[0]
+        mask = self.frame_mask(lengths, n_lat)
+        text, null = self.encode_text(prompts)
+        res = invert_latents(self.denoiser, make_scheduler(self.diffusion, "ddim"), latents,
+                             self.denoiser.prepare_text(text.features, text.mask),
+                             self.denoiser.prepare_text(null.features, null.mask), mask, method=method,
+                             guidance_scale=guidance_scale, num_steps=num_steps, iterations=iterations,
+                             exact=exact, progress=progress)
+        inv = Inversion(prompts=prompts, lengths=lengths, features=feats, latents=latents, noise=res.noise,
+                        trajectory=res.trajectory, method=method, guidance_scale=guidance_scale,
+                        num_steps=num_steps, exact=bool(exact),
+                        iterations=DEFAULT_ITERATIONS[method] if iterations is None else int(iterations),
+                        null_texts=res.null_texts,
+                        null_mask=None if res.null_texts is None else null.mask.expand(len(feats), -1).clone(),
+                        corrections=res.corrections, residuals=res.residuals, forward_rows=res.forward_rows,
+                        seconds=res.seconds)
+        if reconstruct:
+            from salad_core.eval.metrics import mpjpe
+
+            rec = self.reconstruct(inv, progress=progress)
+            vae_feats, vae_joints = self.decode(latents, lengths)
+            gt = [features_to_joints(f, self.skeleton).astype(np.float32) for f in feats]
+            inv.reconstruction = rec
+            inv.errors = {
+                "mpjpe": float(np.mean([mpjpe(r, g) for r, g in zip(rec.joints, gt)])),
+                "mpjpe_global": float(np.mean([mpjpe(r, g, root_aligned=False) for r, g in zip(rec.joints, gt)])),
+                "vae_mpjpe": float(np.mean([mpjpe(r, g) for r, g in zip(vae_joints, gt)])),
+                "vae_mpjpe_global": float(np.mean([mpjpe(r, g, root_aligned=False) for r, g in zip(vae_joints, gt)])),
+                "inversion_mpjpe": float(np.mean([mpjpe(r, v) for r, v in zip(rec.joints, vae_joints)])),
+                "inversion_mpjpe_global": float(np.mean([mpjpe(r, v, root_aligned=False)
+                                                         for r, v in zip(rec.joints, vae_joints)])),
+                "latent_rmse": float(((rec.latents - latents) ** 2).sum().div(
+                    mask.sum() * p * dz).sqrt()),
+            }
+        return inv
+
+    def reconstruct(self, inversion: Any, *, capture_attention: bool | Any = False,
+                    progress: bool = False) -> MotionOutput:
+        """Regenerate an inverted motion (no edit): the source branch of :meth:`edit` alone."""
+        from salad_core.attention.capture import AttentionStore, TokenInfo, as_capture_config
+        from salad_core.attention.controller import EditController
+        from salad_core.attention.editing import edit_latents
+
+        prompts, lengths = list(inversion.prompts), list(inversion.lengths)
+        w, steps = inversion.guidance_scale, inversion.num_steps
+        text, null = self.encode_text(prompts)
+        if inversion.null_texts is not None:
+            nulls = [self.denoiser.prepare_text(f, inversion.null_mask) for f in inversion.null_texts]
+            null_width = inversion.null_mask.shape[1]
+        else:
+            nulls = self.denoiser.prepare_text(null.features, null.mask)
+            null_width = null.features.shape[1]
+        info = TokenInfo.from_batch(text)
+        controller = EditController((), info, info, max(text.features.shape[1], null_width), cfg=w != 1.0,
+                                    edited=False)
+        if capture_attention:
+            dc = self.denoiser.config
+            controller.stores = {"source": AttentionStore(text, lengths, as_capture_config(capture_attention),
+                                                          dc.layers, dc.heads, self.skeleton.unit_length,
+                                                          rows=lambda i: controller.layout.source_cond)}
+        ctx = self.denoiser.prepare_text(text.features, text.mask)
+        mask = self.frame_mask(lengths, inversion.noise.shape[1])
+        run = edit_latents(self.denoiser, make_scheduler(self.diffusion, "ddim"), controller, source=ctx, target=None,
+                           null=nulls, noise=inversion.noise, frame_mask=mask, guidance_scale=w, num_steps=steps,
+                           corrections=inversion.corrections, progress=progress)
+        feats, joints = self.decode(run.source, lengths)
+        maps = controller.stores["source"].result() if capture_attention else None
+        return MotionOutput(feats, joints, prompts, lengths, run.source, inversion.noise, [], maps,
+                            dict(guidance_scale=w, num_steps=steps, solver="ddim", weights=self.source,
+                                 inversion=inversion.method))
+
 
 def check_compatible(vae: MotionVAE, denoiser: Denoiser, text_encoder=None) -> None:
     """Raise if the VAE latent, the denoiser and the text encoder do not fit together."""
@@ -354,6 +639,37 @@ def _check_scale(scale: Any) -> float:
     if not math.isfinite(value):
         raise ValueError(f"guidance_scale must be finite, got {scale!r}")
     return value
+
+
+def _check_steps(num_steps: Any) -> int:
+    if not isinstance(num_steps, (int, np.integer)) or isinstance(num_steps, bool) or num_steps < 1:
+        raise ValueError(f"num_steps must be a positive integer, got {num_steps!r}")
+    return int(num_steps)
+
+
+def _motion_list(motions: Any, skeleton: Skeleton) -> list[np.ndarray]:
+    """Raw features ``(N, D)``, ``(B, N, D)`` or a list of ``(N_b, D)`` -> float32 arrays cropped to
+    multiples of ``unit_length`` frames."""
+    d, unit, max_len = skeleton.feature_dim, skeleton.unit_length, skeleton.max_length
+    if isinstance(motions, torch.Tensor):
+        motions = motions.detach().cpu().numpy()
+    if isinstance(motions, np.ndarray):
+        motions = [motions] if motions.ndim == 2 else list(motions)
+    if not isinstance(motions, (list, tuple)) or not motions:
+        raise TypeError(f"motions must be a (N, {d}) array, a (B, N, {d}) array or a list of (N, {d}) arrays")
+    out = []
+    for i, m in enumerate(motions):
+        m = np.asarray(m.detach().cpu() if isinstance(m, torch.Tensor) else m, dtype=np.float32)
+        if m.ndim != 2 or m.shape[1] != d:
+            raise ValueError(f"motion {i} must be ({'N'}, {d}) raw {skeleton.name} features, got shape {m.shape}")
+        if not np.isfinite(m).all():
+            raise ValueError(f"motion {i} contains NaN or infinite values")
+        n = m.shape[0] - m.shape[0] % unit
+        if n < unit or n > max_len:
+            raise ValueError(f"motion {i} has {m.shape[0]} frames; allowed: {unit}..{max_len} "
+                             f"(crop longer motions first)")
+        out.append(np.ascontiguousarray(m[:n]))
+    return out
 
 
 def _seeds(seed: int | Sequence[int], n: int) -> list[int]:

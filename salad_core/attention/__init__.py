@@ -1,0 +1,32 @@
+"""Attention capture, zero-shot editing (SALAD §3.3, supplement B) and inversion of given motions.
+
+* :mod:`.capture`: :func:`capture_cross_attention` records the cross-attention (and on request
+  the self-attention) of the conditional branch while sampling; the result,
+  :class:`AttentionMaps`, carries its tokens and words (``word_map``, ``token_map``, ``select``).
+* :mod:`.edits`: typed edit specifications (:class:`WordSwap`, :class:`Refine`,
+  :class:`Reweight`, :class:`Mirror`, :class:`InjectSelfAttention`) and their pure kernels.
+* :mod:`.align`: token alignment of source and target prompts.
+* :mod:`.controller` and :mod:`.editing`: Algorithm 1 in one batched forward per step.
+* :mod:`.inversion`: DDIM inversion made faithful under guidance, to edit given motions.
+
+The pipeline entry points are ``pipe(..., capture_attention=True)``, ``pipe.edit(...)`` and
+``pipe.invert(...)`` (:class:`salad_core.pipeline.SaladPipeline`).
+"""
+from .align import alignment_matrix, global_align, word_swap_matrix
+from .capture import AttentionMaps, AttentionStore, CaptureConfig, TokenInfo, as_capture_config, capture_cross_attention
+from .controller import EditController, RowLayout
+from .editing import EditRun, edit_latents
+from .edits import (MIRROR_GROUPS, REWEIGHT_RANGE, EditSpec, InjectSelfAttention, Mirror, Refine, Reweight, WordSwap,
+                    map_columns, mirror_parts, mirror_permutation, refine_columns, reweight_columns, validate_edits)
+from .inversion import INVERSION_METHODS, Inversion, LatentInversion, ddim_step_coefficients, invert_latents
+from .processor import HookedProcessor, flat_rows, named_rows
+
+__all__ = [
+    "capture_cross_attention", "CaptureConfig", "AttentionStore", "AttentionMaps", "TokenInfo", "as_capture_config",
+    "EditSpec", "WordSwap", "Refine", "Reweight", "Mirror", "InjectSelfAttention", "validate_edits",
+    "MIRROR_GROUPS", "REWEIGHT_RANGE", "mirror_parts", "mirror_permutation", "reweight_columns", "map_columns",
+    "refine_columns", "global_align", "alignment_matrix", "word_swap_matrix",
+    "EditController", "RowLayout", "edit_latents", "EditRun",
+    "invert_latents", "Inversion", "LatentInversion", "INVERSION_METHODS", "ddim_step_coefficients",
+    "HookedProcessor", "flat_rows", "named_rows",
+]

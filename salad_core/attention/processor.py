@@ -1,0 +1,132 @@
+"""One attention processor for capture and editing: fast attention for the output, explicit
+probabilities only for the batch rows a hook asks for.
+
+:class:`~salad_core.models.attention.EagerProcessor` computes the softmax of *every* row; its output
+differs from the fast SDPA kernel in the last bits, so a capture built on it would change the
+generated motion slightly. :class:`HookedProcessor` instead
+
+1. computes the output of every row with ``scaled_dot_product_attention`` (exactly what sampling
+   without hooks computes),
+2. asks its hook which batch rows it needs (``hook.rows(site)``; ``None`` = none at this call,
+   the common case for self-attention sites, which then cost nothing extra),
+3. computes ``softmax(q k^T / sqrt(d))`` for those rows only and passes them to
+   ``hook.process(site, batch_rows, probs)``,
+4. if the hook returns ``(rows, new_probs)``, recomputes the output of those rows as
+   ``new_probs @ v`` (SALAD supplement B: ``Denoise(z_t, t, c){M <- M_hat}``, values from the
+   row's own prompt).
+
+Rows the hook does not replace keep the SDPA output bit for bit, which is why capturing never
+changes a motion and why the source branch of an edit equals plain generation.
+
+Rows of the flat probability tensor and batch rows differ at the self-attention sites: temporal
+probabilities have ``B * P`` rows ordered (batch, part), skeletal ones ``B * N'`` ordered
+(batch, frame); :func:`flat_rows` converts (see :mod:`salad_core.models.attention`).
+"""
+from __future__ import annotations
+
+import math
+from typing import Optional, Protocol
+
+import torch
+import torch.nn.functional as F
+
+from salad_core.models.attention import AttentionProcessor, SiteInfo
+
+__all__ = ["SiteHook", "HookedProcessor", "flat_rows", "named_rows", "flat_from_named"]
+
+
+class SiteHook(Protocol):
+    """What :class:`HookedProcessor` asks of its hook at every call of a site."""
+
+    def rows(self, site: SiteInfo) -> Optional[torch.Tensor]:
+        """Batch rows ``(n,)`` (long) whose probabilities are needed now, or None."""
+
+    def process(self, site: SiteInfo, rows: torch.Tensor, probs: torch.Tensor
+                ) -> Optional[tuple[torch.Tensor, torch.Tensor]]:
+        """Receive the probabilities of ``rows`` in named axes (see :func:`named_rows`); return
+        None, or ``(rows2, new_probs)``: batch rows to replace and their named probabilities."""
+
+
+def _rows_per_sample(site: SiteInfo) -> int:
+    if site.kind == "temporal":
+        return site.parts
+    if site.kind == "skeletal":
+        return site.frames
+    return 1
+
+
+def flat_rows(site: SiteInfo, rows: torch.Tensor) -> torch.Tensor:
+    """Batch rows ``(n,)`` -> rows of the flat probability tensor at ``site`` ``(n * r,)``."""
+    per = _rows_per_sample(site)
+    if per == 1:
+        return rows
+    return (rows[:, None] * per + torch.arange(per, device=rows.device)[None, :]).reshape(-1)
+
+
+def named_rows(site: SiteInfo, probs: torch.Tensor, n: int) -> torch.Tensor:
+    """Flat probabilities of ``n`` batch rows -> named axes (as :meth:`SiteInfo.to_named`).
+
+    temporal ``(n, P, H, N', N')``, skeletal ``(n, N', H, P, P)``, cross ``(n, H, N', P, W)``,
+    sentence ``(n, H, N', P, 1 + N'P)``.
+    """
+    h, nf, p = site.heads, site.frames, site.parts
+    if site.kind == "temporal":
+        return probs.view(n, p, h, nf, nf)
+    if site.kind == "skeletal":
+        return probs.view(n, nf, h, p, p)
+    return probs.view(n, h, nf, p, probs.shape[-1])
+
+
+def flat_from_named(site: SiteInfo, named: torch.Tensor) -> torch.Tensor:
+    """Inverse of :func:`named_rows`: ``(n, ...)`` named -> flat ``(n * r, H, Lq, Lk)``."""
+    n = named.shape[0]
+    h, nf, p = site.heads, site.frames, site.parts
+    if site.kind == "temporal":
+        return named.reshape(n * p, h, nf, nf)
+    if site.kind == "skeletal":
+        return named.reshape(n * nf, h, p, p)
+    return named.reshape(n, h, nf * p, named.shape[-1])
+
+
+class HookedProcessor(AttentionProcessor):
+    """SDPA output for every row plus explicit probabilities for the rows a hook needs.
+
+    Parameters
+    ----------
+    hook : SiteHook
+        Decides per call which batch rows it needs and whether it replaces some.
+    """
+
+    def __init__(self, hook: SiteHook) -> None:
+        self.hook = hook
+
+    def __call__(self, site: SiteInfo, q: torch.Tensor, k: torch.Tensor, v: torch.Tensor,
+                 key_mask: torch.Tensor | None, dropout_p: float) -> torch.Tensor:
+        mask = None if key_mask is None else key_mask[:, None, None, :]
+        out = F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=dropout_p)
+        rows = self.hook.rows(site)
+        if rows is None or rows.numel() == 0:
+            return out
+        flat = flat_rows(site, rows)
+        scores = torch.matmul(q[flat], k[flat].transpose(-1, -2)) * (1.0 / math.sqrt(q.shape[-1]))
+        if key_mask is not None:
+            scores = scores.masked_fill(~key_mask[flat][:, None, None, :], float("-inf"))
+        probs = scores.softmax(dim=-1)
+        result = self.hook.process(site, rows, named_rows(site, probs, rows.numel()))
+        if result is None:
+            return out
+        new_rows, new_named = result
+        new_flat = flat_rows(site, new_rows)
+        new_probs = flat_from_named(site, new_named).to(v.dtype)
+        expected = (new_flat.numel(), *probs.shape[1:])
+        if tuple(new_probs.shape) != expected:
+            raise ValueError(f"hook returned probabilities of shape {tuple(new_probs.shape)} at site "
+                             f"{site.name!r}; expected {expected}")
+        if dropout_p > 0.0:
+            new_probs = F.dropout(new_probs, p=dropout_p, training=True)
+        out = out.clone()
+        out[new_flat] = torch.matmul(new_probs, v[new_flat])
+        return out
+
+    def __repr__(self) -> str:
+        return f"HookedProcessor(hook={type(self.hook).__name__})"

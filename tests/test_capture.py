@@ -1,0 +1,201 @@
+"""Cross-attention capture: bit-identity with plain sampling, the maps' numbers, selection, scoping."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from salad_core.attention import AttentionMaps, CaptureConfig, capture_cross_attention
+from salad_core.models.attention import EagerProcessor, SDPAProcessor, cross_probs_by_part, use_processors
+from salad_core.models.denoiser import Denoiser, DenoiserConfig
+from salad_core.models.vae import MotionVAE, VAEConfig
+from salad_core.pipeline import SaladPipeline
+from salad_core.sampling import denoise, make_scheduler
+from salad_core.skeleton import NUM_PARTS
+from salad_core.text import load_text_encoder
+
+PROMPTS = ["a man does a cartwheel and walks", "a person jumps high"]
+LENGTHS = [40, 28]
+STEPS = 10
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="module")
+def pipe(sample_dir) -> SaladPipeline:
+    """Tiny random pipeline: the real VAE, a 3-layer width-32 denoiser, the real MiniLM."""
+    torch.manual_seed(0)
+    vae = MotionVAE(VAEConfig())
+    den = Denoiser(DenoiserConfig(width=32, heads=2, ff_dim=64, layers=3, text_dim=384))
+    return SaladPipeline(vae, den, load_text_encoder("minilm"), np.load(sample_dir / "Mean.npy"),
+                         np.load(sample_dir / "Std.npy"))
+
+
+@pytest.fixture(scope="module")
+def plain(pipe):
+    return pipe(PROMPTS, lengths=LENGTHS, num_steps=STEPS, seed=3)
+
+
+@pytest.fixture(scope="module")
+def full(pipe):
+    return pipe(PROMPTS, lengths=LENGTHS, num_steps=STEPS, seed=3,
+                capture_attention=CaptureConfig(mode="full", self_attention=True))
+
+
+@pytest.fixture(scope="module")
+def mean(pipe):
+    return pipe(PROMPTS, lengths=LENGTHS, num_steps=STEPS, seed=3, capture_attention=True)
+
+
+def test_capture_never_changes_the_motion(plain, full, mean):
+    for out in (full, mean):
+        assert torch.equal(out.latents, plain.latents)          # bit for bit
+        assert np.array_equal(out.features, plain.features)
+    assert plain.attention is None and isinstance(mean.attention, AttentionMaps)
+
+
+def test_maps_are_cropped_probabilities_with_their_tokens(pipe, mean):
+    maps = mean.attention
+    text = pipe.text_encoder.encode(PROMPTS)
+    for b in range(2):
+        m = maps.cross_map(b)
+        assert m.shape == (NUM_PARTS, LENGTHS[b] // 4, len(text.tokens[b]))
+        # mean of post-softmax rows: every (part, frame) sums to one over the tokens
+        np.testing.assert_allclose(m.sum(-1), 1.0, atol=1e-5)
+        assert maps.tokens(b) == text.tokens[b] and maps.words(b) == text.words[b]
+        assert maps.token_to_word(b) == text.token_to_word[b]
+    assert maps.latent_lengths == [10, 7] and maps.prompts == PROMPTS
+    assert maps.num_steps == STEPS and maps.layers == (0, 1, 2) and maps.step_window == (0.0, 1.0)
+
+
+def test_word_map_sums_the_sub_tokens(mean):
+    maps = mean.attention
+    cols = maps.word_columns(0, "cartwheel")
+    assert len(cols) > 1                     # MiniLM splits it into word pieces
+    np.testing.assert_allclose(maps.word_map(0, "cartwheel"), sum(maps.token_map(0, c) for c in cols), rtol=1e-6)
+    phrase = maps.word_map(0, "does a cartwheel")
+    # words 2, 3, 4 of ['a', 'man', 'does', 'a', 'cartwheel', 'and', 'walks']: only the second "a"
+    np.testing.assert_allclose(phrase, maps.word_map(0, 2) + maps.word_map(0, 3) + maps.word_map(0, 4), rtol=1e-5)
+    np.testing.assert_allclose(maps.word_map(0, (2, 5)), phrase, rtol=1e-6)
+    np.testing.assert_allclose(maps.word_map(0, "a"), maps.word_map(0, 0) + maps.word_map(0, 3), rtol=1e-5)
+    words = maps.word_maps(1)
+    assert list(words) == maps.words(1) and words["jumps"].shape == (NUM_PARTS, 7)
+    with pytest.raises(ValueError, match=r"'flips' is not in prompt 1.*\['a', 'person', 'jumps', 'high'\]"):
+        maps.word_map(1, "flips")
+    with pytest.raises(IndexError, match="out of range"):
+        maps.token_map(1, 99)
+
+
+def _reference(pipe, steps_window=(0.0, 1.0)):
+    """Straightforward recording: an eager controller appends every cross site's cond rows."""
+    prompts, lengths = PROMPTS, LENGTHS
+    text, null = pipe.encode_text(prompts)
+    n_lat = max(lengths) // 4
+    noise = pipe.make_noise([3, 4], n_lat)
+    mask = pipe.frame_mask(lengths, n_lat)
+    records, state = [], {}
+
+    def hook(info):
+        state["i"] = info.index
+
+    def controller(site, probs):
+        if site.kind == "cross" and steps_window[0] <= state["i"] / STEPS < steps_window[1]:
+            records.append(cross_probs_by_part(probs, site.frames, site.parts)[2:].clone())   # cond rows
+        return None
+
+    with use_processors(pipe.denoiser, EagerProcessor(controller)):
+        denoise(pipe.denoiser, make_scheduler(), pipe.denoiser.prepare_text(text.features, text.mask),
+                pipe.denoiser.prepare_text(null.features, null.mask), noise, mask, num_steps=STEPS,
+                controller_hooks=[hook])
+    stack = torch.stack(records)                          # (S*L, B, H, N', P, W)
+    return stack.mean((0, 2)).permute(0, 2, 1, 3).numpy(), text  # (B, P, N', W)
+
+
+def test_streaming_mean_equals_a_straightforward_recording(pipe, mean):
+    ref, text = _reference(pipe)
+    for b in range(2):
+        n, w = LENGTHS[b] // 4, len(text.tokens[b])
+        np.testing.assert_allclose(mean.attention.cross_map(b), ref[b, :, :n, :w], atol=2e-5)
+
+
+def test_full_mode_agrees_with_the_mean_mode_and_selects_anything(mean, full):
+    fm, mm = full.attention, mean.attention
+    assert fm.full(0).shape == (STEPS, 3, 2, 10, NUM_PARTS, len(fm.tokens(0))) and fm.full(0).dtype == np.float16
+    np.testing.assert_allclose(fm.cross_map(0), mm.cross_map(0), atol=2e-3)
+    # with 10 steps and 10 bins every bin holds one step: any bin-aligned window agrees
+    for steps, layers in (((0.0, 0.5), [0, 1]), ((0.3, 1.0), [2]), ((0.9, 1.0), None)):
+        a, b = fm.select(steps=steps, layers=layers), mm.select(steps=steps, layers=layers)
+        assert a.step_window == b.step_window == steps
+        np.testing.assert_allclose(a.cross_map(1), b.cross_map(1), atol=2e-3)
+    # the selection really narrows: early and late maps differ, their average is the whole
+    early, late = mm.select(steps=(0.0, 0.5)).cross_map(0), mm.select(steps=(0.5, 1.0)).cross_map(0)
+    np.testing.assert_allclose((early + late) / 2, mm.cross_map(0), atol=1e-5)
+    assert np.abs(early - late).max() > 1e-4
+    # heads only in full mode
+    h0 = fm.select(heads=[0]).cross_map(0)
+    np.testing.assert_allclose((h0 + fm.select(heads=1).cross_map(0)) / 2, fm.cross_map(0), atol=2e-3)
+    with pytest.raises(ValueError, match="heads can only be selected in a mode='full'"):
+        mm.select(heads=[0])
+    with pytest.raises(ValueError, match="multiples of 1/10"):
+        mm.select(steps=(0.0, 0.33))
+    with pytest.raises(ValueError, match=r"layers \[5\] were not captured"):
+        mm.select(layers=[5])
+
+
+def test_self_attention_maps_on_request(full, mean):
+    fm = full.attention
+    t, s = fm.temporal_map(1), fm.skeletal_map(1)
+    assert t.shape == (NUM_PARTS, 7, 7) and s.shape == (7, NUM_PARTS, NUM_PARTS)
+    # sample 1 is the shorter one: padded key frames are masked, so its rows still sum to one
+    np.testing.assert_allclose(t.sum(-1), 1.0, atol=2e-3)
+    np.testing.assert_allclose(s.sum(-1), 1.0, atol=2e-3)
+    assert fm.kinds == ("cross", "temporal", "skeletal")
+    with pytest.raises(ValueError, match="self_attention=True"):
+        mean.attention.temporal_map(0)
+
+
+def test_step_window_and_layers_of_the_config(pipe, full):
+    out = pipe(PROMPTS, lengths=LENGTHS, num_steps=STEPS, seed=3,
+               capture_attention=CaptureConfig(steps=(0.5, 1.0), layers=(1,)))
+    maps = out.attention
+    assert maps.step_window == (0.5, 1.0) and maps.layers == (1,)
+    np.testing.assert_allclose(maps.cross_map(0), full.attention.select(steps=(0.5, 1.0), layers=[1]).cross_map(0),
+                               atol=2e-3)
+
+
+def test_the_model_is_restored_even_after_an_error(pipe):
+    text = pipe.text_encoder.encode(PROMPTS)
+    before = pipe.denoiser.attn_processors
+    with pytest.raises(RuntimeError, match="boom"):
+        with capture_cross_attention(pipe.denoiser, text, LENGTHS) as store:
+            assert any(type(p).__name__ == "HookedProcessor" for p in pipe.denoiser.attn_processors.values())
+            raise RuntimeError("boom")
+    assert pipe.denoiser.attn_processors == before
+    assert all(isinstance(p, SDPAProcessor) for p in pipe.denoiser.attn_processors.values())
+    with pytest.raises(RuntimeError, match="no step was recorded"):
+        store.result()
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(mode="sum"), "mode must be one of"),
+    (dict(steps=(0.5, 0.2)), "0 <= start < stop <= 1"),
+    (dict(step_bins=0), "step_bins must be a positive int"),
+    (dict(layers=[]), "non-empty sequence"),
+    (dict(full_dtype="int8"), "full_dtype"),
+])
+def test_config_validation(kwargs, match):
+    with pytest.raises((ValueError, TypeError), match=match):
+        CaptureConfig(**kwargs)
+
+
+def test_capture_refuses_the_ablation_without_cross_attention(pipe):
+    den = Denoiser(DenoiserConfig(width=32, heads=2, ff_dim=64, layers=3, text_dim=384, cross_attention=False))
+    with pytest.raises(ValueError, match="w/o CrossAttn"):
+        with capture_cross_attention(den, pipe.text_encoder.encode(PROMPTS), LENGTHS):
+            pass
