@@ -22,11 +22,11 @@ class UserError(Exception):
     """An error the user can fix; printed as one line."""
 
 
-def _sub(subparsers, name: str, help: str, example: str) -> argparse.ArgumentParser:
+def _sub(subparsers, name: str, help: str, example: str, **kwargs) -> argparse.ArgumentParser:
     EXAMPLES[name] = example
     return subparsers.add_parser(
         name, help=help, description=f"{help}\n\nexample:\n  {example}",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=argparse.RawDescriptionHelpFormatter, **kwargs,
     )
 
 
@@ -199,28 +199,35 @@ def cmd_edit(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_render(args: argparse.Namespace) -> int:
+def _load_joints(motion: str, skeleton: str):
+    """``(skeleton, joints (N, J, 3), path)`` from a features ``(N, D)`` or joints ``(N, J, 3)`` .npy."""
     import numpy as np
 
     from salad_core.motion import check_features, features_to_joints
     from salad_core.skeleton import get_skeleton
-    from salad_viz import animate, keyframe_strip
 
-    sk = get_skeleton(args.skeleton)
-    path = Path(args.motion)
+    sk = get_skeleton(skeleton)
+    path = Path(motion)
     if not path.is_file():
         raise UserError(f"motion file not found: {path}")
     arr = np.load(path, allow_pickle=False)
     if arr.ndim == 2:
         check_features(arr, sk, name=str(path))
-        joints = features_to_joints(arr, sk)
-    elif arr.ndim == 3 and arr.shape[1:] == (sk.num_joints, 3):
+        return sk, features_to_joints(arr, sk), path
+    if arr.ndim == 3 and arr.shape[1:] == (sk.num_joints, 3):
         if not np.isfinite(arr).all():
             raise UserError(f"{path} contains NaN or infinite values")
-        joints = arr
-    else:
-        raise UserError(f"{path} has shape {arr.shape}; expected features (N, {sk.feature_dim}) or "
-                        f"joints (N, {sk.num_joints}, 3)")
+        return sk, arr, path
+    raise UserError(f"{path} has shape {arr.shape}; expected features (N, {sk.feature_dim}) or "
+                    f"joints (N, {sk.num_joints}, 3)")
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from salad_viz import animate, keyframe_strip
+
+    sk, joints, path = _load_joints(args.motion, args.skeleton)
     out = _check_out_dir(args.out, args.force)
     stem = path.stem
     if args.strip:
@@ -238,23 +245,9 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from salad_core.motion import check_features, features_to_joints
-    from salad_core.skeleton import get_skeleton
     from salad_viz import export_bvh, export_glb, export_npy
 
-    sk = get_skeleton(args.skeleton)
-    path = Path(args.motion)
-    if not path.is_file():
-        raise UserError(f"motion file not found: {path}")
-    arr = np.load(path, allow_pickle=False)
-    if arr.ndim == 2:
-        check_features(arr, sk, name=str(path))
-        arr = features_to_joints(arr, sk)
-    elif not (arr.ndim == 3 and arr.shape[1:] == (sk.num_joints, 3)) or not np.isfinite(arr).all():
-        raise UserError(f"{path}: expected finite features (N, {sk.feature_dim}) or joints (N, {sk.num_joints}, 3), "
-                        f"got shape {arr.shape}")
+    sk, arr, path = _load_joints(args.motion, args.skeleton)
     out = _check_out_dir(args.out, args.force)
     (p,) = _outputs(out, [f"{path.stem}.{args.format}"], args.force)
     fn = {"bvh": export_bvh, "glb": export_glb, "npy": export_npy}[args.format]
@@ -366,7 +359,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("what", choices=["vae", "denoiser"])
 
     _sub(sub, "eval", "evaluate generators with the T2M protocol (R-precision, FID, MM-Dist, Diversity, "
-         "MultiModality), CFG sweeps", "salad eval --data data/procedural --quick --out eval_out")
+         "MultiModality), CFG sweeps", "salad eval --data data/procedural --quick --out eval_out",
+         add_help=False)  # --help goes to the evaluation's own parser
     return p
 
 
