@@ -98,9 +98,14 @@ def _attention_figure(out: Path, stem: str, result, force: bool) -> Path | None:
     from salad_viz import plot_attention_grid
 
     (path,) = _outputs(out, [f"{stem}_attention.png"], force)
+    import numpy as np
+
     maps = result.attention
-    words = [w for w in dict.fromkeys(maps.words(0)) if w not in _FUNCTION_WORDS] or None
-    fig = plot_attention_grid(maps.cross_map(0), maps.tokens(0), word_ids=words, prompt=result.texts[0])
+    words = maps.words(0)
+    keep = [i for i, w in enumerate(words) if w not in _FUNCTION_WORDS] or list(range(len(words)))
+    # one panel per content word (by position, so repeated words are fine): (P, N', K) word maps
+    stacked = np.stack([maps.word_map(0, i) for i in keep], axis=-1)
+    fig = plot_attention_grid(stacked, [words[i] for i in keep], prompt=result.texts[0])
     from salad_core.io import atomic_path
 
     with atomic_path(path) as tmp:
