@@ -399,3 +399,12 @@ def test_every_caption_word_is_in_the_lexicon(tiny, figures):
         for line in (tiny / "texts" / f"{mid}.txt").read_text().splitlines():
             for w in split_words(parse_text_line(line).caption):
                 assert w in LEXICON, w
+
+
+def test_parsed_phrase_parts_follow_the_annotation_definition():
+    from salad_core.data.procedural import parse_prompt
+
+    phrases = parse_prompt("a man is walking while raising his left hand up high")
+    assert [ph.parts for ph in phrases] == [("root", "left leg", "right leg"), ("left arm",)]
+    (mirror,) = [ph for ph in parse_prompt("a man raises his right hand") if ph.kind == "raise"]
+    assert mirror.parts == ("right arm",)

@@ -547,6 +547,22 @@ class ParsedPhrase:
     reps: int | None                # None when the phrase does not say how many times
     variant: str
 
+    @property
+    def parts(self) -> tuple[str, ...]:
+        """Body parts the phrase drives, as the corpus annotations define them.
+
+        A phrase that names no side (e.g. "waves") takes the primitive's first allowed side.
+        """
+        from .primitives import PRIMITIVES, Action, primitive_parts
+
+        spec = PRIMITIVES[self.kind]
+        side = self.side if self.side in spec.sides else spec.sides[0]
+        try:
+            action = Action(self.kind, side, tuple(sorted(self.mods)), self.reps or 1, self.variant)
+        except ValueError:  # a modifier or variant this primitive does not take: parts do not depend on it
+            action = Action(self.kind, side)
+        return primitive_parts(action)[0]
+
 
 _GLUE = ("a man", "the man", "a woman", "the woman", "a person", "the person", "someone", "he", "she",
          "is", "while", "as", "then", "and then", "and", "before", "after", "after that", "first",
