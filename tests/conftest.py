@@ -31,3 +31,34 @@ def sample_features() -> np.ndarray:
 def sample_joints() -> np.ndarray:
     """Real HumanML3D joints of motion 012314 (recovered from the features), ``(N-1, 22, 3)``."""
     return np.load(SAMPLE_DIR / "new_joints" / "012314.npy")
+
+
+@pytest.fixture(scope="module")
+def single_thread():
+    """Run a module's tests with one torch thread (tiny models are dominated by thread hand-off,
+    and one thread is immune to other processes loading the 2 cores); restores the setting."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="session")
+def make_tiny_pipeline(sample_dir):
+    """Factory of tiny randomly initialised pipelines: the real VAE, a 3-layer width-32 denoiser,
+    the real MiniLM and the sample's Mean/Std (fast; the motions are noise, the plumbing is real)."""
+    def make(seed: int = 0):
+        import torch
+
+        from salad_core.models import Denoiser, DenoiserConfig, MotionVAE, VAEConfig
+        from salad_core.pipeline import SaladPipeline
+        from salad_core.text import load_text_encoder
+
+        torch.manual_seed(seed)
+        vae = MotionVAE(VAEConfig())
+        den = Denoiser(DenoiserConfig(width=32, heads=2, ff_dim=64, layers=3, text_dim=384))
+        return SaladPipeline(vae, den, load_text_encoder("minilm"), np.load(sample_dir / "Mean.npy"),
+                             np.load(sample_dir / "Std.npy"))
+    return make

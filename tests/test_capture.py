@@ -8,33 +8,21 @@ import torch
 from salad_core.attention import AttentionMaps, CaptureConfig, capture_cross_attention
 from salad_core.models.attention import EagerProcessor, SDPAProcessor, cross_probs_by_part, use_processors
 from salad_core.models.denoiser import Denoiser, DenoiserConfig
-from salad_core.models.vae import MotionVAE, VAEConfig
 from salad_core.pipeline import SaladPipeline
 from salad_core.sampling import denoise, make_scheduler
 from salad_core.skeleton import NUM_PARTS
-from salad_core.text import load_text_encoder
 
 PROMPTS = ["a man does a cartwheel and walks", "a person jumps high"]
 LENGTHS = [40, 28]
 STEPS = 10
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 @pytest.fixture(scope="module")
-def pipe(sample_dir) -> SaladPipeline:
-    """Tiny random pipeline: the real VAE, a 3-layer width-32 denoiser, the real MiniLM."""
-    torch.manual_seed(0)
-    vae = MotionVAE(VAEConfig())
-    den = Denoiser(DenoiserConfig(width=32, heads=2, ff_dim=64, layers=3, text_dim=384))
-    return SaladPipeline(vae, den, load_text_encoder("minilm"), np.load(sample_dir / "Mean.npy"),
-                         np.load(sample_dir / "Std.npy"))
+def pipe(make_tiny_pipeline) -> SaladPipeline:
+    return make_tiny_pipeline(seed=0)
 
 
 @pytest.fixture(scope="module")

@@ -3,24 +3,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from salad_core import cli
 
 
 @pytest.fixture(scope="module")
-def tiny_weights(tmp_path_factory, sample_dir):
+def tiny_weights(tmp_path_factory, make_tiny_pipeline):
     """A tiny randomly initialised pipeline folder (fast; the motions are noise, the plumbing is real)."""
-    from salad_core.models import Denoiser, DenoiserConfig, MotionVAE, VAEConfig
-    from salad_core.pipeline import SaladPipeline
-    from salad_core.text import load_text_encoder
-
-    torch.manual_seed(0)
-    vae = MotionVAE(VAEConfig())
-    den = Denoiser(DenoiserConfig(width=32, heads=2, ff_dim=64, layers=3, text_dim=384))
-    pipe = SaladPipeline(vae, den, load_text_encoder("minilm"), np.load(sample_dir / "Mean.npy"),
-                         np.load(sample_dir / "Std.npy"))
-    return pipe.save_pretrained(tmp_path_factory.mktemp("weights"))
+    return make_tiny_pipeline(seed=0).save_pretrained(tmp_path_factory.mktemp("weights"))
 
 
 @pytest.mark.parametrize("command", ["demo", "generate", "render", "export", "corpus", "train"])

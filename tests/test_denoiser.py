@@ -22,13 +22,7 @@ from salad_core.skeleton import NUM_PARTS
 TINY = DenoiserConfig(latent_dim=4, width=32, heads=4, ff_dim=48, layers=5, text_dim=12, max_len=256)
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    # tiny models are dominated by thread hand-off on a shared 2-core machine
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 def _inputs(cfg: DenoiserConfig, b: int = 3, n: int = 6, w: int = 5, seed: int = 0):

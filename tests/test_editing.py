@@ -11,33 +11,20 @@ from salad_core.attention import (CaptureConfig, EditController, InjectSelfAtten
                                   TokenInfo, WordSwap, global_align, map_columns, mirror_parts, mirror_permutation,
                                   refine_columns, reweight_columns, validate_edits, word_swap_matrix)
 from salad_core.models.attention import EagerProcessor, SDPAProcessor, use_processors
-from salad_core.models.denoiser import Denoiser, DenoiserConfig
-from salad_core.models.vae import MotionVAE, VAEConfig
 from salad_core.pipeline import SaladPipeline, default_weights_dir
 from salad_core.sampling import StepInfo, make_scheduler
 from salad_core.skeleton import PART_NAMES
-from salad_core.text import load_text_encoder
 
 STEPS = 8
 SRC = "a man walks forward"
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 @pytest.fixture(scope="module")
-def pipe(sample_dir) -> SaladPipeline:
-    """Tiny random pipeline: the real VAE, a 3-layer width-32 denoiser, the real MiniLM."""
-    torch.manual_seed(1)
-    vae = MotionVAE(VAEConfig())
-    den = Denoiser(DenoiserConfig(width=32, heads=2, ff_dim=64, layers=3, text_dim=384))
-    return SaladPipeline(vae, den, load_text_encoder("minilm"), np.load(sample_dir / "Mean.npy"),
-                         np.load(sample_dir / "Std.npy"))
+def pipe(make_tiny_pipeline) -> SaladPipeline:
+    return make_tiny_pipeline(seed=1)
 
 
 # ------------------------------------------------------------------------------ specs

@@ -4,20 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 
 @pytest.fixture(scope="module")
-def tiny_pipe(sample_dir):
-    from salad_core.models import Denoiser, DenoiserConfig, MotionVAE, VAEConfig
-    from salad_core.pipeline import SaladPipeline
-    from salad_core.text import load_text_encoder
-
-    torch.manual_seed(0)
-    vae = MotionVAE(VAEConfig())
-    den = Denoiser(DenoiserConfig(width=32, heads=2, ff_dim=64, layers=3, text_dim=384))
-    return SaladPipeline(vae, den, load_text_encoder("minilm"), np.load(sample_dir / "Mean.npy"),
-                         np.load(sample_dir / "Std.npy"))
+def tiny_pipe(make_tiny_pipeline):
+    return make_tiny_pipeline(seed=0)
 
 
 def test_everything_runs_without_network(tiny_pipe, tmp_path):

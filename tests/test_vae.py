@@ -21,13 +21,7 @@ from salad_core.models.vae import MotionVAE, VAEConfig, VAEEncoding
 from salad_core.skeleton import PART_NAMES, get_skeleton
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    # tiny tensors: one thread is faster and immune to other processes loading the 2 cores
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 def _vae(seed: int = 0, **kw) -> MotionVAE:
