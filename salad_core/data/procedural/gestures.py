@@ -181,13 +181,13 @@ def punch(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str
     return g
 
 
-def stretch_forward(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str = "both", *,
-                    mods: tuple[str, ...] = (), duration: float | None = None) -> Gesture:
-    """Stretch the arms straight forward at shoulder height and hold."""
+def _hold_arm_pose(persona: Persona, rng: np.random.Generator, side: str, mods: tuple[str, ...],
+                   duration: float | None, pose_ranges: tuple[tuple[float, float], ...], swivel) -> Gesture:
+    """Raise the arms of ``side`` to a pose drawn from ``pose_ranges`` (3 joint-angle ranges), hold, lower."""
     u = rng.uniform
     pace = _pace(mods)
     arms = SIDES[side]
-    pose = np.array([u(1.48, 1.6), u(0.02, 0.1), u(0.02, 0.12)])
+    pose = np.array([u(lo, hi) for lo, hi in pose_ranges])
     rise, lower = u(0.45, 0.65) * pace, u(0.45, 0.65) * pace
     hold = _hold_time(duration, rise + lower, u(0.8, 1.8) * pace)
     total = rise + hold + lower
@@ -196,8 +196,15 @@ def stretch_forward(persona: Persona, body: BodyModel, rng: np.random.Generator,
     g = _empty(n, persona)
     rest = np.asarray(persona.arm_rest, dtype=np.float64)
     angles = keyframes(t, [0.0, rise, rise + hold, total], np.stack([rest, pose, pose, rest]))
-    _set_arms(g, arms, angles, np.array([0.5, -1.0, 0.0]), t)
+    _set_arms(g, arms, angles, np.asarray(swivel, dtype=np.float64), t)
     return g
+
+
+def stretch_forward(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str = "both", *,
+                    mods: tuple[str, ...] = (), duration: float | None = None) -> Gesture:
+    """Stretch the arms straight forward at shoulder height and hold."""
+    return _hold_arm_pose(persona, rng, side, mods, duration, ((1.48, 1.6), (0.02, 0.1), (0.02, 0.12)),
+                          (0.5, -1.0, 0.0))
 
 
 def clap(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str = "both", *,
@@ -236,20 +243,8 @@ def clap(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str 
 def arms_out(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str = "both", *,
              mods: tuple[str, ...] = (), duration: float | None = None) -> Gesture:
     """Hold the arms straight out to the sides at shoulder height."""
-    u = rng.uniform
-    pace = _pace(mods)
-    arms = SIDES[side]
-    pose = np.array([u(0.0, 0.15), u(1.45, 1.62), u(0.02, 0.1)])
-    rise, lower = u(0.45, 0.65) * pace, u(0.45, 0.65) * pace
-    hold = _hold_time(duration, rise + lower, u(0.8, 1.8) * pace)
-    total = rise + hold + lower
-    n = num_frames(total)
-    t = frame_times(n, FPS)
-    g = _empty(n, persona)
-    rest = np.asarray(persona.arm_rest, dtype=np.float64)
-    angles = keyframes(t, [0.0, rise, rise + hold, total], np.stack([rest, pose, pose, rest]))
-    _set_arms(g, arms, angles, np.array([0.0, -1.0, -0.4]), t)
-    return g
+    return _hold_arm_pose(persona, rng, side, mods, duration, ((0.0, 0.15), (1.45, 1.62), (0.02, 0.1)),
+                          (0.0, -1.0, -0.4))
 
 
 # ----------------------------------------------------------------------------- head
