@@ -9,7 +9,7 @@ WORK=${1:-runs/default}
 PY=${PYTHON:-.venv/bin/python}
 RESUME=${RESUME:+--resume}
 VAE_STEPS=${VAE_STEPS:-1126}   # the shipped VAE: 1,126 steps, checkpoint `best` (step 1,000)
-DEN_STEPS=${DEN_STEPS:-6000}   # planned; the shipped v0.1 denoiser stopped at 1,009 (best: step 1,000)
+DEN_STEPS=${DEN_STEPS:-3600}   # the shipped denoiser: 3,600 steps (rate step-decayed at 3,000)
 mkdir -p "$WORK"
 # 1. the corpus (deterministic: the same seed gives byte-identical files)
 [ -f "$WORK/corpus/corpus.json" ] || "$PY" -m salad_core.cli corpus build --out "$WORK/corpus" --size default --seed 0
