@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
 import sys
 from pathlib import Path
@@ -56,7 +57,7 @@ def _outputs(out_dir: Path, names: list[str], force: bool) -> list[Path]:
 def _load_pipeline(weights: str | None):
     from salad_core.pipeline import SaladPipeline
 
-    return SaladPipeline.from_pretrained(weights)
+    return SaladPipeline.from_pretrained(weights)   # a missing or corrupt folder raises CheckpointError
 
 
 def _slug(text: str, n: int = 40) -> str:
@@ -118,6 +119,7 @@ DEMO_PROMPT = "a man jumps forward and then walks forward, while waving his arms
 
 
 def cmd_generate(args: argparse.Namespace) -> int:
+    _check_finite("--guidance", args.guidance)
     out = _check_out_dir(args.out, args.force)
     pipe = _load_pipeline(args.weights)
     prompts = args.prompt
@@ -144,14 +146,49 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return cmd_generate(args)
 
 
-def _edit_specs(args: argparse.Namespace) -> list:
+def _edit_args(p: argparse.ArgumentParser) -> None:
+    """The edit flags shared by ``salad edit`` and ``salad invert`` (parsed by :func:`_edit_specs`)."""
+    p.add_argument("--target", default=None, help="target prompt (word swap, refinement); default: the source")
+    p.add_argument("--swap", type=float, default=None, metavar="TAU",
+                   help="word swap: source maps while t >= TAU*T, TAU in [0, 1) (paper: 0.8)")
+    p.add_argument("--refine", action="store_true", help="prompt refinement (aligned words keep the source maps)")
+    p.add_argument("--reweight", action="append", metavar="WORD=SCALE", help="scale a word's attention, s in [-3, 3]")
+    p.add_argument("--mirror", choices=["legs", "arms", "all"], help="swap left/right body-part rows")
+    p.add_argument("--window", default=None, metavar="START:STOP",
+                   help="step window of --refine/--reweight/--mirror as fractions of the sampling steps, "
+                        "0 <= START < STOP <= 1 (0 = the noisiest step; default 0:1)")
+
+
+def _parse_window(text: str) -> tuple[float, float]:
+    parts = text.replace(",", ":").split(":")
+    if len(parts) != 2:
+        raise UserError(f"--window takes START:STOP step fractions (e.g. 0:0.5), got {text!r}")
+    try:
+        return float(parts[0]), float(parts[1])
+    except ValueError:
+        raise UserError(f"--window {text!r}: START and STOP must be numbers in [0, 1] (e.g. 0:0.5)") from None
+
+
+def _spec(flag: str, build: Callable):
+    """Build one edit spec; its validation error becomes one line naming the flag."""
+    try:
+        return build()
+    except (TypeError, ValueError) as exc:
+        raise UserError(f"{flag}: {exc}") from None
+
+
+def _edit_specs(args: argparse.Namespace, required: bool = True) -> list:
+    """Edit specifications from the flags of :func:`_edit_args`, in the order the pipeline needs
+    (the replacement first, then the modifiers); ``[]`` if none was given and not ``required``."""
     from salad_core.attention import Mirror, Refine, Reweight, WordSwap
 
+    window = {} if args.window is None else {"steps": _parse_window(args.window)}
+    in_window = "" if args.window is None else f" --window {args.window}"
     specs = []
     if args.swap is not None:
-        specs.append(WordSwap(tau=args.swap))
+        specs.append(_spec(f"--swap {args.swap:g}", lambda: WordSwap(tau=args.swap)))
     if args.refine:
-        specs.append(Refine())
+        specs.append(_spec(f"--refine{in_window}", lambda: Refine(**window)))
     for item in args.reweight or []:
         word, sep, scale = item.rpartition("=")
         if not sep or not word:
@@ -160,29 +197,33 @@ def _edit_specs(args: argparse.Namespace) -> list:
             value = float(scale)
         except ValueError:
             raise UserError(f"--reweight {item!r}: the scale {scale!r} is not a number") from None
-        specs.append(Reweight(words=word, scale=value))
+        specs.append(_spec(f"--reweight {item}{in_window}", lambda: Reweight(words=word, scale=value, **window)))
     if args.mirror:
-        specs.append(Mirror(parts=args.mirror))
-    if not specs:
+        specs.append(_spec(f"--mirror {args.mirror}{in_window}", lambda: Mirror(parts=args.mirror, **window)))
+    if args.window is not None and not (args.refine or args.reweight or args.mirror):
+        raise UserError("--window applies to --refine, --reweight and --mirror; give one of them "
+                        "(word swap is timed by TAU alone)")
+    if not specs and required:
         raise UserError("give at least one edit: --swap TAU, --refine, --reweight WORD=SCALE or --mirror PARTS")
     return specs
 
 
+def _check_finite(flag: str, value: float) -> float:
+    """NaN and infinite scales are refused here, before any weights are loaded."""
+    if not math.isfinite(value):
+        raise UserError(f"{flag} must be a finite number, got {value}")
+    return value
+
+
 def cmd_edit(args: argparse.Namespace) -> int:
     """Edit a generated motion (same noise) or, with --motion, a given motion through inversion."""
-    import numpy as np
-
     out = _check_out_dir(args.out, args.force)
     specs = _edit_specs(args)
+    _check_finite("--guidance", args.guidance)
     pipe = _load_pipeline(args.weights)
     if args.motion:
-        path = Path(args.motion)
-        if not path.is_file():
-            raise UserError(f"motion file not found: {path}")
-        feats = np.load(path, allow_pickle=False)
-        inv = pipe.invert(feats, args.source, guidance_scale=args.guidance, num_steps=args.steps,
-                          progress=not args.quiet)
-        print("inversion reconstruction error:", {k: round(float(v), 4) for k, v in inv.errors.items()})
+        _, features, _ = _load_features(args.motion, pipe.skeleton.name)
+        inv = _invert(pipe, features, args.source, args, method="fixed_point")
         result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet)
     else:
         result = pipe.edit(args.source, args.target, edits=specs, lengths=args.length, seed=args.seed,
@@ -204,27 +245,127 @@ def cmd_edit(args: argparse.Namespace) -> int:
     return 0
 
 
-def _load_joints(motion: str, skeleton: str):
-    """``(skeleton, joints (N, J, 3), path)`` from a features ``(N, D)`` or joints ``(N, J, 3)`` .npy."""
+# ----------------------------------------------------------------------------- motion files
+def _load_motion_array(motion: str, skeleton: str):
+    """``(skeleton, array, path)``: a validated features ``(N, D)`` or joints ``(N, J, 3)`` .npy."""
     import numpy as np
 
-    from salad_core.motion import check_features, features_to_joints
+    from salad_core.motion import check_features
     from salad_core.skeleton import get_skeleton
 
-    sk = get_skeleton(skeleton)
+    try:
+        sk = get_skeleton(skeleton)
+    except (KeyError, ValueError) as exc:
+        raise UserError(f"--skeleton: {exc.args[0] if exc.args else exc}") from None
     path = Path(motion)
     if not path.is_file():
         raise UserError(f"motion file not found: {path}")
-    arr = np.load(path, allow_pickle=False)
+    try:
+        arr = np.load(path, allow_pickle=False)   # never unpickle: a .npy must not run code
+    except (ValueError, OSError, EOFError) as exc:
+        raise UserError(f"cannot read {path} as a .npy array (truncated, corrupt or pickled?): {exc}") from None
+    if not isinstance(arr, np.ndarray) or not np.issubdtype(arr.dtype, np.number):
+        raise UserError(f"{path} does not hold a numeric array (got {getattr(arr, 'dtype', type(arr).__name__)})")
     if arr.ndim == 2:
-        check_features(arr, sk, name=str(path))
-        return sk, features_to_joints(arr, sk), path
+        try:
+            check_features(arr, sk, name=str(path))
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
+        return sk, arr.astype(np.float32, copy=False), path
     if arr.ndim == 3 and arr.shape[1:] == (sk.num_joints, 3):
         if not np.isfinite(arr).all():
             raise UserError(f"{path} contains NaN or infinite values")
-        return sk, arr, path
+        return sk, arr.astype(np.float32, copy=False), path
     raise UserError(f"{path} has shape {arr.shape}; expected features (N, {sk.feature_dim}) or "
                     f"joints (N, {sk.num_joints}, 3)")
+
+
+def _load_joints(motion: str, skeleton: str):
+    """``(skeleton, joints (N, J, 3), path)`` from a features ``(N, D)`` or joints ``(N, J, 3)`` .npy."""
+    from salad_core.motion import features_to_joints
+
+    sk, arr, path = _load_motion_array(motion, skeleton)
+    return sk, (features_to_joints(arr, sk) if arr.ndim == 2 else arr), path
+
+
+def _load_features(motion: str, skeleton: str):
+    """``(skeleton, features (N, D), path)``: the models need features; joints files are refused."""
+    sk, arr, path = _load_motion_array(motion, skeleton)
+    if arr.ndim != 2:
+        raise UserError(f"{path} holds joints {arr.shape}; inversion needs HumanML3D features (N, {sk.feature_dim}) "
+                        "(the *_features.npy that salad generate writes)")
+    unit, max_len = sk.unit_length, sk.max_length
+    if not unit <= len(arr) - len(arr) % unit <= max_len:
+        raise UserError(f"{path} has {len(arr)} frames; allowed: {unit}..{max_len} (at {sk.fps:g} fps; longer "
+                        f"motions must be cropped first)")
+    return sk, arr, path
+
+
+# ----------------------------------------------------------------------------- invert
+def _invert(pipe, features, prompt: str, args: argparse.Namespace, method: str, iterations=None, exact=False):
+    """Invert one motion under its prompt and print the reconstruction error in cm."""
+    inv = pipe.invert(features, prompt, method=method, guidance_scale=args.guidance, num_steps=args.steps,
+                      iterations=iterations, exact=exact, progress=not args.quiet)
+    cm = _errors_cm(inv.errors, pipe.skeleton)
+    print(f"inversion ({method}, {inv.num_steps} steps, w={inv.guidance_scale:g}): reconstruction MPJPE "
+          f"{cm['mpjpe_cm']:.2f} cm root-aligned, {cm['mpjpe_global_cm']:.2f} cm global "
+          f"(VAE floor {cm['vae_mpjpe_cm']:.2f} cm)")
+    return inv
+
+
+def _errors_cm(errors: dict, skeleton) -> dict[str, float]:
+    """The inversion's joint errors (skeleton length units) in centimetres; other figures as they are."""
+    to_cm = 100.0 * skeleton.feature_scale    # feature_scale: the skeleton's length unit in metres
+    return {(f"{k}_cm" if "mpjpe" in k else k): float(v) * (to_cm if "mpjpe" in k else 1.0)
+            for k, v in errors.items()}
+
+
+def cmd_invert(args: argparse.Namespace) -> int:
+    """Invert a given motion under its prompt; write the reconstruction, its error and any edit."""
+    import json
+
+    from salad_core.attention import INVERSION_METHODS
+    from salad_core.io import atomic_write_text
+
+    specs = _edit_specs(args, required=False)
+    _check_finite("--guidance", args.guidance)
+    if args.method not in INVERSION_METHODS:
+        raise UserError(f"--method {args.method!r}; allowed: {', '.join(INVERSION_METHODS)}")
+    if not (args.prompt or "").strip():
+        raise UserError("--prompt is empty; describe what the motion shows, e.g. 'a person walks forward'")
+    sk, features, path = _load_features(args.motion, args.skeleton)
+    out = _check_out_dir(args.out, args.force)
+    stem = path.stem
+    branches = ["reconstruction"] + (["edited"] if specs else [])
+    # refuse before any work: every file this run would write
+    _outputs(out, [f"{stem}_{b}{ext}" for b in branches for ext in ("_features.npy", "_joints.npy", ".bvh")]
+             + [f"{stem}_inversion.json"], args.force)
+    pipe = _load_pipeline(args.weights)
+    if pipe.skeleton.name != sk.name:
+        raise UserError(f"the weights are for skeleton {pipe.skeleton.name!r}, the motion was read as {sk.name!r}; "
+                        f"pass --skeleton {pipe.skeleton.name}")
+    inv = _invert(pipe, features, args.prompt, args, method=args.method, iterations=args.iterations,
+                  exact=args.exact)
+    rec = inv.reconstruction
+    n = rec.lengths[0]
+    files = _write_motion_files(out, f"{stem}_reconstruction", rec.features[0, :n], rec.joints[0], pipe.skeleton,
+                                force=args.force, gif=False, bvh=True)
+    target = None
+    if specs:
+        result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet)
+        dst = result.edited
+        target = dst.texts[0]
+        files += _write_motion_files(out, f"{stem}_edited", dst.features[0, :n], dst.joints[0], pipe.skeleton,
+                                     force=args.force, gif=False, bvh=True)
+    report = {"motion": str(path), "prompt": inv.prompts[0], "frames": n, "input_frames": int(len(features)),
+              "method": inv.method, "num_steps": inv.num_steps, "guidance_scale": inv.guidance_scale,
+              "iterations": inv.iterations, "exact": inv.exact, "seconds": round(float(inv.seconds), 3),
+              "errors": _errors_cm(inv.errors, pipe.skeleton), "weights": pipe.source,
+              "edit": None if not specs else {"target": target, "edits": [repr(e) for e in specs]}}
+    (json_path,) = _outputs(out, [f"{stem}_inversion.json"], args.force)
+    files.append(atomic_write_text(json_path, json.dumps(report, indent=2) + "\n"))
+    print(", ".join(str(f) for f in files))
+    return 0
 
 
 def cmd_render(args: argparse.Namespace) -> int:
@@ -289,6 +430,12 @@ def cmd_train(args: argparse.Namespace, rest: list[str]) -> int:
     return int(train_main([args.what, *rest]) or 0)
 
 
+def cmd_bench(args: argparse.Namespace, rest: list[str]) -> int:
+    from salad_core.bench import main as bench_main
+
+    return int(bench_main(rest) or 0)
+
+
 def _generation_args(p: argparse.ArgumentParser, length: int) -> None:
     p.add_argument("--length", type=int, default=length, help=f"frames at 20 fps, multiple of 4, <= 196 (default {length})")
     p.add_argument("--seed", type=int, default=0)
@@ -323,15 +470,30 @@ def build_parser() -> argparse.ArgumentParser:
               "re-weighting, mirroring); with --motion, edit a given motion through inversion",
               'salad edit "a man raises his right hand high" --reweight high=-1 --out edit_out')
     ed.add_argument("source", help="source prompt (for --motion: what the given motion shows)")
-    ed.add_argument("--target", default=None, help="target prompt (word swap, refinement); default: the source")
-    ed.add_argument("--swap", type=float, default=None, metavar="TAU",
-                    help="word swap: source maps while t >= TAU*T (paper: 0.8)")
-    ed.add_argument("--refine", action="store_true", help="prompt refinement (aligned words keep the source maps)")
-    ed.add_argument("--reweight", action="append", metavar="WORD=SCALE", help="scale a word's attention, s in [-3, 3]")
-    ed.add_argument("--mirror", choices=["legs", "arms", "all"], help="swap left/right body-part rows")
-    ed.add_argument("--motion", default=None, help="a features .npy (N, 263) to edit instead of a generated one")
+    _edit_args(ed)
+    ed.add_argument("--motion", default=None, help="a features .npy (N, 263) to edit instead of a generated one "
+                    "(inverted first; see also salad invert)")
     ed.add_argument("--out", required=True)
     _generation_args(ed, length=100)
+
+    iv = _sub(sub, "invert", "invert a given motion to noise under its prompt: write its reconstruction and the "
+              "reconstruction error (MPJPE, cm); with edit flags, also the edited motion",
+              'salad invert walk_features.npy --prompt "a person walks forward" --mirror arms --out inv_out')
+    iv.add_argument("motion", help="HumanML3D features .npy (N, 263), 4 <= N <= 196 (cropped to a multiple of 4)")
+    iv.add_argument("--prompt", required=True, help="what the motion shows (the source prompt)")
+    iv.add_argument("--out", required=True, help="output folder")
+    _edit_args(iv)
+    iv.add_argument("--method", default="fixed_point",
+                    help="inversion method: ddim, fixed_point (default: DDIM inversion made faithful under "
+                         "guidance) or null_text")
+    iv.add_argument("--iterations", type=int, default=None, help="fixed-point updates / null-text steps per step")
+    iv.add_argument("--exact", action="store_true", help="per-step corrections: the reconstruction is exact")
+    iv.add_argument("--guidance", type=float, default=7.5,
+                    help="guidance scale the inversion is made for (default 7.5)")
+    iv.add_argument("--steps", type=int, default=50, help="DDIM steps (default 50)")
+    iv.add_argument("--weights", default=None, help="pipeline folder (default: the shipped weights)")
+    iv.add_argument("--skeleton", default="humanml3d")
+    iv.add_argument("--force", action="store_true", help="overwrite existing files")
 
     r = _sub(sub, "render", "animate a motion file (features .npy or joints .npy) as GIF or MP4",
              "salad render gen_out/00_a_person_jumps_joints.npy --out renders --format mp4")
@@ -366,11 +528,16 @@ def build_parser() -> argparse.ArgumentParser:
     _sub(sub, "eval", "evaluate generators with the T2M protocol (R-precision, FID, MM-Dist, Diversity, "
          "MultiModality), CFG sweeps", "salad eval --data data/procedural --quick --out eval_out",
          add_help=False)  # --help goes to the evaluation's own parser
+    _sub(sub, "bench", "measure speed, roofline fraction, edit overheads, training rate and memory on this "
+         "machine; one table", "salad bench --quick --threads 1 --out bench.md",
+         add_help=False)  # --help goes to salad_core.bench's own parser
     return p
 
 
 COMMANDS: dict[str, Callable] = {"corpus": cmd_corpus, "demo": cmd_demo, "generate": cmd_generate,
-                                 "render": cmd_render, "export": cmd_export, "edit": cmd_edit}
+                                 "render": cmd_render, "export": cmd_export, "edit": cmd_edit, "invert": cmd_invert}
+#: Commands whose remaining arguments go to another module's parser.
+PASS_THROUGH: dict[str, Callable] = {"train": cmd_train, "eval": cmd_eval, "bench": cmd_bench}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -382,13 +549,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
-    if rest and args.command not in ("train", "eval"):
+    if rest and args.command not in PASS_THROUGH:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
     try:
-        if args.command == "train":
-            return cmd_train(args, rest)
-        if args.command == "eval":
-            return cmd_eval(args, rest)
+        if args.command in PASS_THROUGH:
+            return PASS_THROUGH[args.command](args, rest)
         return COMMANDS[args.command](args)
     except KeyboardInterrupt:
         print("salad: interrupted", file=sys.stderr)

@@ -219,7 +219,13 @@ class SaladPipeline:
             hint = (" (the shipped weights are missing from this installation: reinstall salad, or train "
                     "them with scripts/train_default.sh)") if path is None else ""
             raise CheckpointError(f"no pipeline.json in {root}{hint}")
-        cfg = json.loads(cfg_path.read_text())
+        try:
+            cfg = json.loads(cfg_path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as err:
+            raise CheckpointError(f"{cfg_path} is not valid JSON ({err}); restore the file or re-run "
+                                  "scripts/assemble_weights.py") from err
+        if not isinstance(cfg, dict):
+            raise CheckpointError(f"{cfg_path} must hold a JSON object, found {type(cfg).__name__}")
         vae, _, _ = load_model(root / cfg.get("vae", "vae"))
         denoiser, _, _ = load_model(root / cfg.get("denoiser", "denoiser"))
         stats = load_tensors(root / cfg.get("stats", "stats.safetensors"))

@@ -1,6 +1,8 @@
 """The ``salad`` command line: help with examples, outputs, refusal to overwrite, one-line errors."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -13,7 +15,8 @@ def tiny_weights(tmp_path_factory, make_tiny_pipeline):
     return make_tiny_pipeline(seed=0).save_pretrained(tmp_path_factory.mktemp("weights"))
 
 
-@pytest.mark.parametrize("command", ["demo", "generate", "render", "export", "corpus", "train"])
+@pytest.mark.parametrize("command", ["demo", "generate", "edit", "invert", "render", "export", "corpus", "train",
+                                     "bench"])
 def test_every_command_help_shows_an_example(command, capsys):
     with pytest.raises(SystemExit) as exc:
         cli.main([command, "--help"])
@@ -83,7 +86,10 @@ def test_export_and_render_from_features(sample_dir, tmp_path, capsys):
     assert cli.main(["-q", "export", str(src), "--format", "bvh", "--out", str(tmp_path)]) == 0
     text = (tmp_path / "012314.bvh").read_text()
     assert text.startswith("HIERARCHY") and "Frame Time: 0.05" in text
-    assert cli.main(["-q", "render", str(src), "--out", str(tmp_path), "--size", "96"]) == 0
+    short = tmp_path / "short" / "012314.npy"        # a 24-frame crop: rendering costs ~0.1 s a frame
+    short.parent.mkdir()
+    np.save(short, np.load(src)[:24])
+    assert cli.main(["-q", "render", str(short), "--out", str(tmp_path), "--size", "96"]) == 0
     assert (tmp_path / "012314.gif").stat().st_size > 1000
 
 
@@ -124,3 +130,181 @@ def test_edit_errors(tiny_weights, tmp_path, capsys, extra, message):
                      "--weights", str(tiny_weights), "--out", str(tmp_path / "e")])
     err = capsys.readouterr().err
     assert code == 2 and message in err and "Traceback" not in err
+
+
+def _one_line_error(capsys) -> str:
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    return err
+
+
+# ----------------------------------------------------------------------------- edit: bad windows and scales
+@pytest.mark.parametrize("extra, message", [
+    (["--swap", "1.5"], "--swap 1.5: WordSwap.tau=1.5 must be in [0, 1)"),
+    (["--swap", "-0.2"], "--swap -0.2: WordSwap.tau=-0.2 must be in [0, 1)"),
+    (["--swap", "nan"], "--swap nan: WordSwap.tau=nan must be in [0, 1)"),
+    (["--refine", "--window", "0.5:1.5"],
+     "--refine --window 0.5:1.5: Refine.steps=(0.5, 1.5) must satisfy 0 <= start < stop <= 1"),
+    (["--mirror", "all", "--window=-0.1:0.5"], "Mirror.steps=(-0.1, 0.5) must satisfy 0 <= start < stop <= 1"),
+    (["--reweight", "high=2", "--window", "0.8:0.2"], "Reweight.steps=(0.8, 0.2) must satisfy 0 <= start < stop"),
+    (["--mirror", "all", "--window", "0:inf"], "must satisfy 0 <= start < stop <= 1"),
+    (["--mirror", "all", "--window", "half"], "--window takes START:STOP"),
+    (["--swap", "0.8", "--window", "0:0.5"], "--window applies to --refine, --reweight and --mirror"),
+    (["--reweight", "high=nan"], "--reweight high=nan: Reweight.scale must be a finite number, got nan"),
+    (["--reweight", "high=inf"], "--reweight high=inf: Reweight.scale must be a finite number, got inf"),
+    (["--reweight", "high=-inf"], "Reweight.scale must be a finite number"),
+    (["--mirror", "all", "--guidance", "nan"], "--guidance must be a finite number, got nan"),
+    (["--mirror", "all", "--guidance", "inf"], "--guidance must be a finite number, got inf"),
+])
+def test_edit_rejects_windows_outside_unit_interval_and_non_finite_scales(tmp_path, capsys, extra, message):
+    # refused before any weights are read: the weights folder does not even exist
+    code = cli.main(["-q", "edit", "a man raises his right hand high", *extra, "--steps", "2",
+                     "--weights", str(tmp_path / "nowhere"), "--out", str(tmp_path / "e")])
+    assert code == 2
+    err = _one_line_error(capsys)
+    assert err.startswith("salad edit: error: ") and message in err
+
+
+def test_generate_rejects_non_finite_guidance(tmp_path, capsys):
+    code = cli.main(["-q", "generate", "a person walks", "--guidance=-inf", "--weights", str(tmp_path / "nowhere"),
+                     "--out", str(tmp_path / "g")])
+    assert code == 2 and "--guidance must be a finite number, got -inf" in _one_line_error(capsys)
+    assert not (tmp_path / "g").exists()
+
+
+def test_edit_flags_build_the_specs_with_their_window():
+    from salad_core.attention import Mirror, Refine, Reweight, WordSwap
+
+    parser = cli.build_parser()
+    args = parser.parse_args(["edit", "a man raises his hand", "--target", "a man slowly raises his hand high",
+                              "--refine", "--reweight", "high=-1.5", "--mirror", "arms", "--window", "0.2:0.6",
+                              "--out", "x"])
+    assert cli._edit_specs(args) == [Refine(steps=(0.2, 0.6)), Reweight("high", -1.5, steps=(0.2, 0.6)),
+                                     Mirror("arms", steps=(0.2, 0.6))]
+    args = parser.parse_args(["invert", "m.npy", "--prompt", "a man walks", "--swap", "0.7", "--out", "x"])
+    assert cli._edit_specs(args, required=False) == [WordSwap(tau=0.7)]
+    args = parser.parse_args(["invert", "m.npy", "--prompt", "a man walks", "--out", "x"])
+    assert cli._edit_specs(args, required=False) == []
+    with pytest.raises(cli.UserError, match="give at least one edit"):
+        cli._edit_specs(args)
+
+
+# ----------------------------------------------------------------------------- unknown skeleton
+def test_unknown_skeleton_is_one_line_error(sample_dir, tmp_path, capsys):
+    src = sample_dir / "new_joint_vecs" / "012314.npy"
+    assert cli.main(["-q", "export", str(src), "--skeleton", "smpl", "--out", str(tmp_path)]) == 2
+    err = _one_line_error(capsys)
+    assert "--skeleton" in err and "smpl" in err and "humanml3d" in err and "kit" in err
+    assert cli.main(["-q", "invert", str(src), "--prompt", "a person walks", "--skeleton", "smpl",
+                     "--out", str(tmp_path)]) == 2
+    assert "smpl" in _one_line_error(capsys)
+
+
+# ----------------------------------------------------------------------------- invert
+@pytest.fixture(scope="module")
+def inverted(tiny_weights, tmp_path_factory, sample_dir):
+    """One ``salad invert`` run with a mirror edit on the real sample motion (170 frames)."""
+    out = tmp_path_factory.mktemp("inv")
+    src = sample_dir / "new_joint_vecs" / "012314.npy"
+    args = ["-q", "invert", str(src), "--prompt", "a person walks forward", "--mirror", "arms", "--steps", "4",
+            "--weights", str(tiny_weights), "--out", str(out)]
+    assert cli.main(args) == 0
+    return out, src, args
+
+
+def test_invert_writes_reconstruction_edit_and_report(inverted):
+    out, src, _ = inverted
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted([f"012314_{b}{e}" for b in ("reconstruction", "edited")
+                            for e in ("_features.npy", "_joints.npy", ".bvh")] + ["012314_inversion.json"])
+    rec = np.load(out / "012314_reconstruction_features.npy")
+    edited = np.load(out / "012314_edited_features.npy")
+    assert rec.shape == edited.shape == (168, 263)            # 170 frames cropped to a multiple of 4
+    assert np.load(out / "012314_reconstruction_joints.npy").shape == (168, 22, 3)
+    assert not np.allclose(rec, edited)                       # the mirror changed the motion
+    assert (out / "012314_reconstruction.bvh").read_text().startswith("HIERARCHY")
+    report = json.loads((out / "012314_inversion.json").read_text())
+    assert report["method"] == "fixed_point" and report["num_steps"] == 4 and report["frames"] == 168
+    assert report["input_frames"] == 170 and report["edit"]["edits"] == ["Mirror(parts='arms', steps=(0.0, 1.0))"]
+
+
+def test_invert_reports_the_reconstruction_mpjpe_in_cm(inverted, sample_features):
+    from salad_core.eval.metrics import mpjpe
+    from salad_core.motion import features_to_joints
+
+    out, _, _ = inverted
+    errors = json.loads((out / "012314_inversion.json").read_text())["errors"]
+    gt = features_to_joints(sample_features[:168], "humanml3d")
+    rec = np.load(out / "012314_reconstruction_joints.npy")
+    assert errors["mpjpe_cm"] == pytest.approx(100 * mpjpe(rec, gt), rel=1e-4)
+    assert errors["mpjpe_global_cm"] == pytest.approx(100 * mpjpe(rec, gt, root_aligned=False), rel=1e-4)
+    assert errors["mpjpe_cm"] > 0 and errors["vae_mpjpe_cm"] > 0
+
+
+def test_invert_prints_mpjpe_and_refuses_to_overwrite(inverted, capsys):
+    out, _, args = inverted
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    capsys.readouterr()
+    assert cli.main(args) == 2                                  # refused before any work
+    err = _one_line_error(capsys)
+    assert "--force" in err and "012314_reconstruction_features.npy" in err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    no_edit = [a for a in args if a not in ("--mirror", "arms")]
+    assert cli.main([*no_edit, "--force", "--steps", "2"]) == 0
+    printed = capsys.readouterr().out
+    report = json.loads((out / "012314_inversion.json").read_text())
+    assert report["num_steps"] == 2 and report["edit"] is None
+    assert f"reconstruction MPJPE {report['errors']['mpjpe_cm']:.2f} cm" in printed
+    assert (out / "012314_reconstruction_features.npy").read_bytes() != before["012314_reconstruction_features.npy"]
+
+
+def _bad_files(tmp_path, sample_features):
+    wide = np.zeros((40, 100), np.float32)
+    nan = np.array(sample_features[:40], np.float32)
+    nan[3, 5] = np.nan
+    files = {"wide.npy": wide, "nan.npy": nan, "joints.npy": np.zeros((40, 22, 3), np.float32),
+             "long.npy": np.zeros((300, 263), np.float32), "short.npy": np.zeros((3, 263), np.float32)}
+    for name, arr in files.items():
+        np.save(tmp_path / name, arr)
+    np.save(tmp_path / "obj.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    (tmp_path / "corrupt.npy").write_bytes(b"\x93NUMPY garbage" * 3)
+    good = tmp_path / "good.npy"
+    np.save(good, sample_features[:40])
+    (tmp_path / "truncated.npy").write_bytes(good.read_bytes()[:2000])
+
+
+@pytest.mark.parametrize("name, message", [
+    ("wide.npy", "263"), ("nan.npy", "NaN"), ("joints.npy", "inversion needs HumanML3D features"),
+    ("long.npy", "300 frames; allowed: 4..196"), ("short.npy", "3 frames; allowed: 4..196"),
+    ("obj.npy", "cannot read"), ("corrupt.npy", "cannot read"), ("truncated.npy", "cannot read"),
+    ("missing.npy", "motion file not found")])
+def test_invert_rejects_bad_motion_files(tmp_path, capsys, sample_features, name, message):
+    _bad_files(tmp_path, sample_features)
+    code = cli.main(["-q", "invert", str(tmp_path / name), "--prompt", "a person walks",
+                     "--weights", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o")])
+    assert code == 2 and message in _one_line_error(capsys)
+
+
+@pytest.mark.parametrize("extra, message", [(["--method", "magic"], "allowed: ddim, fixed_point, null_text"),
+                                            (["--prompt", "  "], "--prompt is empty"),
+                                            (["--swap", "2"], "WordSwap.tau=2.0 must be in [0, 1)")])
+def test_invert_rejects_bad_options(tmp_path, capsys, sample_dir, extra, message):
+    src = sample_dir / "new_joint_vecs" / "012314.npy"
+    args = ["-q", "invert", str(src), "--prompt", "a person walks", *extra, "--weights", str(tmp_path / "nowhere"),
+            "--out", str(tmp_path / "o")]
+    assert cli.main(args) == 2 and message in _one_line_error(capsys)
+
+
+def test_edit_given_motion_uses_the_same_loader(tiny_weights, tmp_path, capsys, sample_features):
+    _bad_files(tmp_path, sample_features)
+    code = cli.main(["-q", "edit", "a person walks", "--mirror", "all", "--motion", str(tmp_path / "nan.npy"),
+                     "--weights", str(tiny_weights), "--out", str(tmp_path / "o")])
+    assert code == 2 and "NaN" in _one_line_error(capsys)
+
+
+# ----------------------------------------------------------------------------- bench (not run: too slow)
+def test_bench_refuses_to_overwrite_its_table(tmp_path, capsys):
+    table = tmp_path / "bench.md"
+    table.write_text("old")
+    assert cli.main(["bench", "--quick", "--out", str(table)]) == 2
+    assert "--force" in _one_line_error(capsys) and table.read_text() == "old"

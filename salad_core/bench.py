@@ -1,0 +1,783 @@
+"""``salad bench``: how fast salad runs on this machine, as one table measured in one run.
+
+Five sections, each a function returning rows of the table (:class:`Row`), run in this order:
+
+* ``memory``: peak memory of one generation with streaming attention capture (the default
+  ``capture_attention=True``, a running mean per step bin) at 50 and at 200 DDIM steps: the peak
+  resident set size (RSS) during the call minus the RSS before it. On Linux the kernel's
+  high-water mark ``VmHWM`` is reset before each call (``/proc/self/clear_refs``), elsewhere the
+  process peak ``ru_maxrss`` is used (a delta then only shows growth beyond earlier peaks). It runs
+  first, before large batches have grown the process.
+* ``overheads``: wall time of attention capture, of each edit (word swap, refinement, re-weighting,
+  mirroring) and of inversion relative to a plain generation of the same prompt, every variant
+  timed in the same rounds, interleaved, so that a busy machine slows all of them alike (medians).
+* ``speed``: seconds per motion of the denoiser alone (random text features: the text encoder is
+  excluded; VAE decoding too, which costs under 1 % of 50 steps) for 196 frames, 50 DDIM steps,
+  guidance 7.5 (both branches in one batched forward), at batch 1 and 32, for the paper
+  configuration and the shipped default, and for a 120-frame motion with the shipped default.
+  Beside each, the *roofline* row: the denoiser's achieved GFLOP/s (FLOPs per step computed from
+  the configuration by :func:`gemm_flops`) against this machine's matmul GFLOP/s measured at the
+  same GEMM shapes (:func:`matmul_rates`); the fraction is the matmul-bound time over the step time.
+* ``training``: optimiser steps per second of the VAE and of the denoiser on random data, with the
+  shipped recipe's model configs and batch sizes (``runs.json`` beside the shipped weights, else
+  the library defaults). The denoiser step is the trainer's own (:func:`_prepare`: frozen-VAE
+  encoding, noising, caption dropping; then forward, backward, AdamW), with random text features.
+
+``--quick`` (about a minute) times fewer steps and rounds, measures batch 32 on one step and
+extrapolates to 50 (every DDIM step costs the same), uses 120-frame motions for the overheads and
+the memory, and says so in the notes under the table.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import gc
+import json
+import logging
+import os
+import platform
+import statistics
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+import torch
+
+from salad_core.models.denoiser import Denoiser, DenoiserConfig
+from salad_core.sampling import denoise, make_scheduler
+from salad_core.skeleton import get_skeleton
+
+__all__ = ["Row", "Case", "Plan", "SECTIONS", "gemm_flops", "step_flops", "matmul_rates", "roofline_seconds",
+           "time_denoiser_steps", "speed_rows", "forward_variant_rows", "overhead_rows", "training_rows",
+           "memory_rows", "peak_rss_delta", "denoiser_cases", "TrainRecipe", "train_recipe", "bench_pipeline",
+           "machine_header", "run_benchmarks", "format_table", "main"]
+
+log = logging.getLogger(__name__)
+
+SKELETON = get_skeleton("humanml3d")
+MOTION_FRAMES = SKELETON.max_length            # 196 frames = 49 latent frames
+SHORT_FRAMES = 120                             # the CLI's default length (6 s at 20 fps)
+SAMPLING_STEPS = 50                            # DDIM steps of the paper's sampler
+GUIDANCE = 7.5                                 # classifier-free guidance (paper default)
+BATCHES = (1, 32)
+SECTIONS = ("memory", "overheads", "speed", "training")
+COLUMNS = ["section", "measure", "setting", "value", "unit", "reference", "ratio", "note"]
+
+SOURCE = "a man walks forward and waves his right hand"
+SWAPPED = "a man walks forward and raises his right hand"          # same word count: word swap
+REFINED = "a man slowly walks forward and waves his right hand high"
+
+
+@dataclass
+class Row:
+    """One line of the table: ``value`` in ``unit``, optionally against a ``reference`` (``ratio``)."""
+
+    section: str
+    measure: str
+    setting: str
+    value: float
+    unit: str
+    reference: float | None = None
+    ratio: float | None = None
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Case:
+    """A denoiser configuration to time, with its text length."""
+
+    name: str               # "paper" or "default"
+    config: DenoiserConfig
+    tokens: int             # W, text tokens per prompt
+
+
+@dataclass(frozen=True)
+class Plan:
+    """How much is timed; :meth:`for_mode` gives the quick and the full plans."""
+
+    quick: bool
+    b1_steps: int                    # timed DDIM steps at batch 1 (after one warm-up step)
+    b32_steps: int                   # timed DDIM steps at batch 32 (extrapolated to 50 if fewer)
+    b32_warmup: bool                 # a warm-up step at batch 32 too (quick: the batch-1 run warmed the model)
+    matmul_time: float               # seconds of repeated timing per GEMM shape (best rate kept)
+    edit_frames: int                 # motion length of the overhead and memory runs
+    edit_steps: int                  # DDIM steps of the overhead runs
+    edit_rounds: int                 # interleaved rounds (median)
+    train_steps: int                 # timed optimiser steps (after train_warmup)
+    train_warmup: int
+    memory_steps: tuple[int, ...] = (50, 200)
+    extras: bool = False             # full only: forward variants and the naive Algorithm 1 reference
+
+    @classmethod
+    def for_mode(cls, quick: bool) -> "Plan":
+        if quick:
+            return cls(True, b1_steps=5, b32_steps=1, b32_warmup=False, matmul_time=0.05, edit_frames=SHORT_FRAMES,
+                       edit_steps=10, edit_rounds=1, train_steps=1, train_warmup=1)
+        return cls(False, b1_steps=SAMPLING_STEPS, b32_steps=SAMPLING_STEPS, b32_warmup=True, matmul_time=0.3,
+                   edit_frames=MOTION_FRAMES, edit_steps=SAMPLING_STEPS, edit_rounds=3, train_steps=5,
+                   train_warmup=2, extras=True)
+
+
+# ================================================================================ FLOPs
+def gemm_flops(cfg: DenoiserConfig, rows: int, frames: int, tokens: int) -> dict[str, float]:
+    """FLOPs (2 per multiply-add) of one denoiser forward over ``rows`` samples, by GEMM shape class.
+
+    Counts every matrix product of :class:`~salad_core.models.denoiser.Denoiser` (LayerNorm,
+    softmax, GELU and other element-wise work are not counted). Keys: ``proj`` (``w x w``-like
+    projections: input/output processes, temporal and skeletal Q/K/V/O, cross Q/O, skip merges,
+    timestep MLP and FiLMs), ``ffn_up`` (``w x f``), ``ffn_down`` (``f x w``), ``attn`` (``q k^T``
+    and ``p v`` of the three attentions), ``text_once`` (``word_emb`` and every layer's text K/V:
+    cached on the TextContext, so done once per sampling call, not per step).
+    """
+    w, f, p, L, dz = cfg.width, cfg.ff_dim, cfg.num_parts, cfg.layers, cfg.latent_dim
+    n = frames * p                                                  # (frame, part) tokens per sample
+    half = L // 2
+    proj = n * (dz * w + w * w)                                     # input process: Linear(Dz,w), Linear(w,w)
+    proj += n * (w * w + w * dz)                                    # output process: Linear(w,w), Linear(w,Dz)
+    proj += L * n * (4 * w * w + 4 * w * w + 2 * w * w)             # temporal QKVO, skeletal QKVO, cross Q and O
+    proj += half * n * 2 * w * w                                    # skip merges Linear(2w, w)
+    proj += 2 * w * w + L * 4 * 2 * w * w                           # timestep MLP + 4 FiLMs Linear(w, 2w) per layer
+    attn = L * (2 * n * frames * w + 2 * n * p * w + 2 * n * tokens * w)   # temporal, skeletal, cross: qk^T + pv
+    ffn_up = L * n * w * f
+    ffn_down = L * n * f * w
+    text_once = tokens * cfg.text_dim * w + L * 2 * tokens * w * w  # word_emb + per-layer K, V
+    out = {"proj": proj, "ffn_up": ffn_up, "ffn_down": ffn_down, "attn": attn, "text_once": text_once}
+    return {k: 2.0 * v * rows for k, v in out.items()}
+
+
+def step_flops(cfg: DenoiserConfig, batch: int, frames: int, tokens: int, guidance: bool = True) -> float:
+    """FLOPs of one sampling step for ``batch`` motions of ``frames`` latent frames (CFG: 2 rows each)."""
+    fl = gemm_flops(cfg, (2 if guidance else 1) * batch, frames, tokens)
+    return sum(v for k, v in fl.items() if k != "text_once")
+
+
+def _best_rate(fn: Callable[[], Any], flops: float, min_time: float) -> float:
+    """Best GFLOP/s of ``fn`` over repeated timings for ``min_time`` s (the best resists other load)."""
+    fn()
+    best, start = float("inf"), time.perf_counter()
+    while True:
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+        if time.perf_counter() - start >= min_time:
+            break
+    return flops / best / 1e9
+
+
+def matmul_rates(cfg: DenoiserConfig, rows: int, frames: int, tokens: int, min_time: float) -> dict[str, float]:
+    """This machine's GFLOP/s of plain matmuls at the denoiser's GEMM shapes (keys of :func:`gemm_flops`
+    except ``text_once``; ``attn`` is a batched ``q k^T`` of the temporal attention)."""
+    w, f, p, h = cfg.width, cfg.ff_dim, cfg.num_parts, cfg.heads
+    m = rows * frames * p
+    dh = w // h
+    g = torch.Generator().manual_seed(0)
+    a_w, a_f = torch.randn(m, w, generator=g), torch.randn(m, f, generator=g)
+    b_ww, b_wf, b_fw = torch.randn(w, w, generator=g), torch.randn(w, f, generator=g), torch.randn(f, w, generator=g)
+    q = torch.randn(rows * p * h, frames, dh, generator=g)
+    k = torch.randn(rows * p * h, dh, frames, generator=g)
+    with torch.inference_mode():
+        return {
+            "proj": _best_rate(lambda: a_w @ b_ww, 2.0 * m * w * w, min_time),
+            "ffn_up": _best_rate(lambda: a_w @ b_wf, 2.0 * m * w * f, min_time),
+            "ffn_down": _best_rate(lambda: a_f @ b_fw, 2.0 * m * f * w, min_time),
+            "attn": _best_rate(lambda: torch.bmm(q, k), 2.0 * q.shape[0] * frames * frames * dh, min_time),
+        }
+
+
+def roofline_seconds(flops: dict[str, float], rates: dict[str, float]) -> float:
+    """Seconds one step would take if every GEMM class ran at its measured matmul rate."""
+    return sum(flops[k] / (rates[k] * 1e9) for k in rates)
+
+
+# ================================================================================ speed
+def denoiser_cases(weights: str | Path | None = None) -> tuple[Case, Case]:
+    """The paper configuration (CLIP B/32 text: 512-d, padded to 77 tokens) and the shipped default
+    (its ``denoiser.json``; MiniLM text, 32 tokens as a long HumanML3D caption)."""
+    from salad_core.io import config_from_dict
+    from salad_core.pipeline import default_weights_dir
+
+    path = Path(weights or default_weights_dir()) / "denoiser.json"
+    try:
+        shipped = config_from_dict(DenoiserConfig, json.loads(path.read_text())["config"])
+    except (OSError, ValueError, KeyError) as exc:
+        # the shipped recipe (configs/default_denoiser.json), when the weights are not installed
+        log.warning("cannot read %s (%s); using the shipped recipe's denoiser config", path, exc)
+        shipped = DenoiserConfig(width=128, heads=4, ff_dim=512, layers=5, text_dim=384)
+    return Case("paper", DenoiserConfig(), 77), Case("default", shipped, 32)
+
+
+def _random_inputs(case: Case, batch: int, latent_frames: int, seed: int = 0):
+    """Random text features/masks, a null text, noise and a full frame mask for one batch."""
+    g = torch.Generator().manual_seed(seed)
+    cfg = case.config
+    text = torch.randn(batch, case.tokens, cfg.text_dim, generator=g)
+    lengths = torch.randint(5, case.tokens + 1, (batch,), generator=g)
+    mask = torch.arange(case.tokens)[None] < lengths[:, None]
+    null_mask = torch.zeros(1, case.tokens, dtype=torch.bool)
+    null_mask[0, :2] = True  # the empty prompt: start and end tokens only
+    null = (torch.randn(1, case.tokens, cfg.text_dim, generator=g), null_mask)
+    noise = torch.randn(batch, latent_frames, cfg.num_parts, cfg.latent_dim, generator=g)
+    frame_mask = torch.ones(batch, latent_frames, dtype=torch.bool)
+    return (text, mask), null, noise, frame_mask
+
+
+def time_denoiser_steps(model: Denoiser, case: Case, batch: int, latent_frames: int, steps: int,
+                        warmup: bool = True) -> np.ndarray:
+    """Seconds of each of ``steps`` guided DDIM steps (float64), after an optional warm-up step."""
+    cond, null, noise, fm = _random_inputs(case, batch, latent_frames)
+    if warmup:
+        denoise(model, make_scheduler(), cond, null, noise, fm, guidance_scale=GUIDANCE, num_steps=1)
+    stamps = [time.perf_counter()]
+    denoise(model, make_scheduler(), cond, null, noise, fm, guidance_scale=GUIDANCE, num_steps=steps,
+            callback=lambda info, z: stamps.append(time.perf_counter()))
+    return np.diff(np.asarray(stamps, dtype=np.float64))
+
+
+def speed_rows(model: Denoiser, case: Case, frames: int, batch: int, steps: int, *, warmup: bool = True,
+               matmul_time: float = 0.3, rates_twice: bool = False) -> list[Row]:
+    """Seconds per motion, and the roofline row, of one (configuration, length, batch) setting."""
+    unit = SKELETON.unit_length
+    latent_frames = frames // unit
+    per_step = time_denoiser_steps(model, case, batch, latent_frames, steps, warmup=warmup)
+    fl = gemm_flops(case.config, 2 * batch, latent_frames, case.tokens)
+    flops = sum(v for k, v in fl.items() if k != "text_once")
+    rates = matmul_rates(case.config, 2 * batch, latent_frames, case.tokens, matmul_time)
+    if rates_twice:  # best of two windows: other processes share the CPUs
+        again = matmul_rates(case.config, 2 * batch, latent_frames, case.tokens, matmul_time)
+        rates = {k: max(v, again[k]) for k, v in rates.items()}
+    if len(per_step) >= SAMPLING_STEPS:
+        total, how = float(per_step[:SAMPLING_STEPS].sum()), f"all {SAMPLING_STEPS} steps timed"
+    else:
+        total = float(np.median(per_step)) * SAMPLING_STEPS
+        how = (f"median of {len(per_step)} timed step{'s' * (len(per_step) > 1)} x {SAMPLING_STEPS} "
+               "(extrapolated)")
+    best = float(per_step.min())
+    achieved = flops / best / 1e9
+    ideal = roofline_seconds(fl, rates)
+    effective = flops / ideal / 1e9              # the FLOP-weighted matmul rate at these shapes
+    setting = f"{case.name}, {frames} frames, batch {batch}"
+    return [
+        Row("speed", "seconds per motion", setting, total / batch, "s", note=how),
+        Row("roofline", "denoiser GFLOP/s (best step)", setting, achieved, "GFLOP/s", reference=effective,
+            ratio=ideal / best,
+            note=f"{flops / 1e9:.2f} GFLOP/step; matmul GFLOP/s at these shapes: "
+                 + ", ".join(f"{k} {v:.1f}" for k, v in rates.items())),
+    ]
+
+
+def forward_variant_rows(model: Denoiser, case: Case, batch: int = 1, reps: int = 4) -> list[Row]:
+    """Best seconds per guided forward with the text K/V recomputed every call, and with the eager
+    (capture / edit) attention processor, against the cached SDPA forward of sampling."""
+    from salad_core.models.attention import EagerProcessor, use_processors
+
+    cond, _, noise, fm = _random_inputs(case, 2 * batch, MOTION_FRAMES // SKELETON.unit_length)
+    ctx = model.prepare_text(*cond)
+    t = torch.tensor([500])
+    eager = EagerProcessor()
+
+    def cached():
+        model(noise, t, frame_mask=fm, text_context=ctx)
+
+    def recomputed():
+        model(noise, t, cond[0], cond[1], fm)
+
+    def eager_run():
+        with use_processors(model, eager):
+            model(noise, t, frame_mask=fm, text_context=ctx)
+
+    runs = {"cached": cached, "recomputed": recomputed, "eager": eager_run}
+    best = {k: float("inf") for k in runs}
+    with torch.inference_mode():
+        for fn in runs.values():
+            fn()
+        for _ in range(reps):
+            for name, fn in runs.items():
+                t0 = time.perf_counter()
+                fn()
+                best[name] = min(best[name], time.perf_counter() - t0)
+    setting = f"{case.name}, {MOTION_FRAMES} frames, batch {batch}"
+    return [Row("speed", "forward, text K/V recomputed per call", setting, best["recomputed"], "s",
+                reference=best["cached"], ratio=best["recomputed"] / best["cached"],
+                note="vs the TextContext cache of sampling (best of %d)" % reps),
+            Row("speed", "forward, eager attention processor", setting, best["eager"], "s",
+                reference=best["cached"], ratio=best["eager"] / best["cached"],
+                note="the capture/edit processor vs SDPA (best of %d)" % reps)]
+
+
+# ================================================================================ pipeline
+def bench_pipeline(weights: str | Path | None = None):
+    """``(pipeline, description)``: the given or shipped weights, else a random shipped-size pipeline."""
+    from salad_core.models.vae import MotionVAE, VAEConfig
+    from salad_core.pipeline import SaladPipeline, default_weights_dir
+    from salad_core.text import load_text_encoder
+
+    if weights is not None or (default_weights_dir() / "pipeline.json").is_file():
+        pipe = SaladPipeline.from_pretrained(weights)
+        return pipe, f"weights {pipe.source}"
+    torch.manual_seed(0)
+    _, default = denoiser_cases()
+    d = SKELETON.feature_dim
+    pipe = SaladPipeline(MotionVAE(VAEConfig()), Denoiser(default.config), load_text_encoder("minilm"),
+                         np.zeros(d, np.float32), np.ones(d, np.float32))
+    return pipe, "random weights of the shipped size (no shipped weights installed)"
+
+
+def _naive_algorithm1(pipe, source: str, target: str, edits, length: int, steps: int) -> torch.Tensor:
+    """Three separate guided forwards per step (source, probe, edited; eager attention everywhere),
+    the maps passed between them: the structure of the official ``Text2Motion.edit``."""
+    from salad_core.attention import EditController, TokenInfo
+    from salad_core.models.attention import EagerProcessor, use_processors
+    from salad_core.models.denoiser import TextContext
+    from salad_core.sampling import StepInfo
+
+    den = pipe.denoiser
+    ts, null = pipe.encode_text([source])
+    tt = pipe.text_encoder.encode([target])
+    width = max(ts.features.shape[1], tt.features.shape[1], null.features.shape[1])
+    ctrl = EditController(edits, TokenInfo.from_batch(ts), TokenInfo.from_batch(tt), width, cfg=True, probe=True)
+
+    def both(ctx):
+        return TextContext.concat([den.prepare_text(null.features, null.mask), ctx])
+
+    cs, ct = both(den.prepare_text(ts.features, ts.mask)), both(den.prepare_text(tt.features, tt.mask))
+    noise = pipe.make_noise([0], length // pipe.skeleton.unit_length)
+    sched = make_scheduler(pipe.diffusion, "ddim")
+    sched.set_timesteps(steps)
+    z, ze = noise.clone(), noise.clone()
+    pad = lambda p: torch.nn.functional.pad(p, (0, width - p.shape[-1]))  # noqa: E731
+    with torch.inference_mode():
+        for i, t in enumerate(sched.timesteps):
+            ctrl.on_step(StepInfo(i, steps, float(t), True, 1))
+            src, own = {}, {}
+
+            def record(store):
+                def fn(site, probs):
+                    store[site.name] = probs[1:].clone()
+                return fn
+
+            def edit(site, probs):
+                if site.kind != "cross":
+                    return None
+                m = pad(src[site.name].view(1, site.heads, site.frames, site.parts, -1))
+                o = pad(own[site.name].view(1, site.heads, site.frames, site.parts, -1))
+                new = ctrl.edit_cross(m, o)[..., :site.tokens]
+                out = probs.clone()
+                out[1:] = new.reshape(1, site.heads, -1, site.tokens)
+                return out
+
+            outs = []
+            for x, ctx, ctl in ((z, cs, record(src)), (ze, ct, record(own)), (ze, ct, edit)):
+                with use_processors(den, EagerProcessor(ctl)):
+                    u, c = den(torch.cat([x, x]), t.reshape(1), text_context=ctx).chunk(2)
+                outs.append(u + GUIDANCE * (c - u))
+            z = sched.step(outs[0], t, z).prev_sample
+            ze = sched.step(outs[2], t, ze).prev_sample
+    pipe.decode(torch.cat([z, ze]), [length, length])
+    return ze
+
+
+def overhead_rows(pipe, frames: int, steps: int, rounds: int, *, warmup_steps: int = 2,
+                  naive: bool = False) -> list[Row]:
+    """Median wall time of capture, each edit and inversion against a plain generation (ratio),
+    all timed in the same interleaved rounds (full pipeline calls: text, denoising, decoding)."""
+    from salad_core.attention import InjectSelfAttention, Mirror, Refine, Reweight, WordSwap
+
+    kw = dict(lengths=frames, seed=0)
+    plain = pipe(SOURCE, num_steps=warmup_steps, **kw)
+    motion = plain.features[0, :frames]          # a motion to invert (any motion of this length would do)
+    variants: dict[str, tuple[Callable[[int], Any], str]] = {
+        "plain generation": (lambda s: pipe(SOURCE, num_steps=s, **kw), ""),
+        "attention capture": (lambda s: pipe(SOURCE, num_steps=s, capture_attention=True, **kw),
+                              "streaming mean of the cross maps"),
+        "word swap": (lambda s: pipe.edit(SOURCE, SWAPPED, edits=[WordSwap(), InjectSelfAttention()], num_steps=s,
+                                          **kw), "tau 0.8 + self-attention injection"),
+        "refinement": (lambda s: pipe.edit(SOURCE, REFINED, edits=[Refine()], num_steps=s, **kw), ""),
+        "reweight": (lambda s: pipe.edit(SOURCE, edits=[Reweight("waves", 2.0)], num_steps=s, **kw), ""),
+        "mirror": (lambda s: pipe.edit(SOURCE, edits=[Mirror("all")], num_steps=s, **kw), ""),
+        "inversion": (lambda s: pipe.invert(motion, SOURCE, num_steps=s, reconstruct=False),
+                      "fixed_point, without the reconstruction"),
+    }
+    if naive:
+        variants["naive Algorithm 1"] = (
+            lambda s: _naive_algorithm1(pipe, SOURCE, REFINED, [Refine()], frames, s),
+            "reference: 3 separate guided forwards per step, as the official code")
+    for fn, _ in variants.values():             # warm-up: text-encoder cache, allocator, first calls
+        fn(warmup_steps)
+    times: dict[str, list[float]] = {k: [] for k in variants}
+    for _ in range(rounds):
+        for name, (fn, _) in variants.items():
+            t0 = time.perf_counter()
+            fn(steps)
+            times[name].append(time.perf_counter() - t0)
+    base = statistics.median(times["plain generation"])
+    setting = f"{frames} frames, {steps} steps, batch 1"
+    return [Row("overheads", name, setting, statistics.median(times[name]), "s", reference=base,
+                ratio=statistics.median(times[name]) / base, note=note)
+            for name, (_, note) in variants.items()]
+
+
+# ================================================================================ memory
+def _rss_kib() -> tuple[int, int] | None:
+    """``(current, peak)`` RSS in KiB from ``/proc/self/status`` (Linux), else None."""
+    try:
+        text = Path("/proc/self/status").read_text()
+    except OSError:
+        return None
+    vals = {}
+    for line in text.splitlines():
+        key, _, rest = line.partition(":")
+        if key in ("VmRSS", "VmHWM"):
+            vals[key] = int(rest.split()[0])
+    return (vals["VmRSS"], vals["VmHWM"]) if len(vals) == 2 else None
+
+
+def _reset_peak() -> bool:
+    """Reset the kernel's RSS high-water mark of this process (Linux >= 4.0)."""
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def peak_rss_delta(fn: Callable[[], Any]) -> tuple[float, str]:
+    """``(MiB, method)``: peak RSS while ``fn`` runs minus the RSS before it."""
+    import resource
+
+    gc.collect()
+    if _reset_peak() and _rss_kib() is not None:
+        before, _ = _rss_kib()
+        fn()
+        _, peak = _rss_kib()
+        return max(peak - before, 0) / 1024, "resource RSS: VmHWM (reset) - VmRSS before"
+    # ru_maxrss is KiB on Linux, bytes on macOS; it cannot be reset
+    scale = 1 / 1024 if sys.platform != "darwin" else 1 / 2**20
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    fn()
+    after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return (after - before) * scale, "resource RSS: ru_maxrss delta (process peak, not resettable)"
+
+
+def memory_rows(pipe, frames: int, steps: Sequence[int] = (50, 200)) -> list[Row]:
+    """Peak RSS growth of one generation with streaming capture, per number of steps; the ratio
+    is against the first (the streaming store should not grow with the steps)."""
+    pipe(SOURCE, lengths=frames, num_steps=2, capture_attention=True)  # first-call allocations out of the way
+    rows, first = [], None
+    for s in steps:
+        mib, method = peak_rss_delta(lambda: pipe(SOURCE, lengths=frames, num_steps=s, capture_attention=True))
+        first = mib if first is None else first
+        rows.append(Row("memory", "peak memory, generation with streaming capture", f"{frames} frames, {s} steps",
+                        mib, "MiB", reference=None if s == steps[0] else first,
+                        ratio=None if s == steps[0] or first <= 0 else mib / first, note=method))
+    return rows
+
+
+# ================================================================================ training
+@dataclass(frozen=True)
+class TrainRecipe:
+    """Model configs and training configs whose step rate is measured."""
+
+    vae: Any              # VAEConfig
+    vae_train: Any        # VAETrainConfig (batch_size, window, optimiser)
+    denoiser: DenoiserConfig
+    denoiser_train: Any   # DenoiserTrainConfig (batch_size, max_length, cond_drop_prob, optimiser)
+    diffusion: Any        # DiffusionConfig
+    source: str           # where the recipe came from
+
+
+def train_recipe(weights: str | Path | None = None) -> TrainRecipe:
+    """The recipe in ``runs.json`` of ``weights`` or of the shipped weights, else the library defaults."""
+    from salad_core.io import config_from_dict
+    from salad_core.models.vae import VAEConfig
+    from salad_core.pipeline import default_weights_dir
+    from salad_core.sampling import DiffusionConfig
+    from salad_core.train.config import DenoiserTrainConfig, VAETrainConfig
+
+    folders = ([Path(weights)] if weights is not None else []) + [default_weights_dir()]
+    for path in (f / "runs.json" for f in folders):
+        try:
+            runs = json.loads(path.read_text())
+            v, d = runs["vae"]["config"], runs["denoiser"]["config"]
+            return TrainRecipe(config_from_dict(VAEConfig, v["model"]), config_from_dict(VAETrainConfig, v["train"]),
+                               config_from_dict(DenoiserConfig, d["model"]),
+                               config_from_dict(DenoiserTrainConfig, d["train"]),
+                               config_from_dict(DiffusionConfig, d.get("task", {}).get("diffusion", {})),
+                               f"recipe of {path}")
+        except FileNotFoundError:
+            continue
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            log.warning("cannot read the training recipe %s (%s)", path, exc)
+    log.warning("no readable runs.json in %s; using the library's default training configs",
+                ", ".join(map(str, folders)))
+    return TrainRecipe(VAEConfig(), VAETrainConfig(), DenoiserConfig(text_dim=384), DenoiserTrainConfig(),
+                       DiffusionConfig(), "library defaults")
+
+
+def _adamw(model: torch.nn.Module, config: Any) -> torch.optim.Optimizer:
+    return torch.optim.AdamW([p for p in model.parameters() if p.requires_grad], lr=config.lr,
+                             betas=tuple(config.betas), eps=config.adam_eps, weight_decay=config.weight_decay)
+
+
+def _steps_per_second(step: Callable[[], None], steps: int, warmup: int) -> float:
+    for _ in range(warmup):
+        step()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        step()
+    return steps / (time.perf_counter() - t0)
+
+
+class _RandomText:
+    """Stands in for the trainer's caption cache: random token features, ``tokens`` per caption."""
+
+    def __init__(self, dim: int, tokens: int, seed: int = 0) -> None:
+        self.dim, self.tokens = dim, tokens
+        self.generator = torch.Generator().manual_seed(seed)
+
+    def encode(self, captions: list[str]) -> tuple[torch.Tensor, torch.Tensor]:
+        feats = torch.randn(len(captions), self.tokens, self.dim, generator=self.generator)
+        return feats, torch.ones(len(captions), self.tokens, dtype=torch.bool)
+
+
+def training_rows(recipe: TrainRecipe, steps: int, warmup: int = 1, text_tokens: int = 24) -> list[Row]:
+    """Optimiser steps per second of the VAE and of the denoiser on random data (one process)."""
+    from salad_core.models.vae import MotionVAE
+    from salad_core.train.common import StepContext
+    from salad_core.train.denoiser_trainer import DenoiserObjective, _prepare
+    from salad_core.train.distributed import DistEnv, GlobalBatchRandom
+    from salad_core.train.vae_trainer import VAEObjective
+
+    g = torch.Generator().manual_seed(0)
+    torch.manual_seed(0)
+    # VAE: encode, reparameterise, decode, the four losses, backward, AdamW (VAEObjective)
+    vc, vt = recipe.vae, recipe.vae_train
+    vae = MotionVAE(vc).train()
+    sk = vae.skeleton
+    motion = torch.randn(vt.batch_size, vt.window, sk.feature_dim, generator=g)
+    eps = torch.randn(vt.batch_size, vt.window // vae.downsample, vae.num_parts, vae.latent_dim, generator=g)
+    objective, opt = VAEObjective(vae), _adamw(vae, vt)
+
+    def vae_step() -> None:
+        opt.zero_grad(set_to_none=True)
+        objective(motion, eps)["loss"].backward()
+        opt.step()
+
+    vae_rate = _steps_per_second(vae_step, steps, warmup)
+    del vae, objective, opt
+
+    # denoiser: the trainer's batch preparation with a frozen (random) VAE, then forward/backward/AdamW
+    dc, dt = recipe.denoiser, recipe.denoiser_train
+    frozen = MotionVAE(vc).eval()
+    for p in frozen.parameters():
+        p.requires_grad_(False)
+    den = Denoiser(dc).train()
+    env = DistEnv()
+    ctx = StepContext(rand=GlobalBatchRandom(torch.Generator().manual_seed(0), env), env=env, train=True, step=0)
+    batch = {"motion": torch.randn(dt.batch_size, dt.max_length, sk.feature_dim, generator=g),
+             "length": torch.full((dt.batch_size,), dt.max_length), "caption": [SOURCE] * dt.batch_size}
+    latent_shape = (dt.max_length // frozen.downsample, frozen.num_parts, frozen.latent_dim)
+    text = _RandomText(dc.text_dim, text_tokens)
+    scheduler = make_scheduler(recipe.diffusion, "ddim")
+    objective, opt = DenoiserObjective(den), _adamw(den, dt)
+
+    def denoiser_step() -> None:
+        inputs = _prepare(batch, ctx, vae=frozen, text=text, scheduler=scheduler, config=dt,
+                          prediction_type=recipe.diffusion.prediction_type, latent_shape=latent_shape)
+        opt.zero_grad(set_to_none=True)
+        objective(**inputs)["loss"].backward()
+        opt.step()
+
+    den_rate = _steps_per_second(denoiser_step, steps, warmup)
+    timed = f"{steps} timed step{'s' * (steps > 1)} after {warmup} warm-up; {recipe.source}"
+    return [
+        Row("training", "VAE steps/s", f"batch {vt.batch_size} x {vt.window} frames, latent {vc.latent_dim}",
+            vae_rate, "steps/s", note=f"random motions; {timed}"),
+        Row("training", "denoiser steps/s",
+            f"batch {dt.batch_size} x {dt.max_length} frames, width {dc.width}, {dc.layers} layers",
+            den_rate, "steps/s", note=f"random motions and text ({text_tokens} tokens), frozen random VAE; {timed}"),
+    ]
+
+
+# ================================================================================ the table
+def machine_header(threads: int, quick: bool) -> str:
+    """One line: date, platform, CPUs, torch version and threads, and the load at the start."""
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    cpu = platform.processor() or platform.machine()
+    return (f"salad bench{' --quick' if quick else ''}, {_dt.datetime.now().astimezone():%Y-%m-%d %H:%M %Z}: "
+            f"{platform.platform()} ({cpu}), {os.cpu_count()} CPUs, Python {platform.python_version()}, "
+            f"torch {torch.__version__}, {threads} torch thread{'s' * (threads != 1)}, load average {load:.2f} "
+            "at the start")
+
+
+def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None = None,
+                   weights: str | Path | None = None) -> "Any":
+    """Measure everything (or ``sections``) in this process and return the table.
+
+    Parameters
+    ----------
+    quick : bool
+        The quick plan (about a minute; see :class:`Plan`) instead of the full one.
+    threads : int
+        Torch intra-op threads for the run (restored afterwards).
+    sections : sequence of str, optional
+        Subset of :data:`SECTIONS` (default: all, in that order).
+    weights : path, optional
+        Pipeline folder for the memory and overhead sections (default: the shipped weights).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns :data:`COLUMNS`; ``df.attrs["header"]`` states the machine and the date,
+        ``df.attrs["notes"]`` how the figures were measured.
+    """
+    import pandas as pd
+
+    sections = list(SECTIONS if sections is None else sections)
+    unknown = [s for s in sections if s not in SECTIONS]
+    if unknown:
+        raise ValueError(f"unknown bench sections {unknown}; allowed: {', '.join(SECTIONS)}")
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise ValueError(f"threads={threads!r} must be a positive integer")
+    plan = Plan.for_mode(quick)
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    header = machine_header(threads, quick)
+    notes: list[str] = []
+    rows: list[Row] = []
+    try:
+        if "memory" in sections or "overheads" in sections:
+            pipe, what = bench_pipeline(weights)
+            notes.append(f"memory and overheads: the full pipeline with {what}; guidance {GUIDANCE}, DDIM")
+            if "memory" in sections:
+                log.info("memory: streaming capture at %s steps", plan.memory_steps)
+                rows += memory_rows(pipe, plan.edit_frames, plan.memory_steps)
+            if "overheads" in sections:
+                log.info("overheads: %d rounds of %d variants", plan.edit_rounds, 8 if plan.extras else 7)
+                rows += overhead_rows(pipe, plan.edit_frames, plan.edit_steps, plan.edit_rounds, naive=plan.extras)
+                notes.append(f"overheads: median of {plan.edit_rounds} interleaved round(s) after a 2-step warm-up "
+                             "of every variant; ratio = variant / plain generation")
+            del pipe
+            gc.collect()
+        if "speed" in sections:
+            for case in denoiser_cases(weights):
+                torch.manual_seed(0)
+                model = Denoiser(case.config).eval()
+                lengths = (MOTION_FRAMES, SHORT_FRAMES) if case.name == "default" else (MOTION_FRAMES,)
+                for frames in lengths:
+                    for batch in BATCHES:
+                        log.info("speed: %s, %d frames, batch %d", case.name, frames, batch)
+                        big = batch > 1
+                        rows += speed_rows(model, case, frames, batch, plan.b32_steps if big else plan.b1_steps,
+                                           warmup=plan.b32_warmup or not big, matmul_time=plan.matmul_time,
+                                           rates_twice=not plan.quick)
+                if plan.extras:
+                    rows += forward_variant_rows(model, case)
+                del model
+                gc.collect()
+            paper, default = denoiser_cases(weights)
+            notes.append(f"speed: denoiser only (random weights), {SAMPLING_STEPS} DDIM steps, guidance {GUIDANCE} "
+                         "(both branches in one batched forward), random text features: text encoder and VAE "
+                         f"decoding excluded; paper = width {paper.config.width}, {paper.config.layers} layers, "
+                         f"ffn {paper.config.ff_dim}, {paper.config.heads} heads, CLIP text {paper.config.text_dim}-d "
+                         f"x {paper.tokens} tokens; default = width {default.config.width}, {default.config.layers} "
+                         f"layers, ffn {default.config.ff_dim}, {default.config.heads} heads, MiniLM "
+                         f"{default.config.text_dim}-d x {default.tokens} tokens")
+            if plan.quick:
+                notes.append(f"quick: batch 1 timed on {plan.b1_steps} steps, batch 32 on {plan.b32_steps} step, "
+                             f"both extrapolated to {SAMPLING_STEPS} (every DDIM step costs the same)")
+            notes.append("roofline: value = FLOPs per step (dense GEMMs + attention products, element-wise work "
+                         "not counted) / best step time; reference = this machine's matmul GFLOP/s at the same "
+                         "GEMM shapes, FLOP-weighted; ratio = matmul-bound time / best step time")
+        if "training" in sections:
+            recipe = train_recipe(weights)
+            log.info("training: %d timed steps each", plan.train_steps)
+            rows += training_rows(recipe, plan.train_steps, plan.train_warmup)
+    finally:
+        torch.set_num_threads(before)
+    if plan.quick:
+        notes.append(f"quick: overheads and memory on {plan.edit_frames}-frame motions, overheads with "
+                     f"{plan.edit_steps} steps; training rates from {plan.train_steps} step(s)")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    notes.append(f"load average {load:.2f} at the end: other processes on the {os.cpu_count()} CPUs slow every "
+                 "figure (ratios measured side by side suffer least)")
+    df = pd.DataFrame([r.__dict__ for r in rows], columns=COLUMNS)
+    df.attrs["header"] = header
+    df.attrs["notes"] = notes
+    return df
+
+
+def _fmt(value: Any) -> str:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return ""
+    if isinstance(value, (int, float, np.floating)):
+        v = float(value)
+        if v == 0:
+            return "0"
+        if abs(v) >= 100:
+            return f"{v:,.0f}"
+        if abs(v) >= 0.01:
+            return f"{v:.3g}" if abs(v) < 10 else f"{v:.1f}"
+        return f"{v:.2e}"
+    return str(value).replace("|", "\\|")
+
+
+def format_table(df: Any) -> str:
+    """The table as Markdown: the machine header, one table, then the notes."""
+    cols = list(df.columns)
+    lines = [f"**{df.attrs.get('header', 'salad bench')}**", "",
+             "| " + " | ".join(cols) + " |",
+             "|" + "|".join("---:" if c in ("value", "reference", "ratio") else "---" for c in cols) + "|"]
+    for rec in df.itertuples(index=False):
+        lines.append("| " + " | ".join(_fmt(getattr(rec, c)) for c in cols) + " |")
+    notes = df.attrs.get("notes", [])
+    if notes:
+        lines += ["", "Notes:"] + [f"- {n}" for n in notes]
+    return "\n".join(lines) + "\n"
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="salad bench", formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="measure generation speed, the denoiser's roofline fraction, the overheads of capture, "
+                    "edits and inversion, training steps/s and peak memory on this machine; one table.\n\n"
+                    "example:\n  salad bench --quick --threads 1 --out bench.md")
+    p.add_argument("--quick", action="store_true", help="about a minute: fewer timed steps (extrapolated)")
+    p.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's, here %d)"
+                   % torch.get_num_threads())
+    p.add_argument("--out", default=None, help="also write the table to this Markdown file")
+    p.add_argument("--force", action="store_true", help="overwrite --out")
+    p.add_argument("--sections", default=None, help=f"comma-separated subset of {','.join(SECTIONS)}")
+    p.add_argument("--weights", default=None, help="pipeline folder for memory/overheads (default: shipped)")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``salad bench``: print the table (and write it to ``--out``); returns the exit code."""
+    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    threads = torch.get_num_threads() if args.threads is None else args.threads
+    if threads < 1:
+        raise ValueError(f"--threads {threads}: use a positive number of threads")
+    out = Path(args.out) if args.out else None
+    if out is not None:
+        if out.exists() and not args.force:
+            raise FileExistsError(f"--out {out} exists; pass --force to overwrite it")
+        if not out.parent.is_dir():
+            raise FileNotFoundError(f"--out {out}: the folder {out.parent} does not exist")
+    sections = [s.strip() for s in args.sections.split(",") if s.strip()] if args.sections else None
+    df = run_benchmarks(args.quick, threads, sections=sections, weights=args.weights)
+    text = format_table(df)
+    print(text, end="")
+    if out is not None:
+        from salad_core.io import atomic_write_text
+
+        atomic_write_text(out, text)
+        print(f"written to {out}")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,175 @@
+"""salad_core.bench: the FLOP count against a hand count and torch's counter, and tiny runs of the
+measuring helpers (``salad bench --quick`` itself takes a minute and is not run here)."""
+from __future__ import annotations
+
+import datetime
+import os
+import platform
+
+import numpy as np
+import pytest
+import torch
+
+from salad_core import bench
+from salad_core.models.denoiser import Denoiser, DenoiserConfig
+
+TINY = DenoiserConfig(latent_dim=4, num_parts=7, width=8, heads=2, ff_dim=16, layers=3, text_dim=6)
+
+
+@pytest.fixture(scope="module")
+def tiny_pipe(make_tiny_pipeline, single_thread):
+    return make_tiny_pipeline(seed=0)
+
+
+def test_gemm_flops_matches_a_hand_count():
+    # Dz=4, P=7, w=8, f=16, L=3 (1 skip), C=6; 2 rows, 3 latent frames -> n = 21 tokens, W = 5 text tokens.
+    # Multiply-adds per row:
+    #   input  Linear(4,8)+Linear(8,8):        21 * (32 + 64)          = 2016
+    #   output Linear(8,8)+Linear(8,4):        21 * (64 + 32)          = 2016
+    #   per layer QKVO x2 + cross Q,O: 3 * 21 * 10 * 64               = 40320
+    #   skip merge Linear(16, 8):          1 * 21 * 16 * 8             = 2688
+    #   timestep MLP 2 x (8x8) + 12 FiLMs Linear(8,16): 128 + 12 * 128 = 1664
+    #   attention qk^T + pv: 3 * (2*21*3*8 + 2*21*7*8 + 2*21*5*8)      = 15120
+    #   FFN: 3 * 21 * 8 * 16 each way                                   = 8064
+    #   text once: word_emb 5*6*8 + K,V 3 * 2 * 5 * 64                  = 2160
+    fl = bench.gemm_flops(TINY, rows=2, frames=3, tokens=5)
+    assert fl == {"proj": 4 * 48704, "ffn_up": 4 * 8064, "ffn_down": 4 * 8064, "attn": 4 * 15120, "text_once": 4 * 2160}
+    # one CFG step for one motion = the 2 rows above, without the cached text projections
+    assert bench.step_flops(TINY, batch=1, frames=3, tokens=5) == 4 * (48704 + 2 * 8064 + 15120)
+    assert bench.step_flops(TINY, batch=1, frames=3, tokens=5, guidance=False) == 2 * (48704 + 2 * 8064 + 15120)
+
+
+def test_gemm_flops_equals_torch_flop_counter_on_the_real_model(single_thread):
+    """With the eager attention processor every product is a counted matmul: the count is exact."""
+    from torch.utils.flop_counter import FlopCounterMode
+
+    from salad_core.models.attention import EagerProcessor, use_processors
+
+    torch.manual_seed(0)
+    rows, frames, tokens = 4, 6, 5
+    cfg = DenoiserConfig(width=32, heads=2, ff_dim=64, layers=5, text_dim=24)
+    model = Denoiser(cfg).eval()
+    x = torch.randn(rows, frames, cfg.num_parts, cfg.latent_dim)
+    text, mask = torch.randn(rows, tokens, cfg.text_dim), torch.ones(rows, tokens, dtype=torch.bool)
+    expected = bench.gemm_flops(cfg, rows, frames, tokens)
+    with torch.inference_mode(), use_processors(model, EagerProcessor()):
+        ctx = model.prepare_text(text, mask)
+        with FlopCounterMode(display=False) as first:
+            model(x, torch.tensor([10]), text_context=ctx)         # computes and caches the text K/V
+        with FlopCounterMode(display=False) as again:
+            model(x, torch.tensor([10]), text_context=ctx)         # a sampling step: cache hit
+    assert first.get_total_flops() == sum(expected.values())
+    assert again.get_total_flops() == bench.step_flops(cfg, rows // 2, frames, tokens)
+
+
+def test_speed_rows_and_roofline_are_consistent(single_thread):
+    torch.manual_seed(0)
+    model = Denoiser(TINY).eval()
+    case = bench.Case("tiny", TINY, 5)
+    per_step = bench.time_denoiser_steps(model, case, batch=2, latent_frames=4, steps=3)
+    assert per_step.dtype == np.float64 and per_step.shape == (3,) and (per_step > 0).all()
+    speed, roof = bench.speed_rows(model, case, frames=16, batch=2, steps=3, matmul_time=0.001)
+    assert (speed.measure, speed.unit, roof.unit) == ("seconds per motion", "s", "GFLOP/s")
+    assert speed.setting == roof.setting == "tiny, 16 frames, batch 2"
+    assert speed.note == "median of 3 timed steps x 50 (extrapolated)"
+    flops = bench.step_flops(TINY, 2, 4, 5)
+    assert f"{flops / 1e9:.2f} GFLOP/step" in roof.note
+    assert roof.ratio == pytest.approx(roof.value / roof.reference, rel=1e-9)   # achieved / matmul rate
+    best_step = flops / (roof.value * 1e9)
+    assert speed.value * 2 / bench.SAMPLING_STEPS >= best_step * (1 - 1e-9)     # median step >= best step
+    full, _ = bench.speed_rows(model, case, frames=16, batch=1, steps=bench.SAMPLING_STEPS, matmul_time=0.001)
+    assert full.note == "all 50 steps timed"
+
+
+def test_overhead_rows_time_every_variant_against_plain_generation(tiny_pipe):
+    rows = bench.overhead_rows(tiny_pipe, frames=16, steps=2, rounds=1, warmup_steps=1)
+    assert [r.measure for r in rows] == ["plain generation", "attention capture", "word swap", "refinement",
+                                         "reweight", "mirror", "inversion"]
+    plain = rows[0].value
+    assert rows[0].ratio == 1.0
+    for r in rows:
+        assert r.setting == "16 frames, 2 steps, batch 1" and r.reference == plain and r.value > 0
+        assert r.ratio == pytest.approx(r.value / plain)
+
+
+def test_peak_rss_delta_sees_an_allocation():
+    mib, method = bench.peak_rss_delta(lambda: np.ones(8_000_000).sum())   # 61 MiB, freed on return
+    if "VmHWM" not in method:
+        pytest.skip("no resettable RSS high-water mark on this platform")
+    assert 50 < mib < 300
+    idle, _ = bench.peak_rss_delta(lambda: None)
+    assert idle < 20
+
+
+def test_memory_rows_compare_step_counts(tiny_pipe):
+    first, second = bench.memory_rows(tiny_pipe, frames=16, steps=(2, 8))
+    assert (first.setting, second.setting) == ("16 frames, 2 steps", "16 frames, 8 steps")
+    assert first.unit == "MiB" and first.value >= 0 and first.reference is None
+    assert second.reference == first.value and "RSS" in second.note
+
+
+def _tiny_recipe():
+    from salad_core.models.vae import VAEConfig
+    from salad_core.sampling import DiffusionConfig
+    from salad_core.train.config import DenoiserTrainConfig, VAETrainConfig
+
+    return bench.TrainRecipe(VAEConfig(), VAETrainConfig(batch_size=2, window=8),
+                             DenoiserConfig(width=32, heads=2, ff_dim=64, layers=3, text_dim=384),
+                             DenoiserTrainConfig(batch_size=2, max_length=16), DiffusionConfig(), "tiny recipe")
+
+
+def test_training_rows_time_both_trainers(single_thread):
+    vae, den = bench.training_rows(_tiny_recipe(), steps=1, warmup=1)
+    assert (vae.measure, den.measure) == ("VAE steps/s", "denoiser steps/s")
+    assert vae.setting == "batch 2 x 8 frames, latent 32"
+    assert den.setting == "batch 2 x 16 frames, width 32, 3 layers"
+    assert all(np.isfinite(r.value) and r.value > 0 for r in (vae, den)) and "tiny recipe" in den.note
+
+
+def test_recipe_and_cases_come_from_the_weights_folder(tiny_pipe, tmp_path):
+    import json
+
+    from salad_core.io import config_to_dict
+
+    weights = tiny_pipe.save_pretrained(tmp_path / "w")
+    paper, default = bench.denoiser_cases(weights)
+    assert paper.config == DenoiserConfig() and paper.tokens == 77
+    assert default.config == tiny_pipe.denoiser.config
+    tiny = _tiny_recipe()
+    runs = {"vae": {"config": {"model": config_to_dict(tiny.vae), "train": config_to_dict(tiny.vae_train)}},
+            "denoiser": {"config": {"model": config_to_dict(tiny.denoiser), "train": config_to_dict(tiny.denoiser_train),
+                                    "task": {"diffusion": {"prediction_type": "epsilon"}}}}}
+    (weights / "runs.json").write_text(json.dumps(runs))
+    recipe = bench.train_recipe(weights)
+    assert (recipe.vae_train.batch_size, recipe.vae_train.window, recipe.denoiser_train.max_length) == (2, 8, 16)
+    assert recipe.denoiser == tiny.denoiser and recipe.diffusion.prediction_type == "epsilon"
+    assert recipe.source == f"recipe of {weights / 'runs.json'}"
+
+
+def test_run_benchmarks_prints_one_table_with_the_machine(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(bench, "train_recipe", lambda weights=None: _tiny_recipe())
+    threads = torch.get_num_threads()
+    df = bench.run_benchmarks(quick=True, threads=1, sections=["training"])
+    assert torch.get_num_threads() == threads                      # restored
+    assert list(df.columns) == bench.COLUMNS and len(df) == 2
+    header = df.attrs["header"]
+    for part in (platform.platform(), f"{os.cpu_count()} CPUs", f"torch {torch.__version__}", "1 torch thread",
+                 datetime.date.today().isoformat()):
+        assert part in header
+    text = bench.format_table(df)
+    lines = text.splitlines()
+    assert sum(line.startswith("| section | measure |") for line in lines) == 1   # one table
+    assert sum(line.startswith("| training |") for line in lines) == 2
+    assert "Notes:" in text and "training rates from 1 step(s)" in text
+
+    out = tmp_path / "bench.md"
+    assert bench.main(["--quick", "--threads", "1", "--sections", "training", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    written = out.read_text()
+    assert written in printed and "| training | VAE steps/s |" in written
+    with pytest.raises(FileExistsError, match="--force"):
+        bench.main(["--quick", "--sections", "training", "--out", str(out)])
+    with pytest.raises(ValueError, match="unknown bench sections"):
+        bench.run_benchmarks(quick=True, threads=1, sections=["nope"])
+    with pytest.raises(ValueError, match="threads=0"):
+        bench.run_benchmarks(quick=True, threads=0)
