@@ -1,0 +1,85 @@
+"""Assemble a :class:`~salad_core.pipeline.SaladPipeline` folder from a VAE run and a denoiser run.
+
+Used for the shipped default weights (``scripts/assemble_weights.py``) and for the small ablation
+models (``scripts/train_ablations.py``). Each run's ``best`` checkpoint is taken (else ``latest``),
+the VAE run's Mean/Std, the denoiser run's text encoder and diffusion config; the folder gets
+``pipeline.json``, ``vae.*``, ``denoiser.*``, ``stats.safetensors`` and ``runs.json`` (the runs'
+configs and last log lines, for model cards).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+
+from salad_core.io import atomic_write_text, config_from_dict, load_model, load_tensors, save_checkpoint, save_tensors
+
+__all__ = ["run_checkpoint", "last_log_line", "assemble_pipeline", "export_vae"]
+
+
+def run_checkpoint(run: str | Path) -> Path:
+    """The checkpoint stem of a run folder: ``best`` if it was validated, else ``latest``."""
+    run = Path(run)
+    for name in ("best", "latest"):
+        if (run / f"{name}.safetensors").is_file():
+            return run / name
+    raise FileNotFoundError(f"run folder {run} has no best/latest checkpoint (was it trained?)")
+
+
+def last_log_line(run: str | Path) -> dict:
+    """The last line of a run's ``log.jsonl`` (``{}`` when there is none)."""
+    path = Path(run) / "log.jsonl"
+    lines = path.read_text().splitlines() if path.is_file() else []
+    return json.loads(lines[-1]) if lines else {}
+
+
+def _run_record(run: Path) -> dict:
+    return {"checkpoint": run_checkpoint(run).name, "config": json.loads((run / "config.json").read_text()),
+            "last_log": last_log_line(run)}
+
+
+def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | Path, *,
+                      dtype: torch.dtype | None = torch.float16, text_encoder=None) -> Path:
+    """Write a pipeline folder that ``SaladPipeline.from_pretrained(out)`` loads.
+
+    Parameters
+    ----------
+    vae_run, denoiser_run : path
+        Run folders written by ``salad train vae`` / ``salad train denoiser``.
+    out : path
+        Pipeline folder (created; existing files of the same names are replaced atomically).
+    dtype : torch.dtype or None
+        Storage dtype of the weights (float16 by default; ``None`` keeps float32).
+    text_encoder : optional
+        An already loaded text encoder (default: the one the denoiser run names).
+    """
+    from salad_core.pipeline import SaladPipeline
+    from salad_core.sampling import DiffusionConfig
+    from salad_core.text import load_text_encoder
+
+    vae_run, denoiser_run, out = Path(vae_run), Path(denoiser_run), Path(out)
+    vae, _, _ = load_model(run_checkpoint(vae_run))
+    den, _, _ = load_model(run_checkpoint(denoiser_run))
+    stats = load_tensors(vae_run / "mean_std.safetensors")
+    task = json.loads((denoiser_run / "config.json").read_text()).get("task", {})
+    diffusion = config_from_dict(DiffusionConfig, task["diffusion"]) if task.get("diffusion") else DiffusionConfig()
+    encoder = text_encoder if text_encoder is not None else load_text_encoder(task.get("text_encoder", "minilm"))
+    pipe = SaladPipeline(vae, den, encoder, stats["mean"].numpy(), stats["std"].numpy(), diffusion=diffusion)
+    pipe.save_pretrained(out, dtype=dtype)
+    runs = {"vae": _run_record(vae_run), "denoiser": _run_record(denoiser_run)}
+    atomic_write_text(out / "runs.json", json.dumps(runs, indent=2) + "\n")
+    return out
+
+
+def export_vae(vae_run: str | Path, out: str | Path, *, dtype: torch.dtype | None = torch.float16) -> Path:
+    """Write a VAE-only folder: ``vae.*`` (loadable with :func:`salad_core.io.load_model`), ``stats.safetensors``
+    and ``runs.json``; for the VAE ablations, which have no denoiser."""
+    vae_run, out = Path(vae_run), Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    vae, _, _ = load_model(run_checkpoint(vae_run))
+    save_checkpoint(out / "vae", vae, model_type="salad_vae", config=vae.config, dtype=dtype)
+    stats = load_tensors(vae_run / "mean_std.safetensors")
+    save_tensors(out / "stats.safetensors", {"mean": stats["mean"], "std": stats["std"]})
+    atomic_write_text(out / "runs.json", json.dumps({"vae": _run_record(vae_run)}, indent=2) + "\n")
+    return out
