@@ -427,7 +427,7 @@ def cmd_eval(args: argparse.Namespace, rest: list[str]) -> int:
 def cmd_train(args: argparse.Namespace, rest: list[str]) -> int:
     from salad_core.train import main as train_main
 
-    return int(train_main([args.what, *rest]) or 0)
+    return int(train_main(([args.what] if args.what else []) + rest) or 0)
 
 
 def cmd_bench(args: argparse.Namespace, rest: list[str]) -> int:
@@ -521,9 +521,11 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--force", action="store_true", help="write into a non-empty folder")
 
-    t = _sub(sub, "train", "train the VAE or the denoiser (torchrun-ready)",
-             "salad train vae --data data/procedural --out runs/vae")
-    t.add_argument("what", choices=["vae", "denoiser"])
+    t = _sub(sub, "train", "train the SALAD VAE or denoiser, or the three KeyMotion models (torchrun-ready)",
+             "salad train vae --data data/procedural --out runs/vae", add_help=False)
+    # --help and the choices go to salad_core.train.cli (TRAIN_TARGETS), which owns them; importing
+    # them here would load torch for every command
+    t.add_argument("what", nargs="?", help="vae, denoiser or keymotion")
 
     _sub(sub, "eval", "evaluate generators with the T2M protocol (R-precision, FID, MM-Dist, Diversity, "
          "MultiModality), CFG sweeps", "salad eval --data data/procedural --quick --out eval_out",

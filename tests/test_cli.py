@@ -25,6 +25,18 @@ def test_every_command_help_shows_an_example(command, capsys):
     assert "example:" in out and f"salad {command}" in out
 
 
+def test_train_help_and_choices_come_from_the_trainers_cli(capsys):
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["train", "keymotion", "--help"])
+    assert exc.value.code == 0
+    assert "--steps-per-stage" in capsys.readouterr().out      # the trainers' own parser answered
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["train", "gan", "--data", "d", "--out", "o"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "invalid choice: 'gan'" in err and "'keymotion'" in err
+
+
 def test_generate_writes_outputs_and_refuses_to_overwrite(tiny_weights, tmp_path, capsys):
     out = tmp_path / "gen"
     args = ["generate", "a person walks forward", "--length", "40", "--steps", "3", "--weights",

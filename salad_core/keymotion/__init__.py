@@ -17,7 +17,7 @@ _LAZY = {
     "MotionMaskedAutoencoder": "mmae", "MMAEConfig": "mmae", "keyframe_lerp": "mmae", "scatter_keyframes": "mmae",
     "KeyMotionPipeline": "pipeline", "KeyMotionOutput": "pipeline",
     "KeyMotionTrainConfig": "train", "train_keymotion": "train", "train_kf_vae": "train", "train_pst": "train",
-    "train_mmae": "train",
+    "train_mmae": "train", "KeyMotionRecipe": "train", "load_keymotion_recipe": "train",
 }
 
 __all__ = ["select_keyframes", "mdo_keyframes", "mieo_keyframes", "uniform_keyframes",

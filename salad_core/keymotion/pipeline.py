@@ -214,11 +214,12 @@ class KeyMotionPipeline:
             Overrides the stored default length.
         """
         root = Path(path) if path is not None else DEFAULT_WEIGHTS_DIR
+        if path is None and not (root / "keymotion.json").is_file():
+            raise FileNotFoundError(
+                f"no shipped KeyMotion weights at {root} (missing from this installation: reinstall salad, or "
+                "train them with scripts/train_keymotion.sh, or `salad train keymotion --data DIR --out RUN` "
+                "and pass RUN as path)")
         if not root.is_dir():
-            if path is None:
-                raise FileNotFoundError(
-                    f"no shipped KeyMotion weights at {root}; train them with "
-                    "salad_core.keymotion.train.train_keymotion(data_dir, out_dir) and pass out_dir as path")
             raise FileNotFoundError(f"KeyMotion folder {root} does not exist")
         doc: dict[str, Any] = {}
         if (root / "keymotion.json").is_file():

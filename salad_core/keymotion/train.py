@@ -16,6 +16,9 @@ handling and ``torchrun`` DDP as the SALAD trainers. The stages:
 
 :func:`train_keymotion` runs the three stages into ``out/kf_vae``, ``out/pst``, ``out/mmae`` and
 writes ``out/keymotion.json``, so ``KeyMotionPipeline.from_pretrained(out)`` loads the result.
+:class:`KeyMotionRecipe` is its JSON configuration (``configs/default_keymotion.json``), read by
+``salad train keymotion`` (:mod:`salad_core.train.cli`). The PST and MMAE stages share one
+caption-feature cache, filled in batches at their first step (:class:`PrefilledCaptions`).
 
 Items come from :class:`~salad_core.data.dataset.MotionTextDataset` (random crops and captions,
 lengths multiples of 4); every item keeps ``K = num_keyframes`` keyframes whatever its length.
@@ -63,6 +66,10 @@ __all__ = [
     "train_mmae",
     "train_keymotion",
     "load_frozen_kf_vae",
+    "PrefilledCaptions",
+    "STAGES",
+    "KeyMotionRecipe",
+    "load_keymotion_recipe",
 ]
 
 log = logging.getLogger(__name__)
@@ -82,7 +89,8 @@ class KeyMotionTrainConfig(TrainConfig):
     max_length: int = 196                      # motions are cropped/padded to this many frames
     keyframe_method: str = "mdo"               # "mdo" (paper), "uniform" or "mieo"
     cond_drop_prob: float = 0.1                # PST: captions replaced by "" (classifier-free guidance)
-    text_cache_size: int = 8192                # captions whose token features are kept (0: encode every batch)
+    text_cache_size: int = 32768               # captions whose token features are kept (0: encode every batch);
+                                               # when all fit, they are encoded up front in batches
     keyframe_noise: float = 0.0                # MMAE: std of noise added to the input keyframes (normalised units)
 
     def __post_init__(self) -> None:
@@ -198,6 +206,53 @@ def _keyframe_inputs(batch: dict[str, Any], device: str) -> tuple[torch.Tensor, 
     return motion, length, idx, gather_keyframes(motion, idx)
 
 
+class PrefilledCaptions:
+    """Caption features of a :class:`CaptionFeatureCache`, prefilled at the first :meth:`encode`.
+
+    Encoding captions one by one costs one text-encoder forward per caption during the first epoch
+    (most of a CPU step); the prefill encodes all the stage's captions in fixed batches, which
+    depend only on the set of captions, so runs stay exactly reproducible and resumable. It runs
+    at the first batch rather than at construction so that a finished stage that is resumed (and
+    trains nothing) does not pay for it. A cache already holding the captions (shared by the PST
+    and MMAE stages) encodes nothing again; nothing is prefilled when they do not all fit.
+
+    Parameters
+    ----------
+    cache : CaptionFeatureCache
+    captions : list of str
+        The captions to prefill (e.g. of the train and validation splits).
+    """
+
+    def __init__(self, cache: CaptionFeatureCache, captions: list[str]) -> None:
+        self.cache = cache
+        self._todo: list[str] | None = list(captions)
+
+    def encode(self, captions: list[str]) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(features (B, W, C), mask (B, W) bool)`` of ``captions`` (see :meth:`CaptionFeatureCache.encode`)."""
+        if self._todo is not None:
+            n = self.cache.prefill(self._todo)
+            self._todo = None
+            if n:
+                log.info("text features of %d captions computed up front", n)
+        return self.cache.encode(captions)
+
+
+def _stage_captions(text_cache: CaptionFeatureCache | None, encoder: Any, config: KeyMotionTrainConfig,
+                    *datasets: KeyframeDataset | None) -> PrefilledCaptions:
+    if text_cache is None:
+        text_cache = CaptionFeatureCache(encoder, config.text_cache_size)
+    _check_cache(text_cache, encoder)
+    return PrefilledCaptions(text_cache, [line.caption for ds in datasets if ds is not None
+                                          for line in ds.base.all_captions()])
+
+
+def _check_cache(text_cache: Any, encoder: Any) -> None:
+    if not isinstance(text_cache, CaptionFeatureCache):
+        raise TypeError(f"text_cache must be a CaptionFeatureCache, got {type(text_cache).__name__}")
+    if text_cache.encoder is not encoder:
+        raise ValueError("text_cache wraps another text encoder than the one this stage trains with")
+
+
 def _text_encoder(text_encoder: Any, device: str) -> tuple[Any, str]:
     from salad_core.text import load_text_encoder
 
@@ -255,7 +310,7 @@ def _prepare_vae(batch: dict[str, Any], ctx: StepContext, *, latent_shape: tuple
             "eps": ctx.rand.randn(keyframes.shape[0], latent_shape)}
 
 
-def _prepare_pst(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, text: CaptionFeatureCache,
+def _prepare_pst(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, text: PrefilledCaptions,
                  scheduler: Any, config: KeyMotionTrainConfig, latent_shape: tuple[int, int]) -> dict[str, Any]:
     dev = ctx.env.device
     _, length, idx, keyframes = _keyframe_inputs(batch, dev)
@@ -276,7 +331,7 @@ def _prepare_pst(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, t
             "target": noise}
 
 
-def _prepare_mmae(batch: dict[str, Any], ctx: StepContext, *, text: CaptionFeatureCache,
+def _prepare_mmae(batch: dict[str, Any], ctx: StepContext, *, text: PrefilledCaptions,
                   config: KeyMotionTrainConfig) -> dict[str, Any]:
     dev = ctx.env.device
     motion, length, idx, keyframes = _keyframe_inputs(batch, dev)
@@ -328,8 +383,13 @@ def load_frozen_kf_vae(path: str | os.PathLike, device: str | torch.device = "cp
 
 def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, model_config: PSTConfig | None,
                    train_config: KeyMotionTrainConfig, env: DistEnv, text_encoder: Any = "minilm",
-                   diffusion_config: Any = None) -> TrainTask:
-    """The :class:`TrainTask` of a PST run on the latents of a frozen keyframe VAE."""
+                   diffusion_config: Any = None, *, text_cache: CaptionFeatureCache | None = None) -> TrainTask:
+    """The :class:`TrainTask` of a PST run on the latents of a frozen keyframe VAE.
+
+    ``text_cache`` (a :class:`CaptionFeatureCache` of the same encoder object) lets stages share
+    caption features; by default one of ``train_config.text_cache_size`` entries is built here.
+    Either way it is prefilled with the captions of the splits (see :class:`PrefilledCaptions`).
+    """
     from salad_core.sampling import DiffusionConfig, make_scheduler
 
     diffusion_config = diffusion_config or PST_DIFFUSION
@@ -357,7 +417,8 @@ def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, mod
     torch.manual_seed(train_config.seed)
     pst = ParallelSkipTransformer(model_config).to(env.device)
     scheduler = make_scheduler(diffusion_config, "ddim")
-    prepare = partial(_prepare_pst, vae=vae, text=CaptionFeatureCache(encoder, train_config.text_cache_size),
+    text = _stage_captions(text_cache, encoder, train_config, train_set, val_set)
+    prepare = partial(_prepare_pst, vae=vae, text=text,
                       scheduler=scheduler, config=train_config, latent_shape=vae.latent_shape)
     meta = {"diffusion": config_to_dict(diffusion_config), "text_encoder": encoder_name,
             "kf_vae": str(resolve_checkpoint(vae_path)), "data": str(Path(data_dir))}
@@ -370,8 +431,12 @@ def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, mod
 
 
 def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None, train_config: KeyMotionTrainConfig,
-                    env: DistEnv, text_encoder: Any = "minilm", num_keyframes: int = 20) -> TrainTask:
-    """The :class:`TrainTask` of an MMAE run (``num_keyframes`` must match the keyframe VAE's)."""
+                    env: DistEnv, text_encoder: Any = "minilm", num_keyframes: int = 20, *,
+                    text_cache: CaptionFeatureCache | None = None) -> TrainTask:
+    """The :class:`TrainTask` of an MMAE run (``num_keyframes`` must match the keyframe VAE's).
+
+    ``text_cache``: as in :func:`build_pst_task`.
+    """
     encoder, encoder_name = _text_encoder(text_encoder, env.device)
     if model_config is None:
         model_config = MMAEConfig(text_dim=encoder.dim, max_length=train_config.max_length)
@@ -385,7 +450,8 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
     torch.manual_seed(train_config.seed)
     mmae = MotionMaskedAutoencoder(model_config).to(env.device)
     mmae.set_normalization(train_set.mean, train_set.std)
-    prepare = partial(_prepare_mmae, text=CaptionFeatureCache(encoder, train_config.text_cache_size), config=train_config)
+    text = _stage_captions(text_cache, encoder, train_config, train_set, val_set)
+    prepare = partial(_prepare_mmae, text=text, config=train_config)
     meta = {"text_encoder": encoder_name, "num_keyframes": num_keyframes,
             "keyframe_method": train_config.keyframe_method, "data": str(Path(data_dir))}
     return TrainTask(
@@ -416,22 +482,26 @@ def train_kf_vae(data_dir: str | os.PathLike, out_dir: str | os.PathLike, model_
 def train_pst(data_dir: str | os.PathLike, out_dir: str | os.PathLike, vae_path: str | os.PathLike,
               model_config: PSTConfig | None = None, train_config: KeyMotionTrainConfig | None = None,
               text_encoder: Any = "minilm", resume: bool = False, *, diffusion_config: Any = None,
-              env: DistEnv | None = None, on_step: Callable[[int], None] | None = None) -> TrainResult:
+              env: DistEnv | None = None, on_step: Callable[[int], None] | None = None,
+              text_cache: CaptionFeatureCache | None = None) -> TrainResult:
     """Train a :class:`ParallelSkipTransformer` on the latents of the frozen VAE at ``vae_path``."""
     train_config = train_config or KeyMotionTrainConfig()
     env = env or init_distributed(train_config.device)
-    task = build_pst_task(data_dir, vae_path, model_config, train_config, env, text_encoder, diffusion_config)
+    task = build_pst_task(data_dir, vae_path, model_config, train_config, env, text_encoder, diffusion_config,
+                          text_cache=text_cache)
     return fit(task, out_dir, train_config, resume=resume, env=env, on_step=on_step)
 
 
 def train_mmae(data_dir: str | os.PathLike, out_dir: str | os.PathLike, model_config: MMAEConfig | None = None,
                train_config: KeyMotionTrainConfig | None = None, text_encoder: Any = "minilm",
                resume: bool = False, *, num_keyframes: int = 20, env: DistEnv | None = None,
-               on_step: Callable[[int], None] | None = None) -> TrainResult:
+               on_step: Callable[[int], None] | None = None,
+               text_cache: CaptionFeatureCache | None = None) -> TrainResult:
     """Train a :class:`MotionMaskedAutoencoder` (in-filling from ``num_keyframes`` keyframes)."""
     train_config = train_config or KeyMotionTrainConfig()
     env = env or init_distributed(train_config.device)
-    task = build_mmae_task(data_dir, model_config, train_config, env, text_encoder, num_keyframes)
+    task = build_mmae_task(data_dir, model_config, train_config, env, text_encoder, num_keyframes,
+                           text_cache=text_cache)
     return fit(task, out_dir, train_config, resume=resume, env=env, on_step=on_step)
 
 
@@ -447,22 +517,147 @@ def train_keymotion(data_dir: str | os.PathLike, out_dir: str | os.PathLike, *,
     :meth:`KeyMotionPipeline.from_pretrained(out_dir) <salad_core.keymotion.pipeline.KeyMotionPipeline.from_pretrained>`
     loads the trained pipeline (each stage's ``best`` checkpoint if it was validated, else
     ``latest``). With ``resume`` a finished stage is skipped and an interrupted one continues.
+    A stage stopped by a signal (SIGINT/SIGTERM) ends the call: the later stages are not started,
+    the returned dict holds the stages run so far, and ``keymotion.json`` is not written.
+    The PST and MMAE share one caption-feature cache when their ``text_cache_size`` agree.
     """
     out = Path(out_dir)
     vae_train = vae_train or KeyMotionTrainConfig()
+    pst_train, mmae_train = pst_train or vae_train, mmae_train or vae_train
     env = env or init_distributed(vae_train.device)
     encoder, encoder_name = _text_encoder(text_encoder, env.device)   # loaded once for both text stages
     results: dict[str, TrainResult] = {}
     results["kf_vae"] = train_kf_vae(data_dir, out / "kf_vae", vae_config, vae_train, resume, env=env)
+    if results["kf_vae"].interrupted:
+        return results
     # the MMAE in-fills from as many keyframes as the trained VAE generates
     vae_doc = json.loads(resolve_checkpoint(out / "kf_vae").with_suffix(".json").read_text())
     num_keyframes = int(vae_doc["config"]["num_keyframes"])
-    results["pst"] = train_pst(data_dir, out / "pst", out / "kf_vae", pst_config, pst_train or vae_train, encoder,
-                               resume, env=env)
-    results["mmae"] = train_mmae(data_dir, out / "mmae", mmae_config, mmae_train or vae_train, encoder, resume,
-                                 num_keyframes=num_keyframes, env=env)
-    if env.is_main:
+    pst_cache = CaptionFeatureCache(encoder, pst_train.text_cache_size)
+    mmae_cache = pst_cache if mmae_train.text_cache_size == pst_train.text_cache_size else None
+    results["pst"] = train_pst(data_dir, out / "pst", out / "kf_vae", pst_config, pst_train, encoder, resume,
+                               env=env, text_cache=pst_cache)
+    if results["pst"].interrupted:
+        return results
+    results["mmae"] = train_mmae(data_dir, out / "mmae", mmae_config, mmae_train, encoder, resume,
+                                 num_keyframes=num_keyframes, env=env, text_cache=mmae_cache)
+    if env.is_main and not results["mmae"].interrupted:
+        # 120 frames (6 s) unless the models were trained on shorter motions
+        default_length = min(120, vae_train.max_length, pst_train.max_length, mmae_train.max_length)
         doc = {"format": "keymotion_pipeline", "version": 1, "text_encoder": encoder_name,
-               "diffusion": config_to_dict(PST_DIFFUSION), "default_length": 120}
+               "diffusion": config_to_dict(PST_DIFFUSION), "default_length": default_length}
         atomic_write_text(out / "keymotion.json", json.dumps(doc, indent=2) + "\n")
     return results
+
+
+# --------------------------------------------------------------------------- config files
+#: The three stages, in training order (run folders and config sections of that name).
+STAGES: tuple[str, ...] = ("kf_vae", "pst", "mmae")
+_MODEL_CONFIGS: dict[str, type] = {"kf_vae": KeyframeVAEConfig, "pst": PSTConfig, "mmae": MMAEConfig}
+
+
+@dataclass(frozen=True)
+class KeyMotionRecipe:
+    """Everything :func:`train_keymotion` needs, read from / written to one JSON document.
+
+    The document (``configs/default_keymotion.json``; a run's ``config.json``)::
+
+        {"text_encoder": "minilm",
+         "train":  {...},                                  fields shared by the three stages
+         "kf_vae": {"model": {...}, "train": {...}},       KeyframeVAEConfig, stage train fields
+         "pst":    {"model": {...}, "train": {...}},       PSTConfig
+         "mmae":   {"model": {...}, "train": {...}}}       MMAEConfig
+
+    A stage's train config is the shared ``"train"`` fields updated by its own. Omitted model
+    configs use the model defaults; the PST's ``latent_size``/``latent_dim`` default to the
+    keyframe VAE's.
+    """
+
+    kf_vae_model: KeyframeVAEConfig | None = None      # None: KeyframeVAEConfig defaults
+    pst_model: PSTConfig | None = None                 # None: sized from the VAE and the text encoder
+    mmae_model: MMAEConfig | None = None               # None: MMAEConfig defaults (text_dim of the encoder)
+    kf_vae_train: KeyMotionTrainConfig = KeyMotionTrainConfig()   # keyframe VAE recipe
+    pst_train: KeyMotionTrainConfig = KeyMotionTrainConfig()      # PST recipe
+    mmae_train: KeyMotionTrainConfig = KeyMotionTrainConfig()     # MMAE recipe
+    text_encoder: str = "minilm"                       # "minilm" or a local CLIP folder
+
+    def __post_init__(self) -> None:
+        for stage in STAGES:
+            model, train = getattr(self, f"{stage}_model"), getattr(self, f"{stage}_train")
+            if model is not None and not isinstance(model, _MODEL_CONFIGS[stage]):
+                raise TypeError(f"KeyMotionRecipe.{stage}_model must be a {_MODEL_CONFIGS[stage].__name__} or None, "
+                                f"got {type(model).__name__}")
+            if not isinstance(train, KeyMotionTrainConfig):
+                raise TypeError(f"KeyMotionRecipe.{stage}_train must be a KeyMotionTrainConfig, got {type(train).__name__}")
+        if not isinstance(self.text_encoder, str) or not self.text_encoder:
+            raise ValueError(f"KeyMotionRecipe.text_encoder={self.text_encoder!r} is invalid; use 'minilm' or a CLIP folder")
+
+    @classmethod
+    def from_doc(cls, doc: dict[str, Any], *, train_overrides: dict[str, Any] | None = None,
+                 stage_overrides: dict[str, dict[str, Any]] | None = None) -> "KeyMotionRecipe":
+        """Build from a document (see the class docstring).
+
+        ``train_overrides`` replace fields of every stage's train config, then
+        ``stage_overrides[stage]`` those of one stage (e.g. ``{"pst": {"max_steps": 900}}``);
+        None values are ignored.
+        """
+        from salad_core.io import config_from_dict
+
+        if not isinstance(doc, dict):
+            raise ValueError(f"a KeyMotion config must be a JSON object, got {type(doc).__name__}")
+        known = {"text_encoder", "train", *STAGES}
+        unknown = sorted(k for k in doc if k not in known and not k.startswith("_"))
+        if unknown:
+            raise ValueError(f"unknown keys {unknown} in the KeyMotion config; allowed: {sorted(known)}")
+        stage_overrides = stage_overrides or {}
+        bad = sorted(set(stage_overrides) - set(STAGES))
+        if bad:
+            raise ValueError(f"stage_overrides has unknown stages {bad}; use {list(STAGES)}")
+        shared = doc.get("train") or {}
+        kw: dict[str, Any] = {"text_encoder": doc.get("text_encoder", "minilm")}
+        for stage in STAGES:
+            section = doc.get(stage) or {}
+            extra = sorted(set(section) - {"model", "train"})
+            if extra:
+                raise ValueError(f"section {stage!r} of the KeyMotion config has unknown keys {extra}; "
+                                 "allowed: ['model', 'train']")
+            fields = {**shared, **(section.get("train") or {})}
+            for over in (train_overrides or {}, stage_overrides.get(stage) or {}):
+                fields.update({k: v for k, v in over.items() if v is not None})
+            kw[f"{stage}_train"] = config_from_dict(KeyMotionTrainConfig, fields)
+            model = dict(section.get("model") or {})
+            if stage == "pst" and model and kw["kf_vae_model"] is not None:
+                vae = kw["kf_vae_model"]
+                model.setdefault("latent_size", vae.latent_size)
+                model.setdefault("latent_dim", vae.latent_dim)
+            kw[f"{stage}_model"] = config_from_dict(_MODEL_CONFIGS[stage], model) if model else None
+        return cls(**kw)
+
+    def to_doc(self) -> dict[str, Any]:
+        """The document (full train config per stage, no shared ``"train"`` section)."""
+        doc: dict[str, Any] = {"text_encoder": self.text_encoder}
+        for stage in STAGES:
+            model = getattr(self, f"{stage}_model")
+            section: dict[str, Any] = {"train": config_to_dict(getattr(self, f"{stage}_train"))}
+            if model is not None:
+                section["model"] = config_to_dict(model)
+            doc[stage] = section
+        return doc
+
+    def train_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`train_keymotion`."""
+        return {"vae_config": self.kf_vae_model, "pst_config": self.pst_model, "mmae_config": self.mmae_model,
+                "vae_train": self.kf_vae_train, "pst_train": self.pst_train, "mmae_train": self.mmae_train,
+                "text_encoder": self.text_encoder}
+
+
+def load_keymotion_recipe(path: str | os.PathLike, **overrides: Any) -> KeyMotionRecipe:
+    """Read a KeyMotion config JSON file (``overrides``: those of :meth:`KeyMotionRecipe.from_doc`)."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path} is not valid JSON: {exc}") from None
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: a KeyMotion config must be a JSON object, got {type(doc).__name__}")
+    return KeyMotionRecipe.from_doc(doc, **overrides)

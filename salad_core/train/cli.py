@@ -1,4 +1,4 @@
-"""``salad train vae|denoiser ...``: the command line of the trainers (also ``python -m salad_core.train``).
+"""``salad train vae|denoiser|keymotion ...``: the command line of the trainers (also ``python -m salad_core.train``).
 
 Under ``torchrun --nproc_per_node=N -m salad_core.train ...`` the same command trains with DDP.
 
@@ -7,6 +7,15 @@ The ``--config`` file is JSON, either a bare training config (the fields of
 of the keys ``"train"``, ``"model"`` (the model config), ``"diffusion"`` and ``"text_encoder"``,
 which is the shape of a run's own ``config.json``. With ``--resume`` and no ``--config`` the run's
 ``config.json`` is used.
+
+``keymotion`` trains the keyframe VAE, the PST and the MMAE one after the other into
+``--out/{kf_vae,pst,mmae}`` (:func:`salad_core.keymotion.train.train_keymotion`). Its ``--config``
+is a :class:`~salad_core.keymotion.train.KeyMotionRecipe` document (``configs/default_keymotion.json``:
+``text_encoder``, shared ``train`` fields, and ``kf_vae``/``pst``/``mmae`` sections with ``model`` and
+``train``); the resolved recipe is written to ``--out/config.json``, which ``--resume`` reads when
+no ``--config`` is given. ``--steps`` and ``--batch-size`` apply to every stage,
+``--steps-per-stage KF_VAE PST MMAE`` to each stage. With ``--resume`` finished stages are skipped
+and an interrupted one continues exactly.
 """
 from __future__ import annotations
 
@@ -21,20 +30,30 @@ from salad_core.io import config_from_dict
 
 from .config import DenoiserTrainConfig, VAETrainConfig
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "TRAIN_TARGETS"]
+
+#: What ``salad train`` can train (the single source of the ``what`` choices).
+TRAIN_TARGETS: tuple[str, ...] = ("vae", "denoiser", "keymotion")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="salad train", description="Train the SALAD VAE or denoiser.")
-    parser.add_argument("what", choices=("vae", "denoiser"), help="which model to train")
+    parser = argparse.ArgumentParser(
+        prog="salad train", formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Train the SALAD VAE or denoiser, or the three KeyMotion models.",
+        epilog="example:\n  salad train vae --data data/procedural --out runs/vae --config configs/default_vae.json\n"
+               "  salad train denoiser --data data/procedural --out runs/denoiser --vae runs/vae\n"
+               "  salad train keymotion --data data/procedural --out runs/keymotion --config configs/default_keymotion.json")
+    parser.add_argument("what", choices=TRAIN_TARGETS, help="which model to train")
     parser.add_argument("--data", required=True, help="HumanML3D-layout data folder")
     parser.add_argument("--out", required=True, help="run folder (checkpoints, logs)")
     parser.add_argument("--config", help="JSON file: a training config or {train, model, diffusion, text_encoder}")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out exactly where it stopped")
-    parser.add_argument("--steps", type=int, help="max optimiser steps (overrides the config)")
+    parser.add_argument("--steps", type=int, help="max optimiser steps (overrides the config; keymotion: every stage)")
+    parser.add_argument("--steps-per-stage", type=int, nargs=3, metavar=("KF_VAE", "PST", "MMAE"),
+                        help="keymotion only: max optimiser steps of each stage (overrides the config)")
     parser.add_argument("--batch-size", type=int, help="global batch size (overrides the config)")
     parser.add_argument("--vae", help="denoiser only: VAE run folder or checkpoint")
-    parser.add_argument("--text-encoder", help="denoiser only: 'minilm' (default) or a local CLIP folder")
+    parser.add_argument("--text-encoder", help="denoiser, keymotion: 'minilm' (default) or a local CLIP folder")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     return parser
@@ -54,10 +73,21 @@ def _read_doc(args: argparse.Namespace) -> dict[str, Any]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the trainer; returns the process exit code (130 when stopped by a signal)."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.steps_per_stage is not None and args.what != "keymotion":
+        parser.error("--steps-per-stage is for keymotion only (use --steps)")
+    if args.steps_per_stage is not None and args.steps is not None:
+        parser.error("give --steps (every stage) or --steps-per-stage, not both")
+    if args.steps_per_stage is not None and min(args.steps_per_stage) < 0:
+        parser.error(f"--steps-per-stage {args.steps_per_stage} must be integers >= 0")
+    if args.vae is not None and args.what == "keymotion":
+        parser.error("--vae is for the denoiser only (keymotion trains its own keyframe VAE)")
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     doc = _read_doc(args)
+    if args.what == "keymotion":
+        return _main_keymotion(args, doc)
     cls = VAETrainConfig if args.what == "vae" else DenoiserTrainConfig
     train_doc = doc.get("train", {k: v for k, v in doc.items() if k not in ("model", "diffusion", "text_encoder", "model_type", "task", "_path")})
     overrides = {"max_steps": args.steps, "batch_size": args.batch_size}
@@ -100,6 +130,46 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{args.what}: step {result.step}, last loss {result.last_loss}, best val {result.best_val} "
               f"(step {result.best_step}), {result.steps_per_s:.3f} steps/s -> {result.out_dir}")
     return 130 if result.interrupted else 0
+
+
+def _main_keymotion(args: argparse.Namespace, doc: dict[str, Any]) -> int:
+    """``salad train keymotion``: the three stages into ``args.out``."""
+    from salad_core.io import atomic_write_text
+    from salad_core.keymotion.train import STAGES, KeyMotionRecipe, train_keymotion
+
+    overrides: dict[str, Any] = {"max_steps": args.steps, "batch_size": args.batch_size}
+    if args.no_progress:
+        overrides["progress"] = False
+    per_stage = dict(zip(STAGES, ({"max_steps": n} for n in args.steps_per_stage))) if args.steps_per_stage else None
+    if args.text_encoder:
+        doc = {**doc, "text_encoder": args.text_encoder}
+    try:
+        recipe = KeyMotionRecipe.from_doc(doc, train_overrides=overrides, stage_overrides=per_stage)
+    except (TypeError, ValueError) as exc:
+        raise SystemExit(f"--config {doc.get('_path', '(defaults)')}: {exc}") from None
+    out = Path(args.out)
+    if not args.resume and any((out / stage / "train_state.safetensors").exists() for stage in STAGES):
+        raise SystemExit(f"{out} already holds a KeyMotion training run; pass --resume to continue it "
+                         "or choose another --out folder")
+
+    from .distributed import init_distributed, shutdown_distributed
+
+    env = init_distributed(recipe.kf_vae_train.device)
+    if not env.is_main:
+        logging.getLogger().setLevel(logging.WARNING)
+    try:
+        if env.is_main:
+            out.mkdir(parents=True, exist_ok=True)
+            # the resolved recipe: what --resume without --config continues
+            atomic_write_text(out / "config.json", json.dumps(recipe.to_doc(), indent=2) + "\n")
+        results = train_keymotion(args.data, args.out, **recipe.train_kwargs(), resume=args.resume, env=env)
+    finally:
+        shutdown_distributed()
+    if env.is_main:
+        for stage, result in results.items():
+            print(f"keymotion {stage}: step {result.step}, last loss {result.last_loss}, best val {result.best_val} "
+                  f"(step {result.best_step}), {result.steps_per_s:.3f} steps/s -> {result.out_dir}")
+    return 130 if any(r.interrupted for r in results.values()) else 0
 
 
 if __name__ == "__main__":  # pragma: no cover

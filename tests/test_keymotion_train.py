@@ -1,0 +1,260 @@
+"""``salad train keymotion``: config document, CLI, staged resume, and the shipped KeyMotion weights.
+
+The CLI runs on a tiny procedural corpus with tiny models and a deterministic hashing text encoder
+(patched in place of MiniLM, which the training would otherwise load and run on every caption).
+The shipped-weights tests load the real package folder ``salad_core/weights/keymotion`` with MiniLM.
+"""
+from __future__ import annotations
+
+import json
+import tomllib
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from safetensors import safe_open
+
+from salad_core.data.texts import split_words
+from salad_core.io import load_tensors
+from salad_core.keymotion.pipeline import DEFAULT_WEIGHTS_DIR, KeyMotionPipeline
+from salad_core.keymotion.train import STAGES, KeyMotionRecipe, KeyMotionTrainConfig, load_keymotion_recipe
+from salad_core.skeleton import get_skeleton
+from salad_core.text import TextBatch
+from salad_core.train.cli import TRAIN_TARGETS, build_parser
+from salad_core.train.cli import main as train_main
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_CONFIG = ROOT / "configs" / "default_keymotion.json"
+D = get_skeleton("humanml3d").feature_dim
+TEXT_DIM = 16
+SIZE_CAP = 10 * 1024 * 1024
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    old = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(old)
+
+
+class HashTextEncoder:
+    """Deterministic toy encoder: [CLS] words [SEP], each token a fixed random vector from its crc32."""
+
+    name = "hash"
+    dim = TEXT_DIM
+
+    def encode(self, prompts, allow_empty: bool = False) -> TextBatch:
+        words = [split_words(p) for p in prompts]
+        toks = [["[CLS]", *w, "[SEP]"] for w in words]
+        width = max(len(t) for t in toks)
+        feats = torch.zeros(len(prompts), width, self.dim)
+        mask = torch.zeros(len(prompts), width, dtype=torch.bool)
+        for b, t in enumerate(toks):
+            for j, tok in enumerate(t):
+                feats[b, j] = torch.randn(self.dim, generator=torch.Generator().manual_seed(zlib.crc32(tok.encode())))
+            mask[b, : len(t)] = True
+        return TextBatch(feats, mask, toks, [[None, *range(len(w)), None] for w in words], words, list(prompts))
+
+
+TINY_DOC = {
+    "text_encoder": "minilm",
+    "train": {"batch_size": 8, "lr": 1e-3, "warmup_steps": 1, "val_every": 2, "val_batches": 1, "ckpt_every": 1,
+              "log_every": 1, "seed": 7, "num_threads": 1, "device": "cpu", "max_length": 96},
+    "kf_vae": {"model": {"num_keyframes": 8, "max_length": 96, "frame_dim": 56, "index_dim": 8, "latent_size": 2,
+                         "latent_dim": 16, "num_layers": 1, "num_heads": 4, "ff_dim": 64, "dropout": 0.0},
+               "train": {"max_steps": 3}},
+    "pst": {"model": {"text_dim": TEXT_DIM, "width": 32, "num_heads": 4, "ff_dim": 64, "num_cond_layers": 1,
+                      "num_cross_layers": 2, "dropout": 0.0, "max_length": 96},
+            "train": {"max_steps": 3, "lr": 2e-3}},
+    "mmae": {"model": {"text_dim": TEXT_DIM, "max_length": 96, "width": 32, "num_layers": 1, "num_heads": 4,
+                       "ff_dim": 64, "dropout": 0.0},
+             "train": {"max_steps": 3, "keyframe_noise": 0.05}},
+}
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory) -> Path:
+    """The tiny procedural corpus (HumanML3D layout), built once."""
+    from salad_core.data.procedural import build_corpus
+
+    root = tmp_path_factory.mktemp("procedural_tiny")
+    build_corpus(root, size="tiny", seed=0, progress=False)
+    return root
+
+
+@pytest.fixture()
+def hash_encoder(monkeypatch) -> HashTextEncoder:
+    """``load_text_encoder`` returns the hashing encoder (the trainers import it at call time)."""
+    enc = HashTextEncoder()
+    monkeypatch.setattr("salad_core.text.load_text_encoder", lambda name, device="cpu": enc)
+    return enc
+
+
+def _config_file(tmp_path: Path, doc: dict) -> Path:
+    path = tmp_path / "km.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def _weights(path: Path) -> dict[str, torch.Tensor]:
+    return load_tensors(path)
+
+
+# ----------------------------------------------------------------------------- parsing
+def test_parser_targets_and_keymotion_options():
+    parser = build_parser()
+    what = next(a for a in parser._actions if a.dest == "what")
+    assert tuple(what.choices) == TRAIN_TARGETS and "keymotion" in TRAIN_TARGETS
+    args = parser.parse_args(["keymotion", "--data", "d", "--out", "o", "--steps-per-stage", "10", "20", "30",
+                              "--resume"])
+    assert args.what == "keymotion" and args.steps_per_stage == [10, 20, 30] and args.resume
+    with pytest.raises(SystemExit):
+        parser.parse_args(["keymotion", "--data", "d", "--out", "o", "--steps-per-stage", "10", "20"])
+    with pytest.raises(SystemExit):
+        parser.parse_args(["gan", "--data", "d", "--out", "o"])
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["vae", "--steps-per-stage", "1", "2", "3"], "for keymotion only"),
+    (["keymotion", "--steps", "5", "--steps-per-stage", "1", "2", "3"], "not both"),
+    (["keymotion", "--steps-per-stage", "1", "-2", "3"], "must be integers >= 0"),
+    (["keymotion", "--vae", "runs/vae"], "denoiser only"),
+])
+def test_cli_rejects_bad_combinations(argv, message, capsys, tmp_path):
+    with pytest.raises(SystemExit) as exc:
+        train_main([*argv[:1], "--data", str(tmp_path), "--out", str(tmp_path / "o"), *argv[1:]])
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_default_config_file_parses_into_three_stages():
+    recipe = load_keymotion_recipe(DEFAULT_CONFIG)
+    doc = json.loads(DEFAULT_CONFIG.read_text())
+    assert recipe.text_encoder == "minilm"
+    for stage in STAGES:
+        train = getattr(recipe, f"{stage}_train")
+        assert isinstance(train, KeyMotionTrainConfig)
+        assert train.max_steps == doc[stage]["train"]["max_steps"]        # stage field
+        assert train.num_threads == 1 and train.seed == doc["train"]["seed"]  # shared field
+        model = getattr(recipe, f"{stage}_model")
+        assert {k: getattr(model, k) for k in doc[stage]["model"]} == doc[stage]["model"]
+    # the PST denoises the VAE's latents, the text stages read MiniLM's 384-d features
+    assert (recipe.pst_model.latent_size, recipe.pst_model.latent_dim) == \
+        (recipe.kf_vae_model.latent_size, recipe.kf_vae_model.latent_dim)
+    assert recipe.pst_model.text_dim == recipe.mmae_model.text_dim == 384
+    assert recipe.mmae_train.keyframe_noise == doc["mmae"]["train"]["keyframe_noise"]
+    assert recipe.kf_vae_train.keyframe_noise == 0.0
+    # the written document reads back to the same recipe
+    assert KeyMotionRecipe.from_doc(json.loads(json.dumps(recipe.to_doc()))) == recipe
+
+
+def test_recipe_overrides_defaults_and_errors():
+    doc = {"train": {"batch_size": 16, "max_steps": 50},
+           "kf_vae": {"model": {"latent_size": 3, "latent_dim": 8, "num_keyframes": 10}},
+           "pst": {"model": {"width": 64}, "train": {"max_steps": 70}}}
+    r = KeyMotionRecipe.from_doc(doc, train_overrides={"batch_size": 4, "max_steps": None},
+                                 stage_overrides={"mmae": {"max_steps": 9}})
+    assert [getattr(r, f"{s}_train").max_steps for s in STAGES] == [50, 70, 9]
+    assert {getattr(r, f"{s}_train").batch_size for s in STAGES} == {4}
+    assert (r.pst_model.latent_size, r.pst_model.latent_dim, r.pst_model.width) == (3, 8, 64)  # from the VAE
+    assert r.mmae_model is None and r.text_encoder == "minilm"
+    kw = r.train_kwargs()
+    assert kw["vae_config"].num_keyframes == 10 and kw["mmae_train"].max_steps == 9
+    with pytest.raises(ValueError, match=r"unknown keys \['vae'\]"):
+        KeyMotionRecipe.from_doc({"vae": {}})
+    with pytest.raises(ValueError, match=r"section 'pst' .* unknown keys \['diffusion'\]"):
+        KeyMotionRecipe.from_doc({"pst": {"diffusion": {}}})
+    with pytest.raises(ValueError, match="batch_size"):
+        KeyMotionRecipe.from_doc({"train": {"batch_size": 0}})
+    with pytest.raises(ValueError, match=r"unknown stages \['denoiser'\]"):
+        KeyMotionRecipe.from_doc({}, stage_overrides={"denoiser": {"max_steps": 1}})
+
+
+# ------------------------------------------------------------------------------- training
+def test_cli_trains_three_stages_then_resumes_exactly(tmp_path, corpus, hash_encoder, capsys):
+    cfg = _config_file(tmp_path, TINY_DOC)
+    base = ["keymotion", "--data", str(corpus), "--config", str(cfg), "--no-progress"]
+    # one run straight through: 3 steps per stage
+    full = tmp_path / "full"
+    assert train_main([*base, "--out", str(full)]) == 0
+    printed = capsys.readouterr().out
+    assert all(f"keymotion {s}: step 3" in printed for s in STAGES)
+    for stage in STAGES:
+        lines = [json.loads(l) for l in (full / stage / "log.jsonl").read_text().splitlines()]
+        assert [l["step"] for l in lines if "loss" in l] == [1, 2, 3]
+        assert all(np.isfinite(l["loss"]) for l in lines if "loss" in l)
+    written = json.loads((full / "config.json").read_text())
+    assert written["pst"]["train"]["lr"] == 2e-3 and written["mmae"]["model"]["width"] == 32
+    assert json.loads((full / "keymotion.json").read_text())["format"] == "keymotion_pipeline"
+
+    # the same run stopped inside the PST (step 1) and before the MMAE, then resumed from config.json
+    part = tmp_path / "part"
+    assert train_main([*base, "--out", str(part), "--steps-per-stage", "3", "1", "0"]) == 0
+    assert json.loads((part / "config.json").read_text())["pst"]["train"]["max_steps"] == 1
+    capsys.readouterr()
+    assert train_main(["keymotion", "--data", str(corpus), "--out", str(part), "--resume", "--no-progress",
+                       "--steps-per-stage", "3", "3", "3"]) == 0
+    printed = capsys.readouterr().out
+    assert all(f"keymotion {s}: step 3" in printed for s in STAGES)
+    for stage in STAGES:
+        a, b = _weights(full / stage / "latest.safetensors"), _weights(part / stage / "latest.safetensors")
+        assert a.keys() == b.keys()
+        assert all(torch.equal(a[k], b[k]) for k in a), f"{stage}: resumed weights differ from the straight run"
+
+    # the trained folder loads and generates motions of the asked lengths
+    pipe = KeyMotionPipeline.from_pretrained(part, text_encoder=hash_encoder)
+    assert pipe.num_keyframes == 8 and pipe.mmae.config.width == 32
+    assert pipe.default_length == 96                                  # capped by the trained max_length
+    out = pipe(["a person walks", "a person jumps"], lengths=[40, 64], num_steps=3, guidance_scale=2.0)
+    assert out.features.shape == (2, 64, D) and np.isfinite(out.features).all()
+    assert not out.features[0, 40:].any()
+
+    # a second fresh run into a used folder is refused, and its recorded recipe is left alone
+    before = (full / "config.json").read_bytes()
+    with pytest.raises(SystemExit, match="already holds a KeyMotion training run"):
+        train_main([*base, "--out", str(full), "--steps", "9"])
+    assert (full / "config.json").read_bytes() == before
+
+
+# -------------------------------------------------------------------------- shipped weights
+@pytest.fixture(scope="module")
+def shipped() -> KeyMotionPipeline:
+    return KeyMotionPipeline.from_pretrained()
+
+
+def test_shipped_folder_is_safetensors_json_md_under_the_size_cap():
+    files = sorted(p for p in DEFAULT_WEIGHTS_DIR.iterdir() if p.is_file())
+    names = {p.name for p in files}
+    assert {"keymotion.json", "MODEL_CARD.md"} | {f"{s}.{e}" for s in STAGES for e in ("json", "safetensors")} <= names
+    assert {p.suffix for p in files} <= {".safetensors", ".json", ".md"}
+    tensors = [p for p in files if p.suffix == ".safetensors"]
+    assert sum(p.stat().st_size for p in tensors) < SIZE_CAP
+    for p in tensors:
+        with safe_open(str(p), "pt") as fh:                            # real safetensors, stored in fp16
+            dtypes = {fh.get_slice(k).get_dtype() for k in fh.keys()}
+        assert dtypes <= {"F16", "I64", "BOOL"} and "F16" in dtypes, (p.name, dtypes)
+    # the package data globs of pyproject.toml pick up every shipped file
+    globs = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]["salad_core"]
+    packaged = {q for g in globs for q in (ROOT / "salad_core").glob(g)}
+    assert set(files) <= packaged
+
+
+def test_shipped_pipeline_loads_in_float32_and_generates_deterministically(shipped):
+    assert shipped.text_encoder_name == "minilm" and shipped.text_encoder.dim == 384
+    for model in (shipped.kf_vae, shipped.pst, shipped.mmae):
+        assert {p.dtype for p in model.parameters()} == {torch.float32}   # fp16 storage cast back
+    prompts = ["a person walks forward", "a man waves his left hand"]
+    a = shipped(prompts, lengths=[60, 100], seed=3, num_steps=10)
+    assert a.features.shape == (2, 100, D) and a.lengths == [60, 100]
+    assert np.isfinite(a.features).all() and not a.features[0, 60:].any()
+    assert [j.shape for j in a.joints] == [(60, 22, 3), (100, 22, 3)]
+    assert all(np.isfinite(j).all() for j in a.joints)
+    assert all(k[0] == 0 and k[-1] == n - 1 and (np.diff(k) > 0).all() for k, n in zip(a.keyframes, a.lengths))
+    b = shipped(prompts, lengths=[60, 100], seed=3, num_steps=10)
+    np.testing.assert_array_equal(a.features, b.features)
+    c = shipped(prompts, lengths=[60, 100], seed=4, num_steps=10)
+    assert not np.allclose(a.features, c.features)
