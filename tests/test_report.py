@@ -1,0 +1,271 @@
+"""salad_core.eval.report: published Table 1, held-out corpus clips, official-release loading,
+length-bucketed generation and the KeyMotion round trips used by the notebooks.
+
+Tiny seeded models, one CPU thread, a hashing text encoder (no MiniLM) and a 40-motion corpus.
+"""
+from __future__ import annotations
+
+import itertools
+import zlib
+
+import numpy as np
+import pytest
+import torch
+
+from salad_core.data.texts import split_words
+from salad_core.eval import EvalResult, results_frame, to_markdown
+from salad_core.eval.metrics import mpjpe
+from salad_core.eval.protocol import METRICS
+from salad_core.eval.report import (
+    PAPER_TABLE1,
+    LengthBucketed,
+    heldout_corpus,
+    infill_from_keyframes,
+    keyframe_roundtrip,
+    length_groups,
+    official_salad_pipeline,
+    paper_table1,
+    read_official_options,
+)
+from salad_core.keymotion import select_keyframes
+from salad_core.keymotion.kf_vae import KeyframeVAE, KeyframeVAEConfig
+from salad_core.keymotion.mmae import MMAEConfig, MotionMaskedAutoencoder
+from salad_core.keymotion.models import pose_joints
+from salad_core.keymotion.pipeline import KeyMotionPipeline
+from salad_core.keymotion.pst import ParallelSkipTransformer, PSTConfig
+from salad_core.models import Denoiser, DenoiserConfig, MotionVAE, VAEConfig
+from salad_core.pipeline import SaladPipeline
+from salad_core.skeleton import get_skeleton
+from salad_core.text import TextBatch
+
+SK = get_skeleton("humanml3d")
+TEXT_DIM = 32
+K = 8
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread(single_thread):
+    yield
+
+
+class HashTextEncoder:
+    """Deterministic toy encoder: [CLS] words [SEP], each token a fixed random vector from its crc32."""
+
+    name = "hash"
+    dim = TEXT_DIM
+    max_tokens = 32
+
+    def _vec(self, token: str) -> torch.Tensor:
+        return torch.randn(self.dim, generator=torch.Generator().manual_seed(zlib.crc32(token.encode())))
+
+    def encode(self, prompts, allow_empty: bool = False) -> TextBatch:
+        words = [split_words(p) for p in prompts]
+        toks = [["[CLS]", *w, "[SEP]"] for w in words]
+        width = max(len(t) for t in toks)
+        feats = torch.zeros(len(prompts), width, self.dim)
+        mask = torch.zeros(len(prompts), width, dtype=torch.bool)
+        for b, t in enumerate(toks):
+            for j, tok in enumerate(t):
+                feats[b, j] = self._vec(tok)
+            mask[b, : len(t)] = True
+        return TextBatch(feats, mask, toks, [[None, *range(len(w)), None] for w in words], words, list(prompts))
+
+
+def _tiny_salad(sample_dir, seed=0, activation="gelu", heads=2):
+    torch.manual_seed(seed)
+    vae = MotionVAE(VAEConfig(activation=activation)).eval()
+    den = Denoiser(DenoiserConfig(width=32, heads=heads, ff_dim=64, layers=3, text_dim=TEXT_DIM, dropout=0.0)).eval()
+    return vae, den, np.load(sample_dir / "Mean.npy"), np.load(sample_dir / "Std.npy")
+
+
+@pytest.fixture(scope="module")
+def salad_pipe(sample_dir):
+    vae, den, mean, std = _tiny_salad(sample_dir)
+    return SaladPipeline(vae, den, HashTextEncoder(), mean, std)
+
+
+@pytest.fixture(scope="module")
+def keymotion_pipe(sample_dir):
+    torch.manual_seed(3)
+    vae = KeyframeVAE(KeyframeVAEConfig(num_keyframes=K, frame_dim=56, index_dim=8, latent_size=2, latent_dim=16,
+                                        num_layers=1, num_heads=4, ff_dim=128, dropout=0.0))
+    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4,
+                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
+    mmae = MotionMaskedAutoencoder(MMAEConfig(text_dim=TEXT_DIM, width=64, num_layers=2, num_heads=4, ff_dim=128,
+                                              dropout=0.0))
+    mean, std = np.load(sample_dir / "Mean.npy"), np.load(sample_dir / "Std.npy")
+    for m in (vae, mmae):
+        m.set_normalization(mean, std)
+    # a non-zero output head, so the MMAE's correction of the interpolation is not trivially zero
+    with torch.no_grad():
+        for p in mmae.out.parameters():
+            p.normal_(0.0, 0.05)
+    return KeyMotionPipeline(vae, pst, mmae, HashTextEncoder())
+
+
+# ------------------------------------------------------------------------------ paper table
+def test_paper_table1_holds_the_published_rows_labelled_as_the_papers():
+    df = paper_table1()
+    assert list(df["name"]) == ["paper: Real motion", "paper: SALAD"]
+    assert (df["kind"] == "paper").all()
+    salad = df.iloc[1]
+    assert (salad["R-precision top-1"], salad["R-precision top-3"], salad["R-precision top-3 ±"]) == (.581, .857, .002)
+    assert (salad["FID"], salad["FID ±"], salad["MM-Dist"], salad["MultiModality"]) == (.076, .002, 2.649, 1.751)
+    assert np.isnan(df.iloc[0]["MultiModality"]) and df.iloc[0]["FID"] == .002
+    kit = paper_table1("kit", methods=["SALAD"])
+    assert kit.iloc[0]["FID"] == .296 and kit.iloc[0]["Diversity"] == 11.097
+    every = paper_table1(methods=None)
+    assert len(every) == len(PAPER_TABLE1["humanml3d"]) == 10
+    assert np.isnan(every.set_index("name").loc["paper: MoMask", "Diversity"])
+    # usable as the published reference beside computed rows
+    ours = results_frame([EvalResult("SALAD", {m: (0.5, 0.6) for m in METRICS[:6]}, {"kind": "generator"})])
+    md = to_markdown(ours, reference=df)
+    assert "Published numbers" in md and "0.857 ± 0.002" in md and "1.751 ± 0.062" in md
+    with pytest.raises(ValueError, match="not rows of the paper's Table 1"):
+        paper_table1(methods=["KeyMotion"])
+
+
+# ---------------------------------------------------------------------------- held-out corpus
+def test_heldout_corpus_writes_the_split_clips_byte_for_byte(tmp_path):
+    from salad_core.data.procedural import build_corpus
+
+    build_corpus(tmp_path / "full", size=40, seed=3, progress=False)
+    out = heldout_corpus(tmp_path / "held", motions=3, size=40, seed=3)
+    names = (out / "test.txt").read_text().split()
+    full_test = (tmp_path / "full" / "test.txt").read_text().split()
+    first = sorted({int(n.lstrip("M")) for n in full_test})[:3]       # the split's first 3 motions, by id
+    assert names == sorted([f"{i:06d}" for i in first] + [f"M{i:06d}" for i in first])
+    assert set(names) <= set(full_test)
+    for n in names:
+        for sub, ext in (("new_joint_vecs", "npy"), ("new_joints", "npy"), ("texts", "txt"), ("annotations", "json")):
+            assert (out / sub / f"{n}.{ext}").read_bytes() == (tmp_path / "full" / sub / f"{n}.{ext}").read_bytes()
+    assert not (out / "train.txt").exists()
+    with pytest.raises(FileExistsError):
+        heldout_corpus(out, motions=1, size=40, seed=3)
+    with pytest.raises(ValueError, match="motions=99"):
+        heldout_corpus(tmp_path / "other", motions=99, size=40, seed=3)
+
+
+# ------------------------------------------------------------------------------ official
+def test_read_official_options_types(tmp_path):
+    p = tmp_path / "opt.txt"
+    p.write_text("------------ Options -------------\nname: t2m_denoiser_vpred_vaegelu\nis_continue: False\n"
+                 "lr: 0.0005\nn_layers: 5\nmilestones: [50000]\ncheckpoints_dir: ./checkpoints\n"
+                 "clip_version: ViT-B/32\n-------------- End ----------------\n")
+    opt = read_official_options(p)
+    assert opt == {"name": "t2m_denoiser_vpred_vaegelu", "is_continue": False, "lr": 0.0005, "n_layers": 5,
+                   "milestones": [50000], "checkpoints_dir": "./checkpoints", "clip_version": "ViT-B/32"}
+    with pytest.raises(FileNotFoundError, match="opt.txt"):
+        read_official_options(tmp_path / "missing" / "opt.txt")
+
+
+def test_official_salad_pipeline_loads_a_release_folder(tmp_path, sample_dir):
+    vae, den, mean, std = _tiny_salad(sample_dir, seed=5, activation="silu", heads=4)
+    ds = tmp_path / "checkpoints" / "t2m"
+    for sub in ("den/model", "myvae/model", "Comp_v6_KLD005/meta"):
+        (ds / sub).mkdir(parents=True)
+    (ds / "den" / "opt.txt").write_text("name: den\nvae_name: myvae\nn_heads: 4\nbeta_end: 0.02\n"
+                                        "prediction_type: epsilon\nactivation: gelu\n")
+    (ds / "myvae" / "opt.txt").write_text("name: myvae\nactivation: silu\n")
+    torch.save({"vae": vae.official_state_dict(), "epoch": 3}, ds / "myvae" / "model" / "net_best_fid.tar")
+    torch.save({"denoiser": den.official_state_dict(), "epoch": 7}, ds / "den" / "model" / "net_best_fid.tar")
+    np.save(ds / "Comp_v6_KLD005" / "meta" / "mean.npy", mean)
+    np.save(ds / "Comp_v6_KLD005" / "meta" / "std.npy", std)
+
+    pipe = official_salad_pipeline(tmp_path / "checkpoints", "humanml3d", "den", text_encoder=HashTextEncoder())
+    assert pipe.vae.config.activation == "silu" and pipe.denoiser.config.heads == 4
+    assert pipe.diffusion.beta_end == 0.02 and pipe.diffusion.prediction_type == "epsilon"
+    assert pipe.diffusion.beta_start == 0.00085                 # not in opt.txt: the official default
+    np.testing.assert_array_equal(pipe.mean, mean.astype(np.float32))
+    # the same networks: identical outputs on the same input
+    x = torch.randn(1, 5, 7, 32)
+    text, tmask = torch.randn(1, 4, TEXT_DIM), torch.ones(1, 4, dtype=torch.bool)
+    with torch.no_grad():
+        t = torch.tensor([10])
+        torch.testing.assert_close(pipe.denoiser(x, t, text, tmask), den(x, t, text, tmask))
+        torch.testing.assert_close(pipe.vae.decode(x), vae.decode(x))
+    out = pipe("a man walks", lengths=40, num_steps=2)
+    assert out.features.shape == (1, 40, SK.feature_dim) and np.isfinite(out.features).all()
+
+    (ds / "den" / "opt.txt").write_text("name: den\n")
+    with pytest.raises(ValueError, match="vae_name"):
+        official_salad_pipeline(tmp_path / "checkpoints", "humanml3d", "den", text_encoder=HashTextEncoder())
+
+
+# ------------------------------------------------------------------------ length buckets
+def _padded_cost(lengths, groups):
+    return sum(len(g) * max(lengths[i] for i in g) for g in groups)
+
+
+def test_length_groups_is_the_least_padding_partition():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        lengths = [int(v) for v in rng.integers(10, 50, size=int(rng.integers(1, 9))) * 4]
+        for k in (1, 2, 3):
+            groups = length_groups(lengths, k)
+            assert len(groups) <= k
+            assert sorted(np.concatenate(groups).tolist()) == list(range(len(lengths)))
+            s = sorted(lengths)
+            best = min(sum((b - a) * s[b - 1] for a, b in zip((0, *cuts), (*cuts, len(s))))
+                       for r in range(min(k, len(s)))
+                       for cuts in itertools.combinations(range(1, len(s)), r))
+            assert _padded_cost(lengths, groups) == best
+    assert [g.tolist() for g in length_groups([40, 196, 44], 3)] in ([[0, 2], [1]], [[0], [2], [1]])
+    with pytest.raises(ValueError, match="groups"):
+        length_groups([40], 0)
+
+
+def test_length_bucketed_generates_the_same_motions_in_fewer_padded_frames(salad_pipe):
+    prompts = ["a man walks forward", "a person jumps", "someone waves", "a man kicks", "a person sits"]
+    lengths = [40, 160, 44, 48, 152]
+    calls = []
+
+    def spy(p, lengths, seed, **kw):
+        calls.append(list(lengths))
+        return salad_pipe(p, lengths=lengths, seed=seed, **kw)
+
+    spy.source = "spy"
+    ref = salad_pipe(prompts, lengths=lengths, seed=11, num_steps=3)
+    got = LengthBucketed(spy, groups=2)(prompts, lengths=lengths, seed=11, num_steps=3)
+    assert sorted(map(sorted, calls)) == [[40, 44, 48], [152, 160]]
+    assert got.features.shape == ref.features.shape and got.lengths == lengths
+    np.testing.assert_allclose(got.features, ref.features, atol=1e-4)
+    for a, b in zip(got.joints, ref.joints):
+        np.testing.assert_allclose(a, b, atol=1e-4)
+    assert LengthBucketed(salad_pipe).source == salad_pipe.source
+    with pytest.raises(ValueError, match="one length per prompt"):
+        LengthBucketed(salad_pipe)(prompts, lengths=[40])
+
+
+# ------------------------------------------------------------------------------ KeyMotion
+def test_keyframe_roundtrip_selects_encodes_and_decodes(keymotion_pipe, sample_features):
+    x = sample_features[:80]
+    res = keyframe_roundtrip(keymotion_pipe, x)
+    xn = (x - keymotion_pipe.mmae.norm.mean.numpy()) / keymotion_pipe.mmae.norm.std.numpy()
+    np.testing.assert_array_equal(res.indices, select_keyframes(xn.astype(np.float32), K, "mdo"))
+    np.testing.assert_allclose(res.keyframes, x[res.indices], atol=1e-4)
+    np.testing.assert_allclose(res.joints, pose_joints(torch.from_numpy(x[res.indices]), SK).numpy(), atol=1e-4)
+    d = res.decoded_indices
+    assert d[0] == 0 and d[-1] == len(x) - 1 and (np.diff(d) > 0).all()
+    assert res.decoded.shape == (K, SK.feature_dim) and res.decoded_joints.shape == (K, SK.num_joints, 3)
+    assert res.pose_mpjpe == pytest.approx(mpjpe(res.decoded_joints, res.joints)) and res.pose_mpjpe > 0
+    assert res.index_error == pytest.approx(np.abs(d - res.indices).mean())
+    uni = keyframe_roundtrip(keymotion_pipe, x, method="uniform")
+    np.testing.assert_array_equal(uni.indices, np.round(np.linspace(0, len(x) - 1, K)).astype(int))
+    with pytest.raises(ValueError, match="frames"):
+        keyframe_roundtrip(keymotion_pipe, x[: K - 1])
+
+
+def test_infill_from_keyframes_against_interpolation(keymotion_pipe, sample_features):
+    x = sample_features[:64]
+    res = infill_from_keyframes(keymotion_pipe, x, "a person walks")
+    assert res.features.shape == x.shape and res.joints.shape == (64, SK.num_joints, 3)
+    assert res.lerp_mpjpe == pytest.approx(mpjpe(res.lerp_joints, res.true_joints))
+    assert res.mpjpe == pytest.approx(mpjpe(res.joints, res.true_joints)) and res.mpjpe != res.lerp_mpjpe
+    kept = infill_from_keyframes(keymotion_pipe, x, "a person walks", keep_keyframes=True)
+    np.testing.assert_allclose(kept.features[kept.indices], x[kept.indices], atol=1e-4)
+    # every frame a keyframe: interpolation is the motion itself, and kept keyframes leave nothing to fill
+    whole = infill_from_keyframes(keymotion_pipe, x[:K], "a person walks", keep_keyframes=True)
+    assert whole.lerp_mpjpe_global < 1e-5 and whole.mpjpe_global < 1e-5
+    with pytest.raises(ValueError, match="caption"):
+        infill_from_keyframes(keymotion_pipe, x, "  ")
