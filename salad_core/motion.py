@@ -39,6 +39,7 @@ __all__ = [
     "retarget_joints",
     "mirror_joints",
     "mirror_features",
+    "bone_lengths",
     "normalize",
     "denormalize",
     "compute_mean_std",
@@ -569,6 +570,26 @@ def mirror_joints(joints: Array, skeleton: SkeletonLike = "humanml3d") -> Array:
     else:
         flip = np.array([-1.0, 1.0, 1.0], dtype=out.dtype if np.issubdtype(out.dtype, np.floating) else None)
     return out * flip
+
+
+def bone_lengths(joints: Array, skeleton: SkeletonLike = "humanml3d") -> Array:
+    """Length of every bone ``parent -> joint`` per frame: joints ``(..., J, 3)`` -> ``(..., J)``.
+
+    Entry 0 (the root, which has no parent) is 0. numpy or torch. Generated motions are not
+    constrained to one skeleton (the features hold joint positions), so their bone lengths drift;
+    this measures by how much.
+    """
+    sk = get_skeleton(skeleton)
+    joints = _as_array(joints, "joints")
+    shape = _shape(joints)
+    if len(shape) < 2 or shape[-2:] != (sk.num_joints, 3):
+        raise ValueError(f"joints must have shape (..., {sk.num_joints}, 3) for skeleton {sk.name!r}, "
+                         f"got shape {shape}")
+    parents = [max(p, 0) for p in sk.parents]          # the root is its own "parent": length 0
+    diff = joints - joints[..., parents, :]
+    if isinstance(diff, torch.Tensor):
+        return torch.linalg.vector_norm(diff, dim=-1)
+    return np.linalg.norm(diff, axis=-1)
 
 
 def mirror_features(features: Array, skeleton: SkeletonLike = "humanml3d") -> Array:

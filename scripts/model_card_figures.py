@@ -3,8 +3,9 @@
 Usage: python scripts/model_card_figures.py --data CORPUS [--weights DIR] [--clips 100] [--seeds 4]
 
 Prints: the VAE's reconstruction MPJPE on test clips; for prompts with a left/right or body-part
-contrast, the per-part activity of generated motions (mean part speed, m/s) and the left/right
-activity ratio, averaged over seeds; and the generation time per motion.
+contrast, the per-part activity of generated motions (mean part speed, m/s), the left/right
+activity ratio, and how far their bone lengths stray from the corpus's (the features hold joint
+positions, so nothing forces one skeleton), averaged over seeds; and the generation time per motion.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import numpy as np
 from salad_core.attention.measure import left_right_ratio
 from salad_core.data.procedural import part_activity
 from salad_core.eval.metrics import mpjpe
-from salad_core.motion import features_to_joints
+from salad_core.motion import bone_lengths, features_to_joints
 from salad_core.pipeline import SaladPipeline
 from salad_core.skeleton import PART_NAMES
 
@@ -30,6 +31,7 @@ PROMPTS = [
     "a man is jumping high",
     "a man sits on the ground",
     "a person nods his head",
+    "a man raises his right hand high",
 ]
 
 
@@ -44,17 +46,33 @@ def main() -> None:
     pipe = SaladPipeline.from_pretrained(args.weights)
 
     names = (args.data / "test.txt").read_text().split()[: args.clips]
-    errs = []
+    errs, real_bones = [], []
     for n in names:
         f = np.load(args.data / "new_joint_vecs" / f"{n}.npy")
         f = f[: len(f) // 4 * 4]
         feats, joints = pipe.decode(pipe.encode_motion(f), [len(f)])
-        errs.append(mpjpe(joints[0], features_to_joints(f)))
+        real = features_to_joints(f)
+        errs.append(mpjpe(joints[0], real))
+        real_bones.append(bone_lengths(real)[:, 1:])
     print(f"VAE reconstruction MPJPE (root-aligned) on {len(errs)} test clips: mean {np.mean(errs) * 100:.2f} cm, "
           f"median {np.median(errs) * 100:.2f} cm")
+    # per-bone range of the corpus (its personas differ in size): 1st-99th percentile over frames
+    real_bones = np.concatenate(real_bones)
+    lo, hi = np.percentile(real_bones, 1, axis=0), np.percentile(real_bones, 99, axis=0)
+
+    def bone_stray(j: np.ndarray) -> tuple[float, float]:
+        """(share of frames with a bone outside the corpus range +-10 %, worst bone / corpus 99th pct)."""
+        b = bone_lengths(j)[:, 1:]
+        out = (b < 0.9 * lo) | (b > 1.1 * hi)
+        return float(out.any(axis=1).mean()), float((b / hi).max())
+
+    real_stray = [bone_stray(features_to_joints(np.load(args.data / "new_joint_vecs" / f"{n}.npy")))[0]
+                  for n in names]
+    print(f"corpus test clips: {np.mean(real_stray) * 100:.1f} % of frames have a bone outside the corpus range +-10 %")
 
     print(f"\ngenerated motions ({args.length} frames, 50 DDIM steps, w=7.5, {args.seeds} seeds each):")
-    print(f"{'prompt':36s} " + " ".join(f"{p[:9]:>9s}" for p in PART_NAMES) + "  L/R legs  L/R arms  root travel")
+    print(f"{'prompt':36s} " + " ".join(f"{p[:9]:>9s}" for p in PART_NAMES)
+          + "  L/R legs  L/R arms  root travel  bad-bone frames  worst bone/p99")
     t0 = time.perf_counter()
     for prompt in PROMPTS:
         out = pipe([prompt] * args.seeds, lengths=args.length, seed=list(range(args.seeds)))
@@ -63,7 +81,9 @@ def main() -> None:
         legs = np.exp(np.mean([np.log(r["legs"]) for r in lr]))
         arms = np.exp(np.mean([np.log(r["arms"]) for r in lr]))
         travel = np.mean([np.linalg.norm(j[-1, 0, [0, 2]] - j[0, 0, [0, 2]]) for j in out.joints])
-        print(f"{prompt:36s} " + " ".join(f"{a:9.2f}" for a in act) + f"  {legs:8.2f}  {arms:8.2f}  {travel:8.2f} m")
+        stray = np.array([bone_stray(j) for j in out.joints])
+        print(f"{prompt:36s} " + " ".join(f"{a:9.2f}" for a in act) + f"  {legs:8.2f}  {arms:8.2f}  {travel:8.2f} m"
+              f"  {stray[:, 0].mean() * 100:13.1f} %  {stray[:, 1].max():14.2f}")
     dt = (time.perf_counter() - t0) / (len(PROMPTS) * args.seeds)
     print(f"\ngeneration time: {dt:.2f} s per motion (batch {args.seeds}, text encoder included)")
 

@@ -465,3 +465,18 @@ def test_recover_root_matches_recovered_pelvis(sample_features):
     np.testing.assert_allclose(np.diff(half), sample_features[:-1, 0], atol=1e-5)
     rt, roott = recover_root(torch.tensor(sample_features))
     np.testing.assert_allclose(roott.numpy(), root, atol=1e-4)
+
+
+def test_bone_lengths_of_a_processed_clip_are_the_target_skeleton(sample_joints):
+    from salad_core.motion import bone_lengths
+
+    sk = get_skeleton("humanml3d")
+    lengths = bone_lengths(sample_joints)
+    assert lengths.shape == sample_joints.shape[:2]
+    assert np.all(lengths[:, 0] == 0.0)                       # the root has no bone
+    np.testing.assert_allclose(lengths, np.broadcast_to(sk.bone_lengths, lengths.shape), atol=1e-4)
+    # torch gives the same; stretching the motion by 2 doubles every bone
+    t = bone_lengths(torch.from_numpy(2.0 * sample_joints))
+    np.testing.assert_allclose(t.numpy(), 2.0 * lengths, rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match="joints must have shape"):
+        bone_lengths(sample_joints[:, :21])
