@@ -552,17 +552,23 @@ def features_to_joints_rot(features: Array, skeleton: SkeletonLike = "humanml3d"
 
 
 # =========================================================================== mirroring
+def _joints_of(joints: Array, sk: Skeleton) -> Array:
+    """``joints`` as an array of shape ``(..., J, 3)`` for ``sk``, else a ValueError naming the shape."""
+    joints = _as_array(joints, "joints")
+    shape = _shape(joints)
+    if len(shape) < 2 or shape[-2:] != (sk.num_joints, 3):
+        raise ValueError(f"joints must have shape (..., {sk.num_joints}, 3) for skeleton {sk.name!r}, "
+                         f"got shape {shape}")
+    return joints
+
+
 def mirror_joints(joints: Array, skeleton: SkeletonLike = "humanml3d") -> Array:
     """Mirror joints ``(..., J, 3)`` across the YZ plane: negate x and swap left/right joints.
 
     This is HumanML3D's augmentation that produces the ``M<id>`` clips. numpy or torch.
     """
     sk = get_skeleton(skeleton)
-    joints = _as_array(joints, "joints")
-    shape = _shape(joints)
-    if len(shape) < 2 or shape[-2:] != (sk.num_joints, 3):
-        raise ValueError(f"joints must have shape (..., {sk.num_joints}, 3) for skeleton {sk.name!r}, "
-                         f"got shape {shape}")
+    joints = _joints_of(joints, sk)
     idx = list(sk.mirror_map)
     out = joints[..., idx, :]
     if isinstance(out, torch.Tensor):
@@ -580,11 +586,7 @@ def bone_lengths(joints: Array, skeleton: SkeletonLike = "humanml3d") -> Array:
     this measures by how much.
     """
     sk = get_skeleton(skeleton)
-    joints = _as_array(joints, "joints")
-    shape = _shape(joints)
-    if len(shape) < 2 or shape[-2:] != (sk.num_joints, 3):
-        raise ValueError(f"joints must have shape (..., {sk.num_joints}, 3) for skeleton {sk.name!r}, "
-                         f"got shape {shape}")
+    joints = _joints_of(joints, sk)
     parents = [max(p, 0) for p in sk.parents]          # the root is its own "parent": length 0
     diff = joints - joints[..., parents, :]
     if isinstance(diff, torch.Tensor):

@@ -35,16 +35,7 @@ from salad_core.keymotion.selection import select_keyframes
 from salad_core.motion import features_to_joints
 from salad_core.skeleton import PART_NAMES
 
-PROMPTS = [
-    "a person walks forward",
-    "a man waves his left hand",
-    "a man waves his right hand",
-    "a person kicks with the left leg",
-    "a person kicks with the right leg",
-    "a man is jumping high",
-    "a man sits on the ground",
-    "a person nods his head",
-]
+from model_card_figures import PROMPTS  # the same prompts as the SALAD model card (this folder)
 
 
 @torch.no_grad()

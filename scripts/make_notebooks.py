@@ -223,7 +223,6 @@ MultiModality on (100 prompts x 30), 50 DDIM steps, w = 7.5. Two ways to run it:
 The paper's numbers are shown afterwards in a separate table. They are copied from the paper and not
 computed here."""),
     ("code", SETUP + '''
-import tempfile
 # QUICK settings: measured to keep this notebook under 2 minutes on a 2-core CPU
 QUICK_SETTINGS = dict(replications=2, max_samples=64, num_steps=10, mm=False)
 HELDOUT_MOTIONS = 64          # QUICK: held-out procedural test motions (x2 with mirrors)
@@ -236,7 +235,7 @@ KEYMOTION_WEIGHTS = os.environ.get("SALAD_KEYMOTION")     # KeyMotion folder (No
     ("code", '''import time
 from IPython.display import Markdown, display
 from salad_core.eval import EvalSettings, evaluate_generator, evaluate_real, results_frame, to_markdown
-from salad_core.eval.report import LengthBucketed, heldout_corpus, official_salad_pipeline, paper_table1
+from salad_core.eval.report import LengthBucketed, official_salad_pipeline, paper_table1, procedural_eval_corpus
 from salad_core.eval.train_evaluator import load_packaged_evaluator
 from salad_core.keymotion import KeyMotionPipeline
 from salad_core.pipeline import SaladPipeline
@@ -257,15 +256,7 @@ if not QUICK and CHECKPOINTS:          # the paper's setting: real data, officia
     else:
         print("KeyMotion row left out: the shipped KeyMotion is trained on the procedural corpus; set KEYMOTION_WEIGHTS")
 else:                                  # the procedural corpus with the shipped models
-    if QUICK:
-        data = heldout_corpus(Path(tempfile.mkdtemp()) / "heldout", HELDOUT_MOTIONS)
-    elif DATA_ROOT:
-        data = Path(DATA_ROOT)
-    else:
-        from salad_core.data.procedural import build_corpus
-        data = OUT / "procedural_corpus"
-        if not (data / "test.txt").is_file():
-            build_corpus(data, size="default", seed=0)
+    data = procedural_eval_corpus(QUICK, OUT, data_root=DATA_ROOT, heldout_motions=HELDOUT_MOTIONS)
     evaluator, _ = load_packaged_evaluator()
     generators["SALAD"] = (LengthBucketed(SaladPipeline.from_pretrained()), "shipped (procedural corpus)")
     generators["KeyMotion"] = (KeyMotionPipeline.from_pretrained(KEYMOTION_WEIGHTS),
@@ -313,7 +304,6 @@ it is faster.
 replications, the whole split, 50 DDIM steps. It uses the official weights and evaluator when
 `CHECKPOINTS` and `DATA_ROOT` are set. The paper's curve is plotted separately and labelled "paper"."""),
     ("code", SETUP + '''
-import tempfile
 # QUICK settings: measured to keep this notebook under 2 minutes on a 2-core CPU
 QUICK_SCALES = [1.5, 4.5, 7.5, 10.5]
 QUICK_SETTINGS = dict(replications=2, max_samples=64, num_steps=4, mm=False)
@@ -326,7 +316,7 @@ SALAD_RUN = os.environ.get("SALAD_RUN", "t2m_denoiser_vpred_vaegelu")'''),
     ("code", '''from IPython.display import Markdown, display
 from salad_core.eval import DEFAULT_CFG_SCALES, EvalSettings, cfg_sweep, paper_cfg_sweep, plot_cfg_sweep
 from salad_core.eval import results_frame, to_markdown
-from salad_core.eval.report import LengthBucketed, heldout_corpus, official_salad_pipeline
+from salad_core.eval.report import LengthBucketed, official_salad_pipeline, procedural_eval_corpus
 from salad_core.eval.train_evaluator import load_packaged_evaluator
 from salad_core.pipeline import SaladPipeline
 
@@ -340,15 +330,7 @@ if not QUICK and CHECKPOINTS:
     evaluator.source = f"official T2M evaluator ({DATASET})"
     pipe, weights = LengthBucketed(official_salad_pipeline(CHECKPOINTS, DATASET, SALAD_RUN)), "official"
 else:
-    if QUICK:
-        data = heldout_corpus(Path(tempfile.mkdtemp()) / "heldout", HELDOUT_MOTIONS)
-    elif DATA_ROOT:
-        data = Path(DATA_ROOT)
-    else:
-        from salad_core.data.procedural import build_corpus
-        data = OUT / "procedural_corpus"
-        if not (data / "test.txt").is_file():
-            build_corpus(data, size="default", seed=0)
+    data = procedural_eval_corpus(QUICK, OUT, data_root=DATA_ROOT, heldout_motions=HELDOUT_MOTIONS)
     evaluator, _ = load_packaged_evaluator()
     pipe, weights = LengthBucketed(SaladPipeline.from_pretrained()), "shipped (procedural corpus)"
 print(settings.describe(), "\\nw:", scales)'''),

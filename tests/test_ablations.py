@@ -12,7 +12,7 @@ from salad_core.ablations import (list_ablations, load_ablation_pipeline, load_a
 from salad_core.models.denoiser import DenoiserConfig
 from salad_core.models.vae import VAEConfig
 from salad_core.io import config_from_dict
-from test_train import make_fake_corpus
+from _doubles import make_fake_corpus
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -20,7 +20,7 @@ from salad_core.train import main
 from salad_core.train.state import load_train_state
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_train import make_fake_corpus  # noqa: E402
+from _doubles import make_fake_corpus  # noqa: E402
 
 MODEL = {"latent_dim": 8, "n_extra_layers": 0, "dropout": 0.0}  # no dropout: its masks are per process
 # Gradients of the two set-ups agree to float rounding (Adam moments within ~1.3e-8 here), but

@@ -7,14 +7,12 @@ fast; the trainers and the pipeline take any object with the text-encoder interf
 from __future__ import annotations
 
 import json
-import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
-from salad_core.data.texts import split_words
 from salad_core.keymotion import select_keyframes
 from salad_core.keymotion.kf_vae import (
     KeyframeVAE,
@@ -29,7 +27,7 @@ from salad_core.keymotion.pipeline import KeyMotionOutput, KeyMotionPipeline, de
 from salad_core.keymotion.pst import PST_DIFFUSION, ParallelSkipTransformer, PSTConfig
 from salad_core.motion import features_to_joints
 from salad_core.skeleton import get_skeleton
-from salad_core.text import TextBatch
+from _doubles import HashTextEncoder
 
 SK = get_skeleton("humanml3d")
 D = SK.feature_dim
@@ -37,43 +35,10 @@ TEXT_DIM = 16
 K = 8
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    old = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(old)
+pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 # ------------------------------------------------------------------------------ helpers
-class HashTextEncoder:
-    """Deterministic toy encoder: [CLS] words [SEP], each token a fixed random vector from its crc32."""
-
-    name = "hash"
-    dim = TEXT_DIM
-    max_tokens = 32
-
-    def _vec(self, token: str) -> torch.Tensor:
-        g = torch.Generator().manual_seed(zlib.crc32(token.encode()))
-        return torch.randn(self.dim, generator=g)
-
-    def encode(self, prompts, allow_empty: bool = False) -> TextBatch:
-        words = [split_words(p) for p in prompts]
-        toks = [["[CLS]", *w, "[SEP]"] for w in words]
-        width = max(len(t) for t in toks)
-        feats = torch.zeros(len(prompts), width, self.dim)
-        mask = torch.zeros(len(prompts), width, dtype=torch.bool)
-        for b, t in enumerate(toks):
-            for j, tok in enumerate(t):
-                feats[b, j] = self._vec(tok)
-            mask[b, : len(t)] = True
-        t2w = [[None, *range(len(w)), None] for w in words]
-        return TextBatch(feats, mask, toks, t2w, words, list(prompts))
-
-    def encode_null(self, n: int = 1) -> TextBatch:
-        return self.encode([""] * n, allow_empty=True)
-
-
 def tiny_vae_config(**kw) -> KeyframeVAEConfig:
     base = dict(num_keyframes=K, frame_dim=56, index_dim=8, latent_size=2, latent_dim=16, num_layers=1,
                 num_heads=4, ff_dim=128, dropout=0.0)

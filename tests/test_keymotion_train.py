@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import tomllib
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -16,14 +15,13 @@ import pytest
 import torch
 from safetensors import safe_open
 
-from salad_core.data.texts import split_words
 from salad_core.io import load_tensors
 from salad_core.keymotion.pipeline import DEFAULT_WEIGHTS_DIR, KeyMotionPipeline
 from salad_core.keymotion.train import STAGES, KeyMotionRecipe, KeyMotionTrainConfig, load_keymotion_recipe
 from salad_core.skeleton import get_skeleton
-from salad_core.text import TextBatch
 from salad_core.train.cli import TRAIN_TARGETS, build_parser
 from salad_core.train.cli import main as train_main
+from _doubles import HashTextEncoder
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_CONFIG = ROOT / "configs" / "default_keymotion.json"
@@ -32,31 +30,7 @@ TEXT_DIM = 16
 SIZE_CAP = 10 * 1024 * 1024
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    old = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(old)
-
-
-class HashTextEncoder:
-    """Deterministic toy encoder: [CLS] words [SEP], each token a fixed random vector from its crc32."""
-
-    name = "hash"
-    dim = TEXT_DIM
-
-    def encode(self, prompts, allow_empty: bool = False) -> TextBatch:
-        words = [split_words(p) for p in prompts]
-        toks = [["[CLS]", *w, "[SEP]"] for w in words]
-        width = max(len(t) for t in toks)
-        feats = torch.zeros(len(prompts), width, self.dim)
-        mask = torch.zeros(len(prompts), width, dtype=torch.bool)
-        for b, t in enumerate(toks):
-            for j, tok in enumerate(t):
-                feats[b, j] = torch.randn(self.dim, generator=torch.Generator().manual_seed(zlib.crc32(tok.encode())))
-            mask[b, : len(t)] = True
-        return TextBatch(feats, mask, toks, [[None, *range(len(w)), None] for w in words], words, list(prompts))
+pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 TINY_DOC = {

@@ -39,12 +39,7 @@ TINY = dict(dim_word=8, dim_text_hidden=16, dim_coemb=32, dim_movement_enc_hidde
 SETTINGS = EvalSettings(replications=2, mm=False, seed=3)
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 @pytest.fixture(scope="module")

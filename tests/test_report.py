@@ -6,13 +6,11 @@ Tiny seeded models, one CPU thread, a hashing text encoder (no MiniLM) and a 40-
 from __future__ import annotations
 
 import itertools
-import zlib
 
 import numpy as np
 import pytest
 import torch
 
-from salad_core.data.texts import split_words
 from salad_core.eval import EvalResult, results_frame, to_markdown
 from salad_core.eval.metrics import mpjpe
 from salad_core.eval.protocol import METRICS
@@ -36,39 +34,14 @@ from salad_core.keymotion.pst import ParallelSkipTransformer, PSTConfig
 from salad_core.models import Denoiser, DenoiserConfig, MotionVAE, VAEConfig
 from salad_core.pipeline import SaladPipeline
 from salad_core.skeleton import get_skeleton
-from salad_core.text import TextBatch
+from _doubles import HashTextEncoder
 
 SK = get_skeleton("humanml3d")
 TEXT_DIM = 32
 K = 8
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread(single_thread):
-    yield
-
-
-class HashTextEncoder:
-    """Deterministic toy encoder: [CLS] words [SEP], each token a fixed random vector from its crc32."""
-
-    name = "hash"
-    dim = TEXT_DIM
-    max_tokens = 32
-
-    def _vec(self, token: str) -> torch.Tensor:
-        return torch.randn(self.dim, generator=torch.Generator().manual_seed(zlib.crc32(token.encode())))
-
-    def encode(self, prompts, allow_empty: bool = False) -> TextBatch:
-        words = [split_words(p) for p in prompts]
-        toks = [["[CLS]", *w, "[SEP]"] for w in words]
-        width = max(len(t) for t in toks)
-        feats = torch.zeros(len(prompts), width, self.dim)
-        mask = torch.zeros(len(prompts), width, dtype=torch.bool)
-        for b, t in enumerate(toks):
-            for j, tok in enumerate(t):
-                feats[b, j] = self._vec(tok)
-            mask[b, : len(t)] = True
-        return TextBatch(feats, mask, toks, [[None, *range(len(w)), None] for w in words], words, list(prompts))
+pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 def _tiny_salad(sample_dir, seed=0, activation="gelu", heads=2):
@@ -81,7 +54,7 @@ def _tiny_salad(sample_dir, seed=0, activation="gelu", heads=2):
 @pytest.fixture(scope="module")
 def salad_pipe(sample_dir):
     vae, den, mean, std = _tiny_salad(sample_dir)
-    return SaladPipeline(vae, den, HashTextEncoder(), mean, std)
+    return SaladPipeline(vae, den, HashTextEncoder(TEXT_DIM), mean, std)
 
 
 @pytest.fixture(scope="module")
@@ -100,7 +73,7 @@ def keymotion_pipe(sample_dir):
     with torch.no_grad():
         for p in mmae.out.parameters():
             p.normal_(0.0, 0.05)
-    return KeyMotionPipeline(vae, pst, mmae, HashTextEncoder())
+    return KeyMotionPipeline(vae, pst, mmae, HashTextEncoder(TEXT_DIM))
 
 
 # ------------------------------------------------------------------------------ paper table
@@ -172,7 +145,7 @@ def test_official_salad_pipeline_loads_a_release_folder(tmp_path, sample_dir):
     np.save(ds / "Comp_v6_KLD005" / "meta" / "mean.npy", mean)
     np.save(ds / "Comp_v6_KLD005" / "meta" / "std.npy", std)
 
-    pipe = official_salad_pipeline(tmp_path / "checkpoints", "humanml3d", "den", text_encoder=HashTextEncoder())
+    pipe = official_salad_pipeline(tmp_path / "checkpoints", "humanml3d", "den", text_encoder=HashTextEncoder(TEXT_DIM))
     assert pipe.vae.config.activation == "silu" and pipe.denoiser.config.heads == 4
     assert pipe.diffusion.beta_end == 0.02 and pipe.diffusion.prediction_type == "epsilon"
     assert pipe.diffusion.beta_start == 0.00085                 # not in opt.txt: the official default
@@ -189,7 +162,7 @@ def test_official_salad_pipeline_loads_a_release_folder(tmp_path, sample_dir):
 
     (ds / "den" / "opt.txt").write_text("name: den\n")
     with pytest.raises(ValueError, match="vae_name"):
-        official_salad_pipeline(tmp_path / "checkpoints", "humanml3d", "den", text_encoder=HashTextEncoder())
+        official_salad_pipeline(tmp_path / "checkpoints", "humanml3d", "den", text_encoder=HashTextEncoder(TEXT_DIM))
 
 
 # ------------------------------------------------------------------------ length buckets
@@ -269,3 +242,12 @@ def test_infill_from_keyframes_against_interpolation(keymotion_pipe, sample_feat
     assert whole.lerp_mpjpe_global < 1e-5 and whole.mpjpe_global < 1e-5
     with pytest.raises(ValueError, match="caption"):
         infill_from_keyframes(keymotion_pipe, x, "  ")
+
+
+def test_procedural_eval_corpus_picks_heldout_clips_or_the_given_root(tmp_path):
+    from salad_core.eval.report import procedural_eval_corpus
+
+    quick = procedural_eval_corpus(True, tmp_path, heldout_motions=2)
+    ids = (quick / "test.txt").read_text().split()
+    assert len(ids) == 4 and all((quick / "new_joint_vecs" / f"{i}.npy").is_file() for i in ids)
+    assert procedural_eval_corpus(False, tmp_path, data_root=str(tmp_path / "hml")) == tmp_path / "hml"

@@ -9,7 +9,6 @@ import errno
 import json
 import os
 import signal
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,40 +32,10 @@ from salad_core.train import (
 )
 from salad_core.train.distributed import DistEnv, GlobalBatchRandom
 from salad_core.train.state import capture_rng, load_train_state, optimizer_from_flat, optimizer_to_flat, restore_rng
+from _doubles import HashTextEncoder, make_fake_corpus
 
 SK = get_skeleton("humanml3d")
-WORDS = ("walks", "jumps", "runs", "waves", "kicks", "turns")
-
-
 # ----------------------------------------------------------------------------- fixtures
-def make_fake_corpus(root: Path, n_train: int = 8, n_val: int = 3, lengths=(64, 72), seed: int = 0) -> Path:
-    """A HumanML3D-layout folder with random smooth features (width from the skeleton)."""
-    rng = np.random.default_rng(seed)
-    d = SK.feature_dim
-    (root / "new_joint_vecs").mkdir(parents=True)
-    (root / "texts").mkdir()
-    ids = [f"{i:06d}" for i in range(n_train + n_val)]
-    feats = []
-    for i, mid in enumerate(ids):
-        n = int(rng.integers(*lengths))
-        t = np.linspace(0.0, 1.0, n)[:, None]
-        x = np.sin(2 * np.pi * (t * rng.uniform(0.5, 2.0, d) + rng.uniform(0.0, 1.0, d)))
-        x = (x + 0.1 * rng.standard_normal((n, d))).astype(np.float32)
-        np.save(root / "new_joint_vecs" / f"{mid}.npy", x)
-        feats.append(x)
-        w = WORDS[i % len(WORDS)]
-        (root / "texts" / f"{mid}.txt").write_text(
-            f"a person {w}#a/DET person/NOUN {w}/VERB#0.0#0.0\n"
-            f"someone {w} slowly#someone/PRON {w}/VERB slowly/ADV#0.0#0.0\n")
-    (root / "train.txt").write_text("\n".join(ids[:n_train]) + "\n")
-    (root / "val.txt").write_text("\n".join(ids[n_train:]) + "\n")
-    (root / "test.txt").write_text("\n".join(ids[n_train:]) + "\n")
-    cat = np.concatenate(feats)
-    np.save(root / "Mean.npy", cat.mean(0).astype(np.float32))
-    np.save(root / "Std.npy", (cat.std(0) + 1e-3).astype(np.float32))
-    return root
-
-
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory) -> Path:
     return make_fake_corpus(tmp_path_factory.mktemp("corpus"))
@@ -365,30 +334,6 @@ def test_batch_size_must_split_evenly_and_fit_the_data(corpus, tmp_path):
 
 
 # ---------------------------------------------------------------------------- denoiser
-class HashTextEncoder:
-    """A deterministic stand-in text encoder: [CLS] word... [SEP], one seeded vector per word."""
-
-    dim = 16
-
-    def encode(self, prompts, allow_empty=False):
-        from salad_core.data.texts import split_words
-        from salad_core.text import TextBatch
-
-        self.calls = getattr(self, "calls", []) + [list(prompts)]
-        words = [split_words(p) for p in prompts]
-        w = max(len(ws) for ws in words) + 2
-        feats = torch.zeros(len(prompts), w, self.dim)
-        mask = torch.zeros(len(prompts), w, dtype=torch.bool)
-        for i, ws in enumerate(words):
-            toks = ["[CLS]", *ws, "[SEP]"]
-            for j, tok in enumerate(toks):
-                g = torch.Generator().manual_seed(zlib.crc32(tok.encode()))
-                feats[i, j] = torch.randn(self.dim, generator=g)
-            mask[i, : len(toks)] = True
-        return TextBatch(feats, mask, [["[CLS]", *ws, "[SEP]"] for ws in words],
-                         [[None, *range(len(ws)), None] for ws in words], words, list(prompts))
-
-
 @pytest.fixture(scope="module")
 def tiny_vae_run(corpus, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("vae_for_denoiser")
@@ -399,7 +344,7 @@ def tiny_vae_run(corpus, tmp_path_factory) -> Path:
 def tiny_denoiser_config():
     from salad_core.models.denoiser import DenoiserConfig
 
-    return DenoiserConfig(latent_dim=8, width=16, heads=2, ff_dim=32, layers=1, text_dim=HashTextEncoder.dim)
+    return DenoiserConfig(latent_dim=8, width=16, heads=2, ff_dim=32, layers=1, text_dim=16)
 
 
 def den_train_config(**kw) -> DenoiserTrainConfig:

@@ -24,12 +24,7 @@ SIZES = dict(dim_text_hidden=24, dim_coemb=24, dim_movement_enc_hidden=24, dim_m
 STEPS, AE_STEPS = 40, 30
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 @pytest.fixture(scope="module")

@@ -38,7 +38,9 @@ __all__ = [
     "PAPER_TABLE1",
     "PAPER_TABLE1_DEFAULT_ROWS",
     "paper_table1",
+    "procedural_eval_corpus",
     "heldout_corpus",
+    "procedural_eval_corpus",
     "read_official_options",
     "official_salad_pipeline",
     "LengthBucketed",
@@ -195,6 +197,29 @@ def heldout_corpus(out_dir: str | os.PathLike, motions: int = 40, *, split: str 
 # ------------------------------------------------------------------------ official release
 _OFFICIAL_DS = {"humanml3d": "t2m", "kit": "kit"}
 _CLIP_FOLDERS = {"ViT-B/32": "clip-vit-base-patch32", "ViT-L/14": "clip-vit-large-patch14"}
+
+
+def procedural_eval_corpus(quick: bool, out_dir: str | os.PathLike, *, data_root: str | os.PathLike | None = None,
+                           heldout_motions: int = 32) -> Path:
+    """The procedural data the Table-1 / CFG-sweep notebooks score the shipped models on.
+
+    QUICK: ``heldout_motions`` held-out test motions (and mirrors) in a fresh temporary folder
+    (:func:`heldout_corpus`); else ``data_root`` if given; else the whole default corpus,
+    built once into ``out_dir/procedural_corpus`` (the FULL protocol on the procedural corpus).
+    """
+    out_dir = Path(out_dir)
+    if quick:
+        import tempfile
+
+        return heldout_corpus(Path(tempfile.mkdtemp()) / "heldout", heldout_motions)
+    if data_root:
+        return Path(data_root)
+    from salad_core.data.procedural import build_corpus
+
+    data = out_dir / "procedural_corpus"
+    if not (data / "test.txt").is_file():
+        build_corpus(data, size="default", seed=0)
+    return data
 
 
 def read_official_options(path: str | os.PathLike) -> dict[str, Any]:

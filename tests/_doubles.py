@@ -1,0 +1,75 @@
+"""Test doubles shared by several test modules: a hashing text encoder and a fake corpus folder."""
+from __future__ import annotations
+
+import zlib
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from salad_core.data.texts import split_words
+from salad_core.skeleton import get_skeleton
+from salad_core.text import TextBatch
+
+#: Verbs of the fake corpus's captions (one per clip, cycled).
+WORDS = ("walks", "jumps", "runs", "waves", "kicks", "turns")
+
+
+class HashTextEncoder:
+    """Deterministic stand-in text encoder: ``[CLS] words [SEP]``, each token a fixed random
+    ``(dim,)`` vector seeded by its crc32. Records every ``encode`` call in ``calls``."""
+
+    name = "hash"
+    max_tokens = 32
+
+    def __init__(self, dim: int = 16) -> None:
+        self.dim = dim
+        self.calls: list[list[str]] = []
+
+    def _vec(self, token: str) -> torch.Tensor:
+        return torch.randn(self.dim, generator=torch.Generator().manual_seed(zlib.crc32(token.encode())))
+
+    def encode(self, prompts, allow_empty: bool = False) -> TextBatch:
+        self.calls.append(list(prompts))
+        words = [split_words(p) for p in prompts]
+        toks = [["[CLS]", *w, "[SEP]"] for w in words]
+        width = max(len(t) for t in toks)
+        feats = torch.zeros(len(prompts), width, self.dim)
+        mask = torch.zeros(len(prompts), width, dtype=torch.bool)
+        for b, t in enumerate(toks):
+            for j, tok in enumerate(t):
+                feats[b, j] = self._vec(tok)
+            mask[b, : len(t)] = True
+        return TextBatch(feats, mask, toks, [[None, *range(len(w)), None] for w in words], words, list(prompts))
+
+    def encode_null(self, n: int = 1) -> TextBatch:
+        return self.encode([""] * n, allow_empty=True)
+
+
+def make_fake_corpus(root: Path, n_train: int = 8, n_val: int = 3, lengths=(64, 72), seed: int = 0) -> Path:
+    """A HumanML3D-layout folder with random smooth features (width from the skeleton), two captions
+    per clip, train/val/test splits and Mean/Std."""
+    rng = np.random.default_rng(seed)
+    d = get_skeleton("humanml3d").feature_dim
+    (root / "new_joint_vecs").mkdir(parents=True)
+    (root / "texts").mkdir()
+    ids = [f"{i:06d}" for i in range(n_train + n_val)]
+    feats = []
+    for i, mid in enumerate(ids):
+        n = int(rng.integers(*lengths))
+        t = np.linspace(0.0, 1.0, n)[:, None]
+        x = np.sin(2 * np.pi * (t * rng.uniform(0.5, 2.0, d) + rng.uniform(0.0, 1.0, d)))
+        x = (x + 0.1 * rng.standard_normal((n, d))).astype(np.float32)
+        np.save(root / "new_joint_vecs" / f"{mid}.npy", x)
+        feats.append(x)
+        w = WORDS[i % len(WORDS)]
+        (root / "texts" / f"{mid}.txt").write_text(
+            f"a person {w}#a/DET person/NOUN {w}/VERB#0.0#0.0\n"
+            f"someone {w} slowly#someone/PRON {w}/VERB slowly/ADV#0.0#0.0\n")
+    (root / "train.txt").write_text("\n".join(ids[:n_train]) + "\n")
+    (root / "val.txt").write_text("\n".join(ids[n_train:]) + "\n")
+    (root / "test.txt").write_text("\n".join(ids[n_train:]) + "\n")
+    cat = np.concatenate(feats)
+    np.save(root / "Mean.npy", cat.mean(0).astype(np.float32))
+    np.save(root / "Std.npy", (cat.std(0) + 1e-3).astype(np.float32))
+    return root
