@@ -221,6 +221,27 @@ def test_max_samples_caps_batches(corpus, evaluator):
     assert all(len(v) == 1 for v in res.values.values())
 
 
+def test_capped_real_row_is_referenced_against_the_same_items(corpus, evaluator, monkeypatch):
+    """With --max-samples below the split size, the real row's FID reference must be another pass
+    (other crops/captions) over the SAME clips, as the generator rows compare with their own clips;
+    a reference of other clips would inflate the real row's FID by small-sample bias alone."""
+    import salad_core.eval.protocol as protocol
+
+    seen = []
+    original = protocol._batches_for
+
+    def spy(dataset, settings, epoch, order_tag):
+        out = original(dataset, settings, epoch, order_tag)
+        seen.append((epoch, sorted(n for b in out for n in b.names)))
+        return out
+
+    monkeypatch.setattr(protocol, "_batches_for", spy)
+    evaluate_real(corpus, evaluator, EvalSettings.quick_mode(max_samples=32, replications=1))
+    (epoch_a, names_a), (epoch_b, names_b) = seen
+    assert epoch_a != epoch_b                      # independent crops and captions
+    assert names_a == names_b and len(names_a) == 32
+
+
 # ------------------------------------------------------------------------------ tables
 def test_mean_ci_and_formatting():
     res = EvalResult("x", {"FID": (1.0, 2.0, 3.0)})

@@ -346,7 +346,8 @@ def evaluate_real(dataset_root: str | PathLike, evaluator, settings: EvalSetting
     Returns
     -------
     EvalResult
-        R-precision, FID (against an independent pass over the split), MM-Dist, Diversity.
+        R-precision, FID (against an independent pass over the same items: other crops and
+        captions), MM-Dist, Diversity.
     """
     settings = settings or EvalSettings()
     evaluator.eval()
@@ -358,7 +359,9 @@ def evaluate_real(dataset_root: str | PathLike, evaluator, settings: EvalSetting
         batches = _batches_for(ds, settings, r, r)
         text = np.concatenate([_text_embeddings(evaluator, b.tokens) for b in batches])
         real = np.concatenate([_motion_embeddings(evaluator, b.motions, b.lengths) for b in batches])
-        ref_batches = _batches_for(ds, settings, _REFERENCE_EPOCH + r, _REFERENCE_EPOCH + r)
+        # the reference: the same items (same order, so a capped --max-samples run compares like with
+        # like, as the generator rows do) with independent crops and captions (another epoch)
+        ref_batches = _batches_for(ds, settings, _REFERENCE_EPOCH + r, r)
         ref = np.concatenate([_motion_embeddings(evaluator, b.motions, b.lengths) for b in ref_batches])
         samples, div_pairs = len(real), _diversity_pairs(len(real), settings.diversity_pairs)
         _score(vals, text, real, real_ref=ref, div_pairs=div_pairs, settings=settings, rng=_rng(settings, _TAG_DIV, r))
