@@ -440,10 +440,24 @@ def _generation_args(p: argparse.ArgumentParser, length: int) -> None:
     p.add_argument("--length", type=int, default=length, help=f"frames at 20 fps, multiple of 4, <= 196 (default {length})")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--guidance", type=float, default=7.5, help="classifier-free guidance scale (default 7.5)")
-    p.add_argument("--steps", type=int, default=50, help="sampler steps (default 50)")
+    p.add_argument("--steps", type=int, default=None, help="sampler steps (default 50)")
     p.add_argument("--solver", default=None, help="scheduler: ddim (default), dpm++, euler, ...")
+    p.add_argument("--preset", default=None, choices=("paper", "fast"),
+                   help="sampler preset instead of --solver/--steps: paper = DDIM 50 steps, fast = DPM-Solver++ 20 steps")
     p.add_argument("--weights", default=None, help="pipeline folder (default: the shipped weights)")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
+
+
+def _resolve_sampler(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
+    """Fill ``args.solver``/``args.steps`` from ``--preset`` (exclusive with them) or the defaults."""
+    if args.preset is not None:
+        if args.solver is not None or args.steps is not None:
+            parser.error("--preset sets the solver and the steps; give --preset or --solver/--steps, not both")
+        from salad_core.sampling import SAMPLER_PRESETS
+
+        args.solver, args.steps = SAMPLER_PRESETS[args.preset]
+    elif args.steps is None:
+        args.steps = 50
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -553,6 +567,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if rest and args.command not in PASS_THROUGH:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
+    if hasattr(args, "preset"):
+        _resolve_sampler(args, parser)
     try:
         if args.command in PASS_THROUGH:
             return PASS_THROUGH[args.command](args, rest)

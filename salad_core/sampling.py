@@ -28,6 +28,8 @@ __all__ = [
     "DiffusionConfig",
     "SOLVERS",
     "make_scheduler",
+    "SAMPLER_PRESETS",
+    "sampler_preset",
     "StepInfo",
     "denoise",
     "training_target",
@@ -79,6 +81,20 @@ def _solver_table() -> dict[str, tuple[str, dict[str, Any]]]:
 
 #: Solver names accepted by :func:`make_scheduler`.
 SOLVERS: tuple[str, ...] = tuple(_solver_table())
+
+
+#: Named sampler settings ``(solver, steps)``: "paper" is the official sampler (DDIM, 50 steps);
+#: "fast" is DPM-Solver++ (2M) at 20 steps, which scored like DDIM-50 with the shipped weights on the
+#: procedural benchmark (quick protocol, 2 x 64 samples, w 7.5: FID 0.49 +- 0.17 vs 0.51 +- 0.19,
+#: R-precision top-3 0.969 for both) at 2/5 of the denoiser calls.
+SAMPLER_PRESETS: dict[str, tuple[str, int]] = {"paper": ("ddim", 50), "fast": ("dpm++", 20)}
+
+
+def sampler_preset(name: str) -> tuple[str, int]:
+    """``(solver, num_steps)`` of a named preset of :data:`SAMPLER_PRESETS`."""
+    if name not in SAMPLER_PRESETS:
+        raise ValueError(f"sampler preset {name!r} is unknown; choose one of {sorted(SAMPLER_PRESETS)}")
+    return SAMPLER_PRESETS[name]
 
 
 def make_scheduler(config: DiffusionConfig | None = None, solver: str = "ddim", **overrides: Any):

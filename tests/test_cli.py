@@ -37,6 +37,30 @@ def test_train_help_and_choices_come_from_the_trainers_cli(capsys):
     assert "invalid choice: 'gan'" in err and "'keymotion'" in err
 
 
+def test_sampler_preset_sets_solver_and_steps(tiny_weights, tmp_path, capsys, monkeypatch):
+    from salad_core.pipeline import SaladPipeline
+    from salad_core.sampling import SAMPLER_PRESETS, sampler_preset
+
+    seen = []
+    original = SaladPipeline.__call__
+
+    def spy(self, *a, **kw):
+        seen.append((kw["solver"], kw["num_steps"]))
+        return original(self, *a, **kw)
+
+    monkeypatch.setattr(SaladPipeline, "__call__", spy)
+    base = ["-q", "generate", "a person walks", "--length", "16", "--weights", str(tiny_weights), "--no-render",
+            "--no-attention"]
+    assert cli.main([*base, "--out", str(tmp_path / "a"), "--preset", "fast"]) == 0
+    assert cli.main([*base, "--out", str(tmp_path / "b")]) == 0
+    assert seen == [("dpm++", 20), (None, 50)] and sampler_preset("fast") == SAMPLER_PRESETS["fast"]
+    with pytest.raises(SystemExit) as exc:
+        cli.main([*base, "--out", str(tmp_path / "c"), "--preset", "fast", "--steps", "10"])
+    assert exc.value.code == 2 and "not both" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="choose one of \\['fast', 'paper'\\]"):
+        sampler_preset("turbo")
+
+
 def test_generate_writes_outputs_and_refuses_to_overwrite(tiny_weights, tmp_path, capsys):
     out = tmp_path / "gen"
     args = ["generate", "a person walks forward", "--length", "40", "--steps", "3", "--weights",
