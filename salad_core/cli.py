@@ -556,6 +556,21 @@ COMMANDS: dict[str, Callable] = {"corpus": cmd_corpus, "demo": cmd_demo, "genera
 PASS_THROUGH: dict[str, Callable] = {"train": cmd_train, "eval": cmd_eval, "bench": cmd_bench}
 
 
+def run_reporting_errors(label: str, debug: bool, call: Callable[[], int]) -> int:
+    """Run a command: Ctrl-C exits 130; any error prints one line ``<label>: error: ...`` and exits 2
+    (the full traceback only with ``debug``)."""
+    try:
+        return call()
+    except KeyboardInterrupt:
+        print(f"{label}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # one clear line unless --debug
+        if debug:
+            raise
+        print(f"{label}: error: {exc}", file=sys.stderr)
+        return 2
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
@@ -569,24 +584,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
     if hasattr(args, "preset"):
         _resolve_sampler(args, parser)
-    try:
-        if args.command in PASS_THROUGH:
-            return PASS_THROUGH[args.command](args, rest)
-        return COMMANDS[args.command](args)
-    except KeyboardInterrupt:
-        print("salad: interrupted", file=sys.stderr)
-        return 130
-    except UserError as exc:
-        if args.debug:
-            raise
-        print(f"salad {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except Exception as exc:  # one clear line unless --debug
-        if args.debug:
-            raise
-        print(f"salad {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-
+    if args.command in PASS_THROUGH:
+        return run_reporting_errors(f"salad {args.command}", args.debug, lambda: PASS_THROUGH[args.command](args, rest))
+    return run_reporting_errors(f"salad {args.command}", args.debug, lambda: COMMANDS[args.command](args))
 
 if __name__ == "__main__":
     sys.exit(main())

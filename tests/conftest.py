@@ -62,3 +62,13 @@ def make_tiny_pipeline(sample_dir):
         return SaladPipeline(vae, den, load_text_encoder("minilm"), np.load(sample_dir / "Mean.npy"),
                              np.load(sample_dir / "Std.npy"))
     return make
+
+
+@pytest.fixture(scope="session")
+def tiny_procedural_corpus(tmp_path_factory):
+    """The "tiny" procedural corpus (seed 0), built once per test session (a few seconds)."""
+    from salad_core.data.procedural import build_corpus
+
+    root = tmp_path_factory.mktemp("tiny_corpus_seed0")
+    build_corpus(root, size="tiny", seed=0, progress=False, overwrite=True)
+    return root

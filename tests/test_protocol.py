@@ -43,14 +43,8 @@ pytestmark = pytest.mark.usefixtures("single_thread")
 
 
 @pytest.fixture(scope="module")
-def corpus(tmp_path_factory):
-    from salad_core.data.procedural import build_corpus
-
-    # shared by the evaluation test modules of one session (corpus.json is written last)
-    root = tmp_path_factory.getbasetemp() / "tiny_corpus_seed0"
-    if not (root / "corpus.json").is_file():
-        build_corpus(root, size="tiny", seed=0, progress=False, overwrite=True)
-    return root
+def corpus(tiny_procedural_corpus):
+    return tiny_procedural_corpus
 
 
 @pytest.fixture(scope="module")

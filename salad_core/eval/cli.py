@@ -173,17 +173,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    try:
-        return run(args)
-    except KeyboardInterrupt:
-        print("salad eval: interrupted", file=sys.stderr)
-        return 130
-    except Exception as exc:  # one clear line unless --debug
-        if args.debug:
-            raise
-        print(f"salad eval: error: {exc}", file=sys.stderr)
-        return 2
+    from salad_core.cli import run_reporting_errors
 
+    return run_reporting_errors("salad eval", args.debug, lambda: run(args))
 
 if __name__ == "__main__":
     sys.exit(main())
