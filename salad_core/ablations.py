@@ -48,6 +48,7 @@ class AblationVariant:
     model: dict[str, Any] = field(default_factory=dict)      # model-config overrides
     diffusion: dict[str, Any] = field(default_factory=dict)  # denoiser only: DiffusionConfig overrides
     vae: str | None = None          # denoiser only: name of the VAE variant it learns on
+    train: dict[str, Any] = field(default_factory=dict)      # training overrides (a table with its own budget)
 
 
 @dataclass(frozen=True)
@@ -96,7 +97,7 @@ def load_recipe(path: str | os.PathLike) -> AblationRecipe:
     den_doc = json.loads((path.parent / doc["denoiser_base"]).read_text())
     vae_doc = _merge(vae_doc, {"train": doc.get("vae_train", {})})
     den_doc = _merge(den_doc, {"train": doc.get("denoiser_train", {}), "model": doc.get("denoiser_model", {})})
-    allowed = {"label", "table", "model", "diffusion", "vae"}
+    allowed = {"label", "table", "model", "diffusion", "vae", "train"}
     variants = []
     for kind, group in (("vae", doc["vaes"]), ("denoiser", doc["denoisers"])):
         for name, spec in group.items():
@@ -111,7 +112,8 @@ def load_recipe(path: str | os.PathLike) -> AblationRecipe:
                 raise ValueError(f"ablation recipe {path}: VAE variant {name!r} cannot set 'diffusion' or 'vae'")
             variants.append(AblationVariant(name=name, kind=kind, label=spec.get("label", name),
                                             table=spec.get("table", ""), model=spec.get("model", {}),
-                                            diffusion=spec.get("diffusion", {}), vae=spec.get("vae")))
+                                            diffusion=spec.get("diffusion", {}), vae=spec.get("vae"),
+                                            train=spec.get("train", {})))
     names = [v.name for v in variants]
     if len(set(names)) != len(names):
         raise ValueError(f"ablation recipe {path}: variant names must be unique across VAEs and denoisers: {names}")
@@ -134,14 +136,14 @@ def plan_jobs(recipe: AblationRecipe, work: str | os.PathLike) -> list[TrainJob]
     vae_models: dict[str, dict[str, Any]] = {}
     for v in recipe.variants:
         if v.kind == "vae":
-            doc = _merge(recipe.vae_doc, {"model": v.model})
+            doc = _merge(recipe.vae_doc, {"model": v.model, "train": v.train})
             vae_models[v.name] = doc["model"]
             jobs.append(TrainJob(v, work / f"vae_{v.name}", doc, None))
     for v in recipe.variants:
         if v.kind == "denoiser":
             parts, z_dim = _vae_latent(vae_models[v.vae])
             doc = _merge(recipe.denoiser_doc, {"model": {**v.model, "num_parts": parts, "latent_dim": z_dim},
-                                               "diffusion": v.diffusion})
+                                               "diffusion": v.diffusion, "train": v.train})
             jobs.append(TrainJob(v, work / f"den_{v.name}", doc, work / f"vae_{v.vae}"))
     return jobs
 

@@ -73,3 +73,23 @@ def make_fake_corpus(root: Path, n_train: int = 8, n_val: int = 3, lengths=(64, 
     np.save(root / "Mean.npy", cat.mean(0).astype(np.float32))
     np.save(root / "Std.npy", (cat.std(0) + 1e-3).astype(np.float32))
     return root
+
+
+def make_tiny_evaluator(corpus_root, seed: int = 0, **dims):
+    """A random (untrained) T2M evaluator of the given ``dims`` with random word vectors over the
+    corpus vocabulary and the corpus's Mean/Std; ``source = "tiny-random-evaluator"``."""
+    from salad_core.data.dataset import load_mean_std
+    from salad_core.eval.t2m import EvaluatorConfig, T2MEvaluator
+    from salad_core.eval.vocab import corpus_vocabulary
+    from salad_core.eval.word_vectorizer import WordVectorizer
+
+    words = corpus_vocabulary(corpus_root)
+    vec = WordVectorizer(words, np.random.default_rng(seed).standard_normal((len(words), dims["dim_word"])))
+    torch.manual_seed(seed)
+    ev = T2MEvaluator(EvaluatorConfig.for_skeleton("humanml3d", **dims, vocab=tuple(words)), vec)
+    mean, std = load_mean_std(corpus_root)
+    with torch.no_grad():
+        ev.mean.copy_(torch.from_numpy(mean))
+        ev.std.copy_(torch.from_numpy(std))
+    ev.source = "tiny-random-evaluator"
+    return ev.eval()

@@ -21,7 +21,8 @@ def test_shipped_recipe_plans_every_table_row(tmp_path):
     recipe = load_recipe(REPO / "configs" / "ablations.json")
     jobs = plan_jobs(recipe, tmp_path)
     by_name = {j.variant.name: j for j in jobs}
-    assert {n for n, j in by_name.items() if j.variant.kind == "vae"} == {"st", "pose", "no_pos", "no_vel", "no_pos_vel"}
+    assert {n for n, j in by_name.items() if j.variant.kind == "vae"} == \
+        {"st", "pose", "no_pos", "no_vel", "no_pos_vel", "st_long", "pose_long"}
     assert {n for n, j in by_name.items() if j.variant.kind == "denoiser"} == \
         {"full", "no_st", "no_cross", "no_both", "eps", "x0", "no_film"}
     # VAE jobs come before the denoisers that need them
@@ -34,6 +35,11 @@ def test_shipped_recipe_plans_every_table_row(tmp_path):
     assert st["train"] == nopos["train"] and st["train"]["max_steps"] == 400
     assert nopos["model"]["lambda_pos"] == 0.0 and "lambda_pos" not in recipe.variant("st").model
     assert by_name["pose"].config["model"]["kind"] == "pose"
+    # Table 2's pair has a budget of its own (a variant's "train" overrides the shared one), equal for both
+    long_st, long_pose = by_name["st_long"].config, by_name["pose_long"].config
+    assert long_st["train"] == long_pose["train"] and long_st["train"]["max_steps"] == 1500
+    assert long_st["train"]["batch_size"] == st["train"]["batch_size"]          # the rest is inherited
+    assert long_pose["model"]["kind"] == "pose" and recipe.variant("st_long").table == "Table 2"
     # denoisers are sized to their VAE's latent: the pose VAE gives one 224-channel token per frame
     vae_pose = config_from_dict(VAEConfig, by_name["pose"].config["model"])
     no_st = config_from_dict(DenoiserConfig, by_name["no_st"].config["model"])

@@ -7,7 +7,6 @@ from types import SimpleNamespace
 import numpy as np
 import pandas as pd
 import pytest
-import torch
 
 from salad_core.data.dataset import load_mean_std
 from salad_core.eval.metrics import mean_ci
@@ -28,10 +27,9 @@ from salad_core.eval.protocol import (
     to_latex,
     to_markdown,
 )
-from salad_core.eval.t2m import EvaluatorConfig, T2MEvaluator
-from salad_core.eval.vocab import corpus_vocabulary
-from salad_core.eval.word_vectorizer import WordVectorizer
 from salad_core.skeleton import get_skeleton
+
+from _doubles import make_tiny_evaluator
 
 SK = get_skeleton("humanml3d")
 TINY = dict(dim_word=8, dim_text_hidden=16, dim_coemb=32, dim_movement_enc_hidden=16, dim_movement_latent=16,
@@ -50,16 +48,7 @@ def corpus(tiny_procedural_corpus):
 @pytest.fixture(scope="module")
 def evaluator(corpus):
     """A random (untrained) tiny evaluator with random word vectors and the corpus statistics."""
-    words = corpus_vocabulary(corpus)
-    vec = WordVectorizer(words, np.random.default_rng(0).standard_normal((len(words), TINY["dim_word"])))
-    torch.manual_seed(0)
-    ev = T2MEvaluator(EvaluatorConfig.for_skeleton("humanml3d", **TINY, vocab=tuple(words)), vec)
-    mean, std = load_mean_std(corpus)
-    with torch.no_grad():
-        ev.mean.copy_(torch.from_numpy(mean))
-        ev.std.copy_(torch.from_numpy(std))
-    ev.source = "tiny-random-evaluator"
-    return ev.eval()
+    return make_tiny_evaluator(corpus, **TINY)
 
 
 class Replay:

@@ -22,6 +22,7 @@ from salad_core.eval.report import (
     keyframe_roundtrip,
     length_groups,
     official_salad_pipeline,
+    paper_denoiser_ablations,
     paper_table1,
     read_official_options,
 )
@@ -96,6 +97,26 @@ def test_paper_table1_holds_the_published_rows_labelled_as_the_papers():
     assert "Published numbers" in md and "0.857 ± 0.002" in md and "1.751 ± 0.062" in md
     with pytest.raises(ValueError, match="not rows of the paper's Table 1"):
         paper_table1(methods=["KeyMotion"])
+
+
+def test_paper_denoiser_ablations_hold_the_published_rows():
+    t3 = paper_denoiser_ablations("table3")
+    assert list(t3["name"]) == ["paper: Full model", "paper: w/o ST-Latent", "paper: w/o CrossAttn", "paper: w/o both"]
+    row = t3.set_index("name").loc["paper: w/o ST-Latent"]
+    assert (row["R-precision top-3"], row["FID"], row["FID ±"]) == (.816, .433, .006)
+    assert np.isnan(row["R-precision top-1"]) and np.isnan(row["MM-Dist"])
+    assert paper_denoiser_ablations("supp_table2").set_index("name").loc["paper: epsilon-prediction", "FID"] == .257
+    kit = paper_denoiser_ablations("supp_table3", "kit")
+    assert kit["R-precision top-3"].tolist() == [.828, .803] and (kit["kind"] == "paper").all()
+    # a reference beside computed rows shows only the two columns the paper printed
+    ours = results_frame([EvalResult("full", {m: (0.5, 0.6) for m in METRICS[:6]}, {"kind": "generator"})])
+    md = to_markdown(ours, reference=t3)
+    published = md.split("Published numbers")[1]
+    assert "0.433 ± 0.006" in published and "MM-Dist" not in published
+    with pytest.raises(ValueError, match="no 'kit' rows"):
+        paper_denoiser_ablations("table3", "kit")
+    with pytest.raises(ValueError, match="supp_table2"):
+        paper_denoiser_ablations("table4")
 
 
 # ---------------------------------------------------------------------------- held-out corpus

@@ -3,7 +3,8 @@ KeyMotion round trips.
 
 - :func:`paper_table1`: SALAD (CVPR 2025) Table 1 as printed, in the shape of
   :func:`~salad_core.eval.protocol.results_frame`, for ``to_markdown(ours, reference=paper_table1())``.
-  Published numbers only; nothing here is computed.
+  Published numbers only; nothing here is computed. :func:`paper_denoiser_ablations` likewise for
+  Table 3 and supplement Tables 2-3.
 - :func:`heldout_corpus`: a small folder of procedural-corpus clips from the split the shipped
   weights never trained on (the test split of ``build_corpus(size="default", seed=0)``), so quick
   evaluations score unseen motions without building the whole corpus.
@@ -38,7 +39,8 @@ __all__ = [
     "PAPER_TABLE1",
     "PAPER_TABLE1_DEFAULT_ROWS",
     "paper_table1",
-    "procedural_eval_corpus",
+    "PAPER_DENOISER_ABLATIONS",
+    "paper_denoiser_ablations",
     "heldout_corpus",
     "procedural_eval_corpus",
     "read_official_options",
@@ -125,6 +127,57 @@ def paper_table1(dataset: str = "humanml3d", methods: Sequence[str] | None = PAP
         row.update({k: None for k in SETTING_COLUMNS})
         row.update(kind="paper", split="test", batch_size=32, replications=20,
                    data=f"SALAD paper (CVPR 2025), Table 1 ({key})")
+        rows.append(row)
+    return pd.DataFrame(rows, columns=["name", *[c for m in METRICS for c in (m, m + CI_SUFFIX)], *SETTING_COLUMNS])
+
+
+# SALAD (CVPR 2025) denoiser ablations, HumanML3D test set (supp. Table 3 also KIT-ML): method ->
+# (R-precision top-3, FID) as (mean, 95% half-width). Copied from the paper; never computed.
+PAPER_DENOISER_ABLATIONS: dict[str, dict[str, dict[str, tuple]]] = {
+    "table3": {"humanml3d": {
+        "Full model": ((.857, .002), (.076, .002)),
+        "w/o ST-Latent": ((.816, .002), (.433, .006)),
+        "w/o CrossAttn": ((.778, .002), (.274, .007)),
+        "w/o both": ((.752, .002), (.345, .007)),
+    }},
+    "supp_table2": {"humanml3d": {
+        "x-prediction": ((.860, .002), (.111, .003)),
+        "epsilon-prediction": ((.803, .002), (.257, .008)),
+        "v-prediction": ((.857, .002), (.076, .002)),
+    }},
+    "supp_table3": {
+        "humanml3d": {"with FiLM": ((.857, .002), (.076, .002)), "without FiLM": ((.843, .002), (.087, .003))},
+        "kit": {"with FiLM": ((.828, .005), (.296, .012)), "without FiLM": ((.803, .006), (.311, .013))},
+    },
+}
+_TABLE_TITLES = {"table3": "Table 3", "supp_table2": "supplement Table 2", "supp_table3": "supplement Table 3"}
+
+
+def paper_denoiser_ablations(which: str = "table3", dataset: str = "humanml3d") -> pd.DataFrame:
+    """The paper's denoiser ablations (R-precision top-3 and FID only) as a results-frame-shaped
+    DataFrame with rows ``"paper: <method>"``, for ``to_markdown(ours, reference=...)``.
+
+    ``which``: ``"table3"`` (w/o ST-Latent, w/o CrossAttn, both), ``"supp_table2"`` (the three
+    diffusion parametrisations) or ``"supp_table3"`` (FiLM; HumanML3D and KIT-ML).
+    """
+    from salad_core.skeleton import get_skeleton
+
+    if which not in PAPER_DENOISER_ABLATIONS:
+        raise ValueError(f"which={which!r}; choose one of {sorted(PAPER_DENOISER_ABLATIONS)}")
+    key = get_skeleton(dataset).name
+    tables = PAPER_DENOISER_ABLATIONS[which]
+    if key not in tables:
+        raise ValueError(f"the paper's {_TABLE_TITLES[which]} has no {key!r} rows; it covers {sorted(tables)}")
+    rows = []
+    for method, (top3, fid) in tables[key].items():
+        row: dict[str, Any] = {"name": f"paper: {method}"}
+        for m in METRICS:
+            row[m], row[m + CI_SUFFIX] = np.nan, np.nan
+        row["R-precision top-3"], row["R-precision top-3" + CI_SUFFIX] = top3
+        row["FID"], row["FID" + CI_SUFFIX] = fid
+        row.update({k: None for k in SETTING_COLUMNS})
+        row.update(kind="paper", split="test", batch_size=32, replications=20,
+                   data=f"SALAD paper (CVPR 2025), {_TABLE_TITLES[which]} ({key})")
         rows.append(row)
     return pd.DataFrame(rows, columns=["name", *[c for m in METRICS for c in (m, m + CI_SUFFIX)], *SETTING_COLUMNS])
 

@@ -75,7 +75,9 @@ def get_norm(name: str, channels: int) -> nn.Module:
 def _frozen(value: np.ndarray | torch.Tensor) -> nn.Parameter:
     """A float32 parameter that the optimiser never updates (it still appears in state dicts)."""
     # always a private copy: a view of a caller's (or another layer's) array must not be shared
-    return nn.Parameter(torch.tensor(np.array(value, dtype=np.float32)), requires_grad=False)
+    param = nn.Parameter(torch.tensor(np.array(value, dtype=np.float32)), requires_grad=False)
+    param.salad_constant = True         # structure, not weights: num_parameters(trainable_only) skips it
+    return param
 
 
 def adjacency_with_self_loops(edges, num_nodes: int) -> np.ndarray:

@@ -525,8 +525,14 @@ class MotionVAE(nn.Module):
         return dict(self.state_dict())
 
     def num_parameters(self, trainable_only: bool = True) -> int:
-        """Parameter count; the official script's figure (0.168M) includes the frozen graph matrices."""
-        return sum(p.numel() for p in self.parameters() if p.requires_grad or not trainable_only)
+        """Parameter count; the official script's figure (0.168M) includes the frozen graph matrices.
+
+        ``trainable_only`` leaves out the graph matrices (adjacency, pooling), which are structure,
+        not weights; it does not depend on ``requires_grad``, so a VAE frozen for inference counts the
+        same as in training.
+        """
+        return sum(p.numel() for p in self.parameters()
+                   if not (trainable_only and getattr(p, "salad_constant", False)))
 
     # -------------------------------------------------------------- helpers
     def _criterion(self, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

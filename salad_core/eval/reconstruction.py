@@ -1,0 +1,287 @@
+"""VAE reconstruction quality as in SALAD Table 2 and supplement Table 4: FID and MPJPE.
+
+Each replication takes the same real batches as :func:`~salad_core.eval.protocol.evaluate_real`
+(random crops of the split, lengths multiples of the unit length), passes every clip through the
+VAE (normalise with the VAE's statistics, encode, decode the posterior mean, de-normalise) and
+scores
+
+* **FID** between the evaluator embeddings of the real clips and of their reconstructions (the
+  official ``evaluation_vae``: same clips, so this measures what the VAE loses, with no sampling
+  noise between two sets of motions);
+* **MPJPE**: root-aligned mean per-joint position error of the recovered joints, averaged over
+  poses, in the skeleton's unit (metres for HumanML3D), as the official ``test_vae``.
+
+Results are mean ± 1.96·std/√R over R replications, like the generation tables.
+:func:`reconstruction_frame` puts several VAEs in one DataFrame (with their trainable-parameter
+counts) and :func:`reconstruction_markdown` renders it; :func:`paper_vae_tables` holds the paper's
+numbers, labelled as such.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from os import PathLike
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+import torch
+
+from . import metrics as M
+from .protocol import EvalSettings, _batches_for, _dataset, _motion_embeddings, _skeleton_of
+
+__all__ = ["RECONSTRUCTION_METRICS", "ReconstructionResult", "reconstruct_features", "evaluate_reconstruction",
+           "part_errors", "reconstruction_frame", "reconstruction_markdown", "paper_vae_tables"]
+
+logger = logging.getLogger(__name__)
+
+#: Metric columns of the reconstruction tables, in order (both lower is better).
+RECONSTRUCTION_METRICS = ("FID", "MPJPE")
+
+
+@dataclass(frozen=True)
+class ReconstructionResult:
+    """Per-replication FID and MPJPE of one VAE, its size and the settings that produced them."""
+
+    name: str
+    values: Mapping[str, tuple[float, ...]]          # "FID" / "MPJPE" -> one value per replication
+    parameters: int | None                           # learnable parameters of the VAE (frozen or not)
+    settings: Mapping[str, Any] = field(default_factory=dict)
+
+    def summary(self) -> dict[str, tuple[float, float]]:
+        """``metric -> (mean, 95% half-width)`` over the replications."""
+        out = {}
+        for m in RECONSTRUCTION_METRICS:
+            mean, half = M.mean_ci(np.asarray(self.values[m], dtype=np.float64))
+            out[m] = (float(mean), float(half))
+        return out
+
+
+def _check_stats(mean, std, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    mean = np.asarray(mean, dtype=np.float32).reshape(-1)
+    std = np.asarray(std, dtype=np.float32).reshape(-1)
+    if mean.shape != (dim,) or std.shape != (dim,):
+        raise ValueError(f"mean and std must be ({dim},) for {dim}-d features, got {mean.shape} and {std.shape}")
+    if not (np.isfinite(mean).all() and np.isfinite(std).all()) or (std <= 0).any():
+        raise ValueError("mean/std must be finite and std > 0")
+    return mean, std
+
+
+@torch.no_grad()
+def reconstruct_features(vae, mean, std, motions: np.ndarray, lengths: Sequence[int], *,
+                         sample: bool = False, seed: int = 0) -> np.ndarray:
+    """Pass raw clips through a VAE, each at its own length.
+
+    Parameters
+    ----------
+    vae : MotionVAE
+    mean, std : array ``(D,)``
+        The normalisation the VAE was trained with.
+    motions : array ``(B, N, D)``
+        Raw (de-normalised) features, zero past each length.
+    lengths : sequence of B ints
+        Frames of each clip; multiples of ``vae.config.downsample``.
+    sample : bool
+        Decode ``mu + eps * sigma`` instead of the posterior mean ``mu`` (the default).
+    seed : int
+        Seeds ``eps`` when ``sample``.
+
+    Returns
+    -------
+    array ``(B, N, D)``
+        Raw reconstructed features, zero past each length.
+    """
+    motions = np.asarray(motions, dtype=np.float32)
+    if motions.ndim != 3:
+        raise ValueError(f"motions must be (B, N, D), got shape {motions.shape}")
+    b, n, d = motions.shape
+    mean, std = _check_stats(mean, std, d)
+    lengths = [int(x) for x in lengths]
+    unit = int(vae.config.downsample)
+    if len(lengths) != b:
+        raise ValueError(f"got {len(lengths)} lengths for {b} motions")
+    bad = [x for x in lengths if x <= 0 or x > n or x % unit]
+    if bad:
+        raise ValueError(f"lengths {bad} are not multiples of the VAE's downsampling {unit} within 1..{n}")
+    vae.eval()
+    gen = torch.Generator().manual_seed(int(seed)) if sample else None
+    out = np.zeros_like(motions)
+    # clips of equal length share one forward pass (crops come in multiples of the unit length)
+    for length in sorted(set(lengths)):
+        idx = [i for i, x in enumerate(lengths) if x == length]
+        x = torch.from_numpy((motions[idx, :length] - mean) / std)
+        enc = vae.encode(x, sample=sample, generator=gen)
+        rec = vae.decode(enc.z).float().numpy()
+        out[idx, :length] = rec * std + mean
+    return out
+
+
+@torch.no_grad()
+def evaluate_reconstruction(vae, mean, std, dataset_root: str | PathLike, evaluator,
+                            settings: EvalSettings | None = None, name: str = "VAE", *,
+                            sample: bool = False, weights: str | None = None) -> ReconstructionResult:
+    """FID and MPJPE of a VAE's reconstructions of the split's clips (see the module docstring).
+
+    Parameters
+    ----------
+    vae : MotionVAE
+        Skeleton-aware or pose-vector; its ``downsample`` must divide the evaluator's unit length
+        crops (4 for both shipped kinds).
+    mean, std : array ``(D,)``
+        The VAE's normalisation statistics.
+    dataset_root : path
+        HumanML3D-layout folder.
+    evaluator : T2MEvaluator
+    settings : EvalSettings, optional
+        Replications, split, batch size, sample cap and seed are used; generation settings are not.
+    name : str
+        Row label.
+    sample : bool
+        Decode a posterior sample instead of its mean.
+    weights : str, optional
+        Recorded as the VAE's source.
+
+    Returns
+    -------
+    ReconstructionResult
+    """
+    from salad_core.motion import features_to_joints
+
+    settings = settings or EvalSettings()
+    evaluator.eval()
+    sk = _skeleton_of(evaluator)
+    ds = _dataset(dataset_root, settings, sk)
+    vals: dict[str, list[float]] = {m: [] for m in RECONSTRUCTION_METRICS}
+    samples = 0
+    for r in range(settings.replications):
+        real_emb, rec_emb, errors, poses = [], [], 0.0, 0
+        for i, batch in enumerate(_batches_for(ds, settings, r, r)):
+            rec = reconstruct_features(vae, mean, std, batch.motions, batch.lengths, sample=sample,
+                                       seed=settings.seed * 1_000_003 + r * 1_009 + i)
+            real_emb.append(_motion_embeddings(evaluator, batch.motions, batch.lengths))
+            rec_emb.append(_motion_embeddings(evaluator, rec, batch.lengths))
+            for k, length in enumerate(batch.lengths):
+                gt = features_to_joints(batch.motions[k, :length], sk)
+                pred = features_to_joints(rec[k, :length], sk)
+                errors += M.mpjpe(pred, gt) * int(length)       # mean over poses of the whole replication
+                poses += int(length)
+        real_emb, rec_emb = np.concatenate(real_emb), np.concatenate(rec_emb)
+        samples = len(real_emb)
+        vals["FID"].append(M.fid(real_emb, rec_emb))
+        vals["MPJPE"].append(errors / poses)
+        logger.info("%s: replication %d/%d: FID %.4f, MPJPE %.4f", name, r + 1, settings.replications,
+                    vals["FID"][-1], vals["MPJPE"][-1])
+    params = vae.num_parameters() if hasattr(vae, "num_parameters") else None
+    recorded = dict(kind="vae", split=settings.split, batch_size=settings.batch_size,
+                    replications=settings.replications, samples=samples, seed=settings.seed,
+                    max_samples=settings.max_samples, quick=settings.quick, sample=sample,
+                    weights=weights, evaluator=getattr(evaluator, "source", type(evaluator).__name__),
+                    data=str(dataset_root))
+    return ReconstructionResult(name, {k: tuple(v) for k, v in vals.items()}, params, recorded)
+
+
+def part_errors(pred_joints: np.ndarray, gt_joints: np.ndarray, skeleton="humanml3d") -> dict[str, float]:
+    """Root-aligned position error per body part: ``{part name: mean error}`` over the part's joints
+    and all poses (the joints of each of the 7 latent parts, ``skeleton.joint_to_part``).
+
+    ``pred_joints``, ``gt_joints``: ``(..., N, J, 3)``. The root part (joint 0 only) is 0 by
+    construction after root alignment and is left out.
+    """
+    from salad_core.skeleton import get_skeleton
+
+    sk = get_skeleton(skeleton)
+    p = np.asarray(pred_joints, dtype=np.float64)
+    g = np.asarray(gt_joints, dtype=np.float64)
+    if p.shape != g.shape or p.ndim < 3 or p.shape[-2:] != (sk.num_joints, 3):
+        raise ValueError(f"joints must both be (..., N, {sk.num_joints}, 3), got {p.shape} and {g.shape}")
+    err = np.linalg.norm((p - p[..., :1, :]) - (g - g[..., :1, :]), axis=-1)     # (..., N, J)
+    err = err.reshape(-1, sk.num_joints)
+    part_of = np.asarray(sk.joint_to_part)
+    return {name: float(err[:, (part_of == k) & (np.arange(sk.num_joints) != 0)].mean())
+            for k, name in enumerate(sk.part_names)
+            if ((part_of == k) & (np.arange(sk.num_joints) != 0)).any()}
+
+
+def reconstruction_frame(results: Sequence[ReconstructionResult]) -> pd.DataFrame:
+    """One row per VAE: ``name``, ``parameters``, ``FID``, ``FID ±``, ``MPJPE``, ``MPJPE ±`` and the settings."""
+    if not results:
+        raise ValueError("results is empty")
+    rows = []
+    for res in results:
+        if not isinstance(res, ReconstructionResult):
+            raise TypeError(f"results must hold ReconstructionResult objects, got {type(res).__name__}")
+        row: dict[str, Any] = {"name": res.name, "parameters": res.parameters}
+        for m, (mean, half) in res.summary().items():
+            row[m], row[m + " ±"] = mean, half
+        row.update(res.settings)
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _params(n) -> str:
+    if n is None or (isinstance(n, float) and math.isnan(n)):
+        return "-"
+    return f"{n / 1e6:.2f}M" if n >= 1e5 else f"{int(n):,}"
+
+
+def reconstruction_markdown(df: pd.DataFrame, digits: int = 3, mpjpe_scale: float = 100.0,
+                            mpjpe_unit: str = "cm") -> str:
+    """A Markdown table of :func:`reconstruction_frame` (or :func:`paper_vae_tables`) rows.
+
+    MPJPE is shown times ``mpjpe_scale`` (default: metres -> cm); the header names the unit.
+    """
+    missing = [c for c in ("name", *RECONSTRUCTION_METRICS) if c not in df.columns]
+    if missing:
+        raise ValueError(f"the DataFrame lacks the columns {missing}; build it with reconstruction_frame(results)")
+    show_params = "parameters" in df.columns and df["parameters"].notna().any()
+    header = ["Method", *(["Params"] if show_params else []), "FID ↓", f"MPJPE ({mpjpe_unit}) ↓"]
+    lines = ["| " + " | ".join(header) + " |", "|:--" + "|--:" * (len(header) - 1) + "|"]
+    for _, r in df.iterrows():
+        cells = [str(r["name"])]
+        if show_params:
+            cells.append(_params(r["parameters"]))
+        cells.append(_fmt(r["FID"], r.get("FID ±"), digits))
+        cells.append(_fmt(r["MPJPE"] * mpjpe_scale, (r.get("MPJPE ±") or 0.0) * mpjpe_scale, digits))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _fmt(mean, half, digits: int) -> str:
+    if mean is None or not np.isfinite(mean):
+        return "-"
+    if half is None or not np.isfinite(half):
+        return f"{mean:.{digits}f}"
+    return f"{mean:.{digits}f} ± {half:.{digits}f}"
+
+
+# SALAD (CVPR 2025) Table 2 and supplement Table 4, HumanML3D test set: (params, FID, MPJPE in metres)
+# as (mean, 95% half-width). Copied from the paper; never computed.
+_PAPER_TABLE2 = {
+    "MoMask (VQ-VAE)": (19.44e6, (0.020, 0.000), (0.030, 0.000)),
+    "ParCo (part-aware VQ-VAE)": (6.35e6, (0.021, 0.000), (0.108, 0.000)),
+    "SALAD (skeleton-aware VAE)": (0.16e6, (0.003, 0.000), (0.016, 0.000)),
+}
+_PAPER_SUPP_TABLE4 = {
+    "Full model": (None, (0.003, 0.000), (0.016, 0.000)),
+    "without L_pos": (None, (0.005, 0.000), (0.023, 0.000)),
+    "without L_vel": (None, (0.009, 0.000), (0.016, 0.000)),
+    "without both": (None, (0.012, 0.000), (0.024, 0.000)),
+}
+
+
+def paper_vae_tables(which: str = "table2") -> pd.DataFrame:
+    """The paper's VAE numbers (HumanML3D test set), rows named ``"paper: ..."``.
+
+    ``which``: ``"table2"`` (MoMask, ParCo and SALAD VAEs: parameters, FID, MPJPE) or
+    ``"supp_table4"`` (the VAE loss-term ablation). MPJPE in metres, as :func:`reconstruction_frame`.
+    """
+    tables = {"table2": _PAPER_TABLE2, "supp_table4": _PAPER_SUPP_TABLE4}
+    if which not in tables:
+        raise ValueError(f"which={which!r}; choose one of {sorted(tables)}")
+    rows = []
+    for method, (params, fid, err) in tables[which].items():
+        rows.append({"name": f"paper: {method}", "parameters": params, "FID": fid[0], "FID ±": fid[1],
+                     "MPJPE": err[0], "MPJPE ±": err[1], "kind": "paper",
+                     "data": f"SALAD paper (CVPR 2025), {'Table 2' if which == 'table2' else 'supp. Table 4'}"})
+    return pd.DataFrame(rows)
