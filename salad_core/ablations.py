@@ -260,12 +260,33 @@ def ship(jobs: list[TrainJob], out: str | os.PathLike, *, text_encoder=None) -> 
             folder = export_vae(job.run_dir, out / f"vae_{v.name}")
         else:
             folder = assemble_pipeline(job.depends_on, job.run_dir, out / v.name, text_encoder=text_encoder)
+            _share_vae(folder, out / f"vae_{v.vae}")
         last = last_log_line(job.run_dir)
         index[folder.name] = {"variant": v.name, "kind": v.kind, "label": v.label, "table": v.table,
                               "vae": f"vae_{v.vae}" if v.vae else None, "steps": last.get("step"),
                               "model": v.model, "diffusion": v.diffusion}
     atomic_write_text(out / "index.json", json.dumps(index, indent=2) + "\n")
     return out
+
+
+def _share_vae(pipeline_dir: Path, vae_dir: Path) -> None:
+    """Point a shipped pipeline at its VAE variant's folder instead of a byte-identical copy.
+
+    Several denoisers learn on the same VAE (and the pose-vector VAE alone is 5 MB), so the pipeline's
+    ``vae.*`` files are removed and ``pipeline.json`` names ``../vae_<name>/vae``. A VAE folder that
+    is missing or holds other weights leaves the pipeline's own copy in place.
+    """
+    from salad_core.io import atomic_write_text
+
+    own, shared = pipeline_dir / "vae.safetensors", vae_dir / "vae.safetensors"
+    if not (shared.is_file() and own.is_file() and shared.read_bytes() == own.read_bytes()
+            and (vae_dir / "vae.json").read_bytes() == (pipeline_dir / "vae.json").read_bytes()):
+        return
+    doc = json.loads((pipeline_dir / "pipeline.json").read_text())
+    doc["vae"] = f"../{vae_dir.name}/vae"
+    atomic_write_text(pipeline_dir / "pipeline.json", json.dumps(doc, indent=2) + "\n")
+    own.unlink()
+    (pipeline_dir / "vae.json").unlink()
 
 
 # ------------------------------------------------------------------------------ loading

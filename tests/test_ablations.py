@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from salad_core.ablations import (list_ablations, load_ablation_pipeline, load_ablation_vae, load_recipe, plan_jobs,
                                   run_jobs, ship)
@@ -22,9 +23,12 @@ def test_shipped_recipe_plans_every_table_row(tmp_path):
     jobs = plan_jobs(recipe, tmp_path)
     by_name = {j.variant.name: j for j in jobs}
     assert {n for n, j in by_name.items() if j.variant.kind == "vae"} == \
-        {"st", "pose", "no_pos", "no_vel", "no_pos_vel", "st_long", "pose_long"}
+        {"st", "no_pos", "no_vel", "no_pos_vel", "st_long", "pose_long"}
     assert {n for n, j in by_name.items() if j.variant.kind == "denoiser"} == \
         {"full", "no_st", "no_cross", "no_both", "eps", "x0", "no_film"}
+    # the denoisers learn on Table 2's pair of VAEs
+    assert {j.depends_on.name for j in jobs if j.depends_on is not None} == {"vae_st_long", "vae_pose_long"}
+    assert by_name["no_st"].depends_on.name == by_name["no_both"].depends_on.name == "vae_pose_long"
     # VAE jobs come before the denoisers that need them
     order = [j.run_dir.name for j in jobs]
     for j in jobs:
@@ -34,14 +38,13 @@ def test_shipped_recipe_plans_every_table_row(tmp_path):
     st, nopos = by_name["st"].config, by_name["no_pos"].config
     assert st["train"] == nopos["train"] and st["train"]["max_steps"] == 400
     assert nopos["model"]["lambda_pos"] == 0.0 and "lambda_pos" not in recipe.variant("st").model
-    assert by_name["pose"].config["model"]["kind"] == "pose"
     # Table 2's pair has a budget of its own (a variant's "train" overrides the shared one), equal for both
     long_st, long_pose = by_name["st_long"].config, by_name["pose_long"].config
     assert long_st["train"] == long_pose["train"] and long_st["train"]["max_steps"] == 1500
     assert long_st["train"]["batch_size"] == st["train"]["batch_size"]          # the rest is inherited
     assert long_pose["model"]["kind"] == "pose" and recipe.variant("st_long").table == "Table 2"
     # denoisers are sized to their VAE's latent: the pose VAE gives one 224-channel token per frame
-    vae_pose = config_from_dict(VAEConfig, by_name["pose"].config["model"])
+    vae_pose = config_from_dict(VAEConfig, by_name["pose_long"].config["model"])
     no_st = config_from_dict(DenoiserConfig, by_name["no_st"].config["model"])
     full = config_from_dict(DenoiserConfig, by_name["full"].config["model"])
     assert (no_st.num_parts, no_st.latent_dim) == (vae_pose.num_parts, vae_pose.z_dim) == (1, 224)
@@ -103,7 +106,11 @@ def test_tiny_study_trains_ships_and_loads(tmp_path):
     assert index["vae_st"]["steps"] == 2
     vae, mean, std = load_ablation_vae("pose", out)
     assert vae.num_parts == 1 and mean.shape == std.shape == (263,)
+    # the pipelines share their VAE variant's folder instead of copying it
+    assert not (out / "no_st" / "vae.safetensors").exists()
+    assert json.loads((out / "no_st" / "pipeline.json").read_text())["vae"] == "../vae_pose/vae"
     pipe = load_ablation_pipeline("no_st", out)
+    assert all(torch.equal(a, b) for a, b in zip(pipe.vae.parameters(), vae.parameters(), strict=True))
     assert pipe.latent_shape == (1, 7 * 8)   # pose latent = parts x latent_dim of the tiny VAE
     res = pipe("a person walks", lengths=16, seed=0, num_steps=2)
     assert res.features.shape == (1, 16, 263) and np.isfinite(res.features).all()
