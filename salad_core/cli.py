@@ -302,7 +302,7 @@ def _load_features(motion: str, skeleton: str):
 
 
 # ----------------------------------------------------------------------------- invert
-def _invert(pipe, features, prompt: str, args: argparse.Namespace, method: str, iterations=None, exact=False):
+def _invert(pipe, features, prompt: str, args: argparse.Namespace, method: str, iterations=None, exact=True):
     """Invert one motion under its prompt and print the reconstruction error in cm."""
     inv = pipe.invert(features, prompt, method=method, guidance_scale=args.guidance, num_steps=args.steps,
                       iterations=iterations, exact=exact, progress=not args.quiet)
@@ -501,7 +501,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="inversion method: ddim, fixed_point (default: DDIM inversion made faithful under "
                          "guidance) or null_text")
     iv.add_argument("--iterations", type=int, default=None, help="fixed-point updates / null-text steps per step")
-    iv.add_argument("--exact", action="store_true", help="per-step corrections: the reconstruction is exact")
+    iv.add_argument("--exact", action=argparse.BooleanOptionalAction, default=True,
+                    help="per-step corrections, so the reconstruction is exact (default; --no-exact: the plain "
+                         "method)")
     iv.add_argument("--guidance", type=float, default=7.5,
                     help="guidance scale the inversion is made for (default 7.5)")
     iv.add_argument("--steps", type=int, default=50, help="DDIM steps (default 50)")

@@ -509,7 +509,7 @@ class SaladPipeline:
     # ------------------------------------------------------------------ inversion
     def invert(self, motions: Any, prompts: str | Sequence[str], *, method: str = "fixed_point",
                guidance_scale: float = 7.5, num_steps: int = 50, iterations: int | None = None,
-               exact: bool = False, reconstruct: bool = True, progress: bool = False) -> Any:
+               exact: bool = True, reconstruct: bool = True, progress: bool = False) -> Any:
         """Invert given motions to noise under their prompts, so that :meth:`edit` can edit them.
 
         Parameters
@@ -528,7 +528,10 @@ class SaladPipeline:
         iterations : int, optional
             Fixed-point updates or null-text optimiser steps per sampling step.
         exact : bool
-            Add per-step corrections so that the source reconstruction is exact.
+            Add per-step corrections so that the source reconstruction is exact (default). At the
+            same cost it brought the error down to the VAE's own (1.5 cm vs 3.9 cm without, shipped
+            weights) and the mirror edit acted more strongly on the inverted motion, not less;
+            ``False`` keeps the plain method (the edited branch then carries no correction).
         reconstruct : bool
             Regenerate the motion from the inverted noise and measure the error
             (``inversion.errors``, metres: ``mpjpe`` root-aligned and ``mpjpe_global`` against

@@ -162,9 +162,9 @@ print("source", left_right_ratio(e.source.joints[0]), "\\nedited", left_right_ra
 show(e, "mirror", ["source", "mirrored"])'''),
     ("md", """**Editing a given motion** (supplement B) takes a held-out test motion of the procedural corpus, one the
 model never saw in training, and inverts it to noise under its own caption (`pipe.invert`: DDIM inversion
-with fixed-point refinement, which stays faithful under guidance; `exact=True` also stores the small
-per-step corrections, so that regenerating reproduces the motion up to the VAE's own error). Regenerating from
-that noise reconstructs the motion. Without `exact`, at few steps the shipped model can lose what it
+with fixed-point refinement, which stays faithful under guidance; `exact=True`, the default, also stores the
+small per-step corrections, so that regenerating reproduces the motion up to the VAE's own error). Regenerating
+from that noise reconstructs the motion. Without `exact` (`exact=False`), at few steps the shipped model can lose what it
 generates badly: for the motion below (arms waved over the head) the plain fixed-point reconstruction at 20
 steps keeps the arms down (9.7 cm MPJPE), the exact one keeps them up (1.1 cm). The printed errors separate two things:
 - the VAE's own encode/decode error, the floor of any inversion;
@@ -603,6 +603,98 @@ display(Markdown("**Published (SALAD, CVPR 2025, supplement Table 4, HumanML3D; 
     ("code", '''frame = reconstruction_frame(table2 + table4)
 frame.to_csv(OUT / "table2_vae.csv", index=False)
 frame[["name", "parameters", "FID", "FID ±", "MPJPE", "MPJPE ±", "samples", "replications"]]'''),
+]
+
+NOTEBOOKS["07_table3_denoiser_ablations"] = [
+    ("md", """# Paper Table 3 and supplement Tables 2-3: what the denoiser's parts are worth
+
+SALAD's denoiser works on the skeleto-temporal latent (ST-Latent), reads the text through cross-attention,
+predicts v, and modulates every block with FiLM of the diffusion time. The paper removes each in turn:
+- **Table 3** swaps the ST-Latent for a pose-vector latent ("w/o ST-Latent"). It also replaces the
+  cross-attention with self-attention over the motion tokens plus one sentence feature ("w/o CrossAttn"),
+  and drops both at once.
+- **Supplement Table 2** trains with epsilon-, x- (sample) and v-prediction.
+- **Supplement Table 3** replaces FiLM by adding the time embedding ("without FiLM").
+
+Every variant is evaluated with the same T2M protocol (`salad_core.eval.run_ablation`): R-precision,
+FID, MM-Dist and Diversity, each as mean ± 95% confidence half-width over replications.
+
+**QUICK mode (the default, what CI runs).** The variants come from the shipped ablation study
+(`configs/ablations.json`, trained by `scripts/train_ablations.py` on salad's procedural corpus).
+- Every denoiser has the same small size (width 96, 3 layers) and the same budget of 500 steps. Each
+  learns on the latents of one of notebook 06's Table 2 VAEs (1,500 steps each): the skeleton-aware VAE,
+  or the pose-vector VAE for "w/o ST-Latent" and "w/o both".
+- The shipped SALAD model (width 256, 3,600 steps) is not one of the rows. The rows compare only with
+  each other.
+- They are scored on 64 held-out test motions and their mirrors, with the shipped procedural-corpus
+  evaluator, in 2 replications of 64 samples, 10 DDIM steps and w = 7.5.
+- At this budget the models are far from converged. FID from 64 samples is dominated by estimation
+  bias, and 2 replications give rough intervals. What these tables can show is a large effect, or the
+  absence of one, not the paper's margins.
+
+**FULL mode** (`SALAD_QUICK=0`) runs the paper's protocol: 20 replications of the whole test split, 50
+steps, w = 7.5. To evaluate variants trained on HumanML3D or KIT-ML, set `DATA_ROOT`, `CHECKPOINTS` (the
+official evaluator) and `ABLATIONS` (the folder written by
+`scripts/train_ablations.py --data DATA_ROOT --ship ABLATIONS`).
+
+The paper's numbers are shown separately and labelled as the paper's. They are copied, not computed."""),
+    ("code", SETUP + '''
+QUICK_SETTINGS = dict(replications=2, max_samples=64, num_steps=10, mm=False)
+HELDOUT_MOTIONS = 64                                     # QUICK: held-out procedural test motions (x2 with mirrors)
+# FULL mode only (SALAD_QUICK=0); environment variables or edit here
+DATA_ROOT = os.environ.get("SALAD_DATA")                 # HumanML3D / KIT-ML root
+CHECKPOINTS = os.environ.get("SALAD_CHECKPOINTS")        # official 'checkpoints' folder (evaluator)
+DATASET = os.environ.get("SALAD_DATASET", "humanml3d")
+ABLATIONS = os.environ.get("SALAD_ABLATIONS")            # shipped ablation folder (None: salad's own)'''),
+    ("code", '''import time
+from IPython.display import Markdown, display
+from salad_core.ablations import list_ablations, load_ablation_pipeline
+from salad_core.eval import EvalSettings, evaluate_generator, evaluate_real, results_frame, to_markdown
+from salad_core.eval.report import LengthBucketed, paper_denoiser_ablations, procedural_eval_corpus
+from salad_core.eval.train_evaluator import load_packaged_evaluator
+from salad_core.text import load_text_encoder
+
+settings = EvalSettings.quick_mode(**QUICK_SETTINGS) if QUICK else EvalSettings()
+if not QUICK and CHECKPOINTS:          # variants trained on HumanML3D / KIT-ML, the official evaluator
+    from salad_core.eval import T2MEvaluator
+    if not (DATA_ROOT and ABLATIONS):
+        raise ValueError("FULL mode with CHECKPOINTS needs DATA_ROOT (the dataset) and ABLATIONS (variants "
+                         "trained on it with scripts/train_ablations.py --data DATA_ROOT --ship ABLATIONS)")
+    data = Path(DATA_ROOT)
+    evaluator = T2MEvaluator.from_official(CHECKPOINTS, DATASET)
+    evaluator.source = f"official T2M evaluator ({DATASET})"
+else:                                  # the procedural corpus with salad's shipped variants
+    data = procedural_eval_corpus(QUICK, OUT, data_root=DATA_ROOT, heldout_motions=HELDOUT_MOTIONS)
+    evaluator, _ = load_packaged_evaluator()
+index = {k: v for k, v in list_ablations(ABLATIONS).items() if v["kind"] == "denoiser"}
+text_encoder = load_text_encoder("minilm")            # one encoder shared by every variant
+print(settings.describe())
+print("data:", data)
+for name, entry in index.items():
+    print(f"  {name:9s} {entry['label']}: {entry['steps']} steps on {entry['vae']}")'''),
+    ("md", """Every variant is evaluated once, on the same real batches, crops, captions and noise seeds. The three
+tables below are cut from these results."""),
+    ("code", '''results = {"real": evaluate_real(data, evaluator, settings)}
+for name, entry in index.items():
+    t0 = time.perf_counter()
+    gen = LengthBucketed(load_ablation_pipeline(name, ABLATIONS, text_encoder=text_encoder))
+    results[name] = evaluate_generator(gen, data, evaluator, settings, name=entry["label"], weights=f"ablation {name}")
+    print(f"{name}: {time.perf_counter() - t0:.0f} s")
+
+def table(names, which, dataset=DATASET):
+    """Our rows (those shipped) and, apart, the paper's rows of the same table."""
+    ours = results_frame([results["real"], *[results[n] for n in names if n in results]])
+    return to_markdown(ours, reference=paper_denoiser_ablations(which, dataset))'''),
+    ("md", "## Table 3: ST-Latent and cross-attention"),
+    ("code", '''display(Markdown(table(["full", "no_st", "no_cross", "no_both"], "table3")))'''),
+    ("md", "## Supplement Table 2: the diffusion parametrisation"),
+    ("code", '''display(Markdown(table(["x0", "eps", "full"], "supp_table2")))'''),
+    ("md", "## Supplement Table 3: FiLM"),
+    ("code", '''display(Markdown(table(["full", "no_film"], "supp_table3")))'''),
+    ("md", "All rows as one DataFrame, for `to_csv` or `to_latex`."),
+    ("code", '''frame = results_frame(list(results.values()))
+frame.to_csv(OUT / "table3_denoiser_ablations.csv", index=False)
+frame[["name", "R-precision top-3", "R-precision top-3 ±", "FID", "FID ±", "MM-Dist", "Diversity", "weights"]]'''),
 ]
 
 NOTEBOOKS["08_teaching_diffusion"] = [

@@ -220,6 +220,8 @@ def test_edit_flags_build_the_specs_with_their_window():
     args = parser.parse_args(["invert", "m.npy", "--prompt", "a man walks", "--swap", "0.7", "--out", "x"])
     assert cli._edit_specs(args, required=False) == [WordSwap(tau=0.7)]
     args = parser.parse_args(["invert", "m.npy", "--prompt", "a man walks", "--out", "x"])
+    assert args.exact is True
+    assert parser.parse_args(["invert", "m.npy", "--prompt", "a man walks", "--out", "x", "--no-exact"]).exact is False
     assert cli._edit_specs(args, required=False) == []
     with pytest.raises(cli.UserError, match="give at least one edit"):
         cli._edit_specs(args)
@@ -261,6 +263,7 @@ def test_invert_writes_reconstruction_edit_and_report(inverted):
     assert (out / "012314_reconstruction.bvh").read_text().startswith("HIERARCHY")
     report = json.loads((out / "012314_inversion.json").read_text())
     assert report["method"] == "fixed_point" and report["num_steps"] == 4 and report["frames"] == 168
+    assert report["exact"] is True                            # the default; --no-exact turns it off
     assert report["input_frames"] == 170 and report["edit"]["edits"] == ["Mirror(parts='arms', steps=(0.0, 1.0))"]
 
 

@@ -78,7 +78,12 @@ def test_inversion_of_latents_by_method(pipe, motion):
 
 def test_pipe_invert_measures_the_reconstruction(pipe, motion, sample_features):
     inv = pipe.invert(motion, PROMPT, num_steps=STEPS)
-    assert inv.method == "fixed_point" and inv.lengths == [48] and inv.noise.shape == (1, 12, 7, 32)
+    # defaults: fixed-point inversion with exact replay (at the VAE floor for the same cost)
+    assert inv.method == "fixed_point" and inv.exact and inv.corrections is not None
+    assert inv.lengths == [48] and inv.noise.shape == (1, 12, 7, 32)
+    plain = pipe.invert(motion, PROMPT, num_steps=STEPS, exact=False)
+    assert not plain.exact and plain.corrections is None
+    assert inv.errors["inversion_mpjpe"] < 1e-4
     gt = features_to_joints(motion)
     rec = inv.reconstruction
     assert rec.joints[0].shape == gt.shape and rec.texts == [PROMPT]
