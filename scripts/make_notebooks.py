@@ -621,7 +621,7 @@ FID, MM-Dist and Diversity, each as mean ± 95% confidence half-width over repli
 
 **QUICK mode (the default, what CI runs).** The variants come from the shipped ablation study
 (`configs/ablations.json`, trained by `scripts/train_ablations.py` on salad's procedural corpus).
-- Every denoiser has the same small size (width 96, 3 layers) and the same budget of 500 steps. Each
+- Every denoiser has the same small size (width 96, 3 layers) and the same budget of 700 steps. Each
   learns on the latents of one of notebook 06's Table 2 VAEs (1,500 steps each): the skeleton-aware VAE,
   or the pose-vector VAE for "w/o ST-Latent" and "w/o both".
 - The shipped SALAD model (width 256, 3,600 steps) is not one of the rows. The rows compare only with
