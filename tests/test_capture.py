@@ -187,3 +187,27 @@ def test_capture_refuses_the_ablation_without_cross_attention(pipe):
     with pytest.raises(ValueError, match="w/o CrossAttn"):
         with capture_cross_attention(den, pipe.text_encoder.encode(PROMPTS), LENGTHS):
             pass
+
+
+def test_softmax_last_matches_torch_softmax_and_leaves_its_input():
+    from salad_core.models.attention import softmax_last
+
+    g = torch.Generator().manual_seed(0)
+    for width in (1, 5, 14, 32, 77):
+        x = torch.randn(2, 4, 343, width, generator=g) * 5
+        x[0, :, :, 0] = float("-inf") if width > 1 else 0.0         # masked keys
+        before = x.clone()
+        torch.testing.assert_close(softmax_last(x), x.softmax(-1), rtol=1e-6, atol=1e-7)
+        assert torch.equal(x, before)
+    assert softmax_last(torch.full((1, 3), float("-inf"))).isnan().all()     # as torch.softmax
+
+
+def test_row_taker_slices_consecutive_rows_and_gathers_others():
+    from salad_core.attention.processor import _row_taker
+
+    x = torch.arange(40.0).view(10, 4)
+    view = _row_taker(torch.tensor([3, 4, 5]))(x)
+    assert torch.equal(view, x[3:6]) and view.data_ptr() == x[3:6].data_ptr()      # no copy
+    for rows in ([1, 3, 5], [5, 4], [2]):
+        torch.testing.assert_close(_row_taker(torch.tensor(rows))(x), x[torch.tensor(rows)])
+    assert _row_taker(torch.tensor([7]))(x).data_ptr() == x[7:8].data_ptr()

@@ -370,3 +370,11 @@ def test_measure_script_runs_on_a_tiny_pipeline_and_corpus(pipe, tmp_path):
     assert inv["fixed_point+exact"]["inversion_mpjpe"] < 1e-4
     saved = json.loads((tmp_path / "out.json").read_text())
     assert saved["inversion"]["summary"]["ddim"]["forward_rows"] == inv["ddim"]["forward_rows"]
+    swap = res["word_swap"]["summary"]
+    assert swap["root_kept_pairs"] + swap["locomotion_pairs"] == len(res["word_swap"]["pairs"])
+    # one section alone
+    only = script.main(["--data", str(tmp_path / "corpus"), "--weights", str(tmp_path / "weights"), "--quick",
+                        "--sections", "b"])
+    assert "mirroring" in only and not {"localisation", "word_swap", "reweight", "inversion"} & set(only)
+    with pytest.raises(SystemExit):
+        script.main(["--data", str(tmp_path / "corpus"), "--sections", "x"])

@@ -30,7 +30,7 @@ from typing import Optional, Protocol
 import torch
 import torch.nn.functional as F
 
-from salad_core.models.attention import AttentionProcessor, SiteInfo
+from salad_core.models.attention import AttentionProcessor, SiteInfo, softmax_last
 
 __all__ = ["SiteHook", "HookedProcessor", "flat_rows", "named_rows", "flat_from_named"]
 
@@ -88,6 +88,16 @@ def flat_from_named(site: SiteInfo, named: torch.Tensor) -> torch.Tensor:
     return named.reshape(n, h, nf * p, named.shape[-1])
 
 
+def _row_taker(flat: torch.Tensor):
+    """``x -> x[flat]``; a slice (a view, no copy) when ``flat`` is a run of consecutive rows, as the
+    conditional rows of one guidance branch are."""
+    n = flat.numel()
+    if n and int(flat[-1]) - int(flat[0]) == n - 1 and (n == 1 or bool((flat.diff() == 1).all())):
+        start = int(flat[0])
+        return lambda x: x[start:start + n]
+    return lambda x: x[flat]
+
+
 class HookedProcessor(AttentionProcessor):
     """SDPA output for every row plus explicit probabilities for the rows a hook needs.
 
@@ -108,10 +118,11 @@ class HookedProcessor(AttentionProcessor):
         if rows is None or rows.numel() == 0:
             return out
         flat = flat_rows(site, rows)
-        scores = torch.matmul(q[flat], k[flat].transpose(-1, -2)) * (1.0 / math.sqrt(q.shape[-1]))
+        take = _row_taker(flat)
+        scores = torch.matmul(take(q), take(k).transpose(-1, -2)).mul_(1.0 / math.sqrt(q.shape[-1]))
         if key_mask is not None:
-            scores = scores.masked_fill(~key_mask[flat][:, None, None, :], float("-inf"))
-        probs = scores.softmax(dim=-1)
+            scores = scores.masked_fill_(~take(key_mask)[:, None, None, :], float("-inf"))
+        probs = softmax_last(scores)
         result = self.hook.process(site, rows, named_rows(site, probs, rows.numel()))
         if result is None:
             return out

@@ -159,6 +159,19 @@ def cross_probs_by_part(probs: torch.Tensor, frames: int, parts: int) -> torch.T
 Controller = Callable[[SiteInfo, torch.Tensor], Optional[torch.Tensor]]
 
 
+def softmax_last(scores: torch.Tensor) -> torch.Tensor:
+    """Softmax over the last axis, ``exp(x - max) / sum``; ``scores`` is consumed (computed in place
+    on a new tensor only, the input is not modified).
+
+    The same values as ``scores.softmax(-1)`` up to float rounding, but PyTorch's CPU softmax kernel
+    is slow on short rows: on cross-attention probabilities ``(1, 4, 343, 14)`` (14 text tokens) it
+    took 347 us against 75 us for this form (55 us each at 32 tokens). Rows that are all ``-inf``
+    give NaN, as ``softmax`` does.
+    """
+    e = (scores - scores.amax(dim=-1, keepdim=True)).exp_()
+    return e.div_(e.sum(dim=-1, keepdim=True))
+
+
 class AttentionProcessor:
     """Core attention ``(q, k, v) -> out``; subclasses decide how.
 
@@ -204,7 +217,7 @@ class EagerProcessor(AttentionProcessor):
         scores = torch.matmul(q, k.transpose(-1, -2)) * (1.0 / math.sqrt(q.shape[-1]))
         if key_mask is not None:
             scores = scores.masked_fill(~key_mask[:, None, None, :], float("-inf"))
-        probs = scores.softmax(dim=-1)
+        probs = softmax_last(scores)
         if self.controller is not None:
             new = self.controller(site, probs)
             if new is not None:
