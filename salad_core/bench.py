@@ -23,6 +23,12 @@ Five sections, each a function returning rows of the table (:class:`Row`), run i
   the library defaults). The denoiser step is the trainer's own (:func:`_prepare`: frozen-VAE
   encoding, noising, caption dropping; then forward, backward, AdamW), with random text features.
 
+* ``compile`` (opt-in, not part of the default run: compiling takes about a minute): one guided
+  forward of the shipped default denoiser (196 frames, batch 1) eager against ``torch.compile``
+  (inductor), the compile time and the number of 50-step generations after which compiling pays
+  for itself. If compiling fails, the row says so and sampling is unaffected (salad never compiles
+  by default).
+
 ``--quick`` (about a minute) times fewer steps and rounds, measures batch 32 on one step and
 extrapolates to 50 (every DDIM step costs the same), uses 120-frame motions for the overheads and
 the memory, and says so in the notes under the table.
@@ -50,7 +56,7 @@ from salad_core.models.denoiser import Denoiser, DenoiserConfig
 from salad_core.sampling import denoise, make_scheduler
 from salad_core.skeleton import get_skeleton
 
-__all__ = ["Row", "Case", "Plan", "SECTIONS", "gemm_flops", "step_flops", "matmul_rates", "roofline_seconds",
+__all__ = ["Row", "Case", "Plan", "SECTIONS", "OPTIONAL_SECTIONS", "compile_rows", "gemm_flops", "step_flops", "matmul_rates", "roofline_seconds",
            "time_denoiser_steps", "speed_rows", "forward_variant_rows", "overhead_rows", "training_rows",
            "memory_rows", "peak_rss_delta", "denoiser_cases", "TrainRecipe", "train_recipe", "bench_pipeline",
            "machine_header", "run_benchmarks", "format_table", "main"]
@@ -64,6 +70,8 @@ SAMPLING_STEPS = 50                            # DDIM steps of the paper's sampl
 GUIDANCE = 7.5                                 # classifier-free guidance (paper default)
 BATCHES = (1, 32)
 SECTIONS = ("memory", "overheads", "speed", "training")
+#: Sections run only when asked for by name.
+OPTIONAL_SECTIONS = ("compile",)
 COLUMNS = ["section", "measure", "setting", "value", "unit", "reference", "ratio", "note"]
 
 SOURCE = "a man walks forward and waves his right hand"
@@ -305,6 +313,49 @@ def forward_variant_rows(model: Denoiser, case: Case, batch: int = 1, reps: int 
             Row("speed", "forward, eager attention processor", setting, best["eager"], "s",
                 reference=best["cached"], ratio=best["eager"] / best["cached"],
                 note="the capture/edit processor vs SDPA (best of %d)" % reps)]
+
+
+def compile_rows(case: Case, batch: int = 1, reps: int = 10) -> list[Row]:
+    """Best seconds of one guided forward eager vs ``torch.compile`` (inductor, static shapes), the
+    compile time, and after how many 50-step generations compiling pays off. A failure to compile
+    is reported in the row's note (value NaN), not raised."""
+    torch.manual_seed(0)
+    model = Denoiser(case.config).eval()
+    cond, _, noise, fm = _random_inputs(case, 2 * batch, MOTION_FRAMES // SKELETON.unit_length)
+    ctx = model.prepare_text(*cond)
+    t = torch.tensor([500])
+    setting = f"{case.name}, {MOTION_FRAMES} frames, batch {batch}"
+
+    def timed(fn) -> float:
+        best = float("inf")
+        with torch.inference_mode():
+            for _ in range(reps):
+                t0 = time.perf_counter()
+                fn()
+                best = min(best, time.perf_counter() - t0)
+        return best
+
+    with torch.inference_mode():
+        eager_out = model(noise, t, frame_mask=fm, text_context=ctx)
+    eager = timed(lambda: model(noise, t, frame_mask=fm, text_context=ctx))
+    try:
+        compiled = torch.compile(model, dynamic=False)
+        t0 = time.perf_counter()
+        with torch.inference_mode():
+            out = compiled(noise, t, frame_mask=fm, text_context=ctx)
+        compile_s = time.perf_counter() - t0
+    except Exception as err:  # noqa: BLE001 - any backend failure is a measurement, not a crash
+        return [Row("compile", "forward, torch.compile", setting, float("nan"), "s", reference=eager,
+                    note=f"torch.compile failed ({type(err).__name__}: {str(err).splitlines()[0][:120]})")]
+    fast = timed(lambda: compiled(noise, t, frame_mask=fm, text_context=ctx))
+    diff = float((out - eager_out).abs().max())
+    saved = (eager - fast) * SAMPLING_STEPS
+    payoff = compile_s / saved if saved > 0 else float("inf")
+    return [Row("compile", "forward, torch.compile (inductor)", setting, fast, "s", reference=eager,
+                ratio=fast / eager, note=f"vs eager (best of {reps}); max |difference| {diff:.1e}"),
+            Row("compile", "compile time (first call)", setting, compile_s, "s",
+                note=f"pays off after {payoff:.0f} generations of {SAMPLING_STEPS} steps" if np.isfinite(payoff)
+                else "never pays off: the compiled forward is not faster")]
 
 
 # ================================================================================ pipeline
@@ -624,7 +675,8 @@ def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None 
     threads : int
         Torch intra-op threads for the run (restored afterwards).
     sections : sequence of str, optional
-        Subset of :data:`SECTIONS` (default: all, in that order).
+        Subset of :data:`SECTIONS` and :data:`OPTIONAL_SECTIONS` (default: all of :data:`SECTIONS`,
+        in that order).
     weights : path, optional
         Pipeline folder for the memory and overhead sections (default: the shipped weights).
 
@@ -637,9 +689,9 @@ def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None 
     import pandas as pd
 
     sections = list(SECTIONS if sections is None else sections)
-    unknown = [s for s in sections if s not in SECTIONS]
+    unknown = [s for s in sections if s not in SECTIONS + OPTIONAL_SECTIONS]
     if unknown:
-        raise ValueError(f"unknown bench sections {unknown}; allowed: {', '.join(SECTIONS)}")
+        raise ValueError(f"unknown bench sections {unknown}; allowed: {', '.join(SECTIONS + OPTIONAL_SECTIONS)}")
     if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
         raise ValueError(f"threads={threads!r} must be a positive integer")
     plan = Plan.for_mode(quick)
@@ -696,6 +748,9 @@ def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None 
             recipe = train_recipe(weights)
             log.info("training: %d timed steps each", plan.train_steps)
             rows += training_rows(recipe, plan.train_steps, plan.train_warmup)
+        if "compile" in sections:
+            log.info("compile: torch.compile of the default denoiser")
+            rows += compile_rows(denoiser_cases(weights)[1], reps=3 if plan.quick else 10)
     finally:
         torch.set_num_threads(before)
     if plan.quick:
@@ -750,7 +805,8 @@ def _parser() -> argparse.ArgumentParser:
                    % torch.get_num_threads())
     p.add_argument("--out", default=None, help="also write the table to this Markdown file")
     p.add_argument("--force", action="store_true", help="overwrite --out")
-    p.add_argument("--sections", default=None, help=f"comma-separated subset of {','.join(SECTIONS)}")
+    p.add_argument("--sections", default=None, help=f"comma-separated subset of {','.join(SECTIONS)} (default: "
+                   f"all of them), or the opt-in {','.join(OPTIONAL_SECTIONS)}")
     p.add_argument("--weights", default=None, help="pipeline folder for memory/overheads (default: shipped)")
     return p
 

@@ -173,3 +173,25 @@ def test_run_benchmarks_prints_one_table_with_the_machine(monkeypatch, tmp_path,
         bench.run_benchmarks(quick=True, threads=1, sections=["nope"])
     with pytest.raises(ValueError, match="threads=0"):
         bench.run_benchmarks(quick=True, threads=0)
+
+
+def test_compile_rows_report_speed_payoff_and_failure(monkeypatch):
+    case = bench.Case("tiny", DenoiserConfig(width=32, heads=2, ff_dim=64, layers=1, text_dim=16), tokens=6)
+    # a stand-in "compiler" that returns the model itself: same output, no gain
+    monkeypatch.setattr(torch, "compile", lambda model, **kw: model)
+    rows = bench.compile_rows(case, reps=2)
+    assert [r.section for r in rows] == ["compile", "compile"]
+    fwd, first = rows
+    assert fwd.reference > 0 and fwd.value > 0 and fwd.ratio == pytest.approx(fwd.value / fwd.reference)
+    assert "max |difference| 0.0e+00" in fwd.note and first.unit == "s" and first.value >= 0
+    # the payoff follows from the two timings (equal models: either way, by noise)
+    assert ("pays off after" in first.note) == (fwd.value < fwd.reference)
+
+    def broken(model, **kw):
+        raise RuntimeError("no C++ compiler\nmore")
+
+    monkeypatch.setattr(torch, "compile", broken)
+    (row,) = bench.compile_rows(case, reps=1)
+    assert np.isnan(row.value) and "torch.compile failed (RuntimeError: no C++ compiler)" in row.note
+    # opt-in: the default run does not compile
+    assert "compile" not in bench.SECTIONS and "compile" in bench.OPTIONAL_SECTIONS
