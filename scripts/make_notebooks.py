@@ -445,6 +445,15 @@ show = np.linspace(0, km.num_keyframes - 1, 6).round().astype(int)
 display(Image.fromarray(viz.keyframe_strip([rt.joints, rt.decoded_joints], "humanml3d", show, layout="row",
                                            labels=False, colors=["tab:gray", "tab:orange"],
                                            title="selected keyframes (grey) and their keyframe-VAE reconstruction (orange)")))'''),
+    ("md", """This long motion is only one sample. The same round trip over every held-out clip of the folder puts its
+errors in context (the KeyMotion model card reports the mean over 300 test clips)."""),
+    ("code", '''trips = {n: keyframe_roundtrip(km, np.load(root / "new_joint_vecs" / f"{n}.npy")) for n in names}
+frame_err = np.array([t.index_error for t in trips.values()])
+pose_err = 100 * np.array([t.pose_mpjpe for t in trips.values()])
+print(f"{len(trips)} held-out clips: frame error mean {frame_err.mean():.1f}, median {np.median(frame_err):.1f}, "
+      f"max {frame_err.max():.1f} frames; pose MPJPE mean {pose_err.mean():.1f} cm")
+print(f"this notebook's motion {name}: {trips[name].index_error:.1f} frames, "
+      f"rank {int((frame_err < trips[name].index_error).sum()) + 1} of {len(trips)} from the best")'''),
     ("md", """## In-filling from ground-truth keyframes (MMAE)
 
 The MMAE gets the true keyframes at their true frames, plus the caption, and predicts every frame. The
