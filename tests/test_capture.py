@@ -200,6 +200,13 @@ def test_softmax_last_matches_torch_softmax_and_leaves_its_input():
         torch.testing.assert_close(softmax_last(x), x.softmax(-1), rtol=1e-6, atol=1e-7)
         assert torch.equal(x, before)
     assert softmax_last(torch.full((1, 3), float("-inf"))).isnan().all()     # as torch.softmax
+    # differentiable (null-text inversion optimises through it)
+    x = torch.randn(3, 5, requires_grad=True)
+    w = torch.randn(3, 5)
+    (softmax_last(x) * w).sum().backward()
+    ref = x.detach().clone().requires_grad_(True)
+    (ref.softmax(-1) * w).sum().backward()
+    torch.testing.assert_close(x.grad, ref.grad)
 
 
 def test_row_taker_slices_consecutive_rows_and_gathers_others():
@@ -211,3 +218,21 @@ def test_row_taker_slices_consecutive_rows_and_gathers_others():
     for rows in ([1, 3, 5], [5, 4], [2]):
         torch.testing.assert_close(_row_taker(torch.tensor(rows))(x), x[torch.tensor(rows)])
     assert _row_taker(torch.tensor([7]))(x).data_ptr() == x[7:8].data_ptr()
+
+
+@pytest.mark.parametrize("keys", [7, 15, 16, 40])
+def test_fast_attention_matches_sdpa_with_and_without_a_key_mask(keys):
+    import torch.nn.functional as F
+
+    from salad_core.models.attention import SHORT_KEYS, fast_attention
+
+    g = torch.Generator().manual_seed(keys)
+    q, k, v = (torch.randn(3, 2, 10, 8, generator=g) for _ in range(3))
+    q, k, v = q, k[:, :, :1].expand(-1, -1, keys, -1) + torch.randn(3, 2, keys, 8, generator=g), \
+        torch.randn(3, 2, keys, 8, generator=g)
+    mask = torch.ones(3, keys, dtype=torch.bool)
+    mask[1, keys // 2:] = False
+    for m in (None, mask):
+        ref = F.scaled_dot_product_attention(q, k, v, attn_mask=None if m is None else m[:, None, None, :])
+        torch.testing.assert_close(fast_attention(q, k, v, m, 0.0), ref, rtol=1e-5, atol=1e-6)
+    assert SHORT_KEYS == 16

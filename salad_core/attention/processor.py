@@ -30,7 +30,7 @@ from typing import Optional, Protocol
 import torch
 import torch.nn.functional as F
 
-from salad_core.models.attention import AttentionProcessor, SiteInfo, softmax_last
+from salad_core.models.attention import AttentionProcessor, SiteInfo, fast_attention, softmax_last
 
 __all__ = ["SiteHook", "HookedProcessor", "flat_rows", "named_rows", "flat_from_named"]
 
@@ -112,8 +112,7 @@ class HookedProcessor(AttentionProcessor):
 
     def __call__(self, site: SiteInfo, q: torch.Tensor, k: torch.Tensor, v: torch.Tensor,
                  key_mask: torch.Tensor | None, dropout_p: float) -> torch.Tensor:
-        mask = None if key_mask is None else key_mask[:, None, None, :]
-        out = F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=dropout_p)
+        out = fast_attention(q, k, v, key_mask, dropout_p)      # what plain sampling computes, bit for bit
         rows = self.hook.rows(site)
         if rows is None or rows.numel() == 0:
             return out
