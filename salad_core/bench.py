@@ -11,6 +11,8 @@ Five sections, each a function returning rows of the table (:class:`Row`), run i
 * ``overheads``: wall time of attention capture, of each edit (word swap, refinement, re-weighting,
   mirroring) and of inversion relative to a plain generation of the same prompt, every variant
   timed in the same rounds, interleaved, so that a busy machine slows all of them alike (medians).
+  The full plan also times 32 prompts through the pipeline one at a time, in one batch, and in
+  the pipeline's default chunks of 8 (:func:`batching_rows`).
 * ``speed``: seconds per motion of the denoiser alone (random text features: the text encoder is
   excluded; VAE decoding too, which costs under 1 % of 50 steps) for 196 frames, 50 DDIM steps,
   guidance 7.5 (both branches in one batched forward), at batch 1 and 32, for the paper
@@ -56,7 +58,7 @@ from salad_core.models.denoiser import Denoiser, DenoiserConfig
 from salad_core.sampling import denoise, make_scheduler
 from salad_core.skeleton import get_skeleton
 
-__all__ = ["Row", "Case", "Plan", "SECTIONS", "OPTIONAL_SECTIONS", "compile_rows", "gemm_flops", "step_flops", "matmul_rates", "roofline_seconds",
+__all__ = ["Row", "Case", "Plan", "SECTIONS", "OPTIONAL_SECTIONS", "compile_rows", "batching_rows", "gemm_flops", "step_flops", "matmul_rates", "roofline_seconds",
            "time_denoiser_steps", "speed_rows", "forward_variant_rows", "overhead_rows", "training_rows",
            "memory_rows", "peak_rss_delta", "denoiser_cases", "TrainRecipe", "train_recipe", "bench_pipeline",
            "machine_header", "run_benchmarks", "format_table", "main"]
@@ -430,6 +432,36 @@ def _naive_algorithm1(pipe, source: str, target: str, edits, length: int, steps:
     return ze
 
 
+def batching_rows(pipe, frames: int, steps: int, motions: int = 32, chunk: int = 8) -> list[Row]:
+    """Seconds per motion of ``motions`` full pipeline generations: one prompt at a time, all in one
+    batch, and in chunks of ``chunk`` (:attr:`SaladPipeline.max_batch`), extrapolated from ``steps``
+    to :data:`SAMPLING_STEPS` denoising steps (text encoding and decoding included once)."""
+    prompts = [SOURCE] * motions
+    kept = pipe.max_batch
+
+    def per_motion(max_batch: int, batch: int) -> float:
+        pipe.max_batch = max_batch
+        pipe(prompts[:batch], lengths=frames, num_steps=1, seed=0)             # warm-up
+        t0 = time.perf_counter()
+        for start in range(0, motions, batch):
+            pipe(prompts[start:start + batch], lengths=frames, num_steps=steps, seed=start)
+        return (time.perf_counter() - t0) / motions * SAMPLING_STEPS / steps
+
+    try:
+        single = per_motion(1, 1)
+        whole = per_motion(motions, motions)
+        chunked = per_motion(chunk, motions)
+    finally:
+        pipe.max_batch = kept
+    setting = f"{frames} frames, {motions} prompts"
+    note = f"timed on {steps} steps, x{SAMPLING_STEPS / steps:g}; ratio vs one prompt at a time"
+    return [Row("speed", "pipeline, one prompt at a time", setting, single, "s/motion", note=note),
+            Row("speed", "pipeline, all prompts in one batch", setting, whole, "s/motion", reference=single,
+                ratio=whole / single, note=note),
+            Row("speed", f"pipeline, batches of {chunk} (max_batch, the default)", setting, chunked, "s/motion",
+                reference=single, ratio=chunked / single, note=note)]
+
+
 def overhead_rows(pipe, frames: int, steps: int, rounds: int, *, warmup_steps: int = 2,
                   naive: bool = False) -> list[Row]:
     """Median wall time of capture, each edit and inversion against a plain generation (ratio),
@@ -712,6 +744,9 @@ def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None 
                 rows += overhead_rows(pipe, plan.edit_frames, plan.edit_steps, plan.edit_rounds, naive=plan.extras)
                 notes.append(f"overheads: median of {plan.edit_rounds} interleaved round(s) after a 2-step warm-up "
                              "of every variant; ratio = variant / plain generation")
+                if plan.extras:
+                    log.info("speed: pipeline batching, 32 prompts")
+                    rows += batching_rows(pipe, plan.edit_frames, 5)
             del pipe
             gc.collect()
         if "speed" in sections:

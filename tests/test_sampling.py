@@ -1,6 +1,7 @@
 """Schedulers, the CFG denoising loop and the training target."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 
@@ -253,3 +254,31 @@ def test_tiny_trained_denoiser_with_cfg_moves_samples_to_the_class_mean():
     d_wrong = (z - means[1 - labels]).flatten(1).norm(dim=1)
     assert torch.all(d_right < d_wrong)
     assert torch.all(d_right < 0.5 * (means[0] - means[1]).norm())
+
+
+@pytest.mark.parametrize("solver", ["ddim", "dpm++"])
+def test_pipeline_denoises_large_batches_in_chunks_with_the_same_motions(make_tiny_pipeline, single_thread, solver,
+                                                                         monkeypatch):
+    pipe = make_tiny_pipeline(seed=0)
+    prompts = [f"a person walks {w}" for w in ("forward", "back", "left", "right", "fast")]
+    lengths = [40, 16, 28, 40, 8]
+    pipe.max_batch = 100
+    whole = pipe(prompts, lengths=lengths, seed=3, num_steps=4, solver=solver)
+    import salad_core.pipeline as P
+
+    calls, real = [], P.denoise
+
+    def counting(*args, **kwargs):
+        calls.append(args[4].shape)                    # the chunk's noise (B, N', P, Dz)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(P, "denoise", counting)
+    pipe.max_batch = 2
+    chunked = pipe(prompts, lengths=lengths, seed=3, num_steps=4, solver=solver)
+    # chunks of 2, 2 and 1 motions, each denoised at its own longest length (10, 10, 2 latent frames)
+    assert [tuple(s[:2]) for s in calls] == [(2, 10), (2, 10), (1, 2)]
+    assert torch.equal(chunked.noise, whole.noise)
+    torch.testing.assert_close(chunked.latents, whole.latents, rtol=1e-4, atol=1e-4)
+    for b, n in enumerate(lengths):
+        assert torch.count_nonzero(chunked.latents[b, n // 4:]) == 0
+        np.testing.assert_allclose(chunked.features[b, :n], whole.features[b, :n], rtol=1e-3, atol=1e-3)
