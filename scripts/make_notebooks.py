@@ -245,20 +245,15 @@ KEYMOTION_WEIGHTS = os.environ.get("SALAD_KEYMOTION")     # KeyMotion folder (No
     ("code", '''import time
 from IPython.display import Markdown, display
 from salad_core.eval import EvalSettings, evaluate_generator, evaluate_real, results_frame, to_markdown
-from salad_core.eval.report import LengthBucketed, official_salad_pipeline, paper_table1, procedural_eval_corpus
-from salad_core.eval.train_evaluator import load_packaged_evaluator
+from salad_core.eval.report import LengthBucketed, evaluation_data, official_salad_pipeline, paper_table1
 from salad_core.keymotion import KeyMotionPipeline
 from salad_core.pipeline import SaladPipeline
 
 settings = EvalSettings.quick_mode(**QUICK_SETTINGS) if QUICK else EvalSettings()
+data, evaluator = evaluation_data(QUICK, OUT, data_root=DATA_ROOT, checkpoints=CHECKPOINTS, dataset=DATASET,
+                                  heldout_motions=HELDOUT_MOTIONS)
 generators = {}
 if not QUICK and CHECKPOINTS:          # the paper's setting: real data, official evaluator and weights
-    from salad_core.eval import T2MEvaluator
-    if not DATA_ROOT:
-        raise ValueError("FULL mode with CHECKPOINTS needs DATA_ROOT: the HumanML3D / KIT-ML folder")
-    data = Path(DATA_ROOT)
-    evaluator = T2MEvaluator.from_official(CHECKPOINTS, DATASET)
-    evaluator.source = f"official T2M evaluator ({DATASET})"
     generators["SALAD (official weights)"] = (LengthBucketed(official_salad_pipeline(CHECKPOINTS, DATASET, SALAD_RUN)),
                                               "official")
     if KEYMOTION_WEIGHTS:
@@ -266,8 +261,6 @@ if not QUICK and CHECKPOINTS:          # the paper's setting: real data, officia
     else:
         print("KeyMotion row left out: the shipped KeyMotion is trained on the procedural corpus; set KEYMOTION_WEIGHTS")
 else:                                  # the procedural corpus with the shipped models
-    data = procedural_eval_corpus(QUICK, OUT, data_root=DATA_ROOT, heldout_motions=HELDOUT_MOTIONS)
-    evaluator, _ = load_packaged_evaluator()
     generators["SALAD"] = (LengthBucketed(SaladPipeline.from_pretrained()), "shipped (procedural corpus)")
     generators["KeyMotion"] = (KeyMotionPipeline.from_pretrained(KEYMOTION_WEIGHTS),
                                KEYMOTION_WEIGHTS or "shipped (procedural corpus)")
@@ -326,22 +319,16 @@ SALAD_RUN = os.environ.get("SALAD_RUN", "t2m_denoiser_vpred_vaegelu")'''),
     ("code", '''from IPython.display import Markdown, display
 from salad_core.eval import DEFAULT_CFG_SCALES, EvalSettings, cfg_sweep, paper_cfg_sweep, plot_cfg_sweep
 from salad_core.eval import results_frame, to_markdown
-from salad_core.eval.report import LengthBucketed, official_salad_pipeline, procedural_eval_corpus
-from salad_core.eval.train_evaluator import load_packaged_evaluator
+from salad_core.eval.report import LengthBucketed, evaluation_data, official_salad_pipeline
 from salad_core.pipeline import SaladPipeline
 
 settings = EvalSettings.quick_mode(**QUICK_SETTINGS) if QUICK else EvalSettings(mm=False)
 scales = QUICK_SCALES if QUICK else list(DEFAULT_CFG_SCALES)
+data, evaluator = evaluation_data(QUICK, OUT, data_root=DATA_ROOT, checkpoints=CHECKPOINTS, dataset=DATASET,
+                                  heldout_motions=HELDOUT_MOTIONS)
 if not QUICK and CHECKPOINTS:
-    from salad_core.eval import T2MEvaluator
-    if not DATA_ROOT:
-        raise ValueError("FULL mode with CHECKPOINTS needs DATA_ROOT: the HumanML3D / KIT-ML folder")
-    data, evaluator = Path(DATA_ROOT), T2MEvaluator.from_official(CHECKPOINTS, DATASET)
-    evaluator.source = f"official T2M evaluator ({DATASET})"
     pipe, weights = LengthBucketed(official_salad_pipeline(CHECKPOINTS, DATASET, SALAD_RUN)), "official"
 else:
-    data = procedural_eval_corpus(QUICK, OUT, data_root=DATA_ROOT, heldout_motions=HELDOUT_MOTIONS)
-    evaluator, _ = load_packaged_evaluator()
     pipe, weights = LengthBucketed(SaladPipeline.from_pretrained()), "shipped (procedural corpus)"
 print(settings.describe(), "\\nw:", scales)'''),
     ("code", '''results = cfg_sweep(pipe, data, evaluator, settings, scales=scales, name="SALAD", weights=weights)
@@ -526,23 +513,16 @@ from salad_core.ablations import list_ablations, load_ablation_vae
 from salad_core.eval import EvalSettings
 from salad_core.eval.reconstruction import (evaluate_reconstruction, paper_vae_tables, reconstruction_frame,
                                             reconstruction_markdown)
-from salad_core.eval.report import official_salad_pipeline, procedural_eval_corpus
-from salad_core.eval.train_evaluator import load_packaged_evaluator
+from salad_core.eval.report import evaluation_data, official_salad_pipeline
 from salad_core.pipeline import SaladPipeline
 
 settings = EvalSettings.quick_mode(**QUICK_SETTINGS) if QUICK else EvalSettings(mm=False)
+data, evaluator = evaluation_data(QUICK, OUT, data_root=DATA_ROOT, checkpoints=CHECKPOINTS, dataset=DATASET,
+                                  heldout_motions=HELDOUT_MOTIONS)
 if not QUICK and CHECKPOINTS:          # the paper's setting: real data, official evaluator and VAE
-    from salad_core.eval import T2MEvaluator
-    if not DATA_ROOT:
-        raise ValueError("FULL mode with CHECKPOINTS needs DATA_ROOT: the HumanML3D / KIT-ML folder")
-    data = Path(DATA_ROOT)
-    evaluator = T2MEvaluator.from_official(CHECKPOINTS, DATASET)
-    evaluator.source = f"official T2M evaluator ({DATASET})"
     reference = official_salad_pipeline(CHECKPOINTS, DATASET, SALAD_RUN)
     reference_name = "SALAD VAE (official weights)"
 else:                                  # the procedural corpus with the shipped models
-    data = procedural_eval_corpus(QUICK, OUT, data_root=DATA_ROOT, heldout_motions=HELDOUT_MOTIONS)
-    evaluator, _ = load_packaged_evaluator()
     reference = SaladPipeline.from_pretrained()
     reference_name = "shipped SALAD VAE, 3,000 steps"
 # salad's own ablation models are trained on the procedural corpus: used with it, or when asked for
@@ -659,22 +639,15 @@ ABLATIONS = os.environ.get("SALAD_ABLATIONS")            # shipped ablation fold
 from IPython.display import Markdown, display
 from salad_core.ablations import list_ablations, load_ablation_pipeline
 from salad_core.eval import EvalSettings, evaluate_generator, evaluate_real, results_frame, to_markdown
-from salad_core.eval.report import LengthBucketed, paper_denoiser_ablations, procedural_eval_corpus
-from salad_core.eval.train_evaluator import load_packaged_evaluator
+from salad_core.eval.report import LengthBucketed, evaluation_data, paper_denoiser_ablations
 from salad_core.text import load_text_encoder
 
 settings = EvalSettings.quick_mode(**QUICK_SETTINGS) if QUICK else EvalSettings()
-if not QUICK and CHECKPOINTS:          # variants trained on HumanML3D / KIT-ML, the official evaluator
-    from salad_core.eval import T2MEvaluator
-    if not (DATA_ROOT and ABLATIONS):
-        raise ValueError("FULL mode with CHECKPOINTS needs DATA_ROOT (the dataset) and ABLATIONS (variants "
-                         "trained on it with scripts/train_ablations.py --data DATA_ROOT --ship ABLATIONS)")
-    data = Path(DATA_ROOT)
-    evaluator = T2MEvaluator.from_official(CHECKPOINTS, DATASET)
-    evaluator.source = f"official T2M evaluator ({DATASET})"
-else:                                  # the procedural corpus with salad's shipped variants
-    data = procedural_eval_corpus(QUICK, OUT, data_root=DATA_ROOT, heldout_motions=HELDOUT_MOTIONS)
-    evaluator, _ = load_packaged_evaluator()
+if not QUICK and CHECKPOINTS and not ABLATIONS:
+    raise ValueError("FULL mode with CHECKPOINTS needs ABLATIONS: variants trained on DATA_ROOT with "
+                     "scripts/train_ablations.py --data DATA_ROOT --ship ABLATIONS")
+data, evaluator = evaluation_data(QUICK, OUT, data_root=DATA_ROOT, checkpoints=CHECKPOINTS, dataset=DATASET,
+                                  heldout_motions=HELDOUT_MOTIONS)
 index = {k: v for k, v in list_ablations(ABLATIONS).items() if v["kind"] == "denoiser"}
 text_encoder = load_text_encoder("minilm")            # one encoder shared by every variant
 print(settings.describe())

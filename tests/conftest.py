@@ -72,3 +72,12 @@ def tiny_procedural_corpus(tmp_path_factory):
     root = tmp_path_factory.mktemp("tiny_corpus_seed0")
     build_corpus(root, size="tiny", seed=0, progress=False, overwrite=True)
     return root
+
+
+@pytest.fixture(scope="session")
+def tiny_random_evaluator(tiny_procedural_corpus):
+    """A random (untrained) tiny T2M evaluator over the tiny corpus's vocabulary and statistics."""
+    from _doubles import make_tiny_evaluator
+
+    return make_tiny_evaluator(tiny_procedural_corpus, dim_word=8, dim_text_hidden=16, dim_coemb=32,
+                               dim_movement_enc_hidden=16, dim_movement_latent=16, dim_motion_hidden=32)

@@ -29,11 +29,8 @@ from salad_core.eval.protocol import (
 )
 from salad_core.skeleton import get_skeleton
 
-from _doubles import make_tiny_evaluator
 
 SK = get_skeleton("humanml3d")
-TINY = dict(dim_word=8, dim_text_hidden=16, dim_coemb=32, dim_movement_enc_hidden=16, dim_movement_latent=16,
-            dim_motion_hidden=32)
 SETTINGS = EvalSettings(replications=2, mm=False, seed=3)
 
 
@@ -46,9 +43,8 @@ def corpus(tiny_procedural_corpus):
 
 
 @pytest.fixture(scope="module")
-def evaluator(corpus):
-    """A random (untrained) tiny evaluator with random word vectors and the corpus statistics."""
-    return make_tiny_evaluator(corpus, **TINY)
+def evaluator(tiny_random_evaluator):
+    return tiny_random_evaluator
 
 
 class Replay:

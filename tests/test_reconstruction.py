@@ -23,13 +23,10 @@ from salad_core.models import MotionVAE, VAEConfig
 from salad_core.motion import features_to_joints
 from salad_core.skeleton import get_skeleton
 
-from _doubles import make_tiny_evaluator
 
 pytestmark = pytest.mark.usefixtures("single_thread")
 
 SK = get_skeleton("humanml3d")
-TINY = dict(dim_word=8, dim_text_hidden=16, dim_coemb=32, dim_movement_enc_hidden=16, dim_movement_latent=16,
-            dim_motion_hidden=32)
 SETTINGS = EvalSettings(replications=2, max_samples=32, mm=False, seed=5)
 
 
@@ -65,8 +62,8 @@ def corpus(tiny_procedural_corpus):
 
 
 @pytest.fixture(scope="module")
-def evaluator(corpus):
-    return make_tiny_evaluator(corpus, **TINY)
+def evaluator(tiny_random_evaluator):
+    return tiny_random_evaluator
 
 
 @pytest.fixture(scope="module")

@@ -6,6 +6,7 @@ Tiny seeded models, one CPU thread, a hashing text encoder (no MiniLM) and a 40-
 from __future__ import annotations
 
 import itertools
+import types
 
 import numpy as np
 import pytest
@@ -272,3 +273,22 @@ def test_procedural_eval_corpus_picks_heldout_clips_or_the_given_root(tmp_path):
     ids = (quick / "test.txt").read_text().split()
     assert len(ids) == 4 and all((quick / "new_joint_vecs" / f"{i}.npy").is_file() for i in ids)
     assert procedural_eval_corpus(False, tmp_path, data_root=str(tmp_path / "hml")) == tmp_path / "hml"
+
+
+def test_evaluation_data_picks_the_procedural_or_the_official_setting(tmp_path, monkeypatch):
+    from salad_core.eval import report
+
+    data, ev = report.evaluation_data(True, tmp_path, heldout_motions=2)
+    assert (data / "test.txt").is_file() and "evaluator" in str(ev.source)
+    assert report.evaluation_data(False, tmp_path, data_root=tmp_path / "mine")[0] == tmp_path / "mine"
+    with pytest.raises(ValueError, match="needs DATA_ROOT"):
+        report.evaluation_data(False, tmp_path, checkpoints=tmp_path)
+    calls = []
+    from salad_core.eval import t2m
+
+    monkeypatch.setattr(t2m.T2MEvaluator, "from_official",
+                        classmethod(lambda cls, ckpt, ds: calls.append((ckpt, ds)) or types.SimpleNamespace()))
+    data, ev = report.evaluation_data(False, tmp_path, data_root=tmp_path / "hml", checkpoints="ck", dataset="kit")
+    assert calls == [("ck", "kit")] and data == tmp_path / "hml" and ev.source == "official T2M evaluator (kit)"
+    # QUICK ignores the official release
+    assert report.evaluation_data(True, tmp_path, checkpoints="ck", heldout_motions=2)[1].source != ev.source

@@ -8,6 +8,8 @@ KeyMotion round trips.
 - :func:`heldout_corpus`: a small folder of procedural-corpus clips from the split the shipped
   weights never trained on (the test split of ``build_corpus(size="default", seed=0)``), so quick
   evaluations score unseen motions without building the whole corpus.
+- :func:`evaluation_data`: the data folder and evaluator a notebook's parameters ask for (QUICK,
+  procedural FULL, or the official release on HumanML3D / KIT-ML).
 - :func:`read_official_options` and :func:`official_salad_pipeline`: a :class:`SaladPipeline` from
   the official release's ``checkpoints`` folder (FULL mode of the notebooks).
 - :class:`LengthBucketed`: a SALAD generator that splits each batch into groups of similar length,
@@ -43,6 +45,7 @@ __all__ = [
     "paper_denoiser_ablations",
     "heldout_corpus",
     "procedural_eval_corpus",
+    "evaluation_data",
     "read_official_options",
     "official_salad_pipeline",
     "LengthBucketed",
@@ -273,6 +276,34 @@ def procedural_eval_corpus(quick: bool, out_dir: str | os.PathLike, *, data_root
     if not (data / "test.txt").is_file():
         build_corpus(data, size="default", seed=0)
     return data
+
+
+def evaluation_data(quick: bool, out_dir: str | os.PathLike, *, data_root: str | os.PathLike | None = None,
+                    checkpoints: str | os.PathLike | None = None, dataset: str = "humanml3d",
+                    heldout_motions: int = 32) -> tuple[Path, Any]:
+    """The data folder and the evaluator of a reproduction notebook, from its parameters cell.
+
+    FULL mode with ``checkpoints`` (the official release): ``data_root`` (HumanML3D or KIT-ML,
+    required) and the official T2M evaluator of ``dataset``. Otherwise the procedural data of
+    :func:`procedural_eval_corpus` and the shipped procedural-corpus evaluator.
+
+    Returns
+    -------
+    (Path, T2MEvaluator)
+        The evaluator's ``source`` names where it came from (recorded in every result).
+    """
+    if not quick and checkpoints:
+        from salad_core.eval.t2m import T2MEvaluator
+
+        if not data_root:
+            raise ValueError("FULL mode with CHECKPOINTS needs DATA_ROOT: the HumanML3D / KIT-ML folder")
+        evaluator = T2MEvaluator.from_official(checkpoints, dataset)
+        evaluator.source = f"official T2M evaluator ({dataset})"
+        return Path(data_root), evaluator
+    from salad_core.eval.train_evaluator import load_packaged_evaluator
+
+    data = procedural_eval_corpus(quick, out_dir, data_root=data_root, heldout_motions=heldout_motions)
+    return data, load_packaged_evaluator()[0]
 
 
 def read_official_options(path: str | os.PathLike) -> dict[str, Any]:
