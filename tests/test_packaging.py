@@ -61,3 +61,13 @@ def test_pyproject_dependencies_are_pinned_in_requirements():
 def test_console_script_declared():
     meta = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     assert meta["scripts"]["salad"] == "salad_core.cli:main"
+
+
+def test_version_is_one_number_everywhere():
+    import salad_core
+
+    root = Path(__file__).resolve().parents[1]
+    version = tomllib.loads((root / "pyproject.toml").read_text())["project"]["version"]
+    assert salad_core.__version__ == version
+    major_minor = ".".join(version.split(".")[:2])
+    assert f"## Status (version {major_minor})" in (root / "README.md").read_text()
