@@ -252,9 +252,17 @@ def test_markdown_and_latex_exports(real, noise):
     assert "R-precision top-1 ↑" in header and "FID ↓" in header and "MultiModality" not in header
     row = next(line for line in lines if line.startswith("| noise"))
     assert format_mean_ci(df.loc[1, "FID"], df.loc[1, "FID ±"]) in row
-    assert "Full T2M protocol" in md and "replications 2" in md and "w 7.5" in md
+    # 2 replications without MultiModality: said to be a reduced protocol, never "full"
+    assert "Reduced T2M protocol (2 replications instead of 20, no MultiModality)" in md
+    assert "Full T2M protocol" not in md and "replications 2" in md and "w 7.5" in md
     tex = to_latex(df)
-    assert tex.startswith("% Full T2M protocol") and "\\begin{tabular}{lcccccc}" in tex
+    assert tex.startswith("% Reduced T2M protocol") and "\\begin{tabular}{lcccccc}" in tex
+    full = df.assign(replications=20, max_samples=None, mm=True)
+    assert to_markdown(full).startswith("**Full T2M protocol;")
+    capped = df.assign(replications=20, max_samples=192, mm=True)
+    assert "at most 192 samples per replication instead of the whole split" in to_markdown(capped)
+    assert "reduced protocol" in SETTINGS.describe() and EvalSettings().describe().startswith("full protocol")
+    assert EvalSettings().protocol_deviations() == []
     assert format_mean_ci(df.loc[0, "MM-Dist"], df.loc[0, "MM-Dist ±"], latex=True) in tex
     assert "$\\downarrow$" in tex and tex.rstrip().endswith("\\end{tabular}")
     # quick mode is stated loudly; names are escaped

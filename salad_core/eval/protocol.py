@@ -167,14 +167,37 @@ class EvalSettings:
         """A validated copy with some fields changed."""
         return replace(self, **changes)
 
+    def protocol_deviations(self) -> list[str]:
+        """How these settings fall short of the T2M protocol (20 replications of the whole split,
+        MultiModality on); empty for the protocol itself. Generation settings (steps, w, solver)
+        are choices within the protocol and are not listed."""
+        return _deviations(self.replications, self.max_samples, self.mm)
+
     def describe(self) -> str:
         """One line for humans, starting with the mode."""
-        mode = "QUICK MODE (not the full protocol)" if self.quick else "full protocol"
+        short = self.protocol_deviations()
+        mode = ("QUICK MODE (not the full protocol)" if self.quick else
+                f"reduced protocol ({', '.join(short)})" if short else "full protocol")
         mm = f"on ({self.mm_prompts} prompts x {self.mm_repeats})" if self.mm else "off"
         cap = f", at most {self.max_samples} samples per replication" if self.max_samples else ""
         return (f"{mode}: split={self.split}, batch {self.batch_size}, {self.replications} replications{cap}, "
                 f"MultiModality {mm}, steps {self.num_steps}, w {self.guidance_scale:g}, "
                 f"solver {self.solver or 'default'}, seed {self.seed}")
+
+
+#: Replications of the T2M protocol.
+PROTOCOL_REPLICATIONS = 20
+
+
+def _deviations(replications, max_samples, mm) -> list[str]:
+    out = []
+    if replications is not None and int(replications) < PROTOCOL_REPLICATIONS:
+        out.append(f"{int(replications)} replications instead of {PROTOCOL_REPLICATIONS}")
+    if max_samples is not None and not (isinstance(max_samples, float) and math.isnan(max_samples)):
+        out.append(f"at most {int(max_samples)} samples per replication instead of the whole split")
+    if mm is False:
+        out.append("no MultiModality")
+    return out
 
 
 # ------------------------------------------------------------------------------------ results
@@ -590,9 +613,20 @@ def _fmt_setting(v: Any) -> str:
 def _note(df: pd.DataFrame) -> str:
     """Settings shared by the rows, as one sentence; quick mode first and loud."""
     quick = any(bool(v) for v in _unique(df, "quick"))
-    parts = ["QUICK MODE: fewer replications and samples than the protocol, not comparable with published "
-             "numbers" if quick else "Full T2M protocol"]
     gen_rows = df[_kind(df) == "generator"]
+    short: list[str] = []
+    for _, r in df.iterrows():
+        mm = r.get("mm") if _kind(df).loc[r.name] == "generator" else None     # the real row has no MultiModality
+        for d in _deviations(r.get("replications"), r.get("max_samples"), mm):
+            if d not in short:
+                short.append(d)
+    if quick:
+        parts = ["QUICK MODE: fewer replications and samples than the protocol, not comparable with published "
+                 "numbers"]
+    elif short:
+        parts = [f"Reduced T2M protocol ({', '.join(short)}), not comparable with published numbers"]
+    else:
+        parts = ["Full T2M protocol"]
     for label, key in (("split", "split"), ("batch", "batch_size"), ("replications", "replications"),
                        ("samples/replication", "samples"), ("MultiModality", "mm"), ("steps", "num_steps"),
                        ("w", "guidance_scale"), ("solver", "solver"), ("seed", "seed"), ("weights", "weights"),
