@@ -359,25 +359,21 @@ class SaladPipeline:
             noise = self.make_noise(seeds, n_lat)
         else:
             noise = _check_noise(noise, (len(prompts), n_lat, *self.latent_shape))
-        mask = self.frame_mask(lengths, n_lat)
         text, null = self.encode_text(prompts)
-        cond = self.denoiser.prepare_text(text.features, text.mask)
         uncond = self.denoiser.prepare_text(null.features, null.mask)
-        scheduler = make_scheduler(self.diffusion, solver or self.solver)
         settings = dict(guidance_scale=guidance_scale, num_steps=int(num_steps), solver=solver or self.solver,
                         weights=self.source)
         attention = None
         if capture_attention:
             from salad_core.attention.capture import capture_cross_attention
 
+            cond = self.denoiser.prepare_text(text.features, text.mask)
+            mask = self.frame_mask(lengths, n_lat)
             with capture_cross_attention(self.denoiser, text, lengths, capture_attention) as store:
-                latents = denoise(self.denoiser, scheduler, cond, uncond, noise, mask,
-                                  guidance_scale=guidance_scale, num_steps=int(num_steps),
+                latents = denoise(self.denoiser, make_scheduler(self.diffusion, solver or self.solver), cond, uncond,
+                                  noise, mask, guidance_scale=guidance_scale, num_steps=int(num_steps),
                                   controller_hooks=[store.on_step], progress=progress)
             attention = store.result()
-        elif len(prompts) <= self.max_batch:
-            latents = denoise(self.denoiser, scheduler, cond, uncond, noise, mask,
-                              guidance_scale=guidance_scale, num_steps=int(num_steps), progress=progress)
         else:
             latents = self._denoise_in_chunks(text, uncond, noise, lengths, guidance_scale, int(num_steps),
                                               solver or self.solver, progress)
@@ -386,8 +382,9 @@ class SaladPipeline:
 
     def _denoise_in_chunks(self, text: TextBatch, uncond: Any, noise: torch.Tensor, lengths: Sequence[int],
                            guidance_scale: float, num_steps: int, solver: str, progress: bool) -> torch.Tensor:
-        """Denoise ``B > max_batch`` motions in consecutive chunks of ``max_batch``, each at its own
-        longest length; returns latents ``(B, N', P, Dz)`` as one call would (zero past each length).
+        """Denoise the ``B`` motions in consecutive chunks of at most ``max_batch`` (one chunk when
+        ``B <= max_batch``), each at its own longest length; returns latents ``(B, N', P, Dz)`` as one
+        call would (zero past each length).
 
         Every sample keeps its own noise, so the motions are those of one batched call up to float
         rounding (the GEMMs block differently at another batch size).

@@ -533,12 +533,14 @@ print(f"{'QUICK MODE' if QUICK else 'full protocol'}: {settings.replications} re
 print("data:", data)
 print("ablation VAEs:", {k: f"{v['label']}, {v['steps']} steps" for k, v in vae_rows.items()})
 
+loaded = {}                            # row name -> (vae, mean, std), for the figures below
+
 def score(variant):
     """Reconstruction FID / MPJPE of one shipped ablation VAE, labelled with its training steps."""
-    vae, mean, std = load_ablation_vae(variant, ABLATIONS)
     entry = vae_rows[variant]
-    return evaluate_reconstruction(vae, mean, std, data, evaluator, settings, weights=f"vae_{variant}",
-                                   name=f"{entry['label']}, {entry['steps']} steps")'''),
+    name = f"{entry['label']}, {entry['steps']} steps"
+    loaded[name] = load_ablation_vae(variant, ABLATIONS)
+    return evaluate_reconstruction(*loaded[name], data, evaluator, settings, weights=f"vae_{variant}", name=name)'''),
     ("md", """## Table 2: skeleton-aware against pose-vector latent
 
 Both VAEs have the same training steps, batch, learning rate and loss. `Params` counts the learnable
@@ -565,7 +567,7 @@ from salad_core.eval.protocol import real_batches
 from salad_core.eval.reconstruction import part_errors, reconstruct_features
 from salad_core.motion import features_to_joints
 
-vaes = {r.name: load_ablation_vae(r.settings["weights"][len("vae_"):], ABLATIONS) for r in table2[:-1]}
+vaes = {r.name: loaded[r.name] for r in table2[:-1]}
 vaes[reference_name] = (reference.vae, reference.mean, reference.std)
 per_part = {}
 for name, (vae, mean, std) in vaes.items():

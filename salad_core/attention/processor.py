@@ -24,13 +24,12 @@ probabilities have ``B * P`` rows ordered (batch, part), skeletal ones ``B * N'`
 """
 from __future__ import annotations
 
-import math
 from typing import Optional, Protocol
 
 import torch
 import torch.nn.functional as F
 
-from salad_core.models.attention import AttentionProcessor, SiteInfo, fast_attention, softmax_last
+from salad_core.models.attention import AttentionProcessor, SiteInfo, attention_probs, fast_attention
 
 __all__ = ["SiteHook", "HookedProcessor", "flat_rows", "named_rows", "flat_from_named"]
 
@@ -118,10 +117,7 @@ class HookedProcessor(AttentionProcessor):
             return out
         flat = flat_rows(site, rows)
         take = _row_taker(flat)
-        scores = torch.matmul(take(q), take(k).transpose(-1, -2)).mul_(1.0 / math.sqrt(q.shape[-1]))
-        if key_mask is not None:
-            scores = scores.masked_fill_(~take(key_mask)[:, None, None, :], float("-inf"))
-        probs = softmax_last(scores)
+        probs = attention_probs(take(q), take(k), None if key_mask is None else take(key_mask))
         result = self.hook.process(site, rows, named_rows(site, probs, rows.numel()))
         if result is None:
             return out

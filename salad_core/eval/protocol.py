@@ -817,6 +817,29 @@ _PAPER_TABLE1 = {
 }
 
 
+def paper_row(name: str, cells: Mapping[str, tuple[float, float] | None], source: str, **settings: Any) -> dict:
+    """One published row in the shape of :func:`results_frame`: ``"paper: <name>"``, the given
+    metrics as ``(mean, 95% half-width)`` (None or absent: NaN, a cell the paper does not print),
+    ``kind="paper"``, the protocol's split/batch/replications, ``data=source`` and ``settings``."""
+    unknown = set(cells) - set(METRICS)
+    if unknown:
+        raise ValueError(f"unknown metrics {sorted(unknown)}; known: {METRICS}")
+    row: dict[str, Any] = {"name": f"paper: {name}"}
+    for m in METRICS:
+        cell = cells.get(m)
+        row[m], row[m + CI_SUFFIX] = cell if cell is not None else (np.nan, np.nan)
+    row.update({k: None for k in SETTING_COLUMNS})
+    row.update(kind="paper", split="test", batch_size=32, replications=PROTOCOL_REPLICATIONS, data=source,
+               **settings)
+    return row
+
+
+def paper_frame(rows: Sequence[dict]) -> pd.DataFrame:
+    """Rows of :func:`paper_row` as a DataFrame with :func:`results_frame`'s columns."""
+    return pd.DataFrame(list(rows), columns=["name", *[c for m in METRICS for c in (m, m + CI_SUFFIX)],
+                                             *SETTING_COLUMNS])
+
+
 def paper_cfg_sweep(dataset: str = "humanml3d") -> pd.DataFrame:
     """The SALAD paper's own CFG sweep (supplement Table 1) as a :func:`results_frame`-shaped frame.
 
@@ -830,13 +853,7 @@ def paper_cfg_sweep(dataset: str = "humanml3d") -> pd.DataFrame:
     rows = []
     for w, cells in _PAPER_TABLE1[key].items():
         real = w == "Real motion"
-        row: dict[str, Any] = {"name": f"paper: {REAL_NAME}" if real else f"paper: SALAD w={w:g}"}
-        for m, (mean, half) in zip(METRICS[:6], cells):
-            row[m], row[m + CI_SUFFIX] = mean, half
-        row["MultiModality"] = row["MultiModality" + CI_SUFFIX] = np.nan
-        row.update({k: None for k in SETTING_COLUMNS})
-        row.update(kind="paper", split="test", batch_size=32, replications=20,
-                   guidance_scale=None if real else float(w), num_steps=None if real else 50,
-                   data=f"SALAD paper, supplement Table 1 ({key})")
-        rows.append(row)
-    return pd.DataFrame(rows, columns=["name", *[c for m in METRICS for c in (m, m + CI_SUFFIX)], *SETTING_COLUMNS])
+        rows.append(paper_row(REAL_NAME if real else f"SALAD w={w:g}", dict(zip(METRICS[:6], cells)),
+                              f"SALAD paper, supplement Table 1 ({key})",
+                              guidance_scale=None if real else float(w), num_steps=None if real else 50))
+    return paper_frame(rows)

@@ -29,7 +29,7 @@ import pandas as pd
 import torch
 
 from . import metrics as M
-from .protocol import EvalSettings, _batches_for, _dataset, _motion_embeddings, _skeleton_of
+from .protocol import EvalSettings, _batches_for, _dataset, _motion_embeddings, _skeleton_of, format_mean_ci
 
 __all__ = ["RECONSTRUCTION_METRICS", "ReconstructionResult", "reconstruct_features", "evaluate_reconstruction",
            "part_errors", "reconstruction_frame", "reconstruction_markdown", "paper_vae_tables"]
@@ -241,18 +241,10 @@ def reconstruction_markdown(df: pd.DataFrame, digits: int = 3, mpjpe_scale: floa
         cells = [str(r["name"])]
         if show_params:
             cells.append(_params(r["parameters"]))
-        cells.append(_fmt(r["FID"], r.get("FID ±"), digits))
-        cells.append(_fmt(r["MPJPE"] * mpjpe_scale, (r.get("MPJPE ±") or 0.0) * mpjpe_scale, digits))
+        cells.append(format_mean_ci(r["FID"], r.get("FID ±", np.nan), digits))
+        cells.append(format_mean_ci(r["MPJPE"] * mpjpe_scale, r.get("MPJPE ±", np.nan) * mpjpe_scale, digits))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
-
-
-def _fmt(mean, half, digits: int) -> str:
-    if mean is None or not np.isfinite(mean):
-        return "-"
-    if half is None or not np.isfinite(half):
-        return f"{mean:.{digits}f}"
-    return f"{mean:.{digits}f} ± {half:.{digits}f}"
 
 
 # SALAD (CVPR 2025) Table 2 and supplement Table 4, HumanML3D test set: (params, FID, MPJPE in metres)

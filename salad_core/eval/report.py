@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from .protocol import CI_SUFFIX, METRICS, SETTING_COLUMNS
+from .protocol import METRICS, paper_frame, paper_row
 
 if TYPE_CHECKING:
     from salad_core.keymotion.pipeline import KeyMotionPipeline
@@ -122,16 +122,8 @@ def paper_table1(dataset: str = "humanml3d", methods: Sequence[str] | None = PAP
     unknown = [m for m in names if m not in table]
     if unknown or not names:
         raise ValueError(f"methods={unknown or names!r} are not rows of the paper's Table 1; rows: {list(table)}")
-    rows = []
-    for method in names:
-        row: dict[str, Any] = {"name": f"paper: {method}"}
-        for m, cell in zip(METRICS, table[method]):
-            row[m], row[m + CI_SUFFIX] = cell if cell is not None else (np.nan, np.nan)
-        row.update({k: None for k in SETTING_COLUMNS})
-        row.update(kind="paper", split="test", batch_size=32, replications=20,
-                   data=f"SALAD paper (CVPR 2025), Table 1 ({key})")
-        rows.append(row)
-    return pd.DataFrame(rows, columns=["name", *[c for m in METRICS for c in (m, m + CI_SUFFIX)], *SETTING_COLUMNS])
+    source = f"SALAD paper (CVPR 2025), Table 1 ({key})"
+    return paper_frame([paper_row(method, dict(zip(METRICS, table[method])), source) for method in names])
 
 
 # SALAD (CVPR 2025) denoiser ablations, HumanML3D test set (supp. Table 3 also KIT-ML): method ->
@@ -171,18 +163,9 @@ def paper_denoiser_ablations(which: str = "table3", dataset: str = "humanml3d") 
     tables = PAPER_DENOISER_ABLATIONS[which]
     if key not in tables:
         raise ValueError(f"the paper's {_TABLE_TITLES[which]} has no {key!r} rows; it covers {sorted(tables)}")
-    rows = []
-    for method, (top3, fid) in tables[key].items():
-        row: dict[str, Any] = {"name": f"paper: {method}"}
-        for m in METRICS:
-            row[m], row[m + CI_SUFFIX] = np.nan, np.nan
-        row["R-precision top-3"], row["R-precision top-3" + CI_SUFFIX] = top3
-        row["FID"], row["FID" + CI_SUFFIX] = fid
-        row.update({k: None for k in SETTING_COLUMNS})
-        row.update(kind="paper", split="test", batch_size=32, replications=20,
-                   data=f"SALAD paper (CVPR 2025), {_TABLE_TITLES[which]} ({key})")
-        rows.append(row)
-    return pd.DataFrame(rows, columns=["name", *[c for m in METRICS for c in (m, m + CI_SUFFIX)], *SETTING_COLUMNS])
+    source = f"SALAD paper (CVPR 2025), {_TABLE_TITLES[which]} ({key})"
+    return paper_frame([paper_row(method, {"R-precision top-3": top3, "FID": fid}, source)
+                        for method, (top3, fid) in tables[key].items()])
 
 
 # ----------------------------------------------------------------------------------- data

@@ -50,6 +50,7 @@ __all__ = [
     "AttentionProcessor",
     "SDPAProcessor",
     "fast_attention",
+    "attention_probs",
     "softmax_last",
     "SHORT_KEYS",
     "EagerProcessor",
@@ -197,6 +198,15 @@ class AttentionProcessor:
         return f"{type(self).__name__}()"
 
 
+def attention_probs(q: torch.Tensor, k: torch.Tensor, key_mask: torch.Tensor | None) -> torch.Tensor:
+    """``softmax(q k^T / sqrt(dh))`` ``(R, H, Lq, Lk)`` with masked keys (``key_mask (R, Lk)``
+    False) at probability 0; ``q (R, H, Lq, dh)``, ``k (R, H, Lk, dh)``."""
+    scores = torch.matmul(q, k.transpose(-1, -2)).mul_(1.0 / math.sqrt(q.shape[-1]))
+    if key_mask is not None:
+        scores = scores.masked_fill_(~key_mask[:, None, None, :], float("-inf"))
+    return softmax_last(scores)
+
+
 #: Key lengths below this use explicit matmuls instead of SDPA (see :func:`fast_attention`).
 SHORT_KEYS = 16
 
@@ -214,12 +224,9 @@ def fast_attention(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, key_mask: 
 
     Shapes: ``q (R, H, Lq, dh)``, ``k, v (R, H, Lk, dh)``, ``key_mask (R, Lk)`` bool or None.
     """
-    mask = None if key_mask is None else key_mask[:, None, None, :]
     if dropout_p == 0.0 and k.shape[-2] < SHORT_KEYS:
-        scores = torch.matmul(q, k.transpose(-1, -2)).mul_(1.0 / math.sqrt(q.shape[-1]))
-        if mask is not None:
-            scores = scores.masked_fill_(~mask, float("-inf"))
-        return torch.matmul(softmax_last(scores), v)
+        return torch.matmul(attention_probs(q, k, key_mask), v)
+    mask = None if key_mask is None else key_mask[:, None, None, :]
     return F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=dropout_p)
 
 
@@ -248,10 +255,7 @@ class EagerProcessor(AttentionProcessor):
         self.controller = controller
 
     def __call__(self, site, q, k, v, key_mask, dropout_p):
-        scores = torch.matmul(q, k.transpose(-1, -2)) * (1.0 / math.sqrt(q.shape[-1]))
-        if key_mask is not None:
-            scores = scores.masked_fill(~key_mask[:, None, None, :], float("-inf"))
-        probs = softmax_last(scores)
+        probs = attention_probs(q, k, key_mask)
         if self.controller is not None:
             new = self.controller(site, probs)
             if new is not None:
