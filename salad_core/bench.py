@@ -55,10 +55,12 @@ import numpy as np
 import torch
 
 from salad_core.models.denoiser import Denoiser, DenoiserConfig
+from salad_core.models.gemm import backend as gemm_backend
 from salad_core.sampling import denoise, make_scheduler
 from salad_core.skeleton import get_skeleton
 
-__all__ = ["Row", "Case", "Plan", "SECTIONS", "OPTIONAL_SECTIONS", "compile_rows", "batching_rows", "gemm_flops", "step_flops", "matmul_rates", "roofline_seconds",
+__all__ = ["Row", "Case", "Plan", "SECTIONS", "OPTIONAL_SECTIONS", "compile_rows", "batching_rows", "gemm_flops", "step_flops", "matmul_rates", "attended_tokens",
+           "matmul_rates_by_backend", "roofline_seconds",
            "time_denoiser_steps", "speed_rows", "forward_variant_rows", "overhead_rows", "training_rows",
            "memory_rows", "peak_rss_delta", "denoiser_cases", "TrainRecipe", "train_recipe", "bench_pipeline",
            "machine_header", "run_benchmarks", "format_table", "main"]
@@ -70,6 +72,10 @@ MOTION_FRAMES = SKELETON.max_length            # 196 frames = 49 latent frames
 SHORT_FRAMES = 120                             # the CLI's default length (6 s at 20 fps)
 SAMPLING_STEPS = 50                            # DDIM steps of the paper's sampler
 GUIDANCE = 7.5                                 # classifier-free guidance (paper default)
+#: Valid tokens of the random prompts (start/end tokens included), drawn uniformly: HumanML3D captions
+#: are about 12 words. The rest of the padded width (CLIP: 77) is masked padding, which the denoiser
+#: does not attend to (:func:`salad_core.models.attention.trim_masked_keys`).
+PROMPT_TOKENS = (8, 24)
 BATCHES = (1, 32)
 SECTIONS = ("memory", "overheads", "speed", "training")
 #: Sections run only when asked for by name.
@@ -137,10 +143,12 @@ def gemm_flops(cfg: DenoiserConfig, rows: int, frames: int, tokens: int) -> dict
 
     Counts every matrix product of :class:`~salad_core.models.denoiser.Denoiser` (LayerNorm,
     softmax, GELU and other element-wise work are not counted). Keys: ``proj`` (``w x w``-like
-    projections: input/output processes, temporal and skeletal Q/K/V/O, cross Q/O, skip merges,
-    timestep MLP and FiLMs), ``ffn_up`` (``w x f``), ``ffn_down`` (``f x w``), ``attn`` (``q k^T``
-    and ``p v`` of the three attentions), ``text_once`` (``word_emb`` and every layer's text K/V:
-    cached on the TextContext, so done once per sampling call, not per step).
+    projections: input/output processes, temporal and skeletal Q/K/V/O, cross Q/O, skip merges),
+    ``ffn_up`` (``w x f``), ``ffn_down`` (``f x w``), ``attn`` (``q k^T`` and ``p v`` of the three
+    attentions over ``tokens`` text keys), and the work a sampling call does once rather than per
+    step: ``text_once`` (``word_emb`` and every layer's text K/V, cached on the TextContext) and
+    ``timestep_once`` (the timestep MLP and all FiLMs of one timestep, for all rows: cached per
+    timestep by :meth:`~salad_core.models.denoiser.Denoiser.timestep_conditioning`).
     """
     w, f, p, L, dz = cfg.width, cfg.ff_dim, cfg.num_parts, cfg.layers, cfg.latent_dim
     n = frames * p                                                  # (frame, part) tokens per sample
@@ -149,19 +157,25 @@ def gemm_flops(cfg: DenoiserConfig, rows: int, frames: int, tokens: int) -> dict
     proj += n * (w * w + w * dz)                                    # output process: Linear(w,w), Linear(w,Dz)
     proj += L * n * (4 * w * w + 4 * w * w + 2 * w * w)             # temporal QKVO, skeletal QKVO, cross Q and O
     proj += half * n * 2 * w * w                                    # skip merges Linear(2w, w)
-    proj += 2 * w * w + L * 4 * 2 * w * w                           # timestep MLP + 4 FiLMs Linear(w, 2w) per layer
     attn = L * (2 * n * frames * w + 2 * n * p * w + 2 * n * tokens * w)   # temporal, skeletal, cross: qk^T + pv
     ffn_up = L * n * w * f
     ffn_down = L * n * f * w
     text_once = tokens * cfg.text_dim * w + L * 2 * tokens * w * w  # word_emb + per-layer K, V
     out = {"proj": proj, "ffn_up": ffn_up, "ffn_down": ffn_down, "attn": attn, "text_once": text_once}
-    return {k: 2.0 * v * rows for k, v in out.items()}
+    out = {k: 2.0 * v * rows for k, v in out.items()}
+    film = L * 4 * 2 * w * w if cfg.film else 0
+    out["timestep_once"] = 2.0 * (2 * w * w + film)                 # timestep MLP + 4 FiLMs Linear(w, 2w) per layer
+    return out
+
+
+#: Keys of :func:`gemm_flops` that a sampling call computes once, not at every step.
+ONCE_PER_CALL = ("text_once", "timestep_once")
 
 
 def step_flops(cfg: DenoiserConfig, batch: int, frames: int, tokens: int, guidance: bool = True) -> float:
     """FLOPs of one sampling step for ``batch`` motions of ``frames`` latent frames (CFG: 2 rows each)."""
     fl = gemm_flops(cfg, (2 if guidance else 1) * batch, frames, tokens)
-    return sum(v for k, v in fl.items() if k != "text_once")
+    return sum(v for k, v in fl.items() if k not in ONCE_PER_CALL)
 
 
 def _best_rate(fn: Callable[[], Any], flops: float, min_time: float) -> float:
@@ -177,24 +191,52 @@ def _best_rate(fn: Callable[[], Any], flops: float, min_time: float) -> float:
     return flops / best / 1e9
 
 
-def matmul_rates(cfg: DenoiserConfig, rows: int, frames: int, tokens: int, min_time: float) -> dict[str, float]:
-    """This machine's GFLOP/s of plain matmuls at the denoiser's GEMM shapes (keys of :func:`gemm_flops`
-    except ``text_once``; ``attn`` is a batched ``q k^T`` of the temporal attention)."""
+def matmul_rates_by_backend(cfg: DenoiserConfig, rows: int, frames: int, tokens: int,
+                            min_time: float) -> dict[str, dict[str, float]]:
+    """This machine's GFLOP/s of plain matrix products at the denoiser's GEMM shapes, per library.
+
+    ``{"aten": {...}, "onednn": {...}}`` with the per-step keys of :func:`gemm_flops` (not :data:`ONCE_PER_CALL`):
+    ``aten`` is ``torch.matmul`` (MKL's ``sgemm`` in PyTorch's CPU builds); ``onednn`` (only when
+    :func:`salad_core.models.gemm.onednn_available`) is the oneDNN product the dense layers use,
+    for the ``proj``/``ffn`` shapes (oneDNN has no batched route here, so ``attn`` is aten only:
+    a batched ``q k^T`` of the temporal attention).
+    """
+    from salad_core.models import gemm
+
     w, f, p, h = cfg.width, cfg.ff_dim, cfg.num_parts, cfg.heads
     m = rows * frames * p
     dh = w // h
     g = torch.Generator().manual_seed(0)
     a_w, a_f = torch.randn(m, w, generator=g), torch.randn(m, f, generator=g)
-    b_ww, b_wf, b_fw = torch.randn(w, w, generator=g), torch.randn(w, f, generator=g), torch.randn(f, w, generator=g)
+    w_ww, w_fw, w_wf = torch.randn(w, w, generator=g), torch.randn(f, w, generator=g), torch.randn(w, f, generator=g)
     q = torch.randn(rows * p * h, frames, dh, generator=g)
     k = torch.randn(rows * p * h, dh, frames, generator=g)
+    flops = {"proj": 2.0 * m * w * w, "ffn_up": 2.0 * m * w * f, "ffn_down": 2.0 * m * f * w}
+    out: dict[str, dict[str, float]] = {}
     with torch.inference_mode():
-        return {
-            "proj": _best_rate(lambda: a_w @ b_ww, 2.0 * m * w * w, min_time),
-            "ffn_up": _best_rate(lambda: a_w @ b_wf, 2.0 * m * w * f, min_time),
-            "ffn_down": _best_rate(lambda: a_f @ b_fw, 2.0 * m * f * w, min_time),
+        # weights stored (out, in) as in nn.Linear; aten multiplies by the transposed view, as F.linear does
+        out["aten"] = {
+            "proj": _best_rate(lambda: a_w @ w_ww.t(), flops["proj"], min_time),
+            "ffn_up": _best_rate(lambda: a_w @ w_fw.t(), flops["ffn_up"], min_time),
+            "ffn_down": _best_rate(lambda: a_f @ w_wf.t(), flops["ffn_down"], min_time),
             "attn": _best_rate(lambda: torch.bmm(q, k), 2.0 * q.shape[0] * frames * frames * dh, min_time),
         }
+        if gemm.onednn_available():
+            with gemm.use_backend("onednn"):
+                out["onednn"] = {
+                    "proj": _best_rate(lambda: gemm.linear(a_w, w_ww), flops["proj"], min_time),
+                    "ffn_up": _best_rate(lambda: gemm.linear(a_w, w_fw), flops["ffn_up"], min_time),
+                    "ffn_down": _best_rate(lambda: gemm.linear(a_f, w_wf), flops["ffn_down"], min_time),
+                }
+    return out
+
+
+def matmul_rates(cfg: DenoiserConfig, rows: int, frames: int, tokens: int, min_time: float) -> dict[str, float]:
+    """This machine's best GFLOP/s at the denoiser's GEMM shapes (keys of :func:`gemm_flops` except
+    :data:`ONCE_PER_CALL`): for every shape the faster of the libraries of :func:`matmul_rates_by_backend`,
+    so the roofline is measured against the best this CPU does, not against the library salad uses."""
+    by_backend = matmul_rates_by_backend(cfg, rows, frames, tokens, min_time)
+    return {key: max(rates.get(key, 0.0) for rates in by_backend.values()) for key in by_backend["aten"]}
 
 
 def roofline_seconds(flops: dict[str, float], rates: dict[str, float]) -> float:
@@ -224,7 +266,8 @@ def _random_inputs(case: Case, batch: int, latent_frames: int, seed: int = 0):
     g = torch.Generator().manual_seed(seed)
     cfg = case.config
     text = torch.randn(batch, case.tokens, cfg.text_dim, generator=g)
-    lengths = torch.randint(5, case.tokens + 1, (batch,), generator=g)
+    lo, hi = PROMPT_TOKENS
+    lengths = torch.randint(min(lo, case.tokens), min(hi, case.tokens) + 1, (batch,), generator=g)
     mask = torch.arange(case.tokens)[None] < lengths[:, None]
     null_mask = torch.zeros(1, case.tokens, dtype=torch.bool)
     null_mask[0, :2] = True  # the empty prompt: start and end tokens only
@@ -232,6 +275,13 @@ def _random_inputs(case: Case, batch: int, latent_frames: int, seed: int = 0):
     noise = torch.randn(batch, latent_frames, cfg.num_parts, cfg.latent_dim, generator=g)
     frame_mask = torch.ones(batch, latent_frames, dtype=torch.bool)
     return (text, mask), null, noise, frame_mask
+
+
+def attended_tokens(case: Case, batch: int) -> int:
+    """Text keys the cross-attention attends at ``batch`` (the longest valid prompt of the guided
+    batch, padding after it dropped): the ``tokens`` of the FLOP count of a timed step."""
+    (_, mask), (_, null_mask), _, _ = _random_inputs(case, batch, 1)
+    return int(torch.cat([mask, null_mask]).any(dim=0).nonzero().max()) + 1
 
 
 def time_denoiser_steps(model: Denoiser, case: Case, batch: int, latent_frames: int, steps: int,
@@ -252,12 +302,14 @@ def speed_rows(model: Denoiser, case: Case, frames: int, batch: int, steps: int,
     unit = SKELETON.unit_length
     latent_frames = frames // unit
     per_step = time_denoiser_steps(model, case, batch, latent_frames, steps, warmup=warmup)
-    fl = gemm_flops(case.config, 2 * batch, latent_frames, case.tokens)
-    flops = sum(v for k, v in fl.items() if k != "text_once")
-    rates = matmul_rates(case.config, 2 * batch, latent_frames, case.tokens, matmul_time)
+    tokens = attended_tokens(case, batch)
+    fl = gemm_flops(case.config, 2 * batch, latent_frames, tokens)
+    flops = sum(v for k, v in fl.items() if k not in ONCE_PER_CALL)
+    by_backend = matmul_rates_by_backend(case.config, 2 * batch, latent_frames, tokens, matmul_time)
     if rates_twice:  # best of two windows: other processes share the CPUs
-        again = matmul_rates(case.config, 2 * batch, latent_frames, case.tokens, matmul_time)
-        rates = {k: max(v, again[k]) for k, v in rates.items()}
+        again = matmul_rates_by_backend(case.config, 2 * batch, latent_frames, tokens, matmul_time)
+        by_backend = {lib: {k: max(v, again[lib][k]) for k, v in rates.items()} for lib, rates in by_backend.items()}
+    rates = {k: max(r.get(k, 0.0) for r in by_backend.values()) for k in by_backend["aten"]}
     if len(per_step) >= SAMPLING_STEPS:
         total, how = float(per_step[:SAMPLING_STEPS].sum()), f"all {SAMPLING_STEPS} steps timed"
     else:
@@ -273,8 +325,10 @@ def speed_rows(model: Denoiser, case: Case, frames: int, batch: int, steps: int,
         Row("speed", "seconds per motion", setting, total / batch, "s", note=how),
         Row("roofline", "denoiser GFLOP/s (best step)", setting, achieved, "GFLOP/s", reference=effective,
             ratio=ideal / best,
-            note=f"{flops / 1e9:.2f} GFLOP/step; matmul GFLOP/s at these shapes: "
-                 + ", ".join(f"{k} {v:.1f}" for k, v in rates.items())),
+            note=f"{flops / 1e9:.2f} GFLOP/step ({tokens} text keys attended); matmul GFLOP/s at these shapes: "
+                 + "; ".join(f"{lib} " + ", ".join(f"{k} {v:.1f}" for k, v in r.items())
+                             for lib, r in by_backend.items())
+                 + f"; dense layers ran on {gemm_backend()}"),
     ]
 
 
@@ -772,13 +826,15 @@ def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None 
                          f"ffn {paper.config.ff_dim}, {paper.config.heads} heads, CLIP text {paper.config.text_dim}-d "
                          f"x {paper.tokens} tokens; default = width {default.config.width}, {default.config.layers} "
                          f"layers, ffn {default.config.ff_dim}, {default.config.heads} heads, MiniLM "
-                         f"{default.config.text_dim}-d x {default.tokens} tokens")
+                         f"{default.config.text_dim}-d x {default.tokens} tokens; prompts of {PROMPT_TOKENS[0]}-"
+                         f"{PROMPT_TOKENS[1]} valid tokens, the rest masked padding (not attended)")
             if plan.quick:
                 notes.append(f"quick: batch 1 timed on {plan.b1_steps} steps, batch 32 on {plan.b32_steps} step, "
                              f"both extrapolated to {SAMPLING_STEPS} (every DDIM step costs the same)")
-            notes.append("roofline: value = FLOPs per step (dense GEMMs + attention products, element-wise work "
-                         "not counted) / best step time; reference = this machine's matmul GFLOP/s at the same "
-                         "GEMM shapes, FLOP-weighted; ratio = matmul-bound time / best step time")
+            notes.append("roofline: value = FLOPs per step (dense GEMMs + attention products over the attended "
+                         "keys, element-wise work not counted) / best step time; reference = this machine's best "
+                         "matmul GFLOP/s at the same GEMM shapes (the faster of aten/MKL and oneDNN per shape), "
+                         "FLOP-weighted; ratio = matmul-bound time / best step time")
         if "training" in sections:
             recipe = train_recipe(weights)
             log.info("training: %d timed steps each", plan.train_steps)

@@ -230,6 +230,8 @@ def denoise(denoiser: Denoiser, scheduler, cond: TextInput, uncond: TextInput | 
     denoiser.eval()
     try:
         with torch.inference_mode():
+            if hasattr(denoiser, "prepare_timesteps"):
+                denoiser.prepare_timesteps(timesteps)   # every step's FiLMs in one product
             z = latents * scheduler.init_noise_sigma
             if keep is not None:
                 z = z * keep

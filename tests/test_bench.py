@@ -28,22 +28,25 @@ def test_gemm_flops_matches_a_hand_count():
     #   output Linear(8,8)+Linear(8,4):        21 * (64 + 32)          = 2016
     #   per layer QKVO x2 + cross Q,O: 3 * 21 * 10 * 64               = 40320
     #   skip merge Linear(16, 8):          1 * 21 * 16 * 8             = 2688
-    #   timestep MLP 2 x (8x8) + 12 FiLMs Linear(8,16): 128 + 12 * 128 = 1664
     #   attention qk^T + pv: 3 * (2*21*3*8 + 2*21*7*8 + 2*21*5*8)      = 15120
     #   FFN: 3 * 21 * 8 * 16 each way                                   = 8064
     #   text once: word_emb 5*6*8 + K,V 3 * 2 * 5 * 64                  = 2160
+    # Once per timestep, not per row: timestep MLP 2 x (8x8) + 12 FiLMs Linear(8,16): 128 + 12 * 128 = 1664
     fl = bench.gemm_flops(TINY, rows=2, frames=3, tokens=5)
-    assert fl == {"proj": 4 * 48704, "ffn_up": 4 * 8064, "ffn_down": 4 * 8064, "attn": 4 * 15120, "text_once": 4 * 2160}
-    # one CFG step for one motion = the 2 rows above, without the cached text projections
-    assert bench.step_flops(TINY, batch=1, frames=3, tokens=5) == 4 * (48704 + 2 * 8064 + 15120)
-    assert bench.step_flops(TINY, batch=1, frames=3, tokens=5, guidance=False) == 2 * (48704 + 2 * 8064 + 15120)
+    assert fl == {"proj": 4 * 47040, "ffn_up": 4 * 8064, "ffn_down": 4 * 8064, "attn": 4 * 15120,
+                  "text_once": 4 * 2160, "timestep_once": 2 * 1664}
+    # one CFG step for one motion = the 2 rows above, without the cached text and timestep work
+    assert bench.step_flops(TINY, batch=1, frames=3, tokens=5) == 4 * (47040 + 2 * 8064 + 15120)
+    assert bench.step_flops(TINY, batch=1, frames=3, tokens=5, guidance=False) == 2 * (47040 + 2 * 8064 + 15120)
 
 
 def test_gemm_flops_equals_torch_flop_counter_on_the_real_model(single_thread):
-    """With the eager attention processor every product is a counted matmul: the count is exact."""
+    """With the eager attention processor and the aten dense layers (torch's counter does not see
+    oneDNN's op) every product is a counted matmul: the count is exact."""
     from torch.utils.flop_counter import FlopCounterMode
 
     from salad_core.models.attention import EagerProcessor, use_processors
+    from salad_core.models.gemm import use_backend
 
     torch.manual_seed(0)
     rows, frames, tokens = 4, 6, 5
@@ -52,12 +55,12 @@ def test_gemm_flops_equals_torch_flop_counter_on_the_real_model(single_thread):
     x = torch.randn(rows, frames, cfg.num_parts, cfg.latent_dim)
     text, mask = torch.randn(rows, tokens, cfg.text_dim), torch.ones(rows, tokens, dtype=torch.bool)
     expected = bench.gemm_flops(cfg, rows, frames, tokens)
-    with torch.inference_mode(), use_processors(model, EagerProcessor()):
+    with torch.inference_mode(), use_processors(model, EagerProcessor()), use_backend("aten"):
         ctx = model.prepare_text(text, mask)
         with FlopCounterMode(display=False) as first:
-            model(x, torch.tensor([10]), text_context=ctx)         # computes and caches the text K/V
+            model(x, torch.tensor([10]), text_context=ctx)         # computes and caches text K/V, timestep
         with FlopCounterMode(display=False) as again:
-            model(x, torch.tensor([10]), text_context=ctx)         # a sampling step: cache hit
+            model(x, torch.tensor([10]), text_context=ctx)         # a sampling step: cache hits
     assert first.get_total_flops() == sum(expected.values())
     assert again.get_total_flops() == bench.step_flops(cfg, rows // 2, frames, tokens)
 

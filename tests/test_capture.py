@@ -236,3 +236,26 @@ def test_fast_attention_matches_sdpa_with_and_without_a_key_mask(keys):
         ref = F.scaled_dot_product_attention(q, k, v, attn_mask=None if m is None else m[:, None, None, :])
         torch.testing.assert_close(fast_attention(q, k, v, m, 0.0), ref, rtol=1e-5, atol=1e-6)
     assert SHORT_KEYS == 16
+
+
+def test_trailing_padding_is_trimmed_and_gives_the_same_attention():
+    import torch.nn.functional as F
+
+    from salad_core.models.attention import fast_attention, trim_masked_keys
+
+    g = torch.Generator().manual_seed(0)
+    q, k, v = (torch.randn(2, 2, 9, 8, generator=g) for _ in range(3))
+    k, v = torch.randn(2, 2, 30, 8, generator=g), torch.randn(2, 2, 30, 8, generator=g)
+    mask = torch.zeros(2, 30, dtype=torch.bool)
+    mask[0, :5] = True
+    mask[1, :12] = True
+    mask[1, 3] = False                                   # interior padding stays (masked)
+    k2, v2, m2 = trim_masked_keys(k, v, mask)
+    assert k2.shape[2] == v2.shape[2] == 12 and m2.shape == (2, 12) and bool(m2[1, :3].all()) and not m2[1, 3]
+    assert k2.data_ptr() == k.data_ptr()                 # a view, no copy
+    ref = F.scaled_dot_product_attention(q, k, v, attn_mask=mask[:, None, None, :])
+    torch.testing.assert_close(fast_attention(q, k, v, mask, 0.0), ref, rtol=1e-5, atol=1e-6)
+    full = torch.ones(2, 30, dtype=torch.bool)
+    full[:, 20:] = False
+    assert trim_masked_keys(k, v, full)[2] is None        # all that is left is valid: no mask
+    assert trim_masked_keys(k, v, torch.ones(2, 30, dtype=torch.bool))[0] is k

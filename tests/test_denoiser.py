@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from dataclasses import replace
 import torch
 import torch.nn.functional as F
 
@@ -422,7 +423,8 @@ def test_text_context_caches_projections_and_follows_weight_changes():
         model.transformer.middle_block.cross_attn.Wv.weight.mul_(2.0)  # in-place weight change
         c = model(x, t, frame_mask=fm, text_context=ctx)
     assert ctx._cache is not cache
-    assert torch.equal(c, model(x, t, text, tm, fm).detach())
+    # the autograd route (per-layer FiLMs, F.linear) agrees up to float rounding
+    torch.testing.assert_close(c, model(x, t, text, tm, fm).detach())
     assert not torch.allclose(a, c)
     # replacing the parameter objects (load_state_dict(assign=True)) also invalidates the cache
     other = _model(seed=1).state_dict()
@@ -434,6 +436,53 @@ def test_text_context_caches_projections_and_follows_weight_changes():
     ctx2 = model.prepare_text(text, tm)
     model(x, t, frame_mask=fm, text_context=ctx2).square().mean().backward()
     assert ctx2._cache is None and model.word_emb.weight.grad.abs().sum() > 0
+
+
+# ------------------------------------------------------------ timestep conditioning
+def test_inference_forward_equals_the_autograd_forward():
+    """Sampling's route (FiLM table, trimmed padding, oneDNN dense layers) against training's
+    (per-layer FiLMs, F.linear), on the paper width where the dense layers are large enough."""
+    cfg = DenoiserConfig(latent_dim=8, width=64, heads=4, ff_dim=128, layers=3, text_dim=16)
+    model = _model(cfg)
+    x, _, text, tm, fm = _inputs(cfg, b=3, n=6, w=9)
+    tm[:, 6:] = False                                    # trailing padding in every row: trimmed
+    for t in (torch.tensor([417]), torch.tensor([417, 12, 417])):
+        with torch.enable_grad():
+            ref = model(x, t, text, tm, fm)              # parameters need gradients: training route
+        assert ref.requires_grad
+        with torch.inference_mode():
+            fast = model(x, t, text, tm, fm)
+        torch.testing.assert_close(fast, ref.detach(), rtol=1e-5, atol=1e-5)
+
+
+def test_timestep_table_is_filled_once_and_follows_weight_changes():
+    model = _model()
+    x, _, text, tm, fm = _inputs(TINY)
+    t = torch.tensor([981])
+    with torch.inference_mode():
+        model.prepare_timesteps(torch.tensor([981, 961, 941]))
+        table = model._timestep_table()
+        assert sorted(table) == [941.0, 961.0, 981.0]
+        row = table[981.0]
+        a = model(x, t, text, tm, fm)
+        assert model._timestep_table()[981.0] is row        # a hit, not recomputed
+        temb, films = model.timestep_conditioning(torch.tensor([981, 5]))
+        assert temb.shape == (2, TINY.width) and len(films) == TINY.layers
+        assert films[0][0][0].shape == (2, 1, 1, TINY.width) and 5.0 in model._timestep_table()
+        expect = model.transformer.layers[2].cross_film(model.timestep_emb(torch.tensor([5])))
+        torch.testing.assert_close(films[2][2][0][1:], expect[0])
+        torch.testing.assert_close(films[2][2][1][1:], expect[1])
+    with torch.no_grad():
+        model.transformer.layers[1].ffn_film.linear[1].bias.add_(0.5)   # in-place change: table rebuilt
+    with torch.inference_mode():
+        b = model(x, t, text, tm, fm)
+        assert 961.0 not in model._timestep_table()
+    with torch.enable_grad():
+        ref = model(x, t, text, tm, fm)
+    assert not torch.allclose(a, b)
+    torch.testing.assert_close(b, ref.detach(), rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match="no FiLM"):
+        _model(replace(TINY, film=False)).timestep_conditioning(t)
 
 
 def test_concat_pads_token_axes():

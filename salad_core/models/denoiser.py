@@ -37,6 +37,7 @@ from torch import nn
 from salad_core.io import CheckpointError, load_state_into, register_model
 from salad_core.models.attention import Attention, AttnProcessorMixin, CallDims, site_names
 from salad_core.models.embeddings import PositionalEmbedding, TimestepEmbedding
+from salad_core.models.gemm import Linear, linear
 from salad_core.skeleton import NUM_PARTS
 
 __all__ = ["DenoiserConfig", "TextContext", "FiLM", "STTransformerLayer", "SkipTransformer", "Denoiser"]
@@ -44,6 +45,10 @@ __all__ = ["DenoiserConfig", "TextContext", "FiLM", "STTransformerLayer", "SkipT
 log = logging.getLogger(__name__)
 
 _ACTIVATIONS = {"gelu": nn.GELU, "relu": nn.ReLU}
+
+#: Most timesteps whose conditioning :meth:`Denoiser.timestep_conditioning` keeps (about 40 KB each
+#: for the paper model); the table starts over when a schedule would overflow it.
+_TIMESTEP_CACHE = 1024
 
 
 @dataclass(frozen=True)
@@ -182,7 +187,7 @@ class FiLM(nn.Module):
 
     def __init__(self, width: int) -> None:
         super().__init__()
-        self.linear = nn.Sequential(nn.SiLU(), nn.Linear(width, 2 * width))
+        self.linear = nn.Sequential(nn.SiLU(), Linear(width, 2 * width))
 
     def forward(self, temb: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``temb`` ``(B, w)`` -> ``scale, shift`` each ``(B, 1, 1, w)``."""
@@ -225,9 +230,9 @@ class STTransformerLayer(nn.Module):
         self.cross_attn = Attention(w, h, p, "cross" if config.cross_attention else "sentence")
         self.cross_dropout = nn.Dropout(p)
         self.ffn_norm = nn.LayerNorm(w)
-        self.ffn_linear1 = nn.Linear(w, config.ff_dim)
+        self.ffn_linear1 = Linear(w, config.ff_dim)
         self.ffn_activation = _ACTIVATIONS[config.activation]()
-        self.ffn_linear2 = nn.Linear(config.ff_dim, w)
+        self.ffn_linear2 = Linear(config.ff_dim, w)
         self.ffn_dropout = nn.Dropout(p)
         if config.film:
             self.temp_film = FiLM(w)
@@ -239,12 +244,24 @@ class STTransformerLayer(nn.Module):
         """This layer's text keys/values ``(B, H, W, dh)`` from projected tokens ``(B, W, w)``."""
         return self.cross_attn.project_kv(self.cross_tgt_norm(memory))
 
+    @property
+    def films(self) -> tuple[FiLM, ...]:
+        """The four FiLMs in application order (temporal, skeletal, cross, FFN); empty without FiLM."""
+        return (self.temp_film, self.skel_film, self.cross_film, self.ffn_film) if self.use_film else ()
+
     def forward(self, x: torch.Tensor, temb: torch.Tensor, text_kv: tuple[torch.Tensor, torch.Tensor],
-                masks: _Masks, dims: CallDims) -> torch.Tensor:
-        """``x`` ``(B, N', P, w)`` -> ``(B, N', P, w)``; ``temb`` ``(B, w)``."""
+                masks: _Masks, dims: CallDims, films: Sequence[tuple[torch.Tensor, torch.Tensor]] | None = None
+                ) -> torch.Tensor:
+        """``x`` ``(B, N', P, w)`` -> ``(B, N', P, w)``; ``temb`` ``(B, w)``.
+
+        ``films``: this layer's four ``(scale, shift)`` pairs, each ``(B or 1, 1, 1, w)``, when the
+        caller computed them already (:meth:`Denoiser.timestep_conditioning`); else from ``temb``.
+        """
         b, n, p, w = x.shape
-        films = ((self.temp_film(temb), self.skel_film(temb), self.cross_film(temb), self.ffn_film(temb))
-                 if self.use_film else (None,) * 4)
+        if not self.use_film:
+            films = (None,) * 4
+        elif films is None:
+            films = tuple(film(temb) for film in self.films)
 
         # temporal attention: every part is a sequence over frames, rows ordered (batch, part)
         h = x.permute(0, 2, 1, 3).reshape(b * p, n, w)
@@ -266,7 +283,12 @@ class STTransformerLayer(nn.Module):
             h = self.cross_attn(q, kv=kv, key_mask=masks.sentence, dims=dims)
         x = x + _modulate(self.cross_dropout(h.view(b, n, p, w)), films[2])
 
-        h = self.ffn_linear2(self.ffn_activation(self.ffn_linear1(self.ffn_norm(x))))
+        h = self.ffn_norm(x)
+        if isinstance(self.ffn_activation, nn.GELU) and self.ffn_activation.approximate == "none":
+            h = linear(h, self.ffn_linear1.weight, self.ffn_linear1.bias, activation="gelu")  # fused on oneDNN
+        else:
+            h = self.ffn_activation(self.ffn_linear1(h))
+        h = self.ffn_linear2(h)
         return x + _modulate(self.ffn_dropout(h), films[3])
 
 
@@ -279,7 +301,7 @@ class SkipTransformer(nn.Module):
         self.input_blocks = nn.ModuleList([STTransformerLayer(config) for _ in range(half)])
         self.middle_block = STTransformerLayer(config)
         self.output_blocks = nn.ModuleList([STTransformerLayer(config) for _ in range(half)])
-        self.skip_blocks = nn.ModuleList([nn.Linear(2 * config.width, config.width) for _ in range(half)])
+        self.skip_blocks = nn.ModuleList([Linear(2 * config.width, config.width) for _ in range(half)])
 
     @property
     def layers(self) -> list[STTransformerLayer]:
@@ -287,17 +309,19 @@ class SkipTransformer(nn.Module):
         return [*self.input_blocks, self.middle_block, *self.output_blocks]
 
     def forward(self, x: torch.Tensor, temb: torch.Tensor, text_kv: list[tuple[torch.Tensor, torch.Tensor]],
-                masks: _Masks, dims: CallDims) -> torch.Tensor:
+                masks: _Masks, dims: CallDims, films: list | None = None) -> torch.Tensor:
+        """``films``: per layer (execution order) its FiLM pairs, or None to compute them from ``temb``."""
         half = len(self.input_blocks)
+        films = films or [None] * (2 * half + 1)
         skips = []
         for i, block in enumerate(self.input_blocks):
-            x = block(x, temb, text_kv[i], masks, dims)
+            x = block(x, temb, text_kv[i], masks, dims, films[i])
             skips.append(x)
-        x = self.middle_block(x, temb, text_kv[half], masks, dims)
+        x = self.middle_block(x, temb, text_kv[half], masks, dims, films[half])
         for i, (block, merge) in enumerate(zip(self.output_blocks, self.skip_blocks)):
             # the last input block's output pairs with the first output block (U-Net symmetry)
             x = merge(torch.cat([x, skips.pop()], dim=-1))
-            x = block(x, temb, text_kv[half + 1 + i], masks, dims)
+            x = block(x, temb, text_kv[half + 1 + i], masks, dims, films[half + 1 + i])
         return x
 
 
@@ -306,7 +330,7 @@ class InputProcess(nn.Module):
 
     def __init__(self, latent_dim: int, width: int) -> None:
         super().__init__()
-        self.layers = nn.Sequential(nn.Linear(latent_dim, width), nn.ReLU(), nn.Linear(width, width))
+        self.layers = nn.Sequential(Linear(latent_dim, width), nn.ReLU(), Linear(width, width))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.layers(x)
@@ -317,8 +341,8 @@ class OutputProcess(nn.Module):
 
     def __init__(self, width: int, latent_dim: int) -> None:
         super().__init__()
-        self.layers = nn.Sequential(nn.LayerNorm(width), nn.Linear(width, width), nn.ReLU(),
-                                    nn.Linear(width, latent_dim))
+        self.layers = nn.Sequential(nn.LayerNorm(width), Linear(width, width), nn.ReLU(),
+                                    Linear(width, latent_dim))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.layers(x)
@@ -346,7 +370,7 @@ class Denoiser(AttnProcessorMixin, nn.Module):
         self.input_process = InputProcess(config.latent_dim, config.width)
         self.pos_emb = PositionalEmbedding(config.width, config.max_len, config.dropout)
         self.timestep_emb = TimestepEmbedding(config.width)
-        self.word_emb = nn.Linear(config.text_dim, config.width)
+        self.word_emb = Linear(config.text_dim, config.width)
         self.transformer = SkipTransformer(config)
         self.output_process = OutputProcess(config.width, config.latent_dim)
         names = site_names(config.layers, config.cross_attention)
@@ -441,6 +465,7 @@ class Denoiser(AttnProcessorMixin, nn.Module):
             raise ValueError(f"text batch ({text_context.batch_size}) must equal the latent batch ({b})")
         if text_context.text_dim != cfg.text_dim:
             raise ValueError(f"text features have C={text_context.text_dim}, the denoiser expects {cfg.text_dim}")
+        t_in = timesteps
         timesteps = self._timesteps(timesteps, b, x.device)
         masks = self._masks(frame_mask, text_context.mask, b, n, p)
         kv = text_context.layer_kv(self)
@@ -448,12 +473,89 @@ class Denoiser(AttnProcessorMixin, nn.Module):
 
         h = self.input_process(x).reshape(b, n * p, cfg.width)
         h = self.pos_emb(h).view(b, n, p, cfg.width)       # index t * P + j (supplement A.2)
-        temb = self.timestep_emb(timesteps)                   # (B, w)
+        films = None
+        if cfg.film and not torch.is_grad_enabled():
+            # sampling: the timestep embedding and all FiLMs from the per-timestep cache, one row per
+            # distinct timestep (a scalar timestep: one row broadcast over the batch)
+            one = torch.as_tensor(t_in).numel() == 1
+            temb, films = self.timestep_conditioning(timesteps[:1] if one else timesteps)
+        else:
+            temb = self.timestep_emb(timesteps)               # (B, w)
         if not cfg.film:
             # "w/o FiLM" ablation (supplement C.4): timestep embedding added to the input
             h = h + temb[:, None, None, :]
-        h = self.transformer(h, temb, kv, masks, dims)
+        h = self.transformer(h, temb, kv, masks, dims, films)
         return self.output_process(h)
+
+    # ---------------------------------------------------------- timestep conditioning
+    def _film_signature(self) -> tuple:
+        params = [*self.timestep_emb.parameters()] + [
+            prm for layer in self.transformer.layers for film in layer.films for prm in film.parameters()
+        ]
+        return (id(self),) + tuple((id(p), p.data_ptr(), p._version, p.dtype) for p in params)
+
+    def timestep_conditioning(self, timesteps: torch.Tensor) -> tuple[torch.Tensor, list]:
+        """Timestep embedding and every layer's FiLM ``(scale, shift)`` for ``timesteps``, cached.
+
+        The FiLMs depend on the timestep only, so with gradients disabled each distinct timestep is
+        computed once (all layers' FiLMs in one product of the stacked FiLM weights, which costs the
+        same as one layer's: reading the 2.6 M FiLM weights of the paper model is what takes the
+        time) and kept until the timestep or FiLM weights change (storage and version counters are
+        checked as for the text cache). :meth:`prepare_timesteps` fills the cache for a whole
+        schedule in one product. With gradients enabled nothing is cached.
+
+        Parameters
+        ----------
+        timesteps : torch.Tensor
+            ``(R,)`` timesteps (``R = 1`` broadcasts over the batch).
+
+        Returns
+        -------
+        temb : torch.Tensor
+            ``(R, w)``.
+        films : list
+            Per layer (execution order) a tuple of four ``(scale, shift)``, each ``(R, 1, 1, w)``.
+        """
+        if not self.config.film:
+            raise ValueError("this denoiser has no FiLM (config.film=False)")
+        w, layers = self.config.width, self.config.layers
+        if torch.is_grad_enabled():
+            temb = self.timestep_emb(timesteps)
+            return temb, [tuple(f(temb) for f in layer.films) for layer in self.transformer.layers]
+        table = self._timestep_table()
+        keys = [float(t) for t in timesteps.detach().reshape(-1).tolist()]
+        missing = [t for t in dict.fromkeys(keys) if t not in table]
+        if missing:
+            self.prepare_timesteps(torch.tensor(missing, device=timesteps.device).to(timesteps.dtype))
+        rows = torch.stack([table[t] for t in keys])                          # (R, w + L*4*2w)
+        temb = rows[:, :w]
+        per = rows[:, w:].view(len(keys), layers, 4, 2, w)[:, :, :, :, None, None, :]   # (R, L, 4, 2, 1, 1, w)
+        films = [tuple((per[:, i, k, 0], per[:, i, k, 1]) for k in range(4)) for i in range(layers)]
+        return temb, films
+
+    def _timestep_table(self) -> dict:
+        sig = self._film_signature()
+        if getattr(self, "_t_signature", None) != sig:
+            self._t_table: dict[float, torch.Tensor] = {}
+            self._t_signature = sig
+            weights = [film.linear[1] for layer in self.transformer.layers for film in layer.films]
+            self._t_weight = torch.cat([lin.weight for lin in weights])       # (L*4*2w, w)
+            self._t_bias = torch.cat([lin.bias for lin in weights])           # (L*4*2w,)
+        return self._t_table
+
+    def prepare_timesteps(self, timesteps: torch.Tensor) -> None:
+        """Compute and cache the conditioning of every timestep in ``timesteps`` ``(S,)`` in one
+        product (see :meth:`timestep_conditioning`); a no-op with gradients enabled or without FiLM."""
+        if torch.is_grad_enabled() or not self.config.film:
+            return
+        table = self._timestep_table()
+        if len(table) > _TIMESTEP_CACHE:
+            table.clear()
+        t = timesteps.detach().reshape(-1)
+        temb = self.timestep_emb(t)                                                # (S, w)
+        films = torch.nn.functional.linear(torch.nn.functional.silu(temb), self._t_weight, self._t_bias)
+        for value, row in zip(t.tolist(), torch.cat([temb, films], dim=1)):
+            table[float(value)] = row
 
     @staticmethod
     def _timesteps(timesteps, batch: int, device) -> torch.Tensor:
