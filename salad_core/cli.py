@@ -582,6 +582,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
+    from salad_core.allocator import tune_from_environment
+
+    try:
+        tune_from_environment()     # large activations from the heap, freed memory kept for reuse
+    except ValueError as exc:
+        parser.error(str(exc))
     if rest and args.command not in PASS_THROUGH:
         parser.error(f"unrecognized arguments: {' '.join(rest)}")
     if hasattr(args, "preset"):

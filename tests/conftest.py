@@ -11,6 +11,9 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
 os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 os.environ.setdefault("MPLBACKEND", "Agg")
+# the test process keeps glibc's allocator: the salad command would otherwise tune it for the whole
+# session (salad_core.allocator), and tests measure memory growth
+os.environ.setdefault("SALAD_ALLOCATOR", "system")
 
 DATA_DIR = Path(__file__).parent / "data"
 SAMPLE_DIR = DATA_DIR / "humanml3d_sample"

