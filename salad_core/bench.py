@@ -927,6 +927,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not out.parent.is_dir():
             raise FileNotFoundError(f"--out {out}: the folder {out.parent} does not exist")
     sections = [s.strip() for s in args.sections.split(",") if s.strip()] if args.sections else None
+    from salad_core.allocator import tune_from_environment
+
+    tune_from_environment()   # as the salad command does (also for the bench/ scripts that call this)
     df = run_benchmarks(args.quick, threads, sections=sections, weights=args.weights)
     text = format_table(df)
     print(text, end="")

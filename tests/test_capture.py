@@ -235,7 +235,7 @@ def test_fast_attention_matches_sdpa_with_and_without_a_key_mask(keys):
     for m in (None, mask):
         ref = F.scaled_dot_product_attention(q, k, v, attn_mask=None if m is None else m[:, None, None, :])
         torch.testing.assert_close(fast_attention(q, k, v, m, 0.0), ref, rtol=1e-5, atol=1e-6)
-    assert SHORT_KEYS == 16
+    assert SHORT_KEYS == 50
 
 
 def test_trailing_padding_is_trimmed_and_gives_the_same_attention():
@@ -259,3 +259,34 @@ def test_trailing_padding_is_trimmed_and_gives_the_same_attention():
     full[:, 20:] = False
     assert trim_masked_keys(k, v, full)[2] is None        # all that is left is valid: no mask
     assert trim_masked_keys(k, v, torch.ones(2, 30, dtype=torch.bool))[0] is k
+
+
+@pytest.mark.parametrize("keys", [12, 60])          # explicit route (probabilities reused) and SDPA route
+def test_hooked_processor_output_is_plain_attention_and_hook_sees_all_keys(keys):
+    from salad_core.attention.processor import HookedProcessor
+    from salad_core.models.attention import SiteInfo, attention_probs, fast_attention
+
+    g = torch.Generator().manual_seed(keys)
+    b, h, frames, parts = 2, 2, 3, NUM_PARTS
+    q = torch.randn(b, h, frames * parts, 8, generator=g)
+    k, v = torch.randn(b, h, keys + 5, 8, generator=g), torch.randn(b, h, keys + 5, 8, generator=g)
+    mask = torch.zeros(b, keys + 5, dtype=torch.bool)
+    mask[0, :keys] = True
+    mask[1, :keys // 2] = True                        # the last 5 keys are padding in every row: trimmed
+    site = SiteInfo("layers.0.cross", "cross", 0, 1, h, b, frames, parts, keys + 5)
+    seen = {}
+
+    class Hook:
+        def rows(self, site):
+            return torch.tensor([1])
+
+        def process(self, site, rows, probs):
+            seen["probs"] = probs.clone()
+
+    out = HookedProcessor(Hook())(site, q, k, v, mask, 0.0)
+    assert torch.equal(out, fast_attention(q, k, v, mask, 0.0))           # bit for bit
+    probs = seen["probs"]                                                 # (1, H, N', P, W) named
+    assert probs.shape == (1, h, frames, parts, keys + 5)
+    ref = attention_probs(q[1:], k[1:], mask[1:]).view(1, h, frames, parts, keys + 5)
+    torch.testing.assert_close(probs, ref, rtol=1e-5, atol=1e-6)
+    assert float(probs[..., keys // 2:].abs().max()) == 0.0                # masked and trimmed keys: 0

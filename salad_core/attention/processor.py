@@ -5,12 +5,14 @@ probabilities only for the batch rows a hook asks for.
 differs from the fast SDPA kernel in the last bits, so a capture built on it would change the
 generated motion slightly. :class:`HookedProcessor` instead
 
-1. computes the output of every row with ``scaled_dot_product_attention`` (exactly what sampling
-   without hooks computes),
-2. asks its hook which batch rows it needs (``hook.rows(site)``; ``None`` = none at this call,
+1. asks its hook which batch rows it needs (``hook.rows(site)``; ``None`` = none at this call,
    the common case for self-attention sites, which then cost nothing extra),
-3. computes ``softmax(q k^T / sqrt(d))`` for those rows only and passes them to
-   ``hook.process(site, batch_rows, probs)``,
+2. computes the output of every row exactly as sampling without hooks does
+   (:func:`~salad_core.models.attention.fast_attention`); on its explicit route (key axes shorter
+   than ``SHORT_KEYS``, e.g. typical prompts) the probabilities it computes anyway are the ones
+   the hook gets, so capture costs only what the hook does with them; on the SDPA route
+   ``softmax(q k^T / sqrt(d))`` is computed again for the hook's rows only,
+3. passes the probabilities of those rows to ``hook.process(site, batch_rows, probs)``,
 4. if the hook returns ``(rows, new_probs)``, recomputes the output of those rows as
    ``new_probs @ v`` (SALAD supplement B: ``Denoise(z_t, t, c){M <- M_hat}``, values from the
    row's own prompt).
@@ -29,7 +31,8 @@ from typing import Optional, Protocol
 import torch
 import torch.nn.functional as F
 
-from salad_core.models.attention import AttentionProcessor, SiteInfo, attention_probs, fast_attention
+from salad_core.models.attention import (AttentionProcessor, SiteInfo, attention_probs, explicit_route,
+                                         fast_attention, trim_masked_keys)
 
 __all__ = ["SiteHook", "HookedProcessor", "flat_rows", "named_rows", "flat_from_named"]
 
@@ -111,13 +114,22 @@ class HookedProcessor(AttentionProcessor):
 
     def __call__(self, site: SiteInfo, q: torch.Tensor, k: torch.Tensor, v: torch.Tensor,
                  key_mask: torch.Tensor | None, dropout_p: float) -> torch.Tensor:
-        out = fast_attention(q, k, v, key_mask, dropout_p)      # what plain sampling computes, bit for bit
         rows = self.hook.rows(site)
         if rows is None or rows.numel() == 0:
-            return out
+            return fast_attention(q, k, v, key_mask, dropout_p)  # what plain sampling computes, bit for bit
         flat = flat_rows(site, rows)
         take = _row_taker(flat)
-        probs = attention_probs(take(q), take(k), None if key_mask is None else take(key_mask))
+        kt, vt, mt = (k, v, None) if key_mask is None else trim_masked_keys(k, v, key_mask)
+        if explicit_route(kt.shape[-2], dropout_p):
+            # the same operations as fast_attention's explicit route: its probabilities serve the hook
+            all_probs = attention_probs(q, kt, mt)
+            out = torch.matmul(all_probs, vt)
+            probs = take(all_probs)
+            if kt.shape[-2] < k.shape[-2]:               # trimmed padding: probability 0 for the hook
+                probs = F.pad(probs, (0, k.shape[-2] - kt.shape[-2]))
+        else:
+            out = fast_attention(q, k, v, key_mask, dropout_p)
+            probs = attention_probs(take(q), take(k), None if key_mask is None else take(key_mask))
         result = self.hook.process(site, rows, named_rows(site, probs, rows.numel()))
         if result is None:
             return out
