@@ -200,6 +200,7 @@ def test_softmax_last_matches_torch_softmax_and_leaves_its_input():
         torch.testing.assert_close(softmax_last(x), x.softmax(-1), rtol=1e-6, atol=1e-7)
         assert torch.equal(x, before)
     assert softmax_last(torch.full((1, 3), float("-inf"))).isnan().all()     # as torch.softmax
+    assert softmax_last(torch.full((1, 20), float("-inf"))).isnan().all()
     # differentiable (null-text inversion optimises through it)
     x = torch.randn(3, 5, requires_grad=True)
     w = torch.randn(3, 5)
