@@ -282,3 +282,20 @@ def test_pipeline_denoises_large_batches_in_chunks_with_the_same_motions(make_ti
     for b, n in enumerate(lengths):
         assert torch.count_nonzero(chunked.latents[b, n // 4:]) == 0
         np.testing.assert_allclose(chunked.features[b, :n], whole.features[b, :n], rtol=1e-3, atol=1e-3)
+
+
+def test_chunk_size_follows_max_batch_or_the_allocator(make_tiny_pipeline, monkeypatch):
+    import salad_core.allocator as allocator
+
+    pipe = make_tiny_pipeline(seed=0)
+    assert pipe.max_batch is None
+    monkeypatch.setitem(allocator._state, "tuned", False)
+    assert pipe.chunk_size() == 8                      # glibc's default allocator: small chunks pay
+    monkeypatch.setitem(allocator._state, "tuned", True)
+    assert pipe.chunk_size() == 32                     # freed memory reused: one large batch pays
+    pipe.max_batch = 3
+    assert pipe.chunk_size() == 3
+    for bad in (0, 2.5, True):
+        pipe.max_batch = bad
+        with pytest.raises(ValueError, match="max_batch must be a positive int or None"):
+            pipe.chunk_size()
