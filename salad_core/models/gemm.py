@@ -112,6 +112,8 @@ def use_backend(name: str | None) -> Iterator[None]:
 
 
 def _fast_ok(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None) -> bool:
+    if torch.compiler.is_compiling():        # torch.compile lowers F.linear itself (inductor rejects the op)
+        return False
     if torch.is_grad_enabled() and (x.requires_grad or weight.requires_grad
                                     or (bias is not None and bias.requires_grad)):
         return False
