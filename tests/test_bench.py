@@ -211,3 +211,16 @@ def test_batching_rows_time_three_ways_and_restore_max_batch(tiny_pipe):
     tiny_pipe.max_batch = None                       # the tests keep glibc's allocator: chunks of 8
     rows = bench.batching_rows(tiny_pipe, frames=16, steps=1, motions=4, chunk=2)
     assert rows[2].measure == "pipeline, batches of 2" and tiny_pipe.max_batch is None
+
+
+def test_prompts_and_attended_tokens_of_the_speed_rows():
+    case = bench.Case("tiny", TINY, 77)
+    for batch in (1, 32):
+        (text, mask), (_, null_mask), noise, fm = bench._random_inputs(case, batch, latent_frames=4)
+        lengths = mask.sum(1)
+        lo, hi = bench.PROMPT_TOKENS
+        assert text.shape == (batch, 77, TINY.text_dim) and bool(((lengths >= lo) & (lengths <= hi)).all())
+        assert bool(mask[:, 0].all()) and int(null_mask.sum()) == 2             # prefix masks; null: 2 tokens
+        assert bench.attended_tokens(case, batch) == int(lengths.max())
+    short = bench.Case("short", TINY, 10)                                    # a width below PROMPT_TOKENS
+    assert bench.attended_tokens(short, 4) <= 10
