@@ -31,6 +31,10 @@ Five sections, each a function returning rows of the table (:class:`Row`), run i
   for itself. If compiling fails, the row says so and sampling is unaffected (salad never compiles
   by default).
 
+``salad bench`` (:func:`main`) runs with the tuned allocator of :mod:`salad_core.allocator`, as the
+``salad`` command does (``SALAD_ALLOCATOR=system`` for glibc's default); the header says which. Freed
+memory then stays with the process, so the memory rows measure growth beyond what it already holds.
+
 ``--quick`` (about a minute) times fewer steps and rounds, measures batch 32 on one step and
 extrapolates to 50 (every DDIM step costs the same), uses 120-frame motions for the overheads and
 the memory, and says so in the notes under the table.
