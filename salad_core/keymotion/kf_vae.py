@@ -59,6 +59,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from salad_core.io import register_model
+from salad_core.models.gemm import Linear
 from salad_core.models.layers import ACTIVATIONS
 from salad_core.skeleton import available_skeletons, get_skeleton
 
@@ -215,22 +216,22 @@ class KeyframeVAE(nn.Module):
         d, w = self.skeleton.feature_dim, cfg.width
         self.feature_dim = d
         self.norm = Normalizer(d)
-        self.frame_embed = nn.Linear(d, cfg.frame_dim)
-        self.index_embed = nn.Linear(cfg.index_dim + 1, cfg.index_dim)
+        self.frame_embed = Linear(d, cfg.frame_dim)
+        self.index_embed = Linear(cfg.index_dim + 1, cfg.index_dim)
         self.latent_tokens = nn.Parameter(torch.randn(cfg.latent_size, w) * 0.02)
         self.encoder = nn.ModuleList(
             TransformerBlock(w, cfg.num_heads, cfg.ff_dim, cfg.dropout, activation=cfg.activation)
             for _ in range(cfg.num_layers))
         self.encoder_norm = nn.LayerNorm(w)
-        self.to_dist = nn.Linear(w, 2 * cfg.latent_dim)
-        self.latent_in = nn.Linear(cfg.latent_dim, w)
+        self.to_dist = Linear(w, 2 * cfg.latent_dim)
+        self.latent_in = Linear(cfg.latent_dim, w)
         self.decoder = nn.ModuleList(
             TransformerBlock(w, cfg.num_heads, cfg.ff_dim, cfg.dropout, cross_attention=True,
                              activation=cfg.activation)
             for _ in range(cfg.num_layers))
         self.decoder_norm = nn.LayerNorm(w)
-        self.to_keyframes = nn.Linear(w, d)
-        self.to_positions = nn.Linear(w, 1)
+        self.to_keyframes = Linear(w, d)
+        self.to_positions = Linear(w, 1)
         self.drop = nn.Dropout(cfg.dropout)
         n_tok = cfg.latent_size + cfg.num_keyframes
         self.register_buffer("token_pe", position_sinusoid(torch.arange(n_tok), w), persistent=False)

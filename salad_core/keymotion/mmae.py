@@ -41,6 +41,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from salad_core.io import register_model
+from salad_core.models.gemm import Linear
 from salad_core.models.layers import ACTIVATIONS
 from salad_core.motion import features_to_joints
 from salad_core.skeleton import available_skeletons, get_skeleton
@@ -166,13 +167,13 @@ class MotionMaskedAutoencoder(nn.Module):
         d, w = self.skeleton.feature_dim, cfg.width
         self.feature_dim = d
         self.norm = Normalizer(d)
-        self.motion_in = nn.Linear(d + 1, w)
-        self.text_in = nn.ModuleList(nn.Linear(cfg.text_dim, w) for _ in range(cfg.num_layers))
+        self.motion_in = Linear(d + 1, w)
+        self.text_in = nn.ModuleList(Linear(cfg.text_dim, w) for _ in range(cfg.num_layers))
         self.layers = nn.ModuleList(
             TransformerBlock(w, cfg.num_heads, cfg.ff_dim, cfg.dropout, activation=cfg.activation)
             for _ in range(cfg.num_layers))
         self.out_norm = nn.LayerNorm(w)
-        self.out = nn.Linear(w, d)
+        self.out = Linear(w, d)
         if cfg.lerp_residual:
             # start exactly at the interpolation; the network learns the correction
             nn.init.zeros_(self.out.weight)

@@ -24,6 +24,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from salad_core.models.gemm import Linear
 from salad_core.models.layers import get_activation
 from salad_core.motion import features_to_joints
 from salad_core.skeleton import Skeleton, get_skeleton
@@ -100,9 +101,9 @@ class Attention(nn.Module):
             raise ValueError(f"width={width} must be divisible by the number of heads {heads}")
         self.heads = heads
         self.dropout = dropout
-        self.q = nn.Linear(width, width)
-        self.kv = nn.Linear(width, 2 * width)
-        self.out = nn.Linear(width, width)
+        self.q = Linear(width, width)
+        self.kv = Linear(width, 2 * width)
+        self.out = Linear(width, width)
 
     def forward(self, x: torch.Tensor, context: torch.Tensor, key_mask: torch.Tensor | None = None) -> torch.Tensor:
         """``x (B, Q, w)``, ``context (B, S, w)``, ``key_mask (B, S)`` bool (True = usable key).
@@ -146,8 +147,8 @@ class TransformerBlock(nn.Module):
         self.norm_cross = nn.LayerNorm(width) if cross_attention else None
         self.norm_ctx = nn.LayerNorm(width) if cross_attention else None
         self.norm_ff = nn.LayerNorm(width)
-        self.ff = nn.Sequential(nn.Linear(width, ff_dim), get_activation(activation), nn.Dropout(dropout),
-                                nn.Linear(ff_dim, width))
+        self.ff = nn.Sequential(Linear(width, ff_dim), get_activation(activation), nn.Dropout(dropout),
+                                Linear(ff_dim, width))
         self.drop = nn.Dropout(dropout)
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor | None = None, context: torch.Tensor | None = None,

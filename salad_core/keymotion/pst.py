@@ -47,6 +47,7 @@ from torch import nn
 
 from salad_core.io import register_model
 from salad_core.models.embeddings import timestep_sinusoid
+from salad_core.models.gemm import Linear
 from salad_core.models.layers import ACTIVATIONS
 from salad_core.sampling import DiffusionConfig
 
@@ -108,8 +109,8 @@ class ParallelCrossLayer(nn.Module):
         kw = dict(cross_attention=True, activation=config.activation)
         self.x_block = TransformerBlock(w, config.num_heads, config.ff_dim, config.dropout, **kw)
         self.c_block = TransformerBlock(w, config.num_heads, config.ff_dim, config.dropout, **kw)
-        self.skip_x = nn.Linear(2 * w, w) if receives_skip else None
-        self.skip_c = nn.Linear(2 * w, w) if receives_skip else None
+        self.skip_x = Linear(2 * w, w) if receives_skip else None
+        self.skip_c = Linear(2 * w, w) if receives_skip else None
 
     def forward(self, x: torch.Tensor, c: torch.Tensor, c_mask: torch.Tensor,
                 skip: tuple[torch.Tensor, torch.Tensor] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
@@ -136,17 +137,17 @@ class ParallelSkipTransformer(nn.Module):
         super().__init__()
         self.config = cfg = config or PSTConfig()
         w = cfg.width
-        self.time_mlp = nn.Sequential(nn.Linear(w, w), nn.SiLU(), nn.Linear(w, w))
-        self.length_mlp = nn.Sequential(nn.Linear(w, w), nn.SiLU(), nn.Linear(w, w)) if cfg.length_condition else None
-        self.text_in = nn.Linear(cfg.text_dim, w)
+        self.time_mlp = nn.Sequential(Linear(w, w), nn.SiLU(), Linear(w, w))
+        self.length_mlp = nn.Sequential(Linear(w, w), nn.SiLU(), Linear(w, w)) if cfg.length_condition else None
+        self.text_in = Linear(cfg.text_dim, w)
         self.cond_layers = nn.ModuleList(
             TransformerBlock(w, cfg.num_heads, cfg.ff_dim, cfg.dropout, activation=cfg.activation)
             for _ in range(cfg.num_cond_layers))
-        self.latent_in = nn.Linear(cfg.latent_dim, w)
+        self.latent_in = Linear(cfg.latent_dim, w)
         receivers = {j for _, j in self.skip_pairs}
         self.cross_layers = nn.ModuleList(ParallelCrossLayer(cfg, i in receivers) for i in range(cfg.num_cross_layers))
         self.out_norm = nn.LayerNorm(2 * w)
-        self.out = nn.Linear(2 * w, cfg.latent_dim)
+        self.out = Linear(2 * w, cfg.latent_dim)
         self.drop = nn.Dropout(cfg.dropout)
         self.register_buffer("latent_pe", position_sinusoid(torch.arange(cfg.latent_size), w), persistent=False)
         n_special = 2 if cfg.length_condition else 1
