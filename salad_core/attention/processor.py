@@ -2,7 +2,7 @@
 probabilities only for the batch rows a hook asks for.
 
 :class:`~salad_core.models.attention.EagerProcessor` computes the softmax of *every* row; its output
-differs from the fast SDPA kernel in the last bits, so a capture built on it would change the
+differs from the fast attention of plain sampling in the last bits, so a capture built on it would change the
 generated motion slightly. :class:`HookedProcessor` instead
 
 1. asks its hook which batch rows it needs (``hook.rows(site)``; ``None`` = none at this call,
@@ -17,7 +17,7 @@ generated motion slightly. :class:`HookedProcessor` instead
    ``new_probs @ v`` (SALAD supplement B: ``Denoise(z_t, t, c){M <- M_hat}``, values from the
    row's own prompt).
 
-Rows the hook does not replace keep the SDPA output bit for bit, which is why capturing never
+Rows the hook does not replace keep the plain-sampling output bit for bit, which is why capturing never
 changes a motion and why the source branch of an edit equals plain generation.
 
 Rows of the flat probability tensor and batch rows differ at the self-attention sites: temporal
@@ -101,7 +101,7 @@ def _row_taker(flat: torch.Tensor):
 
 
 class HookedProcessor(AttentionProcessor):
-    """SDPA output for every row plus explicit probabilities for the rows a hook needs.
+    """Plain-sampling output for every row plus explicit probabilities for the rows a hook needs.
 
     Parameters
     ----------

@@ -5,8 +5,10 @@ Every attention module of the denoiser is a *site* with a stable name, e.g.
 and hands the core computation ``softmax(q k^T / sqrt(d)) v`` to a swappable *processor*, as in
 diffusers' ``attention_processor.py``:
 
-* :class:`SDPAProcessor` (default) calls ``torch.nn.functional.scaled_dot_product_attention``
-  (explicit matmuls for fewer than 16 keys, where those are faster: :func:`fast_attention`);
+* :class:`SDPAProcessor` (default) computes it by :func:`fast_attention`: two matmuls and an
+  explicit softmax for key axes shorter than :data:`SHORT_KEYS` (every site of a 196-frame motion
+  with a typical prompt), ``torch.nn.functional.scaled_dot_product_attention`` for longer ones,
+  with trailing padding keys dropped;
 * :class:`EagerProcessor` computes the softmax explicitly and passes the post-softmax
   probabilities to an optional ``controller(site, probs) -> probs``. Whatever the controller
   returns is used to mix the values, so one mechanism serves capture (record and return the
@@ -55,6 +57,7 @@ __all__ = [
     "attention_probs",
     "softmax_last",
     "SHORT_KEYS",
+    "VECTOR_ROW",
     "trim_masked_keys",
     "explicit_route",
     "EagerProcessor",
