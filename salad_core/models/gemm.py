@@ -40,6 +40,8 @@ BACKENDS: tuple[str, ...] = ("auto", "onednn", "aten")
 MIN_ROWS = 64
 
 _ACTIVATIONS = ("none", "gelu")
+# torch.compiler.is_compiling exists from torch 2.3 on (the package allows 2.1)
+_is_compiling = getattr(getattr(torch, "compiler", None), "is_compiling", None) or (lambda: False)
 _state: dict[str, object] = {"backend": None, "probe": None}
 
 
@@ -112,7 +114,7 @@ def use_backend(name: str | None) -> Iterator[None]:
 
 
 def _fast_ok(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None) -> bool:
-    if torch.compiler.is_compiling():        # torch.compile lowers F.linear itself (inductor rejects the op)
+    if _is_compiling():                      # torch.compile lowers F.linear itself (inductor rejects the op)
         return False
     if torch.is_grad_enabled() and (x.requires_grad or weight.requires_grad
                                     or (bias is not None and bias.requires_grad)):
