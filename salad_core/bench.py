@@ -12,7 +12,7 @@ Five sections, each a function returning rows of the table (:class:`Row`), run i
   mirroring) and of inversion relative to a plain generation of the same prompt, every variant
   timed in the same rounds, interleaved, so that a busy machine slows all of them alike (medians).
   The full plan also times 32 prompts through the pipeline one at a time, in one batch, and in
-  the pipeline's default chunks of 8 (:func:`batching_rows`).
+  chunks of 8 (:func:`batching_rows`; the pipeline's default chunk is 32 with the tuned allocator).
 * ``speed``: seconds per motion of the denoiser alone (random text features: the text encoder is
   excluded; VAE decoding too, which costs under 1 % of 50 steps) for 196 frames, 50 DDIM steps,
   guidance 7.5 (both branches in one batched forward), at batch 1 and 32, for the paper
@@ -240,7 +240,11 @@ def matmul_rates(cfg: DenoiserConfig, rows: int, frames: int, tokens: int, min_t
     """This machine's best GFLOP/s at the denoiser's GEMM shapes (keys of :func:`gemm_flops` except
     :data:`ONCE_PER_CALL`): for every shape the faster of the libraries of :func:`matmul_rates_by_backend`,
     so the roofline is measured against the best this CPU does, not against the library salad uses."""
-    by_backend = matmul_rates_by_backend(cfg, rows, frames, tokens, min_time)
+    return _best_rates(matmul_rates_by_backend(cfg, rows, frames, tokens, min_time))
+
+
+def _best_rates(by_backend: dict[str, dict[str, float]]) -> dict[str, float]:
+    """Per GEMM class, the fastest library's rate (``attn`` is measured on aten only)."""
     return {key: max(rates.get(key, 0.0) for rates in by_backend.values()) for key in by_backend["aten"]}
 
 
@@ -309,12 +313,12 @@ def speed_rows(model: Denoiser, case: Case, frames: int, batch: int, steps: int,
     per_step = time_denoiser_steps(model, case, batch, latent_frames, steps, warmup=warmup)
     tokens = attended_tokens(case, batch)
     fl = gemm_flops(case.config, 2 * batch, latent_frames, tokens)
-    flops = sum(v for k, v in fl.items() if k not in ONCE_PER_CALL)
+    flops = step_flops(case.config, batch, latent_frames, tokens)
     by_backend = matmul_rates_by_backend(case.config, 2 * batch, latent_frames, tokens, matmul_time)
     if rates_twice:  # best of two windows: other processes share the CPUs
         again = matmul_rates_by_backend(case.config, 2 * batch, latent_frames, tokens, matmul_time)
         by_backend = {lib: {k: max(v, again[lib][k]) for k, v in rates.items()} for lib, rates in by_backend.items()}
-    rates = {k: max(r.get(k, 0.0) for r in by_backend.values()) for k in by_backend["aten"]}
+    rates = _best_rates(by_backend)
     if len(per_step) >= SAMPLING_STEPS:
         total, how = float(per_step[:SAMPLING_STEPS].sum()), f"all {SAMPLING_STEPS} steps timed"
     else:
@@ -493,7 +497,7 @@ def _naive_algorithm1(pipe, source: str, target: str, edits, length: int, steps:
 
 def batching_rows(pipe, frames: int, steps: int, motions: int = 32, chunk: int = 8) -> list[Row]:
     """Seconds per motion of ``motions`` full pipeline generations: one prompt at a time, all in one
-    batch, and in chunks of ``chunk`` (:attr:`SaladPipeline.max_batch`), extrapolated from ``steps``
+    batch, and in chunks of ``chunk`` (set as :attr:`SaladPipeline.max_batch`), extrapolated from ``steps``
     to :data:`SAMPLING_STEPS` denoising steps: every setting is timed at ``steps`` and ``2 * steps``,
     the difference gives the cost per step and the rest the fixed cost (text encoding, decoding),
     which is counted once."""

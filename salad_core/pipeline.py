@@ -38,7 +38,7 @@ from salad_core.models.denoiser import Denoiser
 from salad_core.models.vae import MotionVAE
 from salad_core.motion import denormalize, features_to_joints, normalize
 from salad_core.sampling import DiffusionConfig, denoise, make_scheduler
-from salad_core.skeleton import Skeleton, get_skeleton
+from salad_core.skeleton import Skeleton
 from salad_core.text import TextBatch, load_text_encoder
 
 __all__ = ["SaladPipeline", "MotionOutput", "EditOutput", "default_weights_dir", "validate_prompts",
@@ -396,8 +396,8 @@ class SaladPipeline:
 
     def _denoise_in_chunks(self, text: TextBatch, uncond: Any, noise: torch.Tensor, lengths: Sequence[int],
                            guidance_scale: float, num_steps: int, solver: str, progress: bool) -> torch.Tensor:
-        """Denoise the ``B`` motions in consecutive chunks of at most ``max_batch`` (one chunk when
-        ``B <= max_batch``), each at its own longest length; returns latents ``(B, N', P, Dz)`` as one
+        """Denoise the ``B`` motions in consecutive chunks of at most :meth:`chunk_size` motions (one
+        chunk when ``B`` is not larger), each at its own longest length; returns latents ``(B, N', P, Dz)`` as one
         call would (zero past each length).
 
         Every sample keeps its own noise, so the motions are those of one batched call up to float

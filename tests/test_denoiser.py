@@ -485,6 +485,21 @@ def test_timestep_table_is_filled_once_and_follows_weight_changes():
         _model(replace(TINY, film=False)).timestep_conditioning(t)
 
 
+def test_timestep_table_starts_over_when_full_and_keeps_the_call_s_timesteps(monkeypatch):
+    import salad_core.models.denoiser as D
+
+    monkeypatch.setattr(D, "_TIMESTEP_CACHE", 3)
+    model = _model()
+    with torch.inference_mode():
+        model.prepare_timesteps(torch.tensor([1, 2, 3]))
+        temb, films = model.timestep_conditioning(torch.tensor([3, 7, 7]))   # 3 cached, 7 new: overflow
+        assert sorted(model._timestep_table()) == [3.0, 7.0]
+    with torch.enable_grad():
+        ref = model.timestep_emb(torch.tensor([3, 7, 7]))
+    torch.testing.assert_close(temb, ref.detach())
+    assert films[0][0][0].shape == (3, 1, 1, TINY.width)
+
+
 def test_concat_pads_token_axes():
     a = TextContext(torch.randn(1, 3, 4), torch.ones(1, 3, dtype=torch.bool))
     b = TextContext(torch.randn(2, 5, 4), torch.ones(2, 5, dtype=torch.bool))

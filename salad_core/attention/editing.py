@@ -159,6 +159,7 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
     denoiser.eval()
     try:
         with torch.inference_mode(), use_processors(denoiser, processors):
+            denoiser.prepare_timesteps(timesteps)       # every step's FiLMs in one product, as denoise() does
             z = torch.cat([noise] * branches) * scheduler.init_noise_sigma
             z = z * torch.cat([keep] * branches)
             iterator = timesteps

@@ -31,8 +31,8 @@ from typing import Optional, Protocol
 import torch
 import torch.nn.functional as F
 
-from salad_core.models.attention import (AttentionProcessor, SiteInfo, attention_probs, explicit_route,
-                                         fast_attention, trim_masked_keys)
+from salad_core.models.attention import (AttentionProcessor, SiteInfo, attention_probs, attention_with_probs,
+                                         fast_attention)
 
 __all__ = ["SiteHook", "HookedProcessor", "flat_rows", "named_rows", "flat_from_named"]
 
@@ -119,16 +119,12 @@ class HookedProcessor(AttentionProcessor):
             return fast_attention(q, k, v, key_mask, dropout_p)  # what plain sampling computes, bit for bit
         flat = flat_rows(site, rows)
         take = _row_taker(flat)
-        kt, vt, mt = (k, v, None) if key_mask is None else trim_masked_keys(k, v, key_mask)
-        if explicit_route(kt.shape[-2], dropout_p):
-            # the same operations as fast_attention's explicit route: its probabilities serve the hook
-            all_probs = attention_probs(q, kt, mt)
-            out = torch.matmul(all_probs, vt)
+        out, all_probs = attention_with_probs(q, k, v, key_mask, dropout_p)
+        if all_probs is not None:                        # explicit route: the probabilities plain sampling used
             probs = take(all_probs)
-            if kt.shape[-2] < k.shape[-2]:               # trimmed padding: probability 0 for the hook
-                probs = F.pad(probs, (0, k.shape[-2] - kt.shape[-2]))
+            if probs.shape[-1] < k.shape[-2]:            # trimmed padding: probability 0 for the hook
+                probs = F.pad(probs, (0, k.shape[-2] - probs.shape[-1]))
         else:
-            out = fast_attention(q, k, v, key_mask, dropout_p)
             probs = attention_probs(take(q), take(k), None if key_mask is None else take(key_mask))
         result = self.hook.process(site, rows, named_rows(site, probs, rows.numel()))
         if result is None:

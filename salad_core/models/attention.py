@@ -54,6 +54,7 @@ __all__ = [
     "AttentionProcessor",
     "SDPAProcessor",
     "fast_attention",
+    "attention_with_probs",
     "attention_probs",
     "softmax_last",
     "SHORT_KEYS",
@@ -266,12 +267,22 @@ def fast_attention(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, key_mask: 
 
     Shapes: ``q (R, H, Lq, dh)``, ``k, v (R, H, Lk, dh)``, ``key_mask (R, Lk)`` bool or None.
     """
+    return attention_with_probs(q, k, v, key_mask, dropout_p)[0]
+
+
+def attention_with_probs(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, key_mask: torch.Tensor | None,
+                         dropout_p: float) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """:func:`fast_attention`'s output and, on its explicit route, the probabilities it mixed the
+    values with: ``(R, H, Lq, Lk')`` over the keys left after :func:`trim_masked_keys`
+    (``Lk' <= Lk``); None on the SDPA route. Capture uses them, so its output is plain sampling's
+    by construction."""
     if key_mask is not None:
         k, v, key_mask = trim_masked_keys(k, v, key_mask)
     if explicit_route(k.shape[-2], dropout_p):
-        return torch.matmul(attention_probs(q, k, key_mask), v)
+        probs = attention_probs(q, k, key_mask)
+        return torch.matmul(probs, v), probs
     mask = None if key_mask is None else key_mask[:, None, None, :]
-    return F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=dropout_p)
+    return F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=dropout_p), None
 
 
 class SDPAProcessor(AttentionProcessor):

@@ -238,6 +238,7 @@ class STTransformerLayer(nn.Module):
         self.ffn_norm = nn.LayerNorm(w)
         self.ffn_linear1 = Linear(w, config.ff_dim)
         self.ffn_activation = _ACTIVATIONS[config.activation]()
+        self.ffn_fused_gelu = config.activation == "gelu"      # GELU fused into ffn_linear1 on oneDNN
         self.ffn_linear2 = Linear(config.ff_dim, w)
         self.ffn_dropout = nn.Dropout(p)
         if config.film:
@@ -290,8 +291,8 @@ class STTransformerLayer(nn.Module):
         x = _add_modulated(x, self.cross_dropout(h.view(b, n, p, w)), films[2])
 
         h = self.ffn_norm(x)
-        if isinstance(self.ffn_activation, nn.GELU) and self.ffn_activation.approximate == "none":
-            h = linear(h, self.ffn_linear1.weight, self.ffn_linear1.bias, activation="gelu")  # fused on oneDNN
+        if self.ffn_fused_gelu:
+            h = linear(h, self.ffn_linear1.weight, self.ffn_linear1.bias, activation="gelu")
         else:
             h = self.ffn_activation(self.ffn_linear1(h))
         h = self.ffn_linear2(h)
@@ -412,15 +413,17 @@ class Denoiser(AttnProcessorMixin, nn.Module):
             raise ValueError(f"text must be (B, W, C={self.config.text_dim}) token features, got {tuple(text.shape)}")
         return TextContext(text, text_mask, pooled)
 
-    def _text_signature(self) -> tuple:
-        # identity, storage and in-place version of every weight the text projections use:
+    def _param_signature(self, params) -> tuple:
+        # identity, storage and in-place version of the weights a cache was built from:
         # optimizer steps, load_state_dict (also with assign=True) and .to() all change it
-        params = [*self.word_emb.parameters()] + [
+        return (id(self),) + tuple((id(p), p.data_ptr(), p._version, p.dtype) for p in params)
+
+    def _text_signature(self) -> tuple:
+        return self._param_signature([*self.word_emb.parameters()] + [
             prm for layer in self.transformer.layers
             for mod in (layer.cross_tgt_norm, layer.cross_attn.Wk, layer.cross_attn.Wv)
             for prm in mod.parameters()
-        ]
-        return (id(self),) + tuple((id(p), p.data_ptr(), p._version, p.dtype) for p in params)
+        ])
 
     def _text_kv(self, ctx: TextContext) -> list[tuple[torch.Tensor, torch.Tensor]]:
         dtype = self.word_emb.weight.dtype
@@ -471,8 +474,7 @@ class Denoiser(AttnProcessorMixin, nn.Module):
             raise ValueError(f"text batch ({text_context.batch_size}) must equal the latent batch ({b})")
         if text_context.text_dim != cfg.text_dim:
             raise ValueError(f"text features have C={text_context.text_dim}, the denoiser expects {cfg.text_dim}")
-        t_in = timesteps
-        timesteps = self._timesteps(timesteps, b, x.device)
+        timesteps = self._timesteps(timesteps, b, x.device)      # (1,) or (B,)
         masks = self._masks(frame_mask, text_context.mask, b, n, p)
         kv = text_context.layer_kv(self)
         dims = CallDims(b, n, p, text_context.num_tokens if cfg.cross_attention else 1 + n * p)
@@ -482,11 +484,10 @@ class Denoiser(AttnProcessorMixin, nn.Module):
         films = None
         if cfg.film and not torch.is_grad_enabled():
             # sampling: the timestep embedding and all FiLMs from the per-timestep cache, one row per
-            # distinct timestep (a scalar timestep: one row broadcast over the batch)
-            one = torch.as_tensor(t_in).numel() == 1
-            temb, films = self.timestep_conditioning(timesteps[:1] if one else timesteps)
+            # given timestep (a scalar timestep: one row broadcast over the batch)
+            temb, films = self.timestep_conditioning(timesteps)
         else:
-            temb = self.timestep_emb(timesteps)               # (B, w)
+            temb = self.timestep_emb(timesteps.expand(b))     # (B, w)
         if not cfg.film:
             # "w/o FiLM" ablation (supplement C.4): timestep embedding added to the input
             h = h + temb[:, None, None, :]
@@ -495,10 +496,9 @@ class Denoiser(AttnProcessorMixin, nn.Module):
 
     # ---------------------------------------------------------- timestep conditioning
     def _film_signature(self) -> tuple:
-        params = [*self.timestep_emb.parameters()] + [
+        return self._param_signature([*self.timestep_emb.parameters()] + [
             prm for layer in self.transformer.layers for film in layer.films for prm in film.parameters()
-        ]
-        return (id(self),) + tuple((id(p), p.data_ptr(), p._version, p.dtype) for p in params)
+        ])
 
     def timestep_conditioning(self, timesteps: torch.Tensor) -> tuple[torch.Tensor, list]:
         """Timestep embedding and every layer's FiLM ``(scale, shift)`` for ``timesteps``, cached.
@@ -528,11 +528,7 @@ class Denoiser(AttnProcessorMixin, nn.Module):
         if torch.is_grad_enabled():
             temb = self.timestep_emb(timesteps)
             return temb, [tuple(f(temb) for f in layer.films) for layer in self.transformer.layers]
-        table = self._timestep_table()
-        keys = [float(t) for t in timesteps.detach().reshape(-1).tolist()]
-        missing = [t for t in dict.fromkeys(keys) if t not in table]
-        if missing:
-            self.prepare_timesteps(torch.tensor(missing, device=timesteps.device).to(timesteps.dtype))
+        table, keys = self._fill_timesteps(timesteps)
         rows = torch.stack([table[t] for t in keys])                          # (R, w + L*4*2w)
         temb = rows[:, :w]
         per = rows[:, w:].view(len(keys), layers, 4, 2, w)[:, :, :, :, None, None, :]   # (R, L, 4, 2, 1, 1, w)
@@ -550,18 +546,31 @@ class Denoiser(AttnProcessorMixin, nn.Module):
         return self._t_table
 
     def prepare_timesteps(self, timesteps: torch.Tensor) -> None:
-        """Compute and cache the conditioning of every timestep in ``timesteps`` ``(S,)`` in one
-        product (see :meth:`timestep_conditioning`); a no-op with gradients enabled or without FiLM."""
-        if torch.is_grad_enabled() or not self.config.film:
-            return
+        """Compute and cache the conditioning of the timesteps in ``timesteps`` ``(S,)`` that are not
+        cached yet, in one product (see :meth:`timestep_conditioning`); a no-op with gradients enabled
+        or without FiLM."""
+        if not torch.is_grad_enabled() and self.config.film:
+            self._fill_timesteps(timesteps)
+
+    def _fill_timesteps(self, timesteps: torch.Tensor) -> tuple[dict, list[float]]:
+        """The (valid) table with every timestep of ``timesteps`` in it, and their keys in order."""
         table = self._timestep_table()
-        if len(table) > _TIMESTEP_CACHE:
-            table.clear()
         t = timesteps.detach().reshape(-1)
-        temb = self.timestep_emb(t)                                                # (S, w)
-        films = torch.nn.functional.linear(torch.nn.functional.silu(temb), self._t_weight, self._t_bias)
-        for value, row in zip(t.tolist(), torch.cat([temb, films], dim=1)):
-            table[float(value)] = row
+        keys = [float(v) for v in t.tolist()]
+        first: dict[float, int] = {}
+        for i, key in enumerate(keys):
+            first.setdefault(key, i)
+        missing = [i for key, i in first.items() if key not in table]
+        if missing and len(table) + len(missing) > _TIMESTEP_CACHE:
+            table.clear()                                   # start over, with all of this call's timesteps
+            missing = list(first.values())
+        if missing:
+            t = t[missing]
+            temb = self.timestep_emb(t)                                            # (S, w)
+            films = torch.nn.functional.linear(torch.nn.functional.silu(temb), self._t_weight, self._t_bias)
+            for i, row in zip(missing, torch.cat([temb, films], dim=1)):
+                table[keys[i]] = row
+        return table, keys
 
     @staticmethod
     def _timesteps(timesteps, batch: int, device) -> torch.Tensor:
@@ -570,7 +579,7 @@ class Denoiser(AttnProcessorMixin, nn.Module):
             t = t[None]
         if t.dim() != 1 or t.shape[0] not in (1, batch):
             raise ValueError(f"timesteps must be a scalar, (1,) or (B={batch},), got shape {tuple(t.shape)}")
-        return t.expand(batch)
+        return t
 
     def _masks(self, frame_mask, text_mask, b: int, n: int, p: int) -> _Masks:
         text = None if bool(text_mask.all()) else text_mask
