@@ -291,3 +291,57 @@ def test_hooked_processor_output_is_plain_attention_and_hook_sees_all_keys(keys)
     ref = attention_probs(q[1:], k[1:], mask[1:]).view(1, h, frames, parts, keys + 5)
     torch.testing.assert_close(probs, ref, rtol=1e-5, atol=1e-6)
     assert float(probs[..., keys // 2:].abs().max()) == 0.0                # masked and trimmed keys: 0
+
+
+def test_prefix_key_runs_finds_runs_and_refuses_other_masks():
+    from salad_core.models.attention import MAX_KEY_RUNS, prefix_key_runs
+
+    mask = torch.zeros(5, 9, dtype=torch.bool)
+    mask[:3, :6] = True                  # three prompts of 6 tokens, then two empty prompts (2 tokens)
+    mask[3:, :2] = True
+    assert prefix_key_runs(mask) == ((0, 3, 6), (3, 5, 2))
+    mask[4, 2] = True                    # changed in place: not mistaken for the cached mask
+    assert prefix_key_runs(mask) == ((0, 3, 6), (3, 4, 2), (4, 5, 3))
+    holes = mask.clone()
+    holes[0, 1] = False                  # not a prefix mask
+    assert prefix_key_runs(holes) is None
+    empty = mask.clone()
+    empty[1] = False                     # a row without any valid key
+    assert prefix_key_runs(empty) is None
+    many = torch.arange(9)[None] < torch.arange(1, MAX_KEY_RUNS + 2)[:, None]
+    assert prefix_key_runs(many) is None and prefix_key_runs(many[:MAX_KEY_RUNS]) is not None
+    assert prefix_key_runs(torch.ones(2, 4, dtype=torch.bool)) == ((0, 2, 4),)
+
+
+def test_attention_by_row_runs_matches_masked_attention_and_hook_gets_zeros_for_masked_keys():
+    import torch.nn.functional as F
+
+    from salad_core.attention.processor import HookedProcessor
+    from salad_core.models.attention import SiteInfo, attention_probs, fast_attention, prefix_key_runs
+
+    g = torch.Generator().manual_seed(1)
+    b, h, frames, parts, keys = 4, 2, 3, NUM_PARTS, 11
+    q = torch.randn(b, h, frames * parts, 8, generator=g)
+    k, v = torch.randn(b, h, keys, 8, generator=g), torch.randn(b, h, keys, 8, generator=g)
+    mask = torch.arange(keys)[None] < torch.tensor([7, 7, 2, 2])[:, None]     # guidance: two runs
+    assert prefix_key_runs(mask) == ((0, 2, 7), (2, 4, 2))
+    ref = F.scaled_dot_product_attention(q, k, v, attn_mask=mask[:, None, None, :])
+    out = fast_attention(q, k, v, mask, 0.0)
+    torch.testing.assert_close(out, ref, rtol=1e-5, atol=1e-6)
+    site = SiteInfo("layers.0.cross", "cross", 0, 1, h, b, frames, parts, keys)
+    seen = {}
+
+    class Hook:
+        def rows(self, site):
+            return torch.tensor([1, 2])
+
+        def process(self, site, rows, probs):
+            seen["probs"] = probs.clone()
+
+    assert torch.equal(HookedProcessor(Hook())(site, q, k, v, mask, 0.0), out)      # bit for bit
+    probs = seen["probs"]
+    assert probs.shape == (2, h, frames, parts, keys)
+    torch.testing.assert_close(probs, attention_probs(q[1:3], k[1:3], mask[1:3]).view(2, h, frames, parts, keys))
+    assert float(probs[0, ..., 7:].abs().max()) == 0.0 and float(probs[1, ..., 2:].abs().max()) == 0.0
+    q.requires_grad_(True)                   # with gradients (null-text optimisation): same values
+    torch.testing.assert_close(fast_attention(q, k, v, mask, 0.0), out)

@@ -549,3 +549,51 @@ def test_input_errors_are_clear():
         model(x, t, text, tm, torch.zeros_like(fm))
     with pytest.raises(ValueError, match="max_len"):
         model(torch.randn(1, 40, NUM_PARTS, 4), t[:1], text[:1], tm[:1])
+
+
+@pytest.mark.parametrize("axis", [1, 2])
+def test_attend_within_equals_attention_over_permuted_tokens(axis):
+    """Self-attention along frames (temporal) or parts (skeletal) from one stacked QKV product equals
+    the per-sequence attention of the permuted tokens, with and without a key mask."""
+    from salad_core.models.attention import Attention, CallDims
+
+    torch.manual_seed(axis)
+    b, n, p, w = 2, 5, 3, 16
+    attn = Attention(w, 4, 0.0, "temporal" if axis == 1 else "skeletal").eval()
+    x = torch.randn(b, n, p, w)
+    dims = CallDims(b, n, p, 0)
+    if axis == 1:
+        seq = x.permute(0, 2, 1, 3).reshape(b * p, n, w)          # rows (batch, part)
+        mask = torch.ones(b * p, n, dtype=torch.bool)
+        mask[p:, 3:] = False                                      # the second sample has 3 valid frames
+    else:
+        seq, mask = x.reshape(b * n, p, w), None                  # rows (batch, frame)
+    with torch.no_grad():
+        ref = attn(seq, key_mask=mask, dims=dims)
+        out = attn.attend_within(x, axis, key_mask=mask, dims=dims)
+    back = ref.view(b, p, n, w).permute(0, 2, 1, 3) if axis == 1 else ref.view(b, n, p, w)
+    torch.testing.assert_close(out, back, rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match="axis"):
+        attn.attend_within(x, 3, dims=dims)
+
+
+def test_stacked_qkv_cache_follows_weight_changes_and_lets_gradients_through():
+    from salad_core.models.attention import Attention
+
+    torch.manual_seed(0)
+    attn = Attention(8, 2, 0.0, "temporal")
+    with torch.inference_mode():
+        w1, b1 = attn.qkv_parameters()
+        assert attn.qkv_parameters()[0] is w1                     # cached while nothing changed
+    torch.testing.assert_close(w1, torch.cat([attn.Wq.weight, attn.Wk.weight, attn.Wv.weight]).detach())
+    with torch.no_grad():
+        attn.Wk.weight.add_(1.0)                                  # an in-place update (optimiser step)
+        w2, _ = attn.qkv_parameters()
+    assert w2 is not w1 and torch.equal(w2[8:16], attn.Wk.weight)
+    attn.load_state_dict({k: torch.zeros_like(v) for k, v in attn.state_dict().items()})
+    with torch.no_grad():
+        assert float(attn.qkv_parameters()[0].abs().sum()) == 0.0
+    assert "_qkv_cache" not in "".join(attn.state_dict())          # not a buffer
+    w3, b3 = attn.qkv_parameters()                                 # with gradients: a differentiable cat
+    (w3.sum() + b3.sum()).backward()
+    assert attn.Wv.weight.grad is not None and float(attn.Wv.weight.grad.sum()) == 64.0

@@ -271,13 +271,11 @@ class STTransformerLayer(nn.Module):
             films = tuple(film(temb) for film in self.films)
 
         # temporal attention: every part is a sequence over frames, rows ordered (batch, part)
-        h = x.permute(0, 2, 1, 3).reshape(b * p, n, w)
-        h = self.temp_attn(self.temp_norm(h), key_mask=masks.temporal, dims=dims)
-        h = h.view(b, p, n, w).permute(0, 2, 1, 3)
+        h = self.temp_attn.attend_within(self.temp_norm(x), 1, key_mask=masks.temporal, dims=dims)
         x = _add_modulated(x, self.temp_dropout(h), films[0])
 
         # skeletal attention: every frame is a sequence over its parts (no skeleton mask, as official)
-        h = self.skel_attn(self.skel_norm(x.reshape(b * n, p, w)), dims=dims).view(b, n, p, w)
+        h = self.skel_attn.attend_within(self.skel_norm(x), 2, dims=dims)
         x = _add_modulated(x, self.skel_dropout(h), films[1])
 
         # cross attention over words (query index t * P + j), or the ablation's sentence token
