@@ -129,6 +129,8 @@ class Plan:
     edit_rounds: int                 # interleaved rounds (median)
     train_steps: int                 # timed optimiser steps (after train_warmup)
     train_warmup: int
+    b1_pairs: int = 3                # roofline: steps timed side by side with their matrix products (batch 1)
+    b32_pairs: int = 1               # the same at batch 32
     memory_steps: tuple[int, ...] = (50, 200)
     extras: bool = False             # full only: forward variants and the naive Algorithm 1 reference
 
@@ -139,7 +141,7 @@ class Plan:
                        edit_steps=10, edit_rounds=1, train_steps=1, train_warmup=1)
         return cls(False, b1_steps=SAMPLING_STEPS, b32_steps=SAMPLING_STEPS, b32_warmup=True, matmul_time=0.3,
                    edit_frames=MOTION_FRAMES, edit_steps=SAMPLING_STEPS, edit_rounds=3, train_steps=5,
-                   train_warmup=2, extras=True)
+                   train_warmup=2, b1_pairs=20, b32_pairs=5, extras=True)
 
 
 # ================================================================================ FLOPs
@@ -243,6 +245,94 @@ def matmul_rates(cfg: DenoiserConfig, rows: int, frames: int, tokens: int, min_t
     return _best_rates(matmul_rates_by_backend(cfg, rows, frames, tokens, min_time))
 
 
+def step_products(cfg: DenoiserConfig, rows: int, frames: int, tokens: int,
+                  libraries: dict[str, str] | None = None, seed: int = 0) -> tuple[Callable[[], None], float]:
+    """The matrix products of one denoiser forward, run back to back: the roofline's reference work.
+
+    Every product :func:`gemm_flops` counts per step, at its shape, over ``rows`` samples of
+    ``frames`` latent frames and ``tokens`` text keys: the dense layers (input and output
+    processes, per layer the temporal and skeletal Q/K/V/O, cross Q/O and the FFN, the skip
+    merges), each with its own weight as in the model (so weights come from memory as they do in
+    a forward), on the library ``libraries[class]`` (``"aten"`` or ``"onednn"`` per class
+    ``proj``/``ffn_up``/``ffn_down``; default: the dense layers' backend), and per layer the
+    attention products ``q k^T`` and ``p v`` of the temporal, skeletal and cross attention at their
+    shapes (``torch.matmul``: PyTorch's only fp32 batched route). No bias, activation, softmax or
+    layer norm.
+
+    Returns
+    -------
+    run : callable
+        Runs all products once (under ``torch.inference_mode``).
+    flops : float
+        Their FLOPs: :func:`step_flops` of the same sizes without guidance doubling (``rows`` rows).
+    """
+    from salad_core.models import gemm
+
+    w, f, p, h, L, dz = cfg.width, cfg.ff_dim, cfg.num_parts, cfg.heads, cfg.layers, cfg.latent_dim
+    dh, n = w // h, rows * frames * p
+    libraries = {"proj": gemm.backend(), "ffn_up": gemm.backend(), "ffn_down": gemm.backend(), **(libraries or {})}
+    dense = [("proj", dz, w), ("proj", w, w)]                            # input process
+    for _ in range(L):
+        dense += [("proj", w, w)] * 10 + [("ffn_up", w, f), ("ffn_down", f, w)]
+    dense += [("proj", 2 * w, w)] * (L // 2) + [("proj", w, w), ("proj", w, dz)]   # skip merges, output process
+    g = torch.Generator().manual_seed(seed)
+    inputs = {k: torch.randn(n, k, generator=g) for k in sorted({k for _, k, _ in dense})}
+    weights = [torch.randn(out, k, generator=g) / k ** 0.5 for _, k, out in dense]
+    attention = []
+    for r, lq, lk in ((rows * p, frames, frames), (rows * frames, p, p), (rows, frames * p, tokens)):
+        attention.append((torch.randn(r, h, lq, dh, generator=g), torch.randn(r, h, dh, lk, generator=g),
+                          torch.softmax(torch.randn(r, h, lq, lk, generator=g), -1),
+                          torch.randn(r, h, lk, dh, generator=g)))
+    flops = sum(2.0 * n * k * out for _, k, out in dense)
+    flops += L * sum(2.0 * q.numel() * kt.shape[-1] + 2.0 * pr.numel() * v.shape[-1] for q, kt, pr, v in attention)
+
+    by_library: dict[str, list[tuple[torch.Tensor, torch.Tensor]]] = {}
+    for (cls, k, _), weight in zip(dense, weights):
+        by_library.setdefault(libraries[cls], []).append((inputs[k], weight))
+
+    def run() -> None:
+        with torch.inference_mode():
+            for library, products in by_library.items():
+                with gemm.use_backend(library):
+                    for x, weight in products:
+                        gemm.linear(x, weight)
+            for _ in range(L):
+                for q, kt, pr, v in attention:
+                    torch.matmul(q, kt)
+                    torch.matmul(pr, v)
+
+    return run, flops
+
+
+def paired_step_times(model: Denoiser, case: Case, batch: int, latent_frames: int, pairs: int,
+                      products: Callable[[], None]) -> tuple[np.ndarray, np.ndarray]:
+    """Seconds of ``pairs`` guided DDIM steps and of ``products`` run right after each of them.
+
+    Timed side by side, step by step, so that the ratio of the two does not depend on how fast
+    this machine happens to be in a given second (on a shared VM that changes by tens of percent
+    within minutes). One extra step comes first and is dropped (it also prepares the text and the
+    timestep table).
+    """
+    cond, null, noise, fm = _random_inputs(case, batch, latent_frames)
+    products()                                        # warm: allocations, oneDNN primitives
+    steps: list[float] = []
+    refs: list[float] = []
+    mark = [0.0]
+
+    def after_step(info, z) -> None:
+        t0 = time.perf_counter()
+        steps.append(t0 - mark[0])
+        products()
+        t1 = time.perf_counter()
+        refs.append(t1 - t0)
+        mark[0] = time.perf_counter()
+
+    mark[0] = time.perf_counter()
+    denoise(model, make_scheduler(), cond, null, noise, fm, guidance_scale=GUIDANCE, num_steps=pairs + 1,
+            callback=after_step)
+    return np.asarray(steps[1:], dtype=np.float64), np.asarray(refs[1:], dtype=np.float64)
+
+
 def _best_rates(by_backend: dict[str, dict[str, float]]) -> dict[str, float]:
     """Per GEMM class, the fastest library's rate (``attn`` is measured on aten only)."""
     return {key: max(rates.get(key, 0.0) for rates in by_backend.values()) for key in by_backend["aten"]}
@@ -306,8 +396,16 @@ def time_denoiser_steps(model: Denoiser, case: Case, batch: int, latent_frames: 
 
 
 def speed_rows(model: Denoiser, case: Case, frames: int, batch: int, steps: int, *, warmup: bool = True,
-               matmul_time: float = 0.3, rates_twice: bool = False) -> list[Row]:
-    """Seconds per motion, and the roofline row, of one (configuration, length, batch) setting."""
+               matmul_time: float = 0.3, rates_twice: bool = False, pairs: int = 3) -> list[Row]:
+    """Seconds per motion, and the roofline row, of one (configuration, length, batch) setting.
+
+    The roofline row compares ``pairs`` steps with the same step's matrix products run alone right
+    after each (:func:`step_products`, :func:`paired_step_times`): value = FLOPs / median step time,
+    reference = FLOPs / median product time, ratio = median over the pairs of product time / step
+    time. The note also gives the older, optimistic yardstick: per-shape best rates of one product
+    repeated on the same operands (:func:`matmul_rates_by_backend`, the temporal attention's rate
+    for every attention product) and the best step's fraction of it.
+    """
     unit = SKELETON.unit_length
     latent_frames = frames // unit
     per_step = time_denoiser_steps(model, case, batch, latent_frames, steps, warmup=warmup)
@@ -325,19 +423,22 @@ def speed_rows(model: Denoiser, case: Case, frames: int, batch: int, steps: int,
         total = float(np.median(per_step)) * SAMPLING_STEPS
         how = (f"median of {len(per_step)} timed step{'s' * (len(per_step) > 1)} x {SAMPLING_STEPS} "
                "(extrapolated)")
-    best = float(per_step.min())
-    achieved = flops / best / 1e9
-    ideal = roofline_seconds(fl, rates)
-    effective = flops / ideal / 1e9              # the FLOP-weighted matmul rate at these shapes
+    hot_ratio = roofline_seconds(fl, rates) / float(per_step.min())
+    libraries = {k: max(by_backend, key=lambda lib: by_backend[lib].get(k, 0.0)) for k in ("proj", "ffn_up", "ffn_down")}
+    products, product_flops = step_products(case.config, 2 * batch, latent_frames, tokens, libraries)
+    step_s, product_s = paired_step_times(model, case, batch, latent_frames, max(1, pairs), products)
     setting = f"{case.name}, {frames} frames, batch {batch}"
     return [
         Row("speed", "seconds per motion", setting, total / batch, "s", note=how),
-        Row("roofline", "denoiser GFLOP/s (best step)", setting, achieved, "GFLOP/s", reference=effective,
-            ratio=ideal / best,
-            note=f"{flops / 1e9:.2f} GFLOP/step ({tokens} text keys attended); matmul GFLOP/s at these shapes: "
+        Row("roofline", "denoiser GFLOP/s (step)", setting, flops / float(np.median(step_s)) / 1e9, "GFLOP/s",
+            reference=product_flops / float(np.median(product_s)) / 1e9,
+            ratio=float(np.median(product_s / step_s)),
+            note=f"{flops / 1e9:.2f} GFLOP/step ({tokens} text keys attended); median of {len(step_s)} step(s), "
+                 f"each followed by its matrix products alone ({', '.join(f'{k} on {v}' for k, v in libraries.items())}"
+                 f"; attention products on aten); older yardstick, one product repeated per shape, GFLOP/s: "
                  + "; ".join(f"{lib} " + ", ".join(f"{k} {v:.1f}" for k, v in r.items())
                              for lib, r in by_backend.items())
-                 + f"; dense layers ran on {gemm_backend()}"),
+                 + f" -> best step at {hot_ratio:.2f} of it; dense layers ran on {gemm_backend()}"),
     ]
 
 
@@ -836,7 +937,7 @@ def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None 
                         big = batch > 1
                         rows += speed_rows(model, case, frames, batch, plan.b32_steps if big else plan.b1_steps,
                                            warmup=plan.b32_warmup or not big, matmul_time=plan.matmul_time,
-                                           rates_twice=not plan.quick)
+                                           rates_twice=not plan.quick, pairs=plan.b32_pairs if big else plan.b1_pairs)
                 if plan.extras:
                     rows += forward_variant_rows(model, case)
                 del model
@@ -853,10 +954,13 @@ def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None 
             if plan.quick:
                 notes.append(f"quick: batch 1 timed on {plan.b1_steps} steps, batch 32 on {plan.b32_steps} step, "
                              f"both extrapolated to {SAMPLING_STEPS} (every DDIM step costs the same)")
-            notes.append("roofline: value = FLOPs per step (dense GEMMs + attention products over the attended "
-                         "keys, element-wise work not counted) / best step time; reference = this machine's best "
-                         "matmul GFLOP/s at the same GEMM shapes (the faster of aten/MKL and oneDNN per shape), "
-                         "FLOP-weighted; ratio = matmul-bound time / best step time")
+            notes.append("roofline: FLOPs per step = dense GEMMs + attention products over the attended keys "
+                         "(element-wise work not counted); every timed step is followed by the same step's matrix "
+                         "products alone (each dense layer with its own weight, on the faster of aten/MKL and oneDNN "
+                         "for its shape class; attention products at their shapes); value = FLOPs / median step "
+                         "time, reference = FLOPs / median products time, ratio = median of products time / step "
+                         "time (side by side, so the machine's speed swings cancel); the note adds the older, "
+                         "optimistic yardstick (one product repeated on the same operands, best time per shape)")
         if "training" in sections:
             recipe = train_recipe(weights)
             log.info("training: %d timed steps each", plan.train_steps)
