@@ -246,7 +246,8 @@ def matmul_rates(cfg: DenoiserConfig, rows: int, frames: int, tokens: int, min_t
 
 
 def step_products(cfg: DenoiserConfig, rows: int, frames: int, tokens: int,
-                  libraries: dict[str, str] | None = None, seed: int = 0) -> tuple[Callable[[], None], float]:
+                  libraries: dict[str, str] | None = None, seed: int = 0,
+                  fold_keys: Sequence[int] | None = None) -> tuple[Callable[[], None], float]:
     """The matrix products of one denoiser forward, run back to back: the roofline's reference work.
 
     Every product :func:`gemm_flops` counts per step, at its shape, over ``rows`` samples of
@@ -258,6 +259,11 @@ def step_products(cfg: DenoiserConfig, rows: int, frames: int, tokens: int,
     attention products ``q k^T`` and ``p v`` of the temporal, skeletal and cross attention at their
     shapes (``torch.matmul``: PyTorch's only fp32 batched route). No bias, activation, softmax or
     layer norm.
+
+    ``fold_keys`` (valid keys of every row) gives instead the products sampling actually runs when
+    the cross-attention is folded (:class:`~salad_core.models.attention.FoldedText`): per layer and
+    row ``(N'P, w) x (w, H W_b)`` and ``(N'P, H W_b) x (H W_b, w)`` in place of the cross Q/O
+    projections and the cross-attention products (fewer FLOPs than :func:`step_flops`).
 
     Returns
     -------
@@ -271,24 +277,35 @@ def step_products(cfg: DenoiserConfig, rows: int, frames: int, tokens: int,
     w, f, p, h, L, dz = cfg.width, cfg.ff_dim, cfg.num_parts, cfg.heads, cfg.layers, cfg.latent_dim
     dh, n = w // h, rows * frames * p
     libraries = {"proj": gemm.backend(), "ffn_up": gemm.backend(), "ffn_down": gemm.backend(), **(libraries or {})}
-    dense = [("proj", dz, w), ("proj", w, w)]                            # input process
+    if fold_keys is not None and len(fold_keys) != rows:
+        raise ValueError(f"fold_keys needs one key count per row ({rows}), got {len(fold_keys)}")
+    dense = [("proj", n, dz, w), ("proj", n, w, w)]                      # input process
     for _ in range(L):
-        dense += [("proj", w, w)] * 10 + [("ffn_up", w, f), ("ffn_down", f, w)]
-    dense += [("proj", 2 * w, w)] * (L // 2) + [("proj", w, w), ("proj", w, dz)]   # skip merges, output process
+        if fold_keys is None:
+            dense += [("proj", n, w, w)] * 10
+        else:                                                           # folded cross-attention per row
+            dense += [("proj", n, w, w)] * 8
+            dense += [c for keys in fold_keys for c in (("proj", frames * p, w, h * keys),
+                                                        ("proj", frames * p, h * keys, w))]
+        dense += [("ffn_up", n, w, f), ("ffn_down", n, f, w)]
+    dense += [("proj", n, 2 * w, w)] * (L // 2) + [("proj", n, w, w), ("proj", n, w, dz)]   # skip merges, output
     g = torch.Generator().manual_seed(seed)
-    inputs = {k: torch.randn(n, k, generator=g) for k in sorted({k for _, k, _ in dense})}
-    weights = [torch.randn(out, k, generator=g) / k ** 0.5 for _, k, out in dense]
+    inputs = {(m, k): torch.randn(m, k, generator=g) for m, k in sorted({(m, k) for _, m, k, _ in dense})}
+    weights = [torch.randn(out, k, generator=g) / k ** 0.5 for _, _, k, out in dense]
     attention = []
-    for r, lq, lk in ((rows * p, frames, frames), (rows * frames, p, p), (rows, frames * p, tokens)):
+    sites = [(rows * p, frames, frames), (rows * frames, p, p)]
+    if fold_keys is None:
+        sites.append((rows, frames * p, tokens))
+    for r, lq, lk in sites:
         attention.append((torch.randn(r, h, lq, dh, generator=g), torch.randn(r, h, dh, lk, generator=g),
                           torch.softmax(torch.randn(r, h, lq, lk, generator=g), -1),
                           torch.randn(r, h, lk, dh, generator=g)))
-    flops = sum(2.0 * n * k * out for _, k, out in dense)
+    flops = sum(2.0 * m * k * out for _, m, k, out in dense)
     flops += L * sum(2.0 * q.numel() * kt.shape[-1] + 2.0 * pr.numel() * v.shape[-1] for q, kt, pr, v in attention)
 
     by_library: dict[str, list[tuple[torch.Tensor, torch.Tensor]]] = {}
-    for (cls, k, _), weight in zip(dense, weights):
-        by_library.setdefault(libraries[cls], []).append((inputs[k], weight))
+    for (cls, m, k, _), weight in zip(dense, weights):
+        by_library.setdefault(libraries[cls], []).append((inputs[(m, k)], weight))
 
     def run() -> None:
         with torch.inference_mode():
@@ -305,32 +322,47 @@ def step_products(cfg: DenoiserConfig, rows: int, frames: int, tokens: int,
 
 
 def paired_step_times(model: Denoiser, case: Case, batch: int, latent_frames: int, pairs: int,
-                      products: Callable[[], None]) -> tuple[np.ndarray, np.ndarray]:
-    """Seconds of ``pairs`` guided DDIM steps and of ``products`` run right after each of them.
+                      products: Sequence[Callable[[], None]]) -> tuple[np.ndarray, np.ndarray]:
+    """Seconds of ``pairs`` guided DDIM steps, and of each of ``products`` run right after every step.
 
     Timed side by side, step by step, so that the ratio of the two does not depend on how fast
     this machine happens to be in a given second (on a shared VM that changes by tens of percent
     within minutes). One extra step comes first and is dropped (it also prepares the text and the
-    timestep table).
+    timestep table). Returns ``steps (pairs,)`` and ``products (len(products), pairs)``.
     """
     cond, null, noise, fm = _random_inputs(case, batch, latent_frames)
-    products()                                        # warm: allocations, oneDNN primitives
+    for run in products:                              # warm: allocations, oneDNN primitives
+        run()
     steps: list[float] = []
-    refs: list[float] = []
+    refs: list[list[float]] = []
     mark = [0.0]
 
     def after_step(info, z) -> None:
         t0 = time.perf_counter()
         steps.append(t0 - mark[0])
-        products()
-        t1 = time.perf_counter()
-        refs.append(t1 - t0)
+        times = []
+        for run in products:
+            t1 = time.perf_counter()
+            run()
+            times.append(time.perf_counter() - t1)
+        refs.append(times)
         mark[0] = time.perf_counter()
 
     mark[0] = time.perf_counter()
     denoise(model, make_scheduler(), cond, null, noise, fm, guidance_scale=GUIDANCE, num_steps=pairs + 1,
             callback=after_step)
-    return np.asarray(steps[1:], dtype=np.float64), np.asarray(refs[1:], dtype=np.float64)
+    return (np.asarray(steps[1:], dtype=np.float64),
+            np.asarray(refs[1:], dtype=np.float64).reshape(pairs, len(products)).T)
+
+
+def folded_keys(case: Case, batch: int) -> list[int] | None:
+    """Valid text keys of every row of a guided step of :func:`_random_inputs`, if sampling folds
+    the cross-attention for them (:meth:`~salad_core.models.attention.Attention.fold_text`:
+    ``heads * keys < width`` in every row), else None."""
+    (_, mask), (_, null_mask), _, _ = _random_inputs(case, batch, 1)
+    keys = [int(n) for n in mask.sum(1)] + [int(null_mask.sum())] * batch
+    cfg = case.config
+    return keys if cfg.cross_attention and cfg.heads * max(keys) < cfg.width else None
 
 
 def _best_rates(by_backend: dict[str, dict[str, float]]) -> dict[str, float]:
@@ -426,16 +458,24 @@ def speed_rows(model: Denoiser, case: Case, frames: int, batch: int, steps: int,
     hot_ratio = roofline_seconds(fl, rates) / float(per_step.min())
     libraries = {k: max(by_backend, key=lambda lib: by_backend[lib].get(k, 0.0)) for k in ("proj", "ffn_up", "ffn_down")}
     products, product_flops = step_products(case.config, 2 * batch, latent_frames, tokens, libraries)
-    step_s, product_s = paired_step_times(model, case, batch, latent_frames, max(1, pairs), products)
+    runs = [products]
+    fold = folded_keys(case, batch)
+    if fold is not None:            # also the products sampling runs with the folded cross-attention
+        done, done_flops = step_products(case.config, 2 * batch, latent_frames, tokens, libraries, fold_keys=fold)
+        runs.append(done)
+    step_s, product_s = paired_step_times(model, case, batch, latent_frames, max(1, pairs), runs)
     setting = f"{case.name}, {frames} frames, batch {batch}"
+    folded = "" if fold is None else (
+        f"; cross-attention folded, so the step runs {done_flops / 1e9:.2f} GFLOP of products: the same "
+        f"comparison against those products gives {float(np.median(product_s[1] / step_s)):.2f}")
     return [
         Row("speed", "seconds per motion", setting, total / batch, "s", note=how),
         Row("roofline", "denoiser GFLOP/s (step)", setting, flops / float(np.median(step_s)) / 1e9, "GFLOP/s",
-            reference=product_flops / float(np.median(product_s)) / 1e9,
-            ratio=float(np.median(product_s / step_s)),
+            reference=product_flops / float(np.median(product_s[0])) / 1e9,
+            ratio=float(np.median(product_s[0] / step_s)),
             note=f"{flops / 1e9:.2f} GFLOP/step ({tokens} text keys attended); median of {len(step_s)} step(s), "
                  f"each followed by its matrix products alone ({', '.join(f'{k} on {v}' for k, v in libraries.items())}"
-                 f"; attention products on aten); older yardstick, one product repeated per shape, GFLOP/s: "
+                 f"; attention products on aten){folded}; older yardstick, one product repeated per shape, GFLOP/s: "
                  + "; ".join(f"{lib} " + ", ".join(f"{k} {v:.1f}" for k, v in r.items())
                              for lib, r in by_backend.items())
                  + f" -> best step at {hot_ratio:.2f} of it; dense layers ran on {gemm_backend()}"),

@@ -244,7 +244,28 @@ def test_paired_step_times_alternate_steps_and_products(single_thread):
     torch.manual_seed(0)
     model = Denoiser(TINY).eval()
     calls = []
-    steps, products = bench.paired_step_times(model, bench.Case("tiny", TINY, 5), batch=1, latent_frames=4,
-                                              pairs=3, products=lambda: (calls.append(1), time.sleep(0.002)))
-    assert steps.shape == products.shape == (3,) and len(calls) == 1 + 4   # warm-up + one after every step
-    assert (products >= 0.002).all() and (steps > 0).all() and (steps < 1).all()
+    steps, products = bench.paired_step_times(model, bench.Case("tiny", TINY, 5), batch=1, latent_frames=4, pairs=3,
+                                              products=[lambda: (calls.append(1), time.sleep(0.002)),
+                                                        lambda: time.sleep(0.004)])
+    assert steps.shape == (3,) and products.shape == (2, 3) and len(calls) == 1 + 4   # warm-up + after every step
+    assert (products[0] >= 0.002).all() and (products[1] >= 0.004).all() and (steps > 0).all()
+
+
+def test_folded_step_products_replace_the_cross_attention_products(single_thread):
+    from torch.utils.flop_counter import FlopCounterMode
+
+    rows, frames, tokens, keys = 2, 6, 5, [3, 2]
+    libs = {"proj": "aten", "ffn_up": "aten", "ffn_down": "aten"}
+    run, flops = bench.step_products(TINY, rows, frames, tokens, libs, fold_keys=keys)
+    with FlopCounterMode(display=False) as counter:
+        run()
+    w, h, n = TINY.width, TINY.heads, frames * TINY.num_parts
+    cross = 2 * 2 * rows * n * w * w + 2 * 2 * rows * n * tokens * w     # Q/O projections + q k^T, p v
+    folded = sum(2 * 2 * n * w * h * k for k in keys)
+    assert counter.get_total_flops() == flops
+    assert flops == bench.step_flops(TINY, rows // 2, frames, tokens) - TINY.layers * (cross - folded)
+    with pytest.raises(ValueError, match="one key count per row"):
+        bench.step_products(TINY, rows, frames, tokens, libs, fold_keys=[3])
+    paper, default = bench.denoiser_cases()
+    keys1 = bench.folded_keys(paper, 1)
+    assert keys1 is not None and len(keys1) == 2 and keys1[1] == 2           # the empty prompt: 2 tokens

@@ -345,3 +345,111 @@ def test_attention_by_row_runs_matches_masked_attention_and_hook_gets_zeros_for_
     assert float(probs[0, ..., 7:].abs().max()) == 0.0 and float(probs[1, ..., 2:].abs().max()) == 0.0
     q.requires_grad_(True)                   # with gradients (null-text optimisation): same values
     torch.testing.assert_close(fast_attention(q, k, v, mask, 0.0), out)
+
+
+def _fold_model():
+    torch.manual_seed(5)
+    return Denoiser(DenoiserConfig(width=32, heads=2, ff_dim=32, layers=3, text_dim=12)).eval()
+
+
+def _fold_inputs(model, lengths=(9, 2), tokens=20):
+    g = torch.Generator().manual_seed(6)
+    b = len(lengths)
+    x = torch.randn(b, 4, NUM_PARTS, model.config.latent_dim, generator=g)
+    text = torch.randn(b, tokens, model.config.text_dim, generator=g)
+    mask = torch.arange(tokens)[None] < torch.tensor(lengths)[:, None]
+    return x, model.prepare_text(text, mask)
+
+
+class _NoFold(SDPAProcessor):
+    takes_folded = False
+
+
+def test_folded_cross_attention_equals_the_projected_route_and_follows_weight_changes():
+    model = _fold_model()
+    x, ctx = _fold_inputs(model)
+    with torch.inference_mode():
+        folds = ctx.layer_folds(model)
+        assert all(f is not None for f in folds) and folds[0].keys == (9, 2)   # 2 heads x 9 keys < width 32
+        out = model(x, torch.tensor([7]), text_context=ctx)
+        with use_processors(model, _NoFold()):
+            ref = model(x, torch.tensor([7]), text_context=ctx)
+        torch.testing.assert_close(out, ref, rtol=1e-5, atol=1e-5)
+        assert ctx.layer_folds(model) is folds                                   # cached
+    with torch.no_grad():
+        model.transformer.layers[1].cross_attn.Wq.weight.mul_(2.0)
+    with torch.inference_mode():
+        assert ctx.layer_folds(model) is not folds                               # Wq changed: rebuilt
+        with use_processors(model, _NoFold()):
+            ref = model(x, torch.tensor([7]), text_context=ctx)
+        torch.testing.assert_close(model(x, torch.tensor([7]), text_context=ctx), ref, rtol=1e-5, atol=1e-5)
+    with pytest.raises(RuntimeError, match="without gradients"):
+        ctx.layer_folds(model)
+
+
+def test_fold_is_skipped_where_it_does_not_pay_or_the_mask_has_holes():
+    model = _fold_model()
+    attn = model.transformer.layers[0].cross_attn
+    k, v = torch.randn(2, 2, 20, 16), torch.randn(2, 2, 20, 16)
+    long = torch.arange(20)[None] < torch.tensor([16, 3])[:, None]         # 2 heads x 16 keys = width
+    assert attn.fold_text(k, v, long) is None
+    holes = torch.arange(20)[None] < torch.tensor([6, 3])[:, None]
+    holes[0, 2] = False
+    assert attn.fold_text(k, v, holes) is None
+    assert attn.fold_text(k[..., :10, :], v[..., :10, :], None).keys == (10, 10)
+
+
+def test_hooked_processor_on_the_folded_route_keeps_outputs_and_serves_the_hook():
+    """Capture on the folded route: output bit for bit plain sampling's; the hook's probabilities
+    are those of the projected route (zeros for padding); replaced rows equal the projected route
+    with the same replacement."""
+    from salad_core.attention.processor import HookedProcessor
+
+    model = _fold_model()
+    x, ctx = _fold_inputs(model)
+    t = torch.tensor([7])
+    seen = {}
+
+    class Watch:
+        def rows(self, site):
+            return torch.tensor([0]) if site.kind == "cross" else None
+
+        def process(self, site, rows, probs):
+            seen[site.name] = probs.clone()
+
+    class Flatten(Watch):            # replaces row 0's maps by uniform attention over its 9 tokens
+        def process(self, site, rows, probs):
+            new = torch.zeros_like(probs)
+            new[..., :9] = 1.0 / 9
+            return rows, new
+
+    recorded = {}
+
+    def record(site, probs):
+        if site.kind == "cross":
+            recorded[site.name] = probs[:1].clone()
+
+    def flatten(site, probs):
+        if site.kind != "cross":
+            return None
+        new = probs.clone()
+        new[:1] = 0.0
+        new[:1, ..., :9] = 1.0 / 9
+        return new
+
+    with torch.inference_mode():
+        plain = model(x, t, text_context=ctx)
+        with use_processors(model, HookedProcessor(Watch())):
+            assert torch.equal(model(x, t, text_context=ctx), plain)              # bit for bit
+        with use_processors(model, EagerProcessor(record)):
+            model(x, t, text_context=ctx)
+        for name, probs in seen.items():
+            named = probs.reshape(recorded[name].shape)
+            torch.testing.assert_close(named, recorded[name], rtol=1e-5, atol=1e-6)
+            assert float(probs[..., 9:].abs().max()) == 0.0                         # padding keys
+        with use_processors(model, HookedProcessor(Flatten())):
+            edited = model(x, t, text_context=ctx)
+        with use_processors(model, EagerProcessor(flatten)):
+            ref = model(x, t, text_context=ctx)
+    torch.testing.assert_close(edited, ref, rtol=1e-5, atol=1e-5)
+    assert not torch.allclose(edited[0], plain[0], atol=1e-3)                       # the edit acted

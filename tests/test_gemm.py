@@ -77,8 +77,14 @@ def test_backend_switch_validates_and_restores(monkeypatch):
     assert gemm.backend() == before
     with pytest.raises(ValueError, match="activation must be one of"):
         gemm.linear(torch.randn(2, 3), torch.randn(4, 3), activation="relu")
+    monkeypatch.setenv("SALAD_GEMM", "aten")
+    assert gemm.backend() == before                  # the environment is read once ...
+    gemm.set_backend(None)                           # ... and again after set_backend(None)
+    assert gemm.backend() == "aten"
     monkeypatch.setenv("SALAD_GEMM", "fastest")
+    gemm.set_backend(None)
     with pytest.raises(ValueError, match="SALAD_GEMM must be one of"):
         gemm.backend()
-    monkeypatch.setenv("SALAD_GEMM", "aten")
-    assert gemm.backend() == "aten"
+    monkeypatch.delenv("SALAD_GEMM")
+    gemm.set_backend(None)
+    assert gemm.backend() == before

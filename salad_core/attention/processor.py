@@ -31,8 +31,8 @@ from typing import Optional, Protocol
 import torch
 import torch.nn.functional as F
 
-from salad_core.models.attention import (AttentionProcessor, SiteInfo, attention_probs, attention_with_probs,
-                                         fast_attention)
+from salad_core.models.attention import (AttentionProcessor, FoldedText, SiteInfo, attention_probs,
+                                         attention_with_probs, fast_attention, folded_cross_attention)
 
 __all__ = ["SiteHook", "HookedProcessor", "flat_rows", "named_rows", "flat_from_named"]
 
@@ -140,6 +140,39 @@ class HookedProcessor(AttentionProcessor):
             new_probs = F.dropout(new_probs, p=dropout_p, training=True)
         out = out.clone()
         out[new_flat] = torch.matmul(new_probs, v[new_flat])
+        return out
+
+    #: Cross-attention sites may come through :meth:`folded` (the route plain sampling takes).
+    takes_folded = True
+
+    def folded(self, site: SiteInfo, x: torch.Tensor, fold: FoldedText) -> torch.Tensor:
+        """The folded cross-attention of plain sampling (:class:`~salad_core.models.attention.FoldedText`)
+        for every row, with the hook served as in :meth:`__call__`: it gets the probabilities the
+        folded route mixed the values with (zeros for padding keys), and rows it replaces are
+        recomputed as ``Wo(new_probs @ v)`` over all keys of the row's own prompt.
+        ``x (B, Lq, w)`` -> ``(B, Lq, w)`` after ``Wo``."""
+        rows = self.hook.rows(site)
+        if rows is None or rows.numel() == 0:
+            return folded_cross_attention(x, fold)[0]          # what plain sampling computes, bit for bit
+        wanted = [int(r) for r in rows]
+        out, kept = folded_cross_attention(x, fold, wanted)
+        heads, lq, tokens = fold.heads, x.shape[1], fold.tokens
+        probs = x.new_zeros(len(wanted), heads, lq, tokens)
+        for i, b in enumerate(wanted):
+            probs[i, :, :, :fold.keys[b]] = kept[b].transpose(0, 1)   # (Lq, H, W_b) -> (H, Lq, W_b)
+        result = self.hook.process(site, rows, named_rows(site, probs, len(wanted)))
+        if result is None:
+            return out
+        new_rows, new_named = result
+        new_probs = flat_from_named(site, new_named).to(x.dtype)
+        expected = (new_rows.numel(), heads, lq, tokens)
+        if tuple(new_probs.shape) != expected:
+            raise ValueError(f"hook returned probabilities of shape {tuple(new_probs.shape)} at site "
+                             f"{site.name!r}; expected {expected}")
+        mixed = torch.matmul(new_probs, fold.v[new_rows])                    # (n, H, Lq, dh)
+        merged = mixed.transpose(1, 2).reshape(new_rows.numel(), lq, -1)
+        out = out.clone()
+        out[new_rows] = F.linear(merged, fold.wo_weight, fold.wo_bias)
         return out
 
     def __repr__(self) -> str:

@@ -35,7 +35,7 @@ previous ones, also after an exception (TransformerLens-style scoped hooks).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Optional, Union
@@ -53,6 +53,8 @@ __all__ = [
     "Controller",
     "AttentionProcessor",
     "SDPAProcessor",
+    "FoldedText",
+    "folded_cross_attention",
     "fast_attention",
     "attention_with_probs",
     "attention_probs",
@@ -358,12 +360,64 @@ def attention_with_probs(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, key_
     return F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=dropout_p), None
 
 
+@dataclass(frozen=True)
+class FoldedText:
+    """One call's text side of a cross-attention site folded into its query and output projections.
+
+    For batch row ``b`` with ``W_b`` valid (leading) keys, ``scores_b = x_b a_b^T + c_b`` is
+    ``(Lq, H * W_b)`` (index ``h * W_b + j``) and equals ``(x_b Wq^T + bq) k_b^T / sqrt(dh)`` per head;
+    after the per-head softmax ``p_b``, ``p_b n_b^T + bo`` equals ``Wo`` applied to ``p_b v_b``. With
+    fewer than ``w / H`` keys this is less work than projecting the queries and merging the heads
+    (paper model, 13 keys: 104 instead of 256 columns), and every product is a dense one.
+    ``k, v, wo_weight, wo_bias`` are kept for rows whose probabilities an editing hook replaces.
+    """
+
+    a: tuple[torch.Tensor, ...]      # per row (H * W_b, w)
+    c: tuple[torch.Tensor, ...]      # per row (H * W_b,)
+    n: tuple[torch.Tensor, ...]      # per row (w, H * W_b)
+    keys: tuple[int, ...]            # W_b
+    k: torch.Tensor                  # (B, H, W, dh)
+    v: torch.Tensor                  # (B, H, W, dh)
+    wo_weight: torch.Tensor          # (w, w)
+    wo_bias: torch.Tensor            # (w,)
+
+    @property
+    def heads(self) -> int:
+        return self.k.shape[1]
+
+    @property
+    def tokens(self) -> int:
+        """W: the (padded) key axis of the unfolded site."""
+        return self.k.shape[2]
+
+
+def folded_cross_attention(x: torch.Tensor, fold: FoldedText, keep_probs: Sequence[int] = ()
+                           ) -> tuple[torch.Tensor, dict[int, torch.Tensor]]:
+    """Cross-attention of queries ``x (B, Lq, w)`` through ``fold`` -> ``(B, Lq, w)`` (after ``Wo``),
+    and the probabilities ``(Lq, H, W_b)`` of the batch rows in ``keep_probs``."""
+    heads, outs, kept = fold.heads, [], {}
+    for b, keys in enumerate(fold.keys):
+        scores = linear(x[b], fold.a[b], fold.c[b])                          # (Lq, H * W_b)
+        probs = softmax_last(scores.view(-1, heads, keys))                    # (Lq, H, W_b)
+        if b in keep_probs:
+            kept[b] = probs
+        outs.append(linear(probs.view(-1, heads * keys), fold.n[b], fold.wo_bias))
+    return torch.stack(outs), kept
+
+
 class SDPAProcessor(AttentionProcessor):
     """Fast default: :func:`fast_attention` (``torch.nn.functional.scaled_dot_product_attention``,
     or explicit matmuls for short key axes, where they are faster on a CPU)."""
 
+    #: :meth:`Attention.forward` may hand this processor a :class:`FoldedText` (see :meth:`folded`).
+    takes_folded = True
+
     def __call__(self, site, q, k, v, key_mask, dropout_p):
         return fast_attention(q, k, v, key_mask, dropout_p)
+
+    def folded(self, site: SiteInfo, x: torch.Tensor, fold: FoldedText) -> torch.Tensor:
+        """Cross-attention through the folded text: ``x (B, Lq, w)`` -> ``(B, Lq, w)`` after ``Wo``."""
+        return folded_cross_attention(x, fold)[0]
 
 
 class EagerProcessor(AttentionProcessor):
@@ -504,16 +558,52 @@ class Attention(nn.Module):
         """Per-head keys and values ``(R, H, Lk, dh)`` of ``context`` ``(R, Lk, w)``."""
         return self._split(self.Wk(context)), self._split(self.Wv(context))
 
+    def fold_text(self, k: torch.Tensor, v: torch.Tensor, key_mask: torch.Tensor | None) -> FoldedText | None:
+        """Fold precomputed text keys/values ``(B, H, W, dh)`` into ``Wq`` and ``Wo`` (see
+        :class:`FoldedText`), or None where that would not pay: a key mask that is not a prefix
+        mask per row, or ``H * W_b >= w`` keys for some row (the folded products would be larger).
+        Built without gradients; the caller keeps it as long as the keys, values and weights."""
+        heads, width = self.heads, self.width
+        dh = width // heads
+        if key_mask is None:
+            keys = [k.shape[2]] * k.shape[0]
+        else:
+            valid = [row.index(False) if not row[-1] else len(row) for row in key_mask.tolist()]
+            if any(n == 0 or any(row[n:]) for n, row in zip(valid, key_mask.tolist())):
+                return None
+            keys = valid
+        if heads * max(keys) >= width:
+            return None
+        scale = 1.0 / math.sqrt(dh)
+        with torch.no_grad():
+            wq = self.Wq.weight.view(heads, dh, width)                       # rows of head h
+            bq = self.Wq.bias.view(heads, dh)
+            wo = self.Wo.weight.view(width, heads, dh)                       # columns of head h
+            a, c, n = [], [], []
+            for b, nk in enumerate(keys):
+                kb, vb = k[b, :, :nk], v[b, :, :nk]                           # (H, W_b, dh)
+                a.append((torch.einsum("hjd,hdc->hjc", kb, wq) * scale).reshape(heads * nk, width))
+                c.append((torch.einsum("hjd,hd->hj", kb, bq) * scale).reshape(heads * nk))
+                n.append(torch.einsum("chd,hjd->chj", wo, vb).reshape(width, heads * nk).contiguous())
+        return FoldedText(tuple(a), tuple(c), tuple(n), tuple(keys), k, v, self.Wo.weight, self.Wo.bias)
+
     def forward(self, query: torch.Tensor, context: torch.Tensor | None = None, *,
                 key_mask: torch.Tensor | None = None,
                 kv: tuple[torch.Tensor, torch.Tensor] | None = None,
+                fold: FoldedText | None = None,
                 dims: CallDims) -> torch.Tensor:
         """Attend ``query`` ``(R, Lq, w)`` to ``context`` (itself if None) -> ``(R, Lq, w)``.
 
         ``kv`` (precomputed :meth:`project_kv` output) replaces ``context`` when given, so the
         text keys/values can be computed once per sampling call. ``key_mask`` ``(R, Lk)`` bool,
-        True = valid key.
+        True = valid key. ``fold`` (:meth:`fold_text` of that ``kv`` and mask) is used when the
+        processor takes it (``takes_folded``) and no gradients are recorded.
         """
+        if (fold is not None and getattr(self.processor, "takes_folded", False) and not self.training
+                and not torch.is_grad_enabled()):
+            site = SiteInfo(self.site_name, self.kind, self.layer, self.num_layers, self.heads,
+                            dims.batch, dims.frames, dims.parts, fold.tokens)
+            return self.processor.folded(site, query, fold)
         q = self._split(self.Wq(query))
         if kv is None:
             k, v = self.project_kv(query if context is None else context)

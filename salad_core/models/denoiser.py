@@ -35,7 +35,7 @@ import torch
 from torch import nn
 
 from salad_core.io import CheckpointError, load_state_into, register_model
-from salad_core.models.attention import Attention, AttnProcessorMixin, CallDims, site_names
+from salad_core.models.attention import Attention, AttnProcessorMixin, CallDims, FoldedText, site_names
 from salad_core.models.embeddings import PositionalEmbedding, TimestepEmbedding
 from salad_core.models.gemm import Linear, linear
 from salad_core.skeleton import NUM_PARTS
@@ -125,6 +125,8 @@ class TextContext:
         self.text, self.mask, self.pooled = text, mask, pooled
         self._signature: tuple | None = None
         self._cache: list[tuple[torch.Tensor, torch.Tensor]] | None = None
+        self._fold_signature: tuple | None = None
+        self._folds: list | None = None
 
     @property
     def batch_size(self) -> int:
@@ -174,9 +176,25 @@ class TextContext:
             self._signature = sig
         return self._cache
 
+    def layer_folds(self, denoiser: "Denoiser") -> list:
+        """Per layer the cross-attention's :class:`~salad_core.models.attention.FoldedText` of these
+        text keys and values (or None where folding does not pay), cached like :meth:`layer_kv` and
+        also rebuilt when the cross-attention ``Wq``/``Wo`` change. Only without gradients."""
+        if torch.is_grad_enabled():
+            raise RuntimeError("folded text is for sampling without gradients")
+        kv = self.layer_kv(denoiser)
+        sig = (self._signature, denoiser._fold_signature())
+        if self._folds is None or self._fold_signature != sig:
+            mask = None if bool(self.mask.all()) else self.mask
+            self._folds = [layer.cross_attn.fold_text(k, v, mask)
+                           for layer, (k, v) in zip(denoiser.transformer.layers, kv)]
+            self._fold_signature = sig
+        return self._folds
+
     def clear_cache(self) -> None:
         """Drop the cached projections (they are rebuilt on next use)."""
         self._cache, self._signature = None, None
+        self._folds, self._fold_signature = None, None
 
 
 class FiLM(nn.Module):
@@ -193,6 +211,11 @@ class FiLM(nn.Module):
         """``temb`` ``(B, w)`` -> ``scale, shift`` each ``(B, 1, 1, w)``."""
         scale, shift = self.linear(temb)[:, None, None, :].chunk(2, dim=-1)
         return scale, shift
+
+
+def _weight_and_bias(modules: Sequence[nn.Module]) -> list[torch.Tensor]:
+    """``weight`` and ``bias`` (when present) of Linear / LayerNorm modules, in order."""
+    return [t for mod in modules for t in (mod.weight, mod.bias) if t is not None]
 
 
 def _add_modulated(x: torch.Tensor, out: torch.Tensor, film: tuple[torch.Tensor, torch.Tensor] | None) -> torch.Tensor:
@@ -257,8 +280,8 @@ class STTransformerLayer(nn.Module):
         return (self.temp_film, self.skel_film, self.cross_film, self.ffn_film) if self.use_film else ()
 
     def forward(self, x: torch.Tensor, temb: torch.Tensor, text_kv: tuple[torch.Tensor, torch.Tensor],
-                masks: _Masks, dims: CallDims, films: Sequence[tuple[torch.Tensor, torch.Tensor]] | None = None
-                ) -> torch.Tensor:
+                masks: _Masks, dims: CallDims, films: Sequence[tuple[torch.Tensor, torch.Tensor]] | None = None,
+                fold: FoldedText | None = None) -> torch.Tensor:
         """``x`` ``(B, N', P, w)`` -> ``(B, N', P, w)``; ``temb`` ``(B, w)``.
 
         ``films``: this layer's four ``(scale, shift)`` pairs, each ``(B or 1, 1, 1, w)``, when the
@@ -281,7 +304,7 @@ class STTransformerLayer(nn.Module):
         # cross attention over words (query index t * P + j), or the ablation's sentence token
         q = self.cross_src_norm(x.reshape(b, n * p, w))
         if self.cross_attention:
-            h = self.cross_attn(q, kv=text_kv, key_mask=masks.text, dims=dims)
+            h = self.cross_attn(q, kv=text_kv, key_mask=masks.text, fold=fold, dims=dims)
         else:
             kx, vx = self.cross_attn.project_kv(q)
             kv = (torch.cat([text_kv[0], kx], dim=2), torch.cat([text_kv[1], vx], dim=2))
@@ -314,19 +337,23 @@ class SkipTransformer(nn.Module):
         return [*self.input_blocks, self.middle_block, *self.output_blocks]
 
     def forward(self, x: torch.Tensor, temb: torch.Tensor, text_kv: list[tuple[torch.Tensor, torch.Tensor]],
-                masks: _Masks, dims: CallDims, films: list | None = None) -> torch.Tensor:
-        """``films``: per layer (execution order) its FiLM pairs, or None to compute them from ``temb``."""
+                masks: _Masks, dims: CallDims, films: list | None = None, folds: list | None = None
+                ) -> torch.Tensor:
+        """``films``: per layer (execution order) its FiLM pairs, or None to compute them from ``temb``;
+        ``folds``: per layer its folded text (:meth:`TextContext.layer_folds`) or None."""
         half = len(self.input_blocks)
         films = films or [None] * (2 * half + 1)
+        folds = folds or [None] * (2 * half + 1)
         skips = []
         for i, block in enumerate(self.input_blocks):
-            x = block(x, temb, text_kv[i], masks, dims, films[i])
+            x = block(x, temb, text_kv[i], masks, dims, films[i], folds[i])
             skips.append(x)
-        x = self.middle_block(x, temb, text_kv[half], masks, dims, films[half])
+        x = self.middle_block(x, temb, text_kv[half], masks, dims, films[half], folds[half])
         for i, (block, merge) in enumerate(zip(self.output_blocks, self.skip_blocks)):
             # the last input block's output pairs with the first output block (U-Net symmetry)
             x = merge(torch.cat([x, skips.pop()], dim=-1))
-            x = block(x, temb, text_kv[half + 1 + i], masks, dims, films[half + 1 + i])
+            j = half + 1 + i
+            x = block(x, temb, text_kv[j], masks, dims, films[j], folds[j])
         return x
 
 
@@ -417,11 +444,17 @@ class Denoiser(AttnProcessorMixin, nn.Module):
         return (id(self),) + tuple((id(p), p.data_ptr(), p._version, p.dtype) for p in params)
 
     def _text_signature(self) -> tuple:
-        return self._param_signature([*self.word_emb.parameters()] + [
-            prm for layer in self.transformer.layers
+        # weight and bias read directly: walking .parameters() of 16 modules at every forward cost
+        # about 0.2 ms of Python per call of the paper model
+        return self._param_signature(_weight_and_bias([self.word_emb] + [
+            mod for layer in self.transformer.layers
             for mod in (layer.cross_tgt_norm, layer.cross_attn.Wk, layer.cross_attn.Wv)
-            for prm in mod.parameters()
-        ])
+        ]))
+
+    def _fold_signature(self) -> tuple:
+        return self._param_signature(_weight_and_bias([
+            mod for layer in self.transformer.layers for mod in (layer.cross_attn.Wq, layer.cross_attn.Wo)
+        ]))
 
     def _text_kv(self, ctx: TextContext) -> list[tuple[torch.Tensor, torch.Tensor]]:
         dtype = self.word_emb.weight.dtype
@@ -475,6 +508,11 @@ class Denoiser(AttnProcessorMixin, nn.Module):
         timesteps = self._timesteps(timesteps, b, x.device)      # (1,) or (B,)
         masks = self._masks(frame_mask, text_context.mask, b, n, p)
         kv = text_context.layer_kv(self)
+        # sampling: the text side folded into the cross-attention's Wq / Wo where that is less work
+        folds = None
+        if cfg.cross_attention and not torch.is_grad_enabled() and any(
+                getattr(layer.cross_attn.processor, "takes_folded", False) for layer in self.transformer.layers):
+            folds = text_context.layer_folds(self)
         dims = CallDims(b, n, p, text_context.num_tokens if cfg.cross_attention else 1 + n * p)
 
         h = self.input_process(x).reshape(b, n * p, cfg.width)
@@ -489,14 +527,14 @@ class Denoiser(AttnProcessorMixin, nn.Module):
         if not cfg.film:
             # "w/o FiLM" ablation (supplement C.4): timestep embedding added to the input
             h = h + temb[:, None, None, :]
-        h = self.transformer(h, temb, kv, masks, dims, films)
+        h = self.transformer(h, temb, kv, masks, dims, films, folds)
         return self.output_process(h)
 
     # ---------------------------------------------------------- timestep conditioning
     def _film_signature(self) -> tuple:
-        return self._param_signature([*self.timestep_emb.parameters()] + [
-            prm for layer in self.transformer.layers for film in layer.films for prm in film.parameters()
-        ])
+        return self._param_signature([*self.timestep_emb.parameters()] + _weight_and_bias([
+            film.linear[1] for layer in self.transformer.layers for film in layer.films
+        ]))
 
     def timestep_conditioning(self, timesteps: torch.Tensor) -> tuple[torch.Tensor, list]:
         """Timestep embedding and every layer's FiLM ``(scale, shift)`` for ``timesteps``, cached.

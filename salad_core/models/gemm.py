@@ -42,7 +42,7 @@ MIN_ROWS = 64
 _ACTIVATIONS = ("none", "gelu")
 # torch.compiler.is_compiling exists from torch 2.3 on (the package allows 2.1)
 _is_compiling = getattr(getattr(torch, "compiler", None), "is_compiling", None) or (lambda: False)
-_state: dict[str, object] = {"backend": None, "probe": None}
+_state: dict[str, object] = {"backend": None, "probe": None, "resolved": None}
 
 
 def _probe() -> tuple[bool, str]:
@@ -76,7 +76,19 @@ def onednn_available() -> bool:
 
 
 def backend() -> str:
-    """The route in effect: ``"onednn"`` or ``"aten"`` (resolving ``auto`` and ``SALAD_GEMM``)."""
+    """The route in effect: ``"onednn"`` or ``"aten"`` (resolving ``auto`` and ``SALAD_GEMM``).
+
+    The answer is kept until :func:`set_backend` / :func:`use_backend` change the choice (every dense
+    layer asks, and reading ``os.environ`` each time cost about 0.5 ms per paper-model forward), so
+    ``SALAD_GEMM`` is read at the first use and again after ``set_backend(None)``.
+    """
+    resolved = _state["resolved"]
+    if resolved is None:
+        resolved = _state["resolved"] = _resolve()
+    return resolved
+
+
+def _resolve() -> str:
     name = _state["backend"]
     if name is None:
         name = os.environ.get("SALAD_GEMM", "auto").strip().lower() or "auto"
@@ -96,7 +108,7 @@ def set_backend(name: str | None) -> None:
     """Choose the route for dense layers (``None`` = back to ``SALAD_GEMM`` / ``auto``)."""
     if name is not None and name not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS} or None, got {name!r}")
-    _state["backend"] = name
+    _state["backend"], _state["resolved"] = name, None
     if name == "onednn" and not onednn_available():
         _state["backend"] = None
         raise RuntimeError("oneDNN linear is not usable in this PyTorch build / on this CPU")
@@ -110,7 +122,7 @@ def use_backend(name: str | None) -> Iterator[None]:
     try:
         yield
     finally:
-        _state["backend"] = previous
+        _state["backend"], _state["resolved"] = previous, None
 
 
 def _fast_ok(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None) -> bool:
