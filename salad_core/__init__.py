@@ -2,4 +2,4 @@
 
 The library part (no plotting imports). See README.md for the entry points.
 """
-__version__ = "0.4.0"
+__version__ = "0.5.0"

@@ -18,8 +18,12 @@ Five sections, each a function returning rows of the table (:class:`Row`), run i
   guidance 7.5 (both branches in one batched forward), at batch 1 and 32, for the paper
   configuration and the shipped default, and for a 120-frame motion with the shipped default.
   Beside each, the *roofline* row: the denoiser's achieved GFLOP/s (FLOPs per step computed from
-  the configuration by :func:`gemm_flops`) against this machine's matmul GFLOP/s measured at the
-  same GEMM shapes (:func:`matmul_rates`); the fraction is the matmul-bound time over the step time.
+  the configuration by :func:`gemm_flops`) against this machine's matmul GFLOP/s at the same
+  shapes, measured by running the step's own matrix products alone right after every timed step
+  (:func:`step_products`, :func:`paired_step_times`); the fraction is the median over those pairs of
+  products time over step time. Where sampling folds the cross-attention (fewer FLOPs than the
+  configuration's count), the note gives the same fraction against the products actually run, and
+  the older per-shape yardstick (:func:`matmul_rates`) for comparison.
 * ``training``: optimiser steps per second of the VAE and of the denoiser on random data, with the
   shipped recipe's model configs and batch sizes (``runs.json`` beside the shipped weights, else
   the library defaults). The denoiser step is the trainer's own (:func:`_prepare`: frozen-VAE
