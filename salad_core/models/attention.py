@@ -63,6 +63,7 @@ __all__ = [
     "VECTOR_ROW",
     "trim_masked_keys",
     "prefix_key_runs",
+    "prefix_lengths",
     "MAX_KEY_RUNS",
     "explicit_route",
     "EagerProcessor",
@@ -276,22 +277,26 @@ def prefix_key_runs(key_mask: torch.Tensor) -> tuple[tuple[int, int, int], ...] 
     if cached is not None and cached[0].shape == key_mask.shape and torch.equal(cached[0], key_mask):
         return cached[1]
     runs: list[tuple[int, int, int]] | None = []
-    lk = key_mask.shape[1]
-    for row, valid in enumerate(key_mask.tolist()):
-        keys = valid.index(False) if not valid[-1] else lk
-        if keys == 0 or any(valid[keys:]):
-            runs = None
-            break
+    for row, keys in enumerate(prefix_lengths(key_mask) or ()):
         if runs and runs[-1][2] == keys:
             runs[-1] = (runs[-1][0], row + 1, keys)
         else:
             runs.append((row, row + 1, keys))
-            if len(runs) > MAX_KEY_RUNS:
-                runs = None
-                break
-    result = None if runs is None else tuple(runs)
+    result = tuple(runs) if runs and len(runs) <= MAX_KEY_RUNS else None
     _RUNS_CACHE[0] = (key_mask.clone(), result)
     return result
+
+
+def prefix_lengths(key_mask: torch.Tensor) -> list[int] | None:
+    """Valid keys per row of ``key_mask (R, Lk)`` if every row is a prefix mask (its first ``n >= 1``
+    keys valid, the rest not), else None."""
+    lengths = []
+    for valid in key_mask.tolist():
+        n = valid.index(False) if not valid[-1] else len(valid)
+        if n == 0 or any(valid[n:]):
+            return None
+        lengths.append(n)
+    return lengths
 
 
 def _attend_runs(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, runs: tuple[tuple[int, int, int], ...],
@@ -565,14 +570,8 @@ class Attention(nn.Module):
         Built without gradients; the caller keeps it as long as the keys, values and weights."""
         heads, width = self.heads, self.width
         dh = width // heads
-        if key_mask is None:
-            keys = [k.shape[2]] * k.shape[0]
-        else:
-            valid = [row.index(False) if not row[-1] else len(row) for row in key_mask.tolist()]
-            if any(n == 0 or any(row[n:]) for n, row in zip(valid, key_mask.tolist())):
-                return None
-            keys = valid
-        if heads * max(keys) >= width:
+        keys = [k.shape[2]] * k.shape[0] if key_mask is None else prefix_lengths(key_mask)
+        if not keys or heads * max(keys) >= width:
             return None
         scale = 1.0 / math.sqrt(dh)
         with torch.no_grad():
