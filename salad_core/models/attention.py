@@ -375,6 +375,8 @@ class FoldedText:
     fewer than ``w / H`` keys this is less work than projecting the queries and merging the heads
     (paper model, 13 keys: 104 instead of 256 columns), and every product is a dense one.
     ``k, v, wo_weight, wo_bias`` are kept for rows whose probabilities an editing hook replaces.
+    Memory: ``2 H W_b w`` floats per row beside the text keys and values (paper model, a 24-token
+    prompt: 0.4 MB per row and layer; a guided batch of 32 such prompts: 65 MB, measured).
     """
 
     a: tuple[torch.Tensor, ...]      # per row (H * W_b, w)
