@@ -18,6 +18,24 @@ from _doubles import make_fake_corpus
 REPO = Path(__file__).resolve().parents[1]
 
 
+def test_long_table3_recipe_differs_from_the_study_only_in_the_denoiser_budget(tmp_path):
+    """configs/ablations_table3_long.json (the 2,500-step check in the ablation model card): the same
+    VAEs and denoiser models as the shipped study, only the denoisers' step budget changes."""
+    short = {j.run_dir.name: j.config for j in plan_jobs(load_recipe(REPO / "configs" / "ablations.json"), tmp_path)}
+    long = {j.run_dir.name: j.config for j in plan_jobs(load_recipe(REPO / "configs" / "ablations_table3_long.json"),
+                                                          tmp_path)}
+    assert {n for n in long if n.startswith("den_")} == {"den_full", "den_no_st"}
+    for name, config in long.items():
+        if name.startswith("vae_"):
+            assert config == short[name]
+        else:
+            assert {k: config[k] for k in config if k != "train"} == {k: short[name][k] for k in short[name] if k != "train"}
+            assert config["train"]["max_steps"] == 2500 and short[name]["train"]["max_steps"] == 700
+            strip = ("max_steps", "val_every", "ckpt_every")
+            assert {k: v for k, v in config["train"].items() if k not in strip} == \
+                {k: v for k, v in short[name]["train"].items() if k not in strip}
+
+
 def test_shipped_recipe_plans_every_table_row(tmp_path):
     recipe = load_recipe(REPO / "configs" / "ablations.json")
     jobs = plan_jobs(recipe, tmp_path)
