@@ -62,6 +62,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
+from salad_core.models.attention import fold_pays
 from salad_core.models.denoiser import Denoiser, DenoiserConfig
 from salad_core.allocator import allocator_tuned
 from salad_core.models.gemm import backend as gemm_backend
@@ -366,7 +367,7 @@ def folded_keys(case: Case, batch: int) -> list[int] | None:
     (_, mask), (_, null_mask), _, _ = _random_inputs(case, batch, 1)
     keys = [int(n) for n in mask.sum(1)] + [int(null_mask.sum())] * batch
     cfg = case.config
-    return keys if cfg.cross_attention and cfg.heads * max(keys) < cfg.width else None
+    return keys if cfg.cross_attention and fold_pays(cfg.heads, cfg.width, keys) else None
 
 
 def _best_rates(by_backend: dict[str, dict[str, float]]) -> dict[str, float]:

@@ -55,6 +55,7 @@ __all__ = [
     "SDPAProcessor",
     "FoldedText",
     "folded_cross_attention",
+    "fold_pays",
     "fast_attention",
     "attention_with_probs",
     "attention_probs",
@@ -398,6 +399,12 @@ class FoldedText:
         return self.k.shape[2]
 
 
+def fold_pays(heads: int, width: int, keys: Sequence[int]) -> bool:
+    """Whether folding the text into ``Wq``/``Wo`` (:class:`FoldedText`) is less work than the
+    projected route: every row's ``heads * keys`` columns fewer than ``width``."""
+    return bool(keys) and heads * max(keys) < width
+
+
 def folded_cross_attention(x: torch.Tensor, fold: FoldedText, keep_probs: Sequence[int] = ()
                            ) -> tuple[torch.Tensor, dict[int, torch.Tensor]]:
     """Cross-attention of queries ``x (B, Lq, w)`` through ``fold`` -> ``(B, Lq, w)`` (after ``Wo``),
@@ -547,14 +554,17 @@ class Attention(nn.Module):
         else:              # (3, B, N', H, P, dh) -> rows (batch, frame)
             qkv = qkv.permute(3, 0, 1, 4, 2, 5).reshape(3, b * n, heads, p, w // heads)
         q, k, v = qkv.unbind(0)
-        site = SiteInfo(self.site_name, self.kind, self.layer, self.num_layers, heads,
-                        dims.batch, dims.frames, dims.parts, 0)
-        out = self.processor(site, q, k, v, key_mask, self.dropout if self.training else 0.0)
+        out = self.processor(self._site(dims, 0), q, k, v, key_mask, self.dropout if self.training else 0.0)
         if axis == 1:      # (B*P, H, N', dh) -> (B, N', P, H, dh)
             out = out.view(b, p, heads, n, -1).permute(0, 3, 1, 2, 4)
         else:              # (B*N', H, P, dh) -> (B, N', P, H, dh)
             out = out.view(b, n, heads, p, -1).permute(0, 1, 3, 2, 4)
         return self.Wo(out.reshape(b, n, p, w))
+
+    def _site(self, dims: CallDims, tokens: int) -> SiteInfo:
+        """This site's :class:`SiteInfo` for one call (``tokens``: key length of cross/sentence sites)."""
+        return SiteInfo(self.site_name, self.kind, self.layer, self.num_layers, self.heads,
+                        dims.batch, dims.frames, dims.parts, tokens)
 
     def _split(self, x: torch.Tensor) -> torch.Tensor:
         # (R, L, w) -> (R, H, L, dh)
@@ -573,7 +583,7 @@ class Attention(nn.Module):
         heads, width = self.heads, self.width
         dh = width // heads
         keys = [k.shape[2]] * k.shape[0] if key_mask is None else prefix_lengths(key_mask)
-        if not keys or heads * max(keys) >= width:
+        if keys is None or not fold_pays(heads, width, keys):
             return None
         scale = 1.0 / math.sqrt(dh)
         with torch.no_grad():
@@ -602,16 +612,13 @@ class Attention(nn.Module):
         """
         if (fold is not None and getattr(self.processor, "takes_folded", False) and not self.training
                 and not torch.is_grad_enabled()):
-            site = SiteInfo(self.site_name, self.kind, self.layer, self.num_layers, self.heads,
-                            dims.batch, dims.frames, dims.parts, fold.tokens)
-            return self.processor.folded(site, query, fold)
+            return self.processor.folded(self._site(dims, fold.tokens), query, fold)
         q = self._split(self.Wq(query))
         if kv is None:
             k, v = self.project_kv(query if context is None else context)
         else:
             k, v = kv
-        site = SiteInfo(self.site_name, self.kind, self.layer, self.num_layers, self.heads,
-                        dims.batch, dims.frames, dims.parts, k.shape[2] if self.kind in ("cross", "sentence") else 0)
+        site = self._site(dims, k.shape[2] if self.kind in ("cross", "sentence") else 0)
         out = self.processor(site, q, k, v, key_mask, self.dropout if self.training else 0.0)
         r, _, lq, _ = out.shape
         return self.Wo(out.transpose(1, 2).reshape(r, lq, self.width))

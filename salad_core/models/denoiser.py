@@ -182,7 +182,11 @@ class TextContext:
         also rebuilt when the cross-attention ``Wq``/``Wo`` change. Only without gradients."""
         if torch.is_grad_enabled():
             raise RuntimeError("folded text is for sampling without gradients")
-        kv = self.layer_kv(denoiser)
+        return self._layer_folds(denoiser, self.layer_kv(denoiser))
+
+    def _layer_folds(self, denoiser: "Denoiser", kv: list[tuple[torch.Tensor, torch.Tensor]]) -> list:
+        """:meth:`layer_folds` given ``kv``, the :meth:`layer_kv` just returned (the denoiser's forward
+        has it already, so the text signature is not checked twice per call)."""
         sig = (self._signature, denoiser._fold_signature())
         if self._folds is None or self._fold_signature != sig:
             mask = None if bool(self.mask.all()) else self.mask
@@ -512,7 +516,7 @@ class Denoiser(AttnProcessorMixin, nn.Module):
         folds = None
         if cfg.cross_attention and not torch.is_grad_enabled() and any(
                 getattr(layer.cross_attn.processor, "takes_folded", False) for layer in self.transformer.layers):
-            folds = text_context.layer_folds(self)
+            folds = text_context._layer_folds(self, kv)
         dims = CallDims(b, n, p, text_context.num_tokens if cfg.cross_attention else 1 + n * p)
 
         h = self.input_process(x).reshape(b, n * p, cfg.width)
