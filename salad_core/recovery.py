@@ -1,0 +1,557 @@
+"""Joint recovery from HumanML3D-style features that keeps bone lengths and planted feet.
+
+The 263-d features (:mod:`salad_core.motion`) describe every frame three times over: joint
+positions ("ric"), chain-local 6D swing rotations ("rot") and joint velocities, plus 4 foot-contact
+channels. The standard recovery (HumanML3D ``recover_from_ric``) reads only the positions, so
+whatever error a generator leaves in them shows as bones that stretch and feet that slide. This
+module recovers joints ``(..., N, J, 3)`` in three ways, chosen with ``method``:
+
+``"positions"``
+    :func:`salad_core.motion.features_to_joints`, unchanged (the raw recovery the metrics use).
+``"fk"``
+    Forward kinematics of the rotation features with fixed bone lengths (the skeleton's, or the
+    motion's own median lengths measured on the position features) and the root from the root
+    channels. Optionally (default) each frame's FK body is turned about the vertical through the
+    root onto the heading of the position features: the heading that the rotation features were
+    made with can differ from the one the root channels integrate to (see below), and then FK and
+    the positions disagree by a yaw of the whole body.
+``"fit"``
+    A skeleton fit: per frame, each bone (root outwards) points from its already fitted parent at
+    the predicted position of its child (optionally blended with the rotation features' bone
+    direction) and has the fixed length, so bone lengths are exact and each joint lands as close
+    to its predicted position as its fitted parent allows. Then the feet are locked where the
+    contact channels say so (see :func:`lock_feet`) and no joint is left below the floor
+    (:func:`lift_above_floor`).
+
+Why ``"fk"`` turns the body onto the positions' heading. HumanML3D stores the root's yaw velocity
+as ``arcsin(y)`` of the per-frame heading increment ``dq = r_{t+1} r_t^-1`` with heading
+quaternions of non-negative ``w``. When the heading passes 180 degrees from the first frame's
+(a motion that turns around), ``r_{t+1}`` flips sign, ``dq`` gets ``w < 0`` and the stored increment
+has the wrong sign: from that frame on the integrated heading is off by twice that step. The
+position recovery then turns the whole body (and the rest of the root path) one way and FK of the
+rotation features turns it the other way, because the first bone of every chain is stored
+relative to ``r_t`` (measured on the tiny procedural corpus: 3 of 200 motions, up to 0.74 m between
+the two recoveries; 0.00001 m on the real clip 012314, which does not turn around).
+
+All three methods are vectorised numpy over frames (Python loops run over joints, contact runs and
+motions of a batch); they accept numpy arrays or torch tensors and return numpy arrays (not
+differentiable), float32 for float32 input and float64 otherwise.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Union
+
+import numpy as np
+import torch
+
+from .motion import check_features, features_to_joints, features_to_joints_rot
+from .skeleton import Skeleton, get_skeleton
+
+__all__ = [
+    "METHODS",
+    "DEFAULT_METHOD",
+    "RecoveryConfig",
+    "recover_joints",
+    "fk_joints",
+    "fit_joints",
+    "fit_skeleton",
+    "motion_bone_lengths",
+    "contact_lock_mask",
+    "lock_feet",
+    "two_bone_ik",
+    "lift_above_floor",
+]
+
+Array = Union[np.ndarray, torch.Tensor]
+SkeletonLike = Union[str, Skeleton]
+
+#: Recovery methods of :func:`recover_joints`.
+METHODS: tuple[str, ...] = ("positions", "fk", "fit")
+#: The method :func:`recover_joints` uses when none is given.
+DEFAULT_METHOD = "fit"
+
+_EPS = 1e-9
+_UP = np.array([0.0, 1.0, 0.0])
+
+
+# =========================================================================== configuration
+@dataclass(frozen=True)
+class RecoveryConfig:
+    """Options of the ``"fk"`` and ``"fit"`` recoveries (``"positions"`` has none).
+
+    Lengths are in metres for HumanML3D; for skeletons in other units (KIT, millimetres) the
+    heights are divided by ``skeleton.feature_scale``.
+    """
+
+    lengths: str = "skeleton"                 # bone lengths: "skeleton" (target) or "motion" (median of the positions)
+    align_heading: bool = True                # fk: turn the FK body onto the position features' heading
+    rotation_weight: float = 0.0              # fit: weight of the rotation features' bone directions, in [0, 1]
+    lock_contacts: bool = True                # fit: lock feet where the contact channels are on
+    contact_threshold: float = 0.5            # a contact channel is on above this value
+    contact_heights: tuple[float, float] = (0.12, 0.06)  # (ankle, toe): highest joint y (m) that may lock
+    min_contact_frames: int = 3               # shorter contact runs are ignored (flicker, not a plant)
+    blend_frames: int = 4                     # frames over which a lock fades in before and out after a run
+    floor: bool = True                        # fit: no joint below y = 0 (feet by IK, else the frame is lifted)
+
+    def __post_init__(self) -> None:
+        if self.lengths not in ("skeleton", "motion"):
+            raise ValueError(f"lengths must be 'skeleton' or 'motion', got {self.lengths!r}")
+        if not 0.0 <= float(self.rotation_weight) <= 1.0:
+            raise ValueError(f"rotation_weight must be in [0, 1], got {self.rotation_weight!r}")
+        if not 0.0 < float(self.contact_threshold) < 1.0:
+            raise ValueError(f"contact_threshold must be in (0, 1), got {self.contact_threshold!r}")
+        heights = tuple(self.contact_heights)
+        if len(heights) != 2 or not all(np.isfinite(h) and h > 0 for h in heights):
+            raise ValueError(f"contact_heights must be two positive heights (ankle, toe) in metres, "
+                             f"got {self.contact_heights!r}")
+        if int(self.min_contact_frames) != self.min_contact_frames or self.min_contact_frames < 1:
+            raise ValueError(f"min_contact_frames must be an integer >= 1, got {self.min_contact_frames!r}")
+        if int(self.blend_frames) != self.blend_frames or self.blend_frames < 0:
+            raise ValueError(f"blend_frames must be an integer >= 0, got {self.blend_frames!r}")
+
+
+# =========================================================================== helpers
+def _as_numpy(features: Array, sk: Skeleton) -> tuple[np.ndarray, np.dtype]:
+    """Checked features as float64 numpy plus the dtype to return."""
+    features = check_features(features, sk)
+    if isinstance(features, torch.Tensor):
+        features = features.detach().cpu().numpy()
+    out = np.float32 if features.dtype == np.float32 else np.float64
+    return np.asarray(features, dtype=np.float64), out
+
+
+def _normalize(v: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
+    """Unit vectors along the last axis; (near-)zero vectors become ``fallback`` (or stay 0)."""
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    out = v / np.maximum(n, _EPS)
+    if fallback is not None:
+        out = np.where(n > 1e-6, out, fallback)
+    return out
+
+
+def _leg(sk: Skeleton, contact: int) -> tuple[int, int]:
+    """(root, middle) of the two-bone chain that ends at a contact ankle: its grandparent and parent."""
+    mid = sk.parents[contact]
+    return sk.parents[mid], mid
+
+
+def _check_method(method: str) -> str:
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
+    return method
+
+
+def _config(config: RecoveryConfig | None) -> RecoveryConfig:
+    if config is None:
+        return RecoveryConfig()
+    if not isinstance(config, RecoveryConfig):
+        raise TypeError(f"config must be a RecoveryConfig, got {type(config).__name__}")
+    return config
+
+
+def motion_bone_lengths(joints: np.ndarray, skeleton: SkeletonLike = "humanml3d") -> np.ndarray:
+    """Median length of every bone over frames: joints ``(..., N, J, 3)`` -> ``(..., J)`` (root 0).
+
+    The median is robust to the frames where a generator stretches a bone, so it is the motion's
+    own body size.
+    """
+    sk = get_skeleton(skeleton)
+    joints = np.asarray(joints, dtype=np.float64)
+    parents = [max(p, 0) for p in sk.parents]
+    return np.median(np.linalg.norm(joints - joints[..., parents, :], axis=-1), axis=-2)
+
+
+def _lengths(positions: np.ndarray, sk: Skeleton, mode: str) -> np.ndarray:
+    """Bone lengths ``(..., J)`` for the config's ``lengths`` mode."""
+    if mode == "motion":
+        return motion_bone_lengths(positions, sk)
+    if sk.bone_lengths is None:
+        raise ValueError(f"skeleton {sk.name!r} has no target bone lengths; use RecoveryConfig(lengths='motion')")
+    return np.broadcast_to(np.asarray(sk.bone_lengths, dtype=np.float64), positions.shape[:-3] + (sk.num_joints,))
+
+
+# =========================================================================== "fk"
+def _yaw_onto(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Per frame, the rotation about +Y through joint 0 that best maps ``source`` onto ``target``.
+
+    Both ``(..., N, J, 3)``; returns ``source`` turned (least squares over the horizontal
+    components of the joints relative to joint 0; the root itself is kept).
+    """
+    a = source - source[..., :1, :]
+    b = target - target[..., :1, :]
+    # rotation by phi about +y maps (x, z) to (x cos + z sin, -x sin + z cos); the best phi
+    # maximises sum(b . R a) = cos * sum(ax bx + az bz) + sin * sum(az bx - ax bz)
+    dot = (a[..., 0] * b[..., 0] + a[..., 2] * b[..., 2]).sum(-1)
+    crs = (a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]).sum(-1)
+    phi = np.arctan2(crs, dot)[..., None]                                 # (..., N, 1)
+    c, s = np.cos(phi), np.sin(phi)
+    x = a[..., 0] * c + a[..., 2] * s
+    z = -a[..., 0] * s + a[..., 2] * c
+    return np.stack([x, a[..., 1], z], -1) + source[..., :1, :]
+
+
+def _fk(f: np.ndarray, positions: np.ndarray, sk: Skeleton, cfg: RecoveryConfig) -> np.ndarray:
+    lengths = _lengths(positions, sk, cfg.lengths)                        # (..., J)
+    raw = np.asarray(sk.raw_offsets, dtype=np.float64)
+    if lengths.ndim == 1:
+        joints = features_to_joints_rot(f, sk, offsets=raw * lengths[:, None])
+    else:  # per-motion lengths: one FK per motion of the batch
+        flat_f = f.reshape(-1, *f.shape[-2:])
+        flat_l = lengths.reshape(-1, sk.num_joints)
+        joints = np.stack([features_to_joints_rot(m, sk, offsets=raw * ln[:, None])
+                           for m, ln in zip(flat_f, flat_l)]).reshape(positions.shape)
+    if cfg.align_heading:
+        joints = _yaw_onto(joints, positions)
+    return joints
+
+
+def fk_joints(features: Array, skeleton: SkeletonLike = "humanml3d", *,
+              config: RecoveryConfig | None = None) -> np.ndarray:
+    """Forward kinematics of the rotation features with fixed bone lengths (method ``"fk"``).
+
+    Parameters
+    ----------
+    features : ``(..., N, D)`` numpy array or torch tensor
+        De-normalised features.
+    skeleton : name or Skeleton
+    config : RecoveryConfig, optional
+        Uses ``lengths`` (skeleton target or the motion's median lengths) and ``align_heading``.
+
+    Returns
+    -------
+    ndarray ``(..., N, J, 3)``
+        Every bone has exactly its fixed length in every frame; the root is the root channels'.
+    """
+    sk = get_skeleton(skeleton)
+    cfg = _config(config)
+    f, out = _as_numpy(features, sk)
+    positions = features_to_joints(f, sk)
+    return _fk(f, positions, sk, cfg).astype(out)
+
+
+# =========================================================================== "fit"
+def fit_skeleton(positions: np.ndarray, lengths: np.ndarray, skeleton: SkeletonLike = "humanml3d", *,
+                 directions: np.ndarray | None = None, direction_weight: float = 0.0) -> np.ndarray:
+    """Fixed-bone-length joints closest to ``positions``, fitted root outwards.
+
+    Joint ``j`` is placed at ``q[parent] + lengths[j] * u`` with ``u`` the unit vector from the
+    fitted parent to the predicted ``positions[j]`` (blended with ``directions[j]`` by
+    ``direction_weight`` when given). The root stays where it is.
+
+    Parameters
+    ----------
+    positions : ndarray ``(..., N, J, 3)``
+        Predicted joints.
+    lengths : ndarray ``(J,)`` or ``(..., J)``
+        Bone length of ``parent(j) -> j`` (root entry ignored).
+    skeleton : name or Skeleton
+    directions : ndarray ``(..., N, J, 3)``, optional
+        Another estimate of each bone's unit direction (e.g. from the rotation features).
+    direction_weight : float
+        Weight of ``directions`` in ``[0, 1]``.
+
+    Returns
+    -------
+    ndarray ``(..., N, J, 3)`` float64 with ``|q[j] - q[parent(j)]| == lengths[j]`` exactly.
+    """
+    sk = get_skeleton(skeleton)
+    p = np.asarray(positions, dtype=np.float64)
+    if p.shape[-2:] != (sk.num_joints, 3):
+        raise ValueError(f"positions must have shape (..., N, {sk.num_joints}, 3), got shape {p.shape}")
+    if not 0.0 <= direction_weight <= 1.0:
+        raise ValueError(f"direction_weight must be in [0, 1], got {direction_weight!r}")
+    ln = np.asarray(lengths, dtype=np.float64)
+    if ln.shape[-1] != sk.num_joints:
+        raise ValueError(f"lengths must have a last axis of {sk.num_joints}, got shape {ln.shape}")
+    ln = ln[..., None, :, None]                                          # (..., 1, J, 1) over frames
+    raw = np.asarray(sk.raw_offsets, dtype=np.float64)
+    q = np.empty_like(p)
+    q[..., 0, :] = p[..., 0, :]
+    for j in range(1, sk.num_joints):
+        par = sk.parents[j]
+        # fallback for a child predicted on its fitted parent: the predicted bone, else the rest direction
+        fallback = _normalize(p[..., j, :] - p[..., par, :], fallback=raw[j])
+        u = _normalize(p[..., j, :] - q[..., par, :], fallback=fallback)
+        if directions is not None and direction_weight > 0:
+            u = _normalize((1.0 - direction_weight) * u + direction_weight * directions[..., j, :], fallback=u)
+        q[..., j, :] = q[..., par, :] + ln[..., j, :] * u
+    return q
+
+
+def two_bone_ik(root: np.ndarray, mid: np.ndarray, goal: np.ndarray, len1, len2,
+                hint: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Analytic two-bone IK: place ``mid`` and the end so that the end reaches ``goal``.
+
+    The chain ``root -> mid -> end`` keeps its bone lengths; the bend stays in the plane of the
+    current ``mid`` (or, for a straight chain, of ``hint``). A goal out of reach is approached as
+    closely as the lengths allow (fully stretched, or fully folded).
+
+    Parameters
+    ----------
+    root, mid, goal : ndarray ``(..., 3)``
+        Fixed chain root (hip), current middle joint (knee), goal of the end joint (ankle).
+    len1, len2 : float or ndarray ``(...)``
+        Lengths of ``root -> mid`` and ``mid -> end``.
+    hint : ndarray ``(..., 3)``, optional
+        Direction to bend towards when the current chain is straight (e.g. the foot's forward).
+
+    Returns
+    -------
+    mid, end : ndarray ``(..., 3)``
+    """
+    l1 = np.asarray(len1, dtype=np.float64)[..., None]
+    l2 = np.asarray(len2, dtype=np.float64)[..., None]
+    v = goal - root
+    dist = np.linalg.norm(v, axis=-1, keepdims=True)
+    u = _normalize(v, fallback=_normalize(mid - root, fallback=-_UP))
+    lo = np.abs(l1 - l2) + 1e-6
+    hi = l1 + l2 - 1e-6
+    d = np.clip(dist, lo, hi)
+    cos_a = np.clip((l1 ** 2 + d ** 2 - l2 ** 2) / (2.0 * l1 * d), -1.0, 1.0)
+    sin_a = np.sqrt(1.0 - cos_a ** 2)
+    pole = mid - root
+    if hint is not None:
+        # a small share of the hint decides only when the current bend is (nearly) straight
+        pole = pole + 0.05 * l1 * _normalize(hint)
+    pole = pole - (pole * u).sum(-1, keepdims=True) * u
+    side = _normalize(np.cross(u, _UP), fallback=np.array([1.0, 0.0, 0.0]))
+    m = _normalize(pole, fallback=_normalize(np.cross(side, u)))
+    new_mid = root + l1 * (cos_a * u + sin_a * m)
+    return new_mid, root + d * u
+
+
+def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start and end (exclusive) of the runs of True in a 1-D bool array."""
+    edge = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return np.nonzero(edge == 1)[0], np.nonzero(edge == -1)[0]
+
+
+def contact_lock_mask(features: Array, joints: np.ndarray | None = None, skeleton: SkeletonLike = "humanml3d",
+                      *, config: RecoveryConfig | None = None) -> np.ndarray:
+    """Frames where each contact joint is locked: ``(..., N, 4)`` bool, in ``skeleton.contact_joints`` order.
+
+    A joint locks where its contact channel is above ``contact_threshold``, it is no higher than
+    ``contact_heights`` (ankle, toe) above y = 0 in ``joints`` (default: the position recovery),
+    and the run of such frames lasts at least ``min_contact_frames``. HumanML3D's contact label
+    (squared displacement under 0.002 m^2 per frame, i.e. up to 0.9 m/s) is on for most frames of a
+    slow motion, also for a heel that is already rising; the height gate keeps those from locking.
+    """
+    sk = get_skeleton(skeleton)
+    cfg = _config(config)
+    f, _ = _as_numpy(features, sk)
+    if joints is None:
+        joints = features_to_joints(f, sk)
+    joints = np.asarray(joints, dtype=np.float64)
+    if joints.shape[:-2] != f.shape[:-1]:
+        raise ValueError(f"joints {joints.shape} do not match features {f.shape} (need (..., N, J, 3))")
+    on = f[..., sk.feature_slices["contacts"]] > cfg.contact_threshold             # (..., N, 4)
+    scale = 1.0 / sk.feature_scale
+    limit = np.array(cfg.contact_heights * 2) * scale                              # ankle, toe, ankle, toe
+    heights = joints[..., list(sk.contact_joints), 1]
+    lock = on & (heights <= limit)
+    if cfg.min_contact_frames > 1:
+        flat = lock.reshape(-1, *lock.shape[-2:]).copy()
+        for m in flat:
+            for k in range(m.shape[-1]):
+                starts, ends = _runs(m[:, k])
+                for s, e in zip(starts, ends):
+                    if e - s < cfg.min_contact_frames:
+                        m[s:e, k] = False
+        lock = flat.reshape(lock.shape)
+    return lock
+
+
+def _lock_targets(track: np.ndarray, lock: np.ndarray, blend: int, floor: float | None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame lock weight ``(N,)`` in [0, 1] and target ``(N, 3)`` of one joint.
+
+    Every locked run is anchored at the joint's median position over the run (height at least
+    ``floor``). Frames within ``blend`` frames of a run blend towards the nearest run's anchor
+    with the smoothstep weight ``3s^2 - 2s^3``, ``s = 1 - distance / (blend + 1)``.
+    """
+    n = track.shape[0]
+    weight = np.zeros(n)
+    target = track.copy()
+    starts, ends = _runs(lock)
+    if len(starts) == 0:
+        return weight, target
+    anchors = np.stack([np.median(track[s:e], axis=0) for s, e in zip(starts, ends)])
+    if floor is not None:
+        anchors[:, 1] = np.maximum(anchors[:, 1], floor)
+    idx = np.arange(n)
+    run_of = np.cumsum(np.isin(idx, starts)) - 1                          # run index at or before t
+    # nearest run before (ending at or before t) and after (starting after t)
+    prev_run = np.searchsorted(ends, idx, side="right") - 1
+    next_run = np.searchsorted(starts, idx, side="right")
+    d_prev = np.where(prev_run >= 0, idx - (ends[np.maximum(prev_run, 0)] - 1), n + blend + 1)
+    d_next = np.where(next_run < len(starts), starts[np.minimum(next_run, len(starts) - 1)] - idx, n + blend + 1)
+    inside = lock
+    use_next = d_next < d_prev
+    near = np.where(use_next, np.minimum(next_run, len(starts) - 1), np.maximum(prev_run, 0))
+    dist = np.where(use_next, d_next, d_prev)
+    s = np.clip(1.0 - dist / (blend + 1.0), 0.0, 1.0)
+    weight = np.where(inside, 1.0, s * s * (3.0 - 2.0 * s))
+    run = np.where(inside, np.maximum(run_of, 0), near)
+    target = anchors[run]
+    return weight, target
+
+
+def lock_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "humanml3d", *,
+              blend_frames: int = 4, floor: float | None = 0.0) -> np.ndarray:
+    """Keep the contact joints in place while they are locked, moving the legs by two-bone IK.
+
+    Each locked run of a contact joint is anchored at the joint's median position over the run;
+    its weight fades in over ``blend_frames`` frames before the run and out after it, so nothing
+    pops. Per foot, the ankle's goal is its (blended) anchor; where the toe is locked and the ankle
+    is not, the ankle goal moves to a foot length from the toe's anchor. Hip -> knee -> ankle is
+    solved by :func:`two_bone_ik` (the knee keeps its bend plane), then the toe is aimed at its goal
+    from the new ankle. Bone lengths are unchanged; joints above the knees are untouched.
+
+    Parameters
+    ----------
+    joints : ndarray ``(N, J, 3)``
+        One motion with fixed bone lengths.
+    lock : ndarray ``(N, 4)`` bool
+        From :func:`contact_lock_mask`, in ``skeleton.contact_joints`` order (left ankle, left toe,
+        right ankle, right toe for HumanML3D).
+    skeleton : name or Skeleton
+    blend_frames : int
+    floor : float or None
+        Lowest height of an anchor and a goal (``None``: no floor).
+
+    Returns
+    -------
+    ndarray ``(N, J, 3)`` float64
+    """
+    sk = get_skeleton(skeleton)
+    q = np.array(joints, dtype=np.float64)
+    if q.ndim != 3 or q.shape[1:] != (sk.num_joints, 3):
+        raise ValueError(f"joints must have shape (N, {sk.num_joints}, 3), got shape {q.shape}")
+    lock = np.asarray(lock, dtype=bool)
+    if lock.shape != (q.shape[0], 4):
+        raise ValueError(f"lock must have shape ({q.shape[0]}, 4), got shape {lock.shape}")
+    parents = sk.parents
+    for side in (0, 1):
+        ankle, toe = sk.contact_joints[2 * side], sk.contact_joints[2 * side + 1]
+        if parents[toe] != ankle:
+            raise ValueError(f"skeleton {sk.name!r}: contact joint {toe} is not the child of {ankle}")
+        la, lt = lock[:, 2 * side], lock[:, 2 * side + 1]
+        if not (la.any() or lt.any()):
+            continue
+        hip, knee = _leg(sk, ankle)
+        l1 = np.linalg.norm(q[:, knee] - q[:, hip], axis=-1)
+        l2 = np.linalg.norm(q[:, ankle] - q[:, knee], axis=-1)
+        lf = np.linalg.norm(q[:, toe] - q[:, ankle], axis=-1)[:, None]
+        wa, ta = _lock_targets(q[:, ankle], la, blend_frames, floor)
+        wt, tt = _lock_targets(q[:, toe], lt, blend_frames, floor)
+        goal_a = q[:, ankle] + wa[:, None] * (ta - q[:, ankle])
+        goal_t = q[:, toe] + wt[:, None] * (tt - q[:, toe])
+        # toe planted, heel free: the ankle goes where a foot length reaches the toe's goal
+        heel_free = (wt * (1.0 - wa))[:, None]
+        via_toe = goal_t + lf * _normalize(goal_a - goal_t, fallback=_UP)
+        goal_a = goal_a + heel_free * (via_toe - goal_a)
+        if floor is not None:
+            goal_a[:, 1] = np.maximum(goal_a[:, 1], floor)
+            goal_t[:, 1] = np.maximum(goal_t[:, 1], floor)
+        active = np.maximum(wa, wt) > 0
+        new_knee, new_ankle = two_bone_ik(q[:, hip], q[:, knee], goal_a, l1, l2,
+                                          hint=q[:, toe] - q[:, ankle])
+        new_toe = new_ankle + lf * _normalize(goal_t - new_ankle, fallback=_normalize(q[:, toe] - q[:, ankle]))
+        q[active, knee] = new_knee[active]
+        q[active, ankle] = new_ankle[active]
+        q[active, toe] = new_toe[active]
+    return q
+
+
+def lift_above_floor(joints: np.ndarray, floor: float = 0.0) -> np.ndarray:
+    """Lift every frame whose lowest joint is below ``floor`` by the difference (bones unchanged).
+
+    ``joints`` ``(..., N, J, 3)``; returns a new float64 array.
+    """
+    q = np.array(joints, dtype=np.float64)
+    deficit = np.maximum(floor - q[..., 1].min(-1), 0.0)                    # (..., N)
+    q[..., 1] += deficit[..., None]
+    return q
+
+
+def _fit_one(f: np.ndarray, positions: np.ndarray, sk: Skeleton, cfg: RecoveryConfig) -> np.ndarray:
+    lengths = _lengths(positions, sk, cfg.lengths)
+    directions = None
+    if cfg.rotation_weight > 0:
+        fk = _fk(f, positions, sk, cfg)
+        parents = [max(p, 0) for p in sk.parents]
+        directions = _normalize(fk - fk[..., parents, :])
+    q = fit_skeleton(positions, lengths, sk, directions=directions, direction_weight=cfg.rotation_weight)
+    floor = 0.0 if cfg.floor else None
+    if cfg.lock_contacts:
+        lock = contact_lock_mask(f, q, sk, config=cfg)
+        q = lock_feet(q, lock, sk, blend_frames=cfg.blend_frames, floor=floor)
+    if cfg.floor:
+        q = lift_above_floor(q, 0.0)
+    return q
+
+
+def fit_joints(features: Array, skeleton: SkeletonLike = "humanml3d", *,
+               config: RecoveryConfig | None = None) -> np.ndarray:
+    """Skeleton fit with fixed bone lengths, locked feet and a floor (method ``"fit"``).
+
+    Parameters
+    ----------
+    features : ``(..., N, D)`` numpy array or torch tensor
+        De-normalised features.
+    skeleton : name or Skeleton
+    config : RecoveryConfig, optional
+
+    Returns
+    -------
+    ndarray ``(..., N, J, 3)``
+        Bone lengths fixed in every frame; locked feet keep their place; with ``floor`` no joint
+        below y = 0.
+    """
+    sk = get_skeleton(skeleton)
+    cfg = _config(config)
+    f, out = _as_numpy(features, sk)
+    positions = features_to_joints(f, sk)
+    flat_f = f.reshape(-1, *f.shape[-2:])
+    flat_p = positions.reshape(-1, *positions.shape[-3:])
+    joints = np.stack([_fit_one(a, b, sk, cfg) for a, b in zip(flat_f, flat_p)])
+    return joints.reshape(positions.shape).astype(out)
+
+
+# =========================================================================== entry point
+def recover_joints(features: Array, method: str = DEFAULT_METHOD, skeleton: SkeletonLike = "humanml3d", *,
+                   config: RecoveryConfig | None = None) -> np.ndarray:
+    """Joints ``(..., N, J, 3)`` from de-normalised features ``(..., N, D)``.
+
+    Parameters
+    ----------
+    features : ``(..., N, D)`` numpy array or torch tensor
+        De-normalised features (HumanML3D 263-d, KIT 251-d), one motion ``(N, D)`` or a batch.
+    method : {"positions", "fk", "fit"}
+        ``"positions"``: the position features as they are (HumanML3D ``recover_from_ric``);
+        ``"fk"``: forward kinematics of the rotation features with fixed bone lengths;
+        ``"fit"``: fixed-length skeleton fitted to the positions, feet locked from the contact
+        channels, nothing below the floor. See the module docstring.
+    skeleton : name or Skeleton
+    config : RecoveryConfig, optional
+        Options of ``"fk"`` and ``"fit"``.
+
+    Returns
+    -------
+    ndarray ``(..., N, J, 3)``, metres for HumanML3D; float32 for float32 input, else float64.
+
+    Raises
+    ------
+    ValueError
+        For an unknown method, a feature width that does not match the skeleton, or NaN/inf.
+    """
+    _check_method(method)
+    sk = get_skeleton(skeleton)
+    cfg = _config(config)
+    if method == "positions":
+        f, out = _as_numpy(features, sk)
+        return features_to_joints(f, sk).astype(out)
+    if method == "fk":
+        return fk_joints(features, sk, config=cfg)
+    return fit_joints(features, sk, config=cfg)
