@@ -441,3 +441,53 @@ def test_pose_variant_trains(sample_dir, sample_features):
         opt.step()
         losses.append(loss.item())
     assert np.mean(losses[-5:]) < 0.5 * np.mean(losses[:5])
+
+
+def _sample_features() -> torch.Tensor:
+    from pathlib import Path
+    path = Path(__file__).parent / "data" / "humanml3d_sample" / "new_joint_vecs" / "012314.npy"
+    return torch.from_numpy(np.load(path)).float()
+
+
+def test_bone_lengths_from_features_match_forward_kinematics():
+    from salad_core.motion import features_to_joints
+
+    feats = _sample_features()                                      # (N, 263) real motion
+    joints = features_to_joints(feats.numpy())
+    sk = get_skeleton("humanml3d")
+    want = np.linalg.norm(joints[:, 1:] - joints[:, list(sk.parents[1:])], axis=-1)
+    got = MotionVAE(VAEConfig()).bone_lengths(feats).numpy()
+    assert got.shape == (feats.shape[0], sk.num_joints - 1)
+    np.testing.assert_allclose(got, want, atol=1e-5)
+
+
+def test_bone_term_measures_stretched_limbs_in_metres():
+    sk = get_skeleton("humanml3d")
+    feats = _sample_features()[:40]
+    mean, std = feats.mean(0), feats.std(0) + 1e-3
+    x = ((feats - mean) / std)[None]                                # (1, 40, 263) normalised
+    vae = MotionVAE(VAEConfig(lambda_bone=2.0))
+    zero = torch.zeros(1, 10, 7, 32)
+    same = vae.loss(x, x.clone(), zero, zero, stats=(mean, std))
+    assert float(same["bone"]) == 0.0
+    # lift the left wrist's ric y by 0.1 m in every frame: one bone (elbow-wrist) changes
+    wrist = sk.joint_names.index("left_wrist")
+    col = sk.feature_slices["ric"].start + 3 * (wrist - 1) + 1
+    moved = feats.clone()
+    moved[:, col] += 0.1
+    recon = ((moved - mean) / std)[None]
+    out = vae.loss(x, recon, zero, zero, stats=(mean, std))
+    lengths = vae.bone_lengths(feats)
+    changed = (vae.bone_lengths(moved) - lengths).abs()             # only the forearm moves
+    assert float(out["bone"]) == pytest.approx(float(changed.mean()), rel=1e-4)
+    assert 0.0 < float(out["bone"]) < 0.1 / (sk.num_joints - 1) + 1e-6
+    base = MotionVAE(VAEConfig()).loss(x, recon, zero, zero)["loss"]     # the official objective
+    assert float(out["loss"]) == pytest.approx(float(base) + 2.0 * float(out["bone"]), rel=1e-6)
+    with pytest.raises(ValueError, match="stats"):
+        vae.loss(x, recon, zero, zero)
+
+
+@pytest.mark.parametrize("field", ["lambda_bone", "latent_noise"])
+def test_robustness_options_are_validated(field):
+    with pytest.raises(ValueError, match=field):
+        VAEConfig(**{field: -1.0})

@@ -73,6 +73,9 @@ class VAEConfig:
     lambda_pos: float = 0.5           # weight of the ric (local joint position) slice term
     lambda_vel: float = 0.5           # weight of the local-velocity slice term
     lambda_kl: float = 0.02           # weight of the KL term (mean over elements)
+    lambda_bone: float = 0.0          # weight of the bone-length term (an addition; 0 = official loss)
+    latent_noise: float = 0.0         # training only: std of extra Gaussian noise on the sampled latent, so
+                                      # the decoder learns latents near (not only on) the data (an addition)
     pose_latent_dim: int | None = None  # "pose" only: Dz of the one-vector latent; None -> parts x latent_dim
     pose_width: int | None = None     # "pose" only: width of MLP/conv stack; None -> the pose latent dim
 
@@ -102,7 +105,7 @@ class VAEConfig:
             raise ValueError(f"dropout must be in [0, 1), got {self.dropout}")
         if self.recon_loss not in RECON_LOSSES:
             raise ValueError(f"recon_loss={self.recon_loss!r} is not supported; choose one of {RECON_LOSSES}")
-        for name in ("lambda_pos", "lambda_vel", "lambda_kl"):
+        for name in ("lambda_pos", "lambda_vel", "lambda_kl", "lambda_bone", "latent_noise"):
             val = getattr(self, name)
             if not np.isfinite(val) or val < 0:
                 raise ValueError(f"{name} must be a finite number >= 0, got {val}")
@@ -410,8 +413,10 @@ class MotionVAE(nn.Module):
         return self.decode(z), mu, logvar
 
     def loss(self, x: torch.Tensor, recon: torch.Tensor, mu: torch.Tensor, logvar: torch.Tensor,
-             mask: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
-        """Training objective ``L = L_rec + λ_pos L_pos + λ_vel L_vel + λ_kl L_kl`` (paper eq. 3).
+             mask: torch.Tensor | None = None,
+             stats: tuple[torch.Tensor, torch.Tensor] | None = None) -> dict[str, torch.Tensor]:
+        """Training objective ``L = L_rec + λ_pos L_pos + λ_vel L_vel + λ_kl L_kl`` (paper eq. 3),
+        plus ``λ_bone L_bone`` when ``config.lambda_bone > 0`` (an addition, see :meth:`bone_lengths`).
 
         All reconstruction terms compare **normalised** features, as the official trainer does:
         ``rec`` on the whole vector, ``pos`` on the ``ric`` slice (root-relative joint positions,
@@ -426,10 +431,14 @@ class MotionVAE(nn.Module):
         mask : Tensor ``(B, N)`` bool, optional
             Valid frames. Reconstruction terms average over valid frames only; the KL averages
             over latent frames that cover at least one valid frame.
+        stats : (mean, std) of Tensor ``(D,)``, optional
+            The features' normalisation; needed by the bone-length term (lengths are measured in
+            metres on de-normalised features).
 
         Returns
         -------
-        dict with scalar tensors ``loss``, ``rec``, ``pos``, ``vel``, ``kl``.
+        dict with scalar tensors ``loss``, ``rec``, ``pos``, ``vel``, ``kl`` (and ``bone`` in metres
+        when ``lambda_bone > 0``).
         """
         if x.shape != recon.shape:
             raise ValueError(f"recon must have the shape of x {tuple(x.shape)}, got {tuple(recon.shape)}")
@@ -465,7 +474,34 @@ class MotionVAE(nn.Module):
         vel = masked_mean(err[..., sl["local_vel"]], frame_w)
         kl = masked_mean(kl_el, lat_w)
         total = rec + cfg.lambda_pos * pos + cfg.lambda_vel * vel + cfg.lambda_kl * kl
-        return {"loss": total, "rec": rec, "pos": pos, "vel": vel, "kl": kl}
+        out = {"loss": total, "rec": rec, "pos": pos, "vel": vel, "kl": kl}
+        if cfg.lambda_bone > 0:
+            if stats is None:
+                raise ValueError("lambda_bone > 0 needs stats=(mean, std) of the features to measure bone lengths")
+            mean, std = (torch.as_tensor(t, dtype=x.dtype, device=x.device) for t in stats)
+            err_len = (self.bone_lengths(recon * std + mean) - self.bone_lengths(x * std + mean)).abs()
+            bone = masked_mean(err_len, frame_w)                      # metres, mean over bones and frames
+            out["bone"] = bone
+            out["loss"] = total + cfg.lambda_bone * bone
+        return out
+
+    def bone_lengths(self, features: torch.Tensor) -> torch.Tensor:
+        """Bone lengths ``(..., N, J-1)`` (metres) of de-normalised features ``(..., N, D)``.
+
+        Read from the root height and the ``ric`` slice (root-relative joint positions in the
+        heading frame, whose x/z put the root at the origin), so no forward kinematics is needed:
+        bone ``j`` joins joint ``j`` and its parent. Why a bone term: the decoder otherwise lets
+        limbs stretch where the latent is slightly off the data (issue: bones of generated motions
+        drifted by up to 49 cm).
+        """
+        sk = self.skeleton
+        sl = sk.feature_slices
+        ric = features[..., sl["ric"]].unflatten(-1, (sk.num_joints - 1, 3))          # (..., N, J-1, 3)
+        root_y = features[..., sl["root_y"]]                                           # (..., N, 1)
+        root = torch.cat([torch.zeros_like(root_y), root_y, torch.zeros_like(root_y)], dim=-1)
+        joints = torch.cat([root.unsqueeze(-2), ric], dim=-2)                         # (..., N, J, 3)
+        parents = torch.as_tensor(sk.parents[1:], device=features.device)
+        return (joints[..., 1:, :] - joints[..., parents, :]).norm(dim=-1)
 
     # ------------------------------------------------------- official weights
     @classmethod
