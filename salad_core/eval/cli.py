@@ -4,6 +4,8 @@
 
     salad eval --data DIR [--weights DIR] [--evaluator DIR] [--quick] [--cfg-sweep]
                [--replications N] [--out DIR] ...
+    salad eval --physics --data CORPUS [--weights DIR] [--keymotion [DIR]] [--steps N] [--guidance W]
+               [--seeds N] [--prompts N] [--sample DIR] [--out DIR]
 
 Prints the results table (Markdown) and, with ``--out``, writes ``results.csv``, ``results.md``,
 ``results.tex``, ``results.json`` (per-replication values and settings) and ``results.png``
@@ -19,6 +21,14 @@ Cost on this 2-core CPU: one batch of 32 prompts at 50 DDIM steps takes about a 
 default pipeline. ``--quick`` (4 batches) therefore takes minutes. The full protocol on the
 procedural test split (1,200 clips: 37 batches x 20 replications, plus 100 x 30 MultiModality
 generations per replication) takes days; ``--no-mm`` removes most of that.
+
+``--physics`` runs the physical-plausibility benchmark instead
+(:mod:`salad_core.eval.physics_prompts`): the fixed prompts, ``--seeds`` seeds each (3 by default,
+from ``--seed``), with SALAD and, with ``--keymotion`` (the shipped weights, or a folder), KeyMotion;
+reference rows for the corpus's test split and for the real clips of ``--sample`` (by default the
+source checkout's ``tests/data/humanml3d_sample``, when present; ``--sample none`` leaves it out).
+It prints the Markdown report and with ``--out`` writes ``physics.md`` and ``physics.json``. The full
+benchmark (41 prompts x 3 seeds, 50 steps) takes a few minutes per generator on this 2-core CPU.
 
 Errors the user can fix print one line and return status 2 (``--debug`` shows the traceback).
 """
@@ -69,6 +79,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", default="SALAD", help="row label of the model")
     p.add_argument("--no-real", action="store_true", help="leave out the 'Real motion' row")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    phys = p.add_argument_group("physical-plausibility benchmark (--physics)")
+    phys.add_argument("--physics", action="store_true",
+                      help="run the physical-plausibility benchmark (bone lengths, foot skating, penetration, "
+                           "jumps, per-action checks) instead of the T2M protocol")
+    phys.add_argument("--keymotion", nargs="?", const="shipped", default=None, metavar="DIR",
+                      help="also benchmark KeyMotion (no value: the shipped weights)")
+    phys.add_argument("--seeds", type=int, default=3, help="seeds per prompt, from --seed (default 3)")
+    phys.add_argument("--prompts", type=int, default=None, metavar="N",
+                      help="only the first N benchmark prompts (default: all)")
+    phys.add_argument("--sample", default=None, metavar="DIR",
+                      help="folder of real HumanML3D clips for a reference row (default: tests/data/"
+                           "humanml3d_sample of a source checkout if present; 'none' to leave it out)")
     p.add_argument("--out", default=None, help="folder for results.{csv,md,tex,json,png}")
     p.add_argument("--progress", action="store_true", help="show a progress bar")
     p.add_argument("--debug", action="store_true", help="show full tracebacks")
@@ -125,6 +147,73 @@ def _write(out_dir: Path, results, df, md: str, tex: str) -> list[Path]:
     return paths
 
 
+def _default_sample() -> Path | None:
+    """The real HumanML3D sample of a source checkout (not installed with the package)."""
+    path = Path(__file__).resolve().parents[2] / "tests" / "data" / "humanml3d_sample"
+    return path if (path / "new_joints").is_dir() else None
+
+
+def run_physics(args) -> int:
+    """``salad eval --physics``: generate the benchmark prompts, measure, check and report."""
+    from .physics_prompts import BenchSettings, benchmark_markdown, run_benchmark
+
+    for flag, on in (("--cfg-sweep", args.cfg_sweep), ("--quick", args.quick), ("--official", args.official)):
+        if on:
+            raise ValueError(f"{flag} does not apply to --physics; use --steps, --seeds and --prompts for a "
+                             "quicker run")
+    if args.seeds < 1:
+        raise ValueError(f"--seeds {args.seeds} must be >= 1")
+    data = Path(args.data)
+    if not (data / f"{args.split}.txt").is_file():
+        raise FileNotFoundError(f"--data {data} has no {args.split}.txt; give a corpus folder "
+                                "(salad corpus build --out DIR)")
+    if args.sample is None:
+        sample = _default_sample()
+    elif args.sample.lower() == "none":
+        sample = None
+    else:
+        sample = Path(args.sample)
+        if not sample.is_dir():
+            raise FileNotFoundError(f"--sample {sample} is not a folder")
+    settings = BenchSettings(steps=args.steps, guidance=args.guidance,
+                             seeds=tuple(range(args.seed, args.seed + args.seeds)), num_prompts=args.prompts)
+    from salad_core.pipeline import SaladPipeline
+
+    pipe = SaladPipeline.from_pretrained(args.weights)
+
+    def salad(texts, lengths, seed):
+        return pipe(texts, lengths=lengths, seed=[seed] * len(texts), guidance_scale=settings.guidance,
+                    num_steps=settings.steps, solver=args.solver).joints
+
+    generators = {args.name: salad}
+    info = {"guidance_options": "none (plain CFG)", "solver": args.solver or pipe.solver,
+            "weights": pipe.source}
+    if args.keymotion is not None:
+        from salad_core.keymotion.pipeline import KeyMotionPipeline
+
+        km = KeyMotionPipeline.from_pretrained(None if args.keymotion == "shipped" else args.keymotion)
+
+        def keymotion(texts, lengths, seed):
+            return km(texts, lengths=lengths, seed=seed, guidance_scale=settings.guidance,
+                      num_steps=settings.steps).joints
+
+        generators["KeyMotion"] = keymotion
+        info["keymotion_weights"] = args.keymotion
+    t0 = time.perf_counter()
+    result = run_benchmark(generators, settings, data_root=data, sample_dir=sample, info=info,
+                           log=lambda line: print(line, flush=True))
+    result["settings"]["seconds"] = round(time.perf_counter() - t0, 1)
+    md = benchmark_markdown(result)
+    print(md)
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "physics.md").write_text(md, encoding="utf-8")
+        (out / "physics.json").write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+        print(f"wrote {out / 'physics.md'} and {out / 'physics.json'}")
+    return 0
+
+
 def run(args) -> int:
     import torch
 
@@ -135,6 +224,8 @@ def run(args) -> int:
         if args.threads < 1:
             raise ValueError(f"--threads {args.threads} must be >= 1")
         torch.set_num_threads(args.threads)
+    if args.physics:
+        return run_physics(args)
     data = Path(args.data)
     if not data.is_dir():
         raise FileNotFoundError(f"--data {data} is not a folder")

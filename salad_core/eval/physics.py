@@ -180,10 +180,10 @@ def _hips_left(x: np.ndarray, sk: Skeleton) -> np.ndarray:
 
 
 def _chest_frames(x: np.ndarray, sk: Skeleton) -> np.ndarray:
-    """``(N, 3, 3)`` rows (left, up, forward) of the trunk, from spine3 and the two collars."""
-    lc, rc = x[:, _idx(sk, "left_collar")], x[:, _idx(sk, "right_collar")]
-    left = _unit(lc - rc)
-    up = 0.5 * (lc + rc) - x[:, _idx(sk, "spine3")]
+    """``(N, 3, 3)`` rows (left, up, forward) of the trunk: left from the right to the left collar,
+    up from spine3 to the neck (made orthogonal to left)."""
+    left = _unit(x[:, _idx(sk, "left_collar")] - x[:, _idx(sk, "right_collar")])
+    up = x[:, _idx(sk, "neck")] - x[:, _idx(sk, "spine3")]
     fwd = _unit(np.cross(left, up))
     up = np.cross(fwd, left)
     return np.stack([left, up, fwd], 1)
