@@ -44,6 +44,7 @@ from typing import Union
 
 import numpy as np
 import torch
+from scipy.ndimage import gaussian_filter1d
 
 from .motion import check_features, features_to_joints, features_to_joints_rot
 from .skeleton import Skeleton, get_skeleton
@@ -87,9 +88,11 @@ class RecoveryConfig:
     lengths: str = "skeleton"                 # bone lengths: "skeleton" (target) or "motion" (median of the positions)
     align_heading: bool = True                # fk: turn the FK body onto the position features' heading
     rotation_weight: float = 0.0              # fit: weight of the rotation features' bone directions, in [0, 1]
+    smooth_sigma: float = 0.5                 # fit: std (frames) of a Gaussian over time on the positions first; 0 = off
     lock_contacts: bool = True                # fit: lock feet where the contact channels are on
     contact_threshold: float = 0.5            # a contact channel is on above this value
     contact_heights: tuple[float, float] = (0.12, 0.06)  # (ankle, toe): highest joint y (m) that may lock
+    contact_speed: float | None = 0.5         # highest horizontal speed (m/s) in the velocity channels that may lock
     min_contact_frames: int = 3               # shorter contact runs are ignored (flicker, not a plant)
     blend_frames: int = 4                     # frames over which a lock fades in before and out after a run
     floor: bool = True                        # fit: no joint below y = 0 (feet by IK, else the frame is lifted)
@@ -99,12 +102,16 @@ class RecoveryConfig:
             raise ValueError(f"lengths must be 'skeleton' or 'motion', got {self.lengths!r}")
         if not 0.0 <= float(self.rotation_weight) <= 1.0:
             raise ValueError(f"rotation_weight must be in [0, 1], got {self.rotation_weight!r}")
+        if not (np.isfinite(self.smooth_sigma) and self.smooth_sigma >= 0):
+            raise ValueError(f"smooth_sigma must be a finite number of frames >= 0, got {self.smooth_sigma!r}")
         if not 0.0 < float(self.contact_threshold) < 1.0:
             raise ValueError(f"contact_threshold must be in (0, 1), got {self.contact_threshold!r}")
         heights = tuple(self.contact_heights)
         if len(heights) != 2 or not all(np.isfinite(h) and h > 0 for h in heights):
             raise ValueError(f"contact_heights must be two positive heights (ankle, toe) in metres, "
                              f"got {self.contact_heights!r}")
+        if self.contact_speed is not None and not (np.isfinite(self.contact_speed) and self.contact_speed > 0):
+            raise ValueError(f"contact_speed must be a positive speed in m/s or None, got {self.contact_speed!r}")
         if int(self.min_contact_frames) != self.min_contact_frames or self.min_contact_frames < 1:
             raise ValueError(f"min_contact_frames must be an integer >= 1, got {self.min_contact_frames!r}")
         if int(self.blend_frames) != self.blend_frames or self.blend_frames < 0:
@@ -350,6 +357,10 @@ def contact_lock_mask(features: Array, joints: np.ndarray | None = None, skeleto
     limit = np.array(cfg.contact_heights * 2) * scale                              # ankle, toe, ankle, toe
     heights = joints[..., list(sk.contact_joints), 1]
     lock = on & (heights <= limit)
+    if cfg.contact_speed is not None:
+        vel = f[..., sk.feature_slices["local_vel"]].reshape(*f.shape[:-1], sk.num_joints, 3)
+        speed = np.linalg.norm(vel[..., list(sk.contact_joints), :][..., [0, 2]], axis=-1) * sk.fps
+        lock &= speed <= cfg.contact_speed * scale
     if cfg.min_contact_frames > 1:
         flat = lock.reshape(-1, *lock.shape[-2:]).copy()
         for m in flat:
@@ -362,39 +373,39 @@ def contact_lock_mask(features: Array, joints: np.ndarray | None = None, skeleto
     return lock
 
 
-def _lock_targets(track: np.ndarray, lock: np.ndarray, blend: int, floor: float | None
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-frame lock weight ``(N,)`` in [0, 1] and target ``(N, 3)`` of one joint.
+def _lock_goals(track: np.ndarray, lock: np.ndarray, blend: int, floor: float | None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame lock weight ``(N,)`` in [0, 1] and goal ``(N, 3)`` of one contact joint.
 
     Every locked run is anchored at the joint's median position over the run (height at least
-    ``floor``). Frames within ``blend`` frames of a run blend towards the nearest run's anchor
-    with the smoothstep weight ``3s^2 - 2s^3``, ``s = 1 - distance / (blend + 1)``.
+    ``floor``); inside the run the goal is the anchor. Outside, the goal is the joint's own track
+    plus the correction it had at the run's nearer edge, faded out over ``blend`` frames with the
+    smoothstep weight ``3s^2 - 2s^3``, ``s = 1 - distance / (blend + 1)`` (corrections of the runs
+    before and after a frame add up). Fading the *correction*, not pulling towards the anchor,
+    leaves a fast swing between two plants on its own path.
     """
     n = track.shape[0]
+    goal = track.copy()
     weight = np.zeros(n)
-    target = track.copy()
     starts, ends = _runs(lock)
     if len(starts) == 0:
-        return weight, target
-    anchors = np.stack([np.median(track[s:e], axis=0) for s, e in zip(starts, ends)])
-    if floor is not None:
-        anchors[:, 1] = np.maximum(anchors[:, 1], floor)
+        return weight, goal
     idx = np.arange(n)
-    run_of = np.cumsum(np.isin(idx, starts)) - 1                          # run index at or before t
-    # nearest run before (ending at or before t) and after (starting after t)
-    prev_run = np.searchsorted(ends, idx, side="right") - 1
-    next_run = np.searchsorted(starts, idx, side="right")
-    d_prev = np.where(prev_run >= 0, idx - (ends[np.maximum(prev_run, 0)] - 1), n + blend + 1)
-    d_next = np.where(next_run < len(starts), starts[np.minimum(next_run, len(starts) - 1)] - idx, n + blend + 1)
-    inside = lock
-    use_next = d_next < d_prev
-    near = np.where(use_next, np.minimum(next_run, len(starts) - 1), np.maximum(prev_run, 0))
-    dist = np.where(use_next, d_next, d_prev)
-    s = np.clip(1.0 - dist / (blend + 1.0), 0.0, 1.0)
-    weight = np.where(inside, 1.0, s * s * (3.0 - 2.0 * s))
-    run = np.where(inside, np.maximum(run_of, 0), near)
-    target = anchors[run]
-    return weight, target
+    for s, e in zip(starts, ends):
+        anchor = np.median(track[s:e], axis=0)
+        if floor is not None:
+            anchor[1] = max(anchor[1], floor)
+        goal[s:e] = anchor
+        weight[s:e] = 1.0
+        for edge, dist in ((s, s - idx), (e - 1, idx - (e - 1))):
+            near = (dist >= 1) & (dist <= blend) & ~lock
+            if not near.any():
+                continue
+            x = 1.0 - dist[near] / (blend + 1.0)
+            w = x * x * (3.0 - 2.0 * x)
+            goal[near] += w[:, None] * (anchor - track[edge])
+            weight[near] = np.maximum(weight[near], w)
+    return weight, goal
 
 
 def lock_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "humanml3d", *,
@@ -402,8 +413,8 @@ def lock_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "hu
     """Keep the contact joints in place while they are locked, moving the legs by two-bone IK.
 
     Each locked run of a contact joint is anchored at the joint's median position over the run;
-    its weight fades in over ``blend_frames`` frames before the run and out after it, so nothing
-    pops. Per foot, the ankle's goal is its (blended) anchor; where the toe is locked and the ankle
+    the correction this makes at the run's edges fades in over ``blend_frames`` frames before the
+    run and out after it, so nothing pops. Per foot, the ankle's goal is its (blended) anchor; where the toe is locked and the ankle
     is not, the ankle goal moves to a foot length from the toe's anchor. Hip -> knee -> ankle is
     solved by :func:`two_bone_ik` (the knee keeps its bend plane), then the toe is aimed at its goal
     from the new ankle. Bone lengths are unchanged; joints above the knees are untouched.
@@ -443,10 +454,8 @@ def lock_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "hu
         l1 = np.linalg.norm(q[:, knee] - q[:, hip], axis=-1)
         l2 = np.linalg.norm(q[:, ankle] - q[:, knee], axis=-1)
         lf = np.linalg.norm(q[:, toe] - q[:, ankle], axis=-1)[:, None]
-        wa, ta = _lock_targets(q[:, ankle], la, blend_frames, floor)
-        wt, tt = _lock_targets(q[:, toe], lt, blend_frames, floor)
-        goal_a = q[:, ankle] + wa[:, None] * (ta - q[:, ankle])
-        goal_t = q[:, toe] + wt[:, None] * (tt - q[:, toe])
+        wa, goal_a = _lock_goals(q[:, ankle], la, blend_frames, floor)
+        wt, goal_t = _lock_goals(q[:, toe], lt, blend_frames, floor)
         # toe planted, heel free: the ankle goes where a foot length reaches the toe's goal
         heel_free = (wt * (1.0 - wa))[:, None]
         via_toe = goal_t + lf * _normalize(goal_a - goal_t, fallback=_UP)
@@ -477,6 +486,11 @@ def lift_above_floor(joints: np.ndarray, floor: float = 0.0) -> np.ndarray:
 
 def _fit_one(f: np.ndarray, positions: np.ndarray, sk: Skeleton, cfg: RecoveryConfig) -> np.ndarray:
     lengths = _lengths(positions, sk, cfg.lengths)
+    if cfg.smooth_sigma > 0 and positions.shape[0] > 1:
+        # a per-frame fit cannot remove frame-to-frame noise, and short bones (spine3: 6 cm) turn
+        # small position noise into large direction noise (unsmoothed, the fit's jitter is ~20 %
+        # above the raw positions' on generated motions); half a frame brings it back down
+        positions = gaussian_filter1d(positions, cfg.smooth_sigma, axis=0, mode="nearest")
     directions = None
     if cfg.rotation_weight > 0:
         fk = _fk(f, positions, sk, cfg)

@@ -18,7 +18,7 @@ Measures (per motion, then averaged over motions; ``--json`` writes every figure
 - ``skate`` (m/s): mean horizontal speed of ankles/toes while low (``checks.foot_sliding``: ankle
   under 8 cm, toe under 3.5 cm above the clip's lowest joint; the corpus checks' definition);
 - ``skate_on`` (m/s): mean horizontal speed of a contact joint in frames where its predicted
-  contact channel is on (> 0.5) and it is within the lock heights (the frames "fit" locks);
+  contact channel is on (> 0.5) and it is no higher than the lock heights (12 cm ankle, 6 cm toe);
 - ``pen_max`` / ``pen_mean`` (cm): depth of the lowest joint below y = 0 (max over frames / mean
   over frames, 0 when above);
 - ``jitter`` (m/s^3): mean norm of the third time difference of all joints times fps^3;
@@ -71,8 +71,11 @@ VARIANTS = {
     "fk": ("fk", RecoveryConfig()),
     "fk/no-align": ("fk", RecoveryConfig(align_heading=False)),
     "fk/motion-len": ("fk", RecoveryConfig(lengths="motion")),
-    "fit/no-lock": ("fit", RecoveryConfig(lock_contacts=False, floor=False)),
+    "fit/bare": ("fit", RecoveryConfig(smooth_sigma=0.0, lock_contacts=False, floor=False)),
+    "fit/no-smooth": ("fit", RecoveryConfig(smooth_sigma=0.0)),
+    "fit/no-lock": ("fit", RecoveryConfig(lock_contacts=False)),
     "fit/rot0.5": ("fit", RecoveryConfig(rotation_weight=0.5)),
+    "fit/v0.3": ("fit", RecoveryConfig(contact_speed=0.3)),
     "fit": ("fit", RecoveryConfig()),
 }
 
@@ -87,7 +90,7 @@ def measure(joints: np.ndarray, features: np.ndarray, reference: np.ndarray | No
     stretch = np.abs(lengths - np.median(lengths, axis=0))
     cj = list(SK.contact_joints)
     speed = np.linalg.norm(np.diff(j[:, cj][..., [0, 2]], axis=0), axis=-1) * FPS     # (N-1, 4)
-    on = contact_lock_mask(features, j, SK, config=RecoveryConfig(min_contact_frames=1))[:-1]
+    on = contact_lock_mask(features, j, SK, config=RecoveryConfig(min_contact_frames=1, contact_speed=None))[:-1]
     low = j[:, :, 1].min(-1)
     out = {
         "bone_p95": 100 * float(np.percentile(bone, 95)),
