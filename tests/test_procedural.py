@@ -231,7 +231,8 @@ def test_each_primitive_moves_its_part_most(kind, side, part):
     driven = PART_NAMES.index(part)
     _, secondary = primitive_parts(clip.events[0].action)
     idle = [p for p in range(len(PART_NAMES)) if PART_NAMES[p] not in clip.events[0].parts + secondary]
-    assert all(act[driven] > 3 * act[p] for p in idle), (act.round(3), idle)
+    # 2x (1.0: 3x): idle parts now breathe, shift weight and wander (issue 27, item 3)
+    assert all(act[driven] > 2 * act[p] for p in idle), (act.round(3), idle)
 
 
 def _mean(values):
@@ -262,8 +263,17 @@ def test_modifiers_change_the_motion_measurably():
 
 
 def test_mirrored_left_action_looks_like_the_right_one():
-    left = _clip("wave", "left", seed=3)
-    right = _clip("wave", "right", seed=3)
+    import dataclasses
+
+    from salad_core.data.procedural.footwork import Persona
+
+    # a symmetric performer without idle sway or wander: those are (deliberately) not mirrored
+    persona = dataclasses.replace(Persona.sample(np.random.default_rng(3)), tilt=0.0, arm_asym=0.0,
+                                  liveliness=0.0, sway=0.0)
+
+    def clip(side):
+        return realise(Plan((Step(Action("wave", side)),)), np.random.default_rng(3), persona=persona)
+    left, right = clip("left"), clip("right")
     mirrored = mirror_joints(left.joints)
     act_l, act_m = part_activity(left.joints), part_activity(mirrored)
     la, ra = PART_NAMES.index("left arm"), PART_NAMES.index("right arm")

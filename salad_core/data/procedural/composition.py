@@ -13,9 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .footwork import Persona, Stance
+from .curves import min_jerk, wrap_angle
+from .footwork import Persona, Stance, max_pelvis_height
 from .gestures import Gesture
-from .kinematics import FPS, BodyModel, Pose, assemble, body_model
+from .kinematics import FPS, BodyModel, Pose, assemble, body_model, rot_y, ypr_matrix
 from .primitives import PRIMITIVES, Action, build_base, build_gesture, primitive_parts
 from .segment import Segment, standing_pose
 
@@ -147,43 +148,140 @@ def _frames(seconds: tuple[float, float], rng) -> int:
     return int(round(rng.uniform(*seconds) * FPS))
 
 
+#: Frames by which the next action may begin before the previous one's core has ended.
+OVERLAP_FRAMES = (2, 9)
+#: Pose fields cross-faded where two segments overlap (the feet follow their own rule).
+_BODY_FIELDS = ("pelvis", "pelvis_ypr", "spine", "neck", "arm", "arm_pole", "knee_pole")
+
+
+def _join(acc: Pose, nxt: Pose, overlap: int) -> Pose:
+    """``acc`` followed by ``nxt``, their last / first ``overlap`` frames cross-faded.
+
+    With ``overlap == 1`` the single shared frame is ``nxt``'s first (segments chained from
+    standing share it exactly). Over a longer overlap the body controls blend with a min-jerk
+    weight, so the body keeps moving from one action into the next (co-articulation); each foot
+    keeps the earlier segment's track until the next segment moves it: both segments hold it
+    planted on the same stance there, so the blend cannot make it slide.
+    """
+    overlap = int(np.clip(overlap, 1, min(acc.num_frames, nxt.num_frames)))
+    head = acc.slice(0, acc.num_frames - overlap)
+    a, b = acc.slice(acc.num_frames - overlap, acc.num_frames), nxt.slice(0, overlap)
+    w = min_jerk((np.arange(overlap) + 1.0) / overlap)
+    mid = b.copy()
+    for name in _BODY_FIELDS:
+        x, y = getattr(a, name), getattr(b, name)
+        ww = w.reshape((-1,) + (1,) * (x.ndim - 1))
+        if name == "pelvis_ypr":
+            d = y - x
+            d[:, 0] = wrap_angle(d[:, 0])
+            setattr(mid, name, x + ww * d)
+        else:
+            setattr(mid, name, (1.0 - ww) * x + ww * y)
+    for k in range(2):
+        moved = (np.linalg.norm(b.ankle[:, k] - nxt.ankle[0, k], axis=-1)
+                 + np.linalg.norm(b.toe[:, k] - nxt.toe[0, k], axis=-1)) > 1e-6
+        own = np.cumsum(moved) > 0                      # once the next segment moves a foot, it owns it
+        mid.ankle[:, k] = np.where(own[:, None], b.ankle[:, k], a.ankle[:, k])
+        mid.toe[:, k] = np.where(own[:, None], b.toe[:, k], a.toe[:, k])
+    norm = np.linalg.norm(mid.arm_pole, axis=-1, keepdims=True)
+    mid.arm_pole = mid.arm_pole / np.maximum(norm, 1e-9)
+    # a blend of two reachable pelvis heights over the same loaded feet may still over-reach
+    loaded = (mid.ankle[..., 1] < 0.15)
+    bound = max_pelvis_height(mid.pelvis, ypr_matrix(mid.pelvis_ypr), mid.ankle, body_model("humanml3d"),
+                              planted=loaded) - 0.004
+    mid.pelvis[:, 1] = np.minimum(mid.pelvis[:, 1], bound)
+    return Pose.concat([head, mid, nxt.slice(overlap, nxt.num_frames)])
+
+
+def _wander(n: int, rng: np.random.Generator, dims: int, period: tuple[float, float] = (1.2, 3.0)) -> np.ndarray:
+    """``(n, dims)`` smooth zero-mean noise of unit std: a sum of three random sines per dim."""
+    t = np.arange(n) / FPS
+    out = np.zeros((n, dims))
+    for _ in range(3):
+        f = 1.0 / rng.uniform(*period, size=dims)
+        ph = rng.uniform(0, 2 * np.pi, size=dims)
+        out += np.sin(2 * np.pi * f[None] * t[:, None] + ph[None]) * rng.uniform(0.5, 1.0, size=dims)[None]
+    return out / np.sqrt(1.5)
+
+
+def _alive(pose: Pose, persona: Persona, rng: np.random.Generator) -> None:
+    """Lay the performer's posture and a low-frequency wander of the joint angles on ``pose``.
+
+    Posture (slouch, sideways tilt, arm asymmetry) is constant over the clip; the wander
+    (trunk, head, arms; amplitude set by ``persona.liveliness``) keeps held poses from freezing.
+    Neither touches the pelvis position or the feet, so contact and reach are unchanged.
+    """
+    n = pose.num_frames
+    live = persona.liveliness
+    pose.spine[:, 1] += persona.slouch
+    pose.neck[:, 1] -= 0.5 * persona.slouch               # the gaze stays level
+    pose.spine[:, 2] += persona.tilt
+    pose.arm[:, 0, 0] += 0.5 * persona.arm_asym
+    pose.arm[:, 1, 0] -= 0.5 * persona.arm_asym
+    # amplitudes (rad, std) small enough that a resting arm or head stays well below an
+    # annotated action's part speed (the phrase-activity checks), large enough to never freeze
+    noise = _wander(n, rng, 12, period=(1.8, 4.0)) * live
+    pose.spine += noise[:, 0:3] * np.array([0.05, 0.035, 0.03])
+    pose.neck += noise[:, 3:6] * np.array([0.06, 0.04, 0.025])
+    pose.arm[:, :, 0] += noise[:, 6:8] * 0.018
+    pose.arm[:, :, 1] += noise[:, 8:10] * 0.012
+    pose.arm[:, :, 2] = np.maximum(pose.arm[:, :, 2] + noise[:, 10:12] * 0.025, 0.02)
+
+
+def _anchor(joints: np.ndarray, body: BodyModel) -> np.ndarray:
+    """``joints`` moved so that frame 0's pelvis is over the origin and frame 0 faces +Z, with
+    the facing HumanML3D's processing measures (hips and shoulders), as clips always started."""
+    r_hip, l_hip, sdr_r, sdr_l = body.skeleton.face_joint_indx
+    p0 = joints[0]
+    across = (p0[r_hip] - p0[l_hip]) + (p0[sdr_r] - p0[sdr_l])
+    fwd = np.cross(np.array([0.0, 1.0, 0.0]), across)
+    yaw = float(np.arctan2(fwd[0], fwd[2]))
+    out = joints - joints[0, 0] * np.array([1.0, 0.0, 1.0])
+    return out @ rot_y(-yaw).T
+
+
 def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
             persona: Persona | None = None, min_frames: int = MIN_FRAMES) -> Clip:
     """Build the joints and events of ``plan`` (random choices from ``rng``).
 
-    The closing stand is stretched so that the clip has at least ``min_frames`` frames.
+    Consecutive actions are co-articulated: the next segment starts while the previous one is
+    still finishing and their body controls cross-fade (:func:`_join`), so a sequence does not
+    pass through a dead stop. The clip starts near the first action's onset and stops shortly
+    after the last one ends (mid-motion, in whatever pose it ends), padded with a lively stand
+    (or seated rest) only as far as ``min_frames`` and the gestures need.
     """
     body = body or body_model("humanml3d")
     persona = persona or Persona.sample(rng)
     stance = Stance.at((0.0, 0.0), 0.0, persona)
     overlay_arms = _arms_of(plan.overlay)
-    poses: list[Pose] = []
-    cursor = 0
+    acc: Pose | None = None
+    prev_tail = 0                                   # frames of the last segment after its core
 
-    def append(seg: Segment) -> int:
-        """Append a segment (its first frame equals the previous last frame); return its offset."""
-        nonlocal cursor
-        p = seg.pose if not poses else seg.pose.slice(1, seg.num_frames)
-        start = cursor if not poses else cursor - 1
-        poses.append(p)
-        cursor += p.num_frames
-        return start
+    def append(seg: Segment, core: tuple[int, int]) -> int:
+        """Append a segment overlapping the previous one's tail; return its offset."""
+        nonlocal acc, prev_tail
+        if acc is None:
+            acc = seg.pose.copy()
+            prev_tail = seg.num_frames - core[1]
+            return 0
+        extra = int(rng.integers(OVERLAP_FRAMES[0], OVERLAP_FRAMES[1] + 1))
+        overlap = prev_tail + core[0] + extra
+        overlap = int(np.clip(overlap, 1, min(acc.num_frames - 1, seg.num_frames - 1)))
+        at = acc.num_frames - overlap
+        acc = _join(acc, seg.pose, overlap)
+        prev_tail = seg.num_frames - core[1]
+        return at
 
-    append(_idle(stance, persona, 2 + _frames((0.05, 0.25), rng), body, rng))
     placed: list[tuple[int, Gesture]] = []
     events: dict[tuple[str, int], tuple[tuple[int, int], dict]] = {}
     seated = False
     for i, step in enumerate(plan.steps):
-        if i > 0:
-            gap = _frames((0.0, 0.2), rng)
-            if gap > 1:
-                append(_idle(stance, persona, gap + 1, body, rng))
         main = step.main
         if main.spec.track == "base":
             arm_layer = bool(_arms_of(step.layer) or overlay_arms)
             seg = build_base(main, stance, persona, body, rng, keep_arms=arm_layer)
             seated = seg.seated
-            at = append(seg)
+            at = append(seg, seg.core)
             core = (at + seg.core[0], at + seg.core[1])
             events[("main", i)] = (core, seg.info)
             stance = seg.end
@@ -197,7 +295,7 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
         else:
             g = build_gesture(main, persona, body, rng)
             seg = _idle(stance, persona, g.num_frames + 2, body, rng)
-            at = append(seg)
+            at = append(seg, (1, 1 + g.num_frames))
             placed.append((at + 1, g))
             events[("main", i)] = ((at + 1, at + 1 + g.num_frames), g.info)
             if step.layer is not None:
@@ -213,17 +311,22 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
         g = build_gesture(plan.overlay, persona, body, rng, duration=(f1 - f0) / FPS)
         placed.append((f0, g))
         events[("overlay", -1)] = ((f0, f0 + g.num_frames), g.info)
-    # the closing rest: long enough for every gesture and for the shortest clip kept
-    need = max([min_frames] + [at + g.num_frames for at, g in placed])
-    n_tail = max(2 + _frames((0.1, 0.35), rng), need - cursor + 1)
-    if seated:
-        append(_rest_seated(poses[-1], n_tail, rng))
-    else:
-        append(_idle(stance, persona, n_tail, body, rng))
-    pose = Pose.concat(poses)
+    # the clip opens shortly before the first action's onset (sometimes just after it) and
+    # closes shortly after the last one ends: no forced stand at either end
+    first = events[("main", 0)][0][0]
+    s0 = int(np.clip(first - int(rng.integers(-2, 5)), 0, max(0, first + 2)))
+    last = max(f1 for (f0, f1), _ in events.values())
+    stop = last + int(rng.integers(1, 8))
+    stop = max(stop, s0 + min_frames, max(at + g.num_frames for at, g in placed) if placed else 0)
+    if stop > acc.num_frames:
+        n_pad = stop - acc.num_frames + 1
+        pad = _rest_seated(acc, n_pad, rng) if seated else _idle(stance, persona, n_pad, body, rng)
+        acc = _join(acc, pad.pose, 1)
+    pose = acc
     for at, g in placed:
         _blend(pose, g, at)
-    joints = assemble(pose, body)
+    _alive(pose, persona, rng)
+    joints = _anchor(assemble(pose, body)[s0:stop], body)
 
     out: list[Event] = []
     n = joints.shape[0]
@@ -239,7 +342,7 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
                     taken |= _arms_of(plan.overlay if g_role == "overlay" else plan.steps[g_i].layer)
             parts = tuple(p for p in parts if p not in taken)
             secondary = tuple(p for p in secondary if p not in taken)
-        out.append(Event(role, i, action, (max(0, f0), min(n, f1)), parts, secondary, dict(info)))
+        out.append(Event(role, i, action, (max(0, f0 - s0), min(n, f1 - s0)), parts, secondary, dict(info)))
     return Clip(joints, plan, out, persona)
 
 

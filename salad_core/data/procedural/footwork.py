@@ -51,23 +51,35 @@ class Persona:
     sway: float             # idle sway amplitude of the pelvis (m)
     head_pitch: float       # resting head pitch (rad, + looks down)
     tempo: float            # global speed factor of this performer (1 = average)
+    slouch: float = 0.0     # extra spine pitch of the posture (rad, + hunched forward)
+    tilt: float = 0.0       # sideways lean of the posture (rad, + towards the left): asymmetry
+    liveliness: float = 1.0  # scale of the low-frequency wander on the joint angles (0 = frozen)
+    arm_asym: float = 0.0   # the left arm is carried this much further forward than the right (rad)
 
     def __post_init__(self) -> None:
         if not 0.03 <= self.width <= 0.3:
             raise ValueError(f"Persona.width={self.width} m must lie in [0.03, 0.3]")
         if not 0.5 <= self.tempo <= 2.0:
             raise ValueError(f"Persona.tempo={self.tempo} must lie in [0.5, 2]")
+        if not 0.0 <= self.liveliness <= 3.0:
+            raise ValueError(f"Persona.liveliness={self.liveliness} must lie in [0, 3]")
 
     @staticmethod
     def sample(rng: np.random.Generator) -> "Persona":
+        # ranges wide enough that posture and arm carriage differ visibly between performers
+        # (generator 1.0 drew a near-identical stance: the corpus's pose std was 0.66x the real one)
         return Persona(
-            width=float(rng.uniform(0.085, 0.12)),
-            toe_out=float(rng.uniform(0.12, 0.3)),
-            arm_rest=(float(rng.uniform(0.02, 0.12)), float(rng.uniform(0.1, 0.18)), float(rng.uniform(0.15, 0.4))),
+            width=float(rng.uniform(0.07, 0.15)),
+            toe_out=float(rng.uniform(0.05, 0.4)),
+            arm_rest=(float(rng.uniform(-0.06, 0.22)), float(rng.uniform(0.06, 0.32)), float(rng.uniform(0.1, 0.8))),
             arm_pole=(0.3, 0.0, -1.0),
-            sway=float(rng.uniform(0.004, 0.012)),
-            head_pitch=float(rng.uniform(-0.05, 0.15)),
-            tempo=float(rng.uniform(0.92, 1.08)),
+            sway=float(rng.uniform(0.012, 0.03)),
+            head_pitch=float(rng.uniform(-0.12, 0.3)),
+            tempo=float(rng.uniform(0.85, 1.15)),
+            slouch=float(rng.uniform(-0.08, 0.25)),
+            tilt=float(rng.uniform(-0.06, 0.06)),
+            liveliness=float(rng.uniform(0.6, 1.4)),
+            arm_asym=float(rng.uniform(-0.12, 0.12)),
         )
 
 

@@ -14,13 +14,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .curves import ease, frame_times, smooth
+from .curves import ease, frame_times, keyframes, smooth
 from .footwork import ANKLE_HEIGHT, PELVIS_AHEAD, Persona, Plant, Stance, Swing, foot_track, \
     max_pelvis_height, standing_height
 from .kinematics import FPS, BodyModel, Pose, heading_vectors, rot_y, ypr_matrix
 from .segment import Segment, knee_poles, num_frames
 
 __all__ = ["GaitStyle", "Route", "locomotion", "gait_style", "GAITS"]
+
+#: Gravity (m/s^2) of a running flight's crest above the lift-off reach.
+GRAVITY_RUN = 9.81
 
 #: Gaits that :func:`gait_style` knows.
 GAITS = ("walk", "run", "jog", "march", "backward", "sidestep", "turn", "spin", "circle")
@@ -47,6 +50,8 @@ class GaitStyle:
     elbow: float            # elbow flexion at cruise (rad)
     running: bool = False   # flight phases: pelvis lowest in stance, highest in flight
     ramp_strides: float = 0.8  # strides to speed up and to slow down
+    plant_at: float = 0.5   # where in its stance the root passes over a foot plant (0 touch-down, 1 lift-off)
+    arm_center: float = 0.0  # running: upper-arm flexion the swing is centred on (rad, heading frame)
 
     def __post_init__(self) -> None:
         if not 0.1 <= self.duty <= 0.8:
@@ -55,6 +60,8 @@ class GaitStyle:
             raise ValueError(f"GaitStyle.cadence={self.cadence} must be positive")
         if self.speed < 0:
             raise ValueError(f"GaitStyle.speed={self.speed} must be >= 0 (use Route.heading to go backwards)")
+        if not 0.2 <= self.plant_at <= 0.8:
+            raise ValueError(f"GaitStyle.plant_at={self.plant_at} must lie in [0.2, 0.8]")
 
 
 @dataclass(frozen=True)
@@ -169,7 +176,8 @@ def locomotion(start: Stance, persona: Persona, style: GaitStyle, route: Route, 
             ankle, yaw = end_stance.ankles[f], float(end_stance.foot_yaw[f])
             roll_out = 0.0
         else:
-            tm = 0.5 * (lands[k] + nxt)
+            # runners land a little ahead of the hips and push off far behind them
+            tm = lands[k] + style.plant_at * (nxt - lands[k])
             pos, hd = along(np.array([tm]))
             fwd, left = heading_vectors(hd[0])
             sign = 1.0 if f == 0 else -1.0
@@ -201,32 +209,40 @@ def locomotion(start: Stance, persona: Persona, style: GaitStyle, route: Route, 
     side = smooth(planted[:, 0] - planted[:, 1], sig) * act           # +1: left foot supports
     pelvis = ground + left * (style.sway * side)[:, None]
     h_stand = standing_height(start, body, pitch=0.03)
-    if style.running:
-        on_ground = smooth(np.maximum(planted[:, 0], planted[:, 1]), sig)
-        bob = style.bob * (1.0 - 2.0 * on_ground)
-    else:
-        single = smooth(np.abs(planted[:, 0] - planted[:, 1]), sig)
-        bob = style.bob * (2.0 * single - 1.0)
-    height = h_stand - style.drop * act + bob * act
     twist = -style.twist * lead[:, 0]
     ypr = np.stack([heading + twist, 0.03 + 0.4 * style.lean * act, -0.05 * side], -1)
     g0 = ypr_matrix(ypr)
-    pelvis[:, 1] = height
-    for _ in range(2):
-        bound = max_pelvis_height(pelvis, g0, ankle, body, planted=planted > 0.5) - 0.004
-        pelvis[:, 1] = np.minimum(smooth(np.minimum(pelvis[:, 1], bound), 1.0), bound)
+    if style.running:
+        pelvis[:, 1] = _running_height(t, planted, pelvis, g0, ankle, body, style, h_stand, act)
+    else:
+        single = smooth(np.abs(planted[:, 0] - planted[:, 1]), sig)
+        bob = style.bob * (2.0 * single - 1.0)
+        pelvis[:, 1] = h_stand - style.drop * act + bob * act
+        for _ in range(2):
+            bound = max_pelvis_height(pelvis, g0, ankle, body, planted=planted > 0.5) - 0.004
+            pelvis[:, 1] = np.minimum(smooth(np.minimum(pelvis[:, 1], bound), 1.0), bound)
     spine = np.stack([-1.3 * twist, 0.03 + 0.6 * style.lean * act, 0.04 * side], -1)
     neck = np.stack([np.zeros(n), persona.head_pitch - 0.5 * style.lean * act, np.zeros(n)], -1)
 
     # ---- arms swing against the legs (the left arm comes forward with the right foot)
     rest = np.asarray(persona.arm_rest, dtype=np.float64)
     arm = np.tile(rest, (n, 2, 1))
-    for k in range(2):
-        swing = style.arm_swing * lead[:, 1 - k]
-        arm[:, k, 0] = rest[0] + swing + 0.1 * act
-        arm[:, k, 1] = rest[1] + style.arm_abd * act
-        arm[:, k, 2] = rest[2] + (style.elbow - rest[2]) * act + 0.35 * np.maximum(swing, 0.0)
+    if style.running:
+        chest_pitch = ypr[:, 1] + spine[:, 1]
+        for k in range(2):
+            arm[:, k] = _running_arm(lead[:, 1 - k], chest_pitch, act, rest, style, body, k)
+    else:
+        for k in range(2):
+            swing = style.arm_swing * lead[:, 1 - k]
+            arm[:, k, 0] = rest[0] + swing + 0.1 * act
+            arm[:, k, 1] = rest[1] + style.arm_abd * act
+            arm[:, k, 2] = rest[2] + (style.elbow - rest[2]) * act + 0.35 * np.maximum(swing, 0.0)
     pole = np.tile(np.asarray(persona.arm_pole, dtype=np.float64), (n, 2, 1))
+    if style.running:
+        # elbows point back *and down*: a backward-only pole would flip the elbow above a
+        # forward-swinging forearm (its component along the arm line vanishes)
+        w = act[:, None, None]
+        pole = (1.0 - w) * pole + w * np.array([0.25, -0.7, -1.0])
     foot_yaw = np.stack([heading + persona.toe_out, heading - persona.toe_out], 1)
     pose = Pose(pelvis, ypr, spine, neck, ankle, toe, knee_poles(foot_yaw), arm, pole)
 
@@ -236,6 +252,73 @@ def locomotion(start: Stance, persona: Persona, style: GaitStyle, route: Route, 
     info = dict(speed=style.speed, distance=float(distance), turn=turned, steps=n_steps,
                 cadence=style.cadence, duration=float(total))
     return Segment(pose, end_stance, (max(0, f0), f1), info=info)
+
+
+def _running_height(t: np.ndarray, planted: np.ndarray, pelvis: np.ndarray, g0: np.ndarray, ankle: np.ndarray,
+                    body: BodyModel, style: GaitStyle, h_stand: float, act: np.ndarray) -> np.ndarray:
+    """``(N,)`` pelvis height of a running gait: lowest in mid-stance, highest in mid-flight.
+
+    The peak-to-peak range is ``2 * style.bob``. The crest of each flight sits where the legs
+    can just reach the floor at the surrounding lift-off and touch-down (``max_pelvis_height``
+    there, both feet's rolls included), the trough of each stance ``2 * bob`` below it; a
+    Hermite curve with zero vertical velocity at the keys joins them. Only stance frames are
+    then bounded by the leg reach, so flight frames really are airborne and the bob survives
+    (1.0 clamped a sine onto the reach bound, which flattened it to 1-2 cm).
+    """
+    n = len(t)
+    on = planted > 0.5
+    anyon = on.any(1)
+    bound = max_pelvis_height(pelvis, g0, ankle, body, planted=on) - 0.004
+    # stance and flight intervals of the cruise (runs of frames with / without a planted foot)
+    edges = np.flatnonzero(np.diff(anyon.astype(int))) + 1
+    runs = np.split(np.arange(n), edges)
+    keys_t, keys_h = [], []
+    for r in runs:
+        if anyon[r[0]]:
+            continue
+        lo, hi = max(r[0] - 1, 0), min(r[-1] + 1, n - 1)       # last stance frame before, first after
+        crest = min(bound[lo], bound[hi]) + 0.25 * GRAVITY_RUN * ((hi - lo) / FPS / 2) ** 2
+        keys_t.append(0.5 * (t[lo] + t[hi]))
+        keys_h.append(crest)
+    if len(keys_t) < 2:
+        # no flight (too slow a start/stop): fall back to a bounded sine
+        h = h_stand - style.drop * act
+        return np.minimum(h, bound)
+    cruise = np.array(keys_h)
+    keys = [(keys_t[0], cruise[0])]
+    for i in range(1, len(keys_t)):
+        keys.append((0.5 * (keys_t[i - 1] + keys_t[i]), min(cruise[i - 1], cruise[i]) - 2 * style.bob))
+        keys.append((keys_t[i], cruise[i]))
+    kt, kh = np.array(keys).T
+    h = keyframes(t, kt, kh)
+    # before the first and after the last flight: ease from / to the standing height
+    w = np.clip(act, 0.0, 1.0)
+    h_out = np.where(t < kt[0], h_stand - style.drop * w, np.where(t > kt[-1], h_stand - style.drop * w, h))
+    blend = ease(t, kt[0] - 0.3, kt[0]) * (1.0 - ease(t, kt[-1], kt[-1] + 0.3))
+    h = (1.0 - blend) * np.minimum(h_out, h_stand) + blend * h
+    for _ in range(2):
+        h = np.where(anyon, np.minimum(h, bound), h)
+        h = np.where(anyon, np.minimum(smooth(h, 0.7), bound), smooth(h, 0.7))
+    return h
+
+
+def _running_arm(lead: np.ndarray, chest_pitch: np.ndarray, act: np.ndarray, rest: np.ndarray,
+                 style: GaitStyle, body: BodyModel, k: int) -> np.ndarray:
+    """``(N, 3)`` (flex, abd, elbow) of arm ``k`` swinging about a neutral shoulder while running.
+
+    The *upper arm* swings ``arm_center +- arm_swing`` (rad, heading frame) with ``lead`` in
+    [-1, 1]: forward of vertical and behind it, as runners do. The elbow stays near
+    ``style.elbow`` and flexes further as the arm comes forward. The arm control is the
+    shoulder-to-wrist line, which runs ahead of the upper arm by the elbow triangle's angle,
+    and is measured in the chest frame, which a forward lean tips backwards: the lean is added.
+    """
+    upper = style.arm_center + style.arm_swing * lead + chest_pitch
+    elbow = style.elbow + 0.17 * lead
+    up, fo = body.upper_arm[k], body.forearm[k]
+    ahead = np.arctan2(fo * np.sin(elbow), up + fo * np.cos(elbow))
+    run = np.stack([upper + ahead, np.full_like(lead, rest[1] + style.arm_abd), elbow], -1)
+    w = act[:, None]
+    return (1.0 - w) * rest[None] + w * run
 
 
 # ----------------------------------------------------------------------------- style presets
@@ -264,18 +347,18 @@ def gait_style(kind: str, rng: np.random.Generator, mods: tuple[str, ...] = (), 
         return st
     if kind == "run":
         return GaitStyle(speed=[u(2.6, 3.0), u(3.0, 3.6), u(3.8, 4.4)][pace + 1], cadence=u(2.6, 2.95) * tempo,
-                         duty=u(0.33, 0.37), swing=Swing(u(0.24, 0.32), u(0.35, 0.42), u(0.1, 0.25)),
-                         roll_in=u(0.0, 0.12), roll_out=-u(0.55, 0.7), width=u(0.04, 0.07), bob=u(0.025, 0.04),
-                         drop=u(0.04, 0.07), lean=u(0.14, 0.22), sway=u(0.005, 0.012), twist=u(0.08, 0.12),
-                         arm_swing=u(0.6, 0.8), arm_abd=u(0.0, 0.08), elbow=u(1.35, 1.6), running=True,
-                         ramp_strides=1.2)
+                         duty=u(0.31, 0.35), swing=Swing(u(0.24, 0.32), u(0.35, 0.42), u(0.1, 0.25)),
+                         roll_in=u(0.0, 0.12), roll_out=-u(0.6, 0.75), width=u(0.04, 0.07), bob=u(0.042, 0.052),
+                         drop=u(0.04, 0.07), lean=u(0.1, 0.18), sway=u(0.005, 0.012), twist=u(0.08, 0.12),
+                         arm_swing=u(0.6, 0.75), arm_abd=u(0.0, 0.08), elbow=u(1.45, 1.65), running=True,
+                         ramp_strides=1.2, plant_at=u(0.38, 0.45), arm_center=u(-0.08, 0.04))
     if kind == "jog":
         st = GaitStyle(speed=[u(1.4, 1.75), u(1.8, 2.3), u(2.4, 2.7)][pace + 1], cadence=u(2.4, 2.7) * tempo,
-                       duty=u(0.38, 0.42), swing=Swing(u(0.13, 0.19), u(0.38, 0.45), u(0.05, 0.15)),
-                       roll_in=u(0.05, 0.15), roll_out=-u(0.45, 0.6), width=u(0.05, 0.08), bob=u(0.02, 0.03),
-                       drop=u(0.03, 0.05), lean=u(0.08, 0.12), sway=u(0.008, 0.015), twist=u(0.06, 0.1),
-                       arm_swing=u(0.45, 0.6), arm_abd=u(0.0, 0.08), elbow=u(1.3, 1.55), running=True,
-                       ramp_strides=1.0)
+                       duty=u(0.34, 0.38), swing=Swing(u(0.13, 0.19), u(0.38, 0.45), u(0.05, 0.15)),
+                       roll_in=u(0.05, 0.15), roll_out=-u(0.5, 0.65), width=u(0.05, 0.08), bob=u(0.04, 0.05),
+                       drop=u(0.03, 0.05), lean=u(0.06, 0.12), sway=u(0.008, 0.015), twist=u(0.06, 0.1),
+                       arm_swing=u(0.5, 0.65), arm_abd=u(0.0, 0.08), elbow=u(1.4, 1.6), running=True,
+                       ramp_strides=1.0, plant_at=u(0.4, 0.47), arm_center=u(-0.08, 0.04))
         if in_place:
             st = replace(st, speed=0.0, roll_in=0.0, roll_out=-0.5, swing=replace(st.swing, height=u(0.15, 0.22)))
         return st

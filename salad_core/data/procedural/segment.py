@@ -10,8 +10,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .curves import envelope, frame_times
-from .footwork import Persona, Plant, Stance, plant_pose, standing_height
-from .kinematics import FPS, BodyModel, Pose, heading_vectors
+from .footwork import Persona, Plant, Stance, max_pelvis_height, plant_pose, standing_height
+from .kinematics import FPS, BodyModel, Pose, heading_vectors, ypr_matrix
 
 __all__ = ["Segment", "standing_pose", "knee_poles", "num_frames"]
 
@@ -64,20 +64,27 @@ def standing_pose(stance: Stance, persona: Persona, n: int, body: BodyModel,
     arm = np.tile(np.asarray(persona.arm_rest, dtype=np.float64), (n, 2, 1))
     pole = np.tile(np.asarray(persona.arm_pole, dtype=np.float64), (n, 2, 1))
     if idle and rng is not None and n > 8:
+        # weight shifts from foot to foot (a slow and a slower wave), breathing, a wandering gaze
         w = envelope(t, 0.0, t[-1], min(0.4, t[-1] / 3))
-        f_sway, f_breath = rng.uniform(0.2, 0.35), rng.uniform(0.2, 0.3)
-        ph = rng.uniform(0, 2 * np.pi, size=3)
-        sway = persona.sway * np.sin(2 * np.pi * f_sway * t + ph[0]) * w
-        pelvis += left[None] * sway[:, None]
-        pelvis[:, 1] -= 0.5 * persona.sway * (1 - np.cos(2 * np.pi * f_sway * t + ph[0])) * w * 0.3
-        breath = 0.012 * np.sin(2 * np.pi * f_breath * t + ph[1]) * w
+        f_sway, f_breath = rng.uniform(0.15, 0.35), rng.uniform(0.2, 0.3)
+        ph = rng.uniform(0, 2 * np.pi, size=5)
+        shift = np.sin(2 * np.pi * f_sway * t + ph[0]) + 0.5 * np.sin(2 * np.pi * 0.45 * f_sway * t + ph[3])
+        sway = persona.sway * shift * w
+        pelvis += left[None] * sway[:, None] + fwd[None] * (0.3 * persona.sway * np.sin(2 * np.pi * 0.7 * f_sway * t + ph[4]) * w)[:, None]
+        ypr[:, 2] += -1.5 * sway                                   # the hips drop on the unloaded side
+        breath = 0.015 * np.sin(2 * np.pi * f_breath * t + ph[1]) * w
         spine[:, 1] += breath
+        spine[:, 2] += 0.8 * sway                                  # the trunk stays over the feet
         neck[:, 1] -= 0.6 * breath
-        arm[:, :, 0] += (0.015 * np.sin(2 * np.pi * f_breath * t + ph[2]) * w)[:, None]
+        neck[:, 0] += 0.12 * np.sin(2 * np.pi * 0.6 * f_sway * t + ph[2]) * w
+        arm[:, :, 0] += (0.012 * np.sin(2 * np.pi * f_breath * t + ph[2]) * w)[:, None]
     ankle = np.zeros((n, 2, 3))
     toe = np.zeros((n, 2, 3))
     for k in range(2):
         p = Plant(-np.inf, np.inf, stance.ankles[k], float(stance.foot_yaw[k]))
         ankle[:, k], toe[:, k] = plant_pose(p, t, body, k)
     poles = knee_poles(np.tile(stance.foot_yaw, (n, 1)))
+    if idle and rng is not None and n > 8:
+        bound = max_pelvis_height(pelvis, ypr_matrix(ypr), ankle, body) - 0.004
+        pelvis[:, 1] = np.minimum(pelvis[:, 1], bound)
     return Pose(pelvis, ypr, spine, neck, ankle, toe, poles, arm, pole)

@@ -1,0 +1,131 @@
+"""Corpus 2.0 realism (issue 27): the stats functions on hand-made inputs with known answers,
+and behaviour checks on a few generated clips (running, co-articulated sequences, contact)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from salad_core.data.procedural import Action, Plan, Step, realise
+from salad_core.data.procedural.checks import bone_length_error
+from salad_core.data.procedural.stats import (body_speed, boundary_figures, canonical_pose, neutral_pose,
+                                              pca_components, pose_spread, run_figures, sentence_frame,
+                                              sequence_boundaries, top_level_phrases, upper_arm_flexion)
+from salad_core.skeleton import get_skeleton
+
+SK = get_skeleton("humanml3d")
+
+
+# ============================================================================ stats on known inputs
+def test_body_speed_of_a_uniform_translation():
+    n, j = 5, SK.num_joints
+    joints = np.zeros((n, j, 3))
+    joints[:, :, 2] = (np.arange(n) * 0.01)[:, None]          # 1 cm per frame at 20 fps
+    np.testing.assert_allclose(body_speed(joints), 0.2)
+    with pytest.raises(ValueError, match="joints must have shape"):
+        body_speed(joints[:1])
+
+
+def test_pca_components_counts_independent_directions():
+    rng = np.random.default_rng(0)
+    x = np.zeros((2000, 10))
+    x[:, :3] = rng.normal(size=(2000, 3)) * np.array([3.0, 2.0, 1.0])
+    assert pca_components(x, 0.5) == 1
+    assert pca_components(x, 0.99) == 3
+    with pytest.raises(ValueError, match="share"):
+        pca_components(x, 1.5)
+
+
+def test_pose_spread_of_a_still_and_of_a_moving_clip():
+    d = SK.feature_dim
+    still = np.zeros((10, d))
+    assert pose_spread(still) == 0.0
+    moving = np.zeros((10, d))
+    ric = SK.feature_slices["ric"]
+    moving[:, ric.start] = np.tile([0.1, -0.1], 5)            # one coordinate +-10 cm: std 0.1
+    assert pose_spread(moving) == pytest.approx(0.1 / (3 * (SK.num_joints - 1)))
+
+
+def test_top_level_phrases_and_boundaries():
+    main0 = {"frames": [5, 40]}
+    layer0 = {"frames": [10, 30]}
+    main1 = {"frames": [38, 80]}
+    overlay = {"frames": [5, 80]}
+    assert top_level_phrases([main0, layer0, main1, overlay]) == [main0, main1]
+    ann = {"num_frames": 90, "captions": [{"phrases": [overlay, main1, layer0, main0]}]}
+    assert sequence_boundaries(ann, pad=2) == [(36, 43)]        # overlap 38..40, padded
+    ann1 = {"num_frames": 90, "captions": [{"phrases": [main0, layer0]}]}
+    assert sequence_boundaries(ann1) == []
+
+
+def test_boundary_figures_see_a_dead_stop_at_the_neutral_stand():
+    n = 30
+    still = np.tile(neutral_pose(), (n, 1, 1)) + np.array([0.0, 0.93, 0.0])
+    fig = boundary_figures(still, [(10, 20)])
+    assert fig[0]["min_speed"] == pytest.approx(0.0, abs=1e-12)
+    assert fig[0]["min_neutral_distance"] < 1e-9
+
+
+def test_sentence_frame_drops_subjects_and_phrases():
+    cap = "a man walks forward and then jumps twice . the person waves"
+    spans = [(2, 4), (6, 8), (10, 11)]                         # split_words drops the "."
+    assert sentence_frame(cap, spans) == "<P> and then <P> <S> <P>"
+    assert sentence_frame("someone kicks", [(1, 2)]) == "<P>"
+
+
+def test_upper_arm_flexion_sign():
+    c = np.tile(neutral_pose(), (2, 1, 1))
+    sh, el = SK.joint_names.index("left_shoulder"), SK.joint_names.index("left_elbow")
+    c[1, el] = c[1, sh] + np.array([0.0, -0.2, 0.2])         # upper arm 45 deg forward
+    flex = upper_arm_flexion(c)
+    assert flex[1, 0] == pytest.approx(45.0, abs=1.0)
+    assert abs(flex[0, 0]) < 25.0                              # hanging arm: near vertical
+
+
+# ============================================================================ generated clips
+def _clip(kind, seed, **kw):
+    return realise(Plan((Step(Action(kind, **kw)),)), np.random.default_rng(seed))
+
+
+@pytest.mark.parametrize("kind", ["run", "jog"])
+def test_running_swings_the_arms_across_vertical_and_bobs(kind):
+    bobs, backs, fronts = [], [], []
+    for seed in range(3):
+        clip = _clip(kind, seed)
+        fig = run_figures(clip.joints, clip.events[0].frames)
+        bobs.append(fig["bob"])
+        backs.append(fig["arm_back"])
+        fronts.append(fig["arm_front"])
+        assert 60 <= fig["elbow_min"] and fig["elbow_max"] <= 115
+        err = bone_length_error(clip.joints)
+        assert err["max_error"] < 1e-6
+        assert clip.joints[..., 1].min() > -0.005
+    assert 0.05 <= np.median(bobs) <= 0.10, bobs
+    assert max(backs) < -20 and min(fronts) > 20, (backs, fronts)
+
+
+def test_running_has_airborne_frames():
+    clip = _clip("run", 1)
+    f0, f1 = clip.events[0].frames
+    feet = clip.joints[f0:f1][:, list(SK.contact_joints), 1].min(-1)
+    assert (feet > 0.03).mean() > 0.2                          # both feet clearly off the floor
+
+
+def test_sequences_do_not_stop_dead():
+    speeds = []
+    for seed in range(6):
+        plan = Plan((Step(Action("walk")), Step(Action("jump"))))
+        clip = realise(plan, np.random.default_rng(seed))
+        (a0, a1), (b0, b1) = clip.events[0].frames, clip.events[1].frames
+        assert b0 <= a1 + 1                                     # the next action starts before the last ends
+        lo, hi = sorted((a1, b0))
+        speeds.append(body_speed(clip.joints)[lo - 2:hi + 3].min())
+        assert clip.joints[..., 1].min() > -0.005
+        assert bone_length_error(clip.joints)["max_error"] < 1e-6
+    assert np.median(speeds) > 0.05, speeds
+
+
+def test_clips_start_facing_forward_at_the_origin():
+    clip = _clip("wave", 2, side="left")
+    assert np.allclose(clip.joints[0, 0, [0, 2]], 0.0)
+    c = canonical_pose(clip.joints[:1])
+    assert c.shape == (1, SK.num_joints, 3)
