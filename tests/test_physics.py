@@ -185,6 +185,38 @@ def test_heading_turns_left_positive():
     assert not pp.Check("turn_deg", hi=-60).evaluate(x).passed
 
 
+def stepping_left_foot(step: float = 1.0) -> np.ndarray:
+    """The left foot planted at z = 0, step, 2 step (10 frames each), lifted 20 cm in between; the
+    right foot stays planted (one contact run, no stride of its own)."""
+    x = still(50)
+    feet = [J["left_ankle"], J["left_foot"]]
+    for k in range(5):
+        f = slice(10 * k, 10 * k + 10)
+        x[f, feet, 2] += step * (k // 2) + (0.5 * step if k % 2 else 0.0)
+        if k % 2:
+            x[f, feet, 1] += 0.2
+    return x
+
+
+def test_strides_between_footfalls():
+    x = stepping_left_foot(1.0)
+    assert ph.strides(x) == pytest.approx([1.0, 1.0])
+    assert ph.measure_motion(x).stride_m == pytest.approx(1.0)
+    assert pp.Check("stride_m", lo=0.4).evaluate(x).passed
+    glide = still(60) + (np.arange(60) / FPS * 1.0)[:, None, None] * np.array([0, 0, 1.0])
+    assert ph.measure_motion(glide).stride_m == 0.0                  # feet never leave the floor
+    assert not pp.Check("stride_m", lo=0.4).evaluate(glide).passed
+
+
+def test_pooled_bone_p95_over_motions():
+    a, b = still(16), still(4)
+    b[0, J["left_wrist"], 1] -= 0.5                                  # one stretched forearm, 1 of 420 bones
+    assert ph.pooled_bone_p95([a, b]) == pytest.approx(0.0, abs=1e-9)
+    c = still(4)
+    c[:, [J["left_wrist"], J["right_wrist"]], 1] -= 0.5             # 8 of 84 bone-frames: above 5 %
+    assert ph.pooled_bone_p95([c]) == pytest.approx(50.0)
+
+
 def test_aggregate_pools_skating_by_contact_count():
     a = ph.measure_motion(still(40))                                 # 0 m/s over 156 transitions
     b = ph.measure_motion(still(11) + (np.arange(11) / FPS * 0.5)[:, None, None] * [1.0, 0, 0])
@@ -276,12 +308,19 @@ def test_runner_with_fake_generators(tiny_procedural_corpus, sample_dir):
                            data_root=tiny_procedural_corpus, sample_dir=sample_dir, prompts=prompts)
     assert set(res["references"]) == {"corpus test split (real)", "HumanML3D 012314 (real)"}
     w, s = res["generators"]["walker"], res["generators"]["statue"]
-    assert (w["checks_passed"], w["checks_total"]) == (2, 2) and s["checks_passed"] == 0
+    # "a person walks forward": travels >= 1 m (the walker does) and makes strides (a glide does not)
+    assert (w["checks_passed"], w["checks_total"]) == (2, 4) and s["checks_passed"] == 0
     assert w["prompts"][0]["checks"][0][0]["value"] == pytest.approx(1.5 * 59 / FPS)
     assert w["aggregate"]["seed_diversity_cm"] == 0.0
     assert w["aggregate"]["skate_mean_ms"] == pytest.approx(1.5)
     md = pp.benchmark_markdown(res)
-    assert "| walker |" in md and "| statue |" in md and "2/2 (4.43)" in md
+    assert "| walker |" in md and "| statue |" in md and "2/2 (4.43)" in md and "0/2 (0.00)" in md
+    rows = {t["target"].split(" (")[0]: t["cells"] for t in pp.targets(res)}
+    assert rows["bone error max <= 8 cm"]["walker"] == (pytest.approx(0.0, abs=1e-9), True)
+    assert rows["foot skating <= 1.5x the corpus's"]["walker"][1] is False        # 1.5 m/s glide
+    assert rows["[issue 22] walking stride >= 0.4 m"]["statue"] == ("0/2", False)
+    assert "walker" not in rows["[issue 22] walking stride >= 0.4 m"]              # first generator
+    assert rows["jump heights within the corpus's range"]["walker"] == ("0/0", None)
 
 
 def test_salad_eval_physics_end_to_end(tiny_procedural_corpus, tmp_path, single_thread):
@@ -298,7 +337,7 @@ def test_salad_eval_physics_end_to_end(tiny_procedural_corpus, tmp_path, single_
     assert doc["settings"]["seeds"] == [0, 1] and doc["settings"]["weights"].endswith("salad")
     assert list(doc["generators"]) == ["SALAD", "KeyMotion"]
     for g in doc["generators"].values():
-        assert g["aggregate"]["motions"] == 4 and g["checks_total"] == 4
+        assert g["aggregate"]["motions"] == 4 and g["checks_total"] == 8    # 2 checks x 2 prompts x 2 seeds
         assert g["aggregate"]["bone_ref_max_cm"] > 0                 # generated bones are not rigid
         assert g["aggregate"]["seed_diversity_cm"] > 0
         assert len(g["prompts"]) == 2 and len(g["prompts"][0]["reports"]) == 2

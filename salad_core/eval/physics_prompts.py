@@ -39,7 +39,7 @@ from . import physics as ph
 
 __all__ = ["Check", "CheckResult", "BenchmarkPrompt", "PROMPTS", "MEASURES", "REFERENCE_RANGES",
            "BenchSettings", "Generator", "corpus_reference_ranges", "load_joints", "measure_clips",
-           "caption_diversity", "reference_rows", "run_benchmark", "benchmark_markdown"]
+           "caption_diversity", "reference_rows", "run_benchmark", "benchmark_markdown", "targets"]
 
 #: A generator: ``(prompts, lengths, seed) -> list of joints (N_b, J, 3)``, one per prompt.
 Generator = Callable[[list[str], list[int], int], list[np.ndarray]]
@@ -147,6 +147,8 @@ MEASURES: dict[str, tuple[Callable, str, str]] = {
     "wrist_lead_m": (_wrist_lead, "m", "highest the named wrist gets above the other wrist"),
     "knee_rise_m": (_knee_rise, "m", "rise of the named knee relative to the pelvis"),
     "head_ms": (lambda x, sk, s: ph.limb_activity(x, sk)["head"], "m/s", "head activity relative to the neck"),
+    "stride_m": (lambda x, sk, s: float(np.median(v)) if (v := ph.strides(x, sk)).size else 0.0, "m",
+                 "median distance between consecutive footfalls of one foot (0: the feet glide)"),
 }
 
 #: Ranges (m) of the pelvis rise measured on the corpus (see the module docstring):
@@ -254,15 +256,17 @@ _JUMP = (_C("jump_rise_m", reference="jump_rise_m"), _C("flight_frames", lo=2)) 
 _ARM = {s: _C("arm_ratio", lo=2.0, side=s) for s in SIDES}
 _LEG = {s: _C("leg_ratio", lo=2.0, side=s) for s in SIDES}
 _BOTH_ARMS = _C("arms_balance", lo=0.5)                                            # corpus >= 0.88
+# Walking makes steps: issue 22's target stride (corpus: walk 0.82 m when slow, march 0.61 m, run 1.58 m)
+_STRIDE = _C("stride_m", lo=0.4)
 
 #: The fixed benchmark prompts (41); corpus minima over single-action clips in the comments.
 PROMPTS: tuple[BenchmarkPrompt, ...] = (
-    _P("a person walks forward", "walk", _C("forward_m", lo=1.0)),                       # 1.74 m
-    _P("a man walks slowly", "walk", _C("forward_m", lo=0.5)),                           # 1.05 m
-    _P("a person runs forward", "run", _C("forward_m", lo=2.0)),                         # 3.01 m
-    _P("a woman jogs forward", "jog", _C("forward_m", lo=1.5)),                          # 2.44 m
+    _P("a person walks forward", "walk", _C("forward_m", lo=1.0), _STRIDE),              # 1.74 m
+    _P("a man walks slowly", "walk", _C("forward_m", lo=0.5), _STRIDE),                  # 1.05 m
+    _P("a person runs forward", "run", _C("forward_m", lo=2.0), _STRIDE),                # 3.01 m
+    _P("a woman jogs forward", "jog", _C("forward_m", lo=1.5), _STRIDE),                 # 2.44 m
     _P("someone jogs in place", "jog", _C("displacement_m", hi=0.3)),                    # 0.00 m
-    _P("a man marches forward", "march", _C("forward_m", lo=0.8)),                       # 1.21 m
+    _P("a man marches forward", "march", _C("forward_m", lo=0.8), _STRIDE),              # 1.21 m
     _P("a person walks backward", "walk_backward", _C("forward_m", hi=-0.4)),            # -0.56 m
     _P("a man sidesteps to the left", "sidestep", _C("left_m", lo=0.3)),                 # 0.39 m
     _P("a person steps sideways to the right", "sidestep", _C("left_m", hi=-0.3)),
@@ -421,7 +425,10 @@ def reference_rows(data_root: str | Path | None = None, sample_dir: str | Path |
     rows: dict[str, dict[str, float]] = {}
     if data_root is not None:
         root = Path(data_root)
-        agg = ph.aggregate_reports(measure_clips(root, _split_ids(root, split), skeleton))
+        motions = [load_joints(root, c, skeleton) for c in _split_ids(root, split)]
+        motions = [x for x in motions if x.shape[0] >= 4]
+        agg = ph.aggregate_reports([ph.measure_motion(x, skeleton) for x in motions])
+        agg["bone_ref_p95_pooled_cm"] = ph.pooled_bone_p95(motions, skeleton)
         agg["seed_diversity_cm"], agg["diversity_groups"] = caption_diversity(root, skeleton=skeleton)
         rows[f"corpus {split} split (real)"] = agg
     if sample_dir is not None:
@@ -430,7 +437,10 @@ def reference_rows(data_root: str | Path | None = None, sample_dir: str | Path |
             sorted(p.stem for p in (sdir / "new_joint_vecs").glob("*.npy"))
         if not ids:
             raise FileNotFoundError(f"sample folder {sdir} holds no new_joints/*.npy or new_joint_vecs/*.npy")
-        rows[f"HumanML3D {', '.join(ids)} (real)"] = ph.aggregate_reports(measure_clips(sdir, ids, skeleton))
+        motions = [load_joints(sdir, c, skeleton) for c in ids]
+        agg = ph.aggregate_reports([ph.measure_motion(x, skeleton) for x in motions])
+        agg["bone_ref_p95_pooled_cm"] = ph.pooled_bone_p95(motions, skeleton)
+        rows[f"HumanML3D {', '.join(ids)} (real)"] = agg
     return rows
 
 
@@ -529,6 +539,7 @@ def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings =
                                "reports": [r.as_dict() for r in reps],
                                "checks": [[asdict(r) for r in row] for row in checks]})
         agg = ph.aggregate_reports(reports)
+        agg["bone_ref_p95_pooled_cm"] = ph.pooled_bone_p95([x for xs in motions for x in xs], sk)
         agg["seed_diversity_cm"] = float(np.nanmean(div)) if np.isfinite(div).any() else float("nan")
         out_gens[name] = {"aggregate": agg, "checks_passed": passed, "checks_total": total,
                           "seconds": time.perf_counter() - t0, "prompts": per_prompt}
@@ -539,6 +550,76 @@ def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings =
            "references": references, "reference_ranges": {k: list(v) for k, v in ranges.items()},
            "reference_source": source, "generators": out_gens}
     return _clean(doc)
+
+
+def targets(result: Mapping) -> list[dict]:
+    """The issues' targets (issue 20 for every generator, issue 22's for the others) evaluated on a
+    :func:`run_benchmark` result: per target its text and, per generator, ``(value, passed)``
+    (``passed`` None when the reference it needs is missing)."""
+    gens = result["generators"]
+    corpus = next((v for k, v in result["references"].items() if k.startswith("corpus")), None)
+    ref = (lambda key: None if corpus is None or corpus.get(key) is None else float(corpus[key]))
+    first = next(iter(gens.values()), None)
+
+    def ratio(v, bound):
+        return (v, None if bound is None or v is None else v <= bound)
+
+    rows = []
+
+    def add(text, fn, only_later: bool = False):
+        cells = {}
+        for i, (name, g) in enumerate(gens.items()):
+            if only_later and i == 0:
+                continue
+            cells[name] = fn(g["aggregate"], g)
+        rows.append({"target": text, "cells": cells})
+
+    sk = ref("skate_mean_ms")
+    add("bone error p95 <= 3 cm (pooled over frames x bones x motions)",
+        lambda a, g: (a.get("bone_ref_p95_pooled_cm"), _le(a.get("bone_ref_p95_pooled_cm"), 3.0)))
+    add("bone error max <= 8 cm", lambda a, g: (a.get("bone_ref_max_cm"), _le(a.get("bone_ref_max_cm"), 8.0)))
+    add(f"foot skating <= 1.5x the corpus's ({_fmt(sk, '{:.3f}')} m/s)",
+        lambda a, g: ratio(a.get("skate_mean_ms"), None if sk is None else 1.5 * sk))
+    add("ground penetration <= 2 cm (max over motions)",
+        lambda a, g: (a.get("penetration_max_cm"), _le(a.get("penetration_max_cm"), 2.0)))
+    add("jump heights within the corpus's range (jump checks passed)", lambda a, g: _count_cell(g, "jump_rise_m"))
+    dv = ref("seed_diversity_cm")
+    add(f"seed diversity >= the corpus's paraphrases ({_fmt(dv, '{:.1f}')} cm)",
+        lambda a, g: (a.get("seed_diversity_cm"), None if dv is None else _ge(a.get("seed_diversity_cm"), dv)))
+    add("[issue 22] walking stride >= 0.4 m (stride checks passed)", lambda a, g: _count_cell(g, "stride_m"),
+        only_later=True)
+    add(f"[issue 22] foot skating <= 2x the corpus's", lambda a, g: ratio(a.get("skate_mean_ms"),
+                                                                         None if sk is None else 2 * sk),
+        only_later=True)
+    add("[issue 22] near-ballistic flight: pelvis acceleration in flight within 25 % of -9.81 m/s^2",
+        lambda a, g: (a.get("flight_accel_ms2"), None if a.get("flight_accel_ms2") is None
+                      else abs(a["flight_accel_ms2"] + ph.GRAVITY) <= 0.25 * ph.GRAVITY), only_later=True)
+    sd = None if first is None else first["aggregate"].get("seed_diversity_cm")
+    add("[issue 22] seed diversity >= half of the first generator's",
+        lambda a, g: (a.get("seed_diversity_cm"), None if sd is None else _ge(a.get("seed_diversity_cm"), sd / 2)),
+        only_later=True)
+    return rows
+
+
+def _le(v, bound):
+    return None if v is None else bool(v <= bound)
+
+
+def _ge(v, bound):
+    return None if v is None else bool(v >= bound)
+
+
+def _count_cell(gen: Mapping, measure: str):
+    hits = [r["passed"] for p in gen["prompts"] for row in p["checks"] for r in row
+            if _check_measure(r["check"]) == measure]
+    return (f"{sum(hits)}/{len(hits)}", (sum(hits) == len(hits)) if hits else None)
+
+
+def _check_measure(desc: str) -> str:
+    """The measure name in a check description ("lo <= name[side] <= hi unit" or "name >= lo unit")."""
+    words = desc.split()
+    name = words[2] if len(words) > 2 and words[1] == "<=" and words[3:4] == ["<="] else words[0]
+    return name.split("[")[0]
 
 
 def _fmt(v, fmt: str = "{:.2f}") -> str:
@@ -574,6 +655,19 @@ def benchmark_markdown(result: Mapping) -> str:
     if not gens:
         return "\n".join(lines) + "\n"
     names = list(gens)
+    lines += ["## Targets (issues 20 and 22)", "", "| target | " + " | ".join(names) + " |",
+              "|---|" + "---|" * len(names)]
+    for t in targets(result):
+        cells = []
+        for n in names:
+            if n not in t["cells"]:
+                cells.append("")
+                continue
+            v, ok = t["cells"][n]
+            val = v if isinstance(v, str) else _fmt(v, "{:.3g}")
+            cells.append(f"{val} {'-' if ok is None else ('pass' if ok else 'FAIL')}")
+        lines.append(f"| {t['target']} | " + " | ".join(cells) + " |")
+    lines.append("")
     lines += ["## Per-action checks", "",
               "Each cell: seeds passing / seeds, and the median measured value.", "",
               "| prompt | check | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
