@@ -380,26 +380,57 @@ class MotionTextDataset(Dataset):
             return np.random.default_rng()
         return np.random.default_rng((self.seed, self.epoch, index))
 
+    def _crop_lengths(self, e: _Entry) -> tuple[int, ...]:
+        """The lengths an item of ``e`` can have: floored, and (random crop) one unit shorter."""
+        u = self.unit_length
+        full = (e.length // u) * u
+        return (full, max(full - u, u)) if self.random_crop else (full,)
+
+    def crops(self) -> list[tuple[str, int, int]]:
+        """Every ``(motion_id, offset, length)`` window an item can return, without repeats.
+
+        With ``random_crop`` an entry of ``L`` frames yields its floored length ``F`` and ``F - unit``
+        at every start in ``[0, L - length]`` (6 to 12 windows); without, the one window ``__getitem__``
+        returns. Items' ``(motion_id, offset, length)`` are always among these (for caches of
+        per-window results such as VAE posteriors).
+        """
+        out: dict[tuple[str, int, int], None] = {}
+        for e in self._entries:
+            for m_len in dict.fromkeys(self._crop_lengths(e)):
+                starts = range(e.length - m_len + 1) if self.random_crop else range(1)
+                for s in starts:
+                    out[(e.motion_id, e.start + s, m_len)] = None
+        return list(out)
+
+    def crop_features(self, motion_id: str, offset: int, length: int) -> np.ndarray:
+        """``(length, D)`` float32 features (normalised if ``normalize``) of a window of a loaded clip."""
+        motion = self._motions.get(motion_id)
+        if motion is None:
+            raise KeyError(f"motion_id {motion_id!r} is not a clip of this dataset ({self.root}/{self.split})")
+        if not (0 <= offset and length >= 1 and offset + length <= len(motion)):
+            raise ValueError(f"window offset={offset}, length={length} does not fit clip {motion_id!r} of "
+                             f"{len(motion)} frames")
+        window = motion[offset:offset + length]
+        if self.normalize:
+            window = (window - self.mean) / self.std
+        return np.asarray(window, dtype=np.float32)
+
     def __getitem__(self, index: int) -> dict[str, Any]:
         if not -len(self) <= index < len(self):
             raise IndexError(f"index {index} out of range for a dataset of {len(self)} items")
         index = index % len(self)
         e = self._entries[index]
-        u = self.unit_length
         if self.random_crop:
             rng = self._rng(index)
             line, text = e.captions[int(rng.integers(len(e.captions)))]
-            m_len = (e.length // u) * u
-            if rng.random() < 1.0 / 3.0:  # T2M's "double": one unit shorter, 1 time in 3
-                m_len = max(m_len - u, u)
+            full, shorter = self._crop_lengths(e)
+            m_len = shorter if rng.random() < 1.0 / 3.0 else full  # T2M's "double": one unit shorter, 1 time in 3
             start = int(rng.integers(0, e.length - m_len + 1))
         else:
             line, text = e.captions[0]
-            m_len, start = (e.length // u) * u, 0
+            m_len, start = self._crop_lengths(e)[0], 0
         offset = e.start + start
-        motion = self._motions[e.motion_id][offset:offset + m_len]
-        if self.normalize:
-            motion = (motion - self.mean) / self.std
+        motion = self.crop_features(e.motion_id, offset, m_len)
         padded = np.zeros((self.max_length, motion.shape[1]), dtype=np.float32)
         padded[:m_len] = motion
         item = dict(motion=padded, length=m_len, caption=text.caption,

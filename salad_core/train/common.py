@@ -16,8 +16,15 @@ Out folder layout::
     log.jsonl                         one JSON object per logged step / validation
     mean_std.safetensors              (VAE, denoiser) the feature normalisation the model was trained with
 
+Batches: a task that declares its items' lengths (``TrainTask.lengths``: the denoiser, KeyMotion's
+MMAE) gets length-bucketed batches (:class:`~salad_core.train.batching.LengthBucketBatchSampler`,
+``config.batching="buckets"``, the default) so that a batch is padded by a few frames only; other
+tasks, and ``batching="random"``, get the random batches of ``DistributedSampler``.
+``config.json`` records the batching, the torch threads and the task's numerics, and every
+``log.jsonl`` line states the threads and the valid frames per second.
+
 Exactness of resume: the data order is a function of ``(seed, epoch)``
-(``DistributedSampler``), a resumed epoch skips the batches already used without loading them,
+(``DistributedSampler`` or the bucketing sampler), a resumed epoch skips the batches already used without loading them,
 the learning rate is a function of the step, and all RNG states (per rank) are restored. So
 ``k`` steps, stop, resume, ``N - k`` steps gives the same weights as ``N`` steps in one go.
 """
@@ -96,6 +103,7 @@ class TrainTask:
     meta: dict[str, Any] = field(default_factory=dict)  # stored in every checkpoint's JSON "meta"
     extra_config: dict[str, Any] = field(default_factory=dict)  # stored in config.json under "task"
     extra_files: dict[str, dict[str, torch.Tensor]] = field(default_factory=dict)  # name -> tensors, written once
+    lengths: Any = None                                # (len(train_set),) item frames: enables length bucketing
 
 
 @dataclass(frozen=True)
@@ -110,6 +118,7 @@ class TrainResult:
     best_step: int | None
     last_loss: float | None         # mean training loss over the last logging window
     steps_per_s: float              # optimiser steps per second in this call (without start-up, validation, checkpoints)
+    frames_per_s: float = 0.0       # valid motion frames (samples x frames) per second, same time base
 
 
 def seed_everything(seed: int) -> None:
@@ -222,9 +231,23 @@ def _check_resume_config(out_dir: Path, config: TrainConfig) -> None:
                     ", ".join(f"{k}: {old.get(k)!r} -> {new[k]!r}" for k in changed))
 
 
+def _bucketing(task: TrainTask, config: TrainConfig) -> bool:
+    return config.batching == "buckets" and task.lengths is not None
+
+
+def _runtime(task: TrainTask, config: TrainConfig) -> dict[str, Any]:
+    """How the run computes (recorded in ``config.json``; the model card reads it)."""
+    from salad_core.allocator import allocator_tuned
+
+    return {"torch_threads": torch.get_num_threads(),
+            "batching": f"length buckets (pools of {config.bucket_pool} batches)" if _bucketing(task, config)
+            else "random",
+            "allocator": "tuned" if allocator_tuned() else "system default"}
+
+
 def _write_config(out_dir: Path, task: TrainTask, config: TrainConfig) -> None:
     doc = {"model_type": task.model_type, "model": config_to_dict(task.model_config),
-           "train": config_to_dict(config), "task": task.extra_config}
+           "train": config_to_dict(config), "task": task.extra_config, "runtime": _runtime(task, config)}
     atomic_write_text(out_dir / "config.json", json.dumps(doc, indent=2) + "\n")
 
 
@@ -301,6 +324,17 @@ def _validate(task: TrainTask, config: TrainConfig, device: str, step: int) -> d
     return {k: v / weight for k, v in sums.items()} if weight else {}
 
 
+def _batch_frames(batch: Batch) -> int:
+    """Valid frames of a collated batch: the sum of ``length``, else batch x frames of ``motion``."""
+    length = batch.get("length")
+    if torch.is_tensor(length):
+        return int(length.sum())
+    motion = batch.get("motion")
+    if torch.is_tensor(motion) and motion.dim() >= 2:
+        return int(motion.shape[0] * motion.shape[1])
+    return 0
+
+
 def _batch_len(batch: Batch) -> int:
     for v in batch.values():
         if torch.is_tensor(v) and v.dim() > 0:
@@ -366,8 +400,19 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
 
         objective = DDP(objective, device_ids=[torch.device(env.device).index] if env.device.startswith("cuda") else None)
 
-    train_sampler = _sampler(task.train_set, env, shuffle=True, seed=config.seed)
-    steps_per_epoch = len(train_sampler) // local_bs
+    bucketing = _bucketing(task, config)
+    if bucketing:
+        from .batching import LengthBucketBatchSampler
+
+        if len(task.lengths) != len(task.train_set):
+            raise ValueError(f"task.lengths has {len(task.lengths)} entries for {len(task.train_set)} training items")
+        train_sampler: Any = LengthBucketBatchSampler(task.lengths, config.batch_size, rank=env.rank,
+                                                      world_size=env.world_size, seed=config.seed,
+                                                      pool_batches=config.bucket_pool)
+        steps_per_epoch = train_sampler.batches_per_epoch
+    else:
+        train_sampler = _sampler(task.train_set, env, shuffle=True, seed=config.seed)
+        steps_per_epoch = len(train_sampler) // local_bs
     if steps_per_epoch == 0:
         raise ValueError(f"the train split has {len(task.train_set)} items, fewer than one batch of "
                          f"{config.batch_size}; lower batch_size")
@@ -454,6 +499,11 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
     stop_flag = torch.zeros(1, device=env.device)
     t_start = time.perf_counter()
     t_log, steps_at_log = t_start, step
+    frames_this_call, frames_at_log = 0, 0
+    if env.is_main:
+        log.info("training %s on %s: %d torch thread(s)%s, %s batches of %d, %d process(es)", task.model_type,
+                 env.device, torch.get_num_threads(), "" if env.device.startswith("cuda") else " per process",
+                 _runtime(task, config)["batching"], config.batch_size, env.world_size)
     steps_this_call = 0
     aux_seconds = 0.0  # validation and checkpoint time, left out of the reported speed
     objective.train()
@@ -465,7 +515,11 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
                 train_sampler.set_epoch(epoch)
                 if hasattr(task.train_set, "set_epoch"):
                     task.train_set.set_epoch(epoch)
-                batches = ResumableBatchSampler(train_sampler, local_bs, drop_last=True, start=batch_in_epoch)
+                if bucketing:
+                    train_sampler.start = batch_in_epoch
+                    batches = train_sampler
+                else:
+                    batches = ResumableBatchSampler(train_sampler, local_bs, drop_last=True, start=batch_in_epoch)
                 loader = _loader(task.train_set, batches, task.collate, config, env, seed=config.seed * 100_003 + epoch)
                 finished_epoch = True
                 for batch in loader:
@@ -483,6 +537,7 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
                     steps_this_call += 1
                     batch_in_epoch += 1
                     samples_seen += config.batch_size
+                    frames_this_call += _batch_frames(batch) * env.world_size   # rank 0's count for every rank
                     avg.add(losses)
                     bar.update(1)
                     if on_step is not None:
@@ -492,10 +547,13 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
                         means = avg.mean(env)
                         last_loss = means.get("loss", last_loss)
                         now = time.perf_counter()
+                        span = max(now - t_log, 1e-9)
                         write_log({"step": step, "epoch": epoch, "lr": lr, **means,
-                                   "steps_per_s": round((step - steps_at_log) / max(now - t_log, 1e-9), 4),
+                                   "steps_per_s": round((step - steps_at_log) / span, 4),
+                                   "frames_per_s": round((frames_this_call - frames_at_log) / span, 1),
+                                   "threads": torch.get_num_threads(),
                                    "elapsed_s": round(elapsed_before + now - t_start, 3)})
-                        t_log, steps_at_log = now, step
+                        t_log, steps_at_log, frames_at_log = now, step, frames_this_call
                         bar.set_postfix(loss=f"{last_loss:.4g}" if last_loss is not None else "-", lr=f"{lr:.2e}")
                     if has_val and config.val_every and (step % config.val_every == 0 or step == total_steps):
                         t_aux = time.perf_counter()
@@ -533,7 +591,8 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
         checkpoint("end")  # max_steps=0: still leave a loadable model and state
     seconds = time.perf_counter() - t_start - aux_seconds
     rate = steps_this_call / seconds if seconds > 0 else 0.0
+    frame_rate = frames_this_call / seconds if seconds > 0 else 0.0
     if interrupted:
         log.warning("stopped at step %d by a signal; resume with resume=True (--resume)", step)
     return TrainResult(out_dir=out_dir, step=step, epoch=epoch, interrupted=interrupted, best_val=best_val,
-                       best_step=best_step, last_loss=last_loss, steps_per_s=rate)
+                       best_step=best_step, last_loss=last_loss, steps_per_s=rate, frames_per_s=frame_rate)

@@ -11,7 +11,21 @@ One step, for a batch of motions ``(B, N, D)`` with lengths ``L``:
    latent elements.
 
 All random draws come from the trainer's shared generator for the global batch, so the run is
-reproducible and independent of the number of processes. Motions are encoded at the padded
+reproducible and independent of the number of processes.
+
+Since 0.6 (defaults; each has a switch in :class:`DenoiserTrainConfig`):
+
+* ``latent_cache``: ``mu`` and ``logvar`` of every window an item can take are encoded once per
+  (VAE, corpus) and looked up (:mod:`salad_core.train.latent_cache`); ``eps`` is still drawn at
+  every step. With ``vae_pad_to_max`` the cached posteriors equal the on-the-fly ones; without it
+  each window is encoded alone (on the fly, it was encoded inside its batch, padded to the batch's
+  longest window, so its last latent frames depended on the batch).
+* ``batching="buckets"``: length-sorted batches (:mod:`salad_core.train.batching`); the summed
+  squared error of a training batch is then divided by ``batch x expected valid latent elements
+  per item`` instead of the batch's own count, so every valid element weighs the same in every
+  batch and the objective is not tilted towards short clips (validation keeps the per-batch mean).
+
+Otherwise motions are encoded at the padded
 ``max_length`` (as the official loader pads to 196; ``vae_pad_to_max``), which makes a sample's
 latent independent of the other samples in its batch; latents are then trimmed to the longest
 sample of the batch, which the denoiser's key-padding masks make exact. Motions are normalised
@@ -32,10 +46,12 @@ from salad_core.io import CheckpointError, config_to_dict
 from salad_core.sampling import training_target
 
 from .common import StepContext, TrainResult, TrainTask, fit
+from .batching import expected_latent_frames
 from .config import DenoiserTrainConfig
 from .distributed import DistEnv, all_reduce_sum, init_distributed
 
-__all__ = ["DenoiserObjective", "CaptionFeatureCache", "train_denoiser", "build_denoiser_task", "load_frozen_vae", "resolve_checkpoint"]
+__all__ = ["DenoiserObjective", "CaptionFeatureCache", "train_denoiser", "build_denoiser_task", "load_frozen_vae",
+           "resolve_checkpoint", "denoiser_latent_cache"]
 
 log = logging.getLogger(__name__)
 
@@ -182,7 +198,14 @@ def _vae_stats(vae_path: str | os.PathLike) -> tuple[Any, Any]:
 
 
 def _prepare(batch: dict[str, Any], ctx: StepContext, *, vae: nn.Module, text: CaptionFeatureCache, scheduler: Any,
-             config: DenoiserTrainConfig, prediction_type: str, latent_shape: tuple[int, int, int]) -> dict[str, Any]:
+             config: DenoiserTrainConfig, prediction_type: str, latent_shape: tuple[int, int, int],
+             latents: Any = None, frames_norm: float | None = None) -> dict[str, Any]:
+    """Objective inputs of a batch.
+
+    ``latents`` (a :class:`~salad_core.train.latent_cache.LatentCache` keyed by ``(motion_id, offset,
+    length)``) replaces the VAE encoder; ``frames_norm`` (expected valid latent frames per item) makes
+    the training loss ``sum of squared errors / (batch x frames_norm x P x Dz)`` (see the module docstring).
+    """
     env, rand, dev = ctx.env, ctx.rand, ctx.env.device
     motion = batch["motion"].to(dev, non_blocking=True)                 # (B, max_length, D)
     length = batch["length"].to(dev)
@@ -201,26 +224,79 @@ def _prepare(batch: dict[str, Any], ctx: StepContext, *, vae: nn.Module, text: C
     if not ctx.train and not config.val_cond_drop:
         drop = torch.zeros_like(drop)
 
-    if not config.vae_pad_to_max:
-        motion = motion[:, : n_lat * ds]                                 # faster; latents then depend on the batch
     with torch.no_grad():
-        enc = vae.encode(motion, sample=False)                           # (B, N/4, P, Dz)
-        z = (enc.mu[:, :n_lat] + eps * torch.exp(0.5 * enc.logvar[:, :n_lat])) * m
+        if latents is not None:
+            keys = list(zip(batch["motion_id"], (int(o) for o in batch["offset"]), length.tolist()))
+            mu, logvar = (t_.to(dev) for t_ in latents.lookup(keys, n_lat))   # (B, N', P, Dz)
+        else:
+            if not config.vae_pad_to_max:
+                motion = motion[:, : n_lat * ds]                         # faster; latents then depend on the batch
+            enc = vae.encode(motion, sample=False)                       # (B, N/4, P, Dz)
+            mu, logvar = enc.mu[:, :n_lat], enc.logvar[:, :n_lat]
+        z = (mu + eps * torch.exp(0.5 * logvar)) * m
         noisy = scheduler.add_noise(z, noise, t)
         target = training_target(scheduler, z, noise, t, prediction_type)
         captions = ["" if d else c for d, c in zip(drop.tolist(), batch["caption"])]
         text_feats, text_mask = text.encode(captions)                    # (B, W, C), (B, W)
-    count = frame_mask.sum().to(torch.float64) * (latent_shape[1] * latent_shape[2])
-    if ctx.train and env.distributed:
-        count = all_reduce_sum(count, env) / env.world_size
+    if ctx.train and frames_norm is not None:
+        # a constant per item: every valid element weighs the same in every (length-sorted) batch
+        count = torch.tensor(b * frames_norm * latent_shape[1] * latent_shape[2], dtype=torch.float64, device=dev)
+    else:
+        count = frame_mask.sum().to(torch.float64) * (latent_shape[1] * latent_shape[2])
+        if ctx.train and env.distributed:
+            count = all_reduce_sum(count, env) / env.world_size
     return {"noisy": noisy, "timesteps": t, "text": text_feats.to(dev), "text_mask": text_mask.to(dev),
             "frame_mask": frame_mask, "target": target, "denom": count.clamp_min(1.0).to(motion.dtype)}
 
 
+def denoiser_latent_cache(vae: nn.Module, datasets: Sequence[Any], config: DenoiserTrainConfig,
+                          cache_dir: str | os.PathLike, env: DistEnv, *, prune: bool = False) -> Any:
+    """The :class:`~salad_core.train.latent_cache.LatentCache` of every window of ``datasets`` under ``vae``.
+
+    Opened from ``cache_dir/<signature>`` or built there (by rank 0; the other ranks wait and open
+    it). The signature covers the VAE's weights, the datasets' clips, statistics and windows, and the
+    encoding (padded to ``max_length`` when ``config.vae_pad_to_max``, else each window alone).
+    """
+    import hashlib
+
+    from .distributed import barrier
+    from .latent_cache import (CACHE_FORMAT, build_latent_cache, corpus_digest, encode_motion_windows,
+                               module_digest, open_or_build)
+
+    pad_to = config.max_length if config.vae_pad_to_max else None
+    source: dict[tuple, Any] = {}
+    for ds in datasets:
+        for key in ds.crops():
+            source.setdefault(key, ds)
+    keys = list(source)
+    parts = [CACHE_FORMAT, module_digest(vae), f"pad_to={pad_to}", config.latent_cache_dtype,
+             *(corpus_digest(ds) for ds in datasets)]
+    signature = hashlib.sha256("|".join(parts).encode()).hexdigest()
+
+    def build(folder: Path) -> Any:
+        log.info("encoding the VAE posteriors of %d windows into %s", len(keys), folder)
+        batches = encode_motion_windows(vae, lambda k: source[k].crop_features(*k), keys, pad_to=pad_to)
+        return build_latent_cache(folder, signature, keys, [k[2] // vae.downsample for k in keys],
+                                  (vae.num_parts, vae.latent_dim), batches, dtype=config.latent_cache_dtype,
+                                  meta={"pad_to": pad_to, "splits": [str(getattr(d, "split", "?")) for d in datasets],
+                                        "windows": len(keys)})
+
+    cache = open_or_build(cache_dir, signature, build, prune=prune) if env.is_main else None
+    barrier(env)
+    if cache is None:
+        cache = open_or_build(cache_dir, signature, build)
+    return cache
+
+
 def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, model_config: Any,
                         train_config: DenoiserTrainConfig, env: DistEnv, text_encoder: Any = "minilm",
-                        diffusion_config: Any = None) -> TrainTask:
-    """The :class:`TrainTask` of a denoiser run (model built with ``train_config.seed``)."""
+                        diffusion_config: Any = None, *, cache_dir: str | os.PathLike | None = None) -> TrainTask:
+    """The :class:`TrainTask` of a denoiser run (model built with ``train_config.seed``).
+
+    ``cache_dir``: where the latent cache lives when ``train_config.latent_cache`` is on and
+    ``train_config.latent_cache_dir`` is not set (:func:`train_denoiser` passes the run folder's
+    ``latent_cache/``; without either a temporary folder is used).
+    """
     from salad_core.data.dataset import MotionTextDataset, collate_motion_text
     from salad_core.models.denoiser import Denoiser, DenoiserConfig
     from salad_core.sampling import DiffusionConfig, make_scheduler
@@ -265,15 +341,37 @@ def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike
     captions = [line.caption for ds in (train_set, val_set) if ds is not None for line in ds.all_captions()]
     if text_cache.prefill(captions):
         log.info("text features of %d captions computed up front", len(text_cache._store))
+    latents = None
+    if train_config.latent_cache:
+        own = train_config.latent_cache_dir is None and cache_dir is not None
+        where = train_config.latent_cache_dir or cache_dir
+        if where is None:
+            import tempfile
+
+            where = tempfile.mkdtemp(prefix="salad_latent_cache_")
+            log.warning("no latent cache folder given: using %s (removed by nobody; pass cache_dir)", where)
+        latents = denoiser_latent_cache(vae, [d for d in (train_set, val_set) if d is not None], train_config,
+                                        where, env, prune=own)
+    bucketing = train_config.batching == "buckets"
+    frames_norm = expected_latent_frames(train_set.lengths, vae.downsample) if bucketing else None
     prepare = partial(_prepare, vae=vae, text=text_cache,
                       scheduler=scheduler, config=train_config,
-                      prediction_type=diffusion_config.prediction_type, latent_shape=latent_shape)
+                      prediction_type=diffusion_config.prediction_type, latent_shape=latent_shape,
+                      latents=latents, frames_norm=frames_norm)
     meta = {"diffusion": config_to_dict(diffusion_config), "text_encoder": encoder_name,
             "vae": str(resolve_checkpoint(vae_path)), "data": str(Path(data_dir))}
+    numerics = {
+        "latents": (f"cached posteriors ({'padded to max_length' if train_config.vae_pad_to_max else 'each window alone'}, "
+                    f"{train_config.latent_cache_dtype}), eps drawn per step" if latents is not None
+                    else "encoded at every step"),
+        "loss_normaliser": (f"batch x expected valid latent frames per item ({frames_norm:.4g}) x parts x latent dim"
+                            if frames_norm is not None else "valid latent elements of the batch"),
+    }
     return TrainTask(
         model=denoiser, model_type="denoiser", model_config=model_config, objective=DenoiserObjective(denoiser),
         train_set=train_set, val_set=val_set, collate=partial(collate_motion_text, trim=False), prepare=prepare,
-        meta=meta, extra_config={"kind": "denoiser", **meta, "data": str(Path(data_dir).resolve())},
+        meta=meta, extra_config={"kind": "denoiser", **meta, "data": str(Path(data_dir).resolve()), "numerics": numerics},
+        lengths=train_set.lengths,
         extra_files={"mean_std.safetensors": {"mean": torch.as_tensor(train_set.mean, dtype=torch.float32),
                                               "std": torch.as_tensor(train_set.std, dtype=torch.float32)}},
     )
@@ -309,5 +407,6 @@ def train_denoiser(data_dir: str | os.PathLike, out_dir: str | os.PathLike, vae_
     """
     train_config = train_config or DenoiserTrainConfig()
     env = env or init_distributed(train_config.device)
-    task = build_denoiser_task(data_dir, vae_path, model_config, train_config, env, text_encoder, diffusion_config)
+    task = build_denoiser_task(data_dir, vae_path, model_config, train_config, env, text_encoder, diffusion_config,
+                               cache_dir=Path(out_dir) / "latent_cache")
     return fit(task, out_dir, train_config, resume=resume, env=env, on_step=on_step)
