@@ -1,0 +1,381 @@
+"""BVH files to HumanML3D joints and features; one loader for every motion file the CLI accepts.
+
+:func:`import_bvh` runs the whole conversion:
+
+1. read the file and run its forward kinematics (:mod:`salad_core.bvh.reader`);
+2. map the rig to the 22 HumanML3D joints (:mod:`salad_core.bvh.rigs`);
+3. turn the up axis to +Y: detected as the axis the spine (pelvis -> head) and the legs (ankles ->
+   pelvis) point along on average over the clip, or, when the clip gives no clear answer (a
+   motion spent lying down), in the rest pose; ``up=`` overrides. The turn is a proper rotation,
+   so left stays left;
+4. convert lengths to metres: the unit (m, cm, mm, inch, foot) whose conversion gives the rig's
+   legs + spine (hip -> knee -> ankle plus pelvis -> head along the spine) the length closest to
+   HumanML3D's target skeleton (1.48 m, a person of about 1.7 m); when even the closest unit is off
+   by more than a factor 1.6 (unusual units such as the CMU conversion's 1/0.45 inch), the rig is
+   scaled to that target length and the unit is reported as ``"fit"``; ``units=`` overrides;
+5. resample to ``fps`` (20, HumanML3D's rate) from the file's Frame Time, linearly in joint
+   positions (when the rates divide, every output frame is a source frame);
+6. put the lowest joint of the clip (the lowest foot, in any upright motion) on the floor,
+   ``y = 0``, as HumanML3D does.
+
+The joints keep the take's horizontal position and heading. :func:`bvh_to_features` then runs
+:func:`salad_core.motion.joints_to_features`, which itself retargets the bone lengths to the
+target skeleton, puts the first frame's root at the origin and turns it to face +Z.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from salad_core.motion import check_features, check_joints, features_to_joints, joints_to_features
+from salad_core.skeleton import get_skeleton
+
+from .reader import BvhMotion, read_bvh
+from .rigs import HML_NAMES, RigMapping, map_rig
+
+__all__ = ["BvhImportOptions", "BvhImport", "import_bvh", "bvh_to_joints", "bvh_to_features", "LoadedMotion",
+           "load_motion", "UNITS", "UP_AXES"]
+
+#: Metres per file unit of the length units :func:`import_bvh` knows.
+UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "ft": 0.3048}
+_UNIT_ALIASES = {"metre": "m", "meter": "m", "metres": "m", "meters": "m", "centimetre": "cm", "centimeter": "cm",
+                 "millimetre": "mm", "millimeter": "mm", "in": "inch", "inches": "inch", "foot": "ft", "feet": "ft"}
+#: Up axes :func:`import_bvh` accepts, as rotations taking that axis to +Y (rows: new x, y, z).
+UP_AXES: dict[str, np.ndarray] = {
+    "y": np.eye(3),
+    "-y": np.diag([1.0, -1.0, -1.0]),
+    "z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
+    "-z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),
+    "x": np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+    "-x": np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+}
+_SK = get_skeleton("humanml3d")
+_IDX = {n: i for i, n in enumerate(HML_NAMES)}
+_LEG = (("left_hip", "left_knee", "left_ankle"), ("right_hip", "right_knee", "right_ankle"))
+_SPINE = ("pelvis", "spine1", "spine2", "spine3", "neck", "head")
+
+
+def _chain_length(joints: np.ndarray, chain) -> np.ndarray:
+    idx = [_IDX[n] for n in chain]
+    return np.linalg.norm(np.diff(joints[..., idx, :], axis=-2), axis=-1).sum(-1)
+
+
+def _stature(joints: np.ndarray) -> float:
+    """Median over frames of the mean leg length plus the spine length (pelvis -> head)."""
+    legs = 0.5 * (_chain_length(joints, _LEG[0]) + _chain_length(joints, _LEG[1]))
+    return float(np.median(legs + _chain_length(joints, _SPINE)))
+
+
+#: Legs + spine of HumanML3D's target skeleton, metres (the reference for unit detection).
+TARGET_STATURE = float(0.5 * sum(_SK.bone_lengths[_IDX[n]] for leg in _LEG for n in leg[1:])
+                       + sum(_SK.bone_lengths[_IDX[n]] for n in _SPINE[1:]))
+_FIT_FACTOR = 1.6
+
+
+@dataclass(frozen=True)
+class BvhImportOptions:
+    """How :func:`import_bvh` converts a file (validated on construction).
+
+    Attributes
+    ----------
+    fps : float
+        Output frame rate (HumanML3D: 20).
+    units : str, float or None
+        Length unit of the file: a key of :data:`UNITS` (``"m", "cm", "mm", "inch", "ft"``), metres
+        per file unit as a positive number, or ``None`` to detect from the skeleton's size.
+    up : str or None
+        The file's up axis, a key of :data:`UP_AXES` (``"y", "z", "-y", "-z", "x", "-x"``), or
+        ``None`` to detect.
+    rig : str or None
+        Force a rig style (``"smpl", "mixamo", "cmu", "generic"``); ``None`` detects.
+    name_map : tuple of (humanml3d_joint, rig_joint) pairs, or a JSON path
+        User overrides of the rig mapping (a dict is accepted and stored as sorted pairs).
+    """
+
+    fps: float = 20.0
+    units: str | float | None = None
+    up: str | None = None
+    rig: str | None = None
+    name_map: tuple[tuple[str, str], ...] | str | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        fps = self.fps
+        if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not math.isfinite(fps) or fps <= 0:
+            raise ValueError(f"fps must be a positive number of frames per second, got {fps!r}")
+        units = self.units
+        if isinstance(units, str):
+            key = _UNIT_ALIASES.get(units.lower(), units.lower())
+            if key not in UNITS:
+                raise ValueError(f"units {units!r} is not known; allowed: {', '.join(UNITS)}, metres per unit as "
+                                 "a number, or None to detect")
+            object.__setattr__(self, "units", key)
+        elif units is not None and (isinstance(units, bool) or not isinstance(units, (int, float))
+                                    or not math.isfinite(units) or units <= 0):
+            raise ValueError(f"units must be a unit name ({', '.join(UNITS)}), a positive number of metres per "
+                             f"file unit, or None; got {units!r}")
+        if self.up is not None:
+            up = str(self.up).lower().replace("+", "")
+            if up not in UP_AXES:
+                raise ValueError(f"up {self.up!r} is not an axis; allowed: {', '.join(UP_AXES)} or None to detect")
+            object.__setattr__(self, "up", up)
+        if isinstance(self.name_map, Mapping):
+            object.__setattr__(self, "name_map", tuple(sorted(self.name_map.items())))
+        elif isinstance(self.name_map, os.PathLike):
+            object.__setattr__(self, "name_map", os.fspath(self.name_map))
+
+
+@dataclass(frozen=True, eq=False)
+class BvhImport:
+    """A BVH take converted to HumanML3D joints.
+
+    Attributes
+    ----------
+    joints : ndarray (N, 22, 3) float32
+        HumanML3D joints, metres, +Y up, lowest joint on y = 0, at ``fps``; the take's own
+        horizontal position and heading.
+    fps : float
+    source_fps : float
+        The file's frame rate (1 / Frame Time).
+    source_frames : int
+    units : str
+        The length unit used (a key of :data:`UNITS`, ``"fit"`` or ``"custom"``).
+    metres_per_unit : float
+    up : str
+        The file's up axis (a key of :data:`UP_AXES`).
+    detected : tuple of str
+        Which of ``"units"``, ``"up"``, ``"rig"`` were detected rather than given.
+    rig : RigMapping
+    path : str
+    """
+
+    joints: np.ndarray
+    fps: float
+    source_fps: float
+    source_frames: int
+    units: str
+    metres_per_unit: float
+    up: str
+    detected: tuple[str, ...]
+    rig: RigMapping
+    path: str
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.joints.shape[0])
+
+    def features(self) -> np.ndarray:
+        """``(N-1, 263)`` HumanML3D features (:func:`salad_core.motion.joints_to_features`)."""
+        if self.num_frames < 2:
+            raise ValueError(f"{self.path}: the take has {self.num_frames} frame at {self.fps:g} fps; features "
+                             "need at least 2")
+        return joints_to_features(self.joints.astype(np.float64), _SK)
+
+    def summary(self) -> str:
+        """One line: frames, rates, unit, up axis and rig style, marking what was detected."""
+        def mark(key):
+            return " (detected)" if key in self.detected else ""
+
+        return (f"{self.path}: {self.source_frames} frames at {self.source_fps:.4g} fps -> {self.num_frames} at "
+                f"{self.fps:g} fps; units {self.units}{mark('units')} ({self.metres_per_unit:.4g} m per unit), "
+                f"up {self.up}{mark('up')}, rig {self.rig.style}{mark('rig')}")
+
+
+def _detect_up(joints: np.ndarray) -> str | None:
+    """The axis (of the file) the spine and legs point along on average, if clear."""
+    pelvis, head = joints[:, _IDX["pelvis"]], joints[:, _IDX["head"]]
+    ankles = 0.5 * (joints[:, _IDX["left_ankle"]] + joints[:, _IDX["right_ankle"]])
+
+    def unit(v):
+        n = np.linalg.norm(v, axis=-1, keepdims=True)
+        return np.where(n > 1e-9, v / np.maximum(n, 1e-12), 0.0)
+
+    v = (unit(head - pelvis) + unit(pelvis - ankles)).mean(0) / 2.0
+    k = int(np.argmax(np.abs(v)))
+    # clear: the mean direction is long (the body mostly upright) and mostly along one axis
+    if np.linalg.norm(v) < 0.5 or abs(v[k]) < 0.8 * np.linalg.norm(v):
+        return None
+    return ("-" if v[k] < 0 else "") + "xyz"[k]
+
+
+def _detect_units(stature: float) -> tuple[str, float]:
+    """Closest known unit by the legs + spine length; ``("fit", scale)`` when none is close."""
+    if not stature > 0:
+        raise ValueError("the rig has zero size (legs and spine of length 0); cannot detect its units")
+    name, per = min(UNITS.items(), key=lambda kv: abs(math.log(stature * kv[1] / TARGET_STATURE)))
+    if abs(math.log(stature * per / TARGET_STATURE)) > math.log(_FIT_FACTOR):
+        return "fit", TARGET_STATURE / stature
+    return name, per
+
+
+def _resample(joints: np.ndarray, src_fps: float, fps: float) -> np.ndarray:
+    """Linear resampling over time of ``(N, J, 3)`` from ``src_fps`` to ``fps`` (first frame kept).
+
+    Frame times written with few decimals (``0.033333`` for 30 fps) make the take a hair shorter
+    than its frame count says; a relative slack of 1e-4 keeps the last frame that such rounding
+    would drop (it is then the last source frame).
+    """
+    n = joints.shape[0]
+    if n == 1 or abs(src_fps - fps) < 1e-9 * fps:
+        return joints
+    n_out = int(np.floor((n - 1) / src_fps * fps * (1 + 1e-4) + 1e-9)) + 1
+    pos = np.minimum(np.arange(n_out) * (src_fps / fps), n - 1)
+    k = np.minimum(np.floor(pos + 1e-9).astype(int), n - 1)
+    k1 = np.minimum(k + 1, n - 1)
+    w = np.clip(pos - k, 0.0, 1.0)[:, None, None]
+    return joints[k] * (1.0 - w) + joints[k1] * w
+
+
+def import_bvh(source: str | os.PathLike | BvhMotion, options: BvhImportOptions | None = None, **kwargs) -> BvhImport:
+    """Convert a BVH take to HumanML3D joints (see the module docstring for the steps).
+
+    Parameters
+    ----------
+    source : path or BvhMotion
+        The ``.bvh`` file, or an already parsed motion.
+    options : BvhImportOptions, optional
+        Or its fields as keyword arguments: ``fps=20``, ``units=None``, ``up=None``, ``rig=None``,
+        ``name_map=None``.
+
+    Returns
+    -------
+    BvhImport
+
+    Raises
+    ------
+    BvhError
+        For a malformed file (message with the line).
+    RigError
+        When the rig's joints cannot be mapped (message lists the missing joints).
+    ValueError
+        For bad options, or an up axis that cannot be detected.
+    """
+    if options is None:
+        options = BvhImportOptions(**kwargs)
+    elif kwargs:
+        raise TypeError("give either options or keyword arguments, not both")
+    motion = source if isinstance(source, BvhMotion) else read_bvh(source)
+    name_map = dict(options.name_map) if isinstance(options.name_map, tuple) else options.name_map
+    mapping = map_rig(motion.joint_names, motion.point_names(), motion.point_parents(),
+                      rest=motion.world_positions(rest=True)[0], name_map=name_map, style=options.rig,
+                      source=motion.path)
+    joints = mapping.apply(motion.world_positions())               # (N, 22, 3) file units and axes
+    detected = []
+    up = options.up
+    if up is None:
+        up = _detect_up(joints) or _detect_up(mapping.apply(motion.world_positions(rest=True)))
+        if up is None:
+            raise ValueError(f"{motion.path}: cannot tell the up axis (the spine points along no single axis in "
+                             f"the motion or the rest pose); pass up= one of {', '.join(UP_AXES)}")
+        detected.append("up")
+    joints = joints @ UP_AXES[up].T
+    if options.units is None:
+        units, per = _detect_units(_stature(joints))
+        detected.append("units")
+    elif isinstance(options.units, str):
+        units, per = options.units, UNITS[options.units]
+    else:
+        units, per = "custom", float(options.units)
+    joints = _resample(joints * per, motion.fps, float(options.fps))
+    joints[..., 1] -= joints[..., 1].min()
+    if options.rig is None:
+        detected.append("rig")
+    return BvhImport(joints.astype(np.float32), float(options.fps), motion.fps, motion.num_frames, units, per, up,
+                     tuple(detected), mapping, motion.path)
+
+
+def bvh_to_joints(source: str | os.PathLike | BvhMotion, *, name_map=None, rig: str | None = None,
+                  fps: float = 20.0, units: str | float | None = None, up: str | None = None) -> np.ndarray:
+    """HumanML3D joints ``(N, 22, 3)`` (float32, metres, +Y up, on the floor) of a BVH take.
+
+    See :func:`import_bvh` for the arguments; this returns only ``import_bvh(...).joints``.
+    """
+    return import_bvh(source, name_map=name_map, rig=rig, fps=fps, units=units, up=up).joints
+
+
+def bvh_to_features(source: str | os.PathLike | BvhMotion, **kwargs) -> np.ndarray:
+    """HumanML3D features ``(N-1, 263)`` of a BVH take (keyword arguments as :func:`bvh_to_joints`)."""
+    return import_bvh(source, **kwargs).features()
+
+
+@dataclass(frozen=True, eq=False)
+class LoadedMotion:
+    """A motion file read for the models.
+
+    Attributes
+    ----------
+    features : ndarray (N, D) float32
+        HumanML3D features (for joints input: of ``N + 1`` joint frames).
+    joints : ndarray (M, J, 3) float32
+        The joints as given (BVH: as imported; joints .npy: as stored; features .npy: recovered).
+    kind : {"bvh", "features", "joints"}
+    path : Path
+    bvh : BvhImport or None
+        The import details for a BVH file.
+    """
+
+    features: np.ndarray
+    joints: np.ndarray
+    kind: str
+    path: Path
+    bvh: BvhImport | None = None
+
+
+def load_motion(path: str | os.PathLike, skeleton: str = "humanml3d", **bvh_options) -> LoadedMotion:
+    """Read a motion file: a ``.bvh`` take, or a ``.npy`` of features ``(N, D)`` or joints ``(N, J, 3)``.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    skeleton : str
+        The skeleton of ``.npy`` files (BVH files are imported to HumanML3D).
+    **bvh_options
+        For BVH files: ``fps, units, up, rig, name_map`` (:class:`BvhImportOptions`).
+
+    Returns
+    -------
+    LoadedMotion
+
+    Raises
+    ------
+    FileNotFoundError
+        ``"motion file not found: <path>"``.
+    ValueError
+        A file that cannot be read or has the wrong shape or non-finite values; BVH errors
+        (:class:`~salad_core.bvh.reader.BvhError`, :class:`~salad_core.bvh.rigs.RigError`) name
+        the problem and, for malformed files, the line.
+    """
+    sk = get_skeleton(skeleton)
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"motion file not found: {p}")
+    if p.suffix.lower() == ".bvh":
+        if sk.name != "humanml3d":
+            raise ValueError(f"{p}: BVH files are imported to the humanml3d skeleton, not {sk.name!r}")
+        if bvh_options.get("fps") is None:
+            bvh_options["fps"] = sk.fps
+        imp = import_bvh(p, **bvh_options)
+        return LoadedMotion(imp.features(), imp.joints, "bvh", p, imp)
+    if bvh_options and any(v is not None for v in bvh_options.values()):
+        given = ", ".join(k for k, v in bvh_options.items() if v is not None)
+        raise ValueError(f"{p}: {given} appl{'ies' if ',' not in given else 'y'} to BVH files only")
+    try:
+        arr = np.load(p, allow_pickle=False)      # never unpickle: a .npy must not run code
+    except (ValueError, OSError, EOFError) as exc:
+        raise ValueError(f"cannot read {p} as a .npy array (truncated, corrupt or pickled?): {exc}") from None
+    if not isinstance(arr, np.ndarray) or not np.issubdtype(arr.dtype, np.number):
+        raise ValueError(f"{p} does not hold a numeric array (got {getattr(arr, 'dtype', type(arr).__name__)})")
+    if arr.ndim == 2:
+        check_features(arr, sk, name=str(p))
+        feats = arr.astype(np.float32, copy=False)
+        return LoadedMotion(feats, np.asarray(features_to_joints(feats, sk), np.float32), "features", p)
+    if arr.ndim == 3 and arr.shape[1:] == (sk.num_joints, 3):
+        check_joints(arr, sk, name=str(p), min_frames=2)
+        joints = arr.astype(np.float32, copy=False)
+        return LoadedMotion(joints_to_features(joints.astype(np.float64), sk), joints, "joints", p)
+    raise ValueError(f"{p} has shape {arr.shape}; expected features (N, {sk.feature_dim}), joints "
+                     f"(N, {sk.num_joints}, 3) or a .bvh file")
