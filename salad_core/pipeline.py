@@ -25,7 +25,7 @@ import json
 import logging
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -37,7 +37,7 @@ from salad_core.io import (CheckpointError, atomic_write_text, config_from_dict,
 from salad_core.models.denoiser import Denoiser
 from salad_core.models.vae import MotionVAE
 from salad_core.motion import denormalize, features_to_joints, normalize
-from salad_core.sampling import DiffusionConfig, denoise, make_scheduler
+from salad_core.sampling import DiffusionConfig, Guidance, denoise, make_scheduler
 from salad_core.skeleton import Skeleton
 from salad_core.text import TextBatch, load_text_encoder
 
@@ -199,13 +199,19 @@ class SaladPipeline:
     max_batch: int | None = None
 
     def __init__(self, vae: MotionVAE, denoiser: Denoiser, text_encoder, mean: np.ndarray, std: np.ndarray,
-                 diffusion: DiffusionConfig | None = None, solver: str = "ddim", source: str | None = None) -> None:
+                 diffusion: DiffusionConfig | None = None, solver: str = "ddim", source: str | None = None,
+                 guidance: Guidance | None = None) -> None:
         self.vae = vae.eval()
         self.denoiser = denoiser.eval()
         self.text_encoder = text_encoder
         self.diffusion = diffusion or DiffusionConfig()
         self.solver = solver
         self.source = source
+        #: Default guidance of these weights (``pipeline.json`` "guidance"; the paper's w 7.5 when absent).
+        #: A number passed as ``guidance_scale`` replaces only its weight; a Guidance replaces it all.
+        self.guidance = guidance if guidance is not None else Guidance(7.5)
+        if not isinstance(self.guidance, Guidance):
+            raise TypeError(f"guidance must be a salad_core.sampling.Guidance, got {type(guidance).__name__}")
         self.skeleton: Skeleton = vae.skeleton
         check_compatible(vae, denoiser, text_encoder)
         d = self.skeleton.feature_dim
@@ -240,8 +246,12 @@ class SaladPipeline:
         if text_encoder is None:
             text_encoder = load_text_encoder(cfg.get("text_encoder", "minilm"))
         diffusion = config_from_dict(DiffusionConfig, cfg.get("diffusion", {}))
+        try:
+            guidance = Guidance(**cfg["guidance"]) if cfg.get("guidance") is not None else None
+        except (TypeError, ValueError) as err:
+            raise CheckpointError(f"{cfg_path}: bad \"guidance\" entry {cfg.get('guidance')!r} ({err})") from err
         return cls(vae, denoiser, text_encoder, stats["mean"].numpy(), stats["std"].numpy(),
-                   diffusion=diffusion, solver=cfg.get("solver", "ddim"), source=str(root))
+                   diffusion=diffusion, solver=cfg.get("solver", "ddim"), source=str(root), guidance=guidance)
 
     def save_pretrained(self, path: str | Path, *, dtype: torch.dtype | None = None, meta: dict | None = None) -> Path:
         """Write this pipeline as a folder that :meth:`from_pretrained` reads."""
@@ -254,7 +264,7 @@ class SaladPipeline:
         doc = {"vae": "vae", "denoiser": "denoiser", "stats": "stats.safetensors",
                "text_encoder": getattr(self.text_encoder, "source", "minilm"),
                "diffusion": config_to_dict(self.diffusion), "solver": self.solver,
-               "skeleton": self.skeleton.name}
+               "guidance": asdict(self.guidance), "skeleton": self.skeleton.name}
         atomic_write_text(root / "pipeline.json", json.dumps(doc, indent=2) + "\n")
         return root
 
@@ -326,8 +336,8 @@ class SaladPipeline:
 
     # ------------------------------------------------------------------ generate
     def __call__(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None = None,
-                 seed: int | Sequence[int] = 0, guidance_scale: float = 7.5, num_steps: int = 50,
-                 solver: str | None = None, capture_attention: bool | Any = False,
+                 seed: int | Sequence[int] = 0, guidance_scale: "float | Guidance | None" = None,
+                 num_steps: int = 50, solver: str | None = None, capture_attention: bool | Any = False,
                  noise: torch.Tensor | None = None, progress: bool = False) -> MotionOutput:
         """Generate one motion per prompt.
 
@@ -338,8 +348,11 @@ class SaladPipeline:
             Frames per motion (default 120 = 6 s at 20 fps), multiples of 4, at most 196.
         seed : int or list of int
             Sample ``b`` uses noise seed ``seed + b`` (or ``seed[b]`` for a list).
-        guidance_scale : float
-            Classifier-free guidance weight ``w`` (paper default 7.5; 1 disables guidance).
+        guidance_scale : float or Guidance, optional
+            Classifier-free guidance: None uses the weights' default (:attr:`guidance`); a number
+            replaces its weight ``w`` only (paper default 7.5; 1 disables guidance); a
+            :class:`~salad_core.sampling.Guidance` (weight, rescale, interval) is used as given
+            (``Guidance(7.5)`` is the paper's sampler).
         num_steps : int
             Sampler steps (50 DDIM steps by default).
         solver : str, optional
@@ -352,7 +365,7 @@ class SaladPipeline:
         """
         prompts = validate_prompts(prompts)
         lengths = validate_lengths(lengths, len(prompts), self.skeleton)
-        guidance_scale = _check_scale(guidance_scale)
+        guidance = self.resolve_guidance(guidance_scale)
         if not isinstance(num_steps, (int, np.integer)) or isinstance(num_steps, bool) or num_steps < 1:
             raise ValueError(f"num_steps must be a positive integer, got {num_steps!r}")
         seeds = _seeds(seed, len(prompts))
@@ -363,7 +376,7 @@ class SaladPipeline:
             noise = _check_noise(noise, (len(prompts), n_lat, *self.latent_shape))
         text, null = self.encode_text(prompts)
         uncond = self.denoiser.prepare_text(null.features, null.mask)
-        settings = dict(guidance_scale=guidance_scale, num_steps=int(num_steps), solver=solver or self.solver,
+        settings = dict(_guidance_settings(guidance), num_steps=int(num_steps), solver=solver or self.solver,
                         weights=self.source)
         attention = None
         if capture_attention:
@@ -373,14 +386,23 @@ class SaladPipeline:
             mask = self.frame_mask(lengths, n_lat)
             with capture_cross_attention(self.denoiser, text, lengths, capture_attention) as store:
                 latents = denoise(self.denoiser, make_scheduler(self.diffusion, solver or self.solver), cond, uncond,
-                                  noise, mask, guidance_scale=guidance_scale, num_steps=int(num_steps),
+                                  noise, mask, guidance_scale=guidance, num_steps=int(num_steps),
                                   controller_hooks=[store.on_step], progress=progress)
             attention = store.result()
         else:
-            latents = self._denoise_in_chunks(text, uncond, noise, lengths, guidance_scale, int(num_steps),
+            latents = self._denoise_in_chunks(text, uncond, noise, lengths, guidance, int(num_steps),
                                               solver or self.solver, progress)
         feats, joints = self.decode(latents, lengths)
         return MotionOutput(feats, joints, prompts, lengths, latents, noise, seeds, attention, settings)
+
+    def resolve_guidance(self, guidance_scale: "float | Guidance | None" = None) -> Guidance:
+        """The :class:`~salad_core.sampling.Guidance` a call uses: None -> :attr:`guidance`; a number ->
+        :attr:`guidance` with that weight; a Guidance -> itself."""
+        if guidance_scale is None:
+            return self.guidance
+        if isinstance(guidance_scale, Guidance):
+            return guidance_scale
+        return replace(self.guidance, scale=_check_scale(guidance_scale))
 
     def chunk_size(self) -> int:
         """Motions per denoising chunk: :attr:`max_batch` if set, else 32 when the allocator is tuned
@@ -395,7 +417,7 @@ class SaladPipeline:
         return 32 if allocator_tuned() else 8
 
     def _denoise_in_chunks(self, text: TextBatch, uncond: Any, noise: torch.Tensor, lengths: Sequence[int],
-                           guidance_scale: float, num_steps: int, solver: str, progress: bool) -> torch.Tensor:
+                           guidance: Guidance, num_steps: int, solver: str, progress: bool) -> torch.Tensor:
         """Denoise the ``B`` motions in consecutive chunks of at most :meth:`chunk_size` motions (one
         chunk when ``B`` is not larger), each at its own longest length; returns latents ``(B, N', P, Dz)`` as one
         call would (zero past each length).
@@ -412,14 +434,15 @@ class SaladPipeline:
             cond = self.denoiser.prepare_text(text.features[rows], text.mask[rows])
             latents[rows, :n_lat] = denoise(self.denoiser, make_scheduler(self.diffusion, solver), cond, uncond,
                                             noise[rows, :n_lat], self.frame_mask(lengths[rows], n_lat),
-                                            guidance_scale=guidance_scale, num_steps=num_steps, progress=progress)
+                                            guidance_scale=guidance, num_steps=num_steps, progress=progress)
         return latents
 
     # ------------------------------------------------------------------ edit
     def edit(self, source: str | Sequence[str] | None = None, target: str | Sequence[str] | None = None,
              edits: Any = (), lengths: int | Sequence[int] | None = None, seed: int | Sequence[int] = 0,
-             guidance_scale: float | None = None, num_steps: int | None = None, solver: str | None = None,
-             noise: torch.Tensor | None = None, inversion: Any = None, capture_attention: bool | Any = False,
+             guidance_scale: "float | Guidance | None" = None, num_steps: int | None = None,
+             solver: str | None = None, noise: torch.Tensor | None = None, inversion: Any = None,
+             capture_attention: bool | Any = False,
              probe: bool = False, progress: bool = False) -> EditOutput:
         """Zero-shot editing by attention modulation (SALAD supplement B, Algorithm 1).
 
@@ -441,7 +464,7 @@ class SaladPipeline:
         lengths, seed, solver, noise
             As :meth:`__call__`.
         guidance_scale, num_steps : optional
-            Default 7.5 and 50, or the inversion's.
+            As :meth:`__call__` (default: :attr:`guidance` and 50), or the inversion's.
         inversion : Inversion, optional
             From :meth:`invert`: edit a given motion. Its prompts, lengths, noise, guidance,
             steps and per-step null texts / corrections are used.
@@ -464,7 +487,7 @@ class SaladPipeline:
         edits = validate_edits(edits)
         null_schedule = corrections = None
         if inversion is not None:
-            prompts, lengths, noise, guidance_scale, num_steps = self._from_inversion(
+            prompts, lengths, noise, guidance, num_steps = self._from_inversion(
                 inversion, source, lengths, noise, guidance_scale, num_steps, solver)
             seeds: list[int] = []
             solver = "ddim"
@@ -475,7 +498,7 @@ class SaladPipeline:
                                  "given motion")
             prompts = validate_prompts(source)
             lengths = validate_lengths(lengths, len(prompts), self.skeleton)
-            guidance_scale = _check_scale(7.5 if guidance_scale is None else guidance_scale)
+            guidance = self.resolve_guidance(guidance_scale)
             num_steps = _check_steps(50 if num_steps is None else num_steps)
             seeds = _seeds(seed, len(prompts))
             n_lat = max(lengths) // self.skeleton.unit_length
@@ -497,7 +520,7 @@ class SaladPipeline:
             null_width = null.features.shape[1]
         width = max(text_src.features.shape[1], text_tgt.features.shape[1], null_width)
         controller = EditController(edits, TokenInfo.from_batch(text_src), TokenInfo.from_batch(text_tgt), width,
-                                    cfg=guidance_scale != 1.0, probe=probe)
+                                    cfg=guidance.cfg, probe=probe)
         if capture_attention:
             cap = as_capture_config(capture_attention)
             dc = self.denoiser.config
@@ -513,10 +536,10 @@ class SaladPipeline:
         run = edit_latents(self.denoiser, scheduler, controller,
                            source=self.denoiser.prepare_text(text_src.features, text_src.mask),
                            target=self.denoiser.prepare_text(text_tgt.features, text_tgt.mask),
-                           null=null_schedule, noise=noise, frame_mask=mask, guidance_scale=guidance_scale,
+                           null=null_schedule, noise=noise, frame_mask=mask, guidance_scale=guidance,
                            num_steps=int(num_steps), corrections=corrections, progress=progress)
-        generation_rows = (2 if guidance_scale != 1.0 else 1) * len(prompts) * int(num_steps)
-        settings = dict(guidance_scale=guidance_scale, num_steps=int(num_steps), solver=solver, weights=self.source)
+        generation_rows = (2 if guidance.cfg else 1) * len(prompts) * int(num_steps)
+        settings = dict(_guidance_settings(guidance), num_steps=int(num_steps), solver=solver, weights=self.source)
         out = []
         for branch, latents, texts in (("source", run.source, prompts), ("edited", run.edited, targets)):
             feats, joints = self.decode(latents, lengths)
@@ -537,19 +560,21 @@ class SaladPipeline:
             raise ValueError(f"lengths={lengths!r} differ from the inverted motions' {inversion.lengths}; omit lengths")
         if noise is not None:
             raise ValueError("noise cannot be given with an inversion: the inversion is the noise")
-        if guidance_scale is not None and float(guidance_scale) != inversion.guidance_scale:
+        made_for = _inversion_guidance(inversion)
+        if guidance_scale is not None and self.resolve_guidance(guidance_scale) != made_for:
             raise ValueError(f"guidance_scale={guidance_scale} but the inversion is faithful to "
-                             f"{inversion.guidance_scale}; invert again with that scale")
+                             f"{_describe_guidance(made_for)}; invert again with that guidance")
         if num_steps is not None and int(num_steps) != inversion.num_steps:
             raise ValueError(f"num_steps={num_steps} but the inversion has {inversion.num_steps} steps")
         if solver is not None and solver.lower() != "ddim":
             raise ValueError(f"solver={solver!r}: an inversion is made for the deterministic 'ddim' sampler")
-        return prompts, list(inversion.lengths), inversion.noise, inversion.guidance_scale, inversion.num_steps
+        return prompts, list(inversion.lengths), inversion.noise, made_for, inversion.num_steps
 
     # ------------------------------------------------------------------ inversion
     def invert(self, motions: Any, prompts: str | Sequence[str], *, method: str = "fixed_point",
-               guidance_scale: float = 7.5, num_steps: int = 50, iterations: int | None = None,
-               exact: bool = True, reconstruct: bool = True, progress: bool = False) -> Any:
+               guidance_scale: "float | Guidance | None" = None, num_steps: int = 50,
+               iterations: int | None = None, exact: bool = True, reconstruct: bool = True,
+               progress: bool = False) -> Any:
         """Invert given motions to noise under their prompts, so that :meth:`edit` can edit them.
 
         Parameters
@@ -564,7 +589,8 @@ class SaladPipeline:
             :mod:`salad_core.attention.inversion`; chosen by the reconstruction errors measured by
             ``scripts/measure_editing.py``.
         guidance_scale, num_steps
-            The sampling settings the inversion is made for (edits must use the same).
+            The sampling settings the inversion is made for (edits must use the same); guidance as
+            in :meth:`__call__`.
         iterations : int, optional
             Fixed-point updates or null-text optimiser steps per sampling step.
         exact : bool
@@ -589,7 +615,7 @@ class SaladPipeline:
         feats = _motion_list(motions, self.skeleton)
         if len(feats) != len(prompts):
             raise ValueError(f"got {len(feats)} motions and {len(prompts)} prompts; give one prompt per motion")
-        guidance_scale = _check_scale(guidance_scale)
+        guidance = self.resolve_guidance(guidance_scale)
         num_steps = _check_steps(num_steps)
         unit = self.skeleton.unit_length
         lengths = [f.shape[0] for f in feats]
@@ -603,10 +629,10 @@ class SaladPipeline:
         res = invert_latents(self.denoiser, make_scheduler(self.diffusion, "ddim"), latents,
                              self.denoiser.prepare_text(text.features, text.mask),
                              self.denoiser.prepare_text(null.features, null.mask), mask, method=method,
-                             guidance_scale=guidance_scale, num_steps=num_steps, iterations=iterations,
+                             guidance_scale=guidance, num_steps=num_steps, iterations=iterations,
                              exact=exact, progress=progress)
         inv = Inversion(prompts=prompts, lengths=lengths, features=feats, latents=latents, noise=res.noise,
-                        trajectory=res.trajectory, method=method, guidance_scale=guidance_scale,
+                        trajectory=res.trajectory, method=method, guidance_scale=guidance.scale, guidance=guidance,
                         num_steps=num_steps, exact=bool(exact),
                         iterations=DEFAULT_ITERATIONS[method] if iterations is None else int(iterations),
                         null_texts=res.null_texts,
@@ -641,7 +667,7 @@ class SaladPipeline:
         from salad_core.attention.editing import edit_latents
 
         prompts, lengths = list(inversion.prompts), list(inversion.lengths)
-        w, steps = inversion.guidance_scale, inversion.num_steps
+        w, steps = _inversion_guidance(inversion), inversion.num_steps
         text, null = self.encode_text(prompts)
         if inversion.null_texts is not None:
             nulls = [self.denoiser.prepare_text(f, inversion.null_mask) for f in inversion.null_texts]
@@ -650,7 +676,7 @@ class SaladPipeline:
             nulls = self.denoiser.prepare_text(null.features, null.mask)
             null_width = null.features.shape[1]
         info = TokenInfo.from_batch(text)
-        controller = EditController((), info, info, max(text.features.shape[1], null_width), cfg=w != 1.0,
+        controller = EditController((), info, info, max(text.features.shape[1], null_width), cfg=w.cfg,
                                     edited=False)
         if capture_attention:
             dc = self.denoiser.config
@@ -665,8 +691,26 @@ class SaladPipeline:
         feats, joints = self.decode(run.source, lengths)
         maps = controller.stores["source"].result() if capture_attention else None
         return MotionOutput(feats, joints, prompts, lengths, run.source, inversion.noise, [], maps,
-                            dict(guidance_scale=w, num_steps=steps, solver="ddim", weights=self.source,
+                            dict(_guidance_settings(w), num_steps=steps, solver="ddim", weights=self.source,
                                  inversion=inversion.method))
+
+
+def _guidance_settings(guidance: Guidance) -> dict[str, Any]:
+    """The guidance entries of an output's ``settings``."""
+    return dict(guidance_scale=guidance.scale, guidance_rescale=guidance.rescale, guidance_interval=guidance.interval)
+
+
+def _describe_guidance(guidance: Guidance) -> str:
+    """``7.5``, or ``7.5 (rescale 0.7, interval (0.1, 0.9))`` when refined."""
+    extra = [f"rescale {guidance.rescale:g}"] * (guidance.rescale > 0)
+    extra += [f"interval {guidance.interval}"] * (guidance.interval is not None)
+    return f"{guidance.scale:g}" + (f" ({', '.join(extra)})" if extra else "")
+
+
+def _inversion_guidance(inversion: Any) -> Guidance:
+    """The guidance an inversion is faithful to (older inversions carry only the weight)."""
+    made = getattr(inversion, "guidance", None)
+    return made if made is not None else Guidance(inversion.guidance_scale)
 
 
 def check_compatible(vae: MotionVAE, denoiser: Denoiser, text_encoder=None) -> None:

@@ -10,6 +10,7 @@ from salad_core.models.denoiser import Denoiser, DenoiserConfig
 from salad_core.sampling import (
     SOLVERS,
     DiffusionConfig,
+    Guidance,
     StepInfo,
     denoise,
     make_scheduler,
@@ -158,6 +159,98 @@ def test_guidance_scale_one_is_the_conditional_branch_and_uncond_required_otherw
     torch.testing.assert_close(only_cond, ref, atol=1e-5, rtol=1e-5)
     with pytest.raises(ValueError, match="uncond"):
         denoise(model, make_scheduler(), cond, None, noise, fm, guidance_scale=3.0)
+
+
+def _reference_with(model, sched, cond, uncond, noise, frame_mask, combine, steps):
+    """Two-pass CFG with a custom ``combine(u, c, t, keep) -> pred`` (reference for Guidance)."""
+    model.eval()
+    sched.set_timesteps(steps)
+    keep = frame_mask[:, :, None, None].float()
+    z = noise * keep
+    b = noise.shape[0]
+    with torch.no_grad():
+        for t in sched.timesteps:
+            u = model(z, t, uncond[0].expand(b, -1, -1), uncond[1].expand(b, -1), frame_mask)
+            c = model(z, t, cond[0], cond[1], frame_mask)
+            z = sched.step(combine(u, c, int(t), keep), t, z).prev_sample * keep
+    return z
+
+
+def test_guidance_rescale_matches_lin_et_al_on_valid_frames():
+    model, cond, null, noise, fm = _setup()
+    phi, w = 0.7, 7.5
+
+    def rescaled(u, c, t, keep):
+        pred = u + w * (c - u)
+        out = torch.empty_like(pred)
+        for i in range(pred.shape[0]):      # per sample, valid frames only, unbiased std
+            valid = keep[i, :, 0, 0] > 0
+            ratio = c[i, valid].std() / pred[i, valid].std()
+            out[i] = phi * pred[i] * ratio + (1 - phi) * pred[i]
+        return out
+
+    ref = _reference_with(model, make_scheduler(), cond, null, noise, fm, rescaled, 6)
+    out = denoise(model, make_scheduler(), cond, null, noise, fm, guidance_scale=Guidance(w, rescale=phi),
+                  num_steps=6)
+    assert (out - ref).abs().max().item() < 1e-5
+    plain = denoise(model, make_scheduler(), cond, null, noise, fm, guidance_scale=w, num_steps=6)
+    assert (out - plain).abs().max().item() > 1e-3          # the rescale changes the samples
+    # rescale 1: the guided prediction has exactly the conditional prediction's std
+    g = Guidance(w, rescale=1.0)
+    u, c = torch.randn(2, 3, 4, 7, 5).unbind(0)
+    pred = g.combine(u, c)
+    torch.testing.assert_close(pred.flatten(1).std(1), c.flatten(1).std(1))
+
+
+def test_guidance_interval_guides_only_inside_and_skips_the_unconditional_rows():
+    model, cond, null, noise, fm = _setup()
+    sched = make_scheduler()
+    lo, hi = 0.3, 0.7
+    inside = lambda t: lo <= t / 1000 <= hi                           # noqa: E731
+
+    ref = _reference_with(model, make_scheduler(), cond, null, noise, fm,
+                          lambda u, c, t, keep: u + 7.5 * (c - u) if inside(t) else c, 8)
+    rows = []
+    hook = model.register_forward_hook(lambda mod, args, kw_out: rows.append(args[0].shape[0]))
+    try:
+        out = denoise(model, sched, cond, null, noise, fm, guidance_scale=Guidance(7.5, interval=(lo, hi)),
+                      num_steps=8)
+    finally:
+        hook.remove()
+    assert (out - ref).abs().max().item() < 1e-5
+    b = noise.shape[0]
+    assert rows == [2 * b if inside(int(t)) else b for t in sched.timesteps]
+    assert 0 < rows.count(2 * b) < len(rows)
+    # an interval covering every step is plain CFG
+    full = denoise(model, make_scheduler(), cond, null, noise, fm, guidance_scale=Guidance(7.5, interval=(0, 1)),
+                   num_steps=8)
+    torch.testing.assert_close(full, denoise(model, make_scheduler(), cond, null, noise, fm, num_steps=8))
+
+
+@pytest.mark.parametrize("kwargs, word", [(dict(rescale=1.5), "rescale"), (dict(rescale=-0.1), "rescale"),
+                                          (dict(interval=(0.8, 0.2)), "interval"), (dict(interval="x"), "interval"),
+                                          (dict(scale=float("nan")), "scale"), (dict(scale="7.5"), "scale")])
+def test_guidance_validation_names_the_field(kwargs, word):
+    with pytest.raises(ValueError, match=word):
+        Guidance(**kwargs)
+
+
+def test_pipeline_guidance_defaults_overrides_and_round_trip(make_tiny_pipeline, tmp_path):
+    pipe = make_tiny_pipeline()
+    assert pipe.guidance == Guidance(7.5)                             # no "guidance" entry: the paper's
+    pipe.guidance = Guidance(4.0, rescale=0.5, interval=(0.1, 0.9))
+    assert pipe.resolve_guidance(None) == pipe.guidance
+    assert pipe.resolve_guidance(2.0) == Guidance(2.0, rescale=0.5, interval=(0.1, 0.9))   # weight only
+    assert pipe.resolve_guidance(Guidance(7.5)) == Guidance(7.5)                          # as given
+    out = pipe("a person walks forward", lengths=16, num_steps=3)
+    assert out.settings["guidance_scale"] == 4.0 and out.settings["guidance_rescale"] == 0.5
+    assert out.settings["guidance_interval"] == (0.1, 0.9)
+    from salad_core.pipeline import SaladPipeline
+
+    pipe.save_pretrained(tmp_path / "p")
+    again = SaladPipeline.from_pretrained(tmp_path / "p", text_encoder=pipe.text_encoder)
+    assert again.guidance == pipe.guidance
+    torch.testing.assert_close(again("a person walks forward", lengths=16, num_steps=3).latents, out.latents)
 
 
 def test_hooks_and_callback_see_every_step_and_mode_is_restored():

@@ -27,7 +27,7 @@ import torch.nn.functional as F
 
 from salad_core.models.attention import use_processors
 from salad_core.models.denoiser import Denoiser, TextContext
-from salad_core.sampling import StepInfo
+from salad_core.sampling import StepInfo, Guidance, as_guidance
 
 from .controller import EditController, RowLayout
 from .processor import HookedProcessor
@@ -63,7 +63,8 @@ def _expand(ctx: TextContext, b: int) -> TextContext:
 
 def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, source: TextContext,
                  target: TextContext | None, null: TextContext | Sequence[TextContext] | None,
-                 noise: torch.Tensor, frame_mask: torch.Tensor | None = None, guidance_scale: float = 7.5,
+                 noise: torch.Tensor, frame_mask: torch.Tensor | None = None,
+                 guidance_scale: "float | Guidance" = 7.5,
                  num_steps: int = 50, corrections: torch.Tensor | None = None, progress: bool = False,
                  generator: torch.Generator | None = None) -> EditRun:
     """Sample the source and the edited motion latents together (see the module docstring).
@@ -85,7 +86,9 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
     frame_mask : torch.Tensor, optional
         ``(B, N')`` bool, True = valid latent frame.
     guidance_scale, num_steps
-        As :func:`salad_core.sampling.denoise`.
+        As :func:`salad_core.sampling.denoise` (a :class:`~salad_core.sampling.Guidance` with an
+        interval still runs the unconditional rows at every step here; outside the interval their
+        output is not used, so source and edit follow the plain sampler's guided prediction).
     corrections : torch.Tensor, optional
         ``(S, B, N', P, Dz)`` added to both branches after step ``i`` (exact inversion).
 
@@ -99,11 +102,12 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
     if controller.batch != b:
         raise ValueError(f"the controller pairs {controller.batch} prompts but the noise has batch {b}")
     edited = controller.edited
-    use_cfg = guidance_scale != 1.0
+    guidance = as_guidance(guidance_scale)
+    use_cfg = guidance.cfg
     if use_cfg != controller.cfg:
-        raise ValueError(f"controller built with cfg={controller.cfg} but guidance_scale={guidance_scale}")
+        raise ValueError(f"controller built with cfg={controller.cfg} but guidance_scale={guidance.scale}")
     if use_cfg and null is None:
-        raise ValueError(f"guidance_scale={guidance_scale} needs the null text; pass null= or use guidance_scale=1")
+        raise ValueError(f"guidance_scale={guidance.scale} needs the null text; pass null= or use guidance_scale=1")
     per_step_null = isinstance(null, (list, tuple))
     if per_step_null and len(null) != num_steps:
         raise ValueError(f"got {len(null)} per-step null texts for num_steps={num_steps}")
@@ -147,6 +151,7 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
     step_kwargs = {"generator": generator} if "generator" in inspect.signature(scheduler.step).parameters else {}
     scheduler.set_timesteps(num_steps, device=noise.device)
     timesteps = scheduler.timesteps
+    num_train = int(scheduler.config.num_train_timesteps)
     if len(timesteps) != num_steps:
         raise ValueError(f"the scheduler made {len(timesteps)} timesteps for num_steps={num_steps}")
     kinds = {"cross"} | {k for e in controller.injections for k in e.kinds}
@@ -189,11 +194,11 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
                 pairs = [(lay.source_uncond, lay.source_cond)]
                 if edited:
                     pairs.append((lay.edited_uncond, lay.edited_cond))
+                active = guidance.active(float(t), num_train)
                 for u_rows, c_rows in pairs:
                     cond = out[c_rows]
                     if lay.cfg:
-                        uncond = out[u_rows]
-                        cond = uncond + guidance_scale * (cond - uncond)    # eq. 9
+                        cond = guidance.combine(out[u_rows], cond, keep=keep, active=active)   # eq. 9
                     preds.append(cond)
                 z = scheduler.step(torch.cat(preds), t, z, **step_kwargs).prev_sample
                 if corrections is not None:

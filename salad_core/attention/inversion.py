@@ -80,6 +80,7 @@ import numpy as np
 import torch
 
 from salad_core.models.denoiser import Denoiser, TextContext
+from salad_core.sampling import Guidance, as_guidance
 
 __all__ = [
     "INVERSION_METHODS",
@@ -155,13 +156,14 @@ class LatentInversion:
 
 
 def _guided(denoiser: Denoiser, x: torch.Tensor, t: torch.Tensor, cond: TextContext, both: TextContext | None,
-            mask: torch.Tensor, w: float) -> torch.Tensor:
-    """Guided prediction (eq. 9); ``both`` = ``[null (B); cond (B)]`` context, None when w = 1."""
-    if both is None:
+            mask: torch.Tensor, guidance: Guidance, num_train: int = 1000) -> torch.Tensor:
+    """Guided prediction (eq. 9, :meth:`Guidance.combine`); ``both`` = ``[null (B); cond (B)]`` context,
+    None when w = 1. Outside the guidance interval the conditional rows run alone, as in
+    :func:`~salad_core.sampling.denoise`."""
+    if both is None or not guidance.active(float(t), num_train):
         return denoiser(x, t, frame_mask=mask, text_context=cond)
     out = denoiser(torch.cat([x, x]), t, frame_mask=torch.cat([mask, mask]), text_context=both)
-    uncond, c = out.chunk(2)
-    return uncond + w * (c - uncond)
+    return guidance.combine(*out.chunk(2), keep=mask[:, :, None, None].to(out.dtype))
 
 
 def _rms(x: torch.Tensor, keep: torch.Tensor) -> float:
@@ -170,7 +172,7 @@ def _rms(x: torch.Tensor, keep: torch.Tensor) -> float:
 
 def invert_latents(denoiser: Denoiser, scheduler, latents: torch.Tensor, cond: TextContext,
                    null: TextContext | None, frame_mask: torch.Tensor | None = None, *,
-                   method: str = "fixed_point", guidance_scale: float = 7.5, num_steps: int = 50,
+                   method: str = "fixed_point", guidance_scale: "float | Guidance" = 7.5, num_steps: int = 50,
                    iterations: int | None = None, exact: bool = False, learning_rate: float = 1e-2,
                    progress: bool = False) -> LatentInversion:
     """Invert clean latents to the noise from which the guided DDIM sampler regenerates them.
@@ -191,7 +193,8 @@ def invert_latents(denoiser: Denoiser, scheduler, latents: torch.Tensor, cond: T
     method : str
         One of :data:`INVERSION_METHODS` (see the module docstring).
     guidance_scale, num_steps
-        The sampling settings the inversion must be faithful to.
+        The sampling settings the inversion must be faithful to (a CFG weight or a
+        :class:`~salad_core.sampling.Guidance`; null-text inversion takes a plain weight only).
     iterations : int, optional
         Fixed-point updates or null-text optimiser steps per sampling step (defaults
         :data:`DEFAULT_ITERATIONS`).
@@ -207,9 +210,13 @@ def invert_latents(denoiser: Denoiser, scheduler, latents: torch.Tensor, cond: T
     iterations = DEFAULT_ITERATIONS[method] if iterations is None else int(iterations)
     if iterations < 0 or (method != "ddim" and iterations < 1):
         raise ValueError(f"iterations={iterations} must be >= 1 for method {method!r}")
-    w = float(guidance_scale)
+    guidance = as_guidance(guidance_scale)
+    w = guidance.scale
     if w != 1.0 and null is None:
         raise ValueError(f"guidance_scale={w} needs the null text")
+    if method == "null_text" and guidance != Guidance(w):
+        raise ValueError(f"null-text inversion takes a plain guidance weight, got {guidance}; use method='fixed_point'")
+    num_train = int(scheduler.config.num_train_timesteps)
     b, n = latents.shape[:2]
     cond = cond.repeat(b)
     if frame_mask is None:
@@ -227,7 +234,6 @@ def invert_latents(denoiser: Denoiser, scheduler, latents: torch.Tensor, cond: T
     traj[s_count] = latents * keep
     residuals = np.full(s_count, np.nan)
     corrections = torch.zeros((s_count, *latents.shape), dtype=latents.dtype) if exact else None
-    rows_w = 2 * b if w != 1.0 else b
     was_training = denoiser.training
     denoiser.eval()
     bar = None
@@ -245,8 +251,8 @@ def invert_latents(denoiser: Denoiser, scheduler, latents: torch.Tensor, cond: T
                 if method == "fixed_point":
                     z_b, best, best_res, best_pred = z_a, None, math.inf, None
                     for k in range(iterations + 1):
-                        pred = _guided(denoiser, z_b, tt, cond, both, frame_mask, w)
-                        rows += rows_w
+                        pred = _guided(denoiser, z_b, tt, cond, both, frame_mask, guidance, num_train)
+                        rows += 2 * b if both is not None and guidance.active(float(t), num_train) else b
                         if k > 0:
                             res = _rms(alpha * z_b + beta * pred - z_a, keep)
                             if res < best_res:
@@ -257,7 +263,7 @@ def invert_latents(denoiser: Denoiser, scheduler, latents: torch.Tensor, cond: T
                     if exact:
                         corrections[i] = (z_a - (alpha * best + beta * best_pred)) * keep
                 else:
-                    pred = _guided(denoiser, z_a, tt, cond, None, frame_mask, 1.0)   # plain: w = 1
+                    pred = _guided(denoiser, z_a, tt, cond, None, frame_mask, Guidance(1.0))   # plain: w = 1
                     rows += b
                     traj[i] = ((z_a - beta * pred) / alpha) * keep
                 if bar is not None:
@@ -268,8 +274,8 @@ def invert_latents(denoiser: Denoiser, scheduler, latents: torch.Tensor, cond: T
                 for i in range(s_count):
                     t, abar_t, abar_next = schedule[i]
                     alpha, beta = ddim_step_coefficients(abar_t, abar_next, pt)
-                    pred = _guided(denoiser, traj[i], t.reshape(1), cond, both, frame_mask, w)
-                    rows += rows_w
+                    pred = _guided(denoiser, traj[i], t.reshape(1), cond, both, frame_mask, guidance, num_train)
+                    rows += 2 * b if both is not None and guidance.active(float(t), num_train) else b
                     miss = (traj[i + 1] - (alpha * traj[i] + beta * pred)) * keep
                     corrections[i] = miss
                     residuals[i] = _rms(miss, keep)
@@ -358,6 +364,7 @@ class Inversion:
     num_steps: int
     exact: bool
     iterations: int
+    guidance: Any = None                           # salad_core.sampling.Guidance made for (None: plain w)
     null_texts: list[torch.Tensor] | None = None   # per step (B, W0, C) (null_text)
     null_mask: torch.Tensor | None = None          # (B, W0) mask of the null-text tokens
     corrections: torch.Tensor | None = None        # (S, B, N', P, Dz) (exact)
