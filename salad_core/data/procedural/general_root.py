@@ -154,6 +154,9 @@ def plant_feet(joints: np.ndarray, flight: np.ndarray | None = None, blend: int 
         foot_vec = joints[:, toe] - joints[:, ankle]
         pole = joints[:, knee] - 0.5 * (joints[:, hip] + joints[:, ankle])
         new_knee, new_ankle = two_bone_ik(joints[:, hip], joints[:, ankle] + corr, body.thigh[k], body.shin[k], pole)
+        # a re-solved leg must not push a knee, ankle or toe into the floor: keep the original there
+        moved &= ((new_knee[:, 1] >= radii[knee] - 1e-9) & (new_ankle[:, 1] >= radii[ankle] - 1e-9)
+                  & (new_ankle[:, 1] + foot_vec[:, 1] >= radii[toe] - 1e-9))
         out[moved, knee] = new_knee[moved]
         out[moved, ankle] = new_ankle[moved]
         out[moved, toe] = new_ankle[moved] + foot_vec[moved]
