@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import itertools
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -45,6 +45,33 @@ VERBS: dict[str, tuple[str, str]] = {
     "hold": ("holds", "holding"), "reach": ("reaches", "reaching"), "clap": ("claps", "clapping"),
     "spread": ("spreads", "spreading"), "nod": ("nods", "nodding"), "shake": ("shakes", "shaking"),
     "look": ("looks", "looking"), "glance": ("glances", "glancing"),
+    # corpus 2.0: new actions, paraphrases and sentence shapes
+    "dance": ("dances", "dancing"), "sway": ("sways", "swaying"), "rock": ("rocks", "rocking"),
+    "groove": ("grooves", "grooving"), "toss": ("tosses", "tossing"), "pitch": ("pitches", "pitching"),
+    "lob": ("lobs", "lobbing"), "bowl": ("bowls", "bowling"), "pick": ("picks", "picking"),
+    "grab": ("grabs", "grabbing"), "stumble": ("stumbles", "stumbling"), "trip": ("trips", "tripping"),
+    "catch": ("catches", "catching"), "regain": ("regains", "regaining"), "lose": ("loses", "losing"),
+    "recover": ("recovers", "recovering"), "fall": ("falls", "falling"), "box": ("boxes", "boxing"),
+    "shadowbox": ("shadowboxes", "shadowboxing"), "jab": ("jabs", "jabbing"), "cross": ("crosses", "crossing"),
+    "swing": ("swings", "swinging"), "scratch": ("scratches", "scratching"), "touch": ("touches", "touching"),
+    "place": ("places", "placing"), "rest": ("rests", "resting"), "stand": ("stands", "standing"),
+    "salute": ("salutes", "saluting"), "give": ("gives", "giving"), "fold": ("folds", "folding"),
+    "circle": ("circles", "circling"), "rotate": ("rotates", "rotating"), "make": ("makes", "making"),
+    "get": ("gets", "getting"), "begin": ("begins", "beginning"), "start": ("starts", "starting"),
+    "keep": ("keeps", "keeping"), "greet": ("greets", "greeting"), "say": ("says", "saying"),
+    "signal": ("signals", "signalling"), "celebrate": ("celebrates", "celebrating"), "wait": ("waits", "waiting"),
+    "think": ("thinks", "thinking"), "exercise": ("exercises", "exercising"), "warm": ("warms", "warming"),
+    "dodge": ("dodges", "dodging"), "avoid": ("avoids", "avoiding"), "search": ("searches", "searching"),
+    "agree": ("agrees", "agreeing"), "disagree": ("disagrees", "disagreeing"), "applaud": ("applauds", "applauding"),
+    "cheer": ("cheers", "cheering"), "fight": ("fights", "fighting"), "spar": ("spars", "sparring"),
+    "hit": ("hits", "hitting"), "thank": ("thanks", "thanking"), "try": ("tries", "trying"),
+    "hear": ("hears", "hearing"), "explore": ("explores", "exploring"), "pace": ("paces", "pacing"),
+    "stride": ("strides", "striding"), "wander": ("wanders", "wandering"), "bounce": ("bounces", "bouncing"),
+    "skip": ("skips", "skipping"), "hurry": ("hurries", "hurrying"), "train": ("trains", "training"),
+    "play": ("plays", "playing"), "show": ("shows", "showing"), "see": ("sees", "seeing"),
+    "rise": ("rises", "rising"), "back": ("backs", "backing"), "clear": ("clears", "clearing"),
+    "stomp": ("stomps", "stomping"), "balance": ("balances", "balancing"), "finish": ("finishes", "finishing"),
+    "ask": ("asks", "asking"), "chase": ("chases", "chasing"), "lean": ("leans", "leaning"), "loosen": ("loosens", "loosening"), "dash": ("dashes", "dashing"), "lower": ("lowers", "lowering"), "attract": ("attracts", "attracting"), "punctuate": ("punctuates", "punctuating"),
 }
 
 #: Word -> (token, POS): the token is the lemma for NOUN and VERB (HumanML3D convention).
@@ -69,14 +96,56 @@ _lex("ADV", "forward backward backwards straight ahead around up down back out t
             "once over forth")
 _lex("ADP", "in on to of with above from at before after into")
 _lex("NUM", "one two three four five")
-_lex("CCONJ", "and")
+_lex("CCONJ", "and but or")
 _lex("SCONJ", "while as")
 _lex("AUX", "is")
+# corpus 2.0 words: objects, body parts, subjects, style and intent, timing and sentence shapes
+_lex("NOUN", "ball balls rock stone frisbee object objects box boxes bag cup pen coin book toy bottle phone "
+             "obstacle log puddle rope hurdle fence hips hip waist chest body forehead brow fists "
+             "jab cross hook hooks uppercut uppercuts combination guard stance boxer "
+             "circles salute dance music beat party rhythm treadmill room stairs staircase balance "
+             "guy lady figure human character individual dancer athlete fighter soldier performer actor "
+             "adult subject friend friends crowd audience officer workout exercise "
+             "clip video animation footage moment pace hurry energy care effort "
+             "noise goodbye hello agreement disbelief confusion thought break attention distance "
+             "motion motions stick bus partner opponent face line knees legs",
+     {"balls": "ball", "objects": "object", "knees": "knee", "legs": "leg", "boxes": "box", "hips": "hip", "fists": "fist", "hooks": "hook",
+      "uppercuts": "uppercut", "circles": "circle", "stairs": "stair", "friends": "friend", "motions": "motion"})
+_lex("ADJ", "heavy small tiny low imaginary invisible military outstretched crossed quick slow fast "
+            "young old elderly tall short athletic sturdy happy excited tired angry nervous calm relaxed "
+            "careful gentle confident casual playful lazy energetic great lively upbeat brief "
+            "whole entire next imaginary short same invisible real own steady light soft sudden hard "
+            "cautious brisk leisurely unsteady awkward middle upper simple")
+_lex("ADV", "overhand underhand upward upwards just simply also simultaneously meanwhile afterwards next "
+            "finally eventually later soon immediately shortly again already suddenly almost "
+            "happily cheerfully joyfully excitedly angrily furiously aggressively powerfully forcefully "
+            "fiercely sadly tiredly wearily lazily calmly casually confidently proudly playfully nervously "
+            "carefully cautiously gently softly lightly smoothly gracefully awkwardly clumsily steadily "
+            "leisurely unhurriedly energetically vigorously briskly swiftly hurriedly eagerly "
+            "enthusiastically impatiently thoughtfully rhythmically hard there when how here")
+_lex("ADP", "like across through throughout during until for by off onto toward towards about")
+_lex("PRON", "himself herself themselves we you it something somebody")
+_lex("DET", "an this another each every no")
+_lex("AUX", "can be are was")
+_lex("SCONJ", "if once because so")
+_lex("PART", "to not")
+_lex("NUM", "six")
 for _lemma, (_pres, _ger) in VERBS.items():
     LEXICON.setdefault(_pres, (_lemma, "VERB"))
     LEXICON.setdefault(_ger, (_lemma, "VERB"))
 # "jumping jacks": spaCy reads "jumping" as a verb form
 LEXICON["jumping"] = ("jump", "VERB")
+LEXICON["seen"] = ("see", "VERB")
+for _w in ("get", "greet", "reach", "rest", "say", "take", "loosen", "fight", "see", "catch"):
+    LEXICON[_w] = (_w, "VERB")      # bare infinitives ("to rest", "to greet someone")
+_lex("NOUN", "step end excitement baseball pitcher question lot part")
+_lex("ADJ", "late ready confused annoyed")
+_lex("ADV", "away")
+_lex("PRON", "who")
+_lex("DET", "which")
+_lex("ADP", "without")
+LEXICON["done"] = ("do", "VERB")
+LEXICON["lost"] = ("lose", "VERB")
 
 #: Subjects: (words, possessives, object pronoun per possessive, subject pronoun or None).
 SUBJECTS: tuple[tuple[str, tuple[str, ...], str | None], ...] = (
@@ -85,6 +154,7 @@ SUBJECTS: tuple[tuple[str, tuple[str, ...], str | None], ...] = (
     ("the person", ("their", "his"), None), ("someone", ("their", "his"), None),
 )
 _OBJECT = {"his": "him", "her": "her", "their": "them"}
+_REFLEXIVE = {"his": "himself", "her": "herself", "their": "themselves"}
 _COUNT = {1: "one", 2: "two", 3: "three", 4: "four", 5: "five"}
 _REPS = {2: ("twice", "two times"), 3: ("three times",), 4: ("four times",), 5: ("five times",)}
 _MIRROR_WORDS = {"left": "right", "right": "left", "clockwise": "counterclockwise",
@@ -224,6 +294,129 @@ RULES: dict[str, list[Rule]] = {
 }
 
 
+def _RS(template: str, sides=_N, **kw) -> list[Rule]:
+    """Rules for every choice of the ``[a|b|c]`` groups of ``template`` (choices may hold spaces)."""
+    parts = re.split(r"(\[[^\]]*\])", template)
+    choices = [p[1:-1].split("|") if p.startswith("[") else [p] for p in parts]
+    return [Rule(" ".join("".join(c).split()), sides, **kw) for c in itertools.product(*choices)]
+
+
+def _rules(*groups) -> list[Rule]:
+    out: list[Rule] = []
+    for g in groups:
+        out += g if isinstance(g, list) else [g]
+    return out
+
+
+_LRN = ("left", "right")
+_ONE_THING = "[something|an object/NOUN|a ball/NOUN|a cup/NOUN|a pen/NOUN|a coin/NOUN|a book/NOUN|a toy/NOUN|a bottle/NOUN|a phone/NOUN]"
+_BIG_THING = "[a box/NOUN|a heavy/ADJ box/NOUN|something|an object/NOUN|a bag/NOUN|a ball/NOUN]"
+_OBSTACLE = "[something|an obstacle/NOUN|a small obstacle/NOUN|a box/NOUN|a log/NOUN|a puddle/NOUN|a rope/NOUN|a hurdle/NOUN|a low/ADJ fence/NOUN]"
+RULES.update({
+    # dance
+    "dance": _rules(_R("V:dance"), _R("V:dance around"), _R("V:dance in place"), _R("V:do a little dance/NOUN"),
+                    _R("V:dance from side/NOUN to side/NOUN"), _R("V:step from side/NOUN to side/NOUN"),
+                    _R("V:dance a few steps/NOUN"), _R("V:groove from side/NOUN to side/NOUN"),
+                    _R("V:do a side/NOUN to side/NOUN dance/NOUN"), _R("V:do a simple/ADJ dance/NOUN step/NOUN")),
+    "sway": _rules(_R("V:sway from side/NOUN to side/NOUN"), _R("V:sway {poss} hips"), _R("V:sway side/NOUN to side/NOUN"),
+                   _R("V:sway {poss} hips from side/NOUN to side/NOUN"), _R("V:rock from side/NOUN to side/NOUN"),
+                   _R("V:move {poss} hips from side/NOUN to side/NOUN"), _R("V:rock {poss} hips")),
+    # everyday
+    "throw": _rules(_RS("V:throw [a ball/NOUN|something|an object/NOUN|a rock/NOUN|a stone/NOUN|a frisbee/NOUN]", _LRN),
+                    _RS("V:throw [a ball/NOUN|something|a stone/NOUN] with {poss} {side} hand", _LRN),
+                    _R("V:throw with {poss} {side} arm", _LRN), _R("V:make a throwing/NOUN motion/NOUN", _LRN),
+                    _R("V:make a throwing/NOUN motion/NOUN with {poss} {side} arm", _LRN),
+                    _RS("V:pitch [a ball/NOUN|a ball/NOUN with {poss} {side} hand]", _LRN),
+                    _RS("V:throw [a ball/NOUN|something] overhand", _LRN),
+                    _R("V:throw a ball/NOUN overhand with {poss} {side} hand", _LRN),
+                    _RS("V:[throw|toss] [a ball/NOUN|something] underhand", _LRN, variant="underhand"),
+                    _RS("V:toss [a ball/NOUN|something|an object/NOUN] with {poss} {side} hand", _LRN, variant="underhand"),
+                    _R("V:toss a ball/NOUN", _LRN, variant="underhand"),
+                    _R("V:bowl a ball/NOUN underhand", _LRN, variant="underhand"),
+                    _R("V:lob a ball/NOUN underhand with {poss} {side} hand", _LRN, variant="underhand")),
+    "pick_up": _rules(_RS(f"V:pick {_ONE_THING} up with {{poss}} {{side}} hand", _LRN),
+                      _RS(f"V:pick up {_ONE_THING} with {{poss}} {{side}} hand", _LRN),
+                      _RS(f"V:bend down and V:pick up {_ONE_THING} with {{poss}} {{side}} hand", _LRN),
+                      _RS("V:reach down and V:grab [something|an object/NOUN] with {poss} {side} hand", _LRN),
+                      _RS(f"V:pick up {_ONE_THING} from the [floor|ground] with {{poss}} {{side}} hand", _LRN),
+                      _RS(f"V:pick up {_BIG_THING} with both hands", _B),
+                      _RS(f"V:bend down and V:pick up {_BIG_THING} with both hands", _B),
+                      _RS(f"V:squat down and V:pick up {_BIG_THING}", _B),
+                      _RS(f"V:lift {_BIG_THING} off the [floor|ground]", _B),
+                      _RS(f"V:pick {_BIG_THING} up from the [floor|ground] with both hands", _B)),
+    "step_over": _rules(_RS(f"V:step over {_OBSTACLE}"), _RS(f"V:walk over {_OBSTACLE}"),
+                        _RS(f"V:step high/ADV over {_OBSTACLE}"),
+                        _RS(f"V:lift {{poss}} legs high/ADV to/PART V:step over {_OBSTACLE}"),
+                        _RS("V:clear [an obstacle/NOUN|a hurdle/NOUN|a low/ADJ fence/NOUN] with high/ADJ steps/NOUN")),
+    "stumble": _rules(_R("V:stumble"), _R("V:stumble forward"), _R("V:trip"), _R("V:trip over something"),
+                      _R("V:trip and V:catch {refl}"), _R("V:stumble and V:regain {poss} balance/NOUN"),
+                      _R("V:lose {poss} balance/NOUN and V:recover"), _R("V:trip and almost V:fall"),
+                      _R("V:walk and suddenly V:stumble"), _R("V:stumble while walking/VERB"),
+                      _R("V:trip on something and V:catch {refl}"), _R("V:stumble but V:keep {poss} balance/NOUN")),
+    # boxing
+    "guard": _rules(_R("V:put up {poss} fists", _B), _R("V:raise {poss} fists", _B), _R("V:hold up {poss} fists", _B),
+                    _R("V:raise {poss} fists in a boxing/NOUN guard/NOUN", _B), _R("V:get into a boxing/NOUN guard/NOUN", _B),
+                    _R("V:hold {poss} hands up like a boxer/NOUN", _B), _R("V:put {poss} guard/NOUN up", _B),
+                    _R("V:hold {poss} fists up in front/NOUN of {poss} face/NOUN", _B)),
+    "jab_cross": _rules(_R("V:throw a jab/NOUN and a cross/NOUN", _LRN), _R("V:do a jab/NOUN cross/NOUN combination/NOUN", _LRN),
+                        _R("V:throw a jab/NOUN with {poss} {side} hand and a cross/NOUN with {poss} {oside} hand", _LRN),
+                        _R("V:jab with {poss} {side} hand and V:cross with {poss} {oside} hand", _LRN),
+                        _R("V:throw a one two/NUM combination/NOUN", _LRN),
+                        _R("V:box", _LRN, reps="implicit"), _R("V:shadowbox", _LRN, reps="implicit"),
+                        _R("V:do some shadowboxing/NOUN", _LRN, reps="implicit"),
+                        _R("V:punch with {poss} {side} hand and then with {poss} {oside} hand", _LRN)),
+    "hook": _rules(_R("V:throw a {side} hook/NOUN", _LRN), _R("V:throw a hook/NOUN with {poss} {side} hand", _LRN),
+                   _R("V:punch with a {side} hook/NOUN", _LRN), _R("V:swing a hook/NOUN with {poss} {side} arm", _LRN),
+                   _R("V:do a {side} hook/NOUN punch/NOUN", _LRN),
+                   _R("V:throw {num} {side} hooks/NOUN", _LRN, reps="count", min_reps=2)),
+    "uppercut": _rules(_R("V:throw a {side} uppercut/NOUN", _LRN), _R("V:throw an uppercut/NOUN with {poss} {side} hand", _LRN),
+                       _R("V:do a {side} uppercut/NOUN", _LRN), _R("V:punch upward with {poss} {side} fist", _LRN),
+                       _R("V:throw an uppercut/NOUN with {poss} {side} fist", _LRN),
+                       _R("V:throw {num} {side} uppercuts/NOUN", _LRN, reps="count", min_reps=2)),
+    # hands on and across the body
+    "hands_on_hips": _rules(_R("V:put {poss} hands on {poss} hips", _B), _R("V:place {poss} hands on {poss} hips", _B),
+                            _R("V:rest {poss} hands on {poss} hips", _B), _R("V:stand with {poss} hands on {poss} hips", _B),
+                            _R("V:put both hands on {poss} hips", _B), _R("V:put {poss} hands on {poss} waist", _B)),
+    "scratch_head": _rules(_R("V:scratch {poss} head with {poss} {side} hand", _LRN), _R("V:scratch {poss} head", _LRN),
+                           _R("V:raise {poss} {side} hand and V:scratch {poss} head", _LRN),
+                           _R("V:scratch the side/NOUN of {poss} head with {poss} {side} hand", _LRN),
+                           _R("V:touch {poss} head with {poss} {side} hand", _LRN)),
+    "salute": _rules(_R("V:salute", _LRN), _R("V:salute with {poss} {side} hand", _LRN), _R("V:give a salute/NOUN", _LRN),
+                     _R("V:give a military salute/NOUN with {poss} {side} hand", _LRN),
+                     _R("V:raise {poss} {side} hand to {poss} forehead in a salute/NOUN", _LRN),
+                     _R("V:bring {poss} {side} hand to {poss} brow", _LRN)),
+    "cross_arms": _rules(_R("V:cross {poss} arms", _B), _R("V:fold {poss} arms", _B),
+                         _R("V:cross {poss} arms over/ADP {poss} chest", _B), _R("V:fold {poss} arms across {poss} chest", _B),
+                         _R("V:stand with {poss} arms crossed", _B), _R("V:cross both arms in front/NOUN of {obj}", _B)),
+    "reach_across": _rules(_R("V:reach across {poss} body with {poss} {side} hand", _LRN),
+                           _R("V:reach across with {poss} {side} arm", _LRN),
+                           _R("V:reach {poss} {side} arm across {poss} body", _LRN),
+                           _R("V:stretch {poss} {side} arm across {poss} chest", _LRN),
+                           _R("V:reach over/ADV to the {oside:NOUN} with {poss} {side} hand", _LRN),
+                           _R("V:extend {poss} {side} hand across {poss} body", _LRN)),
+    "arm_circles": _rules(_R("V:do arm/NOUN circles/NOUN", _B), _R("V:make circles/NOUN with {poss} arms", _B),
+                          _R("V:circle {poss} arms", _B), _R("V:rotate {poss} arms in circles/NOUN", _B),
+                          _R("V:swing {poss} arms in circles/NOUN", _B), _R("V:do some arm/NOUN circles/NOUN", _B),
+                          _R("V:circle {poss} outstretched arms", _B)),
+})
+# paraphrases of the older primitives (corpus 2.0): a treadmill is walking in place
+RULES["walk"] += _rules(_R("V:walk on a treadmill/NOUN", variant="in_place"), _R("V:walk in place on a treadmill/NOUN", variant="in_place"),
+                        _R("V:stride forward"), _R("V:pace forward"), _R("V:walk across the room/NOUN"),
+                        _R("V:walk in a straight line/NOUN"), _R("V:wander forward"))
+RULES["run"] += _rules(_R("V:run across the room/NOUN"), _R("V:run in a straight line/NOUN"), _R("V:dash forward/ADV"))
+RULES["jog"] += _rules(_R("V:jog on a treadmill/NOUN", variant="in_place"), _R("V:run on a treadmill/NOUN", variant="in_place"),
+                       _R("V:jog across the room/NOUN"), _R("V:jog lightly"))
+RULES["jump"] += _rules(_R("V:bounce up and down", expresses=("low",), reps="implicit", min_reps=2),
+                        _R("V:leap into the air", post_height=False), _R("V:jump into the air", post_height=False),
+                        _R("V:skip forward", variant="forward"))
+RULES["kick"] += _rules(_R("V:kick out with {poss} {side} leg", _LR), _R("V:kick {poss} {side} foot out", _LR))
+RULES["squat"] += _rules(_R("V:bend {poss} knees and V:squat"), _R("V:lower {poss} body into a squat/NOUN", post_height=False))
+RULES["bow"] += _rules(_R("V:bow {poss} head and upper/ADJ body"), _R("V:lean forward into a bow/NOUN", post_height=False))
+RULES["clap"] += _rules(_R("V:applaud", _B), _R("V:clap {poss} hands a few times/NOUN", _B))
+RULES["look"] += _rules(_R("V:look over/ADP {poss} {side} shoulder", _LR), _R("V:turn {poss} head {side:ADV}", _LR))
+RULES["sit"] += _rules(_R("V:sit down on the floor/NOUN to/PART V:rest"), _R("V:lower {refl} to the ground"))
+
+
 # ============================================================================ expansion
 Item = tuple[str, str, str]  # (word, token, POS)
 
@@ -254,9 +447,12 @@ def _fill(text: str, form: str, side: str | None, poss: str, reps: int) -> list[
             out.append((poss, poss, "DET"))
         elif tok == "{obj}":
             out.append((_OBJECT[poss], _OBJECT[poss], "PRON"))
-        elif tok.startswith("{side"):
-            pos = tok[6:-1] if ":" in tok else "ADJ"
-            out.append((side, side, pos))
+        elif tok.startswith("{side") or tok.startswith("{oside"):
+            pos = tok.split(":")[1][:-1] if ":" in tok else "ADJ"
+            w = side if tok.startswith("{side") else _MIRROR_WORDS[side]
+            out.append((w, w, pos))
+        elif tok == "{refl}":
+            out.append((_REFLEXIVE[poss], _REFLEXIVE[poss], "PRON"))
         elif tok == "{cw}":
             w = "counterclockwise" if side == "left" else "clockwise"
             out.append((w, w, "ADV"))
@@ -369,6 +565,229 @@ def _all_actions():
                         continue
 
 
+# ============================================================================ style and intent
+#: Extra subjects (words, possessives, subject pronoun or None, primitives they fit or None for any).
+EXTRA_SUBJECTS: tuple[tuple[str, tuple[str, ...], str | None, frozenset | None], ...] = (
+    ("somebody", ("their", "his"), None, None), ("a guy", ("his",), "he", None), ("a lady", ("her",), "she", None),
+    ("a young man", ("his",), "he", None), ("an old man", ("his",), "he", None),
+    ("an elderly man", ("his",), "he", None), ("a tall man", ("his",), "he", None),
+    ("a young woman", ("her",), "she", None), ("an elderly woman", ("her",), "she", None),
+    ("a short woman", ("her",), "she", None), ("a figure", ("their",), None, None),
+    ("the figure", ("their",), None, None), ("a stick figure", ("their",), None, None),
+    ("a human", ("their",), None, None), ("the character", ("their", "his"), None, None),
+    ("an individual", ("their",), None, None), ("the subject", ("their",), None, None),
+    ("an adult", ("their",), None, None), ("a performer", ("their",), None, None),
+    ("the dancer", ("her", "his", "their"), None, frozenset({"dance", "sway", "spin", "clap"})),
+    ("a dancer", ("her", "his", "their"), None, frozenset({"dance", "sway", "spin", "clap"})),
+    ("the boxer", ("his",), "he", frozenset({"jab_cross", "hook", "uppercut", "guard", "punch"})),
+    ("a fighter", ("his", "her"), None, frozenset({"jab_cross", "hook", "uppercut", "guard", "punch", "kick"})),
+    ("the athlete", ("his", "her"), None, frozenset({"jump", "run", "jog", "jumping_jacks", "squat", "knee_lift",
+                                                    "arm_circles", "stretch", "kick", "step_over"})),
+    ("an athletic man", ("his",), "he", frozenset({"jump", "run", "jog", "jumping_jacks", "squat", "kick"})),
+    ("a soldier", ("his",), "he", frozenset({"salute", "march", "turn"})),
+)
+
+#: Speed words beyond "slowly" / "quickly": (before the verb, after the phrase) per modifier. Each
+#: says the modifier, so the parser reads it back and the motion shows it.
+SPEED_STYLE = {
+    "slowly": (("slowly", "carefully", "cautiously", "gently", "calmly", "wearily", "lazily", "tiredly", "sadly"),
+               ("slowly", "carefully", "gently", "calmly", "leisurely", "unhurriedly", "wearily", "lazily", "sadly",
+                "at a slow/ADJ pace", "in a relaxed/ADJ way/NOUN", "with care", "without/ADP hurrying/VERB")),
+    "quickly": (("quickly", "briskly", "swiftly", "hurriedly", "energetically", "eagerly", "excitedly"),
+                ("quickly", "rapidly", "energetically", "vigorously", "briskly", "swiftly", "hurriedly", "excitedly", "at a fast/ADJ pace",
+                 "in a hurry", "with a lot/NOUN of energy", "with great energy")),
+}
+_FORCE = frozenset({"kick", "punch", "jab_cross", "hook", "uppercut", "throw", "guard"})
+_RHYTHM = frozenset({"dance", "sway", "clap", "march", "jumping_jacks", "nod", "arm_circles"})
+_WORKOUT = frozenset({"squat", "jumping_jacks", "knee_lift", "stretch", "arm_circles", "march", "jog", "arms_out",
+                      "kick", "bow"})
+#: Manner words that leave the motion as it is: (words, before the verb?, primitives or None for any).
+MOOD_STYLE: tuple[tuple[str, bool, frozenset | None], ...] = tuple(
+    [(w, True, None) for w in ("happily", "cheerfully", "joyfully", "casually", "confidently", "playfully",
+                               "nervously", "proudly", "smoothly", "steadily", "awkwardly", "clumsily", "gracefully",
+                               "thoughtfully")]
+    + [(w, False, None) for w in ("happily", "cheerfully", "casually", "confidently", "playfully", "nervously",
+                                  "proudly", "smoothly", "steadily", "awkwardly", "gracefully")]
+    + [(w, True, _FORCE) for w in ("angrily", "aggressively", "powerfully", "forcefully", "fiercely")]
+    + [(w, False, _FORCE) for w in ("angrily", "aggressively", "powerfully", "forcefully", "hard")]
+    + [(w, False, _RHYTHM) for w in ("rhythmically", "to the music/NOUN", "to the beat/NOUN", "to a beat/NOUN",
+                                     "to the rhythm/NOUN")]
+    + [(w, False, _WORKOUT) for w in ("as if warming/VERB up", "as part/NOUN of a workout", "as if exercising/VERB",
+                                      "as if training/VERB")]
+)
+#: Intent clauses after a phrase, per primitive: "as if ..." and "to ...".
+INTENT: dict[str, tuple[str, ...]] = {
+    "walk": ("as if looking for something", "as if exploring/VERB the room/NOUN", "as if pacing/VERB",
+             "as if lost/VERB in thought/NOUN"),
+    "run": ("as if in a hurry", "as if late/ADJ for the bus", "as if chasing/VERB someone", "as if training/VERB"),
+    "jog": ("as if training/VERB", "as if exercising/VERB"),
+    "walk_backward": ("as if backing/VERB away from something", "as if avoiding/VERB something"),
+    "sidestep": ("as if dodging/VERB something", "as if avoiding/VERB someone"),
+    "turn": ("as if hearing/VERB a noise", "as if looking around"),
+    "spin": ("as if dancing/VERB", "as if celebrating/VERB"),
+    "jump": ("as if celebrating/VERB", "as if trying/VERB to/PART reach/VERB something", "with excitement/NOUN"),
+    "kick": ("as if kicking/VERB a ball", "as if fighting/VERB someone"),
+    "sit": ("to/PART rest/VERB", "as if tired", "to/PART take/VERB a break"),
+    "bow": ("to the audience", "as if thanking/VERB an audience", "as if greeting/VERB someone"),
+    "wave": ("as if greeting/VERB a friend", "as if saying/VERB goodbye", "to/PART say/VERB hello",
+             "as if signalling/VERB to someone", "to/PART greet/VERB someone"),
+    "raise": ("as if asking/VERB a question/NOUN", "to/PART get/VERB attention/NOUN"),
+    "punch": ("as if fighting/VERB someone", "as if hitting/VERB a punching/NOUN bag", "like a boxer"),
+    "clap": ("as if applauding/VERB", "as if cheering/VERB for someone"),
+    "nod": ("as if agreeing/VERB", "in agreement", "as if agreeing/VERB with someone"),
+    "shake_head": ("as if disagreeing/VERB", "in disbelief"),
+    "look": ("as if searching/VERB for someone", "as if hearing/VERB a noise"),
+    "dance": ("as if at a party", "as if celebrating/VERB", "happily to the music/NOUN"),
+    "throw": ("as if throwing/VERB to a friend", "like a baseball/NOUN pitcher/NOUN", "as if playing/VERB catch/NOUN"),
+    "pick_up": ("from the floor", "off the ground"),
+    "step_over": ("as if avoiding/VERB a puddle", "as if stepping/VERB over a log"),
+    "stumble": ("as if tripping/VERB over something", "as if losing/VERB balance/NOUN"),
+    "guard": ("like a boxer", "as if ready/ADJ to/PART fight/VERB", "as if sparring/VERB"),
+    "jab_cross": ("as if sparring/VERB", "as if fighting/VERB an opponent", "as if hitting/VERB a punching/NOUN bag"),
+    "hook": ("as if sparring/VERB", "as if fighting/VERB an opponent"),
+    "uppercut": ("as if sparring/VERB", "as if fighting/VERB an opponent"),
+    "hands_on_hips": ("as if waiting/VERB", "impatiently", "as if taking/VERB a break"),
+    "scratch_head": ("as if confused/ADJ", "as if thinking/VERB", "in confusion/NOUN"),
+    "salute": ("like a soldier", "as if greeting/VERB an officer"),
+    "cross_arms": ("as if waiting/VERB", "impatiently", "as if annoyed/ADJ"),
+    "reach_across": ("as if grabbing/VERB something", "as if reaching/VERB for something"),
+    "arm_circles": ("as if warming/VERB up", "to/PART loosen/VERB up"),
+    "stretch": ("as if warming/VERB up",),
+    "march": ("like a soldier",),
+}
+
+
+def _style_options(kind: str) -> list[tuple[str, bool]]:
+    """(words, before the verb?) of the manner and intent words that fit ``kind``."""
+    out = [(w, pre) for w, pre, kinds in MOOD_STYLE if kinds is None or kind in kinds]
+    out += [(w, False) for w in INTENT.get(kind, ())]
+    return out
+
+
+def _items(text: str) -> list[Item]:
+    """Word items of literal text; a ``word/POS`` token states its tag."""
+    out = []
+    for tok in text.split():
+        w, _, pos = tok.partition("/")
+        out.append(_word(w, pos or None))
+    return out
+
+
+# ============================================================================ sentence frames
+#: Sentence frames per plan shape. Slots: {S} subject, {P} subject pronoun, {A<i>} / {G<i>} step i
+#: (present / gerund, with its layered gesture after "while"), {M} / {MG} the main action and
+#: {L} / {LG} the layered gesture of a one-step plan, {O} / {OG} the overlay, {SEQ} / {SEQG} all
+#: steps joined by "and then" / ", then". "," "." ";" are punctuation; ``word/POS`` states a tag.
+FRAMES: dict[str, tuple[str, ...]] = {
+    "single": ("{S} {A0}", "{S} is {G0}", "{S} just {A0}", "{S} simply {A0}"),
+    "layered": (
+        "{S} {M} while {LG}", "{S} is {MG} while {LG}", "while {MG} , {S} {L}", "{S} {L} while {MG}",
+        "{S} {M} and {L} at the same time", "{S} {L} as {P} {M}", "{S} {M} , {LG} at the same time",
+        "{S} {M} while also {LG}", "{S} {M} and simultaneously {L}", "{S} {M} , all the while {LG}",
+        "{S} is {MG} and {LG} at the same time", "{S} {L} while {P} {M}", "{S} {M} and meanwhile {L}",
+        "as {P} {M} , {P} {L}"),
+    "seq2": (
+        "{S} {A0} , then {A1}", "{S} {A0} and then {A1}", "{S} {A0} , and then {A1}", "{S} {A0} then {A1}",
+        "{S} {A0} and {A1}", "first , {S} {A0} , then {A1}", "first {S} {A0} and then {A1}",
+        "{S} first {A0} and then {A1}", "{S} first {A0} , then {A1}", "{S} is {G0} and then {G1}",
+        "{S} {A0} before {G1}", "after {G0} , {S} {A1}", "{S} {A0} . after that , {P} {A1}",
+        "{S} {A0} , after which {P} {A1}", "{S} {A0} and afterwards {A1}", "{S} {A0} . next , {P} {A1}",
+        "{S} {A0} and next {A1}", "{S} {A0} and finally {A1}", "{S} {A0} , and after a while/NOUN {P} {A1}",
+        "{S} {A0} , and after a while/NOUN {A1}", "{S} {A0} and eventually {A1}", "{S} {A0} , then eventually {A1}",
+        "at first {S} {A0} , later {P} {A1}", "at first {S} {A0} , but then {P} {A1}", "{S} starts by {G0} and then {A1}",
+        "{S} begins by {G0} , then {A1}", "{S} {A0} , then right/ADV after {A1}", "{S} {A0} and immediately {A1}",
+        "{S} {A0} ; a moment later {P} {A1}", "{S} {A0} and soon after {A1}", "{S} {A0} and later {A1}",
+        "{S} {A0} and shortly after {A1}", "{S} {A0} and , once done , {A1}", "{S} is {G0} , and then {P} {A1}",
+        "{S} {A0} , and when {P} is done , {P} {A1}", "{S} {A0} first , then {A1}", "{S} {A0} and then also {A1}"),
+    "seq3": (
+        "{S} {A0} , then {A1} , then {A2}", "{S} {A0} , then {A1} , and then {A2}", "{S} {A0} , then {A1} , and finally {A2}",
+        "first , {S} {A0} , then {A1} , and finally {A2}", "{S} {A0} , {A1} , and then {A2}",
+        "{S} is {G0} , then {G1} , and then {G2}", "{S} {A0} . then {P} {A1} . finally , {P} {A2}",
+        "{S} {A0} , after that {A1} , and eventually {A2}", "at first {S} {A0} , then {P} {A1} , and at the end {P} {A2}",
+        "{S} starts by {G0} , then {A1} and finally {A2}", "{S} {A0} and then {A1} before {G2}",
+        "{S} first {A0} , next {A1} , and finally {A2}"),
+    "overlay": (
+        "{S} {SEQ} , while {OG}", "while {OG} , {S} {SEQ}", "{S} {O} while {SEQG}", "{S} {SEQ} , {OG} all the while",
+        "{S} {O} the whole time as {P} {SEQ}", "{S} {SEQ} , {OG} the whole time", "{S} keeps {OG} while {P} {SEQ}",
+        "throughout , {S} {O} while {SEQG}"),
+}
+#: Openings that put a frame beginning with "{S} <verb>" into a scene: "in this clip, a man walks".
+OPENINGS = ("in this clip ,", "in this video ,", "in the video ,", "here ,", "in this animation ,", "the video shows how")
+#: Openings that replace the "{S} is" of a gerund frame: "we see a man walking and then jumping".
+GERUND_OPENINGS = ("we see {S}", "the video shows {S}", "there is {S}", "this is {S}", "{S} can be seen",
+                   "{S} who is", "an animation/NOUN of {S}", "a clip/NOUN of {S}", "footage of {S}")
+_OPEN_P = 0.25
+
+
+def sentence_frames() -> list[str]:
+    """Every sentence frame the caption renderer can produce (frames and their openings), as
+    :func:`sentence_frame` writes them: slots become ``<S>``, ``<P>`` and ``<A>``, punctuation goes."""
+    out = set()
+    for frames in FRAMES.values():
+        for f in frames:
+            for g in _opened(f):
+                out.add(_frame_text(g))
+    return sorted(out)
+
+
+def _opened(frame: str) -> list[str]:
+    """``frame`` and each of its openings."""
+    out = [frame]
+    if frame.startswith("{S} is "):
+        out += [o + frame[len("{S} is"):] for o in GERUND_OPENINGS]
+    elif frame.startswith("{S} ") and not frame.startswith("{S} {O}"):
+        out += [o + " " + frame for o in OPENINGS]
+    return out
+
+
+def _frame_text(frame: str) -> str:
+    words = []
+    for tok in frame.split():
+        if tok in (",", ".", ";"):
+            continue
+        if tok.startswith("{"):
+            slot = tok[1:-1]
+            w = "<S>" if slot == "S" else "<P>" if slot == "P" else "<A>"
+            if slot in ("SEQ", "SEQG"):
+                w = "<A> and then <A>"
+            words.append(w)
+        else:
+            words.append(tok.split("/")[0])
+    return " ".join(words)
+
+
+def _subject_words() -> list[tuple[str, ...]]:
+    subs = {tuple(s[0].split()) for s in SUBJECTS} | {tuple(s[0].split()) for s in EXTRA_SUBJECTS}
+    return sorted(subs, key=len, reverse=True)
+
+
+def sentence_frame(words: list[str], spans) -> str:
+    """The sentence frame of a caption: its words with each action phrase span ``[i0, i1)`` as
+    ``<A>``, the subject as ``<S>`` and subject pronouns as ``<P>`` (punctuation is not a word).
+
+    Counting distinct frames over a corpus's captions (``annotations/<id>.json`` hold the words'
+    spans) measures how many sentence shapes the captions use.
+    """
+    words = list(words)
+    starts = {int(i0): int(i1) for i0, i1 in spans}
+    subjects = _subject_words()
+    out, i = [], 0
+    while i < len(words):
+        if i in starts:
+            out.append("<A>")
+            i = max(starts[i], i + 1)
+            continue
+        for sub in subjects:
+            if tuple(words[i:i + len(sub)]) == sub:
+                out.append("<S>")
+                i += len(sub)
+                break
+        else:
+            out.append("<P>" if words[i] in ("he", "she", "they") else words[i])
+            i += 1
+    return " ".join(out)
+
+
 # ============================================================================ captions
 @dataclass(frozen=True)
 class Caption:
@@ -382,6 +801,11 @@ class Caption:
     def words(self) -> list[str]:
         return split_words(self.text)
 
+    @property
+    def frame(self) -> str:
+        """The caption's sentence frame (see :func:`sentence_frame`)."""
+        return sentence_frame(self.words, self.spans)
+
 
 class _Builder:
     """Accumulates words and punctuation, recording phrase spans."""
@@ -390,11 +814,13 @@ class _Builder:
         self.pieces: list[str] = []
         self.items: list[Item] = []
         self.spans: dict[int, tuple[int, int]] = {}
+        self.after_phrase = False               # no word since the last phrase (punctuation only)
 
     def words(self, text: str) -> None:
-        for w in text.split():
-            self.items.append(_word(w))
-            self.pieces.append(w)
+        self.after_phrase = False
+        for item in _items(text):
+            self.items.append(item)
+            self.pieces.append(item[0])
 
     def punct(self, p: str) -> None:
         if self.pieces:
@@ -405,9 +831,10 @@ class _Builder:
         self.items += items
         self.pieces += [w for w, _, _ in items]
         self.spans[idx] = (i0, len(self.items))
+        self.after_phrase = True
 
     def caption(self, n_actions: int, period: bool) -> Caption:
-        text = " ".join(self.pieces) + ("." if period else "")
+        text = " ".join(self.pieces) + ("." if period and not self.pieces[-1].endswith(".") else "")
         words = split_words(text)
         if words != [w for w, _, _ in self.items]:
             raise AssertionError(f"caption words {words} differ from the built words")
@@ -421,9 +848,60 @@ def _choose(rng: np.random.Generator, options: list):
     return options[int(rng.integers(len(options)))]
 
 
+def _shape(plan: Plan) -> str:
+    if plan.overlay is not None:
+        return "overlay"
+    if len(plan.steps) == 1:
+        return "layered" if plan.steps[0].layer is not None else "single"
+    return "seq2" if len(plan.steps) == 2 else "seq3"
+
+
+def _subject(plan: Plan, rng: np.random.Generator) -> tuple[str, tuple[str, ...], str | None]:
+    if rng.random() < 0.75:
+        return _choose(rng, list(SUBJECTS))
+    kinds = {a.kind for _, _, a in plan.actions()}
+    fits = [s[:3] for s in EXTRA_SUBJECTS if s[3] is None or kinds & s[3]]
+    return _choose(rng, fits)
+
+
+#: Chance that a speed modifier is said with a style word ("carefully") rather than "slowly".
+SPEED_STYLE_P = 0.6
+#: Chance that an action phrase without such a word gets a manner or intent word.
+MANNER_P = 0.22
+
+
+def _styled_phrase(action: Action, form: str, poss: str, rng: np.random.Generator, before: bool = True) -> list[Item]:
+    """One wording of ``action``, sometimes with a style word (speed) or a manner/intent word.
+
+    ``before=False`` keeps style words after the phrase: right after another phrase, a word
+    before this one would read as the other phrase's (the parser gives it to that one).
+    """
+    speed = [m for m in action.mods if m in SPEED_STYLE]
+    if speed and rng.random() < SPEED_STYLE_P:
+        plain = replace(action, mods=tuple(m for m in action.mods if m not in SPEED_STYLE))
+        options = phrase_realisations(plain, form, poss)
+        if options:
+            pre, post = SPEED_STYLE[speed[0]]
+            words = _choose(rng, [(w, True) for w in pre if before] + [(w, False) for w in post])
+            return _decorate(_choose(rng, options), words, poss)
+    options = phrase_realisations(action, form, poss)
+    if not before:
+        options = [o for o in options if o[0][0] not in ("slowly", "quickly")] or options
+    items = _choose(rng, options)
+    if not speed and rng.random() < MANNER_P:
+        items = _decorate(items, _choose(rng, [o for o in _style_options(action.kind) if before or not o[1]]), poss)
+    return items
+
+
+def _decorate(items: list[Item], style: tuple[str, bool], poss: str) -> list[Item]:
+    words, before = style
+    extra = _items(words)
+    return extra + items if before else items + extra
+
+
 def render_caption(plan: Plan, rng: np.random.Generator) -> Caption:
     """One random caption of ``plan``; phrase spans in ``plan.actions()`` order."""
-    subj, posses, pron = _choose(rng, list(SUBJECTS))
+    subj, posses, pron = _subject(plan, rng)
     poss = _choose(rng, list(posses))
     acts = plan.actions()
     index = {(role, i): k for k, (role, i, _) in enumerate(acts)}
@@ -431,7 +909,7 @@ def render_caption(plan: Plan, rng: np.random.Generator) -> Caption:
 
     def say(role: str, i: int, form: str) -> None:
         action = acts[index[(role, i)]][2]
-        b.phrase(index[(role, i)], _choose(rng, phrase_realisations(action, form, poss)))
+        b.phrase(index[(role, i)], _styled_phrase(action, form, poss, rng, before=not b.after_phrase))
 
     def step(i: int, form: str) -> None:
         """A step of a sequence: its main action, "while" its layer."""
@@ -440,75 +918,42 @@ def render_caption(plan: Plan, rng: np.random.Generator) -> Caption:
             b.words("while")
             say("layer", i, "ger")
 
-    steps = plan.steps
-    if plan.overlay is None and len(steps) == 1 and steps[0].layer is not None:
-        choice = int(rng.integers(6 if pron else 5))
-        if choice == 0:
-            b.words(subj); say("main", 0, "pres"); b.words("while"); say("layer", 0, "ger")
-        elif choice == 1:
-            b.words(subj + " is"); say("main", 0, "ger"); b.words("while"); say("layer", 0, "ger")
-        elif choice == 2:
-            b.words("while"); say("main", 0, "ger"); b.punct(","); b.words(subj); say("layer", 0, "pres")
-        elif choice == 3:
-            b.words(subj); say("layer", 0, "pres"); b.words("while"); say("main", 0, "ger")
-        elif choice == 4:
-            b.words(subj); say("main", 0, "pres"); b.words("and"); say("layer", 0, "pres")
-            b.words("at the same time")
-        else:
-            b.words(subj); say("layer", 0, "pres"); b.words("as " + pron); say("main", 0, "pres")
-    elif plan.overlay is None and len(steps) == 1:
-        if rng.random() < 0.7:
-            b.words(subj); step(0, "pres")
-        else:
-            b.words(subj + " is"); step(0, "ger")
-    elif plan.overlay is None:
-        n = len(steps)
-        options = [0, 1, 2, 3] + ([4, 5] if n == 2 else []) + ([6] if n == 2 and pron else [])
-        choice = _choose(rng, options)
-        if choice == 0:      # X, then Y(, then Z)
-            b.words(subj); step(0, "pres")
-            for i in range(1, n):
-                b.punct(","); b.words("then"); step(i, "pres")
-        elif choice == 1:    # X and then Y / X, then Y, and then Z
-            b.words(subj); step(0, "pres")
-            for i in range(1, n - 1):
-                b.punct(","); b.words("then"); step(i, "pres")
-            if n > 2:
-                b.punct(",")
-            b.words("and then"); step(n - 1, "pres")
-        elif choice == 2:    # first, S X, then Y
-            b.words("first"); b.punct(","); b.words(subj); step(0, "pres")
-            for i in range(1, n):
-                b.punct(","); b.words("then"); step(i, "pres")
-        elif choice == 3:    # S is X-ing and then Y-ing
-            b.words(subj + " is"); step(0, "ger")
-            for i in range(1, n):
-                b.words("and then"); step(i, "ger")
-        elif choice == 4:    # S X before Y-ing
-            b.words(subj); step(0, "pres"); b.words("before"); step(1, "ger")
-        elif choice == 5:    # after X-ing, S Y
-            b.words("after"); step(0, "ger"); b.punct(","); b.words(subj); step(1, "pres")
-        else:                # S X. after that, he Y
-            b.words(subj); step(0, "pres"); b.punct("."); b.words("after that"); b.punct(",")
-            b.words(pron); step(1, "pres")
-    else:
-        n = len(steps)
-        choice = int(rng.integers(3))
+    def seq(form: str) -> None:
+        step(0, form)
+        for i in range(1, len(plan.steps)):
+            if form == "pres" and rng.random() < 0.4:
+                b.punct(","); b.words("then")
+            else:
+                b.words("and then")
+            step(i, form)
 
-        def seq(form: str) -> None:
-            step(0, form)
-            for i in range(1, n):
-                if form == "pres" and rng.random() < 0.4:
-                    b.punct(","); b.words("then")
-                else:
-                    b.words("and then")
-                step(i, form)
-        if choice == 0:
-            b.words(subj); seq("pres"); b.punct(","); b.words("while"); say("overlay", -1, "ger")
-        elif choice == 1:
-            b.words("while"); say("overlay", -1, "ger"); b.punct(","); b.words(subj); seq("pres")
+    shape = _shape(plan)
+    frames = [f for f in FRAMES[shape] if pron or "{P}" not in f]
+    frame = _choose(rng, frames)
+    if len(plan.steps) > 3 and shape != "overlay":
+        frame = "{S} " + " , then ".join(f"{{A{i}}}" for i in range(len(plan.steps)))
+    opened = _opened(frame)
+    if len(opened) > 1 and rng.random() < _OPEN_P:
+        frame = _choose(rng, opened[1:])
+    for tok in frame.split():
+        if tok in (",", ".", ";"):
+            b.punct(tok)
+        elif tok == "{S}":
+            b.words(subj)
+        elif tok == "{P}":
+            b.words(pron)
+        elif tok[:2] in ("{A", "{G") and tok[2:-1].isdigit():
+            step(int(tok[2:-1]), "pres" if tok[1] == "A" else "ger")
+        elif tok in ("{M}", "{MG}"):
+            say("main", 0, "pres" if tok == "{M}" else "ger")
+        elif tok in ("{L}", "{LG}"):
+            say("layer", 0, "pres" if tok == "{L}" else "ger")
+        elif tok in ("{O}", "{OG}"):
+            say("overlay", -1, "pres" if tok == "{O}" else "ger")
+        elif tok in ("{SEQ}", "{SEQG}"):
+            seq("pres" if tok == "{SEQ}" else "ger")
         else:
-            b.words(subj); say("overlay", -1, "pres"); b.words("while"); seq("ger")
+            b.words(tok)
     return b.caption(len(acts), period=bool(rng.random() < 0.5))
 
 
@@ -564,9 +1009,49 @@ class ParsedPhrase:
         return primitive_parts(action)[0]
 
 
-_GLUE = ("a man", "the man", "a woman", "the woman", "a person", "the person", "someone", "he", "she",
-         "is", "while", "as", "then", "and then", "and", "before", "after", "after that", "first",
-         "at the same time")
+def _glue() -> set[tuple[str, ...]]:
+    """Word runs between the slots of every sentence frame, subjects and pronouns."""
+    out = {tuple(w.split()) for w in ("he", "she", "is")} | set(_subject_words())
+    for frames in FRAMES.values():
+        for f in frames:
+            for g in _opened(f) + [f.replace("{SEQ}", "{A0} , then {A1}")]:
+                run: list[str] = []
+                for tok in g.split() + ["{END}"]:
+                    if tok.startswith("{") or tok in (",", ".", ";"):
+                        if run:
+                            out.add(tuple(run))
+                        run = []
+                    else:
+                        run.append(tok.split("/")[0])
+    out |= {("and", "then"), ("then",)}
+    return out
+
+
+def _style_table() -> tuple[dict[tuple[str, ...], str | None], dict[tuple[str, ...], str | None]]:
+    """Style words before the verb and after the phrase -> the modifier they say (or None)."""
+    pre: dict[tuple[str, ...], str | None] = {}
+    post: dict[tuple[str, ...], str | None] = {}
+    for mod, (before, after) in SPEED_STYLE.items():
+        for w in before:
+            pre[tuple(x.split("/")[0] for x in w.split())] = mod
+        for w in after:
+            post[tuple(x.split("/")[0] for x in w.split())] = mod
+    for w, before, _ in MOOD_STYLE:
+        key = tuple(x.split("/")[0] for x in w.split())
+        (pre if before else post).setdefault(key, None)
+    for ws in INTENT.values():
+        for w in ws:
+            post.setdefault(tuple(x.split("/")[0] for x in w.split()), None)
+    return pre, post
+
+
+@lru_cache(maxsize=1)
+def _units() -> tuple[dict, set, dict, dict, int]:
+    table, longest = _phrase_table()
+    pre, post = _style_table()
+    glue = _glue()
+    longest = max([longest] + [len(k) for k in glue] + [len(k) for k in post])
+    return table, glue, pre, post, longest
 
 
 @lru_cache(maxsize=1)
@@ -606,42 +1091,64 @@ def _states_reps(words: tuple[str, ...]) -> bool:
 def parse_prompt(prompt: str) -> list[ParsedPhrase] | None:
     """Split a prompt into the corpus's action phrases and glue words.
 
+    A style word before a phrase ("happily", "carefully") or after it ("energetically", "as if
+    greeting a friend", "to the music") belongs to the phrase: its span covers it and a style
+    word that says a speed ("carefully": slowly) adds that modifier.
+
     Returns the phrases in order, or None if the prompt is not in the corpus's language (some
-    word sequence is neither an action phrase nor a subject/connective).
+    word sequence is neither an action phrase, a style word next to one, nor a subject or
+    connective of a sentence frame).
     """
     words = split_words(prompt)
     if not words:
         return None
-    table, longest = _phrase_table()
-    glue = {tuple(g.split()) for g in _GLUE}
+    table, glue, pre, post, longest = _units()
     n = len(words)
-    # best[i]: (number of units, back pointer) to cover words[:i]
+    # best[i]: (number of phrase and glue units, units) covering words[:i]; style words are free
     best: list[tuple[int, tuple] | None] = [None] * (n + 1)
     best[0] = (0, ())
     for i in range(n):
         if best[i] is None:
             continue
+        last = best[i][1][-1][0] if best[i][1] else None
         for j in range(i + 1, min(n, i + longest) + 1):
             key = tuple(words[i:j])
-            unit = None
+            units = []
             if key in table:
-                unit = ("phrase", i, j)
-            elif key in glue:
-                unit = ("glue", i, j)
-            if unit is None:
-                continue
-            cand = (best[i][0] + 1, best[i][1] + (unit,))
-            if best[j] is None or cand[0] < best[j][0]:
-                best[j] = cand
+                units.append("phrase")
+            if key in glue:
+                units.append("glue")
+            if key in post and last in ("phrase", "post"):
+                units.append("post")        # before "pre": a word that can be either follows its phrase
+            elif key in pre and last != "pre":
+                units.append("pre")
+            for kind_ in units:
+                cand = (best[i][0] + (kind_ in ("phrase", "glue")), best[i][1] + ((kind_, i, j),))
+                # ties go to the reading whose earlier units are longer: a speed word between two
+                # phrases ("... quickly, shaking ...") ends the first one, as the renderer writes it
+                if best[j] is None or cand[0] < best[j][0] or (cand[0] == best[j][0] and i > best[j][1][-1][1]):
+                    best[j] = cand
     if best[n] is None:
         return None
+    units = list(best[n][1])
     out = []
-    for kind_, i, j in best[n][1]:
+    for k, (kind_, i, j) in enumerate(units):
+        if kind_ == "pre" and (k + 1 >= len(units) or units[k + 1][0] != "phrase"):
+            return None                     # a style word must lead into a phrase
         if kind_ != "phrase":
             continue
-        key = tuple(words[i:j])
-        kind, side, mods, reps, variant = _common(table[key])
-        out.append(ParsedPhrase((i, j), " ".join(key), kind, side, mods, reps, variant))
+        kind, side, mods, reps, variant = _common(table[tuple(words[i:j])])
+        mods = set(mods)
+        i0, i1 = i, j
+        if k > 0 and units[k - 1][0] == "pre":
+            i0 = units[k - 1][1]
+            mods |= {pre[tuple(words[units[k - 1][1]:i])]} - {None}
+        q = k + 1
+        while q < len(units) and units[q][0] == "post":
+            mods |= {post[tuple(words[units[q][1]:units[q][2]])]} - {None}
+            i1 = units[q][2]
+            q += 1
+        out.append(ParsedPhrase((i0, i1), " ".join(words[i0:i1]), kind, side, tuple(sorted(mods)), reps, variant))
     return out or None
 
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import actions, gestures
+from . import actions, boxing, dance, everyday, gestures, poses
 from .footwork import Persona, Stance
 from .gait import Route, gait_style, locomotion
 from .kinematics import BodyModel
@@ -124,6 +124,27 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("nod", "head", "gesture", mods=_SPEED, reps=(2, 3), weight=0.8),
     PrimitiveSpec("shake_head", "head", "gesture", mods=_SPEED, reps=(2, 3), weight=0.7),
     PrimitiveSpec("look", "head", "gesture", sides=("left", "right"), mods=_SPEED, weight=0.8),
+    # --- corpus 2.0: wider coverage
+    # dance
+    PrimitiveSpec("dance", "whole body", "base", mods=_SPEED, accepts=("head",), weight=1.2),
+    PrimitiveSpec("sway", "whole body", "base", mods=_SPEED, accepts=("arms", "head"), weight=0.7),
+    # everyday whole-body actions
+    PrimitiveSpec("throw", "arms", "base", sides=("left", "right"), mods=_SPEED, variants=("", "underhand"), weight=1.1),
+    PrimitiveSpec("pick_up", "whole body", "base", sides=SIDE_WORDS, mods=("slowly",), weight=1.0),
+    PrimitiveSpec("step_over", "locomotion", "base", mods=("slowly",), accepts=("head",), weight=0.8),
+    PrimitiveSpec("stumble", "locomotion", "base", weight=0.7),
+    # boxing
+    PrimitiveSpec("guard", "arms", "gesture", sides=("both",), weight=0.5),
+    PrimitiveSpec("jab_cross", "arms", "gesture", sides=("left", "right"), mods=("quickly",), reps=(1, 2), weight=0.8),
+    PrimitiveSpec("hook", "arms", "gesture", sides=("left", "right"), mods=("quickly",), reps=(1, 2), weight=0.6),
+    PrimitiveSpec("uppercut", "arms", "gesture", sides=("left", "right"), mods=("quickly",), reps=(1, 2), weight=0.6),
+    # hands on the body and across it
+    PrimitiveSpec("hands_on_hips", "arms", "gesture", sides=("both",), mods=_SPEED, weight=0.7),
+    PrimitiveSpec("scratch_head", "arms", "gesture", sides=("left", "right"), mods=_SPEED, weight=0.6),
+    PrimitiveSpec("salute", "arms", "gesture", sides=("left", "right"), mods=("quickly",), weight=0.5),
+    PrimitiveSpec("cross_arms", "arms", "gesture", sides=("both",), mods=_SPEED, weight=0.6),
+    PrimitiveSpec("reach_across", "arms", "gesture", sides=("left", "right"), mods=_SPEED, weight=0.6),
+    PrimitiveSpec("arm_circles", "arms", "gesture", sides=("both",), mods=_SPEED, weight=0.6),
 ]}
 
 
@@ -154,6 +175,31 @@ def primitive_parts(action: Action) -> tuple[tuple[str, ...], tuple[str, ...]]:
         return arms.get(side or "both", arms["both"]), ()
     if k in ("nod", "shake_head"):
         return ("head",), ()
+    if k in ("hands_on_hips", "cross_arms", "arm_circles"):
+        return arms["both"], ()
+    if k in ("guard", "jab_cross"):      # a jab-cross's side is its lead hand; both arms strike
+        return arms["both"], ("spine",)
+    if k in ("scratch_head", "salute"):
+        return arms[side], ("head",)
+    if k == "reach_across":
+        return arms[side], ("spine",)
+    if k in ("hook", "uppercut"):
+        other = "right arm" if side == "left" else "left arm"
+        return arms[side], (other, "spine")
+    if k == "dance":
+        return _LOWER + ("left arm", "right arm"), ("spine", "head")
+    if k == "sway":
+        return ("root", "spine"), ("left leg", "right leg", "left arm", "right arm", "head")
+    if k == "throw":
+        other = "right arm" if side == "left" else "left arm"
+        return arms[side] + ("spine",), _LOWER + (other, "head")
+    if k == "pick_up":
+        rest = tuple(a for a in ("left arm", "right arm") if a not in arms[side])
+        return _LOWER + ("spine",) + arms[side], rest + ("head",)
+    if k == "step_over":
+        return _LOWER, _UPPER
+    if k == "stumble":
+        return _LOWER + ("spine",), ("left arm", "right arm", "head")
     if k == "look":
         return ("head",), ("spine",)
     raise ValueError(f"no parts defined for primitive {k!r}")
@@ -226,6 +272,20 @@ def build_base(action: Action, start: Stance, persona: Persona, body: BodyModel,
         return actions.sit(start, persona, body, rng, mods=mods, hold=rng.uniform(0.6, 1.2))
     if k == "bow":
         return actions.bow(start, persona, body, rng, mods=mods, reps=action.reps)
+    side = 0 if action.side == "left" else 1
+    if k == "dance":
+        return dance.step_touch(start, persona, body, rng, mods=mods)
+    if k == "sway":
+        return dance.sway(start, persona, body, rng, mods=mods, duration=duration)
+    if k == "throw":
+        return everyday.throw(start, persona, body, rng, side=side, underhand=action.variant == "underhand", mods=mods)
+    if k == "pick_up":
+        arms = (0, 1) if action.side == "both" else (side,)
+        return everyday.pick_up(start, persona, body, rng, arms=arms, mods=mods)
+    if k == "step_over":
+        return everyday.step_over(start, persona, body, rng, mods=mods)
+    if k == "stumble":
+        return everyday.stumble(start, persona, body, rng, mods=mods)
     raise ValueError(f"primitive {k!r} is not a base action")
 
 
@@ -254,4 +314,12 @@ def build_gesture(action: Action, persona: Persona, body: BodyModel, rng: np.ran
         return gestures.shake_head(persona, body, rng, mods=mods, reps=action.reps)
     if k == "look":
         return gestures.look(persona, body, rng, side, mods=mods, duration=duration)
+    simple = {"hands_on_hips": poses.hands_on_hips, "scratch_head": poses.scratch_head, "salute": poses.salute,
+              "cross_arms": poses.cross_arms, "reach_across": poses.reach_across, "arm_circles": poses.arm_circles,
+              "guard": boxing.guard}
+    if k in simple:
+        return simple[k](persona, body, rng, side, mods=mods, duration=duration)
+    strikes = {"jab_cross": boxing.jab_cross, "hook": boxing.hook, "uppercut": boxing.uppercut}
+    if k in strikes:
+        return strikes[k](persona, body, rng, side, mods=mods, reps=action.reps)
     raise ValueError(f"primitive {k!r} is not a gesture")
