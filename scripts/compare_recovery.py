@@ -9,21 +9,22 @@ Three data sets (all measured with the same functions, see ``measure``):
 (c) the shipped SALAD model's outputs for the prompts in ``PROMPTS`` (50 DDIM steps, w 7.5 by
     default), generated once and cached with ``--generate``.
 
-Measures (per motion, then averaged over motions; ``--json`` writes every figure):
+Measures (per motion, then the mean over motions, or the max for ``*_max``; ``--json`` writes every
+figure). The physical ones are ``salad_core.eval.physics.measure_motion``'s (the issue-20 benchmark's
+definitions, see that module): ``bone_ref_p95_cm`` / ``bone_ref_max_cm`` (against the skeleton's
+lengths), ``bone_self_max_cm`` (against the motion's own median lengths: what a fixed-bone BVH cannot
+show), ``skate_mean_ms`` and ``skate_share`` (horizontal foot speed in height-based contact, PhysDiff
+style, and the share above 10 cm/s), ``penetration_max_cm``, ``float_mean_cm``, ``jitter_ms3``,
+``knee_hyper_max_deg``. Added here:
 
-- ``bone_p95`` / ``bone_max`` (cm): |bone length - the skeleton's target length| over frames and bones
-  (p95 per motion, then mean; max over all motions);
-- ``stretch_max`` (cm): largest |bone length - that bone's median length in the motion| (a BVH has
-  fixed bones, so this is what a BVH export cannot show);
-- ``skate`` (m/s): mean horizontal speed of ankles/toes while low (``checks.foot_sliding``: ankle
-  under 8 cm, toe under 3.5 cm above the clip's lowest joint; the corpus checks' definition);
 - ``skate_on`` (m/s): mean horizontal speed of a contact joint in frames where its predicted
   contact channel is on (> 0.5) and it is no higher than the lock heights (12 cm ankle, 6 cm toe);
-- ``pen_max`` / ``pen_mean`` (cm): depth of the lowest joint below y = 0 (max over frames / mean
-  over frames, 0 when above);
-- ``jitter`` (m/s^3): mean norm of the third time difference of all joints times fps^3;
 - ``mpjpe`` / ``mpjpe_rel`` (cm): mean joint distance to the reference joints (the clean features'
   position recovery), global and with each frame's root subtracted.
+
+A last table measures how well FK of the rotation features reproduces the position features (mean and
+max joint distance, root-relative) on the clean corpus, the real HumanML3D sample 012314 (evaluation
+only) and the generated motions.
 
 Usage::
 
@@ -43,8 +44,8 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from salad_core.data.procedural.checks import foot_sliding
-from salad_core.motion import denormalize, features_to_joints, normalize
+from salad_core.eval.physics import measure_motion
+from salad_core.motion import denormalize, features_to_joints, features_to_joints_rot, normalize
 from salad_core.recovery import RecoveryConfig, contact_lock_mask, recover_joints
 from salad_core.skeleton import get_skeleton
 
@@ -81,27 +82,19 @@ VARIANTS = {
 
 
 # =========================================================================== measures
+PHYSICS = ("bone_ref_p95_cm", "bone_ref_max_cm", "bone_self_max_cm", "skate_mean_ms", "skate_share",
+           "penetration_max_cm", "float_mean_cm", "jitter_ms3", "knee_hyper_max_deg")
+
+
 def measure(joints: np.ndarray, features: np.ndarray, reference: np.ndarray | None = None) -> dict[str, float]:
     """Figures of one motion ``joints`` ``(N, J, 3)`` recovered from ``features`` ``(N, D)`` (see module doc)."""
     j = np.asarray(joints, dtype=np.float64)
-    parents = np.asarray(SK.parents[1:])
-    lengths = np.linalg.norm(j[:, 1:] - j[:, parents], axis=-1)                      # (N, J-1)
-    bone = np.abs(lengths - np.asarray(SK.bone_lengths[1:]))
-    stretch = np.abs(lengths - np.median(lengths, axis=0))
+    report = measure_motion(j, SK).as_dict()
+    out = {k: float(report[k]) for k in PHYSICS}
     cj = list(SK.contact_joints)
     speed = np.linalg.norm(np.diff(j[:, cj][..., [0, 2]], axis=0), axis=-1) * FPS     # (N-1, 4)
     on = contact_lock_mask(features, j, SK, config=RecoveryConfig(min_contact_frames=1, contact_speed=None))[:-1]
-    low = j[:, :, 1].min(-1)
-    out = {
-        "bone_p95": 100 * float(np.percentile(bone, 95)),
-        "bone_max": 100 * float(bone.max()),
-        "stretch_max": 100 * float(stretch.max()),
-        "skate": float(foot_sliding(j, SK)["mean"]),
-        "skate_on": float(speed[on].mean()) if on.any() else 0.0,
-        "pen_max": 100 * float(np.maximum(-low, 0).max()),
-        "pen_mean": 100 * float(np.maximum(-low, 0).mean()),
-        "jitter": float(np.linalg.norm(np.diff(j, n=3, axis=0), axis=-1).mean() * FPS ** 3),
-    }
+    out["skate_on"] = float(speed[on].mean()) if on.any() else 0.0
     if reference is not None:
         r = np.asarray(reference, dtype=np.float64)
         out["mpjpe"] = 100 * float(np.linalg.norm(j - r, axis=-1).mean())
@@ -111,9 +104,12 @@ def measure(joints: np.ndarray, features: np.ndarray, reference: np.ndarray | No
 
 def aggregate(rows: list[dict[str, float]]) -> dict[str, float]:
     """Mean over motions, except ``*_max`` figures: the max over motions."""
-    keys = rows[0].keys()
-    return {k: float(np.max([r[k] for r in rows]) if k.endswith("_max") else np.mean([r[k] for r in rows]))
-            for k in keys}
+    out = {}
+    for k in rows[0]:
+        v = np.array([r[k] for r in rows], dtype=np.float64)
+        v = v[np.isfinite(v)]
+        out[k] = float("nan") if not v.size else float(v.max() if "_max" in k else v.mean())
+    return out
 
 
 def run_set(features: list[np.ndarray], references: list[np.ndarray] | None, label: str) -> dict:
@@ -139,6 +135,25 @@ def print_table(table: dict, label: str) -> None:
     for name, row in table.items():
         print(f"| {name} | " + " | ".join(f"{row[c]:.3g}" for c in cols) + " |")
     sys.stdout.flush()
+
+
+def fk_consistency(sets: dict[str, list[np.ndarray]]) -> dict:
+    """How far FK of the rotation features (target bone lengths, official root heading) lands from
+    the position features: root-relative joint distance, mean and max over each set (cm), and the
+    share of motions whose max exceeds 1 cm. Prints one table."""
+    table = {}
+    for name, feats in sets.items():
+        mean, worst = [], []
+        for f in feats:
+            pos = features_to_joints(f, SK)
+            fk = features_to_joints_rot(f, SK)
+            d = np.linalg.norm((fk - fk[:, :1]) - (pos - pos[:, :1]), axis=-1)
+            mean.append(d.mean())
+            worst.append(d.max())
+        table[name] = {"motions": len(feats), "mean_cm": 100 * float(np.mean(mean)),
+                       "max_cm": 100 * float(np.max(worst)), "share_over_1cm": float(np.mean(np.array(worst) > 0.01))}
+    print_table(table, "FK of the rotation features against the position features (root-relative)")
+    return table
 
 
 # =========================================================================== data
@@ -196,6 +211,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--guidance", type=float, default=7.5)
     ap.add_argument("--seeds", type=int, default=2, help="seed sets of the ten prompts for --generate")
     ap.add_argument("--length", type=int, default=120)
+    ap.add_argument("--real", type=str, default=str(Path(__file__).resolve().parents[1] / "tests" / "data"
+                    / "humanml3d_sample"), help="folder with the real sample 012314 (evaluation only); '' to skip")
     ap.add_argument("--json", type=Path, default=None, help="write every table here")
     ap.add_argument("--skip", nargs="*", default=[], choices=["clean", "noise"])
     args = ap.parse_args(argv)
@@ -219,12 +236,22 @@ def main(argv: list[str] | None = None) -> int:
                 results[f"noise_{kind}_{sigma}"] = run_set(
                     noisy, clean_refs[: len(sub)],
                     f"(b) {kind} noise std {sigma} (normalised space), {len(sub)} clips, MPJPE to the clean joints")
+    gen = None
     if args.generated is not None:
         data = np.load(args.generated)
         gen = [f.astype(np.float64) for f in data["features"]]
         results["generated"] = run_set(
             gen, None, f"(c) shipped SALAD, {len(gen)} motions ({int(data['steps'])} DDIM steps, "
                        f"w {float(data['guidance'])})")
+    real = None
+    if args.real:
+        path = Path(args.real) / "new_joint_vecs" / "012314.npy"
+        real = np.load(path).astype(np.float64)
+        results["real_012314"] = run_set([real], [features_to_joints(real, SK)],
+                                         f"(a') real HumanML3D {path.stem} (evaluation only)")
+    sets = {"clean corpus": feats, **({"real 012314": [real]} if real is not None else {}),
+            **({"generated": gen} if args.generated is not None else {})}
+    results["fk_vs_positions"] = fk_consistency(sets)
     if args.json is not None:
         args.json.write_text(json.dumps(results, indent=1))
         print(f"\nwrote {args.json}")
