@@ -94,7 +94,7 @@ class RecoveryConfig:
     contact_heights: tuple[float, float] = (0.12, 0.06)  # (ankle, toe): highest joint y (m) that may lock
     contact_speed: float | None = 0.5         # highest horizontal speed (m/s) in the velocity channels that may lock
     min_contact_frames: int = 3               # shorter contact runs are ignored (flicker, not a plant)
-    blend_frames: int = 4                     # frames over which a lock fades in before and out after a run
+    blend_frames: int = 3                     # frames over which a lock fades in before and out after a run
     floor: bool = True                        # fit: no joint below y = 0 (feet by IK, else the frame is lifted)
 
     def __post_init__(self) -> None:
@@ -409,7 +409,7 @@ def _lock_goals(track: np.ndarray, lock: np.ndarray, blend: int, floor: float | 
 
 
 def lock_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "humanml3d", *,
-              blend_frames: int = 4, floor: float | None = 0.0) -> np.ndarray:
+              blend_frames: int = 3, floor: float | None = 0.0) -> np.ndarray:
     """Keep the contact joints in place while they are locked, moving the legs by two-bone IK.
 
     Each locked run of a contact joint is anchored at the joint's median position over the run;

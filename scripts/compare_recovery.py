@@ -77,6 +77,7 @@ VARIANTS = {
     "fit/no-lock": ("fit", RecoveryConfig(lock_contacts=False)),
     "fit/rot0.5": ("fit", RecoveryConfig(rotation_weight=0.5)),
     "fit/v0.3": ("fit", RecoveryConfig(contact_speed=0.3)),
+    "fit/smooth1": ("fit", RecoveryConfig(smooth_sigma=1.0)),
     "fit": ("fit", RecoveryConfig()),
 }
 
