@@ -695,7 +695,7 @@ FRAMES: dict[str, tuple[str, ...]] = {
         "{S} {A0} and next {A1}", "{S} {A0} and finally {A1}", "{S} {A0} , and after a while/NOUN {P} {A1}",
         "{S} {A0} , and after a while/NOUN {A1}", "{S} {A0} and eventually {A1}", "{S} {A0} , then eventually {A1}",
         "at first {S} {A0} , later {P} {A1}", "at first {S} {A0} , but then {P} {A1}", "{S} starts by {G0} and then {A1}",
-        "{S} begins by {G0} , then {A1}", "{S} {A0} , then right/ADV after {A1}", "{S} {A0} and immediately {A1}",
+        "{S} begins by {G0} , then {A1}", "{S} {A0} , then immediately {A1}", "{S} {A0} and immediately {A1}",
         "{S} {A0} ; a moment later {P} {A1}", "{S} {A0} and soon after {A1}", "{S} {A0} and later {A1}",
         "{S} {A0} and shortly after {A1}", "{S} {A0} and , once done , {A1}", "{S} is {G0} , and then {P} {A1}",
         "{S} {A0} , and when {P} is done , {P} {A1}", "{S} {A0} first , then {A1}", "{S} {A0} and then also {A1}"),

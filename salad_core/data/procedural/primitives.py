@@ -191,8 +191,9 @@ def primitive_parts(action: Action) -> tuple[tuple[str, ...], tuple[str, ...]]:
     if k == "sway":
         return ("root", "spine"), ("left leg", "right leg", "left arm", "right arm", "head")
     if k == "throw":
-        other = "right arm" if side == "left" else "left arm"
-        return arms[side] + ("spine",), _LOWER + (other, "head")
+        # "throws a ball" names no arm, so a reading of the words alone (the corpus checks) takes
+        # the first side: both arms count as moved, whichever side the words leave open
+        return arms[side] + ("spine",), _LOWER + ("left arm", "right arm", "head")
     if k == "pick_up":
         rest = tuple(a for a in ("left arm", "right arm") if a not in arms[side])
         return _LOWER + ("spine",) + arms[side], rest + ("head",)
