@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from salad_core.data.dataset import MotionWindowDataset
-from salad_core.data.general_dataset import MixtureWindowDataset, general_windows
+from salad_core.data.general_dataset import MixtureWindowDataset, general_windows, mixture_mean_std
 from salad_core.data.procedural.checks import bone_length_error, joint_angles
 from salad_core.data.procedural.corpus import corpus_digest
 from salad_core.data.procedural.general import (MODES, GeneralConfig, generate_general, sample_general,
@@ -211,3 +211,19 @@ def test_mixture_rejects_bad_arguments(general_dir):
         MixtureWindowDataset(corpus, other, ratio=0.5)
     with pytest.raises(ValueError, match="mean and std"):
         general_windows(a, "test", window=16, mean=None, std=None)
+
+
+def test_mixture_statistics_weigh_the_general_share(general_dir, tmp_path):
+    a = general_dir / "a"
+    # a "corpus" of the same clips with every feature doubled: its share moves the mean
+    (tmp_path / "new_joint_vecs").mkdir()
+    ids = (a / "train.txt").read_text().split()
+    for i in ids:
+        np.save(tmp_path / "new_joint_vecs" / f"{i}.npy", 2.0 * np.load(a / "new_joint_vecs" / f"{i}.npy"))
+    (tmp_path / "train.txt").write_text("\n".join(ids) + "\n")
+    m0, s0 = mixture_mean_std(tmp_path, a, ratio=0.0)
+    m5, s5 = mixture_mean_std(tmp_path, a, ratio=0.5)
+    assert m0.shape == s0.shape == (263,) and (s5 > 0).all()
+    half = np.concatenate([np.load(a / "new_joint_vecs" / f"{i}.npy") for i in ids]).mean(0)
+    assert np.allclose(m0, 2 * half, atol=1e-4)                        # corpus only
+    assert np.allclose(m5, 1.5 * half, atol=1e-3 + 1e-3 * np.abs(half).max())   # equal shares
