@@ -71,7 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-samples", type=int, default=None, help="cap on samples per replication")
     p.add_argument("--split", default="test")
     p.add_argument("--steps", type=int, default=50, help="sampler steps (default 50)")
-    p.add_argument("--guidance", type=float, default=7.5, help="CFG weight w without --cfg-sweep (default 7.5)")
+    p.add_argument("--guidance", type=float, default=None,
+                   help="CFG weight w without --cfg-sweep (default 7.5; with --physics: each model's default "
+                        "guidance, a value replaces only its weight)")
     p.add_argument("--solver", default=None, help="scheduler name (default: the pipeline's)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--mm", dest="mm", action="store_true", default=None, help="compute MultiModality")
@@ -100,7 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
 def _settings(args):
     from .protocol import EvalSettings
 
-    changes = dict(split=args.split, num_steps=args.steps, guidance_scale=args.guidance, solver=args.solver,
+    changes = dict(split=args.split, num_steps=args.steps,
+                   guidance_scale=7.5 if args.guidance is None else args.guidance, solver=args.solver,
                    seed=args.seed)
     if args.replications is not None:
         changes["replications"] = args.replications
@@ -147,6 +150,12 @@ def _write(out_dir: Path, results, df, md: str, tex: str) -> list[Path]:
     return paths
 
 
+def _as_dict(obj) -> dict:
+    from dataclasses import asdict, is_dataclass
+
+    return asdict(obj) if is_dataclass(obj) else {"value": repr(obj)}
+
+
 def _default_sample() -> Path | None:
     """The real HumanML3D sample of a source checkout (not installed with the package)."""
     path = Path(__file__).resolve().parents[2] / "tests" / "data" / "humanml3d_sample"
@@ -180,24 +189,31 @@ def run_physics(args) -> int:
     from salad_core.pipeline import SaladPipeline
 
     pipe = SaladPipeline.from_pretrained(args.weights)
+    # None keeps each model's own default guidance (a SALAD pipeline folder may set rescale/interval)
+    g = settings.guidance
 
     def salad(texts, lengths, seed):
-        return pipe(texts, lengths=lengths, seed=[seed] * len(texts), guidance_scale=settings.guidance,
-                    num_steps=settings.steps, solver=args.solver).joints
+        return pipe(texts, lengths=lengths, seed=[seed] * len(texts), num_steps=settings.steps, solver=args.solver,
+                    **({} if g is None else {"guidance_scale": g})).joints
 
     generators = {args.name: salad}
-    info = {"guidance_options": "none (plain CFG)", "solver": args.solver or pipe.solver,
-            "weights": pipe.source}
+    resolved = pipe.resolve_guidance(g) if hasattr(pipe, "resolve_guidance") else (7.5 if g is None else g)
+    info = {"salad_guidance": resolved if isinstance(resolved, float) else _as_dict(resolved),
+            "solver": args.solver or pipe.solver, "weights": pipe.source}
     if args.keymotion is not None:
+        import inspect
+
         from salad_core.keymotion.pipeline import KeyMotionPipeline
 
         km = KeyMotionPipeline.from_pretrained(None if args.keymotion == "shipped" else args.keymotion)
 
         def keymotion(texts, lengths, seed):
-            return km(texts, lengths=lengths, seed=seed, guidance_scale=settings.guidance,
-                      num_steps=settings.steps).joints
+            return km(texts, lengths=lengths, seed=seed, num_steps=settings.steps,
+                      **({} if g is None else {"guidance_scale": g})).joints
 
         generators["KeyMotion"] = keymotion
+        info["keymotion_guidance"] = (inspect.signature(km.__call__).parameters["guidance_scale"].default
+                                      if g is None else g)
         info["keymotion_weights"] = args.keymotion
     t0 = time.perf_counter()
     result = run_benchmark(generators, settings, data_root=data, sample_dir=sample, info=info,
