@@ -380,3 +380,32 @@ def test_bad_arguments(corpus):
     ds = MotionTextDataset(corpus, "val")
     with pytest.raises(IndexError, match="out of range"):
         ds[5]
+
+
+def test_crops_enumerate_every_window_an_item_can_take(tmp_path):
+    """``crops()`` lists each (motion_id, offset, length) once, every random item is among them, and
+    ``crop_features`` gives the item's rows (a cache of per-window results relies on both)."""
+    from _doubles import make_fake_corpus
+
+    root = make_fake_corpus(tmp_path / "fake", n_train=5, n_val=2, lengths=(41, 90))
+    ds = MotionTextDataset(root, "train", max_length=88, random_crop=True, seed=3)
+    crops = ds.crops()
+    assert len(crops) == len(set(crops))
+    # F = L floored to 4 frames at L - F + 1 starts, F - 4 at L - F + 5 starts
+    assert len(crops) == sum(2 * (n % 4) + 6 for n in ds.lengths)
+    seen = set()
+    for epoch in range(60):
+        ds.set_epoch(epoch)
+        for i in range(len(ds)):
+            it = ds[i]
+            key = (it["motion_id"], it["offset"], it["length"])
+            assert key in crops
+            seen.add(key)
+            np.testing.assert_array_equal(ds.crop_features(*key), it["motion"][: it["length"]])
+    assert len(seen) > 0.9 * len(crops)             # the enumeration is not wider than the crops drawn
+    val = MotionTextDataset(root, "val", max_length=88, random_crop=False)
+    assert val.crops() == [(it["motion_id"], 0, it["length"]) for it in (val[i] for i in range(len(val)))]
+    with pytest.raises(ValueError, match="does not fit clip"):
+        ds.crop_features(crops[0][0], 0, 500)
+    with pytest.raises(KeyError, match="not a clip"):
+        ds.crop_features("nope", 0, 4)

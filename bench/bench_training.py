@@ -1,0 +1,176 @@
+"""Old vs new trainer, side by side: steps/s, samples x frames/s and the loss curves (issue 19).
+
+Trains the same model with the same config on the same corpus twice, at the same time: once with
+the code of an older checkout (``--old``, e.g. ``git worktree add /tmp/h3_old bb0d404``) and once
+with this checkout, each in its own process with the same torch threads. Running both at once means
+both meet the same machine (other jobs, speed swings), so their ratio is fair on a busy machine;
+on an otherwise idle 2-core machine each gets one core. The new side's latent cache is built first
+(timed separately) in a shared folder, so the timed run starts from step 1 for both.
+
+Prints, for each side, optimiser steps/s and valid motion frames/s (both without start-up,
+validation and checkpoints: the trainers' own ``TrainResult`` time base), their ratio, and the
+loss curves as means over windows of ``--window`` steps side by side with the standard error of
+each window, so "equal within noise" can be read off.
+
+Example::
+
+    python bench/bench_training.py --old /tmp/h3_old --data /tmp/h3_corpus --what denoiser --steps 300
+    python bench/bench_training.py --old /tmp/h3_old --data /tmp/h3_corpus --what vae --steps 200
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parents[1]
+
+# Runs inside each side's process, with that side's checkout first on sys.path. It only uses
+# APIs both versions have; the new side additionally gets the shared latent cache folder.
+RUNNER = r'''
+import json, sys, time, torch
+spec = json.loads(sys.argv[1])
+sys.path.insert(0, spec["root"])
+torch.set_num_threads(spec["threads"])
+import dataclasses, inspect
+from salad_core.io import config_from_dict
+from salad_core.train.common import fit
+from salad_core.train.distributed import DistEnv
+doc = spec["config"]
+env = DistEnv()
+if spec["what"] == "denoiser":
+    from salad_core.models.denoiser import DenoiserConfig
+    from salad_core.train.config import DenoiserTrainConfig as TC
+    from salad_core.train.denoiser_trainer import build_denoiser_task as build
+else:
+    from salad_core.models.vae import VAEConfig
+    from salad_core.train.config import VAETrainConfig as TC
+    from salad_core.train.vae_trainer import build_vae_task as build
+known = {f.name for f in dataclasses.fields(TC)}
+train = {k: v for k, v in doc["train"].items() if k in known}
+train.update(max_steps=spec["steps"], log_every=spec["log_every"], progress=False, num_threads=spec["threads"],
+             ckpt_every=0, val_every=0)
+tc = config_from_dict(TC, train)
+t0 = time.perf_counter()
+if spec["what"] == "denoiser":
+    mc = config_from_dict(DenoiserConfig, doc["model"])
+    kw = {"cache_dir": spec["cache_dir"]} if "cache_dir" in inspect.signature(build).parameters else {}
+    task = build(spec["data"], spec["vae"], mc, tc, env, **kw)
+else:
+    task = build(spec["data"], config_from_dict(VAEConfig, doc["model"]), tc, env)
+built = time.perf_counter() - t0
+frames = [0]
+collate = task.collate
+def counting(items):
+    batch = collate(items)
+    frames[0] += int(batch["length"].sum()) if "length" in batch else int(batch["motion"].shape[0] * batch["motion"].shape[1])
+    return batch
+task.collate = counting
+res = fit(task, spec["out"], tc, env=env)
+print("RESULT " + json.dumps({"steps": res.step, "steps_per_s": res.steps_per_s, "frames": frames[0],
+                              "build_s": built, "version": __import__("salad_core").__file__}), flush=True)
+'''
+
+
+def _spec(root: Path, args: argparse.Namespace, out: Path, steps: int, cache_dir: Path | None) -> dict:
+    config = json.loads((HERE / "configs" / f"default_{args.what}.json").read_text())
+    return {"root": str(root), "what": args.what, "data": str(args.data), "vae": str(args.vae), "config": config,
+            "steps": steps, "log_every": args.log_every, "threads": args.threads, "out": str(out),
+            "cache_dir": str(cache_dir) if cache_dir else None}
+
+
+def _launch(spec: dict, log_path: Path) -> subprocess.Popen:
+    env = {**os.environ, "OMP_NUM_THREADS": str(spec["threads"]), "PYTHONPATH": spec["root"]}
+    fh = open(log_path, "w")
+    return subprocess.Popen([sys.executable, "-c", RUNNER, json.dumps(spec)], stdout=fh, stderr=subprocess.STDOUT,
+                            env=env, cwd=spec["root"])
+
+
+def _result(log_path: Path) -> dict:
+    for line in log_path.read_text().splitlines():
+        if line.startswith("RESULT "):
+            return json.loads(line[len("RESULT "):])
+    raise RuntimeError(f"no result in {log_path}:\n{log_path.read_text()[-3000:]}")
+
+
+def _losses(run: Path) -> list[tuple[int, float]]:
+    out = []
+    for line in (run / "log.jsonl").read_text().splitlines():
+        rec = json.loads(line)
+        if "loss" in rec:
+            out.append((int(rec["step"]), float(rec["loss"])))
+    return out
+
+
+def _windows(points: list[tuple[int, float]], window: int) -> dict[int, tuple[float, float, int]]:
+    groups: dict[int, list[float]] = {}
+    for step, loss in points:
+        groups.setdefault((step - 1) // window, []).append(loss)
+    out = {}
+    for w, vals in groups.items():
+        m = sum(vals) / len(vals)
+        sd = math.sqrt(sum((v - m) ** 2 for v in vals) / (len(vals) - 1)) if len(vals) > 1 else float("nan")
+        out[w] = (m, sd / math.sqrt(len(vals)), len(vals))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--old", required=True, type=Path, help="checkout of the older release (git worktree)")
+    p.add_argument("--data", required=True, type=Path, help="HumanML3D-layout corpus")
+    p.add_argument("--what", choices=("denoiser", "vae"), default="denoiser")
+    p.add_argument("--vae", type=Path, default=HERE / "salad_core" / "weights" / "salad" / "vae",
+                   help="frozen VAE of the denoiser runs (default: the shipped one)")
+    p.add_argument("--steps", type=int, default=300)
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--log-every", type=int, default=10)
+    p.add_argument("--window", type=int, default=50, help="steps per window of the loss-curve table")
+    p.add_argument("--out", type=Path, default=None, help="folder for the runs (default: a temporary one)")
+    args = p.parse_args(argv)
+    out = args.out or Path(tempfile.mkdtemp(prefix="bench_training_"))
+    out.mkdir(parents=True, exist_ok=True)
+    cache = out / "latent_cache" if args.what == "denoiser" else None
+    if cache is not None:
+        t0 = time.perf_counter()
+        pre = _launch(_spec(HERE, args, out / "prebuild", 0, cache), out / "prebuild.log")
+        if pre.wait():
+            raise RuntimeError((out / "prebuild.log").read_text()[-3000:])
+        print(f"latent cache prebuilt in {time.perf_counter() - t0:.0f} s (data loading and text features included; "
+              f"{_result(out / 'prebuild.log')['build_s']:.0f} s task build)")
+    load0 = os.getloadavg()[0]
+    procs = {name: _launch(_spec(root, args, out / name, args.steps, cache if name == "new" else None),
+                           out / f"{name}.log") for name, root in (("old", args.old.resolve()), ("new", HERE))}
+    codes = {name: proc.wait() for name, proc in procs.items()}
+    load1 = os.getloadavg()[0]
+    for name, code in codes.items():
+        if code:
+            raise RuntimeError(f"{name} failed:\n{(out / f'{name}.log').read_text()[-3000:]}")
+    res = {name: _result(out / f"{name}.log") for name in procs}
+    print(f"{args.what}, {args.steps} steps each, both processes at once, {args.threads} torch thread(s) each; "
+          f"load average {load0:.2f} at the start, {load1:.2f} at the end; runs in {out}")
+    print(f"{'':8s} {'steps/s':>9s} {'frames/s':>10s} {'frames/step':>12s}  code")
+    for name, r in res.items():
+        fps = r["frames"] / r["steps"] * r["steps_per_s"] if r["steps"] else float("nan")
+        r["frames_per_s"] = fps
+        print(f"{name:8s} {r['steps_per_s']:9.3f} {fps:10.0f} {r['frames'] / max(r['steps'], 1):12.0f}  {r['version']}")
+    print(f"ratio new/old: steps/s {res['new']['steps_per_s'] / res['old']['steps_per_s']:.2f}, "
+          f"samples x frames/s {res['new']['frames_per_s'] / res['old']['frames_per_s']:.2f}")
+    curves = {name: _windows(_losses(out / name), args.window) for name in procs}
+    print(f"\nloss, mean over windows of {args.window} steps (+- standard error of the logged values, "
+          f"one per {args.log_every} steps)")
+    print(f"{'steps':>11s} {'old':>20s} {'new':>20s} {'diff/se':>8s}")
+    for w in sorted(set(curves["old"]) & set(curves["new"])):
+        (mo, so, _), (mn, sn, _) = curves["old"][w], curves["new"][w]
+        z = (mn - mo) / math.sqrt(so ** 2 + sn ** 2) if so == so and sn == sn and (so or sn) else float("nan")
+        print(f"{w * args.window + 1:5d}-{(w + 1) * args.window:<5d} {mo:12.4f} +- {so:.4f} {mn:12.4f} +- {sn:.4f} {z:8.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
