@@ -320,12 +320,74 @@ def _errors_cm(errors: dict, skeleton) -> dict[str, float]:
             for k, v in errors.items()}
 
 
+def _parse_crop(text: str) -> tuple[float, float | None]:
+    """``START:STOP`` in seconds (STOP may be empty: to the end)."""
+    start, sep, stop = text.partition(":")
+    try:
+        a = float(start) if start.strip() else 0.0
+        b = float(stop) if stop.strip() else None
+    except ValueError:
+        a = b = float("nan")
+    if not sep or not math.isfinite(a) or a < 0 or (b is not None and not (math.isfinite(b) and b > a)):
+        raise UserError(f"--crop takes START:STOP in seconds, 0 <= START < STOP (e.g. 2:9.5 or 2:), got {text!r}")
+    return a, b
+
+
+def _invert_input(args: argparse.Namespace):
+    """``(skeleton, loaded motion, features to invert)`` from a .bvh take or a .npy of features or joints.
+
+    BVH takes and joints are converted with :func:`salad_core.motion.joints_to_features`
+    (retargeted, on the floor, facing +Z); ``--crop`` then cuts the features (20 fps).
+    """
+    from salad_core.bvh import JointsConversionError, load_motion
+    from salad_core.skeleton import get_skeleton
+
+    try:
+        sk = get_skeleton(args.skeleton)
+    except (KeyError, ValueError) as exc:
+        raise UserError(f"--skeleton: {exc.args[0] if exc.args else exc}") from None
+    path = Path(args.motion)
+    given = {k: getattr(args, k) for k in ("rig", "name_map", "units", "up") if getattr(args, k) is not None}
+    if given and path.suffix.lower() != ".bvh":
+        flags = ", ".join("--" + k.replace("_", "-") for k in given)
+        raise UserError(f"{flags} appl{'y' if len(given) > 1 else 'ies'} to .bvh files; {path.name} is not one")
+    if "units" in given:
+        try:
+            given["units"] = float(given["units"])      # metres per unit; otherwise a unit name
+        except ValueError:
+            pass
+    try:
+        loaded = load_motion(path, sk.name, **given)
+    except JointsConversionError as exc:
+        raise UserError(f"inversion needs HumanML3D features (N, {sk.feature_dim}); {exc}") from None
+    except (FileNotFoundError, ValueError) as exc:   # BvhError and RigError name the file (and line)
+        raise UserError(str(exc)) from None
+    if loaded.bvh is not None:
+        print(loaded.bvh.summary())
+    features = loaded.features
+    if args.crop is not None:
+        a, b = _parse_crop(args.crop)
+        i, j = int(round(a * sk.fps)), (len(features) if b is None else int(round(b * sk.fps)))
+        if i >= len(features):
+            raise UserError(f"--crop {args.crop}: the motion lasts {len(features) / sk.fps:.2f} s "
+                            f"({len(features)} frames at {sk.fps:g} fps)")
+        features = features[i:j]
+    unit, max_len = sk.unit_length, sk.max_length
+    if not unit <= len(features) - len(features) % unit <= max_len:
+        hint = "" if args.crop is not None else "; pick a part with --crop START:STOP (seconds)"
+        raise UserError(f"{path} has {len(features)} frames; allowed: {unit}..{max_len} (at {sk.fps:g} fps, "
+                        f"{max_len / sk.fps:g} s at most{hint})")
+    return sk, loaded, features
+
+
 def cmd_invert(args: argparse.Namespace) -> int:
-    """Invert a given motion under its prompt; write the reconstruction, its error and any edit."""
+    """Invert a given motion (.bvh take, or .npy features / joints) under its prompt; write the
+    reconstruction, its error, any edit and a side-by-side GIF of the source and the result."""
     import json
 
     from salad_core.attention import INVERSION_METHODS
     from salad_core.io import atomic_write_text
+    from salad_core.motion import features_to_joints
 
     specs = _edit_specs(args, required=False)
     _check_finite("--guidance", args.guidance)
@@ -333,35 +395,61 @@ def cmd_invert(args: argparse.Namespace) -> int:
         raise UserError(f"--method {args.method!r}; allowed: {', '.join(INVERSION_METHODS)}")
     if not (args.prompt or "").strip():
         raise UserError("--prompt is empty; describe what the motion shows, e.g. 'a person walks forward'")
-    sk, features, path = _load_features(args.motion, args.skeleton)
+    sk, loaded, features = _invert_input(args)
+    path = loaded.path
     out = _check_out_dir(args.out, args.force)
     stem = path.stem
     branches = ["reconstruction"] + (["edited"] if specs else [])
+    gif_name = f"{stem}_source_vs_{branches[-1]}.gif"
     # refuse before any work: every file this run would write
     _outputs(out, [f"{stem}_{b}{ext}" for b in branches for ext in ("_features.npy", "_joints.npy", ".bvh")]
-             + [f"{stem}_inversion.json"], args.force)
+             + [f"{stem}_inversion.json"] + ([] if args.no_render else [gif_name])
+             + ([f"{stem}_input_features.npy"] if loaded.kind != "features" else []), args.force)
     pipe = _load_pipeline(args.weights)
     if pipe.skeleton.name != sk.name:
         raise UserError(f"the weights are for skeleton {pipe.skeleton.name!r}, the motion was read as {sk.name!r}; "
                         f"pass --skeleton {pipe.skeleton.name}")
+    files = []
+    if loaded.kind != "features":     # what the model sees of a take: its features (20 fps, on the floor)
+        from salad_core.io import atomic_path
+        import numpy as np
+
+        (inp,) = _outputs(out, [f"{stem}_input_features.npy"], args.force)
+        with atomic_path(inp) as tmp:
+            with open(tmp, "wb") as fh:
+                np.save(fh, np.asarray(features, dtype=np.float32))
+        files.append(inp)
     inv = _invert(pipe, features, args.prompt, args, method=args.method, iterations=args.iterations,
                   exact=args.exact)
     rec = inv.reconstruction
     n = rec.lengths[0]
-    files = _write_motion_files(out, f"{stem}_reconstruction", rec.features[0, :n], rec.joints[0], pipe.skeleton,
-                                force=args.force, gif=False, bvh=True)
-    target = None
+    files += _write_motion_files(out, f"{stem}_reconstruction", rec.features[0, :n], rec.joints[0], pipe.skeleton,
+                                 force=args.force, gif=False, bvh=True)
+    target, shown = None, rec.joints[0]
     if specs:
         result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet)
         dst = result.edited
-        target = dst.texts[0]
+        target, shown = dst.texts[0], dst.joints[0]
         files += _write_motion_files(out, f"{stem}_edited", dst.features[0, :n], dst.joints[0], pipe.skeleton,
                                      force=args.force, gif=False, bvh=True)
+    if not args.no_render:
+        from salad_viz import animate
+
+        (gif,) = _outputs(out, [gif_name], args.force)
+        source = features_to_joints(inv.features[0][:n], pipe.skeleton)
+        files.append(animate([source, shown], pipe.skeleton, gif, layout="side", titles=["source", branches[-1]],
+                             size=(240, 240), stride=2))
     report = {"motion": str(path), "prompt": inv.prompts[0], "frames": n, "input_frames": int(len(features)),
               "method": inv.method, "num_steps": inv.num_steps, "guidance_scale": inv.guidance_scale,
               "iterations": inv.iterations, "exact": inv.exact, "seconds": round(float(inv.seconds), 3),
               "errors": _errors_cm(inv.errors, pipe.skeleton), "weights": pipe.source,
-              "edit": None if not specs else {"target": target, "edits": [repr(e) for e in specs]}}
+              "edit": None if not specs else {"target": target, "edits": [repr(e) for e in specs]},
+              "input": {"kind": loaded.kind, "crop": args.crop}}
+    if loaded.bvh is not None:
+        b = loaded.bvh
+        report["input"]["bvh"] = {"source_fps": b.source_fps, "source_frames": b.source_frames, "units": b.units,
+                                  "metres_per_unit": b.metres_per_unit, "up": b.up, "rig": b.rig.style,
+                                  "detected": list(b.detected), "joints": b.rig.describe()}
     (json_path,) = _outputs(out, [f"{stem}_inversion.json"], args.force)
     files.append(atomic_write_text(json_path, json.dumps(report, indent=2) + "\n"))
     print(", ".join(str(f) for f in files))
@@ -491,9 +579,11 @@ def build_parser() -> argparse.ArgumentParser:
     _generation_args(ed, length=100)
 
     iv = _sub(sub, "invert", "invert a given motion to noise under its prompt: write its reconstruction and the "
-              "reconstruction error (MPJPE, cm); with edit flags, also the edited motion",
-              'salad invert walk_features.npy --prompt "a person walks forward" --mirror arms --out inv_out')
-    iv.add_argument("motion", help="HumanML3D features .npy (N, 263), 4 <= N <= 196 (cropped to a multiple of 4)")
+              "reconstruction error (MPJPE, cm); with edit flags, also the edited motion (npy, BVH and a GIF)",
+              'salad invert my_take.bvh --prompt "a person walks forward" --mirror all --out inv_out')
+    iv.add_argument("motion", help="a .bvh take (any frame rate; SMPL, Mixamo, CMU and similar rigs; see --name-map) "
+                    "or a .npy of HumanML3D features (N, 263) or joints (N, 22, 3); 4 <= N <= 196 frames at "
+                    "20 fps (cropped to a multiple of 4; see --crop)")
     iv.add_argument("--prompt", required=True, help="what the motion shows (the source prompt)")
     iv.add_argument("--out", required=True, help="output folder")
     _edit_args(iv)
@@ -507,6 +597,19 @@ def build_parser() -> argparse.ArgumentParser:
     iv.add_argument("--guidance", type=float, default=7.5,
                     help="guidance scale the inversion is made for (default 7.5)")
     iv.add_argument("--steps", type=int, default=50, help="DDIM steps (default 50)")
+    iv.add_argument("--crop", default=None, metavar="START:STOP",
+                    help="invert only this part of the motion, in seconds (e.g. 2:9.5; STOP empty = to the end)")
+    iv.add_argument("--rig", default=None, choices=["smpl", "mixamo", "cmu", "generic"],
+                    help="BVH: the rig's naming style (default: detected from the joint names)")
+    iv.add_argument("--name-map", default=None, metavar="FILE.json",
+                    help='BVH: JSON object {"humanml3d_joint": "RigJoint", ...} for joints the rig names '
+                         "differently (the error for an unknown rig lists them)")
+    iv.add_argument("--units", default=None,
+                    help="BVH: length unit, m, cm, mm, inch, ft or metres per unit (default: detected from the "
+                         "skeleton's size)")
+    iv.add_argument("--up", default=None, choices=["y", "z", "-y", "-z", "x", "-x"],
+                    help="BVH: the file's up axis (default: detected)")
+    iv.add_argument("--no-render", action="store_true", help="skip the GIF")
     iv.add_argument("--weights", default=None, help="pipeline folder (default: the shipped weights)")
     iv.add_argument("--skeleton", default="humanml3d")
     iv.add_argument("--force", action="store_true", help="overwrite existing files")

@@ -12,11 +12,11 @@ Modules: :mod:`.reader` (parsing and forward kinematics), :mod:`.rigs` (rig styl
 mapping), :mod:`.convert` (up axis, units, resampling, features; :func:`load_motion` for .bvh and
 .npy files).
 """
-from .convert import (UNITS, UP_AXES, BvhImport, BvhImportOptions, LoadedMotion, bvh_to_features, bvh_to_joints,
-                      import_bvh, load_motion)
+from .convert import (UNITS, UP_AXES, BvhImport, BvhImportOptions, JointsConversionError, LoadedMotion,
+                      bvh_to_features, bvh_to_joints, import_bvh, load_motion)
 from .reader import BvhError, BvhJoint, BvhMotion, parse_bvh, read_bvh
 from .rigs import RIG_STYLES, RigError, RigMapping, load_name_map, map_rig, normalize_name
 
 __all__ = ["BvhError", "BvhJoint", "BvhMotion", "read_bvh", "parse_bvh", "RigError", "RigMapping", "RIG_STYLES",
            "map_rig", "load_name_map", "normalize_name", "BvhImportOptions", "BvhImport", "import_bvh",
-           "bvh_to_joints", "bvh_to_features", "LoadedMotion", "load_motion", "UNITS", "UP_AXES"]
+           "bvh_to_joints", "bvh_to_features", "LoadedMotion", "load_motion", "JointsConversionError", "UNITS", "UP_AXES"]

@@ -39,7 +39,7 @@ from .reader import BvhMotion, read_bvh
 from .rigs import HML_NAMES, RigMapping, map_rig
 
 __all__ = ["BvhImportOptions", "BvhImport", "import_bvh", "bvh_to_joints", "bvh_to_features", "LoadedMotion",
-           "load_motion", "UNITS", "UP_AXES"]
+           "load_motion", "JointsConversionError", "UNITS", "UP_AXES"]
 
 #: Metres per file unit of the length units :func:`import_bvh` knows.
 UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "ft": 0.3048}
@@ -302,6 +302,10 @@ def bvh_to_features(source: str | os.PathLike | BvhMotion, **kwargs) -> np.ndarr
     return import_bvh(source, **kwargs).features()
 
 
+class JointsConversionError(ValueError):
+    """A joints file whose joints cannot be turned into HumanML3D features (e.g. all zeros)."""
+
+
 @dataclass(frozen=True, eq=False)
 class LoadedMotion:
     """A motion file read for the models.
@@ -344,6 +348,8 @@ def load_motion(path: str | os.PathLike, skeleton: str = "humanml3d", **bvh_opti
     ------
     FileNotFoundError
         ``"motion file not found: <path>"``.
+    JointsConversionError
+        Joints that ``joints_to_features`` refuses (a ValueError).
     ValueError
         A file that cannot be read or has the wrong shape or non-finite values; BVH errors
         (:class:`~salad_core.bvh.reader.BvhError`, :class:`~salad_core.bvh.rigs.RigError`) name
@@ -376,6 +382,11 @@ def load_motion(path: str | os.PathLike, skeleton: str = "humanml3d", **bvh_opti
     if arr.ndim == 3 and arr.shape[1:] == (sk.num_joints, 3):
         check_joints(arr, sk, name=str(p), min_frames=2)
         joints = arr.astype(np.float32, copy=False)
-        return LoadedMotion(joints_to_features(joints.astype(np.float64), sk), joints, "joints", p)
+        try:
+            feats = joints_to_features(joints.astype(np.float64), sk)
+        except ValueError as exc:
+            raise JointsConversionError(f"{p} holds joints {arr.shape} that cannot be converted to HumanML3D "
+                                        f"features: {exc}") from None
+        return LoadedMotion(feats, joints, "joints", p)
     raise ValueError(f"{p} has shape {arr.shape}; expected features (N, {sk.feature_dim}), joints "
                      f"(N, {sk.num_joints}, 3) or a .bvh file")
