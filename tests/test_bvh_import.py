@@ -605,3 +605,93 @@ def regenerate() -> None:
 
 if __name__ == "__main__" and "--regenerate" in sys.argv:
     regenerate()
+
+
+# ----------------------------------------------------------------------------- salad invert MY_TAKE.bvh
+@pytest.fixture(scope="module")
+def tiny_weights(tmp_path_factory, make_tiny_pipeline):
+    """A tiny randomly initialised pipeline folder (the motions are noise, the plumbing is real)."""
+    return make_tiny_pipeline(seed=0).save_pretrained(tmp_path_factory.mktemp("weights"))
+
+
+@pytest.fixture(scope="module")
+def cmu_take(walk, tmp_path_factory):
+    """A 40-frame CMU-style take at 120 fps in the CMU conversion's unit (a user's file)."""
+    path = tmp_path_factory.mktemp("take") / "my_take.bvh"
+    path.write_text(write_rig(*cmu_rig(_upsampled(walk[:41], 120)), scale=1 / CMU_UNIT, frame_time=1 / 120))
+    return path
+
+
+def test_cli_inverts_and_mirrors_a_bvh_take_with_the_shipped_weights(cmu_take, tmp_path, capsys, single_thread):
+    """``salad invert my_take.bvh --mirror all`` end to end (shipped weights, 5 steps): a GIF, a BVH
+    and npy files of the edited take, the reconstruction error printed and recorded."""
+    from salad_core import cli
+
+    out = tmp_path / "out"
+    code = cli.main(["-q", "invert", str(cmu_take), "--prompt", "a person walks forward and stretches",
+                     "--mirror", "all", "--steps", "5", "--out", str(out)])
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "my_take.bvh: 241 frames at 120 fps -> 41 at 20 fps; units fit (detected)" in printed
+    assert "rig cmu (detected)" in printed and "reconstruction MPJPE" in printed
+    names = {p.name for p in out.iterdir()}
+    assert names == {f"my_take_{b}{e}" for b in ("reconstruction", "edited")
+                     for e in ("_features.npy", "_joints.npy", ".bvh")} | {
+        "my_take_input_features.npy", "my_take_source_vs_edited.gif", "my_take_inversion.json"}
+    report = json.loads((out / "my_take_inversion.json").read_text())
+    assert report["input"]["kind"] == "bvh" and report["input"]["bvh"]["rig"] == "cmu"
+    assert report["input"]["bvh"]["joints"]["left_hip"] == "LeftUpLeg"
+    assert report["input_frames"] == 40 and report["frames"] == 40     # 41 joint frames -> 40 feature frames
+    assert f"reconstruction MPJPE {report['errors']['mpjpe_cm']:.2f} cm" in printed
+    assert 0 < report["errors"]["mpjpe_cm"] < 20
+    # the input features are those of the take; the edit differs from the reconstruction
+    inp = np.load(out / "my_take_input_features.npy")
+    np.testing.assert_allclose(inp, bvh_to_features(cmu_take), atol=1e-5)
+    edited, rec = np.load(out / "my_take_edited_joints.npy"), np.load(out / "my_take_reconstruction_joints.npy")
+    assert edited.shape == rec.shape == (40, 22, 3) and np.abs(edited - rec).max() > 0.05
+    # the edited take's BVH reads back (this project's export) to the edited joints within a few cm
+    back = bvh_to_joints(out / "my_take_edited.bvh")
+    assert back.shape == edited.shape
+    e = edited - edited[..., 1].min() * np.array([0, 1, 0])
+    assert np.median(np.linalg.norm(back - e, axis=-1)) < 0.03
+    import imageio.v3 as iio
+
+    frames = iio.imread(out / "my_take_source_vs_edited.gif", index=None)
+    assert frames.shape[0] == 20 and frames.shape[2] > frames.shape[1]    # two panels side by side
+    assert frames.std() > 10
+
+
+@pytest.mark.parametrize("extra, name, message", [
+    ([], "bad.bvh", "bad.bvh, line 20: frame 2 has 5 values, but the hierarchy declares 9 channels"),
+    ([], "two.bvh", "missing left_hip, right_hip"),
+    (["--up", "z"], "f.npy", "--up applies to .bvh files; f.npy is not one"),
+    (["--crop", "3:1"], "take.bvh", "--crop takes START:STOP in seconds"),
+    (["--crop", "60:"], "take.bvh", "--crop 60:: the motion lasts 2.00 s (40 frames at 20 fps)"),
+    (["--units", "furlong"], "take.bvh", "units 'furlong' is not known"),
+    (["--name-map", "nowhere.json"], "take.bvh", "name_map: file not found"),
+])
+def test_cli_bvh_errors_are_one_line(tmp_path, capsys, cmu_take, extra, name, message):
+    from salad_core import cli
+
+    (tmp_path / "bad.bvh").write_text(_GOOD[:_GOOD.index("1 90 0 0 0 0 10") + 10])
+    (tmp_path / "two.bvh").write_text(_GOOD)
+    (tmp_path / "take.bvh").write_text(cmu_take.read_text())
+    np.save(tmp_path / "f.npy", np.zeros((40, 263), np.float32))
+    code = cli.main(["-q", "invert", str(tmp_path / name), "--prompt", "a person walks", *extra,
+                     "--weights", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err and err.startswith("salad invert: error: ") and message in err, err
+
+
+def test_cli_crop_and_joints_npy(tmp_path, capsys, tiny_weights, walk):
+    """--crop picks seconds of a take; a joints .npy is converted like a take (tiny weights)."""
+    from salad_core import cli
+
+    np.save(tmp_path / "walk_joints.npy", walk.astype(np.float32))
+    out = tmp_path / "o"
+    assert cli.main(["-q", "invert", str(tmp_path / "walk_joints.npy"), "--prompt", "a person walks", "--steps", "2",
+                     "--crop", "0.5:2.1", "--no-render", "--weights", str(tiny_weights), "--out", str(out)]) == 0
+    report = json.loads((out / "walk_joints_inversion.json").read_text())
+    assert report["input"] == {"kind": "joints", "crop": "0.5:2.1"} and report["input_frames"] == 32
+    inp = np.load(out / "walk_joints_input_features.npy")
+    np.testing.assert_allclose(inp, joints_to_features(walk)[10:42], atol=1e-5)
