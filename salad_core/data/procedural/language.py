@@ -71,6 +71,10 @@ VERBS: dict[str, tuple[str, str]] = {
     "play": ("plays", "playing"), "show": ("shows", "showing"), "see": ("sees", "seeing"),
     "rise": ("rises", "rising"), "back": ("backs", "backing"), "clear": ("clears", "clearing"),
     "stomp": ("stomps", "stomping"), "balance": ("balances", "balancing"), "finish": ("finishes", "finishing"),
+    "kneel": ("kneels", "kneeling"), "lie": ("lies", "lying"), "lay": ("lays", "laying"), "climb": ("climbs", "climbing"),
+    "ascend": ("ascends", "ascending"), "go": ("goes", "going"), "pivot": ("pivots", "pivoting"),
+    "tap": ("taps", "tapping"), "tie": ("ties", "tying"), "pray": ("prays", "praying"), "propose": ("proposes", "proposing"),
+    "change": ("changes", "changing"), "drop": ("drops", "dropping"), "settle": ("settles", "settling"), "mount": ("mounts", "mounting"),
     "ask": ("asks", "asking"), "chase": ("chases", "chasing"), "lean": ("leans", "leaning"), "loosen": ("loosens", "loosening"), "dash": ("dashes", "dashing"), "lower": ("lowers", "lowering"), "attract": ("attracts", "attracting"), "punctuate": ("punctuates", "punctuating"),
 }
 
@@ -138,7 +142,12 @@ LEXICON["jumping"] = ("jump", "VERB")
 LEXICON["seen"] = ("see", "VERB")
 for _w in ("get", "greet", "reach", "rest", "say", "take", "loosen", "fight", "see", "catch"):
     LEXICON[_w] = (_w, "VERB")      # bare infinitives ("to rest", "to greet someone")
-_lex("NOUN", "step end excitement baseball pitcher question lot part")
+_lex("NOUN", "step end excitement baseball pitcher question lot part back flight stair platform bench "
+             "crunch crunches heel ball toes knees degrees quarter top shoelace shoelaces prayer proposal",
+     {"crunches": "crunch", "toes": "toe", "degrees": "degree", "shoelaces": "shoelace"})
+_lex("ADJ", "opposite raised flat top")
+_lex("NOUN", "nap home direction basketball player ups feet", {"ups": "up", "feet": "foot"})
+_lex("ADV", "briefly")
 _lex("ADJ", "late ready confused annoyed")
 _lex("ADV", "away")
 _lex("PRON", "who")
@@ -400,6 +409,45 @@ RULES.update({
                           _R("V:circle {poss} outstretched arms", _B)),
 })
 # paraphrases of the older primitives (corpus 2.0): a treadmill is walking in place
+RULES.update({
+    "kneel": _rules(_R("V:kneel down on {poss} {side} knee", _LR), _R("V:kneel on {poss} {side} knee", _LR),
+                    _R("V:go down on {poss} {side} knee", _LR), _R("V:drop to {poss} {side} knee", _LR),
+                    _R("V:kneel down", _LR), _R("V:go down on one knee", _LR), _R("V:kneel on one knee", _LR),
+                    _R("V:get down on one knee and V:stand back up", _LR),
+                    _R("V:kneel down on {poss} {side} knee and V:get back up", _LR)),
+    "lie_down": _rules(_R("V:lie down"), _RS("V:lie down on the [floor|ground]"), _RS("V:lie down on {poss} back"),
+                       _RS("V:lie on the [floor|ground]"), _R("V:lie down on {poss} back with {poss} knees up"),
+                       _R("V:sit down and then V:lie back on the floor"), _R("V:lay {refl} down on the ground"),
+                       _R("V:get down and V:lie on {poss} back")),
+    "lie_down_get_up": _rules(_RS("V:lie down [on the floor|on the ground|on {poss} back] and then V:get back up"),
+                              _R("V:lie down and V:get up again"), _R("V:lie on the floor for a moment and V:get up"),
+                              _R("V:lie down briefly/ADV and V:stand back up"),
+                              _R("V:lie on {poss} back for a moment and then V:get up"),
+                              _R("V:lie down and then V:rise to {poss} feet/NOUN")),
+    "step_up": _rules(_RS("V:step up onto [a box|a step|a platform|a bench|a small step] and back down"),
+                      _R("V:step up and down", reps="implicit", min_reps=1),
+                      _R("V:do step/NOUN ups/NOUN", reps="implicit", min_reps=1),
+                      _RS("V:step onto [a box|a step|a platform] and then V:step back off"),
+                      _R("V:climb onto a box and back down"), _R("V:step up onto something and back down")),
+    "climb_stairs": _rules(_RS("V:walk up [the stairs|some stairs|a flight of stairs|the steps/NOUN|a few steps/NOUN]"),
+                           _RS("V:climb [the stairs|some stairs|a flight of stairs|up the stairs|up some steps/NOUN]"),
+                           _RS("V:go up [the stairs|some stairs|a few steps/NOUN]"), _R("V:ascend a flight of stairs"),
+                           _R("V:ascend the stairs"), _R("V:climb up a staircase"), _R("V:walk up a staircase")),
+    "pivot": _rules(_R("V:pivot to the {side:NOUN}", _LR), _R("V:pivot on {poss} {side} foot", _LR),
+                    _R("V:pivot {side:ADV} on the ball of {poss} {side} foot", _LR),
+                    _R("V:turn {side:ADV} on {poss} {side} foot", _LR),
+                    _R("V:pivot on {poss} {side} foot and V:turn around", _LR, variant="around"),
+                    _R("V:pivot around on {poss} {side} foot", _LR, variant="around"),
+                    _R("V:pivot all the way around", _LR, variant="around"),
+                    _R("V:turn around on the ball of {poss} {side} foot", _LR, variant="around")),
+    "touch_knee": _rules(_R("V:touch {poss} {oside} knee with {poss} {side} hand", _LR),
+                         _R("V:raise {poss} {oside} knee and V:touch it with {poss} {side} hand", _LR),
+                         _R("V:lift {poss} {oside} knee and V:tap it with {poss} {side} hand", _LR),
+                         _R("V:bring {poss} {side} hand to {poss} {oside} knee", _LR),
+                         _R("V:reach across and V:touch {poss} {oside} knee with {poss} {side} hand", _LR),
+                         _R("V:do a cross/NOUN body crunch/NOUN with {poss} {side} hand to {poss} {oside} knee", _LR),
+                         _R("V:do {num} cross/NOUN body crunches/NOUN", _LR, reps="count", min_reps=2)),
+})
 RULES["walk"] += _rules(_R("V:walk on a treadmill/NOUN", variant="in_place"), _R("V:walk in place on a treadmill/NOUN", variant="in_place"),
                         _R("V:stride forward"), _R("V:pace forward"), _R("V:walk across the room/NOUN"),
                         _R("V:walk in a straight line/NOUN"), _R("V:wander forward"))
@@ -655,6 +703,17 @@ INTENT: dict[str, tuple[str, ...]] = {
     "stretch": ("as if warming/VERB up",),
     "march": ("like a soldier",),
 }
+
+
+INTENT.update({
+    "kneel": ("as if tying/VERB a shoelace", "as if praying/VERB", "as if proposing/VERB"),
+    "lie_down": ("to/PART rest/VERB", "as if tired", "as if taking/VERB a nap/NOUN"),
+    "lie_down_get_up": ("as if doing/VERB an exercise", "as part of a workout"),
+    "step_up": ("as if exercising/VERB", "as part of a workout", "as if training/VERB"),
+    "climb_stairs": ("as if going/VERB home/NOUN", "as if in a hurry"),
+    "pivot": ("as if changing/VERB direction/NOUN", "like a basketball/NOUN player/NOUN", "as if dancing/VERB"),
+    "touch_knee": ("as if warming/VERB up", "as part of a workout", "as if exercising/VERB"),
+})
 
 
 def _style_options(kind: str) -> list[tuple[str, bool]]:

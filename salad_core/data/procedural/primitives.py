@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import actions, boxing, dance, everyday, gestures, poses
+from . import actions, boxing, dance, everyday, floorwork, gestures, poses, steps
 from .footwork import Persona, Stance
 from .gait import Route, gait_style, locomotion
 from .kinematics import BodyModel
@@ -133,6 +133,16 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("pick_up", "whole body", "base", sides=SIDE_WORDS, mods=("slowly",), weight=1.0),
     PrimitiveSpec("step_over", "locomotion", "base", mods=("slowly",), accepts=("head",), weight=0.8),
     PrimitiveSpec("stumble", "locomotion", "base", weight=0.7),
+    # down to the floor
+    PrimitiveSpec("kneel", "legs", "base", sides=("left", "right"), mods=_SPEED, weight=0.9),
+    PrimitiveSpec("lie_down", "whole body", "base", mods=("slowly",), weight=0.6, terminal=True),
+    PrimitiveSpec("lie_down_get_up", "whole body", "base", mods=("slowly",), weight=0.6),
+    # footwork: steps, stairs, pivots, a cross-body knee touch
+    PrimitiveSpec("step_up", "legs", "base", mods=_SPEED, reps=(1, 2), accepts=("arms", "head"), weight=0.8),
+    PrimitiveSpec("climb_stairs", "locomotion", "base", mods=_SPEED, accepts=("head",), weight=0.8, terminal=True),
+    PrimitiveSpec("pivot", "locomotion", "base", sides=("left", "right"), mods=_SPEED, variants=("", "around"),
+                  accepts=("arms", "head"), weight=0.8),
+    PrimitiveSpec("touch_knee", "whole body", "base", sides=("left", "right"), mods=_SPEED, reps=(1, 2), weight=0.8),
     # boxing
     PrimitiveSpec("guard", "arms", "gesture", sides=("both",), weight=0.5),
     PrimitiveSpec("jab_cross", "arms", "gesture", sides=("left", "right"), mods=("quickly",), reps=(1, 2), weight=0.8),
@@ -201,6 +211,17 @@ def primitive_parts(action: Action) -> tuple[tuple[str, ...], tuple[str, ...]]:
         return _LOWER, _UPPER
     if k == "stumble":
         return _LOWER + ("spine",), ("left arm", "right arm", "head")
+    if k == "kneel":
+        return _LOWER, ("spine", "left arm", "right arm", "head")
+    if k in ("lie_down", "lie_down_get_up"):
+        return _LOWER + ("spine",), ("left arm", "right arm", "head")
+    if k in ("step_up", "climb_stairs", "pivot"):
+        return _LOWER, _UPPER
+    if k == "touch_knee":     # the side is the hand; it touches the other knee, which rises
+        knee_leg = "right leg" if side == "left" else "left leg"
+        support = "left leg" if side == "left" else "right leg"
+        other = "right arm" if side == "left" else "left arm"
+        return arms[side] + (knee_leg, "spine"), ("root", support, other, "head")
     if k == "look":
         return ("head",), ("spine",)
     raise ValueError(f"no parts defined for primitive {k!r}")
@@ -287,6 +308,19 @@ def build_base(action: Action, start: Stance, persona: Persona, body: BodyModel,
         return everyday.step_over(start, persona, body, rng, mods=mods)
     if k == "stumble":
         return everyday.stumble(start, persona, body, rng, mods=mods)
+    if k == "kneel":
+        return floorwork.kneel(start, persona, body, rng, side=side, mods=mods)
+    if k in ("lie_down", "lie_down_get_up"):
+        return floorwork.lie_down(start, persona, body, rng, mods=mods, get_up=k == "lie_down_get_up")
+    if k == "step_up":
+        return steps.step_up(start, persona, body, rng, mods=mods, reps=action.reps)
+    if k == "climb_stairs":
+        return steps.climb_stairs(start, persona, body, rng, mods=mods)
+    if k == "pivot":
+        angle = np.pi if action.variant == "around" else rng.uniform(0.45, 0.55) * np.pi
+        return steps.pivot(start, persona, body, rng, side=side, angle=angle, mods=mods)
+    if k == "touch_knee":
+        return steps.touch_knee(start, persona, body, rng, hand=side, mods=mods, reps=action.reps)
     raise ValueError(f"primitive {k!r} is not a base action")
 
 
