@@ -333,7 +333,51 @@ def _parse_crop(text: str) -> tuple[float, float | None]:
     return a, b
 
 
-def _invert_input(args: argparse.Namespace):
+def _bvh_args(p: argparse.ArgumentParser) -> None:
+    """The BVH import options shared by ``salad invert`` and ``salad import``."""
+    p.add_argument("--crop", default=None, metavar="START:STOP",
+                   help="use only this part of the motion, in seconds (e.g. 2:9.5; STOP empty = to the end)")
+    p.add_argument("--rig", default=None, choices=["smpl", "mixamo", "cmu", "generic"],
+                   help="BVH: the rig's naming style (default: detected from the joint names)")
+    p.add_argument("--name-map", default=None, metavar="FILE.json",
+                   help='BVH: JSON object {"humanml3d_joint": "RigJoint", ...} for joints the rig names '
+                        "differently (the error for an unknown rig lists them)")
+    p.add_argument("--units", default=None,
+                   help="BVH: length unit, m, cm, mm, inch, ft or metres per unit (default: detected from the "
+                        "skeleton's size)")
+    p.add_argument("--up", default=None, choices=["y", "z", "-y", "-z", "x", "-x"],
+                   help="BVH: the file's up axis (default: detected)")
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    """Convert a BVH take (or a joints .npy) to HumanML3D features and joints for the other commands."""
+    import numpy as np
+
+    from salad_core.io import atomic_path
+    from salad_core.motion import features_to_joints
+
+    sk, loaded, features = _motion_input(args, check_length=False)
+    out = _check_out_dir(args.out, args.force)
+    stem = loaded.path.stem
+    names = [f"{stem}_features.npy", f"{stem}_joints.npy"] + ([] if args.no_render else [f"{stem}.gif"])
+    paths = _outputs(out, names, args.force)
+    joints = features_to_joints(features, sk)
+    for path, arr in zip(paths[:2], (features, joints)):
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.save(fh, np.asarray(arr, dtype=np.float32))
+    if not args.no_render:
+        from salad_viz import animate
+
+        animate(joints, sk, paths[2], size=(320, 320), stride=2)
+    if loaded.bvh is not None and not args.quiet:
+        for hml, src in loaded.bvh.rig.describe().items():
+            print(f"  {hml:15s} <- {src}")
+    print(f"{len(features)} frames at {sk.fps:g} fps ({len(features) / sk.fps:.2f} s): " + ", ".join(map(str, paths)))
+    return 0
+
+
+def _motion_input(args: argparse.Namespace, check_length: bool = True):
     """``(skeleton, loaded motion, features to invert)`` from a .bvh take or a .npy of features or joints.
 
     BVH takes and joints are converted with :func:`salad_core.motion.joints_to_features`
@@ -373,7 +417,7 @@ def _invert_input(args: argparse.Namespace):
                             f"({len(features)} frames at {sk.fps:g} fps)")
         features = features[i:j]
     unit, max_len = sk.unit_length, sk.max_length
-    if not unit <= len(features) - len(features) % unit <= max_len:
+    if check_length and not unit <= len(features) - len(features) % unit <= max_len:
         hint = "" if args.crop is not None else "; pick a part with --crop START:STOP (seconds)"
         raise UserError(f"{path} has {len(features)} frames; allowed: {unit}..{max_len} (at {sk.fps:g} fps, "
                         f"{max_len / sk.fps:g} s at most{hint})")
@@ -395,7 +439,7 @@ def cmd_invert(args: argparse.Namespace) -> int:
         raise UserError(f"--method {args.method!r}; allowed: {', '.join(INVERSION_METHODS)}")
     if not (args.prompt or "").strip():
         raise UserError("--prompt is empty; describe what the motion shows, e.g. 'a person walks forward'")
-    sk, loaded, features = _invert_input(args)
+    sk, loaded, features = _motion_input(args)
     path = loaded.path
     out = _check_out_dir(args.out, args.force)
     stem = path.stem
@@ -597,22 +641,21 @@ def build_parser() -> argparse.ArgumentParser:
     iv.add_argument("--guidance", type=float, default=7.5,
                     help="guidance scale the inversion is made for (default 7.5)")
     iv.add_argument("--steps", type=int, default=50, help="DDIM steps (default 50)")
-    iv.add_argument("--crop", default=None, metavar="START:STOP",
-                    help="invert only this part of the motion, in seconds (e.g. 2:9.5; STOP empty = to the end)")
-    iv.add_argument("--rig", default=None, choices=["smpl", "mixamo", "cmu", "generic"],
-                    help="BVH: the rig's naming style (default: detected from the joint names)")
-    iv.add_argument("--name-map", default=None, metavar="FILE.json",
-                    help='BVH: JSON object {"humanml3d_joint": "RigJoint", ...} for joints the rig names '
-                         "differently (the error for an unknown rig lists them)")
-    iv.add_argument("--units", default=None,
-                    help="BVH: length unit, m, cm, mm, inch, ft or metres per unit (default: detected from the "
-                         "skeleton's size)")
-    iv.add_argument("--up", default=None, choices=["y", "z", "-y", "-z", "x", "-x"],
-                    help="BVH: the file's up axis (default: detected)")
+    _bvh_args(iv)
     iv.add_argument("--no-render", action="store_true", help="skip the GIF")
     iv.add_argument("--weights", default=None, help="pipeline folder (default: the shipped weights)")
     iv.add_argument("--skeleton", default="humanml3d")
     iv.add_argument("--force", action="store_true", help="overwrite existing files")
+
+    im = _sub(sub, "import", "convert a BVH motion-capture take (SMPL, Mixamo, CMU and similar rigs, any frame rate, "
+              "unit and up axis) to HumanML3D features and joints (.npy, 20 fps) and a GIF",
+              "salad import my_take.bvh --out takes")
+    im.add_argument("motion", help="a .bvh take (or a joints .npy (N, 22, 3))")
+    im.add_argument("--out", required=True, help="output folder")
+    _bvh_args(im)
+    im.add_argument("--no-render", action="store_true", help="skip the GIF")
+    im.add_argument("--skeleton", default="humanml3d", help=argparse.SUPPRESS)
+    im.add_argument("--force", action="store_true", help="overwrite existing files")
 
     r = _sub(sub, "render", "animate a motion file (features .npy or joints .npy) as GIF or MP4",
              "salad render gen_out/00_a_person_jumps_joints.npy --out renders --format mp4")
@@ -656,7 +699,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 COMMANDS: dict[str, Callable] = {"corpus": cmd_corpus, "demo": cmd_demo, "generate": cmd_generate,
-                                 "render": cmd_render, "export": cmd_export, "edit": cmd_edit, "invert": cmd_invert}
+                                 "render": cmd_render, "export": cmd_export, "edit": cmd_edit, "invert": cmd_invert,
+                                 "import": cmd_import}
 #: Commands whose remaining arguments go to another module's parser.
 PASS_THROUGH: dict[str, Callable] = {"train": cmd_train, "eval": cmd_eval, "bench": cmd_bench}
 

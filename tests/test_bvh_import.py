@@ -695,3 +695,21 @@ def test_cli_crop_and_joints_npy(tmp_path, capsys, tiny_weights, walk):
     assert report["input"] == {"kind": "joints", "crop": "0.5:2.1"} and report["input_frames"] == 32
     inp = np.load(out / "walk_joints_input_features.npy")
     np.testing.assert_allclose(inp, joints_to_features(walk)[10:42], atol=1e-5)
+
+
+def test_cli_import_converts_a_take_for_the_other_commands(tmp_path, capsys, rigs, walk):
+    from salad_core import cli
+
+    path, _ = rigs["mixamo"]
+    out = tmp_path / "takes"
+    assert cli.main(["import", str(path), "--out", str(out), "--no-render"]) == 0
+    printed = capsys.readouterr().out
+    assert "rig mixamo (detected)" in printed and "left_collar     <- mixamorig:LeftShoulder" in printed
+    feats = np.load(out / "mixamo_features.npy")
+    np.testing.assert_allclose(feats, bvh_to_features(path), atol=1e-6)
+    assert np.load(out / "mixamo_joints.npy").shape == (len(walk) - 1, 22, 3)
+    # the converted features go anywhere a features .npy goes, e.g. salad export
+    assert cli.main(["-q", "export", str(out / "mixamo_features.npy"), "--format", "bvh", "--out", str(out)]) == 0
+    assert bvh_to_joints(out / "mixamo_features.bvh").shape == (len(walk) - 1, 22, 3)
+    assert cli.main(["-q", "import", str(path), "--out", str(out), "--no-render"]) == 2     # refuses to overwrite
+    assert "--force" in capsys.readouterr().err
