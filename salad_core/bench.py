@@ -1,6 +1,6 @@
 """``salad bench``: how fast salad runs on this machine, as one table measured in one run.
 
-Five sections, each a function returning rows of the table (:class:`Row`), run in this order:
+Six sections, each a function returning rows of the table (:class:`Row`), run in this order:
 
 * ``memory``: peak memory of one generation with streaming attention capture (the default
   ``capture_attention=True``, a running mean per step bin) at 50 and at 200 DDIM steps: the peak
@@ -28,6 +28,14 @@ Five sections, each a function returning rows of the table (:class:`Row`), run i
   shipped recipe's model configs and batch sizes (``runs.json`` beside the shipped weights, else
   the library defaults). The denoiser step is the trainer's own (:func:`_prepare`: frozen-VAE
   encoding, noising, caption dropping; then forward, backward, AdamW), with random text features.
+
+* ``train`` (opt-in: it builds a small procedural corpus, unless ``--train-data`` names one, and a
+  latent cache; a few minutes): where a denoiser training step goes, part by part (data, VAE
+  latents, text features, noising, forward, backward, clipping, optimiser, logging, validation;
+  :mod:`salad_core.train.profile`), for the trainer *before* the issue-19 changes (random batches,
+  VAE encoder at every step) and *after* (length buckets, latent cache), steps interleaved in one
+  process; ``ratio`` = before / after (a speed-up). Shipped VAE and MiniLM, the shipped recipe's
+  denoiser and batch size.
 
 * ``compile`` (opt-in, not part of the default run: compiling takes about a minute): one guided
   forward of the shipped default denoiser (196 frames, batch 1) eager against ``torch.compile``
@@ -69,7 +77,7 @@ from salad_core.models.gemm import backend as gemm_backend
 from salad_core.sampling import denoise, make_scheduler
 from salad_core.skeleton import get_skeleton
 
-__all__ = ["Row", "Case", "Plan", "SECTIONS", "OPTIONAL_SECTIONS", "compile_rows", "batching_rows", "gemm_flops", "step_flops", "matmul_rates", "attended_tokens",
+__all__ = ["Row", "Case", "Plan", "SECTIONS", "OPTIONAL_SECTIONS", "compile_rows", "train_profile_rows", "batching_rows", "gemm_flops", "step_flops", "matmul_rates", "attended_tokens",
            "matmul_rates_by_backend", "roofline_seconds",
            "time_denoiser_steps", "speed_rows", "forward_variant_rows", "overhead_rows", "training_rows",
            "memory_rows", "peak_rss_delta", "denoiser_cases", "TrainRecipe", "train_recipe", "bench_pipeline",
@@ -89,7 +97,7 @@ PROMPT_TOKENS = (8, 24)
 BATCHES = (1, 32)
 SECTIONS = ("memory", "overheads", "speed", "training")
 #: Sections run only when asked for by name.
-OPTIONAL_SECTIONS = ("compile",)
+OPTIONAL_SECTIONS = ("compile", "train")
 COLUMNS = ["section", "measure", "setting", "value", "unit", "reference", "ratio", "note"]
 
 SOURCE = "a man walks forward and waves his right hand"
@@ -906,6 +914,57 @@ def training_rows(recipe: TrainRecipe, steps: int, warmup: int = 1, text_tokens:
     ]
 
 
+def train_profile_rows(recipe: TrainRecipe, steps: int, warmup: int, data: str | Path | None = None,
+                       weights: str | Path | None = None, corpus_motions: int = 60) -> tuple[list[Row], list[str]]:
+    """The ``train`` section: a denoiser step part by part, before and after (see the module docstring).
+
+    ``data`` is a HumanML3D-layout folder (default: a procedural corpus of ``corpus_motions`` motions
+    built in a temporary folder). Returns the rows and notes for the table.
+    """
+    import tempfile
+
+    from salad_core.pipeline import default_weights_dir
+    from salad_core.train.profile import PARTS, profile_denoiser_training
+
+    tmp = Path(tempfile.mkdtemp(prefix="salad_bench_train_"))
+    if data is None:
+        from salad_core.data.procedural.corpus import build_corpus
+
+        data = tmp / "corpus"
+        try:
+            build_corpus(data, size=corpus_motions, seed=0, progress=False)
+        except Exception as exc:  # the generator is someone else's code: say what to do instead
+            raise RuntimeError(f"building the train section's procedural corpus failed ({type(exc).__name__}: "
+                               f"{exc}); pass --train-data with a HumanML3D-layout folder") from exc
+    vae = Path(weights or default_weights_dir()) / "vae"
+    cfg = recipe.denoiser_train.replace(progress=False)
+    t0 = time.perf_counter()
+    before, after = profile_denoiser_training(data, vae, recipe.denoiser, cfg, steps=steps, warmup=warmup,
+                                              cache_dir=tmp / "latent_cache", diffusion_config=recipe.diffusion)
+    log.info("train: profiled in %.0f s", time.perf_counter() - t0)
+    setting = f"batch {cfg.batch_size}, width {recipe.denoiser.width}, {recipe.denoiser.layers} layers"
+    rows = [Row("train", f"part: {p}", "ms per step", 1e3 * after.parts[p], "ms", 1e3 * before.parts[p],
+                before.parts[p] / after.parts[p] if after.parts[p] > 0 else None)
+            for p in PARTS]
+    rows += [
+        Row("train", "denoiser step", setting, 1e3 * after.step_s, "ms", 1e3 * before.step_s,
+            before.step_s / after.step_s, note="sum of the parts"),
+        Row("train", "denoiser steps/s", setting, after.steps_per_s, "steps/s", before.steps_per_s,
+            after.steps_per_s / before.steps_per_s, note="ratio = after / before"),
+        Row("train", "samples x frames/s", "valid motion frames per second", after.frames_per_s, "frames/s",
+            before.frames_per_s, after.frames_per_s / before.frames_per_s, note="ratio = after / before"),
+        Row("train", "padding", "latent frames computed / valid", after.padded_frames_per_step / after.frames_per_step,
+            "x", before.padded_frames_per_step / before.frames_per_step, note="batch x longest item over valid frames"),
+        Row("train", "start-up", "data, text prefill (+ latent cache after)", after.startup_s, "s", before.startup_s,
+            note="before the first step; the cache is built once per VAE and corpus"),
+    ]
+    notes = [f"train: value = after (length buckets of {cfg.bucket_pool} batches, latent cache), reference = before "
+             f"(random batches, VAE encoder per step), {steps} timed steps each after {warmup} warm-up, interleaved "
+             f"one by one in one process; part ratio = before / after; data: {data}; VAE: {vae}; "
+             f"validation amortised over val_every={cfg.val_every} steps, logging over log_every={cfg.log_every}"]
+    return rows, notes
+
+
 # ================================================================================ the table
 def machine_header(threads: int, quick: bool) -> str:
     """One line: date, platform, CPUs, torch version and threads, and the load at the start."""
@@ -919,7 +978,7 @@ def machine_header(threads: int, quick: bool) -> str:
 
 
 def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None = None,
-                   weights: str | Path | None = None) -> "Any":
+                   weights: str | Path | None = None, train_data: str | Path | None = None) -> "Any":
     """Measure everything (or ``sections``) in this process and return the table.
 
     Parameters
@@ -933,6 +992,8 @@ def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None 
         in that order).
     weights : path, optional
         Pipeline folder for the memory and overhead sections (default: the shipped weights).
+    train_data : path, optional
+        HumanML3D-layout folder of the ``train`` section (default: a small procedural corpus).
 
     Returns
     -------
@@ -1010,6 +1071,12 @@ def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None 
             recipe = train_recipe(weights)
             log.info("training: %d timed steps each", plan.train_steps)
             rows += training_rows(recipe, plan.train_steps, plan.train_warmup)
+        if "train" in sections:
+            log.info("train: denoiser step profile, before and after")
+            train_rows, train_notes = train_profile_rows(train_recipe(weights), 3 if plan.quick else 12,
+                                                         1 if plan.quick else 2, data=train_data, weights=weights)
+            rows += train_rows
+            notes += train_notes
         if "compile" in sections:
             log.info("compile: torch.compile of the default denoiser")
             rows += compile_rows(denoiser_cases(weights)[1], reps=3 if plan.quick else 10)
@@ -1070,6 +1137,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--sections", default=None, help=f"comma-separated subset of {','.join(SECTIONS)} (default: "
                    f"all of them), or the opt-in {','.join(OPTIONAL_SECTIONS)}")
     p.add_argument("--weights", default=None, help="pipeline folder for memory/overheads (default: shipped)")
+    p.add_argument("--train-data", default=None, help="train section: HumanML3D-layout corpus (default: a small "
+                   "procedural corpus built in a temporary folder)")
     return p
 
 
@@ -1089,7 +1158,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from salad_core.allocator import tune_from_environment
 
     tune_from_environment()   # as the salad command does (also for the bench/ scripts that call this)
-    df = run_benchmarks(args.quick, threads, sections=sections, weights=args.weights)
+    df = run_benchmarks(args.quick, threads, sections=sections, weights=args.weights, train_data=args.train_data)
     text = format_table(df)
     print(text, end="")
     if out is not None:

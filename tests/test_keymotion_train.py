@@ -232,3 +232,94 @@ def test_shipped_pipeline_loads_in_float32_and_generates_deterministically(shipp
     np.testing.assert_array_equal(a.features, b.features)
     c = shipped(prompts, lengths=[60, 100], seed=4, num_steps=10)
     assert not np.allclose(a.features, c.features)
+
+
+# ----------------------------------------------------------------------------- throughput (issue 19)
+@pytest.fixture(scope="module")
+def fake_corpus(tmp_path_factory) -> Path:
+    from _doubles import make_fake_corpus
+
+    return make_fake_corpus(tmp_path_factory.mktemp("fake_km"), n_train=6, n_val=2, lengths=(44, 90))
+
+
+def _keyframe_sets(root: Path, k: int = 8):
+    from salad_core.data.dataset import MotionTextDataset
+    from salad_core.keymotion.train import KeyframeDataset
+
+    train = MotionTextDataset(root, "train", max_length=96, random_crop=True, seed=0)
+    val = MotionTextDataset(root, "val", max_length=96, mean=train.mean, std=train.std, random_crop=False)
+    return KeyframeDataset(train, k, "uniform"), KeyframeDataset(val, k, "uniform")
+
+
+def test_pst_latent_cache_equals_encoding_the_keyframes(fake_corpus, tmp_path):
+    """Cached keyframe-VAE posteriors give the PST's on-the-fly inputs; a weight change rebuilds the cache."""
+    from salad_core.data.dataset import collate_motion_text  # noqa: F401  (collate_keyframes uses it)
+    from salad_core.keymotion.kf_vae import KeyframeVAE, KeyframeVAEConfig
+    from salad_core.keymotion.pst import PST_DIFFUSION
+    from salad_core.keymotion.train import _prepare_pst, collate_keyframes, kf_vae_latent_cache
+    from salad_core.sampling import make_scheduler
+    from salad_core.train.common import StepContext
+    from salad_core.train.distributed import DistEnv, GlobalBatchRandom
+
+    train, val = _keyframe_sets(fake_corpus)
+    torch.manual_seed(0)
+    vae = KeyframeVAE(KeyframeVAEConfig(num_keyframes=8, max_length=96, frame_dim=32, latent_dim=16, num_layers=1,
+                                        ff_dim=64, dropout=0.1)).eval()
+    vae.set_normalization(train.mean, train.std)
+    env = DistEnv()
+    cache = kf_vae_latent_cache(vae, [train, val], tmp_path, env)
+    assert len(cache) == len(train.base.crops()) + len(val.base.crops())
+    items = [train[i] for i in range(4)]
+    batch = collate_keyframes(items)
+
+    class Text:
+        def encode(self, captions):
+            return torch.ones(len(captions), 3, TEXT_DIM), torch.ones(len(captions), 3, dtype=torch.bool)
+
+    cfg = KeyMotionTrainConfig(max_length=96, num_threads=1, progress=False)
+    kw = dict(vae=vae, text=Text(), scheduler=make_scheduler(PST_DIFFUSION, "ddim"), config=cfg,
+              latent_shape=vae.latent_shape)
+    out = {}
+    for name, latents in (("fly", None), ("cache", cache)):
+        ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(2), env), env, train=True, step=0)
+        out[name] = _prepare_pst(batch, ctx, latents=latents, **kw)
+    torch.testing.assert_close(out["cache"]["noisy"], out["fly"]["noisy"], rtol=1e-5, atol=1e-6)
+    assert torch.equal(out["cache"]["target"], out["fly"]["target"])
+    assert kf_vae_latent_cache(vae, [train, val], tmp_path, env).folder == cache.folder      # reused
+    with torch.no_grad():
+        next(vae.parameters()).view(-1)[0] += 1e-3
+    assert kf_vae_latent_cache(vae, [train, val], tmp_path, env).folder != cache.folder   # rebuilt
+
+
+def test_mmae_buckets_weigh_every_frame_alike(fake_corpus, hash_encoder):
+    """The MMAE task declares item lengths (bucketing); in training its losses are scaled by
+    valid frames / (batch x expected frames); validation keeps the per-batch means."""
+    from salad_core.keymotion.mmae import MMAEConfig
+    from salad_core.keymotion.train import build_mmae_task
+    from salad_core.train.batching import expected_latent_frames
+    from salad_core.train.common import StepContext
+    from salad_core.train.distributed import DistEnv, GlobalBatchRandom
+
+    env = DistEnv()
+    cfg = KeyMotionTrainConfig(max_length=96, num_threads=1, progress=False, batch_size=4)
+    task = build_mmae_task(fake_corpus, MMAEConfig(text_dim=hash_encoder.dim, max_length=96, width=32, num_layers=1,
+                                                   num_heads=4, ff_dim=64, dropout=0.0), cfg, env, "minilm", 8)
+    assert np.array_equal(task.lengths, task.train_set.lengths)
+    batch = task.collate([task.train_set[i] for i in range(4)])
+    norm = 4 * expected_latent_frames(task.lengths, 4)
+    losses = {}
+    for train in (True, False):
+        ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(1), env), env, train=train, step=0)
+        inputs = task.prepare(batch, ctx)
+        assert ("frame_weight" in inputs) == train
+        if train:
+            assert float(inputs["frame_weight"]) == pytest.approx(float(batch["length"].sum()) / (4 * norm), rel=1e-6)
+        with torch.no_grad():
+            losses[train] = task.objective(**inputs)
+    for k in ("loss", "rec", "vel"):
+        assert float(losses[True][k]) == pytest.approx(float(losses[False][k]) * float(batch["length"].sum()) / (4 * norm),
+                                                       rel=1e-5)
+    random_cfg = cfg.replace(batching="random")
+    plain = build_mmae_task(fake_corpus, task.model_config, random_cfg, env, "minilm", 8)
+    ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(1), env), env, train=True, step=0)
+    assert "frame_weight" not in plain.prepare(batch, ctx)

@@ -500,3 +500,32 @@ def test_caption_cache_prefill_matches_single_encoding():
     for i, c in enumerate(caps):
         assert torch.allclose(feats[i, mask[i]], ref[c], atol=1e-5)
     assert CaptionFeatureCache(enc, 2).prefill(caps) == 0       # would not fit: left to the LRU path
+
+
+def test_run_config_records_batching_threads_numerics_and_the_card_says_so(corpus, tiny_vae_run, tmp_path):
+    from salad_core.train.assemble import assemble_pipeline, numerics_note, write_numerics_section
+
+    new = tmp_path / "new"
+    train_denoiser(corpus, new, tiny_vae_run, tiny_denoiser_config(), den_train_config(max_steps=2), HashTextEncoder())
+    doc = json.loads((new / "config.json").read_text())
+    assert doc["runtime"]["torch_threads"] == 1 and doc["runtime"]["batching"].startswith("length buckets")
+    assert doc["task"]["numerics"]["latents"].startswith("cached")
+    assert (new / "latent_cache").is_dir()
+    lines = [r for r in map(json.loads, (new / "log.jsonl").read_text().splitlines()) if "lr" in r]
+    assert len(lines) == 2 and all(r["threads"] == 1 and r["frames_per_s"] > 0 for r in lines)
+    old = tmp_path / "old"
+    train_denoiser(corpus, old, tiny_vae_run, tiny_denoiser_config(),
+                   den_train_config(max_steps=2, batching="random", latent_cache=False), HashTextEncoder())
+    assert numerics_note({"denoiser": old}) is None and not (old / "latent_cache").exists()
+    note = numerics_note({"vae": tiny_vae_run, "denoiser": new})
+    assert "**denoiser**" in note and "length buckets" in note and "**vae**" not in note
+    card = tmp_path / "MODEL_CARD.md"
+    card.write_text("# My model\n\nhand-written text\n")
+    write_numerics_section(card, note)
+    write_numerics_section(card, note)                                  # replaced, not appended twice
+    text = card.read_text()
+    assert text.startswith("# My model") and text.count("## Training numerics") == 1
+    write_numerics_section(card, None)
+    assert "Training numerics" not in card.read_text() and "hand-written text" in card.read_text()
+    pipe = assemble_pipeline(tiny_vae_run, new, tmp_path / "pipe", text_encoder=HashTextEncoder())
+    assert "## Training numerics" in (pipe / "MODEL_CARD.md").read_text()

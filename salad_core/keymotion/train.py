@@ -23,6 +23,13 @@ caption-feature cache, filled in batches at their first step (:class:`PrefilledC
 Items come from :class:`~salad_core.data.dataset.MotionTextDataset` (random crops and captions,
 lengths multiples of 4); every item keeps ``K = num_keyframes`` keyframes whatever its length.
 All random draws of a step come from the trainer's shared generator for the global batch.
+
+Throughput (issue 19; switches in :class:`KeyMotionTrainConfig`): the PST looks the keyframe VAE's
+posteriors up in a latent cache of every window an item can take (``latent_cache``; keyframes
+selected and encoded once per keyframe VAE and corpus, ``eps`` still drawn per step); the MMAE,
+whose cost grows with the frames of a batch, gets length-bucketed batches (``batching``) and then
+weighs its per-batch mean losses by ``valid frames / (batch x expected frames per item)``, so every
+frame weighs the same in every batch (see :mod:`salad_core.train.batching`).
 """
 from __future__ import annotations
 
@@ -41,6 +48,7 @@ from torch import nn
 from torch.utils.data import Dataset
 
 from salad_core.io import atomic_write_text, config_to_dict
+from salad_core.train.batching import expected_latent_frames
 from salad_core.train.common import StepContext, TrainResult, TrainTask, fit
 from salad_core.train.config import TrainConfig
 from salad_core.train.denoiser_trainer import CaptionFeatureCache, resolve_checkpoint
@@ -66,6 +74,7 @@ __all__ = [
     "train_mmae",
     "train_keymotion",
     "load_frozen_kf_vae",
+    "kf_vae_latent_cache",
     "PrefilledCaptions",
     "STAGES",
     "KeyMotionRecipe",
@@ -92,6 +101,8 @@ class KeyMotionTrainConfig(TrainConfig):
     text_cache_size: int = 32768               # captions whose token features are kept (0: encode every batch);
                                                # when all fit, they are encoded up front in batches
     keyframe_noise: float = 0.0                # MMAE: std of noise added to the input keyframes (normalised units)
+    latent_cache: bool = True                  # PST: keyframe-VAE posteriors of every window encoded once
+    latent_cache_dir: str | None = None        # PST: where the cache lives (None: the run folder's latent_cache/)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -151,20 +162,30 @@ class KeyframeDataset(Dataset):
     def __len__(self) -> int:
         return len(self.base)
 
+    @property
+    def lengths(self) -> np.ndarray:
+        """``(len(self),)`` frames of each item before cropping (for length-bucketed batches)."""
+        return self.base.lengths
+
     def set_epoch(self, epoch: int) -> None:
         self.base.set_epoch(epoch)
 
-    def __getitem__(self, index: int) -> dict[str, Any]:
-        item = self.base[index]
-        n = int(item["length"])
-        key = (item["motion_id"], int(item["offset"]), n)
+    def keyframes_of(self, key: tuple[str, int, int], motion: np.ndarray | None = None) -> np.ndarray:
+        """``(K,)`` int64 keyframe indices of the window ``key = (motion_id, offset, length)`` (cached)."""
         idx = self._cache.get(key)
         if idx is None:
-            idx = select_keyframes(item["motion"][:n], self.num_keyframes, self.method).astype(np.int64)
+            if motion is None:
+                motion = self.base.crop_features(*key)
+            idx = select_keyframes(motion[: key[2]], self.num_keyframes, self.method).astype(np.int64)
             self._cache[key] = idx
             if len(self._cache) > self.cache_size:
                 self._cache.pop(next(iter(self._cache)))   # dicts keep insertion order: drop the oldest
-        item["keyframes"] = idx.copy()
+        return idx
+
+    def __getitem__(self, index: int) -> dict[str, Any]:
+        item = self.base[index]
+        key = (item["motion_id"], int(item["offset"]), int(item["length"]))
+        item["keyframes"] = self.keyframes_of(key, item["motion"]).copy()
         return item
 
 
@@ -297,10 +318,19 @@ class MMAEObjective(nn.Module):
         self.mmae = mmae
 
     def forward(self, motion: torch.Tensor, inputs: torch.Tensor, keyframe_mask: torch.Tensor,
-                frame_mask: torch.Tensor, text: torch.Tensor, text_mask: torch.Tensor) -> dict[str, torch.Tensor]:
-        """``motion (B, N, D)`` target, ``inputs (B, N, D)`` (keyframe rows read), masks ``(B, N)``."""
+                frame_mask: torch.Tensor, text: torch.Tensor, text_mask: torch.Tensor,
+                frame_weight: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """``motion (B, N, D)`` target, ``inputs (B, N, D)`` (keyframe rows read), masks ``(B, N)``.
+
+        ``frame_weight`` (scalar, length-bucketed training): multiplies the per-batch mean losses,
+        ``valid frames / (batch x expected frames per item)``, so that each frame weighs the same
+        in every batch (the velocity term's ``frames - 1`` pairs are weighed as frames).
+        """
         pred = self.mmae(inputs, keyframe_mask, frame_mask, text, text_mask)
-        return self.mmae.loss(pred, motion, frame_mask)
+        losses = self.mmae.loss(pred, motion, frame_mask)
+        if frame_weight is not None:
+            losses = {k: v * frame_weight for k, v in losses.items()}
+        return losses
 
 
 # ------------------------------------------------------------------------------- prepare
@@ -311,7 +341,8 @@ def _prepare_vae(batch: dict[str, Any], ctx: StepContext, *, latent_shape: tuple
 
 
 def _prepare_pst(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, text: PrefilledCaptions,
-                 scheduler: Any, config: KeyMotionTrainConfig, latent_shape: tuple[int, int]) -> dict[str, Any]:
+                 scheduler: Any, config: KeyMotionTrainConfig, latent_shape: tuple[int, int],
+                 latents: Any = None) -> dict[str, Any]:
     dev = ctx.env.device
     _, length, idx, keyframes = _keyframe_inputs(batch, dev)
     b = keyframes.shape[0]
@@ -322,8 +353,13 @@ def _prepare_pst(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, t
     if not ctx.train:
         drop = torch.zeros_like(drop)
     with torch.no_grad():
-        enc = vae.encode(keyframes, indices_to_positions(idx, length), sample=False)
-        z = enc.mu + eps * torch.exp(0.5 * enc.logvar)
+        if latents is not None:
+            keys = list(zip(batch["motion_id"], (int(o) for o in batch["offset"]), length.tolist()))
+            mu, logvar = (t_.to(dev) for t_ in latents.lookup(keys))      # (B, Lz, Dz)
+        else:
+            enc = vae.encode(keyframes, indices_to_positions(idx, length), sample=False)
+            mu, logvar = enc.mu, enc.logvar
+        z = mu + eps * torch.exp(0.5 * logvar)
         noisy = scheduler.add_noise(z, noise, t)
         captions = ["" if d else c for d, c in zip(drop.tolist(), batch["caption"])]
         feats, mask = text.encode(captions)
@@ -332,7 +368,7 @@ def _prepare_pst(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, t
 
 
 def _prepare_mmae(batch: dict[str, Any], ctx: StepContext, *, text: PrefilledCaptions,
-                  config: KeyMotionTrainConfig) -> dict[str, Any]:
+                  config: KeyMotionTrainConfig, frames_norm: float | None = None) -> dict[str, Any]:
     dev = ctx.env.device
     motion, length, idx, keyframes = _keyframe_inputs(batch, dev)
     b, n, d = motion.shape
@@ -341,8 +377,11 @@ def _prepare_mmae(batch: dict[str, Any], ctx: StepContext, *, text: PrefilledCap
     frame_mask = torch.arange(n, device=dev)[None] < length[:, None]
     with torch.no_grad():
         feats, mask = text.encode(list(batch["caption"]))
-    return {"motion": motion, "inputs": inputs, "keyframe_mask": kf_mask, "frame_mask": frame_mask,
-            "text": feats.to(dev), "text_mask": mask.to(dev)}
+    out = {"motion": motion, "inputs": inputs, "keyframe_mask": kf_mask, "frame_mask": frame_mask,
+           "text": feats.to(dev), "text_mask": mask.to(dev)}
+    if ctx.train and frames_norm is not None:
+        out["frame_weight"] = frame_mask.sum().to(motion.dtype) / (b * frames_norm)
+    return out
 
 
 # --------------------------------------------------------------------------------- tasks
@@ -381,14 +420,62 @@ def load_frozen_kf_vae(path: str | os.PathLike, device: str | torch.device = "cp
     return vae
 
 
+def kf_vae_latent_cache(vae: KeyframeVAE, datasets: list[KeyframeDataset], cache_dir: str | os.PathLike,
+                        env: DistEnv, *, prune: bool = False, batch_size: int = 256) -> Any:
+    """The keyframe VAE's posteriors ``(Lz, Dz)`` of every window of ``datasets`` (a
+    :class:`~salad_core.train.latent_cache.LatentCache` keyed by ``(motion_id, offset, length)``).
+
+    Keyframes are selected once per window (and kept in the datasets' selection caches, so the
+    PST's data loading then finds them); the signature covers the VAE's weights, the corpus, the
+    selection method and the number of keyframes. Built by rank 0 under ``torchrun``.
+    """
+    import hashlib
+
+    from salad_core.train.latent_cache import (CACHE_FORMAT, build_latent_cache, corpus_digest, module_digest,
+                                               open_or_build_shared)
+
+    source: dict[tuple, KeyframeDataset] = {}
+    for ds in datasets:
+        for key in ds.base.crops():
+            source.setdefault(key, ds)
+    keys = list(source)
+    methods = sorted({f"{ds.method}/{ds.num_keyframes}" for ds in datasets})
+    parts = [CACHE_FORMAT, "keymotion-kf-vae", module_digest(vae), *methods, *(corpus_digest(ds.base) for ds in datasets)]
+    signature = hashlib.sha256("|".join(parts).encode()).hexdigest()
+    lz, dz = vae.latent_shape
+    device = next(vae.parameters()).device
+
+    def batches() -> Any:
+        for b0 in range(0, len(keys), batch_size):
+            chunk = keys[b0: b0 + batch_size]
+            idx = np.stack([source[k].keyframes_of(k) for k in chunk])                 # (B, K)
+            frames = np.stack([source[k].base.crop_features(*k)[i] for k, i in zip(chunk, idx)])   # (B, K, D)
+            lengths = torch.tensor([k[2] for k in chunk])
+            positions = indices_to_positions(torch.from_numpy(idx), lengths)
+            with torch.no_grad():
+                enc = vae.encode(torch.from_numpy(frames).to(device), positions.to(device), sample=False)
+            yield list(range(b0, b0 + len(chunk))), enc.mu, enc.logvar
+
+    def build(folder: Path) -> Any:
+        log.info("selecting keyframes and encoding the posteriors of %d windows into %s", len(keys), folder)
+        return build_latent_cache(folder, signature, keys, [lz] * len(keys), (dz,), batches(),
+                                  meta={"kind": "keymotion_kf_vae", "methods": methods, "windows": len(keys)})
+
+    return open_or_build_shared(cache_dir, signature, build, env, prune=prune)
+
+
 def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, model_config: PSTConfig | None,
                    train_config: KeyMotionTrainConfig, env: DistEnv, text_encoder: Any = "minilm",
-                   diffusion_config: Any = None, *, text_cache: CaptionFeatureCache | None = None) -> TrainTask:
+                   diffusion_config: Any = None, *, text_cache: CaptionFeatureCache | None = None,
+                   cache_dir: str | os.PathLike | None = None) -> TrainTask:
     """The :class:`TrainTask` of a PST run on the latents of a frozen keyframe VAE.
 
     ``text_cache`` (a :class:`CaptionFeatureCache` of the same encoder object) lets stages share
     caption features; by default one of ``train_config.text_cache_size`` entries is built here.
     Either way it is prefilled with the captions of the splits (see :class:`PrefilledCaptions`).
+    ``cache_dir``: the latent cache's folder when ``train_config.latent_cache`` is on and
+    ``train_config.latent_cache_dir`` is not set (:func:`train_pst` passes the run's ``latent_cache/``;
+    without either a temporary folder is used).
     """
     from salad_core.sampling import DiffusionConfig, make_scheduler
 
@@ -418,14 +505,26 @@ def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, mod
     pst = ParallelSkipTransformer(model_config).to(env.device)
     scheduler = make_scheduler(diffusion_config, "ddim")
     text = _stage_captions(text_cache, encoder, train_config, train_set, val_set)
+    latents = None
+    if train_config.latent_cache:
+        where = train_config.latent_cache_dir or cache_dir
+        if where is None:
+            import tempfile
+
+            where = tempfile.mkdtemp(prefix="salad_kf_latent_cache_")
+            log.warning("no latent cache folder given: using %s (pass cache_dir)", where)
+        latents = kf_vae_latent_cache(vae, [d for d in (train_set, val_set) if d is not None], where, env,
+                                      prune=train_config.latent_cache_dir is None and cache_dir is not None)
     prepare = partial(_prepare_pst, vae=vae, text=text,
-                      scheduler=scheduler, config=train_config, latent_shape=vae.latent_shape)
+                      scheduler=scheduler, config=train_config, latent_shape=vae.latent_shape, latents=latents)
     meta = {"diffusion": config_to_dict(diffusion_config), "text_encoder": encoder_name,
             "kf_vae": str(resolve_checkpoint(vae_path)), "data": str(Path(data_dir))}
+    numerics = {"latents": "cached keyframe-VAE posteriors, eps drawn per step" if latents is not None
+                else "encoded at every step"}
     return TrainTask(
         model=pst, model_type="keymotion_pst", model_config=model_config, objective=PSTObjective(pst),
         train_set=train_set, val_set=val_set, collate=collate_keyframes, prepare=prepare, meta=meta,
-        extra_config={"kind": "keymotion_pst", **meta, "data": str(Path(data_dir).resolve())},
+        extra_config={"kind": "keymotion_pst", **meta, "data": str(Path(data_dir).resolve()), "numerics": numerics},
         extra_files={"mean_std.safetensors": _mean_std_file(train_set)},
     )
 
@@ -451,13 +550,19 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
     mmae = MotionMaskedAutoencoder(model_config).to(env.device)
     mmae.set_normalization(train_set.mean, train_set.std)
     text = _stage_captions(text_cache, encoder, train_config, train_set, val_set)
-    prepare = partial(_prepare_mmae, text=text, config=train_config)
+    bucketing = train_config.batching == "buckets"
+    u = train_set.base.unit_length
+    frames_norm = u * expected_latent_frames(train_set.lengths, u) if bucketing else None
+    prepare = partial(_prepare_mmae, text=text, config=train_config, frames_norm=frames_norm)
     meta = {"text_encoder": encoder_name, "num_keyframes": num_keyframes,
             "keyframe_method": train_config.keyframe_method, "data": str(Path(data_dir))}
+    numerics = {"loss_normaliser": (f"per-batch means x valid frames / (batch x {frames_norm:.4g} expected frames)"
+                                    if frames_norm is not None else "per-batch means over valid frames")}
     return TrainTask(
         model=mmae, model_type="keymotion_mmae", model_config=model_config, objective=MMAEObjective(mmae),
         train_set=train_set, val_set=val_set, collate=collate_keyframes, prepare=prepare, meta=meta,
-        extra_config={"kind": "keymotion_mmae", **meta, "data": str(Path(data_dir).resolve())},
+        extra_config={"kind": "keymotion_mmae", **meta, "data": str(Path(data_dir).resolve()), "numerics": numerics},
+        lengths=train_set.lengths,
         extra_files={"mean_std.safetensors": _mean_std_file(train_set)},
     )
 
@@ -488,7 +593,7 @@ def train_pst(data_dir: str | os.PathLike, out_dir: str | os.PathLike, vae_path:
     train_config = train_config or KeyMotionTrainConfig()
     env = env or init_distributed(train_config.device)
     task = build_pst_task(data_dir, vae_path, model_config, train_config, env, text_encoder, diffusion_config,
-                          text_cache=text_cache)
+                          text_cache=text_cache, cache_dir=Path(out_dir) / "latent_cache")
     return fit(task, out_dir, train_config, resume=resume, env=env, on_step=on_step)
 
 
@@ -547,6 +652,10 @@ def train_keymotion(data_dir: str | os.PathLike, out_dir: str | os.PathLike, *,
         doc = {"format": "keymotion_pipeline", "version": 1, "text_encoder": encoder_name,
                "diffusion": config_to_dict(PST_DIFFUSION), "default_length": default_length}
         atomic_write_text(out / "keymotion.json", json.dumps(doc, indent=2) + "\n")
+        from salad_core.train.assemble import numerics_note, write_numerics_section
+
+        # the card of the loadable folder says when the stages' numerics differ from release 0.5
+        write_numerics_section(out / "MODEL_CARD.md", numerics_note({stage: out / stage for stage in STAGES}))
     return results
 
 

@@ -5,6 +5,11 @@ models (``scripts/train_ablations.py``). Each run's ``best`` checkpoint is taken
 the VAE run's Mean/Std, the denoiser run's text encoder and diffusion config; the folder gets
 ``pipeline.json``, ``vae.*``, ``denoiser.*``, ``stats.safetensors`` and ``runs.json`` (the runs'
 configs and last log lines, for model cards).
+
+When a run's numerics differ from the release-0.5 trainers (length-bucketed batches with their loss
+normaliser, cached VAE posteriors: recorded by the trainers in the run's ``config.json``), the
+folder's ``MODEL_CARD.md`` gets a "Training numerics" section saying so (:func:`numerics_note`),
+added to an existing card or starting a new one; the section is replaced when assembling again.
 """
 from __future__ import annotations
 
@@ -15,7 +20,10 @@ import torch
 
 from salad_core.io import atomic_write_text, config_from_dict, load_model, load_tensors, save_checkpoint, save_tensors
 
-__all__ = ["run_checkpoint", "last_log_line", "assemble_pipeline", "export_vae"]
+__all__ = ["run_checkpoint", "last_log_line", "assemble_pipeline", "export_vae", "numerics_note",
+           "write_numerics_section"]
+
+_BEGIN, _END = "<!-- training-numerics: begin -->", "<!-- training-numerics: end -->"
 
 
 def run_checkpoint(run: str | Path) -> Path:
@@ -37,6 +45,58 @@ def last_log_line(run: str | Path) -> dict:
 def _run_record(run: Path) -> dict:
     return {"checkpoint": run_checkpoint(run).name, "config": json.loads((run / "config.json").read_text()),
             "last_log": last_log_line(run)}
+
+
+def numerics_note(runs: dict[str, str | Path]) -> str | None:
+    """A Markdown paragraph on how the runs' numerics differ from release 0.5, or None if they do not.
+
+    Parameters
+    ----------
+    runs : dict
+        Name (e.g. ``"denoiser"``) -> run folder holding the ``config.json`` its trainer wrote.
+    """
+    lines = []
+    for name, run in runs.items():
+        path = Path(run) / "config.json"
+        doc = json.loads(path.read_text()) if path.is_file() else {}
+        runtime, numerics = doc.get("runtime", {}), dict(doc.get("task", {}).get("numerics", {}))
+        changes = []
+        batching = runtime.get("batching", "random")
+        if batching != "random":
+            changes.append(f"batches: {batching}")
+        if numerics.get("loss_normaliser") and batching != "random":
+            changes.append(f"loss normaliser: {numerics['loss_normaliser']}")
+        if numerics.get("latents", "").startswith("cached"):
+            changes.append(f"latents: {numerics['latents']}")
+        if changes:
+            threads = runtime.get("torch_threads")
+            lines.append(f"- **{name}** ({Path(run).name}): " + "; ".join(changes)
+                         + (f"; {threads} torch thread(s)" if threads else ""))
+    if not lines:
+        return None
+    return ("## Training numerics\n\n"
+            "These weights were trained with the issue-19 trainers, whose numerics differ from release 0.5 "
+            "(random batches, VAE encoder at every step): the runs are not bit-comparable with older runs of the same "
+            "config, while the objective is the same in expectation. Set `batching: \"random\"` and "
+            "`latent_cache: false` in the training config to train as release 0.5 did.\n\n" + "\n".join(lines) + "\n")
+
+
+def write_numerics_section(card: str | Path, note: str | None) -> Path | None:
+    """Put ``note`` into ``card`` (a ``MODEL_CARD.md``) between markers, replacing an earlier section;
+    ``None`` removes it. Creates the card when it does not exist (and there is a note)."""
+    card = Path(card)
+    text = card.read_text() if card.is_file() else ""
+    if _BEGIN in text and _END in text:
+        head, rest = text.split(_BEGIN, 1)
+        text = head.rstrip("\n") + rest.split(_END, 1)[1]
+    if note is None:
+        if card.is_file():
+            atomic_write_text(card, text)
+        return card if card.is_file() else None
+    section = f"{_BEGIN}\n{note.rstrip()}\n{_END}\n"
+    text = (text.rstrip("\n") + "\n\n" + section) if text.strip() else "# Model card\n\n" + section
+    atomic_write_text(card, text)
+    return card
 
 
 def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | Path, *,
@@ -69,6 +129,7 @@ def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | 
     pipe.save_pretrained(out, dtype=dtype)
     runs = {"vae": _run_record(vae_run), "denoiser": _run_record(denoiser_run)}
     atomic_write_text(out / "runs.json", json.dumps(runs, indent=2) + "\n")
+    write_numerics_section(out / "MODEL_CARD.md", numerics_note({"vae": vae_run, "denoiser": denoiser_run}))
     return out
 
 

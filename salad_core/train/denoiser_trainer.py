@@ -259,9 +259,8 @@ def denoiser_latent_cache(vae: nn.Module, datasets: Sequence[Any], config: Denoi
     """
     import hashlib
 
-    from .distributed import barrier
     from .latent_cache import (CACHE_FORMAT, build_latent_cache, corpus_digest, encode_motion_windows,
-                               module_digest, open_or_build)
+                               module_digest, open_or_build_shared)
 
     pad_to = config.max_length if config.vae_pad_to_max else None
     source: dict[tuple, Any] = {}
@@ -281,11 +280,7 @@ def denoiser_latent_cache(vae: nn.Module, datasets: Sequence[Any], config: Denoi
                                   meta={"pad_to": pad_to, "splits": [str(getattr(d, "split", "?")) for d in datasets],
                                         "windows": len(keys)})
 
-    cache = open_or_build(cache_dir, signature, build, prune=prune) if env.is_main else None
-    barrier(env)
-    if cache is None:
-        cache = open_or_build(cache_dir, signature, build)
-    return cache
+    return open_or_build_shared(cache_dir, signature, build, env, prune=prune)
 
 
 def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, model_config: Any,

@@ -37,7 +37,7 @@ import numpy as np
 import torch
 
 __all__ = ["CACHE_FORMAT", "Key", "module_digest", "corpus_digest", "LatentCache", "build_latent_cache",
-           "open_or_build", "encode_motion_windows"]
+           "open_or_build", "open_or_build_shared", "encode_motion_windows"]
 
 log = logging.getLogger(__name__)
 
@@ -214,6 +214,16 @@ def open_or_build(cache_dir: str | os.PathLike, signature: str, build: Callable[
     cache = build(folder)
     log.info("latent cache %s: %d windows encoded in %.1f s", folder, len(cache), time.perf_counter() - t0)
     return cache
+
+
+def open_or_build_shared(cache_dir: str | os.PathLike, signature: str, build: Callable[[Path], LatentCache],
+                         env: Any, *, prune: bool = False) -> LatentCache:
+    """:func:`open_or_build` under ``torchrun``: rank 0 opens or builds, the others wait, then open it."""
+    from .distributed import barrier
+
+    cache = open_or_build(cache_dir, signature, build, prune=prune) if env.is_main else None
+    barrier(env)
+    return cache if cache is not None else open_or_build(cache_dir, signature, build)
 
 
 def encode_motion_windows(vae: torch.nn.Module, features: Callable[[Key], np.ndarray], keys: Sequence[Key],

@@ -1,0 +1,227 @@
+"""Where a denoiser training step goes: a per-part profile, before/after the throughput changes.
+
+:func:`profile_denoiser_training` builds the denoiser task twice on the same data, frozen VAE and
+text encoder: *before* (``batching="random"``, ``latent_cache=False``: the release-0.5 trainer's
+data path) and *after* (the configured defaults: length buckets and the latent cache), then runs
+their optimiser steps interleaved (one step of each in turn, so the machine's speed swings hit both
+alike) and times every part of a step:
+
+``data``        next batch from the DataLoader (item crops, normalisation, collate)
+``latents``     the frozen VAE's posteriors: encoder call, or cache lookup
+``text``        caption features (the caption cache; prefilled, so a lookup)
+``noise``       the rest of the batch preparation (draws, noising, targets, masks)
+``forward``     the denoiser objective's forward (loss)
+``backward``    ``loss.backward()``
+``clip``        global gradient-norm clipping (``clip_grad_norm_``, timed whether or not the config clips)
+``optimizer``   ``zero_grad`` and the AdamW step
+``logging``     the loss averager (one ``.item()`` per ``log_every`` steps, amortised)
+``validation``  one validation pass divided by ``val_every`` (amortised per step)
+
+The part times are means over the timed steps (batches differ in length, so means, not medians,
+give the rate). Start-up (data loading, text prefill, cache build) is reported apart.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+from functools import partial
+from typing import Any
+
+import numpy as np
+import torch
+
+__all__ = ["PARTS", "StepProfile", "profile_denoiser_training"]
+
+PARTS = ("data", "latents", "text", "noise", "forward", "backward", "clip", "optimizer", "logging", "validation")
+
+
+@dataclass(frozen=True)
+class StepProfile:
+    """Mean seconds per optimiser step by part, and the throughput of one trainer setting."""
+
+    name: str                        # "before" or "after"
+    parts: dict[str, float]          # part -> mean seconds per step
+    steps: int                       # timed steps
+    frames_per_step: float           # mean valid motion frames per step (samples x frames)
+    padded_frames_per_step: float    # mean frames the latent batch covers (batch x longest)
+    startup_s: float                 # task build: data, text prefill, latent cache
+
+    @property
+    def step_s(self) -> float:
+        return float(sum(self.parts.values()))
+
+    @property
+    def steps_per_s(self) -> float:
+        return 1.0 / self.step_s if self.step_s > 0 else float("nan")
+
+    @property
+    def frames_per_s(self) -> float:
+        return self.frames_per_step * self.steps_per_s
+
+
+class _Timed:
+    """Forwards attribute access to ``target``; ``method`` calls add their time to ``sink[part]``."""
+
+    def __init__(self, target: Any, method: str, sink: dict[str, float], part: str) -> None:
+        self._target, self._method, self._sink, self._part = target, method, sink, part
+
+    def __getattr__(self, name: str) -> Any:
+        attr = getattr(self._target, name)
+        if name != self._method:
+            return attr
+
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            t0 = time.perf_counter()
+            try:
+                return attr(*args, **kwargs)
+            finally:
+                self._sink[self._part] = self._sink.get(self._part, 0.0) + time.perf_counter() - t0
+
+        return timed
+
+
+class _Runner:
+    """One trainer setting: its task, optimiser, loader and part timers."""
+
+    def __init__(self, name: str, build: Any, config: Any) -> None:
+        from salad_core.train.common import ResumableBatchSampler, StepContext, _loader, _sampler
+        from salad_core.train.distributed import DistEnv, GlobalBatchRandom
+
+        t0 = time.perf_counter()
+        self.name, self.config = name, config
+        self.task = build(config)
+        self.startup = time.perf_counter() - t0
+        env = DistEnv()
+        self.sink: dict[str, float] = {}
+        kw = dict(self.task.prepare.keywords)
+        kw["vae"] = _Timed(kw["vae"], "encode", self.sink, "latents")
+        kw["text"] = _Timed(kw["text"], "encode", self.sink, "text")
+        if kw.get("latents") is not None:
+            kw["latents"] = _Timed(kw["latents"], "lookup", self.sink, "latents")
+        self.prepare = partial(self.task.prepare.func, *self.task.prepare.args, **kw)
+        self.params = [p for p in self.task.model.parameters() if p.requires_grad]
+        self.optimizer = torch.optim.AdamW(self.params, lr=config.lr, betas=tuple(config.betas), eps=config.adam_eps,
+                                           weight_decay=config.weight_decay)
+        if config.batching == "buckets" and self.task.lengths is not None:
+            from salad_core.train.batching import LengthBucketBatchSampler
+
+            sampler: Any = LengthBucketBatchSampler(self.task.lengths, config.batch_size, seed=config.seed,
+                                                    pool_batches=config.bucket_pool)
+        else:
+            sampler = ResumableBatchSampler(_sampler(self.task.train_set, env, shuffle=True, seed=config.seed),
+                                            config.batch_size, drop_last=True)
+        self.loader = _loader(self.task.train_set, sampler, self.task.collate, config, env, seed=config.seed)
+        self.batches = iter(self.loader)
+        self.ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(config.seed), env), env, True, 0)
+        self.totals = {p: 0.0 for p in PARTS}
+        self.frames = 0.0
+        self.padded = 0.0
+        self.steps = 0
+        self.losses: list[torch.Tensor] = []
+        self.task.objective.train()
+
+    def _next(self) -> Any:
+        try:
+            return next(self.batches)
+        except StopIteration:
+            self.batches = iter(self.loader)
+            return next(self.batches)
+
+    def step(self, record: bool) -> None:
+        t: dict[str, float] = {}
+        t0 = time.perf_counter()
+        batch = self._next()
+        t["data"] = time.perf_counter() - t0
+        self.sink.clear()
+        t0 = time.perf_counter()
+        inputs = self.prepare(batch, self.ctx)
+        prep = time.perf_counter() - t0
+        t["latents"], t["text"] = self.sink.get("latents", 0.0), self.sink.get("text", 0.0)
+        t["noise"] = max(prep - t["latents"] - t["text"], 0.0)
+        t0 = time.perf_counter()
+        losses = self.task.objective(**inputs)
+        t["forward"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        self.optimizer.zero_grad(set_to_none=True)
+        t_zero = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        losses["loss"].backward()
+        t["backward"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        torch.nn.utils.clip_grad_norm_(self.params, self.config.grad_clip or float("inf"))
+        t["clip"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        self.optimizer.step()
+        t["optimizer"] = t_zero + time.perf_counter() - t0
+        t0 = time.perf_counter()
+        self.losses.append(losses["loss"].detach())
+        if len(self.losses) >= self.config.log_every:
+            float(torch.stack(self.losses).mean())
+            self.losses.clear()
+        t["logging"] = time.perf_counter() - t0
+        if record:
+            for k, v in t.items():
+                self.totals[k] += v
+            self.steps += 1
+            self.frames += float(batch["length"].sum())
+            self.padded += float(inputs["frame_mask"].shape[0] * inputs["frame_mask"].shape[1] * 4)
+
+    def validation_per_step(self) -> float:
+        from salad_core.train.common import _validate
+
+        if self.task.val_set is None or not self.config.val_every:
+            return 0.0
+        t0 = time.perf_counter()
+        _validate(self.task, self.config, "cpu", 0)
+        return (time.perf_counter() - t0) / self.config.val_every
+
+    def result(self) -> StepProfile:
+        n = max(self.steps, 1)
+        parts = {k: v / n for k, v in self.totals.items()}
+        return StepProfile(self.name, parts, self.steps, self.frames / n, self.padded / n, self.startup)
+
+
+def profile_denoiser_training(data_dir: Any, vae_path: Any, model_config: Any, train_config: Any, *,
+                              text_encoder: Any = "minilm", steps: int = 10, warmup: int = 2,
+                              cache_dir: Any = None, diffusion_config: Any = None) -> tuple[StepProfile, StepProfile]:
+    """Profile the denoiser step before (random batches, VAE per step) and after (buckets, latent cache).
+
+    Parameters
+    ----------
+    data_dir, vae_path, model_config, train_config, text_encoder, diffusion_config
+        As for :func:`~salad_core.train.denoiser_trainer.build_denoiser_task`; ``train_config`` is the
+        *after* setting (``batching`` and ``latent_cache`` as configured), *before* is the same with
+        ``batching="random"`` and ``latent_cache=False``.
+    steps, warmup : int
+        Timed and untimed steps of each setting (interleaved one by one).
+    cache_dir : path, optional
+        Latent cache folder for the *after* setting (default: a temporary folder).
+
+    Returns
+    -------
+    (before, after) : StepProfile
+    """
+    import tempfile
+
+    from salad_core.text import load_text_encoder
+    from salad_core.train.denoiser_trainer import build_denoiser_task
+    from salad_core.train.distributed import DistEnv
+
+    encoder = load_text_encoder(text_encoder) if isinstance(text_encoder, str) else text_encoder
+    cache_dir = cache_dir or tempfile.mkdtemp(prefix="salad_profile_cache_")
+
+    def build(config: Any) -> Any:
+        return build_denoiser_task(data_dir, vae_path, model_config, config, DistEnv(), encoder, diffusion_config,
+                                   cache_dir=cache_dir)
+
+    before_cfg = dataclasses.replace(train_config, batching="random", latent_cache=False, progress=False)
+    runners = [_Runner("before", build, before_cfg), _Runner("after", build, dataclasses.replace(train_config, progress=False))]
+    for i in range(warmup + steps):
+        for r in runners:
+            r.step(record=i >= warmup)
+    out = []
+    for r in runners:
+        r.totals["validation"] = r.validation_per_step()
+        out.append(r.result())
+    return out[0], out[1]
