@@ -274,7 +274,7 @@ def test_checks_pass_on_the_corpus_own_clips(tiny_procedural_corpus):
         if len(cap["phrases"]) == 1:
             (q,) = parse_prompt(cap["caption"])
             clips.append((cid, q))
-    ranges = pp.corpus_reference_ranges(root)
+    ranges = {**pp.REFERENCE_RANGES, **pp.corpus_reference_ranges(root)}   # as the runner merges them
     checked = 0
     for p in pp.PROMPTS:
         want = parse_prompt(p.text)
@@ -343,6 +343,11 @@ def test_salad_eval_physics_end_to_end(tiny_procedural_corpus, tmp_path, single_
         assert g["aggregate"]["seed_diversity_cm"] > 0
         assert len(g["prompts"]) == 2 and len(g["prompts"][0]["reports"]) == 2
     assert "corpus test split (real)" in doc["references"]
+    saved = np.load(out / "physics_motions.npz")
+    assert len(saved.files) == 8 and saved["SALAD/01/1"].shape == (120, 22, 3)
+    rep = ph.measure_motion(saved["SALAD/01/1"])                     # the saved motion is the measured one
+    assert rep.bone_ref_max_cm == pytest.approx(doc["generators"]["SALAD"]["prompts"][1]["reports"][1]["bone_ref_max_cm"],
+                                                rel=1e-4)
     assert md.index("corpus test split (real)") < md.index("| SALAD |") < md.index("| KeyMotion |")
 
 

@@ -27,7 +27,8 @@ generations per replication) takes days; ``--no-mm`` removes most of that.
 from ``--seed``), with SALAD and, with ``--keymotion`` (the shipped weights, or a folder), KeyMotion;
 reference rows for the corpus's test split and for the real clips of ``--sample`` (by default the
 source checkout's ``tests/data/humanml3d_sample``, when present; ``--sample none`` leaves it out).
-It prints the Markdown report and with ``--out`` writes ``physics.md`` and ``physics.json``. The full
+It prints the Markdown report and with ``--out`` writes ``physics.md``, ``physics.json`` and the
+generated joints (``physics_motions.npz``). The full
 benchmark (41 prompts x 3 seeds, 50 steps) takes a few minutes per generator on this 2-core CPU.
 
 Errors the user can fix print one line and return status 2 (``--debug`` shows the traceback).
@@ -216,8 +217,9 @@ def run_physics(args) -> int:
                                       if g is None else g)
         info["keymotion_weights"] = args.keymotion
     t0 = time.perf_counter()
+    motions: dict = {}
     result = run_benchmark(generators, settings, data_root=data, sample_dir=sample, info=info,
-                           log=lambda line: print(line, flush=True))
+                           log=lambda line: print(line, flush=True), motions_sink=motions)
     result["settings"]["seconds"] = round(time.perf_counter() - t0, 1)
     md = benchmark_markdown(result)
     print(md)
@@ -226,7 +228,11 @@ def run_physics(args) -> int:
         out.mkdir(parents=True, exist_ok=True)
         (out / "physics.md").write_text(md, encoding="utf-8")
         (out / "physics.json").write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
-        print(f"wrote {out / 'physics.md'} and {out / 'physics.json'}")
+        import numpy as np
+
+        np.savez_compressed(out / "physics_motions.npz", **motions)
+        print(f"wrote {out / 'physics.md'}, {out / 'physics.json'} and {out / 'physics_motions.npz'} "
+              "(joints, '<generator>/<prompt index>/<seed>')")
     return 0
 
 

@@ -45,10 +45,12 @@ Definitions (units in the names of :class:`PhysicsReport`'s fields):
   longest flight (s) and the pelvis's vertical acceleration (m/s^2, second difference at frames
   whose neighbours are in flight too), which ballistic flight keeps near -9.81. The pelvis is not
   the centre of mass, so tucking the legs in flight moves it by a little.
-* **Stride** (m): the distance between consecutive ground contacts of the same foot (the mean
-  position of its ankle over each run of at least ``min_contact_frames`` contact frames of the
-  ankle or toe); median over the motion, 0 when no foot leaves and retouches the ground (a figure
-  that glides on its feet has no stride).
+* **Stride** (m): how far a foot travels through the air between two ground contacts: the
+  horizontal distance of its ankle from lift-off (the last frame of a run of at least
+  ``min_contact_frames`` contact frames of the ankle or toe) to the next touch-down (the first
+  frame of the next run); median over the motion, 0 when no foot leaves and retouches the ground.
+  A figure that glides (feet sliding while in contact) has short or no strides however far it
+  travels.
 * **Seed diversity** (cm): mean joint distance between motions of the same prompt made from
   different seeds (:func:`seed_diversity`).
 """
@@ -140,7 +142,7 @@ class PhysicsReport:
     longest_flight_s: float      # longest run of flight frames
     flight_accel_ms2: float      # mean pelvis vertical acceleration inside flight (nan: none)
     flight_accel_count: int      # frames that mean is over
-    stride_m: float              # median distance between consecutive footfalls of one foot (0: none)
+    stride_m: float              # median lift-off to touch-down distance of a foot (0: no step)
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -260,8 +262,9 @@ def foot_skating(joints, skeleton: str | Skeleton = "humanml3d", config: Physics
 
 def strides(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfig = PhysicsConfig()
             ) -> np.ndarray:
-    """Distances (m, on the ground plane) between consecutive footfalls of the same foot, both feet
-    together: a 1-D array, empty when no foot leaves the ground and touches it again."""
+    """Distances (m, on the ground plane) an ankle travels from lift-off to the next touch-down of
+    the same foot, both feet together: a 1-D array, empty when no foot leaves the ground and
+    touches it again."""
     x, sk = _prepare(joints, skeleton)
     on = foot_contacts(x, sk, config)
     cj = sk.contact_joints
@@ -272,8 +275,10 @@ def strides(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfi
         runs = [(a, b) for a, b in zip(edges[::2], edges[1::2]) if b - a >= config.min_contact_frames]
         if len(runs) < 2:
             continue
-        pos = np.stack([x[a:b, cj[foot]][:, [0, 2]].mean(0) for a, b in runs])
-        out.append(np.linalg.norm(np.diff(pos, axis=0), axis=-1))
+        lift = np.array([b - 1 for _, b in runs[:-1]])                # last contact frame of each run
+        land = np.array([a for a, _ in runs[1:]])                     # first frame of the next run
+        ankle = x[:, cj[foot]][:, [0, 2]]
+        out.append(np.linalg.norm(ankle[land] - ankle[lift], axis=-1))
     return np.concatenate(out) if out else np.zeros(0)
 
 

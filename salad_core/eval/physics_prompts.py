@@ -149,7 +149,7 @@ MEASURES: dict[str, tuple[Callable, str, str]] = {
     "knee_rise_m": (_knee_rise, "m", "rise of the named knee relative to the pelvis"),
     "head_ms": (lambda x, sk, s: ph.limb_activity(x, sk)["head"], "m/s", "head activity relative to the neck"),
     "stride_m": (lambda x, sk, s: float(np.median(v)) if (v := ph.strides(x, sk)).size else 0.0, "m",
-                 "median distance between consecutive footfalls of one foot (0: the feet glide)"),
+                 "median distance a foot travels from lift-off to touch-down (0: the feet never step)"),
 }
 
 #: Ranges (m) of the pelvis rise measured on the corpus (see the module docstring):
@@ -257,7 +257,8 @@ _JUMP = (_C("jump_rise_m", reference="jump_rise_m"), _C("flight_frames", lo=2)) 
 _ARM = {s: _C("arm_ratio", lo=2.0, side=s) for s in SIDES}
 _LEG = {s: _C("leg_ratio", lo=2.0, side=s) for s in SIDES}
 _BOTH_ARMS = _C("arms_balance", lo=0.5)                                            # corpus >= 0.88
-# Walking makes steps: issue 22's target stride (corpus: walk 0.82 m when slow, march 0.61 m, run 1.58 m)
+# Walking makes steps: issue 22's target stride (corpus minima: walk 0.83 m, slow walk 0.50 m, march 0.60 m,
+# jog 1.11 m, run 1.46 m)
 _STRIDE = _C("stride_m", lo=0.4)
 
 #: The fixed benchmark prompts (41); corpus minima over single-action clips in the comments.
@@ -382,7 +383,7 @@ def caption_diversity(root: str | Path, splits: Sequence[str] = ("train", "val",
     return float(np.mean(vals)), len(shared)
 
 
-_JUMP_WORDS = re.compile(r"\b(jump|jumps|jumping|hop|hops|hopping|leap|leaps|leaping)\b")
+_JUMP_WORDS = re.compile(r"\b(jump|jumps|jumping|hop|hops|hopping|leap|leaps|leaping|skip|skips|skipping)\b")
 
 
 def corpus_reference_ranges(root: str | Path, splits: Sequence[str] = ("train", "val", "test"),
@@ -390,7 +391,7 @@ def corpus_reference_ranges(root: str | Path, splits: Sequence[str] = ("train", 
     """Measure :data:`REFERENCE_RANGES` on a procedural corpus (needs its ``annotations/``).
 
     A clip is a jump reference when every caption of its annotation is one phrase with a jump word
-    (jump, hop, leap) and no "jacks"; a jumping-jacks reference when every caption is one phrase
+    (jump, hop, leap, skip: the corpus's paraphrases of a jump) and no "jacks"; a jumping-jacks reference when every caption is one phrase
     with "jacks". The range is (min, max) of the pelvis rise over those clips. Keys without clips
     are left out.
     """
@@ -483,7 +484,8 @@ def _clean(v):
 def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings = BenchSettings(),
                   data_root: str | Path | None = None, sample_dir: str | Path | None = None,
                   prompts: Sequence[BenchmarkPrompt] = PROMPTS, skeleton: str | Skeleton = "humanml3d",
-                  info: Mapping[str, object] | None = None, log: Callable[[str], None] | None = None) -> dict:
+                  info: Mapping[str, object] | None = None, log: Callable[[str], None] | None = None,
+                  motions_sink: dict | None = None) -> dict:
     """Generate every prompt with every seed and generator, measure, check and aggregate.
 
     Parameters
@@ -495,6 +497,9 @@ def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings =
     prompts : the benchmark prompts (default :data:`PROMPTS`)
     info : extra settings to record (weights paths, ...)
     log : called with progress lines
+    motions_sink : dict, optional
+        Receives the generated joints, ``"<generator>/<prompt index>/<seed>" -> (N, J, 3)``, so they
+        can be saved and measured again without generating.
 
     Returns
     -------
@@ -526,6 +531,8 @@ def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings =
                 raise ValueError(f"generator {name!r} returned {len(joints)} motions for {len(chosen)} prompts")
             for i, x in enumerate(joints):
                 motions[i].append(np.asarray(x, dtype=np.float64))
+                if motions_sink is not None:
+                    motions_sink[f"{name}/{i:02d}/{seed}"] = np.asarray(x, dtype=np.float32)
             say(f"{name}: seed {seed} generated ({time.perf_counter() - t0:.0f} s)")
         per_prompt, reports, passed, total, div = [], [], 0, 0, []
         for p, xs in zip(chosen, motions):
