@@ -471,6 +471,23 @@ def test_units_up_and_fps_options(rigs, walk):
             BvhImportOptions(**bad)
 
 
+def test_up_axis_comes_from_the_standing_rest_pose(tmp_path, walk, caplog):
+    """A take that falls and lies on its back from frame 1 on: the spine points along Z on average,
+    but the rest pose (frame 0 here) stands along Y, and the rest pose decides."""
+    lying = walk[:20].copy()
+    c, s_ = 0.0, 1.0                                          # -90 degrees about X around the pelvis
+    rot = np.array([[1, 0, 0], [0, c, s_], [0, -s_, c]])
+    lying[1:] = (lying[1:] - lying[1:, :1]) @ rot.T + lying[1:, :1]
+    path = tmp_path / "lying.bvh"
+    path.write_text(write_rig(*smpl_rig(lying)))
+    take = import_bvh(path)
+    assert take.up == "y" and "up" in take.detected
+    assert "the rest pose stands along y but the body's spine points along" in caplog.text
+    # an explicit axis skips the detection (and the warning)
+    caplog.clear()
+    assert import_bvh(path, up="y").detected == ("units", "rig") and not caplog.text
+
+
 def test_bvh_to_joints_and_load_motion(rigs, walk, tmp_path):
     path, _ = rigs["mixamo"]
     joints = bvh_to_joints(path)
@@ -520,7 +537,9 @@ Frame Time: 0.05
 
 
 def test_a_good_small_file_parses():
+    crlf = parse_bvh(_GOOD.replace("\n", "\r\n").replace("  ", "\t"))      # Windows line ends and tabs
     m = parse_bvh(_GOOD)
+    np.testing.assert_array_equal(crlf.values, m.values)
     assert m.joint_names == ("Hips", "Spine") and m.num_frames == 2 and m.values.shape == (2, 9)
     pos = m.world_positions()                                   # (2 frames, Hips + Spine + End Site, 3)
     np.testing.assert_allclose(pos[0], [[0, 90, 0], [0, 100, 0], [0, 110, 0]], atol=1e-9)

@@ -5,9 +5,9 @@
 1. read the file and run its forward kinematics (:mod:`salad_core.bvh.reader`);
 2. map the rig to the 22 HumanML3D joints (:mod:`salad_core.bvh.rigs`);
 3. turn the up axis to +Y: detected as the axis the spine (pelvis -> head) and the legs (ankles ->
-   pelvis) point along on average over the clip, or, when the clip gives no clear answer (a
-   motion spent lying down), in the rest pose; ``up=`` overrides. The turn is a proper rotation,
-   so left stays left;
+   pelvis) point along in the rest pose (BVH rest poses stand: a T- or A-pose in the file's axes),
+   or, when the rest pose is not upright, on average over the motion; ``up=`` overrides. The turn
+   is a proper rotation, so left stays left;
 4. convert lengths to metres: the unit (m, cm, mm, inch, foot) whose conversion gives the rig's
    legs + spine (hip -> knee -> ankle plus pelvis -> head along the spine) the length closest to
    HumanML3D's target skeleton (1.48 m, a person of about 1.7 m); when even the closest unit is off
@@ -24,6 +24,7 @@ target skeleton, puts the first frame's root at the origin and turns it to face 
 """
 from __future__ import annotations
 
+import logging
 import math
 import os
 from dataclasses import dataclass, field
@@ -54,6 +55,7 @@ UP_AXES: dict[str, np.ndarray] = {
     "x": np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
     "-x": np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
 }
+log = logging.getLogger(__name__)
 _SK = get_skeleton("humanml3d")
 _IDX = {n: i for i, n in enumerate(HML_NAMES)}
 _LEG = (("left_hip", "left_knee", "left_ankle"), ("right_hip", "right_knee", "right_ankle"))
@@ -202,6 +204,18 @@ def _detect_up(joints: np.ndarray) -> str | None:
     return ("-" if v[k] < 0 else "") + "xyz"[k]
 
 
+def _choose_up(rest: str | None, moving: str | None, path: str) -> str:
+    """The rest pose decides (BVH rest poses stand: a T- or A-pose in the file's axes), the motion
+    when the rest pose is not upright; a disagreement is logged."""
+    if rest is None and moving is None:
+        raise ValueError(f"{path}: cannot tell the up axis (the spine points along no single axis in the rest "
+                         f"pose or on average in the motion); pass up= one of {', '.join(UP_AXES)}")
+    if rest is not None and moving is not None and rest != moving:
+        log.warning("%s: the rest pose stands along %s but the body's spine points along %s on average in the "
+                    "motion (a take spent lying down?); using %s (pass up= to choose)", path, rest, moving, rest)
+    return rest or moving
+
+
 def _detect_units(stature: float) -> tuple[str, float]:
     """Closest known unit by the legs + spine length; ``("fit", scale)`` when none is close."""
     if not stature > 0:
@@ -267,10 +281,8 @@ def import_bvh(source: str | os.PathLike | BvhMotion, options: BvhImportOptions 
     detected = []
     up = options.up
     if up is None:
-        up = _detect_up(joints) or _detect_up(mapping.apply(motion.world_positions(rest=True)))
-        if up is None:
-            raise ValueError(f"{motion.path}: cannot tell the up axis (the spine points along no single axis in "
-                             f"the motion or the rest pose); pass up= one of {', '.join(UP_AXES)}")
+        up = _choose_up(_detect_up(mapping.apply(motion.world_positions(rest=True))), _detect_up(joints),
+                        motion.path)
         detected.append("up")
     joints = joints @ UP_AXES[up].T
     if options.units is None:
