@@ -8,7 +8,6 @@ are small takes made the same way (``python tests/test_bvh_import.py --regenerat
 """
 from __future__ import annotations
 
-import io
 import json
 import sys
 from pathlib import Path
@@ -16,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from salad_core.bvh import (BvhError, RigError, bvh_to_features, bvh_to_joints, import_bvh, load_motion, map_rig,
+from salad_core.bvh import (BvhError, RigError, bvh_to_features, bvh_to_joints, import_bvh, load_motion,
                             parse_bvh, read_bvh)
 from salad_core.bvh.convert import TARGET_STATURE, UP_AXES, BvhImportOptions
 from salad_core.bvh.rigs import HML_NAMES, normalize_name
