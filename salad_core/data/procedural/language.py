@@ -71,10 +71,17 @@ VERBS: dict[str, tuple[str, str]] = {
     "play": ("plays", "playing"), "show": ("shows", "showing"), "see": ("sees", "seeing"),
     "rise": ("rises", "rising"), "back": ("backs", "backing"), "clear": ("clears", "clearing"),
     "stomp": ("stomps", "stomping"), "balance": ("balances", "balancing"), "finish": ("finishes", "finishing"),
+    "head": ("heads", "heading"), "advance": ("advances", "advancing"), "race": ("races", "racing"),
+    "rush": ("rushes", "rushing"), "dart": ("darts", "darting"), "spring": ("springs", "springing"),
+    "strike": ("strikes", "striking"), "open": ("opens", "opening"),
+    "retreat": ("retreats", "retreating"), "twirl": ("twirls", "twirling"), "peek": ("peeks", "peeking"),
+    "face": ("faces", "facing"), "plop": ("plops", "plopping"), "hail": ("hails", "hailing"),
+    "volunteer": ("volunteers", "volunteering"), "answer": ("answers", "answering"), "check": ("checks", "checking"),
+    "listen": ("listens", "listening"), "refuse": ("refuses", "refusing"),
     "kneel": ("kneels", "kneeling"), "lie": ("lies", "lying"), "lay": ("lays", "laying"), "climb": ("climbs", "climbing"),
     "ascend": ("ascends", "ascending"), "go": ("goes", "going"), "pivot": ("pivots", "pivoting"),
     "tap": ("taps", "tapping"), "tie": ("ties", "tying"), "pray": ("prays", "praying"), "propose": ("proposes", "proposing"),
-    "change": ("changes", "changing"), "drop": ("drops", "dropping"), "settle": ("settles", "settling"), "mount": ("mounts", "mounting"),
+    "change": ("changes", "changing"),  "tidy": ("tidies", "tidying"), "sleep": ("sleeps", "sleeping"), "watch": ("watches", "watching"), "drop": ("drops", "dropping"), "settle": ("settles", "settling"), "mount": ("mounts", "mounting"),
     "ask": ("asks", "asking"), "chase": ("chases", "chasing"), "lean": ("leans", "leaning"), "loosen": ("loosens", "loosening"), "dash": ("dashes", "dashing"), "lower": ("lowers", "lowering"), "attract": ("attracts", "attracting"), "punctuate": ("punctuates", "punctuating"),
 }
 
@@ -148,6 +155,16 @@ _lex("NOUN", "step end excitement baseball pitcher question lot part back flight
 _lex("ADJ", "opposite raised flat top")
 _lex("NOUN", "nap home direction basketball player ups feet", {"ups": "up", "feet": "foot"})
 _lex("ADV", "briefly")
+_lex("NOUN", "airplane applause artist ballerina ceiling chair door joy kick parade park performance race round seat "
+             "show star street stroll taxi traffic walk wave weights work",
+     {"weights": "weight"})
+_lex("ADJ", "deep martial open vertical funny exaggerated silly upbeat cold puzzled slippery professional")
+_lex("NOUN", "confidence ease determination enthusiasm purpose force power song routine fitness instructor flag "
+             "breath seatbelt dog match seconds", {"seconds": "second"})
+_lex("PRON", "nobody")
+_lex("ADV", "out")
+_lex("ADV", "along boldly determinedly dramatically elegantly firmly loosely merrily politely quietly shyly yes no")
+LEXICON["touch"] = ("touch", "VERB")
 _lex("ADJ", "late ready confused annoyed")
 _lex("ADV", "away")
 _lex("PRON", "who")
@@ -448,6 +465,39 @@ RULES.update({
                          _R("V:do a cross/NOUN body crunch/NOUN with {poss} {side} hand to {poss} {oside} knee", _LR),
                          _R("V:do {num} cross/NOUN body crunches/NOUN", _LR, reps="count", min_reps=2)),
 })
+RULES["walk"] += _rules(_R("V:walk a few steps/NOUN forward"), _R("V:head forward"), _R("V:advance forward"),
+                        _R("V:make {poss} way/NOUN forward"), _R("V:go for a short walk/NOUN"),
+                        _R("V:walk toward the front/NOUN"))
+RULES["run"] += _rules(_R("V:race forward"), _R("V:rush forward"), _R("V:dart forward"),
+                       _R("V:run a short distance/NOUN"))
+RULES["jump"] += _rules(_R("V:jump straight up"), _R("V:spring up"), _R("V:jump on both feet/NOUN"),
+                        _R("V:do a vertical/ADJ jump/NOUN", post_height=False))
+RULES["wave"] += _rules(_R("V:wave hello/NOUN with {poss} {side} hand", _LR), _R("V:wave goodbye/NOUN with {poss} {side} hand", _LR),
+                        _R("V:wave at someone with {poss} {side} hand", _LR), _R("V:give a wave/NOUN with {poss} {side} hand", _LR),
+                        _R("V:wave to someone with both hands", _B))
+RULES["raise"] += _rules(_R("V:hold up {poss} {side} hand", _LR), _R("V:put {poss} {side} arm up", _LR, high=("high",), low=()),
+                         _R("V:reach up with {poss} {side} hand", _LR, high=("high",), low=()),
+                         _R("V:hold up both hands", _B), _R("V:reach up with both hands", _B, high=("high",), low=()))
+RULES["kick"] += _rules(_R("V:kick the air with {poss} {side} leg", _LR), _R("V:do a front/ADJ kick/NOUN with {poss} {side} leg", _LR),
+                        _R("V:kick something in front/NOUN of {obj} with {poss} {side} foot", _LR, post_height=False))
+RULES["squat"] += _rules(_R("V:do a deep/ADJ squat/NOUN", expresses=("low",)), _R("V:bend {poss} knees deeply", expresses=("low",)),
+                         _R("V:squat down and V:stand back up", post_height=False))
+RULES["sit"] += _rules(_R("V:take a seat/NOUN on the floor/NOUN"), _R("V:plop down on the floor"),
+                       _R("V:lower {refl} onto the floor"))
+RULES["bow"] += _rules(_R("V:bow politely/ADV"), _R("V:bow to someone"), _R("V:give a bow/NOUN", post_height=False))
+RULES["clap"] += _rules(_R("V:clap along", _B), _R("V:give a round/NOUN of applause/NOUN", _B))
+RULES["nod"] += _rules(_R("V:nod yes/ADV", reps="optional", min_reps=2))
+RULES["shake_head"] += _rules(_R("V:shake {poss} head no/ADV", reps="optional", min_reps=2))
+RULES["look"] += _rules(_R("V:peek to the {side:NOUN}", _LR), _R("V:glance over to the {side:NOUN}", _LR),
+                        _R("V:look around to the {side:NOUN}", _LR))
+RULES["stretch"] += _rules(_R("V:extend both arms straight ahead", _B), _R("V:reach {poss} arms out in front/NOUN", _B))
+RULES["turn"] += _rules(_R("V:rotate to the {side:NOUN}", _LR), _R("V:turn to face/VERB the {side:NOUN}", _LR))
+RULES["spin"] += _rules(_R("V:twirl around", _LR), _R("V:spin on the spot", _LR))
+RULES["jumping_jacks"] += _rules(_R("V:do star/NOUN jumps/NOUN", reps="implicit", min_reps=2))
+RULES["march"] += _rules(_R("V:march with high/ADJ knees"), _R("V:march in place with high/ADJ knees", variant="in_place"))
+RULES["punch"] += _rules(_R("V:strike forward with {poss} {side} fist", _LR))
+RULES["arms_out"] += _rules(_R("V:open {poss} arms wide", _B), _R("V:stretch {poss} arms sideways", _B))
+RULES["walk_backward"] += _rules(_R("V:back up"), _R("V:retreat backward"), _R("V:step back a few steps/NOUN"))
 RULES["walk"] += _rules(_R("V:walk on a treadmill/NOUN", variant="in_place"), _R("V:walk in place on a treadmill/NOUN", variant="in_place"),
                         _R("V:stride forward"), _R("V:pace forward"), _R("V:walk across the room/NOUN"),
                         _R("V:walk in a straight line/NOUN"), _R("V:wander forward"))
@@ -653,55 +703,69 @@ _WORKOUT = frozenset({"squat", "jumping_jacks", "knee_lift", "stretch", "arm_cir
 MOOD_STYLE: tuple[tuple[str, bool, frozenset | None], ...] = tuple(
     [(w, True, None) for w in ("happily", "cheerfully", "joyfully", "casually", "confidently", "playfully",
                                "nervously", "proudly", "smoothly", "steadily", "awkwardly", "clumsily", "gracefully",
-                               "thoughtfully")]
+                               "thoughtfully", "quietly", "boldly", "shyly", "elegantly", "merrily", "dramatically",
+                               "loosely", "firmly", "determinedly", "lightly")]
     + [(w, False, None) for w in ("happily", "cheerfully", "casually", "confidently", "playfully", "nervously",
                                   "proudly", "smoothly", "steadily", "awkwardly", "gracefully")]
+    + [(w, False, None) for w in ("with confidence/NOUN", "with ease/NOUN", "in a playful/ADJ way/NOUN",
+                                  "in a funny/ADJ way/NOUN", "in an exaggerated/ADJ way/NOUN", "in a silly/ADJ way/NOUN",
+                                  "with determination/NOUN", "with enthusiasm/NOUN", "with purpose/NOUN")]
+    + [(w, False, _FORCE) for w in ("with force/NOUN", "with power/NOUN")]
     + [(w, True, _FORCE) for w in ("angrily", "aggressively", "powerfully", "forcefully", "fiercely")]
     + [(w, False, _FORCE) for w in ("angrily", "aggressively", "powerfully", "forcefully", "hard")]
-    + [(w, False, _RHYTHM) for w in ("rhythmically", "to the music/NOUN", "to the beat/NOUN", "to a beat/NOUN",
+    + [(w, False, _RHYTHM) for w in ("in time/NOUN with the music/NOUN", "to an upbeat/ADJ song/NOUN", "rhythmically", "to the music/NOUN", "to the beat/NOUN", "to a beat/NOUN",
                                      "to the rhythm/NOUN")]
-    + [(w, False, _WORKOUT) for w in ("as if warming/VERB up", "as part/NOUN of a workout", "as if exercising/VERB",
+    + [(w, False, _WORKOUT) for w in ("as part/NOUN of an exercise/NOUN routine/NOUN",
+                                      "like a fitness/NOUN instructor/NOUN", "as if warming/VERB up", "as part/NOUN of a workout", "as if exercising/VERB",
                                       "as if training/VERB")]
 )
 #: Intent clauses after a phrase, per primitive: "as if ..." and "to ...".
 INTENT: dict[str, tuple[str, ...]] = {
-    "walk": ("as if looking for something", "as if exploring/VERB the room/NOUN", "as if pacing/VERB",
+    "walk": ("as if taking/VERB a stroll/NOUN", "as if walking/VERB in a park/NOUN", "as if heading/VERB to work/NOUN",
+             "as if looking for something", "as if exploring/VERB the room/NOUN", "as if pacing/VERB",
              "as if lost/VERB in thought/NOUN"),
-    "run": ("as if in a hurry", "as if late/ADJ for the bus", "as if chasing/VERB someone", "as if training/VERB"),
+    "run": ("as if running/VERB a race/NOUN", "as if in a hurry", "as if late/ADJ for the bus", "as if chasing/VERB someone", "as if training/VERB"),
     "jog": ("as if training/VERB", "as if exercising/VERB"),
     "walk_backward": ("as if backing/VERB away from something", "as if avoiding/VERB something"),
     "sidestep": ("as if dodging/VERB something", "as if avoiding/VERB someone"),
     "turn": ("as if hearing/VERB a noise", "as if looking around"),
     "spin": ("as if dancing/VERB", "as if celebrating/VERB"),
-    "jump": ("as if celebrating/VERB", "as if trying/VERB to/PART reach/VERB something", "with excitement/NOUN"),
-    "kick": ("as if kicking/VERB a ball", "as if fighting/VERB someone"),
+    "jump": ("as if trying/VERB to/PART touch/VERB the ceiling/NOUN", "with joy/NOUN", "as if celebrating/VERB", "as if trying/VERB to/PART reach/VERB something", "with excitement/NOUN"),
+    "kick": ("like a martial/ADJ artist/NOUN", "as if kicking/VERB a door/NOUN open/ADJ", "as if kicking/VERB a ball", "as if fighting/VERB someone"),
     "sit": ("to/PART rest/VERB", "as if tired", "to/PART take/VERB a break"),
-    "bow": ("to the audience", "as if thanking/VERB an audience", "as if greeting/VERB someone"),
-    "wave": ("as if greeting/VERB a friend", "as if saying/VERB goodbye", "to/PART say/VERB hello",
+    "bow": ("at the end of a performance/NOUN", "to the audience", "as if thanking/VERB an audience", "as if greeting/VERB someone"),
+    "wave": ("as if hailing/VERB a taxi/NOUN", "as if waving/VERB to a friend across the street/NOUN",
+             "as if greeting/VERB a friend", "as if saying/VERB goodbye", "to/PART say/VERB hello",
              "as if signalling/VERB to someone", "to/PART greet/VERB someone"),
-    "raise": ("as if asking/VERB a question/NOUN", "to/PART get/VERB attention/NOUN"),
+    "raise": ("as if volunteering/VERB", "as if answering/VERB a question/NOUN", "as if asking/VERB a question/NOUN", "to/PART get/VERB attention/NOUN"),
     "punch": ("as if fighting/VERB someone", "as if hitting/VERB a punching/NOUN bag", "like a boxer"),
-    "clap": ("as if applauding/VERB", "as if cheering/VERB for someone"),
-    "nod": ("as if agreeing/VERB", "in agreement", "as if agreeing/VERB with someone"),
-    "shake_head": ("as if disagreeing/VERB", "in disbelief"),
-    "look": ("as if searching/VERB for someone", "as if hearing/VERB a noise"),
-    "dance": ("as if at a party", "as if celebrating/VERB", "happily to the music/NOUN"),
+    "clap": ("at the end of a show/NOUN", "as if applauding/VERB", "as if cheering/VERB for someone"),
+    "nod": ("as if listening/VERB to someone", "as if agreeing/VERB", "in agreement", "as if agreeing/VERB with someone"),
+    "shake_head": ("as if refusing/VERB", "as if disagreeing/VERB", "in disbelief"),
+    "look": ("as if checking/VERB for traffic/NOUN", "as if searching/VERB for someone", "as if hearing/VERB a noise"),
+    "dance": ("like nobody is watching/VERB", "as if at a party", "as if celebrating/VERB", "happily to the music/NOUN"),
     "throw": ("as if throwing/VERB to a friend", "like a baseball/NOUN pitcher/NOUN", "as if playing/VERB catch/NOUN"),
-    "pick_up": ("from the floor", "off the ground"),
-    "step_over": ("as if avoiding/VERB a puddle", "as if stepping/VERB over a log"),
-    "stumble": ("as if tripping/VERB over something", "as if losing/VERB balance/NOUN"),
+    "pick_up": ("as if tidying/VERB up", "from the floor", "off the ground"),
+    "step_over": ("as if stepping/VERB over a sleeping/VERB dog/NOUN", "as if avoiding/VERB a puddle", "as if stepping/VERB over a log"),
+    "stumble": ("as if the floor is slippery/ADJ", "as if tripping/VERB over something", "as if losing/VERB balance/NOUN"),
     "guard": ("like a boxer", "as if ready/ADJ to/PART fight/VERB", "as if sparring/VERB"),
     "jab_cross": ("as if sparring/VERB", "as if fighting/VERB an opponent", "as if hitting/VERB a punching/NOUN bag"),
-    "hook": ("as if sparring/VERB", "as if fighting/VERB an opponent"),
-    "uppercut": ("as if sparring/VERB", "as if fighting/VERB an opponent"),
-    "hands_on_hips": ("as if waiting/VERB", "impatiently", "as if taking/VERB a break"),
-    "scratch_head": ("as if confused/ADJ", "as if thinking/VERB", "in confusion/NOUN"),
-    "salute": ("like a soldier", "as if greeting/VERB an officer"),
-    "cross_arms": ("as if waiting/VERB", "impatiently", "as if annoyed/ADJ"),
-    "reach_across": ("as if grabbing/VERB something", "as if reaching/VERB for something"),
+    "hook": ("as if in a boxing/NOUN match/NOUN", "like a professional/ADJ boxer", "as if sparring/VERB", "as if fighting/VERB an opponent"),
+    "uppercut": ("as if in a boxing/NOUN match/NOUN", "as if sparring/VERB", "as if fighting/VERB an opponent"),
+    "hands_on_hips": ("as if out/ADV of breath/NOUN", "as if waiting/VERB", "impatiently", "as if taking/VERB a break"),
+    "scratch_head": ("as if puzzled/ADJ", "as if confused/ADJ", "as if thinking/VERB", "in confusion/NOUN"),
+    "salute": ("as if saluting/VERB a flag/NOUN", "like a soldier", "as if greeting/VERB an officer"),
+    "cross_arms": ("as if cold/ADJ", "as if thinking/VERB", "as if waiting/VERB", "impatiently", "as if annoyed/ADJ"),
+    "reach_across": ("as if grabbing/VERB a seatbelt/NOUN", "as if grabbing/VERB something", "as if reaching/VERB for something"),
     "arm_circles": ("as if warming/VERB up", "to/PART loosen/VERB up"),
-    "stretch": ("as if warming/VERB up",),
-    "march": ("like a soldier",),
+    "stretch": ("as if warming/VERB up", "as if reaching/VERB for something"),
+    "spin": ("like a ballerina/NOUN", "as if dancing/VERB"),
+    "squat": ("as if lifting/VERB weights/NOUN", "as if sitting/VERB on an invisible chair/NOUN"),
+    "arms_out": ("like an airplane/NOUN", "as if balancing/VERB"),
+    "jumping_jacks": ("as if warming/VERB up", "as part of a workout"),
+    "jog": ("as if jogging/VERB in a park/NOUN", "as if training/VERB", "as if exercising/VERB"),
+    "sidestep": ("as if making/VERB room/NOUN for someone", "as if dodging/VERB something", "as if avoiding/VERB someone"),
+    "march": ("like a soldier", "as if in a parade/NOUN"),
 }
 
 
@@ -738,7 +802,8 @@ def _items(text: str) -> list[Item]:
 #: {L} / {LG} the layered gesture of a one-step plan, {O} / {OG} the overlay, {SEQ} / {SEQG} all
 #: steps joined by "and then" / ", then". "," "." ";" are punctuation; ``word/POS`` states a tag.
 FRAMES: dict[str, tuple[str, ...]] = {
-    "single": ("{S} {A0}", "{S} is {G0}", "{S} just {A0}", "{S} simply {A0}"),
+    "single": ("{S} {A0}", "{S} is {G0}", "{S} just {A0}", "{S} simply {A0}", "{S} {A0} for a moment",
+               "{S} {A0} for a few seconds/NOUN"),
     "layered": (
         "{S} {M} while {LG}", "{S} is {MG} while {LG}", "while {MG} , {S} {L}", "{S} {L} while {MG}",
         "{S} {M} and {L} at the same time", "{S} {L} as {P} {M}", "{S} {M} , {LG} at the same time",
@@ -926,7 +991,7 @@ def _subject(plan: Plan, rng: np.random.Generator) -> tuple[str, tuple[str, ...]
 #: Chance that a speed modifier is said with a style word ("carefully") rather than "slowly".
 SPEED_STYLE_P = 0.6
 #: Chance that an action phrase without such a word gets a manner or intent word.
-MANNER_P = 0.22
+MANNER_P = 0.3
 
 
 def _styled_phrase(action: Action, form: str, poss: str, rng: np.random.Generator, before: bool = True) -> list[Item]:
@@ -1185,7 +1250,8 @@ def parse_prompt(prompt: str) -> list[ParsedPhrase] | None:
                 cand = (best[i][0] + (kind_ in ("phrase", "glue")), best[i][1] + ((kind_, i, j),))
                 # ties go to the reading whose earlier units are longer: a speed word between two
                 # phrases ("... quickly, shaking ...") ends the first one, as the renderer writes it
-                if best[j] is None or cand[0] < best[j][0] or (cand[0] == best[j][0] and i > best[j][1][-1][1]):
+                if best[j] is None or cand[0] < best[j][0] or (cand[0] == best[j][0] and kind_ != "pre"
+                                                                             and i > best[j][1][-1][1]):
                     best[j] = cand
     if best[n] is None:
         return None
