@@ -392,3 +392,28 @@ def test_chunk_size_follows_max_batch_or_the_allocator(make_tiny_pipeline, monke
         pipe.max_batch = bad
         with pytest.raises(ValueError, match="max_batch must be a positive int or None"):
             pipe.chunk_size()
+
+
+def test_pipeline_joints_are_the_fixed_bone_fit_and_raw_joints_the_position_features(make_tiny_pipeline):
+    from salad_core.motion import features_to_joints
+    from salad_core.skeleton import get_skeleton
+
+    pipe = make_tiny_pipeline()
+    assert pipe.recovery == "fit"                                      # HumanML3D has target bone lengths
+    out = pipe(["a person walks forward", "a person jumps"], lengths=[16, 24], num_steps=3)
+    sk = get_skeleton("humanml3d")
+    parents = list(sk.parents[1:])
+    for joints, raw, n, feats in zip(out.joints, out.raw_joints, out.lengths, out.features):
+        assert joints.shape == raw.shape == (n, 22, 3)
+        lengths = np.linalg.norm(joints[:, 1:] - joints[:, parents], axis=-1)
+        np.testing.assert_allclose(lengths, np.broadcast_to(sk.bone_lengths[1:], lengths.shape), atol=1e-4)
+        np.testing.assert_array_equal(raw, features_to_joints(feats[:n], sk).astype(np.float32))
+        assert joints[..., 1].min() >= -1e-4                           # nothing below the floor
+    assert out.settings["recovery"] == "fit"
+    pipe.recovery = "positions"
+    plain = pipe(["a person walks forward", "a person jumps"], lengths=[16, 24], num_steps=3)
+    for a, b in zip(plain.joints, out.raw_joints):
+        np.testing.assert_allclose(a, b, atol=1e-6)
+    pipe.recovery = "spline"
+    with pytest.raises(ValueError, match="recovery"):
+        pipe("a person walks forward", lengths=16, num_steps=2)
