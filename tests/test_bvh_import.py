@@ -408,6 +408,31 @@ def test_rig_mapping_details(rigs):
     assert normalize_name("mixamorig:LeftUpLeg") == "leftupleg" and normalize_name("m_avg_L_Hip") == "lhip"
 
 
+def test_a_rig_with_more_spine_joints(tmp_path, walk):
+    """Hips > Spine > Spine1 > Spine2 > Spine3 > Neck, collars on Spine3: spine3 is Spine3 (where the
+    collars hang), spine1 and spine2 are placed along the rig's longer spine."""
+    spec = [("Hips", None, _at("pelvis"), "pZXY"), ("Spine", "Hips", _mix("pelvis", "spine1", 0.6), "pZXY"),
+            ("Spine1", "Spine", _mix("spine1", "spine2", 0.5), "pZXY"), ("Spine2", "Spine1", _at("spine2"), "pZXY"),
+            ("Spine3", "Spine2", _at("spine3"), "pZXY"), ("Neck", "Spine3", _at("neck"), "pZXY"),
+            ("Head", "Neck", _at("head"), "pZXY")]
+    for s_, S in (("left", "Left"), ("right", "Right")):
+        spec += [(f"{S}Shoulder", "Spine3", _at(f"{s_}_collar"), "pZXY"),
+                 (f"{S}Arm", f"{S}Shoulder", _at(f"{s_}_shoulder"), "pZXY"),
+                 (f"{S}ForeArm", f"{S}Arm", _at(f"{s_}_elbow"), "pZXY"), (f"{S}Hand", f"{S}ForeArm", _at(f"{s_}_wrist"), "pZXY"),
+                 (f"{S}UpLeg", "Hips", _at(f"{s_}_hip"), "pZXY"), (f"{S}Leg", f"{S}UpLeg", _at(f"{s_}_knee"), "pZXY"),
+                 (f"{S}Foot", f"{S}Leg", _at(f"{s_}_ankle"), "pZXY"), (f"{S}ToeBase", f"{S}Foot", _at(f"{s_}_foot"), "pZXY")]
+    path = tmp_path / "long_spine.bvh"
+    path.write_text(write_rig(*_rig(spec, walk[:10]), scale=100.0))
+    take = import_bvh(path)
+    desc = take.rig.describe()
+    assert take.rig.style == "generic" and desc["spine3"] == "Spine3" and desc["neck"] == "Neck"
+    assert desc["spine1"] == "along Hips > Spine > Spine1 > Spine2 > Spine3 at 0.40"
+    err = np.linalg.norm(take.joints - walk[:10], axis=-1)
+    direct = [i for n, i in J.items() if n not in ("spine1", "spine2")]
+    assert err[:, direct].max() < 1e-4
+    assert err[:, [J["spine1"], J["spine2"]]].max() < 0.03        # near the originals, on the rig's spine
+
+
 def test_mixamo_names_without_prefix_and_forced_style(tmp_path, walk):
     path = tmp_path / "plain.bvh"
     path.write_text(write_rig(*mixamo_rig(walk[:10], prefix=""), scale=100.0))
