@@ -1,0 +1,50 @@
+"""salad_core.openmp: the OpenMP wait policy set before torch loads."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from salad_core import openmp
+
+
+def test_sets_passive_when_nothing_chose_a_policy():
+    env: dict[str, str] = {}
+    assert openmp.configure(env) == "passive"
+    assert env["OMP_WAIT_POLICY"] == "PASSIVE"
+
+
+def test_the_users_variables_and_keep_win():
+    env = {"GOMP_SPINCOUNT": "1000"}
+    assert openmp.configure(env).startswith("user: GOMP_SPINCOUNT=1000")
+    assert "OMP_WAIT_POLICY" not in env
+    env = {"OMP_WAIT_POLICY": "ACTIVE"}
+    assert openmp.configure(env) == "user: OMP_WAIT_POLICY=ACTIVE" and env["OMP_WAIT_POLICY"] == "ACTIVE"
+    env = {openmp.ENV_VAR: "keep"}
+    assert openmp.configure(env) == "runtime default" and "OMP_WAIT_POLICY" not in env
+    env = {openmp.ENV_VAR: "Active"}
+    assert openmp.configure(env) == "active" and env["OMP_WAIT_POLICY"] == "ACTIVE"
+
+
+def test_bad_choice_names_the_variable():
+    with pytest.raises(ValueError, match=openmp.ENV_VAR):
+        openmp.configure({openmp.ENV_VAR: "spin"})
+
+
+def _child(code: str, **extra: str) -> str:
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT", openmp.ENV_VAR)}
+    env.update(extra)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    return out.stdout.strip()
+
+
+def test_importing_salad_before_torch_sets_the_policy_for_the_process():
+    code = ("import os, salad_core, torch; from salad_core.openmp import wait_policy; "
+            "print(os.environ.get('OMP_WAIT_POLICY'), '|', wait_policy())")
+    assert _child(code) == "PASSIVE | passive (set by salad_core before torch loaded)"
+    # torch first: too late for libgomp, so salad changes nothing and says why
+    late = ("import torch, os, salad_core; from salad_core.openmp import wait_policy; "
+            "print(os.environ.get('OMP_WAIT_POLICY'), '|', wait_policy())")
+    assert _child(late) == "None | runtime default (torch was imported before salad_core)"
