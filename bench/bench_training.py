@@ -16,6 +16,10 @@ Example::
 
     python bench/bench_training.py --old /tmp/h3_old --data /tmp/h3_corpus --what denoiser --steps 300
     python bench/bench_training.py --old /tmp/h3_old --data /tmp/h3_corpus --what vae --steps 200
+    python bench/bench_training.py --threads-ab --data /tmp/h3_corpus --what vae   # 1 vs 2 threads, this checkout
+
+``--threads-ab`` alternates 1 and 2 torch threads in one process of this checkout's trainer (rounds of a
+few steps, the order flipped every round) and prints the medians and the load average during the rounds.
 """
 from __future__ import annotations
 
@@ -72,9 +76,12 @@ def counting(items):
     frames[0] += int(batch["length"].sum()) if "length" in batch else int(batch["motion"].shape[0] * batch["motion"].shape[1])
     return batch
 task.collate = counting
-res = fit(task, spec["out"], tc, env=env)
+stamps = []
+t_fit = time.time()
+res = fit(task, spec["out"], tc, env=env, on_step=lambda s: stamps.append(time.time()))
 print("RESULT " + json.dumps({"steps": res.step, "steps_per_s": res.steps_per_s, "frames": frames[0],
-                              "build_s": built, "version": __import__("salad_core").__file__}), flush=True)
+                              "build_s": built, "t_fit": t_fit, "stamps": stamps,
+                              "version": __import__("salad_core").__file__}), flush=True)
 '''
 
 
@@ -120,9 +127,70 @@ def _windows(points: list[tuple[int, float]], window: int) -> dict[int, tuple[fl
     return out
 
 
+THREADS_RUNNER = r'''
+import json, os, sys, time, statistics, torch
+spec = json.loads(sys.argv[1])
+from salad_core.io import config_from_dict
+from salad_core.train.distributed import DistEnv
+from salad_core.train.profile import _Runner
+doc = spec["config"]
+if spec["what"] == "denoiser":
+    from salad_core.models.denoiser import DenoiserConfig
+    from salad_core.train.config import DenoiserTrainConfig as TC
+    from salad_core.train.denoiser_trainer import build_denoiser_task
+    tc = config_from_dict(TC, {**doc["train"], "progress": False})
+    mc = config_from_dict(DenoiserConfig, doc["model"])
+    build = lambda c: build_denoiser_task(spec["data"], spec["vae"], mc, c, DistEnv(), cache_dir=spec["cache_dir"])
+else:
+    from salad_core.models.vae import VAEConfig
+    from salad_core.train.config import VAETrainConfig as TC
+    from salad_core.train.vae_trainer import build_vae_task
+    tc = config_from_dict(TC, {**doc["train"], "progress": False})
+    mc = config_from_dict(VAEConfig, doc["model"])
+    build = lambda c: build_vae_task(spec["data"], mc, c, DistEnv())
+runner = _Runner("ab", build, tc)
+times = {1: [], 2: []}
+loads = []
+for r in range(spec["rounds"]):
+    for n in ((1, 2) if r % 2 == 0 else (2, 1)):
+        torch.set_num_threads(n)
+        runner.step(record=False)                     # settle the thread pool
+        t0 = time.perf_counter()
+        for _ in range(spec["steps"]):
+            runner.step(record=False)
+        times[n].append((time.perf_counter() - t0) / spec["steps"])
+        loads.append(os.getloadavg()[0])
+print("RESULT " + json.dumps({"times": times, "loads": loads}), flush=True)
+'''
+
+
+def threads_ab(args: argparse.Namespace, out: Path) -> int:
+    """1 vs 2 torch threads for this checkout's trainer alone, alternating in one process (medians)."""
+    import statistics
+
+    config = json.loads((HERE / "configs" / f"default_{args.what}.json").read_text())
+    spec = {"what": args.what, "data": str(args.data), "vae": str(args.vae), "config": config,
+            "cache_dir": str(out / "latent_cache"), "rounds": args.rounds, "steps": args.ab_steps}
+    env = {**os.environ, "PYTHONPATH": str(HERE)}
+    env.pop("OMP_NUM_THREADS", None)
+    proc = subprocess.run([sys.executable, "-c", THREADS_RUNNER, json.dumps(spec)], capture_output=True, text=True,
+                          env=env, cwd=HERE)
+    lines = [l for l in proc.stdout.splitlines() if l.startswith("RESULT ")]
+    if proc.returncode or not lines:
+        raise RuntimeError(proc.stdout[-2000:] + proc.stderr[-3000:])
+    res = json.loads(lines[0][len("RESULT "):])
+    t1, t2 = (statistics.median(res["times"][k]) for k in ("1", "2"))
+    print(f"{args.what} step, 1 vs 2 torch threads, {args.rounds} alternating rounds of {args.ab_steps} steps "
+          f"(one process; load average during the rounds {min(res['loads']):.2f}-{max(res['loads']):.2f}):")
+    print(f"  1 thread : median {t1 * 1e3:.0f} ms/step  (rounds: {', '.join(f'{t * 1e3:.0f}' for t in res['times']['1'])})")
+    print(f"  2 threads: median {t2 * 1e3:.0f} ms/step  (rounds: {', '.join(f'{t * 1e3:.0f}' for t in res['times']['2'])})")
+    print(f"  speed-up of 2 threads: {t1 / t2:.2f}x")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--old", required=True, type=Path, help="checkout of the older release (git worktree)")
+    p.add_argument("--old", type=Path, help="checkout of the older release (git worktree)")
     p.add_argument("--data", required=True, type=Path, help="HumanML3D-layout corpus")
     p.add_argument("--what", choices=("denoiser", "vae"), default="denoiser")
     p.add_argument("--vae", type=Path, default=HERE / "salad_core" / "weights" / "salad" / "vae",
@@ -132,9 +200,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--log-every", type=int, default=10)
     p.add_argument("--window", type=int, default=50, help="steps per window of the loss-curve table")
     p.add_argument("--out", type=Path, default=None, help="folder for the runs (default: a temporary one)")
+    p.add_argument("--threads-ab", action="store_true",
+                   help="instead: 1 vs 2 torch threads for this checkout's trainer alone (no --old needed)")
+    p.add_argument("--rounds", type=int, default=6, help="--threads-ab: alternating rounds")
+    p.add_argument("--ab-steps", type=int, default=3, help="--threads-ab: timed steps per round and setting")
     args = p.parse_args(argv)
     out = args.out or Path(tempfile.mkdtemp(prefix="bench_training_"))
     out.mkdir(parents=True, exist_ok=True)
+    if args.threads_ab:
+        return threads_ab(args, out)
+    if args.old is None:
+        p.error("--old is required (except with --threads-ab)")
     cache = out / "latent_cache" if args.what == "denoiser" else None
     if cache is not None:
         t0 = time.perf_counter()
@@ -161,6 +237,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name:8s} {r['steps_per_s']:9.3f} {fps:10.0f} {r['frames'] / max(r['steps'], 1):12.0f}  {r['version']}")
     print(f"ratio new/old: steps/s {res['new']['steps_per_s'] / res['old']['steps_per_s']:.2f}, "
           f"samples x frames/s {res['new']['frames_per_s'] / res['old']['frames_per_s']:.2f}")
+    # the side that finishes first leaves the other a quieter machine: also compare the rates over the
+    # wall-clock span in which both were training (step completion times)
+    lo = max(r["stamps"][0] for r in res.values() if r["stamps"])
+    hi = min(r["stamps"][-1] for r in res.values() if r["stamps"])
+    if hi > lo:
+        rates = {name: sum(lo < t <= hi for t in r["stamps"]) / (hi - lo) for name, r in res.items()}
+        print(f"while both were training ({hi - lo:.0f} s): steps/s old {rates['old']:.4f}, new {rates['new']:.4f}, "
+              f"ratio {rates['new'] / rates['old']:.2f}; samples x frames/s ratio (mean frames per step) "
+              f"{rates['new'] * res['new']['frames'] / (rates['old'] * res['old']['frames']):.2f}")
     curves = {name: _windows(_losses(out / name), args.window) for name in procs}
     print(f"\nloss, mean over windows of {args.window} steps (+- standard error of the logged values, "
           f"one per {args.log_every} steps)")

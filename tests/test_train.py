@@ -529,3 +529,34 @@ def test_run_config_records_batching_threads_numerics_and_the_card_says_so(corpu
     assert "Training numerics" not in card.read_text() and "hand-written text" in card.read_text()
     pipe = assemble_pipeline(tiny_vae_run, new, tmp_path / "pipe", text_encoder=HashTextEncoder())
     assert "## Training numerics" in (pipe / "MODEL_CARD.md").read_text()
+
+
+def test_resuming_a_run_from_before_buckets_keeps_its_numerics(corpus, tiny_vae_run, tmp_path, monkeypatch):
+    """A run folder whose config.json predates the batching/latent-cache fields resumes with random
+    batches and the VAE per step (its own numerics), not today's defaults."""
+    from salad_core.train import cli
+
+    seen = {}
+
+    def fake_train(data, out, vae, model_config, train_config, *a, **kw):
+        seen["config"] = train_config
+        raise SystemExit(0)
+
+    monkeypatch.setattr("salad_core.train.denoiser_trainer.train_denoiser", fake_train)
+    run = tmp_path / "old_run"
+    run.mkdir()
+    old = {k: v for k, v in json.loads(json.dumps(den_train_config().__dict__, default=list)).items()
+           if k not in ("batching", "bucket_pool", "latent_cache", "latent_cache_dir", "latent_cache_dtype")}
+    (run / "config.json").write_text(json.dumps({"model_type": "denoiser", "train": old,
+                                                 "task": {"vae": str(tiny_vae_run)}}))
+    with pytest.raises(SystemExit):
+        cli.main(["denoiser", "--data", str(corpus), "--out", str(run), "--resume"])
+    assert seen["config"].batching == "random" and seen["config"].latent_cache is False
+    new_run = tmp_path / "new_run"
+    new_run.mkdir()
+    (new_run / "config.json").write_text(json.dumps({"model_type": "denoiser", "runtime": {},
+                                                     "train": {**old, "batching": "buckets"},
+                                                     "task": {"vae": str(tiny_vae_run)}}))
+    with pytest.raises(SystemExit):
+        cli.main(["denoiser", "--data", str(corpus), "--out", str(new_run), "--resume"])
+    assert seen["config"].batching == "buckets" and seen["config"].latent_cache is True

@@ -30,6 +30,8 @@ from salad_core.io import config_from_dict
 
 from .config import DenoiserTrainConfig, VAETrainConfig
 
+log = logging.getLogger(__name__)
+
 __all__ = ["main", "build_parser", "TRAIN_TARGETS"]
 
 #: What ``salad train`` can train (the single source of the ``what`` choices).
@@ -59,15 +61,42 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: What a run folder's config written before 0.6 (no batching/latent-cache fields) trained with.
+_LEGACY_FIELDS = {"batching": "random", "latent_cache": False}
+
+
+def _keep_legacy_numerics(doc: dict[str, Any], what: str) -> dict[str, Any]:
+    """A run started before 0.6 continues with the numerics it started with (random batches, VAE encoder
+    per step): the fields its config.json lacks get their 0.5 values instead of today's defaults."""
+    fields = dict(_LEGACY_FIELDS) if what != "vae" else {"batching": "random"}
+    if what == "keymotion":
+        doc = dict(doc)
+        for stage in ("kf_vae", "pst", "mmae"):
+            section = dict(doc.get(stage) or {})
+            section["train"] = {**fields, **(section.get("train") or {})}
+            doc[stage] = section
+        return doc
+    if "runtime" in doc:              # written by a 0.6+ trainer: its train section is complete
+        return doc
+    if "train" in doc:
+        return {**doc, "train": {**fields, **doc["train"]}}
+    return {**fields, **doc}
+
+
 def _read_doc(args: argparse.Namespace) -> dict[str, Any]:
     path = Path(args.config) if args.config else None
+    own = False
     if path is None and args.resume and (Path(args.out) / "config.json").is_file():
-        path = Path(args.out) / "config.json"
+        path, own = Path(args.out) / "config.json", True
     if path is None:
         return {}
     doc = json.loads(path.read_text())
     if not isinstance(doc, dict):
         raise SystemExit(f"--config {path}: expected a JSON object")
+    trains = [doc.get("train")] + [(doc.get(stage) or {}).get("train") for stage in ("kf_vae", "pst", "mmae")]
+    if own and not any(isinstance(t, dict) and "batching" in t for t in trains):
+        log.info("%s predates length buckets and the latent cache: resuming with the numerics it started with", path)
+        doc = _keep_legacy_numerics(doc, args.what)
     return {**doc, "_path": str(path)}
 
 
@@ -85,6 +114,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--vae is for the denoiser only (keymotion trains its own keyframe VAE)")
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    from salad_core.allocator import tune_from_environment
+
+    tune_from_environment()   # as the salad command does; also under torchrun -m salad_core.train
     doc = _read_doc(args)
     if args.what == "keymotion":
         return _main_keymotion(args, doc)

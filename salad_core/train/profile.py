@@ -94,12 +94,15 @@ class _Runner:
         self.startup = time.perf_counter() - t0
         env = DistEnv()
         self.sink: dict[str, float] = {}
-        kw = dict(self.task.prepare.keywords)
-        kw["vae"] = _Timed(kw["vae"], "encode", self.sink, "latents")
-        kw["text"] = _Timed(kw["text"], "encode", self.sink, "text")
-        if kw.get("latents") is not None:
-            kw["latents"] = _Timed(kw["latents"], "lookup", self.sink, "latents")
-        self.prepare = partial(self.task.prepare.func, *self.task.prepare.args, **kw)
+        prepare = self.task.prepare
+        if isinstance(prepare, partial):     # the denoiser's: time its encoder, text and cache calls
+            kw = dict(prepare.keywords)
+            for name, method, part in (("vae", "encode", "latents"), ("text", "encode", "text"),
+                                       ("latents", "lookup", "latents")):
+                if kw.get(name) is not None:
+                    kw[name] = _Timed(kw[name], method, self.sink, part)
+            prepare = partial(prepare.func, *prepare.args, **kw)
+        self.prepare = prepare
         self.params = [p for p in self.task.model.parameters() if p.requires_grad]
         self.optimizer = torch.optim.AdamW(self.params, lr=config.lr, betas=tuple(config.betas), eps=config.adam_eps,
                                            weight_decay=config.weight_decay)
@@ -164,8 +167,11 @@ class _Runner:
             for k, v in t.items():
                 self.totals[k] += v
             self.steps += 1
-            self.frames += float(batch["length"].sum())
-            self.padded += float(inputs["frame_mask"].shape[0] * inputs["frame_mask"].shape[1] * 4)
+            motion = batch["motion"]
+            self.frames += float(batch["length"].sum()) if "length" in batch else float(motion.shape[0] * motion.shape[1])
+            mask = inputs.get("frame_mask")
+            self.padded += (float(mask.shape[0] * mask.shape[1] * 4) if mask is not None   # latent frames x 4
+                            else float(motion.shape[0] * motion.shape[1]))
 
     def validation_per_step(self) -> float:
         from salad_core.train.common import _validate
