@@ -572,6 +572,19 @@ def test_a_good_small_file_parses():
                                atol=1e-9)
 
 
+def test_root_motion_may_sit_on_the_hips_below_a_reference_root():
+    text = _GOOD.replace("ROOT Hips\n{\n  OFFSET 0 0 0\n", "ROOT Reference\n{\n  OFFSET 0 0 0\n  CHANNELS 0\n"
+                         "  JOINT Hips\n  {\n  OFFSET 0 0 0\n", 1).replace("MOTION", "}\nMOTION", 1)
+    m = parse_bvh(text)
+    assert m.joint_names == ("Reference", "Hips", "Spine")
+    np.testing.assert_allclose(m.world_positions()[1, 1], [1.0, 90.0, 0.0])
+    rotations_only = text.replace("CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation",
+                                  "CHANNELS 3 Zrotation Yrotation Xrotation").replace("0 90 0 0", "0")
+    with pytest.raises(BvhError, match="'Reference' has no position channels \\(no channels\\) nor do 'Hips', "
+                                       "'Spine' below it: the file carries no root motion"):
+        parse_bvh(rotations_only.replace("1 90 0 0", "0"))
+
+
 def _variant(old: str, new: str, text: str = _GOOD) -> str:
     assert old in text, old
     return text.replace(old, new, 1)
@@ -588,7 +601,8 @@ def _variant(old: str, new: str, text: str = _GOOD) -> str:
     (_variant("0 90 0 0 0 0 0 0 0", "0 90 0 0 x 0 0 0 0"), 19, "value 'x' (Hips Yrotation) is not a number"),
     (_variant("CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation",
               "CHANNELS 3 Zrotation Yrotation Xrotation").replace("0 90 0 0", "0").replace("1 90 0 0", "0"),
-     5, "the root joint 'Hips' has no position channels (Zrotation Yrotation Xrotation): the file carries no root motion"),
+     5, "the root joint 'Hips' has no position channels (Zrotation Yrotation Xrotation) nor does 'Spine' below it: "
+        "the file carries no root motion"),
     (_variant("CHANNELS 3 Zrotation Yrotation Xrotation", "CHANNELS 3 Zrotation Yrotation"), 9,
      "CHANNELS of joint 'Spine' declares 3 channel(s) but lists 2"),
     (_variant("CHANNELS 3 Zrotation Yrotation Xrotation", "CHANNELS 3 Zrotation Yrotation Wrotation"), 9,

@@ -334,6 +334,17 @@ def _channel_label(joints: tuple[BvhJoint, ...], column: int) -> str:
     return f"column {column + 1}"
 
 
+def _root_chain(joints: tuple[BvhJoint, ...]) -> list[BvhJoint]:
+    """The root and its single-child descendants down to the first branching joint: where a file
+    may carry the root motion (``Reference > Hips`` rigs move the hips, not the reference)."""
+    chain = [0]
+    while True:
+        kids = [i for i, j in enumerate(joints) if j.parent == chain[-1]]
+        if len(kids) != 1:
+            return [joints[i] for i in chain]
+        chain.append(kids[0])
+
+
 def parse_bvh(text: str, path: str = "<string>") -> BvhMotion:
     """Parse the contents of a BVH file (see :func:`read_bvh`)."""
     lines = text.splitlines()
@@ -357,11 +368,14 @@ def parse_bvh(text: str, path: str = "<string>") -> BvhMotion:
     if tokens.motion_line is None:
         raise BvhError(path, len(lines), "the file ends after the hierarchy: no MOTION section")
     joints_t = tuple(joints)
-    root = joints_t[0]
-    if not any(c.endswith("position") for c in root.channels):
+    carriers = _root_chain(joints_t)
+    if not any(c.endswith("position") for j in carriers for c in j.channels):
+        root = joints_t[0]
+        verb = "does" if len(carriers) == 2 else "do"
+        below = f" nor {verb} {', '.join(repr(j.name) for j in carriers[1:])} below it" if len(carriers) > 1 else ""
         raise BvhError(path, root.channels_line or root.line,
                        f"the root joint {root.name!r} has no position channels "
-                       f"({' '.join(root.channels) or 'no channels'}): the file carries no root motion")
+                       f"({' '.join(root.channels) or 'no channels'}){below}: the file carries no root motion")
 
     # MOTION section: Frames, Frame Time, then one line per frame
     i = tokens.motion_line + 1
