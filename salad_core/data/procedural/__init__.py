@@ -6,10 +6,13 @@ HumanML3D format and layout (every code path is the one real HumanML3D takes):
 * motions: forward kinematics and limb IK on the HumanML3D 22-joint skeleton with its target
   bone lengths, 20 fps, feet planted without sliding, converted with
   :func:`salad_core.motion.joints_to_features`;
-* 25 action primitives over all 7 body parts with left/right variants, composed into sequences
-  ("X, then Y"), layers ("X while Y"), repetitions ("twice") and modifiers ("high", "low",
-  "slowly", "quickly") that change the motion measurably;
-* 3-4 captions per motion with word/POS tokens, and ground truth no benchmark has: for every
+* 48 action primitives over all 7 body parts with left/right variants (locomotion, jumps, kicks,
+  dance steps, throwing, boxing, kneeling, lying down, stairs, pivots, picking things up, hands on
+  and across the body, ...), composed into sequences ("X, then Y"), layers ("X while Y"),
+  repetitions ("twice") and modifiers ("high", "low", "slowly", "quickly") that change the motion
+  measurably;
+* 3-4 captions per motion in many sentence frames, with synonyms, style and intent words, and
+  word/POS tokens, and ground truth no benchmark has: for every
   caption, each action phrase's word span, the body parts it drives and its frames
   (``annotations/<id>.json``);
 * mirror augmentation (``M<id>``) with left/right swapped in captions and annotations.
@@ -20,7 +23,8 @@ Entry points: :func:`build_corpus` (``salad corpus build``), :func:`corpus_figur
 from .checks import bone_length_error, foot_sliding, joint_angles, part_activity, part_speeds, phrase_activity
 from .composition import Clip, Event, Plan, Step, generate_clip, realise, sample_plan
 from .corpus import GENERATOR_VERSION, SIZES, build_corpus, corpus_digest, corpus_figures, make_motion
-from .language import FIGURE_PROMPTS, Caption, in_language, mirror_caption, parse_prompt, render_captions
+from .language import (FIGURE_PROMPTS, Caption, in_language, mirror_caption, parse_prompt, render_captions,
+                       sentence_frame, sentence_frames, vocabulary)
 from .primitives import MODIFIERS, PRIMITIVES, Action, primitive_parts
 
 __all__ = [
@@ -28,5 +32,6 @@ __all__ = [
     "generate_clip", "realise", "sample_plan", "Plan", "Step", "Event", "Clip",
     "Action", "PRIMITIVES", "MODIFIERS", "primitive_parts",
     "in_language", "parse_prompt", "render_captions", "mirror_caption", "Caption", "FIGURE_PROMPTS",
+    "sentence_frame", "sentence_frames", "vocabulary",
     "part_speeds", "part_activity", "phrase_activity", "foot_sliding", "bone_length_error", "joint_angles",
 ]

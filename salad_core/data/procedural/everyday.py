@@ -77,7 +77,9 @@ def throw(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gener
     o_rest = pose.arm[0, other].copy()
     o_point = np.array([u(1.0, 1.3), u(0.1, 0.25), u(0.2, 0.4)])
     o_pull = np.array([u(0.2, 0.4), u(0.1, 0.2), u(1.2, 1.5)])
-    pose.arm[:, other] = keyframes(tt, kt, np.stack([o_rest, o_rest, o_point, o_point, o_pull, o_pull, o_rest]))
+    # the guiding arm draws in over the whole release and follow-through, slower than the throwing one
+    pose.arm[:, other] = keyframes(tt, kt, np.stack([o_rest, o_rest, o_point, o_point, 0.5 * (o_point + o_pull),
+                                                     o_pull, o_rest]))
     turn = keyframes(tt, kt, [0.0, 0.0, sgn * u(0.35, 0.5), sgn * 0.45, -sgn * u(0.3, 0.45), -sgn * 0.35, 0.0])
     shift = keyframes(tt, kt, [0.0, 0.0, -u(0.03, 0.05), -0.04, u(0.05, 0.08), 0.06, 0.0])
     lean = keyframes(tt, kt, [0.0, 0.0, -0.06, -0.06, u(0.15, 0.25), 0.2, 0.0])
@@ -125,7 +127,7 @@ def pick_up(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gen
         pose.spine[:, 1] += 0.6 * lean * down
         pose.neck[:, 1] -= 0.3 * down
         _bound_pelvis(pose, body)
-        bottom = int(round(t2 * FPS))
+        bottom = int(np.ceil(t2 * FPS))           # first frame with the hands down (weight 1)
         sh = shoulders(pose.slice(bottom, bottom + 1), body)[0]
         ks = list(arms)
         spot = sh[ks].mean(0) + fwd * 0.04

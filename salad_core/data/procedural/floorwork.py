@@ -102,6 +102,10 @@ def kneel(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gener
     bound = max_pelvis_height(pose.pelvis, g0, pose.ankle, body, reach=0.985, planted=planted > 0.5) - 0.003
     free = (tt < t2 + 0.5 * (t3 - t2)) | (tt > t4 + 0.5 * (t5 - t4))
     pose.pelvis[:, 1] = np.where(free, np.minimum(pose.pelvis[:, 1], bound), pose.pelvis[:, 1])
+    # the kneeling knee bends towards its floor point exactly (the default pole points a little outwards)
+    to_knee = (knee - hip) / np.linalg.norm(knee - hip)
+    pole = (1.0 - bend)[:, None] * pose.knee_pole[:, k] + bend[:, None] * to_knee
+    pose.knee_pole[:, k] = pole / np.linalg.norm(pole, axis=-1, keepdims=True)
     # the hands rest on the front thigh while kneeling
     pose.arm[:, :, 0] += (0.35 * bend)[:, None]
     pose.arm[:, :, 2] += (0.5 * bend)[:, None]

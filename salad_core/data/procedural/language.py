@@ -3,8 +3,15 @@ left/right mirroring of captions, and a parser that maps a prompt back to primit
 
 Every caption is built from phrase rules, so the word span of each action phrase (verb plus its
 side, body-part, modifier and repetition words, e.g. "waving his left hand", "jumps high twice")
-is known exactly. Tokens follow HumanML3D's processing: NOUN and VERB words are lemmatised, every
-word carries a coarse POS tag; the lexicon knows every word the rules can produce.
+is known exactly. A phrase may carry a style word before or after it ("carefully", "energetically",
+"at a slow pace": these say the speed modifier, and the motion has it) or a manner or intent
+("happily", "angrily", "to the music", "as if greeting a friend": the motion is the plain one);
+such words belong to the phrase's span. Captions are laid out by sentence frames (:data:`FRAMES`:
+"{S} {A0}, then {A1}", "at first {S} {A0}, later {P} {A1}", "after {G0}, {S} {A1}", ...),
+some opened with a scene ("in this clip, ...", "we see {S} ..."); :func:`sentence_frame` reduces a
+caption to its frame, :func:`sentence_frames` lists the designed ones and :func:`vocabulary` every
+word the captions can use. Tokens follow HumanML3D's processing: NOUN and VERB words are
+lemmatised, every word carries a coarse POS tag; the lexicon knows every word the rules can produce.
 
 Words are ``salad_core.data.texts.split_words`` of the caption, so word indices match the
 annotation convention of the whole toolkit.
@@ -24,7 +31,8 @@ from .primitives import PRIMITIVES, Action
 
 __all__ = ["Caption", "ParsedPhrase", "render_captions", "render_caption", "mirror_caption",
            "mirror_words", "parse_prompt", "in_language", "phrase_realisations", "LEXICON", "VERBS",
-           "POS_TAGS", "SUBJECTS", "FIGURE_PROMPTS"]
+           "POS_TAGS", "SUBJECTS", "EXTRA_SUBJECTS", "FIGURE_PROMPTS", "FRAMES", "OPENINGS", "GERUND_OPENINGS",
+           "SPEED_STYLE", "MOOD_STYLE", "INTENT", "sentence_frame", "sentence_frames", "vocabulary"]
 
 #: Coarse POS tags used in the tokens (spaCy's universal tags, as in HumanML3D's texts).
 POS_TAGS = ("VERB", "NOUN", "DET", "ADP", "NUM", "AUX", "PRON", "ADJ", "ADV", "CCONJ", "PART", "SCONJ", "PROPN")
@@ -878,6 +886,69 @@ def _frame_text(frame: str) -> str:
         else:
             words.append(tok.split("/")[0])
     return " ".join(words)
+
+
+def vocabulary() -> set[str]:
+    """Every word the captions can use: phrase rules (all verb forms, sides, possessives, counts,
+    height, speed and repetition words), style and intent words, subjects and sentence frames.
+
+    The words a corpus's captions actually use are a subset (count them with ``split_words``).
+    """
+    out: set[str] = set()
+
+    def add(text: str) -> None:
+        for tok in text.split():
+            if tok.startswith("V:"):
+                out.update(VERBS[tok[2:]])
+            elif tok in ("{poss}", "{obj}", "{refl}"):
+                table = {"{poss}": {p: p for p in _OBJECT}, "{obj}": _OBJECT, "{refl}": _REFLEXIVE}[tok]
+                out.update(table.values())
+            elif tok.startswith("{side") or tok.startswith("{oside"):
+                out.update(("left", "right"))
+            elif tok == "{cw}":
+                out.update(("clockwise", "counterclockwise"))
+            elif tok == "{num}":
+                out.update(_COUNT.values())
+            elif tok.startswith("{") or tok in (",", ".", ";"):
+                continue
+            else:
+                out.add(tok.split("/")[0])
+
+    for rules in RULES.values():
+        for rule in rules:
+            add(rule.template)
+            for words in (rule.high or ()) + (rule.low or ()):
+                add(words)
+    for table in (_HIGH_DEFAULT, _LOW_DEFAULT):
+        for words in table.values():
+            for w in words:
+                add(w)
+    for kind in RULES:
+        for mod in ("slowly", "quickly"):
+            pre, post = _speed_words(kind, mod)
+            out.update(pre + post)
+    for words in _REPS.values():
+        for w in words:
+            add(w)
+    for before, after in SPEED_STYLE.values():
+        for w in before + after:
+            add(w)
+    for w, _, _ in MOOD_STYLE:
+        add(w)
+    for ws in INTENT.values():
+        for w in ws:
+            add(w)
+    for s in SUBJECTS:
+        add(s[0])
+        out.update(w for w in (s[2],) if w)
+    for s in EXTRA_SUBJECTS:
+        add(s[0])
+    for frames in FRAMES.values():
+        for f in frames:
+            for g in _opened(f):
+                add(g)
+    out.update(("and", "then", "while"))                  # the joints of {SEQ} and of layered steps
+    return out
 
 
 def _subject_words() -> list[tuple[str, ...]]:
