@@ -211,7 +211,8 @@ class SaladPipeline:
 
     def __init__(self, vae: MotionVAE, denoiser: Denoiser, text_encoder, mean: np.ndarray, std: np.ndarray,
                  diffusion: DiffusionConfig | None = None, solver: str = "ddim", source: str | None = None,
-                 guidance: Guidance | None = None, recovery: str | None = None) -> None:
+                 guidance: Guidance | None = None, recovery: str | None = None,
+                 latent_stats: tuple[Any, Any] | None = None) -> None:
         self.vae = vae.eval()
         self.denoiser = denoiser.eval()
         self.text_encoder = text_encoder
@@ -241,6 +242,16 @@ class SaladPipeline:
                              f"got {self.mean.shape} and {self.std.shape}")
         for p in [*self.vae.parameters(), *self.denoiser.parameters()]:
             p.requires_grad_(False)
+        #: Latent normalisation of the diffusion (latent diffusion models' scale factor, per part and
+        #: channel): the denoiser works on ``(z - mean) / std`` of the VAE latents ``z``; None = identity
+        #: (the official models). Stored as ``latent_mean`` / ``latent_std`` ``(P, Dz)`` in the stats file.
+        self.latent_stats = None
+        if latent_stats is not None:
+            shape = tuple(self.latent_shape)
+            mean, std = (torch.as_tensor(np.asarray(t, dtype=np.float32)).reshape(shape) for t in latent_stats)
+            if not bool(torch.isfinite(mean).all()) or not bool((std > 0).all()):
+                raise ValueError("latent_stats need a finite mean and a positive std")
+            self.latent_stats = (mean, std)
 
     # ------------------------------------------------------------------ loading
     @classmethod
@@ -269,7 +280,8 @@ class SaladPipeline:
             guidance = Guidance(**cfg["guidance"]) if cfg.get("guidance") is not None else None
         except (TypeError, ValueError) as err:
             raise CheckpointError(f"{cfg_path}: bad \"guidance\" entry {cfg.get('guidance')!r} ({err})") from err
-        return cls(vae, denoiser, text_encoder, stats["mean"].numpy(), stats["std"].numpy(),
+        latent_stats = (stats["latent_mean"], stats["latent_std"]) if "latent_mean" in stats else None
+        return cls(vae, denoiser, text_encoder, stats["mean"].numpy(), stats["std"].numpy(), latent_stats=latent_stats,
                    diffusion=diffusion, solver=cfg.get("solver", "ddim"), source=str(root), guidance=guidance,
                    recovery=cfg.get("recovery"))
 
@@ -280,7 +292,10 @@ class SaladPipeline:
         save_checkpoint(root / "vae", self.vae, model_type="salad_vae", config=self.vae.config, dtype=dtype, meta=meta)
         save_checkpoint(root / "denoiser", self.denoiser, model_type="denoiser", config=self.denoiser.config,
                         dtype=dtype, meta=meta)
-        save_tensors(root / "stats.safetensors", {"mean": torch.from_numpy(self.mean), "std": torch.from_numpy(self.std)})
+        stats = {"mean": torch.from_numpy(self.mean), "std": torch.from_numpy(self.std)}
+        if self.latent_stats is not None:
+            stats.update(latent_mean=self.latent_stats[0].clone(), latent_std=self.latent_stats[1].clone())
+        save_tensors(root / "stats.safetensors", stats)
         doc = {"vae": "vae", "denoiser": "denoiser", "stats": "stats.safetensors",
                "text_encoder": getattr(self.text_encoder, "source", "minilm"),
                "diffusion": config_to_dict(self.diffusion), "solver": self.solver,
@@ -334,13 +349,15 @@ class SaladPipeline:
             for b, length in enumerate(lengths):
                 # decode each motion at its own length: the VAE's temporal convolutions would
                 # otherwise see the batch's zero padding near the end of shorter motions
-                dec = self.vae.decode(latents[b:b + 1, : length // unit].float())[0].cpu().numpy()
+                z = self.from_diffusion(latents[b:b + 1, : length // unit].float())
+                dec = self.vae.decode(z)[0].cpu().numpy()
                 feats[b, :length] = denormalize(dec, self.mean, self.std)
                 joints.append(recover_joints(feats[b, :length], method, self.skeleton).astype(np.float32))
         return feats, joints
 
     def encode_motion(self, features: np.ndarray, *, sample: bool = False) -> torch.Tensor:
-        """Raw (de-normalised) features ``(N, D)`` or ``(B, N, D)`` -> latents ``(B, N/4, P, Dz)``.
+        """Raw (de-normalised) features ``(N, D)`` or ``(B, N, D)`` -> latents ``(B, N/4, P, Dz)`` in the
+        diffusion's space (:meth:`to_diffusion` of the VAE's).
 
         ``N`` must be a multiple of 4. ``sample=False`` uses the posterior mean.
         """
@@ -357,7 +374,21 @@ class SaladPipeline:
             raise ValueError(f"motion length {x.shape[1]} is not a multiple of {unit}; crop it first")
         with torch.inference_mode():
             enc = self.vae.encode(torch.from_numpy(normalize(x, self.mean, self.std)), sample=sample)
-        return enc.z if sample else enc.mu
+        return self.to_diffusion(enc.z if sample else enc.mu)
+
+    def to_diffusion(self, z: torch.Tensor) -> torch.Tensor:
+        """VAE latents ``(..., P, Dz)`` -> the denoiser's normalised latents (identity without stats)."""
+        if self.latent_stats is None:
+            return z
+        mean, std = self.latent_stats
+        return (z - mean.to(z)) / std.to(z)
+
+    def from_diffusion(self, z: torch.Tensor) -> torch.Tensor:
+        """The denoiser's latents ``(..., P, Dz)`` -> VAE latents (inverse of :meth:`to_diffusion`)."""
+        if self.latent_stats is None:
+            return z
+        mean, std = self.latent_stats
+        return z * std.to(z) + mean.to(z)
 
     # ------------------------------------------------------------------ generate
     def __call__(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None = None,

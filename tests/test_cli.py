@@ -244,7 +244,7 @@ def inverted(tiny_weights, tmp_path_factory, sample_dir):
     """One ``salad invert`` run with a mirror edit on the real sample motion (170 frames)."""
     out = tmp_path_factory.mktemp("inv")
     src = sample_dir / "new_joint_vecs" / "012314.npy"
-    args = ["-q", "invert", str(src), "--prompt", "a person walks forward", "--mirror", "arms", "--steps", "4",
+    args = ["-q", "invert", str(src), "--prompt", "a person walks forward", "--mirror", "arms", "--steps", "4", "--no-render",
             "--weights", str(tiny_weights), "--out", str(out)]
     assert cli.main(args) == 0
     return out, src, args

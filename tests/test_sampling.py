@@ -417,3 +417,27 @@ def test_pipeline_joints_are_the_fixed_bone_fit_and_raw_joints_the_position_feat
     pipe.recovery = "spline"
     with pytest.raises(ValueError, match="recovery"):
         pipe("a person walks forward", lengths=16, num_steps=2)
+
+
+def test_pipeline_latent_normalisation_round_trips_and_is_stored(make_tiny_pipeline, sample_features, tmp_path):
+    from salad_core.pipeline import SaladPipeline
+
+    pipe = make_tiny_pipeline()
+    feats = sample_features[:40]
+    plain_z = pipe.encode_motion(feats)                                 # (1, 10, P, Dz) VAE space
+    plain_feats, _ = pipe.decode(plain_z, [40])
+    p, dz = pipe.latent_shape
+    mean, std = torch.linspace(-1, 1, p * dz).reshape(p, dz), torch.linspace(0.5, 2, p * dz).reshape(p, dz)
+    pipe.latent_stats = (mean, std)
+    z = pipe.encode_motion(feats)                                       # diffusion space
+    torch.testing.assert_close(z, (plain_z - mean) / std)
+    torch.testing.assert_close(pipe.from_diffusion(pipe.to_diffusion(plain_z)), plain_z)
+    norm_feats, _ = pipe.decode(z, [40])                                # decode undoes the normalisation
+    np.testing.assert_allclose(norm_feats, plain_feats, atol=1e-4)
+    pipe.save_pretrained(tmp_path / "p")
+    again = SaladPipeline.from_pretrained(tmp_path / "p", text_encoder=pipe.text_encoder)
+    torch.testing.assert_close(again.latent_stats[0], mean)
+    torch.testing.assert_close(again.latent_stats[1], std)
+    with pytest.raises(ValueError, match="positive std"):
+        SaladPipeline(pipe.vae, pipe.denoiser, pipe.text_encoder, pipe.mean, pipe.std,
+                      latent_stats=(mean, torch.zeros(p, dz)))
