@@ -89,7 +89,13 @@ VERBS: dict[str, tuple[str, str]] = {
     "kneel": ("kneels", "kneeling"), "lie": ("lies", "lying"), "lay": ("lays", "laying"), "climb": ("climbs", "climbing"),
     "ascend": ("ascends", "ascending"), "go": ("goes", "going"), "pivot": ("pivots", "pivoting"),
     "tap": ("taps", "tapping"), "tie": ("ties", "tying"), "pray": ("prays", "praying"), "propose": ("proposes", "proposing"),
-    "change": ("changes", "changing"),  "tidy": ("tidies", "tidying"), "sleep": ("sleeps", "sleeping"), "watch": ("watches", "watching"), "drop": ("drops", "dropping"), "settle": ("settles", "settling"), "mount": ("mounts", "mounting"),
+    "continue": ("continues", "continuing"), "end": ("ends", "ending"),
+    "stop": ("stops", "stopping"), "transition": ("transitions", "transitioning"), "follow": ("follows", "following"),
+    "combine": ("combines", "combining"), "expect": ("expects", "expecting"), "collect": ("collects", "collecting"),
+    "fly": ("flies", "flying"), "sunbathe": ("sunbathes", "sunbathing"),
+    "change": ("changes", "changing"), "tidy": ("tidies", "tidying"), "sleep": ("sleeps", "sleeping"),
+    "watch": ("watches", "watching"), "drop": ("drops", "dropping"), "settle": ("settles", "settling"),
+    "mount": ("mounts", "mounting"),
     "ask": ("asks", "asking"), "chase": ("chases", "chasing"), "lean": ("leans", "leaning"), "loosen": ("loosens", "loosening"), "dash": ("dashes", "dashing"), "lower": ("lowers", "lowering"), "attract": ("attracts", "attracting"), "punctuate": ("punctuates", "punctuating"),
 }
 
@@ -170,6 +176,10 @@ _lex("ADJ", "deep martial open vertical funny exaggerated silly upbeat cold puzz
 _lex("NOUN", "confidence ease determination enthusiasm purpose force power song routine fitness instructor flag "
              "breath seatbelt dog match seconds", {"seconds": "second"})
 _lex("PRON", "nobody")
+_lex("ADJ", "slim slender muscular older bald bearded easy full second")
+_lex("NOUN", "model speed rush hit general wedding pop gym class curb defender baby")
+_lex("ADV", "thereafter subsequently so")
+LEXICON["followed"] = ("follow", "VERB")
 _lex("ADV", "out")
 _lex("ADV", "along boldly determinedly dramatically elegantly firmly loosely merrily politely quietly shyly yes no")
 LEXICON["touch"] = ("touch", "VERB")
@@ -683,6 +693,10 @@ EXTRA_SUBJECTS: tuple[tuple[str, tuple[str, ...], str | None, frozenset | None],
     ("a human", ("their",), None, None), ("the character", ("their", "his"), None, None),
     ("an individual", ("their",), None, None), ("the subject", ("their",), None, None),
     ("an adult", ("their",), None, None), ("a performer", ("their",), None, None),
+    ("a slim woman", ("her",), "she", None), ("a slender woman", ("her",), "she", None),
+    ("a muscular man", ("his",), "he", None), ("an older person", ("their",), None, None),
+    ("a bald man", ("his",), "he", None), ("a bearded man", ("his",), "he", None), ("an actor", ("their", "his"), None, None),
+    ("the model", ("her", "his", "their"), None, None), ("an old woman", ("her",), "she", None),
     ("the dancer", ("her", "his", "their"), None, frozenset({"dance", "sway", "spin", "clap"})),
     ("a dancer", ("her", "his", "their"), None, frozenset({"dance", "sway", "spin", "clap"})),
     ("the boxer", ("his",), "he", frozenset({"jab_cross", "hook", "uppercut", "guard", "punch"})),
@@ -698,9 +712,9 @@ EXTRA_SUBJECTS: tuple[tuple[str, tuple[str, ...], str | None, frozenset | None],
 SPEED_STYLE = {
     "slowly": (("slowly", "carefully", "cautiously", "gently", "calmly", "wearily", "lazily", "tiredly", "sadly"),
                ("slowly", "carefully", "gently", "calmly", "leisurely", "unhurriedly", "wearily", "lazily", "sadly",
-                "at a slow/ADJ pace", "in a relaxed/ADJ way/NOUN", "with care", "without/ADP hurrying/VERB")),
+                "at a slow/ADJ pace", "at an easy/ADJ pace", "without/ADP rushing/VERB", "in a relaxed/ADJ way/NOUN", "with care", "without/ADP hurrying/VERB")),
     "quickly": (("quickly", "briskly", "swiftly", "hurriedly", "energetically", "eagerly", "excitedly"),
-                ("quickly", "rapidly", "energetically", "vigorously", "briskly", "swiftly", "hurriedly", "excitedly", "at a fast/ADJ pace",
+                ("quickly", "rapidly", "energetically", "vigorously", "briskly", "swiftly", "hurriedly", "excitedly", "at a fast/ADJ pace", "at full/ADJ speed/NOUN", "in a rush/NOUN",
                  "in a hurry", "with a lot/NOUN of energy", "with great energy")),
 }
 _FORCE = frozenset({"kick", "punch", "jab_cross", "hook", "uppercut", "throw", "guard"})
@@ -751,26 +765,27 @@ INTENT: dict[str, tuple[str, ...]] = {
     "nod": ("as if listening/VERB to someone", "as if agreeing/VERB", "in agreement", "as if agreeing/VERB with someone"),
     "shake_head": ("as if refusing/VERB", "as if disagreeing/VERB", "in disbelief"),
     "look": ("as if checking/VERB for traffic/NOUN", "as if searching/VERB for someone", "as if hearing/VERB a noise"),
-    "dance": ("like nobody is watching/VERB", "as if at a party", "as if celebrating/VERB", "happily to the music/NOUN"),
-    "throw": ("as if throwing/VERB to a friend", "like a baseball/NOUN pitcher/NOUN", "as if playing/VERB catch/NOUN"),
-    "pick_up": ("as if tidying/VERB up", "from the floor", "off the ground"),
+    "dance": ("as if at a wedding/NOUN", "like a pop/NOUN star/NOUN", "like nobody is watching/VERB", "as if at a party", "as if celebrating/VERB", "happily to the music/NOUN"),
+    "throw": ("as if skipping/VERB a stone", "as if throwing/VERB to a friend", "like a baseball/NOUN pitcher/NOUN", "as if playing/VERB catch/NOUN"),
+    "pick_up": ("as if collecting/VERB something", "as if tidying/VERB up", "from the floor", "off the ground"),
     "step_over": ("as if stepping/VERB over a sleeping/VERB dog/NOUN", "as if avoiding/VERB a puddle", "as if stepping/VERB over a log"),
     "stumble": ("as if the floor is slippery/ADJ", "as if tripping/VERB over something", "as if losing/VERB balance/NOUN"),
-    "guard": ("like a boxer", "as if ready/ADJ to/PART fight/VERB", "as if sparring/VERB"),
+    "guard": ("as if expecting/VERB a hit/NOUN", "like a boxer", "as if ready/ADJ to/PART fight/VERB", "as if sparring/VERB"),
     "jab_cross": ("as if sparring/VERB", "as if fighting/VERB an opponent", "as if hitting/VERB a punching/NOUN bag"),
     "hook": ("as if in a boxing/NOUN match/NOUN", "like a professional/ADJ boxer", "as if sparring/VERB", "as if fighting/VERB an opponent"),
     "uppercut": ("as if in a boxing/NOUN match/NOUN", "as if sparring/VERB", "as if fighting/VERB an opponent"),
     "hands_on_hips": ("as if out/ADV of breath/NOUN", "as if waiting/VERB", "impatiently", "as if taking/VERB a break"),
     "scratch_head": ("as if puzzled/ADJ", "as if confused/ADJ", "as if thinking/VERB", "in confusion/NOUN"),
-    "salute": ("as if saluting/VERB a flag/NOUN", "like a soldier", "as if greeting/VERB an officer"),
+    "salute": ("as if greeting/VERB a general/NOUN", "as if saluting/VERB a flag/NOUN", "like a soldier", "as if greeting/VERB an officer"),
     "cross_arms": ("as if cold/ADJ", "as if thinking/VERB", "as if waiting/VERB", "impatiently", "as if annoyed/ADJ"),
     "reach_across": ("as if grabbing/VERB a seatbelt/NOUN", "as if grabbing/VERB something", "as if reaching/VERB for something"),
     "arm_circles": ("as if warming/VERB up", "to/PART loosen/VERB up"),
     "stretch": ("as if warming/VERB up", "as if reaching/VERB for something"),
     "spin": ("like a ballerina/NOUN", "as if dancing/VERB"),
     "squat": ("as if lifting/VERB weights/NOUN", "as if sitting/VERB on an invisible chair/NOUN"),
-    "arms_out": ("like an airplane/NOUN", "as if balancing/VERB"),
-    "jumping_jacks": ("as if warming/VERB up", "as part of a workout"),
+    "sway": ("as if listening/VERB to music/NOUN", "as if rocking/VERB a baby/NOUN"),
+    "arms_out": ("as if flying/VERB", "like an airplane/NOUN", "as if balancing/VERB"),
+    "jumping_jacks": ("as if in a gym/NOUN class/NOUN", "as if warming/VERB up", "as part of a workout"),
     "jog": ("as if jogging/VERB in a park/NOUN", "as if training/VERB", "as if exercising/VERB"),
     "sidestep": ("as if making/VERB room/NOUN for someone", "as if dodging/VERB something", "as if avoiding/VERB someone"),
     "march": ("like a soldier", "as if in a parade/NOUN"),
@@ -778,13 +793,13 @@ INTENT: dict[str, tuple[str, ...]] = {
 
 
 INTENT.update({
-    "kneel": ("as if tying/VERB a shoelace", "as if praying/VERB", "as if proposing/VERB"),
-    "lie_down": ("to/PART rest/VERB", "as if tired", "as if taking/VERB a nap/NOUN"),
+    "kneel": ("as if looking/VERB at something on the ground", "as if tying/VERB a shoelace", "as if praying/VERB", "as if proposing/VERB"),
+    "lie_down": ("as if sunbathing/VERB", "to/PART rest/VERB", "as if tired", "as if taking/VERB a nap/NOUN"),
     "lie_down_get_up": ("as if doing/VERB an exercise", "as part of a workout"),
-    "step_up": ("as if exercising/VERB", "as part of a workout", "as if training/VERB"),
-    "climb_stairs": ("as if going/VERB home/NOUN", "as if in a hurry"),
-    "pivot": ("as if changing/VERB direction/NOUN", "like a basketball/NOUN player/NOUN", "as if dancing/VERB"),
-    "touch_knee": ("as if warming/VERB up", "as part of a workout", "as if exercising/VERB"),
+    "step_up": ("as if stepping/VERB onto a curb/NOUN", "as if exercising/VERB", "as part of a workout", "as if training/VERB"),
+    "climb_stairs": ("as if climbing/VERB to the second/ADJ floor/NOUN", "as if going/VERB home/NOUN", "as if in a hurry"),
+    "pivot": ("as if dodging/VERB a defender/NOUN", "as if changing/VERB direction/NOUN", "like a basketball/NOUN player/NOUN", "as if dancing/VERB"),
+    "touch_knee": ("as if stretching/VERB", "as if warming/VERB up", "as part of a workout", "as if exercising/VERB"),
 })
 
 
@@ -817,7 +832,8 @@ FRAMES: dict[str, tuple[str, ...]] = {
         "{S} {M} and {L} at the same time", "{S} {L} as {P} {M}", "{S} {M} , {LG} at the same time",
         "{S} {M} while also {LG}", "{S} {M} and simultaneously {L}", "{S} {M} , all the while {LG}",
         "{S} is {MG} and {LG} at the same time", "{S} {L} while {P} {M}", "{S} {M} and meanwhile {L}",
-        "as {P} {M} , {P} {L}"),
+        "as {P} {M} , {P} {L}", "{S} {M} , {LG} as {P} does/AUX so/ADV", "{S} {L} all while {MG}",
+        "{S} combines/VERB {MG} with {LG}", "{S} {M} while {P} also {L}"),
     "seq2": (
         "{S} {A0} , then {A1}", "{S} {A0} and then {A1}", "{S} {A0} , and then {A1}", "{S} {A0} then {A1}",
         "{S} {A0} and {A1}", "first , {S} {A0} , then {A1}", "first {S} {A0} and then {A1}",
@@ -830,14 +846,18 @@ FRAMES: dict[str, tuple[str, ...]] = {
         "{S} begins by {G0} , then {A1}", "{S} {A0} , then immediately {A1}", "{S} {A0} and immediately {A1}",
         "{S} {A0} ; a moment later {P} {A1}", "{S} {A0} and soon after {A1}", "{S} {A0} and later {A1}",
         "{S} {A0} and shortly after {A1}", "{S} {A0} and , once done , {A1}", "{S} is {G0} , and then {P} {A1}",
-        "{S} {A0} , and when {P} is done , {P} {A1}", "{S} {A0} first , then {A1}", "{S} {A0} and then also {A1}"),
+        "{S} {A0} , and when {P} is done , {P} {A1}", "{S} {A0} first , then {A1}", "{S} {A0} and then also {A1}",
+        "{S} {A0} and continues by {G1}", "{S} {A0} and ends by {G1}", "{S} {A0} . afterwards , {P} {A1}",
+        "{S} {A0} and in the end {A1}", "{S} {A0} and , a few seconds/NOUN later , {A1}", "{S} {A0} and thereafter {A1}",
+        "{S} {A0} ; subsequently , {P} {A1}", "{S} {A0} , then without/ADP stopping/VERB {A1}",
+        "{S} {A0} and smoothly transitions/VERB into {G1}"),
     "seq3": (
         "{S} {A0} , then {A1} , then {A2}", "{S} {A0} , then {A1} , and then {A2}", "{S} {A0} , then {A1} , and finally {A2}",
         "first , {S} {A0} , then {A1} , and finally {A2}", "{S} {A0} , {A1} , and then {A2}",
         "{S} is {G0} , then {G1} , and then {G2}", "{S} {A0} . then {P} {A1} . finally , {P} {A2}",
         "{S} {A0} , after that {A1} , and eventually {A2}", "at first {S} {A0} , then {P} {A1} , and at the end {P} {A2}",
         "{S} starts by {G0} , then {A1} and finally {A2}", "{S} {A0} and then {A1} before {G2}",
-        "{S} first {A0} , next {A1} , and finally {A2}"),
+        "{S} first {A0} , next {A1} , and finally {A2}", "{S} {A0} , followed/VERB by {G1} and {G2}"),
     "overlay": (
         "{S} {SEQ} , while {OG}", "while {OG} , {S} {SEQ}", "{S} {O} while {SEQG}", "{S} {SEQ} , {OG} all the while",
         "{S} {O} the whole time as {P} {SEQ}", "{S} {SEQ} , {OG} the whole time", "{S} keeps {OG} while {P} {SEQ}",
@@ -1052,7 +1072,7 @@ def _shape(plan: Plan) -> str:
 
 
 def _subject(plan: Plan, rng: np.random.Generator) -> tuple[str, tuple[str, ...], str | None]:
-    if rng.random() < 0.75:
+    if rng.random() < 0.65:
         return _choose(rng, list(SUBJECTS))
     kinds = {a.kind for _, _, a in plan.actions()}
     fits = [s[:3] for s in EXTRA_SUBJECTS if s[3] is None or kinds & s[3]]
