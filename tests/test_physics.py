@@ -335,6 +335,7 @@ def test_salad_eval_physics_end_to_end(tiny_procedural_corpus, tmp_path, single_
     md = (out / "physics.md").read_text()
     assert doc["settings"]["steps"] == 5 and doc["settings"]["guidance"] is None      # the models' defaults
     assert doc["settings"]["salad_guidance"]["scale"] > 1 and doc["settings"]["keymotion_guidance"] > 1
+    assert doc["settings"]["recovery"] == "positions"                 # the raw model output by default
     assert doc["settings"]["seeds"] == [0, 1] and doc["settings"]["weights"].endswith("salad")
     assert list(doc["generators"]) == ["SALAD", "KeyMotion"]
     for g in doc["generators"].values():
@@ -346,9 +347,20 @@ def test_salad_eval_physics_end_to_end(tiny_procedural_corpus, tmp_path, single_
     saved = np.load(out / "physics_motions.npz")
     assert len(saved.files) == 8 and saved["SALAD/01/1"].shape == (120, 22, 3)
     rep = ph.measure_motion(saved["SALAD/01/1"])                     # the saved motion is the measured one
-    assert rep.bone_ref_max_cm == pytest.approx(doc["generators"]["SALAD"]["prompts"][1]["reports"][1]["bone_ref_max_cm"],
-                                                rel=1e-4)
+    measured = doc["generators"]["SALAD"]["prompts"][1]["reports"][1]["bone_ref_max_cm"]
+    assert rep.bone_ref_max_cm == pytest.approx(measured, rel=1e-4)
     assert md.index("corpus test split (real)") < md.index("| SALAD |") < md.index("| KeyMotion |")
+    # the saved joints measured again without generating give the same figures
+    again = tmp_path / "again"
+    assert main(["--physics", "--data", str(tiny_procedural_corpus), "--motions", str(out / "physics_motions.npz"),
+                 "--prompts", "2", "--seeds", "2", "--out", str(again)]) == 0
+    redo = json.loads((again / "physics.json").read_text())
+    assert redo["settings"]["saved_run_settings"]["steps"] == 5
+    nan = float("nan")
+    for name, g in doc["generators"].items():
+        before = {k: nan if v is None else v for k, v in g["aggregate"].items()}
+        after = {k: nan if v is None else v for k, v in redo["generators"][name]["aggregate"].items()}
+        assert after == pytest.approx(before, rel=1e-6, nan_ok=True)
 
 
 def test_salad_eval_physics_rejects_protocol_flags(tiny_procedural_corpus, capsys):
@@ -356,3 +368,21 @@ def test_salad_eval_physics_rejects_protocol_flags(tiny_procedural_corpus, capsy
 
     assert main(["--physics", "--data", str(tiny_procedural_corpus), "--cfg-sweep"]) == 2
     assert "--cfg-sweep does not apply to --physics" in capsys.readouterr().err
+
+
+def test_recovery_reader_reads_raw_positions_or_fixed_bones(sample_features):
+    """``--recovery``: 'positions' is the raw position-feature read; 'fk' has the reference bones."""
+    from types import SimpleNamespace
+
+    from salad_core.eval.cli import _joints_reader
+    from salad_core.motion import features_to_joints
+
+    feats = sample_features[:40].astype(np.float32)
+    out = SimpleNamespace(features=feats[None], lengths=[40], joints=["shown"])
+    raw = _joints_reader("positions", SK)(out)[0]
+    np.testing.assert_allclose(raw, features_to_joints(feats, SK))
+    assert _joints_reader("pipeline", SK)(out) == ["shown"]
+    fk = _joints_reader("fk", SK)(out)[0]
+    assert ph.measure_motion(fk).bone_ref_max_cm < 1e-3
+    with pytest.raises(ValueError, match="allowed: pipeline"):
+        _joints_reader("magic", SK)

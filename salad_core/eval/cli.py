@@ -28,7 +28,8 @@ from ``--seed``), with SALAD and, with ``--keymotion`` (the shipped weights, or 
 reference rows for the corpus's test split and for the real clips of ``--sample`` (by default the
 source checkout's ``tests/data/humanml3d_sample``, when present; ``--sample none`` leaves it out).
 It prints the Markdown report and with ``--out`` writes ``physics.md``, ``physics.json`` and the
-generated joints (``physics_motions.npz``). The full
+generated joints (``physics_motions.npz``); ``--motions physics_motions.npz`` measures such saved
+joints again without generating (after a change of the measures). The full
 benchmark (41 prompts x 3 seeds, 50 steps) takes a few minutes per generator on this 2-core CPU.
 
 Errors the user can fix print one line and return status 2 (``--debug`` shows the traceback).
@@ -52,7 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="salad eval",
         description="Evaluate a text-to-motion model with the T2M protocol (R-precision, FID, MM-Dist, "
                     "Diversity, MultiModality; mean ± 95% CI over replications).",
-        epilog="example:\n  salad eval --data data/procedural --quick --out runs/eval_quick",
+        epilog="example:\n  salad eval --data data/procedural --quick --out runs/eval_quick\n"
+               "  salad eval --physics --data data/procedural --keymotion --out runs/physics",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", required=True, help="dataset folder in the HumanML3D layout")
     p.add_argument("--weights", default=None, help="SALAD pipeline folder (default: the shipped weights)")
@@ -91,10 +93,18 @@ def build_parser() -> argparse.ArgumentParser:
     phys.add_argument("--seeds", type=int, default=3, help="seeds per prompt, from --seed (default 3)")
     phys.add_argument("--prompts", type=int, default=None, metavar="N",
                       help="only the first N benchmark prompts (default: all)")
+    phys.add_argument("--recovery", default="positions", metavar="METHOD",
+                      help="how joints are read from the generated features: 'positions' (the raw model output, "
+                           "HumanML3D's recover_from_ric; default), a salad_core.recovery method ('fk', 'fit') or "
+                           "'pipeline' (each pipeline's own out.joints)")
+    phys.add_argument("--motions", default=None, metavar="NPZ",
+                      help="measure the joints a run saved (its physics_motions.npz) instead of generating; "
+                           "give the run's --seed/--seeds/--prompts")
     phys.add_argument("--sample", default=None, metavar="DIR",
                       help="folder of real HumanML3D clips for a reference row (default: tests/data/"
                            "humanml3d_sample of a source checkout if present; 'none' to leave it out)")
-    p.add_argument("--out", default=None, help="folder for results.{csv,md,tex,json,png}")
+    p.add_argument("--out", default=None, help="folder for results.{csv,md,tex,json,png} (with --physics: "
+                                               "physics.{md,json} and physics_motions.npz)")
     p.add_argument("--progress", action="store_true", help="show a progress bar")
     p.add_argument("--debug", action="store_true", help="show full tracebacks")
     return p
@@ -163,6 +173,61 @@ def _default_sample() -> Path | None:
     return path if (path / "new_joints").is_dir() else None
 
 
+def _joints_reader(method: str, skeleton):
+    """``output -> list of joints``: the generated features read by ``method`` ('positions': the raw
+    model output; 'fk' / 'fit': :func:`salad_core.recovery.recover_joints`; 'pipeline': ``out.joints``)."""
+    if method == "pipeline":
+        return lambda out: list(out.joints)
+    if method == "positions":
+        from salad_core.motion import features_to_joints
+
+        return lambda out: [features_to_joints(out.features[b, :n], skeleton) for b, n in enumerate(out.lengths)]
+    try:
+        from salad_core.recovery import METHODS, recover_joints
+    except ImportError:
+        raise ValueError(f"--recovery {method!r}: this installation has no salad_core.recovery; use "
+                         "'positions' or 'pipeline'") from None
+    if method not in METHODS:
+        raise ValueError(f"--recovery {method!r} is not known; allowed: pipeline, {', '.join(METHODS)}")
+    return lambda out: [recover_joints(out.features[b, :n], method, skeleton) for b, n in enumerate(out.lengths)]
+
+
+def _physics_generators(args, settings) -> tuple[dict, dict]:
+    """The generators of ``--physics`` (SALAD, and KeyMotion with ``--keymotion``) and their settings."""
+    from salad_core.pipeline import SaladPipeline
+
+    pipe = SaladPipeline.from_pretrained(args.weights)
+    # None keeps each model's own default guidance (a SALAD pipeline folder may set rescale/interval)
+    g = settings.guidance
+
+    joints_of = _joints_reader(args.recovery, pipe.skeleton)
+
+    def salad(texts, lengths, seed):
+        return joints_of(pipe(texts, lengths=lengths, seed=[seed] * len(texts), num_steps=settings.steps,
+                              solver=args.solver, **({} if g is None else {"guidance_scale": g})))
+
+    generators = {args.name: salad}
+    resolved = pipe.resolve_guidance(g) if hasattr(pipe, "resolve_guidance") else (7.5 if g is None else g)
+    info = {"salad_guidance": resolved if isinstance(resolved, float) else _as_dict(resolved),
+            "solver": args.solver or pipe.solver, "weights": pipe.source, "recovery": args.recovery}
+    if args.keymotion is not None:
+        import inspect
+
+        from salad_core.keymotion.pipeline import KeyMotionPipeline
+
+        km = KeyMotionPipeline.from_pretrained(None if args.keymotion == "shipped" else args.keymotion)
+
+        def keymotion(texts, lengths, seed):
+            return joints_of(km(texts, lengths=lengths, seed=seed, num_steps=settings.steps,
+                                **({} if g is None else {"guidance_scale": g})))
+
+        generators["KeyMotion"] = keymotion
+        info["keymotion_guidance"] = (inspect.signature(km.__call__).parameters["guidance_scale"].default
+                                      if g is None else g)
+        info["keymotion_weights"] = args.keymotion
+    return generators, info
+
+
 def run_physics(args) -> int:
     """``salad eval --physics``: generate the benchmark prompts, measure, check and report."""
     from .physics_prompts import BenchSettings, benchmark_markdown, run_benchmark
@@ -187,35 +252,22 @@ def run_physics(args) -> int:
             raise FileNotFoundError(f"--sample {sample} is not a folder")
     settings = BenchSettings(steps=args.steps, guidance=args.guidance,
                              seeds=tuple(range(args.seed, args.seed + args.seeds)), num_prompts=args.prompts)
-    from salad_core.pipeline import SaladPipeline
+    if args.motions is not None:
+        import numpy as np
 
-    pipe = SaladPipeline.from_pretrained(args.weights)
-    # None keeps each model's own default guidance (a SALAD pipeline folder may set rescale/interval)
-    g = settings.guidance
+        from .physics_prompts import saved_generators
 
-    def salad(texts, lengths, seed):
-        return pipe(texts, lengths=lengths, seed=[seed] * len(texts), num_steps=settings.steps, solver=args.solver,
-                    **({} if g is None else {"guidance_scale": g})).joints
-
-    generators = {args.name: salad}
-    resolved = pipe.resolve_guidance(g) if hasattr(pipe, "resolve_guidance") else (7.5 if g is None else g)
-    info = {"salad_guidance": resolved if isinstance(resolved, float) else _as_dict(resolved),
-            "solver": args.solver or pipe.solver, "weights": pipe.source}
-    if args.keymotion is not None:
-        import inspect
-
-        from salad_core.keymotion.pipeline import KeyMotionPipeline
-
-        km = KeyMotionPipeline.from_pretrained(None if args.keymotion == "shipped" else args.keymotion)
-
-        def keymotion(texts, lengths, seed):
-            return km(texts, lengths=lengths, seed=seed, num_steps=settings.steps,
-                      **({} if g is None else {"guidance_scale": g})).joints
-
-        generators["KeyMotion"] = keymotion
-        info["keymotion_guidance"] = (inspect.signature(km.__call__).parameters["guidance_scale"].default
-                                      if g is None else g)
-        info["keymotion_weights"] = args.keymotion
+        path = Path(args.motions)
+        if not path.is_file():
+            raise FileNotFoundError(f"--motions {path} does not exist (a physics_motions.npz of salad eval --physics)")
+        with np.load(path) as saved:
+            generators = saved_generators({k: saved[k] for k in saved.files})
+        info = {"motions": str(path)}
+        run_json = path.parent / "physics.json"
+        if run_json.is_file():                  # the steps, guidance and weights the motions were made with
+            info["saved_run_settings"] = json.loads(run_json.read_text(encoding="utf-8")).get("settings")
+    else:
+        generators, info = _physics_generators(args, settings)
     t0 = time.perf_counter()
     motions: dict = {}
     result = run_benchmark(generators, settings, data_root=data, sample_dir=sample, info=info,

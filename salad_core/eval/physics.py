@@ -48,9 +48,9 @@ Definitions (units in the names of :class:`PhysicsReport`'s fields):
 * **Stride** (m): how far a foot travels through the air between two ground contacts: the
   horizontal distance of its ankle from lift-off (the last frame of a run of at least
   ``min_contact_frames`` contact frames of the ankle or toe) to the next touch-down (the first
-  frame of the next run); median over the motion, 0 when no foot leaves and retouches the ground.
-  A figure that glides (feet sliding while in contact) has short or no strides however far it
-  travels.
+  frame of the next run), for swings of at most ``max_swing_s`` (a step, not a float); median over
+  the motion, 0 when no foot steps. A figure that glides (feet sliding while in contact) or floats
+  (feet off the ground for seconds) has short or no strides however far it travels.
 * **Seed diversity** (cm): mean joint distance between motions of the same prompt made from
   different seeds (:func:`seed_diversity`).
 """
@@ -67,8 +67,8 @@ from ..skeleton import Skeleton, get_skeleton
 __all__ = [
     "PhysicsConfig", "PhysicsReport", "measure_motion", "aggregate_reports", "AGGREGATION",
     "bone_length_errors", "contact_level", "foot_contacts", "foot_skating", "strides", "pooled_bone_p95",
-    "ground_penetration", "floating", "jitter", "acceleration", "flexion_angles", "hyperextension", "standing_height",
-    "flight_frames", "flight_acceleration", "heading_yaw", "root_travel", "limb_activity",
+    "ground_penetration", "floating", "jitter", "acceleration", "flexion_angles", "hyperextension",
+    "standing_height", "flight_frames", "flight_acceleration", "heading_yaw", "root_travel", "limb_activity",
     "seed_diversity", "GRAVITY", "report_table",
 ]
 
@@ -89,6 +89,7 @@ class PhysicsConfig:
     hyper_threshold_deg: float = 5.0                  # hyper-extension (deg) counted in the share of frames
     elbow_hang_deg: float = 45.0                      # upper arm within this of the trunk's down axis
     min_contact_frames: int = 2                       # shortest run of contact that counts as a footfall
+    max_swing_s: float = 1.0                          # longest time (s) a foot may be off the ground in a step
 
     def __post_init__(self) -> None:
         if self.fps is not None and not (isinstance(self.fps, (int, float)) and self.fps > 0):
@@ -104,6 +105,8 @@ class PhysicsConfig:
         if isinstance(self.min_contact_frames, bool) or not isinstance(self.min_contact_frames, int) \
                 or self.min_contact_frames < 1:
             raise ValueError(f"min_contact_frames must be a positive int, got {self.min_contact_frames!r}")
+        if not self.max_swing_s > 0:
+            raise ValueError(f"max_swing_s must be positive (seconds), got {self.max_swing_s!r}")
         if not 0 < self.elbow_hang_deg < 90:
             raise ValueError(f"elbow_hang_deg must be in (0, 90) degrees, got {self.elbow_hang_deg!r}")
 
@@ -263,8 +266,8 @@ def foot_skating(joints, skeleton: str | Skeleton = "humanml3d", config: Physics
 def strides(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfig = PhysicsConfig()
             ) -> np.ndarray:
     """Distances (m, on the ground plane) an ankle travels from lift-off to the next touch-down of
-    the same foot, both feet together: a 1-D array, empty when no foot leaves the ground and
-    touches it again."""
+    the same foot within ``config.max_swing_s``, both feet together: a 1-D array, empty when no
+    foot steps."""
     x, sk = _prepare(joints, skeleton)
     on = foot_contacts(x, sk, config)
     cj = sk.contact_joints
@@ -277,8 +280,9 @@ def strides(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfi
             continue
         lift = np.array([b - 1 for _, b in runs[:-1]])                # last contact frame of each run
         land = np.array([a for a, _ in runs[1:]])                     # first frame of the next run
+        step = (land - lift) <= config.max_swing_s * _fps(sk, config)
         ankle = x[:, cj[foot]][:, [0, 2]]
-        out.append(np.linalg.norm(ankle[land] - ankle[lift], axis=-1))
+        out.append(np.linalg.norm(ankle[land[step]] - ankle[lift[step]], axis=-1))
     return np.concatenate(out) if out else np.zeros(0)
 
 

@@ -40,7 +40,8 @@ from . import physics as ph
 
 __all__ = ["Check", "CheckResult", "BenchmarkPrompt", "PROMPTS", "MEASURES", "REFERENCE_RANGES",
            "BenchSettings", "Generator", "corpus_reference_ranges", "load_joints", "measure_clips",
-           "caption_diversity", "reference_rows", "run_benchmark", "benchmark_markdown", "targets"]
+           "caption_diversity", "reference_rows", "run_benchmark", "benchmark_markdown", "targets",
+           "saved_generators"]
 
 #: A generator: ``(prompts, lengths, seed) -> list of joints (N_b, J, 3)``, one per prompt.
 Generator = Callable[[list[str], list[int], int], list[np.ndarray]]
@@ -391,9 +392,9 @@ def corpus_reference_ranges(root: str | Path, splits: Sequence[str] = ("train", 
     """Measure :data:`REFERENCE_RANGES` on a procedural corpus (needs its ``annotations/``).
 
     A clip is a jump reference when every caption of its annotation is one phrase with a jump word
-    (jump, hop, leap, skip: the corpus's paraphrases of a jump) and no "jacks"; a jumping-jacks reference when every caption is one phrase
-    with "jacks". The range is (min, max) of the pelvis rise over those clips. Keys without clips
-    are left out.
+    (jump, hop, leap, skip: the corpus's paraphrases of a jump) and no "jacks"; a jumping-jacks
+    reference when every caption is one phrase with "jacks". The range is (min, max) of the pelvis
+    rise over those clips, widened to whole millimetres. Keys without clips are left out.
     """
     root = Path(root)
     rises: dict[str, list[float]] = {"jump_rise_m": [], "jumping_jacks_rise_m": []}
@@ -631,6 +632,30 @@ def _check_measure(desc: str) -> str:
     return name.split("[")[0]
 
 
+def saved_generators(motions: Mapping[str, np.ndarray]) -> dict[str, Generator]:
+    """Generators that replay the joints a run saved (``run_benchmark(..., motions_sink=...)``, e.g.
+    ``physics_motions.npz``: ``"<generator>/<prompt index>/<seed>" -> (N, J, 3)``), so the same
+    motions can be measured again (after a change of the measures) without generating them."""
+    names: dict[str, None] = {}
+    for key in motions:
+        parts = key.split("/")
+        if len(parts) != 3 or not parts[1].isdigit() or not parts[2].lstrip("-").isdigit():
+            raise ValueError(f"saved motion key {key!r} is not '<generator>/<prompt index>/<seed>'")
+        names.setdefault(parts[0], None)
+
+    def replay(name: str) -> Generator:
+        def gen(texts, lengths, seed):
+            keys = [f"{name}/{i:02d}/{seed}" for i in range(len(texts))]
+            missing = [k for k in keys if k not in motions]
+            if missing:
+                raise KeyError(f"the saved motions have no {missing[0]!r} (and {len(missing) - 1} more); "
+                               "replay with the prompts and seeds of the saved run")
+            return [np.asarray(motions[k]) for k in keys]
+        return gen
+
+    return {name: replay(name) for name in names}
+
+
 def _fmt(v, fmt: str = "{:.2f}") -> str:
     return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v)
 
@@ -688,13 +713,16 @@ def benchmark_markdown(result: Mapping) -> str:
             for n in names:
                 row = [seed_checks[c] for seed_checks in gens[n]["prompts"][i]["checks"]]
                 vals = [r["value"] for r in row if r["value"] is not None]
-                cells.append(f"{sum(r['passed'] for r in row)}/{len(row)} ({_fmt(float(np.median(vals)) if vals else None)})")
-            lines.append(f"| {p['text'] if c == 0 else ''} | {p['checks'][0][c]['check']} | " + " | ".join(cells) + " |")
-    lines += ["", "Checks passed: " + "; ".join(f"{n} {g['checks_passed']}/{g['checks_total']}" for n, g in gens.items()),
-              "", "## Per prompt", "",
+                median = float(np.median(vals)) if vals else None
+                cells.append(f"{sum(r['passed'] for r in row)}/{len(row)} ({_fmt(median)})")
+            text = p["text"] if c == 0 else ""
+            lines.append(f"| {text} | {p['checks'][0][c]['check']} | " + " | ".join(cells) + " |")
+    passed = "; ".join(f"{n} {g['checks_passed']}/{g['checks_total']}" for n, g in gens.items())
+    lines += ["", "Checks passed: " + passed, "", "## Per prompt", "",
               "Worst seed for bone max and penetration, mean over seeds otherwise; diversity = mean joint "
               "distance between the seeds' motions (cm).", ""]
-    head = "| prompt | " + " | ".join(f"{n} {h}" for n in names for _, h, _, _ in (*_PROMPT_COLUMNS, ("", "div (cm)", "", None)))
+    columns = (*_PROMPT_COLUMNS, ("", "div (cm)", "", None))
+    head = "| prompt | " + " | ".join(f"{n} {h}" for n in names for _, h, _, _ in columns)
     lines += [head + " |", "|---|" + "---:|" * (len(names) * (len(_PROMPT_COLUMNS) + 1))]
     for i, p in enumerate(first):
         cells = []
