@@ -915,11 +915,13 @@ def training_rows(recipe: TrainRecipe, steps: int, warmup: int = 1, text_tokens:
 
 
 def train_profile_rows(recipe: TrainRecipe, steps: int, warmup: int, data: str | Path | None = None,
-                       weights: str | Path | None = None, corpus_motions: int = 60) -> tuple[list[Row], list[str]]:
+                       weights: str | Path | None = None, corpus_motions: int = 60,
+                       text_encoder: Any = "minilm") -> tuple[list[Row], list[str]]:
     """The ``train`` section: a denoiser step part by part, before and after (see the module docstring).
 
     ``data`` is a HumanML3D-layout folder (default: a procedural corpus of ``corpus_motions`` motions
-    built in a temporary folder). Returns the rows and notes for the table.
+    built in a temporary folder); the frozen VAE is ``weights/vae`` (default: the shipped one).
+    Returns the rows and notes for the table.
     """
     import tempfile
 
@@ -940,7 +942,8 @@ def train_profile_rows(recipe: TrainRecipe, steps: int, warmup: int, data: str |
     cfg = recipe.denoiser_train.replace(progress=False)
     t0 = time.perf_counter()
     before, after = profile_denoiser_training(data, vae, recipe.denoiser, cfg, steps=steps, warmup=warmup,
-                                              cache_dir=tmp / "latent_cache", diffusion_config=recipe.diffusion)
+                                              cache_dir=tmp / "latent_cache", diffusion_config=recipe.diffusion,
+                                              text_encoder=text_encoder)
     log.info("train: profiled in %.0f s", time.perf_counter() - t0)
     setting = f"batch {cfg.batch_size}, width {recipe.denoiser.width}, {recipe.denoiser.layers} layers"
     rows = [Row("train", f"part: {p}", "ms per step", 1e3 * after.parts[p], "ms", 1e3 * before.parts[p],

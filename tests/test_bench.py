@@ -269,3 +269,36 @@ def test_folded_step_products_replace_the_cross_attention_products(single_thread
     paper, default = bench.denoiser_cases()
     keys1 = bench.folded_keys(paper, 1)
     assert keys1 is not None and len(keys1) == 2 and keys1[1] == 2           # the empty prompt: 2 tokens
+
+
+def test_train_profile_rows_time_every_part_before_and_after(tmp_path, single_thread):
+    """The ``train`` section on a fake corpus of 40-120-frame clips with a tiny VAE and denoiser:
+    every part is timed for both settings, and the buckets cut the padding of random batches."""
+    from salad_core.io import save_checkpoint
+    from salad_core.models.vae import MotionVAE, VAEConfig
+    from salad_core.sampling import DiffusionConfig
+    from salad_core.train.config import DenoiserTrainConfig, VAETrainConfig
+    from salad_core.train.profile import PARTS
+    from _doubles import HashTextEncoder, make_fake_corpus
+
+    data = make_fake_corpus(tmp_path / "data", n_train=24, n_val=2, lengths=(40, 121))
+    torch.manual_seed(0)
+    vcfg = VAEConfig(latent_dim=4, n_extra_layers=0)
+    save_checkpoint(tmp_path / "w" / "vae", MotionVAE(vcfg), model_type="salad_vae", config=vcfg)
+    enc = HashTextEncoder(dim=6)
+    recipe = bench.TrainRecipe(vcfg, VAETrainConfig(), TINY,
+                               DenoiserTrainConfig(batch_size=8, max_length=120, val_every=4, val_batches=1,
+                                                   vae_pad_to_max=False),
+                               DiffusionConfig(), "tiny")
+    rows, notes = bench.train_profile_rows(recipe, steps=3, warmup=1, data=data, weights=tmp_path / "w",
+                                           text_encoder=enc)
+    by = {r.measure: r for r in rows}
+    assert [f"part: {p}" for p in PARTS] == [r.measure for r in rows[: len(PARTS)]]
+    for p in ("data", "latents", "text", "forward", "backward", "optimizer", "validation"):
+        assert by[f"part: {p}"].value > 0 and by[f"part: {p}"].reference > 0, p
+    step = by["denoiser step"]
+    assert step.value == pytest.approx(sum(by[f"part: {p}"].value for p in PARTS), rel=1e-9)
+    assert step.ratio == pytest.approx(step.reference / step.value)
+    pad = by["padding"]
+    assert 1.0 <= pad.value < pad.reference                      # buckets pad less than random batches
+    assert by["samples x frames/s"].value > 0 and "interleaved" in notes[0]
