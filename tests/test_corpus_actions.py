@@ -74,7 +74,7 @@ def test_new_primitive_is_clean_and_moves_its_parts(kind):
     assert r["driven"] > 0.03, (kind, r)
     assert r["ratio_idle"] > 2.0, (kind, r)
     acc = np.linalg.norm(j[2:] - 2 * j[1:-1] + j[:-2], axis=-1).max() * 400.0
-    assert acc < 200.0, (kind, acc)                           # m/s^2 at 20 fps
+    assert acc < 135.0, (kind, acc)                           # m/s^2 at 20 fps; the real data's maximum ~128
 
 
 def test_generation_is_deterministic():
@@ -199,25 +199,24 @@ def test_step_over_lifts_the_feet_high_and_dance_travels():
     assert np.abs(j[-1, J["left_ankle"]] - j[0, J["left_ankle"]]).max() < 1e-9
 
 
+def _built(kind: str, side: str, seed: int) -> np.ndarray:
+    """Joints of ``kind`` on ``side`` built with a symmetric performer (no realiser extras)."""
+    rng = np.random.default_rng(seed)
+    persona = Persona(width=0.1, toe_out=0.2, arm_rest=(0.05, 0.14, 0.3), arm_pole=(0.3, 0.0, -1.0),
+                      sway=0.0, head_pitch=0.0, tempo=1.0)
+    stance = Stance.at((0.0, 0.0), 0.0, persona)
+    action = Action(kind, side)
+    if action.spec.track == "base":
+        return assemble(build_base(action, stance, persona, BODY, rng).pose, BODY)
+    g = build_gesture(action, persona, BODY, rng)
+    pose = standing_pose(stance, persona, g.num_frames, BODY)
+    pose.arm, pose.arm_pole, pose.spine = g.arm, g.arm_pole, pose.spine + g.spine
+    return assemble(pose, BODY)
+
+
 def test_mirrored_left_action_looks_like_the_right_one():
-    for kind in ("jab_cross", "kneel", "throw"):
-        rng_l, rng_r = np.random.default_rng(7), np.random.default_rng(7)
-        persona = Persona(width=0.1, toe_out=0.2, arm_rest=(0.05, 0.14, 0.3), arm_pole=(0.3, 0.0, -1.0),
-                          sway=0.0, head_pitch=0.0, tempo=1.0)
-        stance = Stance.at((0.0, 0.0), 0.0, persona)
-        for rng, side, out in ((rng_l, "left", []), (rng_r, "right", [])):
-            a = Action(kind, side)
-            if a.spec.track == "base":
-                seg = build_base(a, stance, persona, BODY, rng)
-                out.append(assemble(seg.pose, BODY))
-            else:
-                g = build_gesture(a, persona, BODY, rng)
-                pose = standing_pose(stance, persona, g.num_frames, BODY)
-                pose.arm, pose.arm_pole, pose.spine = g.arm, g.arm_pole, pose.spine + g.spine
-                out.append(assemble(pose, BODY))
-            if side == "left":
-                left = out[0]
-            else:
-                right = out[0]
+    for kind in ("jab_cross", "kneel", "throw", "touch_knee"):
+        left, right = _built(kind, "left", 7), _built(kind, "right", 7)
         # the skeleton's left and right bones differ by up to ~1 cm, hence the tolerance
         assert np.abs(mirror_joints(left) - right).max() < 0.06, kind
+        assert np.abs(left - right).max() > 0.1, kind                         # and the sides differ

@@ -38,7 +38,9 @@ def _strike(persona: Persona, body: BodyModel, rng: np.random.Generator, mods: t
     yaw = [0.0, 0.0]
     for arm, path, turn in strikes:
         for i, p in enumerate(path):
-            times.append(times[-1] + (u(0.1, 0.14) if i == 0 else u(0.06, 0.1)) * pace)
+            # a strike leg lasts at least 0.1 s: faster ones reach wrist accelerations (~190 m/s^2)
+            # well above the real data's (~130)
+            times.append(times[-1] + (u(0.12, 0.16) if i == 0 else u(0.1, 0.13)) * pace)
             for k in (0, 1):
                 keys[k].append(p if k == arm else guard[k])
             yaw.append(turn)

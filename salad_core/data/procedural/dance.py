@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .curves import envelope, frame_times, keyframes, smooth
+from .curves import envelope, frame_times, smooth
 from .footwork import Persona, Plant, Stance, Swing, foot_track, max_pelvis_height
 from .kinematics import FPS, BodyModel, heading_vectors, ypr_matrix
 from .segment import Segment, num_frames, standing_pose

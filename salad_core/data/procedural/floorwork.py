@@ -15,8 +15,8 @@ import numpy as np
 
 from . import actions
 from .curves import frame_times, keyframes
-from .footwork import ANKLE_HEIGHT, TOE_HEIGHT, Persona, Plant, Stance, Swing, flat_pitch, foot_track, \
-    max_pelvis_height, standing_height
+from .footwork import ANKLE_HEIGHT, Persona, Plant, Stance, Swing, flat_pitch, foot_track, max_pelvis_height, \
+    standing_height
 from .kinematics import FPS, BodyModel, Pose, assemble, foot_vector, heading_vectors, ypr_matrix
 from .reach import arm_controls_for
 from .segment import Segment, num_frames, standing_pose
