@@ -52,17 +52,35 @@ if spec["what"] == "denoiser":
     from salad_core.models.denoiser import DenoiserConfig
     from salad_core.train.config import DenoiserTrainConfig as TC
     from salad_core.train.denoiser_trainer import build_denoiser_task as build
-else:
+elif spec["what"] == "vae":
     from salad_core.models.vae import VAEConfig
     from salad_core.train.config import VAETrainConfig as TC
     from salad_core.train.vae_trainer import build_vae_task as build
+else:
+    from salad_core.keymotion import train as km
+    TC = km.KeyMotionTrainConfig
+    build = km.build_pst_task if spec["what"] == "pst" else km.build_mmae_task
 known = {f.name for f in dataclasses.fields(TC)}
-train = {k: v for k, v in doc["train"].items() if k in known}
+if spec["what"] in ("pst", "mmae"):
+    for section in [doc] + [doc[s] for s in ("kf_vae", "pst", "mmae") if s in doc]:
+        if "train" in section:
+            section["train"] = {k: v for k, v in section["train"].items() if k in known}
+    recipe = km.KeyMotionRecipe.from_doc(doc)
+    train = {f.name: getattr(getattr(recipe, spec["what"] + "_train"), f.name) for f in dataclasses.fields(TC)}
+else:
+    train = {k: v for k, v in doc["train"].items() if k in known}
 train.update(max_steps=spec["steps"], log_every=spec["log_every"], progress=False, num_threads=spec["threads"],
              ckpt_every=0, val_every=0)
-tc = config_from_dict(TC, train)
+tc = TC(**train) if spec["what"] in ("pst", "mmae") else config_from_dict(TC, train)
 t0 = time.perf_counter()
-if spec["what"] == "denoiser":
+if spec["what"] in ("pst", "mmae"):
+    model = getattr(recipe, spec["what"] + "_model")
+    kw = {"cache_dir": spec["cache_dir"]} if "cache_dir" in inspect.signature(build).parameters else {}
+    if spec["what"] == "pst":
+        task = build(spec["data"], spec["kf_vae"], model, tc, env, **kw)
+    else:
+        task = build(spec["data"], model, tc, env, "minilm", 20)
+elif spec["what"] == "denoiser":
     mc = config_from_dict(DenoiserConfig, doc["model"])
     kw = {"cache_dir": spec["cache_dir"]} if "cache_dir" in inspect.signature(build).parameters else {}
     task = build(spec["data"], spec["vae"], mc, tc, env, **kw)
@@ -86,8 +104,10 @@ print("RESULT " + json.dumps({"steps": res.step, "steps_per_s": res.steps_per_s,
 
 
 def _spec(root: Path, args: argparse.Namespace, out: Path, steps: int, cache_dir: Path | None) -> dict:
-    config = json.loads((HERE / "configs" / f"default_{args.what}.json").read_text())
+    name = "keymotion" if args.what in ("pst", "mmae") else args.what
+    config = json.loads((HERE / "configs" / f"default_{name}.json").read_text())
     return {"root": str(root), "what": args.what, "data": str(args.data), "vae": str(args.vae), "config": config,
+            "kf_vae": str(HERE / "salad_core" / "weights" / "keymotion" / "kf_vae"),
             "steps": steps, "log_every": args.log_every, "threads": args.threads, "out": str(out),
             "cache_dir": str(cache_dir) if cache_dir else None}
 
@@ -192,7 +212,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--old", type=Path, help="checkout of the older release (git worktree)")
     p.add_argument("--data", required=True, type=Path, help="HumanML3D-layout corpus")
-    p.add_argument("--what", choices=("denoiser", "vae"), default="denoiser")
+    p.add_argument("--what", choices=("denoiser", "vae", "pst", "mmae"), default="denoiser",
+                   help="the model trained (pst, mmae: KeyMotion's stages; the PST on the shipped keyframe VAE)")
     p.add_argument("--vae", type=Path, default=HERE / "salad_core" / "weights" / "salad" / "vae",
                    help="frozen VAE of the denoiser runs (default: the shipped one)")
     p.add_argument("--steps", type=int, default=300)
@@ -211,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
         return threads_ab(args, out)
     if args.old is None:
         p.error("--old is required (except with --threads-ab)")
-    cache = out / "latent_cache" if args.what == "denoiser" else None
+    cache = out / "latent_cache" if args.what in ("denoiser", "pst") else None
     if cache is not None:
         t0 = time.perf_counter()
         pre = _launch(_spec(HERE, args, out / "prebuild", 0, cache), out / "prebuild.log")
@@ -241,8 +262,8 @@ def main(argv: list[str] | None = None) -> int:
     # wall-clock span in which both were training (step completion times)
     lo = max(r["stamps"][0] for r in res.values() if r["stamps"])
     hi = min(r["stamps"][-1] for r in res.values() if r["stamps"])
-    if hi > lo:
-        rates = {name: sum(lo < t <= hi for t in r["stamps"]) / (hi - lo) for name, r in res.items()}
+    rates = {name: sum(lo < t <= hi for t in r["stamps"]) / (hi - lo) for name, r in res.items()} if hi > lo else {}
+    if rates and min(rates.values()) > 0:
         print(f"while both were training ({hi - lo:.0f} s): steps/s old {rates['old']:.4f}, new {rates['new']:.4f}, "
               f"ratio {rates['new'] / rates['old']:.2f}; samples x frames/s ratio (mean frames per step) "
               f"{rates['new'] * res['new']['frames'] / (rates['old'] * res['old']['frames']):.2f}")
