@@ -66,7 +66,6 @@ def throw(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gener
     tt = frame_times(n, FPS)
     pose = standing_pose(start, persona, n, body, rng=None, idle=False)
     kt = [0.0, t_wind, t_back, t_back + 0.06, t_rel, t_follow, t_rest]
-    rest = pose.arm[0, side].copy()
     up, fo = body.upper_arm[side], body.forearm[side]
     keys = np.stack([rest_target(persona, body, side)] * 2 + [back, back, release, follow,
                                                               rest_target(persona, body, side)])
