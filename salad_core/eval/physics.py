@@ -36,15 +36,17 @@ Definitions (units in the names of :class:`PhysicsReport`'s fields):
   The elbow: with joint positions alone the upper arm's twist is unknown, so the direction an elbow
   may bend in is only determined while the upper arm hangs (within ``elbow_hang_deg`` of the
   trunk's down axis): then a forearm bending backwards (more than 120 degrees away from the trunk's
-  forward axis) would need more humeral rotation than a shoulder has, so its flexion angle counts
-  as hyper-extension. Max over frames and sides, and the share of frames above ``hyper_threshold_deg``.
+  forward axis) would need about 120 degrees or more of humeral rotation away from the neutral
+  (forward) bend, more than a shoulder's 70-90, so its flexion angle counts as hyper-extension. Max over frames and sides, and the share of frames above ``hyper_threshold_deg``.
 * **Pelvis**: its height range (cm); the jump rise (m): its apex above the standing height (the
   90th percentile of its height in frames where both feet touch the ground); the feet clearance
   (m): the highest the lowest foot joint gets above the contact level.
 * **Flight** (both feet off the ground: no foot joint in contact): the number of flight frames, the
   longest flight (s) and the pelvis's vertical acceleration (m/s^2, second difference at frames
   whose neighbours are in flight too), which ballistic flight keeps near -9.81. The pelvis is not
-  the centre of mass, so tucking the legs in flight moves it by a little.
+  the centre of mass, so tucking the legs in flight moves it by a little. The ground is taken to
+  be flat: a foot standing on a raised step counts as off the ground (corpus stair clips show
+  "flights" of 1.5-2.7 s for that reason).
 * **Stride** (m): how far a foot travels through the air between two ground contacts: the
   horizontal distance of its ankle from lift-off (the last frame of a run of at least
   ``min_contact_frames`` contact frames of the ankle or toe) to the next touch-down (the first
