@@ -506,7 +506,9 @@ def test_run_config_records_batching_threads_numerics_and_the_card_says_so(corpu
     from salad_core.train.assemble import assemble_pipeline, numerics_note, write_numerics_section
 
     new = tmp_path / "new"
-    train_denoiser(corpus, new, tiny_vae_run, tiny_denoiser_config(), den_train_config(max_steps=2), HashTextEncoder())
+    res = train_denoiser(corpus, new, tiny_vae_run, tiny_denoiser_config(), den_train_config(max_steps=2),
+                         HashTextEncoder())
+    assert res.threads == 1 and res.frames_per_s > 0
     doc = json.loads((new / "config.json").read_text())
     assert doc["runtime"]["torch_threads"] == 1 and doc["runtime"]["batching"].startswith("length buckets")
     assert doc["task"]["numerics"]["latents"].startswith("cached")

@@ -160,7 +160,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         shutdown_distributed()
     if env.is_main:
         print(f"{args.what}: step {result.step}, last loss {result.last_loss}, best val {result.best_val} "
-              f"(step {result.best_step}), {result.steps_per_s:.3f} steps/s -> {result.out_dir}")
+              f"(step {result.best_step}), {result.steps_per_s:.3f} steps/s, {result.frames_per_s:.0f} frames/s on "
+              f"{result.threads} torch thread(s) -> {result.out_dir}")
     return 130 if result.interrupted else 0
 
 
@@ -200,7 +201,8 @@ def _main_keymotion(args: argparse.Namespace, doc: dict[str, Any]) -> int:
     if env.is_main:
         for stage, result in results.items():
             print(f"keymotion {stage}: step {result.step}, last loss {result.last_loss}, best val {result.best_val} "
-                  f"(step {result.best_step}), {result.steps_per_s:.3f} steps/s -> {result.out_dir}")
+                  f"(step {result.best_step}), {result.steps_per_s:.3f} steps/s, {result.frames_per_s:.0f} frames/s "
+                  f"on {result.threads} torch thread(s) -> {result.out_dir}")
     return 130 if any(r.interrupted for r in results.values()) else 0
 
 

@@ -119,6 +119,7 @@ class TrainResult:
     last_loss: float | None         # mean training loss over the last logging window
     steps_per_s: float              # optimiser steps per second in this call (without start-up, validation, checkpoints)
     frames_per_s: float = 0.0       # valid motion frames (samples x frames) per second, same time base
+    threads: int = 0                # torch CPU threads the steps ran on
 
 
 def seed_everything(seed: int) -> None:
@@ -595,4 +596,5 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
     if interrupted:
         log.warning("stopped at step %d by a signal; resume with resume=True (--resume)", step)
     return TrainResult(out_dir=out_dir, step=step, epoch=epoch, interrupted=interrupted, best_val=best_val,
-                       best_step=best_step, last_loss=last_loss, steps_per_s=rate, frames_per_s=frame_rate)
+                       best_step=best_step, last_loss=last_loss, steps_per_s=rate, frames_per_s=frame_rate,
+                       threads=torch.get_num_threads())
