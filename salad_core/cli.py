@@ -31,26 +31,82 @@ def _sub(subparsers, name: str, help: str, example: str, **kwargs) -> argparse.A
     )
 
 
-def _check_out_dir(path: str | os.PathLike, force: bool) -> Path:
+class _Created:
+    """What the running command created: new output files and folders. When the command fails (an
+    error or Ctrl-C) they are removed again, so a failed call leaves nothing behind."""
+
+    def __init__(self) -> None:
+        self.files: list[Path] = []
+        self.dirs: list[Path] = []
+
+    def clean_up(self) -> None:
+        for f in reversed(self.files):
+            try:
+                f.unlink(missing_ok=True)
+            except OSError:
+                pass
+        for d in reversed(self.dirs):       # deepest first; only folders left empty
+            try:
+                d.rmdir()
+            except OSError:
+                pass
+        self.files, self.dirs = [], []
+
+
+_CREATED = _Created()
+
+
+def _check_out_dir(path: str | os.PathLike, force: bool = False) -> Path:
+    """Check that ``--out`` is (or can become) a writable folder; nothing is created here (the first
+    output written creates it, see :func:`_outputs`)."""
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out {out} exists and is not a folder")
+    probe = out
+    while not probe.exists():              # the nearest existing ancestor must be a writable folder
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        raise UserError(f"cannot create output folder {out}: {probe} is not a folder")
+    if probe.exists() and not os.access(probe, os.W_OK | os.X_OK):
+        raise UserError(f"output folder {out} is not writable" if probe == out else
+                        f"cannot create output folder {out}: {probe} is not writable")
+    return out
+
+
+def _make_out_dir(out: Path) -> Path:
+    """Create ``out`` (and missing parents), remembering what was new for :meth:`_Created.clean_up`."""
+    if out.is_dir():
+        return out
+    new = []
+    probe = out
+    while not probe.exists() and probe.parent != probe:
+        new.append(probe)
+        probe = probe.parent
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UserError(f"cannot create output folder {out}: {exc.strerror}") from None
-    if not os.access(out, os.W_OK):
-        raise UserError(f"output folder {out} is not writable")
+    _CREATED.dirs.extend(reversed(new))
     return out
 
 
 # ----------------------------------------------------------------------------- outputs
-def _outputs(out_dir: Path, names: list[str], force: bool) -> list[Path]:
-    """Paths in ``out_dir``; refuse to overwrite any existing one unless ``force``."""
+def _outputs(out_dir: Path, names: list[str], force: bool, *, write: bool = True) -> list[Path]:
+    """Paths in ``out_dir``; refuse to overwrite any existing one unless ``force``.
+
+    With ``write`` (the default) the folder is created and the new paths are remembered, so that a
+    failing command removes them again; ``write=False`` only checks (call it for every file of a run
+    before writing any).
+    """
     paths = [out_dir / n for n in names]
     existing = [p.name for p in paths if p.exists()]
     if existing and not force:
         raise UserError(f"{out_dir} already holds {', '.join(existing)}; pass --force to overwrite")
+    if write:
+        _make_out_dir(out_dir)
+        _CREATED.files.extend(p for p in paths if not p.exists())
     return paths
 
 
@@ -61,9 +117,18 @@ def _load_pipeline(weights: str | None):
 
 
 def _slug(text: str, n: int = 40) -> str:
+    """A file-name stem from a prompt: lower-case words joined by ``_``, at most ``n`` characters, cut
+    at a word boundary (a single word longer than ``n`` is cut)."""
     import re
 
-    return (re.sub(r"[^a-z0-9]+", "_", text.lower()).strip("_")[:n]) or "motion"
+    words = re.findall(r"[a-z0-9]+", text.lower())
+    out = ""
+    for w in words:
+        cand = f"{out}_{w}" if out else w
+        if len(cand) > n:
+            break
+        out = cand
+    return out or (words[0][:n] if words else "motion")
 
 
 def _write_motion_files(out: Path, stem: str, features, joints, skeleton, *, force: bool,
@@ -92,25 +157,37 @@ def _write_motion_files(out: Path, stem: str, features, joints, skeleton, *, for
 _FUNCTION_WORDS = frozenset("a an the and then while his her their its is are to of in on up with as".split())
 
 
-def _attention_figure(out: Path, stem: str, result, force: bool) -> Path | None:
-    """The Fig. 6-style per-word heatmap grid of sample 0 (needs captured attention)."""
+def _has_words(text: str) -> bool:
+    """Whether a prompt holds a word (letters or digits); "!!! ???" and emoji strings do not."""
+    return any(ch.isalnum() for ch in text)
+
+
+def _attention_figure(out: Path, stem: str, result, b: int, force: bool) -> Path | None:
+    """The Fig. 6-style per-word heatmap grid of sample ``b`` (needs captured attention): one panel
+    per content word, repeated words told apart by their index in the prompt."""
     if result.attention is None:
         return None
-    from salad_viz import plot_attention_grid
-
-    (path,) = _outputs(out, [f"{stem}_attention.png"], force)
     import numpy as np
 
-    maps = result.attention
-    words = maps.words(0)
-    keep = [i for i, w in enumerate(words) if w not in _FUNCTION_WORDS] or list(range(len(words)))
-    # one panel per content word (by position, so repeated words are fine): (P, N', K) word maps
-    stacked = np.stack([maps.word_map(0, i) for i in keep], axis=-1)
-    fig = plot_attention_grid(stacked, [words[i] for i in keep], prompt=result.texts[0])
     from salad_core.io import atomic_path
+    from salad_viz import plot_attention_grid
 
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=90, bbox_inches="tight")
+    maps = result.attention
+    words = list(maps.words(b))
+    if not words:
+        return None
+    (path,) = _outputs(out, [f"{stem}_attention.png"], force)
+    keep = [i for i, w in enumerate(words) if w not in _FUNCTION_WORDS] or list(range(len(words)))
+    # (P, N', W) word maps; the panels pick words by position, so repeated words are fine
+    stacked = np.stack([maps.word_map(b, i) for i in range(len(words))], axis=-1)
+    fig = plot_attention_grid(stacked, words, word_ids=keep, prompt=result.texts[b])
+    import matplotlib.pyplot as plt
+
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", dpi=90, bbox_inches="tight")
+    finally:
+        plt.close(fig)
     return path
 
 
@@ -118,21 +195,107 @@ def _attention_figure(out: Path, stem: str, result, force: bool) -> Path | None:
 DEMO_PROMPT = "a man jumps forward and then walks forward, while waving his arms"
 
 
+def _weights_info(weights: str | None) -> tuple[str, int]:
+    """``(skeleton name, diffusion timesteps)`` from a pipeline folder's ``pipeline.json``, read
+    without loading any weights, so that arguments can be checked first; the defaults
+    (humanml3d, 1000) when the file is missing or odd (loading the weights then says why)."""
+    import json
+
+    from salad_core.pipeline import default_weights_dir
+
+    root = Path(weights) if weights is not None else default_weights_dir()
+    try:
+        cfg = json.loads((root / "pipeline.json").read_text())
+        skeleton = str(cfg.get("skeleton", "humanml3d"))
+        steps = int(cfg.get("diffusion", {}).get("num_train_timesteps", 1000))
+    except (OSError, ValueError, TypeError, AttributeError):
+        return "humanml3d", 1000
+    return skeleton, steps
+
+
+def _check_sampling_args(args: argparse.Namespace, n_prompts: int, *, length: bool = True,
+                         solver: bool = True) -> None:
+    """Check --length, --steps, --solver, --seed and --guidance before any weights load (a few
+    seconds); a length that is not a multiple of the unit is rounded down with one note."""
+    from salad_core.pipeline import MAX_GUIDANCE, SEED_RANGE
+    from salad_core.skeleton import get_skeleton
+
+    skeleton, max_steps = _weights_info(getattr(args, "weights", None))
+    try:
+        sk = get_skeleton(skeleton)
+    except (KeyError, ValueError):
+        sk = get_skeleton("humanml3d")
+    if length and getattr(args, "length", None) is not None:
+        unit, max_len = sk.unit_length, sk.max_length
+        if not unit <= args.length <= max_len:
+            raise UserError(f"--length {args.length} frames is out of range; allowed: {unit}..{max_len} "
+                            f"({unit / sk.fps:g}-{max_len / sk.fps:g} s at {sk.fps:g} fps)")
+        if args.length % unit:
+            floored = args.length - args.length % unit
+            _note(args, f"--length {args.length} is not a multiple of {unit}; generating {floored} frames")
+            args.length = floored
+    steps = getattr(args, "steps", None)
+    if steps is not None and not 1 <= steps <= max_steps:
+        raise UserError(f"--steps {steps}: allowed 1..{max_steps} (the model's diffusion timesteps; default 50)")
+    if solver and getattr(args, "solver", None) is not None:
+        from salad_core.sampling import SOLVERS
+
+        if args.solver.lower() not in SOLVERS:
+            raise UserError(f"--solver {args.solver!r} is unknown; allowed: {', '.join(SOLVERS)}")
+    seed = getattr(args, "seed", None)
+    if seed is not None and not (SEED_RANGE[0] <= seed and seed + n_prompts - 1 <= SEED_RANGE[1]):
+        raise UserError(f"--seed {seed} is out of range; allowed: -2**63..2**64-1"
+                        + (f" minus {n_prompts - 1} (prompt b uses seed + b)" if n_prompts > 1 else ""))
+    w = getattr(args, "guidance", None)
+    if w is not None:
+        _check_finite("--guidance", w)
+        if abs(w) > MAX_GUIDANCE:
+            raise UserError(f"--guidance {w:g} is out of range; allowed: -{MAX_GUIDANCE:g}..{MAX_GUIDANCE:g} "
+                            "(the papers use 1-10, default 7.5; larger weights make the sampler diverge)")
+        if w < 0:
+            _note(args, f"--guidance {w:g} is negative: the motion is steered away from the prompt "
+                        "(1 = no guidance, 7.5 = the paper's)", kind="warning")
+
+
+def _note(args: argparse.Namespace, text: str, kind: str = "note") -> None:
+    """One line on stderr, ``salad <command>: note: ...`` (also under -q: it changes the result)."""
+    print(f"salad {getattr(args, 'command', '')}: {kind}: {text}", file=sys.stderr)
+
+
+def _generate_stems(texts: list[str]) -> list[str]:
+    return [f"{b:02d}_{_slug(text)}" for b, text in enumerate(texts)]
+
+
 def cmd_generate(args: argparse.Namespace) -> int:
-    _check_finite("--guidance", args.guidance)
+    from salad_core.pipeline import validate_prompts
+
+    try:
+        prompts = validate_prompts(args.prompt)
+    except (TypeError, ValueError) as exc:
+        raise UserError(str(exc)) from None
+    _check_sampling_args(args, len(prompts))
     out = _check_out_dir(args.out, args.force)
+    attention = not args.no_attention
+    figures = [attention and _has_words(p) for p in prompts]
+    for b, p in enumerate(prompts):
+        if attention and not figures[b]:
+            _note(args, f"prompt {b} {p!r} has no words: no attention figure for it", kind="warning")
+    # every file of the run is checked before anything is written
+    stems = _generate_stems(prompts)
+    _outputs(out, [f"{st}{ext}" for st in stems for ext in ("_features.npy", "_joints.npy", ".bvh")]
+             + [f"{st}.gif" for st in stems if not args.no_render]
+             + [f"{st}_attention.png" for st, fig in zip(stems, figures) if fig], args.force, write=False)
     pipe = _load_pipeline(args.weights)
-    prompts = args.prompt
     result = pipe(prompts, lengths=args.length, seed=args.seed, guidance_scale=args.guidance,
-                  num_steps=args.steps, solver=args.solver, capture_attention=not args.no_attention,
+                  num_steps=args.steps, solver=args.solver, capture_attention=attention and any(figures),
                   progress=not args.quiet)
     for b, text in enumerate(result.texts):
-        stem = f"{b:02d}_{_slug(text)}"
+        stem = stems[b]
         n = result.lengths[b]
         files = _write_motion_files(out, stem, result.features[b, :n], result.joints[b], pipe.skeleton,
                                     force=args.force, gif=not args.no_render, bvh=True)
-        if b == 0 and not args.no_attention:
-            fig = _attention_figure(out, stem, result, args.force)
+        if figures[b]:
+            fig = _attention_figure(out, stem, result, b, args.force)
             files += [fig] if fig else []
         print(f"{text!r} ({n} frames): " + ", ".join(str(f) for f in files))
     return 0
@@ -215,14 +378,41 @@ def _check_finite(flag: str, value: float) -> float:
     return value
 
 
+def _check_edit_target(args: argparse.Namespace, source: str) -> None:
+    """A word swap or a refinement into the source prompt itself gives back the source: refuse it."""
+    kind = "--swap" if args.swap is not None else "--refine" if args.refine else None
+    if kind is None:
+        return
+    target = " ".join((args.target or "").split())
+    if not target or target.lower() == " ".join(source.split()).lower():
+        what = "replaces the source's words with the target's" if kind == "--swap" else \
+            "keeps the source's maps for the target's words shared with it"
+        raise UserError(f"{kind} needs --target, a prompt that differs from the source ({kind[2:]} {what}); "
+                        f"without one the edit gives back the source motion")
+
+
 def cmd_edit(args: argparse.Namespace) -> int:
     """Edit a generated motion (same noise) or, with --motion, a given motion through inversion."""
-    out = _check_out_dir(args.out, args.force)
+    if not (args.source or "").strip():
+        raise UserError("the source prompt is empty; describe a motion, e.g. 'a person walks forward'")
     specs = _edit_specs(args)
-    _check_finite("--guidance", args.guidance)
-    pipe = _load_pipeline(args.weights)
+    _check_edit_target(args, args.source)
+    _check_sampling_args(args, 1, length=not args.motion, solver=not args.motion)
+    if args.motion and args.solver is not None and args.solver.lower() != "ddim":
+        raise UserError(f"--solver {args.solver}: editing a given motion (--motion) uses the DDIM sampler its "
+                        "inversion is made for")
+    features = None
     if args.motion:
-        _, features, _ = _load_features(args.motion, pipe.skeleton.name)
+        skeleton, _ = _weights_info(args.weights)
+        sk, features, _ = _load_features(args.motion, skeleton)
+        if len(features) % sk.unit_length:
+            _note(args, f"{args.motion} has {len(features)} frames, not a multiple of {sk.unit_length}; editing the "
+                        f"first {len(features) - len(features) % sk.unit_length}")
+    out = _check_out_dir(args.out, args.force)
+    names = [f"{b}{ext}" for b in ("source", "edited") for ext in ("_features.npy", "_joints.npy", ".bvh")]
+    _outputs(out, names + ["source_vs_edited.gif"], args.force, write=False)
+    pipe = _load_pipeline(args.weights)
+    if features is not None:
         inv = _invert(pipe, features, args.source, args, method="fixed_point")
         result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet)
     else:
@@ -239,7 +429,7 @@ def cmd_edit(args: argparse.Namespace) -> int:
 
     (gif,) = _outputs(out, ["source_vs_edited.gif"], args.force)
     files.append(animate([src.joints[0], dst.joints[0]], pipe.skeleton, gif, layout="side",
-                         titles=["source", "edited"], size=(240, 240), stride=2))
+                         titles=[f"source: {src.texts[0]}", f"edited: {dst.texts[0]}"], size=(240, 240), stride=2))
     print(f"{src.texts[0]!r} -> {dst.texts[0]!r} with {[type(e).__name__ for e in specs]}: "
           + ", ".join(str(f) for f in files))
     return 0
@@ -264,7 +454,7 @@ def _load_motion_array(motion: str, skeleton: str):
         arr = np.load(path, allow_pickle=False)   # never unpickle: a .npy must not run code
     except (ValueError, OSError, EOFError) as exc:
         raise UserError(f"cannot read {path} as a .npy array (truncated, corrupt or pickled?): {exc}") from None
-    if not isinstance(arr, np.ndarray) or not np.issubdtype(arr.dtype, np.number):
+    if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "iuf":     # complex parts would be dropped
         raise UserError(f"{path} does not hold a numeric array (got {getattr(arr, 'dtype', type(arr).__name__)})")
     if arr.ndim == 2:
         try:
@@ -304,6 +494,8 @@ def _load_features(motion: str, skeleton: str):
 # ----------------------------------------------------------------------------- invert
 def _invert(pipe, features, prompt: str, args: argparse.Namespace, method: str, iterations=None, exact=True):
     """Invert one motion under its prompt and print the reconstruction error in cm."""
+    unit = pipe.skeleton.unit_length
+    features = features[: len(features) - len(features) % unit]   # the callers said so already
     inv = pipe.invert(features, prompt, method=method, guidance_scale=args.guidance, num_steps=args.steps,
                       iterations=iterations, exact=exact, progress=not args.quiet)
     cm = _errors_cm(inv.errors, pipe.skeleton)
@@ -434,11 +626,15 @@ def cmd_invert(args: argparse.Namespace) -> int:
     from salad_core.motion import features_to_joints
 
     specs = _edit_specs(args, required=False)
-    _check_finite("--guidance", args.guidance)
     if args.method not in INVERSION_METHODS:
         raise UserError(f"--method {args.method!r}; allowed: {', '.join(INVERSION_METHODS)}")
     if not (args.prompt or "").strip():
         raise UserError("--prompt is empty; describe what the motion shows, e.g. 'a person walks forward'")
+    _check_edit_target(args, args.prompt)
+    _check_sampling_args(args, 1, length=False, solver=False)
+    if args.iterations is not None and (args.iterations < 0 or (args.method != "ddim" and args.iterations < 1)):
+        raise UserError(f"--iterations {args.iterations}: allowed {0 if args.method == 'ddim' else 1} or more "
+                        f"for --method {args.method}")
     sk, loaded, features = _motion_input(args)
     path = loaded.path
     out = _check_out_dir(args.out, args.force)
@@ -448,7 +644,10 @@ def cmd_invert(args: argparse.Namespace) -> int:
     # refuse before any work: every file this run would write
     _outputs(out, [f"{stem}_{b}{ext}" for b in branches for ext in ("_features.npy", "_joints.npy", ".bvh")]
              + [f"{stem}_inversion.json"] + ([] if args.no_render else [gif_name])
-             + ([f"{stem}_input_features.npy"] if loaded.kind != "features" else []), args.force)
+             + ([f"{stem}_input_features.npy"] if loaded.kind != "features" else []), args.force, write=False)
+    if len(features) % sk.unit_length:
+        n = len(features) - len(features) % sk.unit_length
+        _note(args, f"the motion has {len(features)} frames, not a multiple of {sk.unit_length}; inverting the first {n}")
     pipe = _load_pipeline(args.weights)
     if pipe.skeleton.name != sk.name:
         raise UserError(f"the weights are for skeleton {pipe.skeleton.name!r}, the motion was read as {sk.name!r}; "
@@ -505,9 +704,15 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     from salad_viz import animate, keyframe_strip
 
-    sk, joints, path = _load_joints(args.motion, args.skeleton)
+    from salad_viz._arrays import MAX_SIZE
+
+    if not 8 <= args.size <= MAX_SIZE:
+        raise UserError(f"--size {args.size}: allowed 8..{MAX_SIZE} pixels (the side of a square frame)")
     out = _check_out_dir(args.out, args.force)
+    sk, joints, path = _load_joints(args.motion, args.skeleton)
     stem = path.stem
+    _outputs(out, [f"{stem}.{args.format}"] + ([f"{stem}_strip.png"] if args.strip else []), args.force,
+             write=False)
     if args.strip:
         from salad_core.io import atomic_path
         import imageio.v3 as iio
@@ -525,8 +730,8 @@ def cmd_render(args: argparse.Namespace) -> int:
 def cmd_export(args: argparse.Namespace) -> int:
     from salad_viz import export_bvh, export_glb, export_npy
 
-    sk, arr, path = _load_joints(args.motion, args.skeleton)
     out = _check_out_dir(args.out, args.force)
+    sk, arr, path = _load_joints(args.motion, args.skeleton)
     (p,) = _outputs(out, [f"{path.stem}.{args.format}"], args.force)
     fn = {"bvh": export_bvh, "glb": export_glb, "npy": export_npy}[args.format]
     print(fn(arr, sk, p))
@@ -543,6 +748,11 @@ def cmd_corpus(args: argparse.Namespace) -> int:
         print(f"corpus written to {args.out}: " + ", ".join(f"{k}={v}" for k, v in summary.items()
                                                             if isinstance(v, (int, float, str))))
     else:
+        root = Path(args.out)
+        missing = [n for n in ("all.txt", "new_joint_vecs", "texts") if not (root / n).exists()]
+        if not root.is_dir() or missing:
+            raise UserError(f"--out {root} is not a corpus folder" + (f" (no {', '.join(missing)})" if root.is_dir()
+                            else " (no such folder)") + f"; build one with: salad corpus build --out {root}")
         figs = corpus_figures(args.out)
         for k, v in figs.items():
             print(f"{k}: {v}")
@@ -569,11 +779,18 @@ def cmd_bench(args: argparse.Namespace, rest: list[str]) -> int:
 
 
 def _generation_args(p: argparse.ArgumentParser, length: int) -> None:
-    p.add_argument("--length", type=int, default=length, help=f"frames at 20 fps, multiple of 4, <= 196 (default {length})")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--guidance", type=float, default=7.5, help="classifier-free guidance scale (default 7.5)")
-    p.add_argument("--steps", type=int, default=None, help="sampler steps (default 50)")
-    p.add_argument("--solver", default=None, help="scheduler: ddim (default), dpm++, euler, ...")
+    p.add_argument("--length", type=int, default=length,
+                   help=f"frames at 20 fps, 4..196 (default {length}); other values are rounded down to a "
+                        "multiple of 4, with a note")
+    p.add_argument("--seed", type=int, default=0,
+                   help="noise seed (default 0); prompt b of a batch uses SEED + b, so a motion does not depend on "
+                        "the other prompts")
+    p.add_argument("--guidance", type=float, default=7.5,
+                   help="classifier-free guidance weight w, -100..100 (default 7.5; 1 = no guidance; negative "
+                        "steers away from the prompt)")
+    p.add_argument("--steps", type=int, default=None, help="sampler steps, 1..1000 (default 50)")
+    p.add_argument("--solver", default=None,
+                   help="scheduler: ddim (default), ddpm, dpm++, euler, euler_ancestral, unipc")
     p.add_argument("--preset", default=None, choices=("paper", "fast"),
                    help="sampler preset instead of --solver/--steps: paper = DDIM 50 steps, fast = DPM-Solver++ 20 steps")
     p.add_argument("--weights", default=None, help="pipeline folder (default: the shipped weights)")
@@ -607,8 +824,10 @@ def build_parser() -> argparse.ArgumentParser:
     g = _sub(sub, "generate", "generate motions from text prompts",
              'salad generate "a person jumps" "a man waves his left hand" --length 80 --out gen_out')
     g.add_argument("prompt", nargs="+", help="one or more text prompts")
-    g.add_argument("--out", required=True, help="output folder")
-    g.add_argument("--no-attention", action="store_true", help="do not capture and plot attention maps")
+    g.add_argument("--out", required=True, help="output folder (created if missing)")
+    g.add_argument("--no-attention", action="store_true",
+                   help="do not capture and plot attention maps (by default one NN_<prompt>_attention.png per "
+                        "prompt: a 7-part x frame heatmap per content word)")
     g.add_argument("--no-render", action="store_true", help="skip the GIF animation")
     _generation_args(g, length=120)
 
@@ -619,7 +838,7 @@ def build_parser() -> argparse.ArgumentParser:
     _edit_args(ed)
     ed.add_argument("--motion", default=None, help="a features .npy (N, 263) to edit instead of a generated one "
                     "(inverted first; see also salad invert)")
-    ed.add_argument("--out", required=True)
+    ed.add_argument("--out", required=True, help="output folder (created if missing)")
     _generation_args(ed, length=100)
 
     iv = _sub(sub, "invert", "invert a given motion to noise under its prompt: write its reconstruction and the "
@@ -644,7 +863,8 @@ def build_parser() -> argparse.ArgumentParser:
     _bvh_args(iv)
     iv.add_argument("--no-render", action="store_true", help="skip the GIF")
     iv.add_argument("--weights", default=None, help="pipeline folder (default: the shipped weights)")
-    iv.add_argument("--skeleton", default="humanml3d")
+    iv.add_argument("--skeleton", default="humanml3d", help="skeleton of the motion: humanml3d (22 joints, "
+                    "default) or kit (21)")
     iv.add_argument("--force", action="store_true", help="overwrite existing files")
 
     im = _sub(sub, "import", "convert a BVH motion-capture take (SMPL, Mixamo, CMU and similar rigs, any frame rate, "
@@ -660,27 +880,29 @@ def build_parser() -> argparse.ArgumentParser:
     r = _sub(sub, "render", "animate a motion file (features .npy or joints .npy) as GIF or MP4",
              "salad render gen_out/00_a_person_jumps_joints.npy --out renders --format mp4")
     r.add_argument("motion", help="a .npy file: features (N, 263) or joints (N, 22, 3)")
-    r.add_argument("--out", required=True)
-    r.add_argument("--format", choices=["gif", "mp4"], default="gif")
-    r.add_argument("--size", type=int, default=320, help="frame size in pixels")
+    r.add_argument("--out", required=True, help="output folder (created if missing)")
+    r.add_argument("--format", choices=["gif", "mp4"], default="gif", help="animation format (default gif)")
+    r.add_argument("--size", type=int, default=320, help="side of the square frame in pixels, 8..4096 (default 320)")
     r.add_argument("--strip", action="store_true", help="also write a keyframe strip PNG")
-    r.add_argument("--skeleton", default="humanml3d")
+    r.add_argument("--skeleton", default="humanml3d", help="skeleton of the motion: humanml3d (default) or kit")
     r.add_argument("--force", action="store_true", help="overwrite existing files")
 
     e = _sub(sub, "export", "export a motion file to BVH (Blender), GLB or NPY joints",
              "salad export gen_out/00_a_person_jumps_features.npy --format bvh --out exports")
     e.add_argument("motion", help="a .npy file: features (N, 263) or joints (N, 22, 3)")
-    e.add_argument("--out", required=True)
-    e.add_argument("--format", choices=["bvh", "glb", "npy"], default="bvh")
-    e.add_argument("--skeleton", default="humanml3d")
+    e.add_argument("--out", required=True, help="output folder (created if missing)")
+    e.add_argument("--format", choices=["bvh", "glb", "npy"], default="bvh",
+                   help="bvh (Blender; default), glb (first frame as a 3D scene) or npy (joints (N, J, 3), metres)")
+    e.add_argument("--skeleton", default="humanml3d", help="skeleton of the motion: humanml3d (default) or kit")
     e.add_argument("--force", action="store_true", help="overwrite existing files")
 
     c = _sub(sub, "corpus", "build or inspect the procedural motion-language corpus",
              "salad corpus build --out data/procedural --size default --seed 0")
     c.add_argument("action", choices=["build", "check"], help="build a corpus, or print the figures of one")
     c.add_argument("--out", required=True, help="corpus folder (HumanML3D layout)")
-    c.add_argument("--size", default="default", choices=["tiny", "small", "default"])
-    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--size", default="default", choices=["tiny", "small", "default"],
+                   help="build: how many motions (default: the full corpus, 4,000 plus mirrors)")
+    c.add_argument("--seed", type=int, default=0, help="build: random seed (default 0)")
     c.add_argument("--force", action="store_true", help="write into a non-empty folder")
 
     t = _sub(sub, "train", "train the SALAD VAE or denoiser, or the three KeyMotion models (torchrun-ready)",
@@ -707,17 +929,45 @@ PASS_THROUGH: dict[str, Callable] = {"train": cmd_train, "eval": cmd_eval, "benc
 
 def run_reporting_errors(label: str, debug: bool, call: Callable[[], int]) -> int:
     """Run a command: Ctrl-C exits 130; any error prints one line ``<label>: error: ...`` and exits 2
-    (the full traceback only with ``debug``)."""
+    (the full traceback only with ``debug``). Either way the files and folders the command created
+    are removed again; Python warnings print as one line ``<label>: warning: ...``."""
+    import warnings
+
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        text = " ".join(str(message).split())
+        print(f"{label}: warning: {text}", file=sys.stderr)
+
+    _CREATED.files, _CREATED.dirs = [], []
     try:
-        return call()
+        with warnings.catch_warnings():
+            warnings.showwarning = one_line
+            return call()
     except KeyboardInterrupt:
+        _CREATED.clean_up()
         print(f"{label}: interrupted", file=sys.stderr)
         return 130
     except Exception as exc:  # one clear line unless --debug
+        _CREATED.clean_up()
         if debug:
             raise
         print(f"{label}: error: {exc}", file=sys.stderr)
         return 2
+    finally:
+        _CREATED.files, _CREATED.dirs = [], []
+
+
+def _quiet_libraries() -> None:
+    """-q: no progress bars from the text encoder's libraries (transformers' "Loading weights")."""
+    os.environ["HF_HUB_DISABLE_PROGRESS_BARS"] = "1"        # read when transformers is imported
+    os.environ.setdefault("TRANSFORMERS_VERBOSITY", "error")
+    if "transformers" in sys.modules:                       # already imported (e.g. in a notebook)
+        try:
+            from transformers.utils import logging as hf_logging
+
+            hf_logging.disable_progress_bar()
+            hf_logging.set_verbosity_error()
+        except Exception:   # an old transformers without these: only the bar stays
+            pass
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -729,6 +979,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
+    if args.quiet:
+        _quiet_libraries()
     from salad_core.allocator import tune_from_environment
 
     try:

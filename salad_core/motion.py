@@ -72,13 +72,23 @@ def _shape(x) -> tuple[int, ...]:
 
 
 def _as_array(x, name: str):
-    """Pass torch tensors and numpy arrays through; turn other array-likes into numpy."""
-    if isinstance(x, (np.ndarray, torch.Tensor)):
+    """Pass real-valued torch tensors and numpy arrays through; turn other array-likes into numpy.
+
+    Complex arrays (whose imaginary part a cast would drop with only a ComplexWarning), strings,
+    booleans and objects are refused.
+    """
+    if isinstance(x, torch.Tensor):
+        if x.is_complex() or x.dtype == torch.bool:
+            raise TypeError(f"{name} must hold real numbers, got a {x.dtype} tensor")
+        return x
+    if isinstance(x, np.ndarray):
+        if not (np.issubdtype(x.dtype, np.floating) or np.issubdtype(x.dtype, np.integer)) or x.dtype == bool:
+            raise TypeError(f"{name} must hold real numbers, got dtype {x.dtype}")
         return x
     try:
         return np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError) as err:
-        raise TypeError(f"{name} must be a numpy array or torch tensor, got {type(x).__name__}") from err
+        raise TypeError(f"{name} must be a numpy array or torch tensor of real numbers, got {type(x).__name__}") from err
 
 
 def _check_finite(x, name: str) -> None:
@@ -88,6 +98,19 @@ def _check_finite(x, name: str) -> None:
         first = tuple(int(b[0]) for b in bad) if isinstance(bad, tuple) else tuple(bad[0].tolist())
         n_bad = int((~finite).sum())
         raise ValueError(f"{name} contains {n_bad} non-finite values (NaN or inf); the first is at index {first}")
+
+
+#: Largest magnitude :func:`features_to_joints` accepts: HumanML3D features are metres, metres per
+#: frame, radians and 6D rotations (all of order 1; the real sample's largest is under 2), so a value
+#: beyond this is another unit or a broken array, and its joints would lie kilometres away.
+MAX_FEATURE_MAGNITUDE = 1e4
+
+
+def _check_magnitude(x, name: str, limit: float = MAX_FEATURE_MAGNITUDE) -> None:
+    top = float(x.detach().abs().max()) if isinstance(x, torch.Tensor) else float(np.abs(x).max(initial=0.0))
+    if top > limit:
+        raise ValueError(f"{name} reach |value| = {top:.3g}, beyond {limit:g}: not HumanML3D features (metres, "
+                         "radians, metres per frame; of order 1); check the array's units and scaling")
 
 
 def check_features(features: Array, skeleton: SkeletonLike = "humanml3d", *, name: str = "features",
@@ -504,6 +527,7 @@ def features_to_joints(features: Array, skeleton: SkeletonLike = "humanml3d") ->
     """
     sk = get_skeleton(skeleton)
     features = check_features(features, sk)
+    _check_magnitude(features, "features")
     f, out_dtype = _to_float(features)
     j = sk.num_joints
     r, root = _recover_root(f)

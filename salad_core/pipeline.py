@@ -166,18 +166,20 @@ def validate_lengths(lengths: int | Sequence[int] | None, n: int, skeleton: Skel
         raise TypeError(f"lengths must be an int or a list of ints, got {type(lengths).__name__}")
     out = []
     for i, length in enumerate(lengths):
+        # "length 0" would read as "the length is 0": name the entry only when there are several
+        which = "length" if len(lengths) == 1 else f"lengths[{i}]"
         if isinstance(length, bool) or not isinstance(length, (int, np.integer)):
             if isinstance(length, float) and math.isfinite(length) and float(length).is_integer():
                 length = int(length)
             else:
-                raise TypeError(f"length {i} must be an integer number of frames, got {length!r}")
+                raise TypeError(f"{which} must be an integer number of frames, got {length!r}")
         length = int(length)
         if length < unit or length > max_len:
-            raise ValueError(f"length {i} is {length} frames; allowed: {unit}..{max_len} "
+            raise ValueError(f"{which} = {length} frames is out of range; allowed: {unit}..{max_len} "
                              f"(at {skeleton.fps:g} fps, multiples of {unit})")
         if length % unit:
             floored = length - length % unit
-            warnings.warn(f"length {i} ({length} frames) is not a multiple of {unit}; using {floored}",
+            warnings.warn(f"{which} = {length} frames is not a multiple of {unit}; using {floored}",
                           stacklevel=3)
             length = floored
         out.append(length)
@@ -422,8 +424,8 @@ class SaladPipeline:
         prompts = validate_prompts(prompts)
         lengths = validate_lengths(lengths, len(prompts), self.skeleton)
         guidance = self.resolve_guidance(guidance_scale)
-        if not isinstance(num_steps, (int, np.integer)) or isinstance(num_steps, bool) or num_steps < 1:
-            raise ValueError(f"num_steps must be a positive integer, got {num_steps!r}")
+        num_steps = _check_steps(num_steps, self.diffusion.num_train_timesteps)
+        solver = _check_solver(solver)
         seeds = _seeds(seed, len(prompts))
         n_lat = max(lengths) // self.skeleton.unit_length
         if noise is None:
@@ -543,7 +545,14 @@ class SaladPipeline:
         from salad_core.attention.editing import edit_latents
         from salad_core.attention.edits import validate_edits
 
+        from salad_core.attention.edits import Refine, WordSwap
+        from salad_core.attention.inversion import Inversion
+
         edits = validate_edits(edits)
+        if inversion is not None and not isinstance(inversion, Inversion):
+            raise TypeError(f"inversion must be the Inversion that pipe.invert(motion, prompt) returns, got "
+                            f"{type(inversion).__name__} {inversion!r:.60}")
+        solver = _check_solver(solver)
         null_schedule = corrections = None
         if inversion is not None:
             prompts, lengths, noise, guidance, num_steps = self._from_inversion(
@@ -569,6 +578,7 @@ class SaladPipeline:
         if len(targets) != len(prompts):
             raise ValueError(f"got {len(targets)} target prompts for {len(prompts)} source prompts; give one each "
                              "or a single target for all")
+        _check_edit_does_something(edits, prompts, targets, WordSwap, Refine)
         text_src, null = self.encode_text(prompts)
         text_tgt = text_src if targets == prompts else self.text_encoder.encode(targets)
         if inversion is not None and inversion.null_texts is not None:
@@ -795,19 +805,51 @@ def check_compatible(vae: MotionVAE, denoiser: Denoiser, text_encoder=None) -> N
                          f"{dc.text_dim}-d (it was trained with another encoder)")
 
 
+#: Largest guidance weight accepted (in absolute value): the papers sweep w in 1..10 and larger
+#: weights drive the sampler to non-finite motions (w = 1e30 gave NaN features).
+MAX_GUIDANCE = 100.0
+
+
 def _check_scale(scale: Any) -> float:
-    try:
-        value = float(scale)
-    except (TypeError, ValueError):
-        raise TypeError(f"guidance_scale must be a number, got {scale!r}") from None
+    """A guidance weight: a real number (not a string or bool), finite, ``|w| <= MAX_GUIDANCE``;
+    a negative weight is allowed (it steers away from the prompt) with a warning."""
+    if isinstance(scale, torch.Tensor) and scale.numel() == 1 and not scale.is_complex():
+        scale = scale.item()
+    if isinstance(scale, (bool, str, bytes)) or not isinstance(scale, (int, float, np.integer, np.floating)):
+        raise TypeError(f"guidance_scale must be a number (or a Guidance), got {type(scale).__name__} {scale!r}")
+    value = float(scale)
     if not math.isfinite(value):
         raise ValueError(f"guidance_scale must be finite, got {scale!r}")
+    if abs(value) > MAX_GUIDANCE:
+        raise ValueError(f"guidance_scale={value:g} is out of range; allowed: -{MAX_GUIDANCE:g}..{MAX_GUIDANCE:g} "
+                         "(the papers use 1-10, default 7.5; larger weights make the sampler diverge)")
+    if value < 0:
+        warnings.warn(f"guidance_scale={value:g} is negative: the motion is steered away from the prompt "
+                      "(1 = no guidance, 7.5 = the paper's)", stacklevel=3)
     return value
 
 
-def _check_steps(num_steps: Any) -> int:
+def _check_solver(solver: Any) -> str | None:
+    """None (the pipeline's default) or the name of a solver of :data:`salad_core.sampling.SOLVERS`."""
+    from salad_core.sampling import SOLVERS
+
+    if solver is None:
+        return None
+    if not isinstance(solver, str):
+        raise TypeError(f"solver must be a solver name ({', '.join(SOLVERS)}) or None, got "
+                        f"{type(solver).__name__} {solver!r}")
+    if solver.lower() not in SOLVERS:
+        raise ValueError(f"solver={solver!r} is unknown; allowed: {', '.join(SOLVERS)} (None: the pipeline's default)")
+    return solver
+
+
+def _check_steps(num_steps: Any, max_steps: int | None = None) -> int:
+    """A positive integer number of sampler steps, at most ``max_steps`` (the training timesteps)."""
     if not isinstance(num_steps, (int, np.integer)) or isinstance(num_steps, bool) or num_steps < 1:
         raise ValueError(f"num_steps must be a positive integer, got {num_steps!r}")
+    if max_steps is not None and num_steps > max_steps:
+        raise ValueError(f"num_steps={num_steps} is more than the {max_steps} diffusion timesteps the model was "
+                         f"trained with; allowed: 1..{max_steps} (default 50)")
     return int(num_steps)
 
 
@@ -823,7 +865,11 @@ def _motion_list(motions: Any, skeleton: Skeleton) -> list[np.ndarray]:
         raise TypeError(f"motions must be a (N, {d}) array, a (B, N, {d}) array or a list of (N, {d}) arrays")
     out = []
     for i, m in enumerate(motions):
-        m = np.asarray(m.detach().cpu() if isinstance(m, torch.Tensor) else m, dtype=np.float32)
+        m = m.detach().cpu().numpy() if isinstance(m, torch.Tensor) else np.asarray(m)
+        # complex parts would be dropped with only a ComplexWarning, strings parsed as numbers
+        if m.dtype == bool or not (np.issubdtype(m.dtype, np.integer) or np.issubdtype(m.dtype, np.floating)):
+            raise TypeError(f"motion {i} must hold real numbers, got dtype {m.dtype}")
+        m = m.astype(np.float32, copy=False)
         if m.ndim != 2 or m.shape[1] != d:
             raise ValueError(f"motion {i} must be ({'N'}, {d}) raw {skeleton.name} features, got shape {m.shape}")
         if not np.isfinite(m).all():
@@ -832,18 +878,59 @@ def _motion_list(motions: Any, skeleton: Skeleton) -> list[np.ndarray]:
         if n < unit or n > max_len:
             raise ValueError(f"motion {i} has {m.shape[0]} frames; allowed: {unit}..{max_len} "
                              f"(crop longer motions first)")
+        if n != m.shape[0]:
+            warnings.warn(f"motion {i} has {m.shape[0]} frames, not a multiple of {unit}; using the first {n}",
+                          stacklevel=3)
         out.append(np.ascontiguousarray(m[:n]))
     return out
 
 
+#: Seeds torch.Generator.manual_seed accepts.
+SEED_RANGE = (-(2 ** 63), 2 ** 64 - 1)
+
+
+def _check_edit_does_something(edits: tuple, prompts: list[str], targets: list[str], word_swap: type,
+                               refine: type) -> None:
+    """Refuse edits that cannot change anything and warn about those that probably do not.
+
+    A word swap or a refinement of a prompt into itself gives back the source (refused); no edit
+    and the source as target is a plain regeneration (warned: documented, and a useful baseline);
+    a refinement whose target shares no word with the source keeps no source map (warned).
+    """
+    same = targets == prompts
+    kinds = [type(e).__name__ for e in edits if isinstance(e, (word_swap, refine))]
+    if kinds and same:
+        raise ValueError(f"{kinds[0]} needs a target prompt that differs from the source (target=None or the "
+                         f"same text gives back the source motion); pass target='...'")
+    if not edits and same:
+        warnings.warn("edits is empty and the target is the source: the edited motion is the source motion "
+                      "(nothing is edited)", stacklevel=3)
+    if any(isinstance(e, refine) for e in edits):
+        for i, (a, b) in enumerate(zip(prompts, targets)):
+            if not set(a.lower().split()) & set(b.lower().split()):
+                warnings.warn(f"Refine: target {i} {b!r} shares no word with the source {a!r}, so no source map is "
+                              "kept (the edit is a plain generation of the target)", stacklevel=3)
+
+
 def _seeds(seed: int | Sequence[int], n: int) -> list[int]:
+    """Per-sample noise seeds: ``seed + b`` for an int, the list itself for a list (each an int in
+    :data:`SEED_RANGE`)."""
     if isinstance(seed, (list, tuple)):
         if len(seed) != n:
             raise ValueError(f"got {len(seed)} seeds for {n} prompts")
-        return [int(s) for s in seed]
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        seeds = list(seed)
+    elif isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise TypeError(f"seed must be an int or a list of ints, got {seed!r}")
-    return [int(seed) + i for i in range(n)]
+    else:
+        seeds = [int(seed) + i for i in range(n)]
+    lo, hi = SEED_RANGE
+    for i, s in enumerate(seeds):
+        if isinstance(s, bool) or not isinstance(s, (int, np.integer)):
+            raise TypeError(f"seed {i} must be an int, got {s!r}")
+        if not lo <= int(s) <= hi:
+            raise ValueError(f"seed {int(s)} is out of range; seeds are integers in -2**63..2**64-1"
+                             + (f" (sample {i} uses seed + {i})" if i and not isinstance(seed, (list, tuple)) else ""))
+    return [int(s) for s in seeds]
 
 
 def _check_noise(noise: torch.Tensor, shape: tuple[int, ...]) -> torch.Tensor:

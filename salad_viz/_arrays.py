@@ -18,7 +18,8 @@ from salad_core.skeleton import Skeleton
 
 log = logging.getLogger(__name__)
 
-__all__ = ["to_numpy", "as_joints", "as_joints_list", "check_frame", "check_size", "atomic_output"]
+__all__ = ["to_numpy", "as_joints", "as_joints_list", "check_frame", "check_size", "check_frames_memory",
+           "atomic_output", "MAX_SIZE"]
 
 # Joint extents above this many "metres" almost surely mean millimetres (KIT files).
 _MAX_PLAUSIBLE_EXTENT_M = 50.0
@@ -28,6 +29,9 @@ def to_numpy(x, name: str) -> np.ndarray:
     """A float64 copy of an array-like (numpy array, list, or torch tensor on any device)."""
     if hasattr(x, "detach") and hasattr(x, "cpu"):  # torch tensor, without importing torch
         x = x.detach().cpu().numpy()
+    kind = getattr(getattr(x, "dtype", None), "kind", None)
+    if kind is not None and kind not in "iuf":        # complex parts would be dropped, strings parsed
+        raise TypeError(f"{name} must hold real numbers, got dtype {x.dtype}")
     try:
         arr = np.array(x, dtype=np.float64, copy=True)
     except (TypeError, ValueError) as exc:
@@ -88,15 +92,38 @@ def check_frame(frame: int, n_frames: int, name: str = "frame") -> int:
     return int(frame) % n_frames
 
 
+#: Largest image side in pixels. VTK renders at twice the size (anti-aliasing); at 100000 pixels it
+#: aborted the process ("Frame buffer object was not initialized correctly") and at 20000 it grew to
+#: 24 GB, so sizes are checked before anything is created.
+MAX_SIZE = 4096
+
+#: Largest memory, in bytes, the frames of one animation may take (checked before rendering).
+MAX_ANIMATION_BYTES = 2 * 1024 ** 3
+
+
 def check_size(size: Sequence[int], name: str = "size") -> tuple[int, int]:
-    """``(width, height)`` in pixels, both >= 8."""
+    """``(width, height)`` in pixels, both in ``8..MAX_SIZE``."""
+    if isinstance(size, (str, bytes)):
+        raise ValueError(f"{name} must be (width, height) in pixels, got {size!r}")
     try:
-        w, h = (int(v) for v in size)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be (width, height) in pixels, got {size!r}") from None
-    if w < 8 or h < 8:
-        raise ValueError(f"{name} must be at least 8x8 pixels, got {size!r}")
+        w, h = size
+        if any(isinstance(v, bool) or float(v) != int(v) for v in (w, h)):
+            raise ValueError
+        w, h = int(w), int(h)
+    except (TypeError, ValueError, OverflowError):
+        raise ValueError(f"{name} must be (width, height) in whole pixels, got {size!r}") from None
+    if not (8 <= w <= MAX_SIZE and 8 <= h <= MAX_SIZE):
+        raise ValueError(f"{name} must be at least 8x8 and at most {MAX_SIZE}x{MAX_SIZE} pixels, got {size!r}")
     return w, h
+
+
+def check_frames_memory(n_frames: int, width: int, height: int, name: str = "animation") -> None:
+    """Refuse ``n_frames`` RGB frames of ``width x height`` beyond :data:`MAX_ANIMATION_BYTES`."""
+    need = int(n_frames) * int(width) * int(height) * 3
+    if need > MAX_ANIMATION_BYTES:
+        raise ValueError(f"the {name} would need {need / 1024 ** 3:.1f} GiB for {n_frames} frames of {width}x{height} "
+                         f"pixels (at most {MAX_ANIMATION_BYTES / 1024 ** 3:g} GiB); use a smaller size or a larger "
+                         "stride")
 
 
 @contextmanager

@@ -14,8 +14,9 @@ import numpy as np
 
 from salad_core.skeleton import Skeleton, get_skeleton
 
-from ._arrays import as_joints_list, atomic_output, check_size
-from ._style import THEME_HUES
+from ._arrays import as_joints_list, atomic_output, check_frames_memory, check_size
+from ._style import _SIDE_COLORS, THEME_HUES
+from .camera import fixed_camera, follow_camera, shared_follow_framing
 from .raster import hstack_images
 from .render import SkeletonRenderer
 
@@ -48,6 +49,7 @@ def render_frames(
     trajectory: bool = True,
     backend: str = "auto",
     bone_shape: str = "capsule",
+    side_legend: bool = True,
 ) -> np.ndarray:
     """Render every frame of one or several motions.
 
@@ -58,9 +60,12 @@ def render_frames(
     skeleton : str or Skeleton
     layout : {"side", "overlay"}
         ``"side"``: one panel per motion, side by side, each with its own following camera and its
-        chain colours. ``"overlay"``: all motions in one scene, one colour theme each.
+        chain colours, all drawn at one scale (the same camera distance and height, so figures
+        of the same size look the same size). ``"overlay"``: all motions in one scene, one colour
+        theme each.
     titles : sequence of str, optional
-        One per motion: panel titles (``"side"``) or a legend in the theme colours (``"overlay"``).
+        One per motion: panel titles (``"side"``) or a legend in the theme colours (``"overlay"``);
+        long titles wrap onto several lines.
     size : (width, height)
         Size of one panel in pixels.
     frames : sequence of int, optional
@@ -68,6 +73,10 @@ def render_frames(
     view, elevation, follow, colors, joint_colors, floor, trajectory, backend, bone_shape
         As in :func:`salad_viz.render.render_skeleton`; ``colors`` and ``joint_colors`` take one
         entry per motion.
+    side_legend : bool
+        Draw a "left"/"right" key in the chain colours (blue = left, red = right) in the bottom
+        corner, where the motions are drawn in those colours (no ``colors``/``joint_colors``,
+        not an overlay of several motions).
 
     Returns
     -------
@@ -84,9 +93,15 @@ def render_frames(
     idx = range(n) if frames is None else [int(f) for f in frames]
     if not len(idx):
         raise ValueError("frames is empty")
+    side = layout == "side" and len(motions) > 1
+    check_frames_memory(len(idx), w * (len(motions) if side else 1) + 4 * (len(motions) - 1) * side, h)
+    chain_coloured = colors is None and joint_colors is None and (side or len(motions) == 1)
     jc = joint_colors
     if jc is not None and not isinstance(jc, (list, tuple)):
         jc = [jc] + [None] * (len(motions) - 1) if len(motions) > 1 else jc
+    if side:
+        distance, height = shared_follow_framing(motions, aspect=w / h)
+        shared_fixed = None if follow else fixed_camera(motions, view=view, elevation=elevation, aspect=w / h)
     out = []
     with SkeletonRenderer(skel, size=(w, h), backend=backend, bone_shape=bone_shape) as r:
         for f in idx:
@@ -98,7 +113,11 @@ def render_frames(
             else:
                 panels = []
                 for k, m in enumerate(motions):
-                    panel = r.render(m, min(f, len(m) - 1), view=view, elevation=elevation, follow=follow,
+                    fk = min(f, len(m) - 1)
+                    # one scale for every panel: the same distance and focal height
+                    cam = (follow_camera([m], fk, view=view, elevation=elevation, aspect=w / h, distance=distance,
+                                         height=height) if follow else shared_fixed)
+                    panel = r.render(m, fk, camera=cam, view=view, elevation=elevation, follow=follow,
                                      colors=None if colors is None else [colors[k]],
                                      joint_colors=None if jc is None else jc[k], floor=floor,
                                      trajectory=trajectory)
@@ -106,26 +125,71 @@ def render_frames(
                         panel = _legend(panel, [titles[k]], themed=False)
                     panels.append(panel)
                 img = hstack_images(panels, gap=4)
+            if side_legend and chain_coloured:
+                img = _side_key(img)
             out.append(img)
     return np.stack(out)
 
 
-def _legend(img: np.ndarray, titles: Sequence[str], *, themed: bool) -> np.ndarray:
-    from PIL import Image, ImageDraw, ImageFont
+def _font(h: int):
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=max(10, min(20, h // 16)))
+    except TypeError:
+        return ImageFont.load_default()
+
+
+def _wrap(draw, text: str, font, width: float, max_lines: int = 3) -> list[str]:
+    """Greedy word wrap of ``text`` to ``width`` pixels; more than ``max_lines`` lines end in "..."."""
+    lines: list[str] = []
+    for word in str(text).split():
+        if lines and draw.textlength(lines[-1] + " " + word, font=font) <= width:
+            lines[-1] += " " + word
+        else:
+            lines.append(word)
+    if len(lines) > max_lines:
+        lines = lines[:max_lines]
+        last = lines[-1]
+        while last and draw.textlength(last + " ...", font=font) > width:
+            last = last[:-1]
+        lines[-1] = last.rstrip() + " ..."
+    return lines or [""]
+
+
+def _side_key(img: np.ndarray) -> np.ndarray:
+    """A "left" (blue) / "right" (red) key of the chain colours in the bottom-left corner."""
+    from PIL import Image, ImageDraw
 
     h = img.shape[0]
-    try:
-        font = ImageFont.load_default(size=max(10, min(20, h // 16)))
-    except TypeError:
-        font = ImageFont.load_default()
+    font = _font(min(h, 240))
+    pil = Image.fromarray(np.ascontiguousarray(img))
+    draw = ImageDraw.Draw(pil)
+    x, y = 6, h - 6
+    for text, side in (("left", "left"), ("right", "right")):
+        col = tuple(int(round(c * 255)) for c in _SIDE_COLORS[side][0])
+        box = draw.textbbox((x, 0), text, font=font)
+        draw.text((x, y - (box[3] - box[1]) - box[1]), text, fill=col, font=font, stroke_width=2,
+                  stroke_fill=(255, 255, 255))
+        x = box[2] + 8
+    return np.asarray(pil).copy()
+
+
+def _legend(img: np.ndarray, titles: Sequence[str], *, themed: bool) -> np.ndarray:
+    """Titles in the top-left corner, each wrapped to the image width (at most 3 lines)."""
+    from PIL import Image, ImageDraw
+
+    h, w = img.shape[:2]
+    font = _font(h)
     pil = Image.fromarray(np.ascontiguousarray(img))
     draw = ImageDraw.Draw(pil)
     y = 4
     for k, text in enumerate(titles):
-        col = _theme_text_color(k) if themed else (0.1, 0.1, 0.1)
-        draw.text((6, y), str(text), fill=tuple(int(round(c * 255)) for c in col), font=font)
-        box = draw.textbbox((6, y), str(text), font=font)
-        y = box[3] + 3
+        col = tuple(int(round(c * 255)) for c in (_theme_text_color(k) if themed else (0.1, 0.1, 0.1)))
+        for line in _wrap(draw, str(text), font, w - 12):
+            draw.text((6, y), line, fill=col, font=font, stroke_width=2, stroke_fill=(255, 255, 255))
+            y = draw.textbbox((6, y), line or " ", font=font)[3] + 2
+        y += 1
     return np.asarray(pil).copy()
 
 
@@ -141,8 +205,8 @@ def write_video(frames, path: str | os.PathLike, fps: float = 20.0, *, loop: boo
     arr = np.asarray(frames)
     if arr.ndim != 4 or arr.shape[-1] != 3 or arr.dtype != np.uint8:
         raise ValueError(f"frames must be (T, H, W, 3) uint8, got {arr.shape} {arr.dtype}")
-    if fps <= 0:
-        raise ValueError(f"fps must be positive, got {fps}")
+    if not np.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps must be a positive finite number, got {fps}")
     with atomic_output(path) as tmp:
         if suffix == ".gif":
             import imageio.v3 as iio
@@ -185,6 +249,7 @@ def animate(
     trajectory: bool = True,
     backend: str = "auto",
     bone_shape: str = "capsule",
+    side_legend: bool = True,
 ) -> Path:
     """Animate one or several motions to a GIF or MP4 file.
 
@@ -206,7 +271,7 @@ def animate(
         One panel, in pixels.
     stride : int
         Render every ``stride``-th frame (smaller files, faster).
-    view, elevation, follow, colors, joint_colors, floor, trajectory, backend, bone_shape
+    view, elevation, follow, colors, joint_colors, floor, trajectory, backend, bone_shape, side_legend
         As in :func:`render_frames`.
 
     Returns
@@ -218,12 +283,16 @@ def animate(
         raise ValueError(f"path must end in one of {_FORMATS}, got {Path(path).name!r}")
     if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1:
         raise ValueError(f"stride must be a positive int, got {stride!r}")
+    check_size(size)                     # before anything is created (a huge size can abort VTK)
+    if fps is not None and not (isinstance(fps, (int, float, np.integer, np.floating)) and not isinstance(fps, bool)
+                                and np.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be a positive finite number of frames per second, got {fps!r}")
     motions = as_joints_list(joints, skel)
     n = max(len(m) for m in motions)
     frames = render_frames(motions, skel, layout=layout, titles=titles, size=size, frames=range(0, n, stride),
                            view=view, elevation=elevation, follow=follow, colors=colors,
                            joint_colors=joint_colors, floor=floor, trajectory=trajectory, backend=backend,
-                           bone_shape=bone_shape)
+                           bone_shape=bone_shape, side_legend=side_legend)
     rate = (skel.fps if fps is None else float(fps)) / stride
     return write_video(frames, path, rate)
 

@@ -487,7 +487,8 @@ def plot_word_attention(maps, word: str | None = None, *, ax=None, skeleton: str
     im = _draw_map(ax, shown[0], fpl=fpl, cmap=cmap, vmin=vmin, vmax=vmax, title=word,
                    part_labels=part_labels, fps=fps, frame=frame)
     if colorbar:
-        fig.colorbar(im, ax=ax, fraction=0.05, pad=0.02)
+        cb = fig.colorbar(im, ax=ax, fraction=0.05, pad=0.02)
+        cb.set_label(colorbar_label(normalize))
     return fig
 
 
@@ -510,10 +511,36 @@ def _grid(maps: np.ndarray, titles: Sequence[str], *, ncols, fpl, cmap, normaliz
         im = _draw_map(ax, shown[i], fpl=fpl, cmap=cmap, vmin=vmin, vmax=vmax, title=titles[i],
                        part_labels=(i % ncols == 0), fps=fps, xlabel=(i + ncols >= k))
     if suptitle:
-        fig.suptitle(suptitle)
+        fig.suptitle(_wrap_title(suptitle, panel_size[0] * ncols + 1.2))
     if colorbar and im is not None:
-        fig.colorbar(im, ax=axs, fraction=0.03, pad=0.01, shrink=0.9)
+        cb = fig.colorbar(im, ax=axs, fraction=0.03, pad=0.01, shrink=0.9)
+        cb.set_label(colorbar_label(normalize))
     return fig
+
+
+def colorbar_label(normalize) -> str:
+    """What the colours of a heatmap mean under ``normalize`` (the colour bar's label)."""
+    if normalize in (True, "each"):
+        return "attention / its panel's maximum"
+    if normalize == "shared":
+        return "attention / maximum over all panels"
+    return "attention weight (softmax probability)"
+
+
+def _wrap_title(text: str, width_inches: float, points: float = 12.0) -> str:
+    """Wrap a figure title to about ``width_inches`` (a character is about 0.55 em wide)."""
+    import textwrap
+
+    chars = max(20, int(width_inches * 72 / (0.55 * points)))
+    return "\n".join(textwrap.wrap(str(text), chars)) or str(text)
+
+
+def _distinct_labels(labels: Sequence[str], index: Sequence[str]) -> list[str]:
+    """Labels that occur more than once get their word index, e.g. ``forward [3]`` and ``forward [7]``."""
+    counts: dict[str, int] = {}
+    for lab in labels:
+        counts[lab] = counts.get(lab, 0) + 1
+    return [f"{lab} [{i}]" if counts[lab] > 1 else lab for lab, i in zip(labels, index)]
 
 
 def plot_attention_grid(attention, tokens: Sequence[str], word_ids=None, *, ncols: int | None = None,
@@ -542,7 +569,11 @@ def plot_attention_grid(attention, tokens: Sequence[str], word_ids=None, *, ncol
     panel_size : (width, height)
         Inches per panel.
     colorbar : bool
-        One shared colorbar.
+        One shared colorbar, labelled with what the colours mean (with ``"each"``: every panel is
+        divided by its own maximum, so colours compare within a panel, not across panels).
+
+    Panels of a word that occurs more than once are labelled with its index (``forward [3]``: the
+    word index for ``word_ids=None`` and for integer ids, else the panel's position).
 
     Returns
     -------
@@ -550,6 +581,12 @@ def plot_attention_grid(attention, tokens: Sequence[str], word_ids=None, *, ncol
     """
     get_skeleton(skeleton)
     maps, labels = select_words(attention, tokens, word_ids)
+    if word_ids is None:
+        index = [str(k) for k in range(len(labels))]
+    else:
+        ids = [word_ids] if isinstance(word_ids, (str, int, np.integer)) else list(word_ids)
+        index = [str(w) if isinstance(w, (int, np.integer)) else str(k) for k, w in enumerate(ids)]
+    labels = _distinct_labels(labels, index)
     return _grid(maps, labels, ncols=ncols, fpl=_check_fpl(frames_per_latent), cmap=cmap, normalize=normalize,
                  suptitle=prompt, panel_size=panel_size, colorbar=colorbar, fps=fps)
 
@@ -725,7 +762,8 @@ def _comparison_figure(rows, labels, diff_label, *, fpl, cmap, diff_cmap, normal
             im = _draw_map(ax, m, fpl=fpl, cmap=cmap, vmin=0.0, vmax=vmax, title=f"{title}: {word}",
                            part_labels=(c == 0), xlabel=last)
         if im is not None:
-            fig.colorbar(im, ax=axs[r][:2], fraction=0.03, pad=0.01)
+            cb = fig.colorbar(im, ax=axs[r][:2], fraction=0.03, pad=0.01)
+            cb.set_label("attention / row max" if normalize in (True, "each", "shared") else "attention weight")
         ax = axs[r][2]
         if np.isnan(d_s).all():
             ax.text(0.5, 0.5, "no difference (word absent)", ha="center", va="center", transform=ax.transAxes)
@@ -734,7 +772,7 @@ def _comparison_figure(rows, labels, diff_label, *, fpl, cmap, diff_cmap, normal
         lim = float(np.nanmax(np.abs(d_s))) or 1.0
         imd = _draw_map(ax, d_s, fpl=fpl, cmap=diff_cmap, vmin=-lim, vmax=lim, title=diff_label,
                         part_labels=False, xlabel=last)
-        fig.colorbar(imd, ax=ax, fraction=0.05, pad=0.01)
+        fig.colorbar(imd, ax=ax, fraction=0.05, pad=0.01).set_label("difference")
     if suptitle:
         fig.suptitle(suptitle)
     return fig
@@ -853,7 +891,7 @@ def plot_joint_attention(joints, skeleton: str | Skeleton, maps, word: str | Non
     im = _draw_map(ax_map, shown[0], fpl=fpl, cmap=cmap, vmin=vmin, vmax=vmax, title=None, part_labels=True)
     for i in idx:
         ax_map.axvline(int(i) + 0.5, color="white", lw=1.2)
-    fig.colorbar(im, ax=ax_map, fraction=0.04, pad=0.01)
+    fig.colorbar(im, ax=ax_map, fraction=0.04, pad=0.01).set_label(colorbar_label("each"))
     if word:
         fig.suptitle(f"attention to {word!r}")
     return fig

@@ -16,7 +16,8 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["Camera", "VIEWS", "follow_camera", "fixed_camera", "project_points", "view_direction"]
+__all__ = ["Camera", "VIEWS", "follow_camera", "fixed_camera", "shared_follow_framing", "project_points",
+           "view_direction"]
 
 #: Camera azimuth (degrees, from +Z towards +X) and default elevation of each named view.
 VIEWS: dict[str, tuple[float, float]] = {
@@ -103,6 +104,7 @@ def follow_camera(
     aspect: float = 4.0 / 3.0,
     distance: float | None = None,
     smooth: int = 4,
+    height: float | None = None,
 ) -> Camera:
     """A camera that tracks the (smoothed) root of the motions at ``frame``.
 
@@ -122,19 +124,35 @@ def follow_camera(
         Camera distance in metres; by default fitted to the body height and the spread of roots.
     smooth : int
         Half-width in frames of the moving average applied to the root before following it.
+    height : float, optional
+        Height of the focal point in metres; by default the middle of the motions' vertical extent.
+        Side-by-side panels pass one ``distance`` and ``height`` so all are drawn at one scale.
     """
     roots = np.stack([_smoothed_root(m, smooth)[min(frame, len(m) - 1)] for m in joints])
     all_y = np.concatenate([m[..., 1].ravel() for m in joints])
     top = float(np.percentile(np.concatenate([m[..., 1].max(axis=1) for m in joints]), 95))
     bottom = min(0.0, float(all_y.min()))
     centre = roots.mean(axis=0)
-    centre[1] = 0.5 * (top + bottom)
+    centre[1] = 0.5 * (top + bottom) if height is None else float(height)
     if distance is None:
         spread = float(np.linalg.norm(roots - centre, axis=1).max()) if len(roots) > 1 else 0.0
         radius = 0.5 * (top - bottom) * 1.12 + spread + 0.15  # room for limbs reaching out
         distance = _fit_distance(radius, view_angle, aspect)
     eye = centre + distance * view_direction(view, elevation)
     return Camera(tuple(eye), tuple(centre), (0.0, 1.0, 0.0), view_angle)
+
+
+def shared_follow_framing(motions: Sequence[np.ndarray], *, view_angle: float = 30.0,
+                          aspect: float = 4.0 / 3.0) -> tuple[float, float]:
+    """``(distance, height)`` in metres at which :func:`follow_camera` frames each motion alone and
+    all at one scale: the distance the tallest motion needs, the focal height of their joint extent.
+
+    Used for side-by-side panels, so that figures of the same size look the same size.
+    """
+    tops = [float(np.percentile(m[..., 1].max(axis=1), 95)) for m in motions]
+    bottoms = [min(0.0, float(m[..., 1].min())) for m in motions]
+    radius = max(0.5 * (t - b) * 1.12 + 0.15 for t, b in zip(tops, bottoms))
+    return _fit_distance(radius, view_angle, aspect), 0.5 * (max(tops) + min(bottoms))
 
 
 def fixed_camera(

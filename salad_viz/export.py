@@ -159,6 +159,13 @@ def export_bvh(joints, skeleton: str | Skeleton, path: str | os.PathLike, fps: f
     """
     skel = get_skeleton(skeleton)
     motion = as_joints(joints, skel)
+    if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating))
+                            or not np.isfinite(fps) or fps <= 0):
+        raise ValueError(f"fps must be a positive finite number of frames per second, got {fps!r}")
+    if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)) or \
+            not np.isfinite(scale) or scale <= 0:
+        raise ValueError(f"scale must be a positive finite number (1 = metres), got {scale!r}")
+    _check_bones(motion, skel)
     solved = solve_rotations(motion, skel, lengths=lengths)
     err = fk_error(solved, motion)
     if err > _FK_WARN_M:
@@ -168,6 +175,23 @@ def export_bvh(joints, skeleton: str | Skeleton, path: str | os.PathLike, fps: f
     with atomic_output(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)
+
+
+#: Bones shorter than this (metres, median over the motion) have no direction to solve a rotation from.
+_MIN_BONE_M = 1e-6
+
+
+def _check_bones(motion: np.ndarray, skel: Skeleton) -> None:
+    """Refuse motions with zero-length bones (e.g. all-zero joints), whose rotations are undefined."""
+    names = _names(skel)
+    short = []
+    for j, p in enumerate(skel.parents):
+        if p >= 0 and float(np.median(np.linalg.norm(motion[:, j] - motion[:, p], axis=-1))) < _MIN_BONE_M:
+            short.append(f"{names[p]}->{names[j]}")
+    if short:
+        listed = ", ".join(short[:4]) + (f" and {len(short) - 4} more" if len(short) > 4 else "")
+        raise ValueError(f"joints: {len(short)} bone(s) have zero length ({listed}); a BVH needs a skeleton pose "
+                         "(are these joints all zero or collapsed onto one point?)")
 
 
 def export_glb(joints, skeleton: str | Skeleton, path: str | os.PathLike, frame: int = 0, *, colors=None,

@@ -10,6 +10,7 @@ warning of the encoders (test_text), disk full during a checkpoint and SIGINT-th
 from __future__ import annotations
 
 import json
+import re
 import os
 import shutil
 import subprocess
@@ -60,23 +61,29 @@ def test_non_text_prompts_are_refused_by_generate_edit_and_invert(tiny_pipe, sam
         tiny_pipe.edit("a person walks", target=prompts, edits=[Mirror()], lengths=8, num_steps=1)
 
 
-def test_prompt_over_the_encoder_limit_warns_naming_the_dropped_words(tiny_weights, tmp_path):
-    """MiniLM keeps 512 tokens: the CLI generates from the kept part and the warning names the rest."""
+def test_prompt_over_the_encoder_limit_warns_naming_the_dropped_words(tiny_weights, tmp_path, capsys):
+    """MiniLM keeps 512 tokens: the CLI generates from the kept part and the warning (one line, no
+    source line) names the rest."""
     prompt = "a person walks " * 200 + "and finally jumps"
     out = tmp_path / "long"
-    with pytest.warns(UserWarning, match=r"over the minilm limit of 512.*dropping the words: .*and finally jumps"):
-        code = cli.main(["-q", "generate", prompt, "--length", "16", "--steps", "1", "--weights", str(tiny_weights),
-                         "--out", str(out), "--no-render", "--no-attention"])
+    code = cli.main(["-q", "generate", prompt, "--length", "16", "--steps", "1", "--weights", str(tiny_weights),
+                     "--out", str(out), "--no-render", "--no-attention"])
     assert code == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("salad generate: warning: ")
+    assert re.search(r"over the minilm limit of 512.*dropping the words: .*and finally jumps", err[0])
     (features,) = out.glob("*_features.npy")
     assert np.load(features).shape == (16, 263)
+    # the file name is cut at a word boundary
+    assert features.name == "00_a_person_walks_a_person_walks_a_person_features.npy"
 
 
-def test_length_not_a_multiple_of_4_is_floored_with_a_warning(tiny_weights, tmp_path):
+def test_length_not_a_multiple_of_4_is_floored_with_one_note(tiny_weights, tmp_path, capsys):
     out = tmp_path / "len"
-    with pytest.warns(UserWarning, match=r"length 0 \(42 frames\) is not a multiple of 4; using 40"):
-        code = cli.main(["-q", "generate", "a person walks", "--length", "42", "--steps", "1", "--weights",
-                         str(tiny_weights), "--out", str(out), "--no-render", "--no-attention"])
+    code = cli.main(["-q", "generate", "a person walks", "--length", "42", "--steps", "1", "--weights",
+                     str(tiny_weights), "--out", str(out), "--no-render", "--no-attention"])
+    assert capsys.readouterr().err.strip() == ("salad generate: note: --length 42 is not a multiple of 4; "
+                                               "generating 40 frames")
     assert code == 0 and np.load(out / "00_a_person_walks_features.npy").shape == (40, 263)
 
 

@@ -258,6 +258,13 @@ def invert_latents(denoiser: Denoiser, scheduler, latents: torch.Tensor, cond: T
                             if res < best_res:
                                 best, best_res, best_pred = z_b, res, pred
                         z_b = ((z_a - beta * pred) / alpha) * keep
+                    if best is None:      # every residual NaN/inf: the iteration left the finite numbers
+                        top = float(latents.abs().max())
+                        raise ValueError(
+                            f"the inversion diverged at step {s_count - i} of {s_count} (t={int(t)}): the fixed-point "
+                            f"iterate is not finite. The motion's latents reach |z| = {top:.3g} (the model's are of "
+                            "order 1), so the motion lies far outside what the model was trained on; check its "
+                            "units and scale (raw HumanML3D features, metres)")
                     traj[i] = best
                     residuals[i] = best_res
                     if exact:
