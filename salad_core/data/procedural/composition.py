@@ -9,7 +9,7 @@ interval and body parts are recorded as an :class:`Event`: the ground truth of t
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -230,6 +230,65 @@ def _alive(pose: Pose, persona: Persona, rng: np.random.Generator) -> None:
     pose.arm[:, :, 2] = np.maximum(pose.arm[:, :, 2] + noise[:, 10:12] * 0.025, 0.02)
 
 
+#: Body speed (m/s) above which a stretch of motion needs no extra liveliness (see :func:`_hold_mask`).
+HOLD_SPEED = 0.15
+#: Scale of the extra hold motion of the parts a head gesture does not drive, during it: a turn of
+#: the head is the slowest annotated motion, and the trunk and arms must not out-move it.
+_HEAD_EVENT_CALM = 0.5
+
+
+def _hold_mask(pose: Pose, body: BodyModel, calm: list[tuple[int, int]]) -> np.ndarray:
+    """``(N, 3)`` weights in [0, 1] (trunk, head, arms) of the extra motion of :func:`_lively_holds`.
+
+    It is near 1 where the body is held (mean joint speed well under :data:`HOLD_SPEED`) and
+    upright, 0 where it already moves or lies (a trunk that sways there could touch the floor),
+    smoothed over about 0.8 s so that it fades in and out. Inside the frame intervals ``calm``
+    (head gestures) the arms get none and the trunk :data:`_HEAD_EVENT_CALM` of it.
+    """
+    j = assemble(pose, body)
+    n = len(j)
+    sp = np.linalg.norm(np.diff(j, axis=0), axis=-1).mean(-1) * FPS
+    sp = np.concatenate([sp[:1], sp]) if n > 1 else np.zeros(n)
+    still = np.clip(1.0 - sp / HOLD_SPEED, 0.0, 1.0)
+    sp3 = body.j("spine3")
+    trunk = j[:, sp3] - j[:, 0]
+    upright = np.clip((trunk[:, 1] / np.maximum(np.linalg.norm(trunk, axis=-1), 1e-9) - 0.75) / 0.2, 0.0, 1.0)
+    k = 17
+    head = np.zeros(n)
+    for f0, f1 in calm:             # widened by half the smoothing so it is whole inside the interval
+        head[max(0, f0 - k // 2):max(0, f1 + k // 2)] = 1.0
+    ker = np.hanning(k + 2)[1:-1]
+    ker /= ker.sum()
+
+    def smooth(x):
+        return np.convolve(np.pad(x, k // 2, mode="edge"), ker, mode="valid")
+
+    w = np.clip(smooth(still * upright), 0.0, 1.0)
+    head = np.clip(smooth(head), 0.0, 1.0)
+    # (trunk, head, arms): during a head gesture the arms stay put and the trunk nearly so
+    return np.stack([w * (1.0 - (1.0 - _HEAD_EVENT_CALM) * head), w, w * (1.0 - head)], 1)
+
+
+def _lively_holds(pose: Pose, weight: np.ndarray, persona: Persona, rng: np.random.Generator) -> None:
+    """Add a slow sway of the trunk, head and arms where ``weight`` ``(N, 3)`` (trunk, head, arms)
+    says the body is held.
+
+    Real performers are never still between and inside actions (the real sample has 3 % of its
+    frames under 5 cm/s): the trunk rocks and twists a little, the arms drift and the head moves.
+    The feet and the pelvis position are untouched, so contact and reach are unchanged.
+    """
+    n = pose.num_frames
+    live = np.sqrt(persona.liveliness) * weight     # a calm performer still sways (0: frozen)
+    # amplitudes (rad, std at liveliness 1): enough to lift a held body over 5 cm/s mean joint speed
+    noise = _wander(n, rng, 9, period=(1.0, 2.6))
+    pose.spine += noise[:, 0:3] * live[:, 0:1] * np.array([0.10, 0.08, 0.06])
+    pose.neck += (noise[:, 3:5] * live[:, 1:2]) @ np.array([[0.12, 0.0, 0.0], [0.0, 0.07, 0.0]])
+    arm = noise[:, 5:9] * live[:, 2:3]
+    pose.arm[:, :, 0] += arm[:, 0:2] * 0.12
+    pose.arm[:, :, 1] += arm[:, 2:4] * 0.05
+    pose.arm[:, :, 2] = np.maximum(pose.arm[:, :, 2] + arm[:, 0:2] * 0.12, 0.02)
+
+
 def _anchor(joints: np.ndarray, body: BodyModel) -> np.ndarray:
     """``joints`` moved so that frame 0's pelvis is over the origin and frame 0 faces +Z, with
     the facing HumanML3D's processing measures (hips and shoulders), as clips always started."""
@@ -296,7 +355,10 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
                 events[("layer", i)] = ((g_at, g_at + g.num_frames), g.info)
         else:
             g = build_gesture(main, persona, body, rng)
-            seg = _idle(stance, persona, g.num_frames + 2, body, rng)
+            # under a turn of the head (the slowest annotated motion) the weight shifts are calmer
+            heady = main.spec.category == "head" or (step.layer is not None and step.layer.spec.category == "head")
+            calm = replace(persona, sway=0.4 * persona.sway) if heady else persona
+            seg = _idle(stance, calm, g.num_frames + 2, body, rng)
             at = append(seg, (1, 1 + g.num_frames))
             placed.append((at + 1, g))
             events[("main", i)] = ((at + 1, at + 1 + g.num_frames), g.info)
@@ -328,6 +390,8 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
     for at, g in placed:
         _blend(pose, g, at)
     _alive(pose, persona, rng)
+    calm = [events[(role, i)][0] for role, i, a in plan.actions() if a.spec.category == "head"]
+    _lively_holds(pose, _hold_mask(pose, body, calm), persona, rng)
     joints = _anchor(assemble(pose, body)[s0:stop], body)
 
     out: list[Event] = []

@@ -337,6 +337,9 @@ def gait_style(kind: str, rng: np.random.Generator, mods: tuple[str, ...] = (), 
     if kind in ("walk", "circle"):
         speed = [u(0.5, 0.72), u(1.05, 1.4), u(1.65, 1.95)][pace + 1]
         cadence = [u(1.3, 1.5), u(1.7, 1.9), u(2.0, 2.2)][pace + 1] * tempo
+        # a slow-tempo performer walking fast must not take 1 m steps: the trailing leg cannot
+        # reach its toe-off (the ankle's range clamps the foot and the planted toe slides)
+        speed = min(speed, 0.85 * cadence)
         st = GaitStyle(speed=speed, cadence=cadence, duty=[0.64, 0.61, 0.58][pace + 1],
                        swing=Swing(u(0.06, 0.1), u(0.4, 0.5), u(0.05, 0.2)), roll_in=u(0.2, 0.32),
                        roll_out=-u(0.45, 0.65), width=u(0.07, 0.1), bob=u(0.012, 0.022), drop=u(0.0, 0.02),
