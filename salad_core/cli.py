@@ -253,8 +253,12 @@ def _check_sampling_args(args: argparse.Namespace, n_prompts: int, *, length: bo
             raise UserError(f"--guidance {w:g} is out of range; allowed: -{MAX_GUIDANCE:g}..{MAX_GUIDANCE:g} "
                             "(the papers use 1-10, default 7.5; larger weights make the sampler diverge)")
         if w < 0:
+            import warnings
+
             _note(args, f"--guidance {w:g} is negative: the motion is steered away from the prompt "
                         "(1 = no guidance, 7.5 = the paper's)", kind="warning")
+            # said once, here; the pipeline's own warning would repeat it (restored after the command)
+            warnings.filterwarnings("ignore", message=r"guidance_scale=\S+ is negative")
 
 
 def _note(args: argparse.Namespace, text: str, kind: str = "note") -> None:
@@ -440,7 +444,7 @@ def _load_motion_array(motion: str, skeleton: str):
     """``(skeleton, array, path)``: a validated features ``(N, D)`` or joints ``(N, J, 3)`` .npy."""
     import numpy as np
 
-    from salad_core.motion import check_features
+    from salad_core.motion import MAX_FEATURE_MAGNITUDE, check_features
     from salad_core.skeleton import get_skeleton
 
     try:
@@ -461,6 +465,10 @@ def _load_motion_array(motion: str, skeleton: str):
             check_features(arr, sk, name=str(path))
         except ValueError as exc:
             raise UserError(str(exc)) from None
+        top = float(np.abs(arr).max(initial=0.0))
+        if top > MAX_FEATURE_MAGNITUDE:
+            raise UserError(f"{path} reaches |value| = {top:.3g}, beyond {MAX_FEATURE_MAGNITUDE:g}: not HumanML3D "
+                            "features (metres, radians, metres per frame; of order 1); check its units")
         return sk, arr.astype(np.float32, copy=False), path
     if arr.ndim == 3 and arr.shape[1:] == (sk.num_joints, 3):
         if not np.isfinite(arr).all():
@@ -601,6 +609,12 @@ def _motion_input(args: argparse.Namespace, check_length: bool = True):
     if loaded.bvh is not None:
         print(loaded.bvh.summary())
     features = loaded.features
+    from salad_core.motion import MAX_FEATURE_MAGNITUDE
+
+    top = float(abs(features).max(initial=0.0))
+    if top > MAX_FEATURE_MAGNITUDE:      # before any weights load; the inversion would diverge
+        raise UserError(f"{path} reaches |value| = {top:.3g}, beyond {MAX_FEATURE_MAGNITUDE:g}: not HumanML3D "
+                        "features (metres, radians, metres per frame; of order 1); check its units")
     if args.crop is not None:
         a, b = _parse_crop(args.crop)
         i, j = int(round(a * sk.fps)), (len(features) if b is None else int(round(b * sk.fps)))

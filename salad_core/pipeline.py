@@ -36,7 +36,7 @@ from salad_core.io import (CheckpointError, atomic_write_text, config_from_dict,
                            load_tensors, save_checkpoint, save_tensors)
 from salad_core.models.denoiser import Denoiser
 from salad_core.models.vae import MotionVAE
-from salad_core.motion import denormalize, features_to_joints, normalize
+from salad_core.motion import MAX_FEATURE_MAGNITUDE, denormalize, features_to_joints, normalize
 from salad_core.sampling import DiffusionConfig, Guidance, denoise, make_scheduler
 from salad_core.skeleton import Skeleton
 from salad_core.text import TextBatch, load_text_encoder
@@ -874,6 +874,10 @@ def _motion_list(motions: Any, skeleton: Skeleton) -> list[np.ndarray]:
             raise ValueError(f"motion {i} must be ({'N'}, {d}) raw {skeleton.name} features, got shape {m.shape}")
         if not np.isfinite(m).all():
             raise ValueError(f"motion {i} contains NaN or infinite values")
+        top = float(np.abs(m).max(initial=0.0))
+        if top > MAX_FEATURE_MAGNITUDE:
+            raise ValueError(f"motion {i} reaches |value| = {top:.3g}, beyond {MAX_FEATURE_MAGNITUDE:g}: not raw "
+                             f"{skeleton.name} features (metres, radians, metres per frame; of order 1)")
         n = m.shape[0] - m.shape[0] % unit
         if n < unit or n > max_len:
             raise ValueError(f"motion {i} has {m.shape[0]} frames; allowed: {unit}..{max_len} "

@@ -351,3 +351,28 @@ def test_bench_refuses_to_overwrite_its_table(tmp_path, capsys):
     table.write_text("old")
     assert cli.main(["bench", "--quick", "--out", str(table)]) == 2
     assert "--force" in _one_line_error(capsys) and table.read_text() == "old"
+
+
+def test_quiet_silences_every_progress_bar(tiny_weights, tmp_path):
+    """-q: nothing on stderr from a clean run, not even transformers' "Loading weights" bar (a fresh
+    process, as a user runs it)."""
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-m", "salad_core.cli", "-q", "generate", "a person walks", "--length", "8",
+                          "--steps", "1", "--no-render", "--weights", str(tiny_weights), "--out", str(tmp_path / "q")],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    # the tiny random model's BVH may log a fit warning; no progress bar of any kind
+    assert "Loading weights" not in run.stderr + run.stdout and "it/s" not in run.stderr and "%|" not in run.stderr
+    assert (tmp_path / "q" / "00_a_person_walks_attention.png").is_file()
+
+
+def test_help_texts_name_every_option(capsys):
+    """Every option of the user-facing commands says what it does."""
+    parser = cli.build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    for name in ("demo", "generate", "edit", "invert", "import", "render", "export", "corpus"):
+        for action in sub.choices[name]._actions:
+            if action.option_strings and action.dest != "help":
+                assert action.help, f"salad {name} {action.option_strings[0]} has no help text"

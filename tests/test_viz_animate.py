@@ -119,3 +119,41 @@ def test_pyvista_backend_animation_matches_raster_frames(tmp_path, walk):
     for f in range(3):
         ref = rasterize_skeleton(walk[:3], SKEL, f, size=(64, 80))
         assert np.abs(frames[f].astype(int) - ref).mean() < 15
+
+
+def _colour_pixels(img: np.ndarray, rgb, tol: int = 40) -> int:
+    return int((np.abs(img.astype(int) - np.asarray(rgb) * 255).max(axis=-1) < tol).sum())
+
+
+def test_side_panels_share_one_scale_and_are_labelled(walk):
+    # the same pose in both panels, but the second motion jumps 0.6 m later on: framed on its own,
+    # its figure was drawn smaller; at one scale both panels show frame 0 identically
+    jumper = walk.copy()
+    jumper[6:, :, 1] += 0.6
+    frames = render_frames([walk, jumper], SKEL, size=(96, 96), frames=[0], backend="raster", side_legend=False)
+    left, right = frames[0][:, :96], frames[0][:, 100:]
+    assert np.abs(left.astype(int) - right.astype(int)).mean() < 0.5
+    titled = render_frames([walk, jumper], SKEL, size=(160, 160), frames=[0], backend="raster",
+                           titles=["source", "edited: a person jumps forward and then walks forward, waving"])
+    # a dark title in each panel's top rows; the long one wraps onto more rows than the short one
+    rows = lambda img: int(((img[:60] < 80).all(axis=-1)).any(axis=1).sum())      # noqa: E731
+    assert 0 < rows(titled[0][:, :160]) < rows(titled[0][:, 164:])
+
+
+def test_left_right_key_in_the_chain_colours(walk):
+    from salad_viz._style import _SIDE_COLORS
+
+    with_key = render_frames(walk, SKEL, size=(160, 160), frames=[0], backend="raster")[0]
+    without = render_frames(walk, SKEL, size=(160, 160), frames=[0], backend="raster", side_legend=False)[0]
+    corner = (slice(130, 160), slice(0, 80))
+    diff = np.abs(with_key.astype(int) - without.astype(int))
+    assert diff[corner].sum() > 0 and diff.sum() == diff[corner].sum()      # only the bottom-left corner
+    assert _colour_pixels(with_key[corner], _SIDE_COLORS["left"][0]) > _colour_pixels(without[corner],
+                                                                                      _SIDE_COLORS["left"][0])
+    assert _colour_pixels(with_key[corner], _SIDE_COLORS["right"][0]) > _colour_pixels(without[corner],
+                                                                                       _SIDE_COLORS["right"][0])
+    # an overlay of two motions uses theme colours, not the chain colours: no key
+    over = render_frames([walk, walk + 0.5], SKEL, layout="overlay", size=(160, 160), frames=[0], backend="raster")
+    over_nokey = render_frames([walk, walk + 0.5], SKEL, layout="overlay", size=(160, 160), frames=[0],
+                               backend="raster", side_legend=False)
+    assert np.array_equal(over, over_nokey)

@@ -265,3 +265,32 @@ def test_joint_attention_colors_use_heatmap_colormap():
     np.testing.assert_allclose(cols[9, knee], plt.get_cmap("viridis")(1.0)[:3])
     np.testing.assert_allclose(cols[9, 0], plt.get_cmap("viridis")(0.0)[:3])
     np.testing.assert_allclose(cols[2, knee], plt.get_cmap("viridis")(0.0)[:3])
+
+
+def test_colour_bar_says_what_the_colours_mean_and_repeated_words_are_indexed():
+    att = _attention()
+    fig = plot_attention_grid(att, TOKENS, [4, 8, 3])             # "forward" twice, then "jumps"
+    panels = [ax for ax in fig.axes if ax.images]
+    assert [ax.get_title() for ax in panels] == ["forward [4]", "forward [8]", "jumps"]
+    cbar = [ax for ax in fig.axes if not ax.images and ax.get_ylabel()]
+    assert [ax.get_ylabel() for ax in cbar] == ["attention / its panel's maximum"]
+    # every panel divided by its own maximum: each reaches 1
+    assert all(np.isclose(np.asarray(im.get_array()).max(), 1.0) for im in _image_of(fig))
+    plt.close(fig)
+    fig = plot_attention_grid(att, TOKENS, ["jumps", "walks"], normalize="shared")
+    assert [ax.get_ylabel() for ax in fig.axes if not ax.images and ax.get_ylabel()] == \
+        ["attention / maximum over all panels"]
+    assert sorted(np.asarray(im.get_array()).max() for im in _image_of(fig))[-1] == pytest.approx(1.0)
+    assert sorted(np.asarray(im.get_array()).max() for im in _image_of(fig))[0] < 0.999
+    plt.close(fig)
+    # every word: "forward" appears twice among the words and gets its word index
+    fig = plot_attention_grid(att, TOKENS)
+    titles = [ax.get_title() for ax in fig.axes if ax.images]
+    assert titles.count("forward [3]") == 1 and titles.count("forward [7]") == 1 and "forward" not in titles
+
+
+def test_long_prompt_titles_wrap():
+    prompt = "a man jumps forward and then walks forward, while waving his arms above his head and smiling " * 2
+    fig = plot_attention_grid(_attention(), TOKENS, ["jumps"], prompt=prompt)
+    lines = fig._suptitle.get_text().split("\n")
+    assert len(lines) >= 3 and " ".join(lines) == prompt.strip()
