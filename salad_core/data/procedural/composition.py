@@ -231,7 +231,7 @@ def _alive(pose: Pose, persona: Persona, rng: np.random.Generator) -> None:
 
 
 #: Body speed (m/s) above which a stretch of motion needs no extra liveliness (see :func:`_hold_mask`).
-HOLD_SPEED = 0.15
+HOLD_SPEED = 0.2
 #: Scale of the extra hold motion of the parts a head gesture does not drive, during it: a turn of
 #: the head is the slowest annotated motion, and the trunk and arms must not out-move it.
 _HEAD_EVENT_CALM = 0.5
@@ -242,7 +242,7 @@ def _hold_mask(pose: Pose, body: BodyModel, calm: list[tuple[int, int]]) -> np.n
 
     It is near 1 where the body is held (mean joint speed well under :data:`HOLD_SPEED`) and
     upright, 0 where it already moves or lies (a trunk that sways there could touch the floor),
-    smoothed over about 0.8 s so that it fades in and out. Inside the frame intervals ``calm``
+    smoothed over about 0.5 s so that it fades in and out. Inside the frame intervals ``calm``
     (head gestures) the arms get none and the trunk :data:`_HEAD_EVENT_CALM` of it.
     """
     j = assemble(pose, body)
@@ -253,7 +253,7 @@ def _hold_mask(pose: Pose, body: BodyModel, calm: list[tuple[int, int]]) -> np.n
     sp3 = body.j("spine3")
     trunk = j[:, sp3] - j[:, 0]
     upright = np.clip((trunk[:, 1] / np.maximum(np.linalg.norm(trunk, axis=-1), 1e-9) - 0.75) / 0.2, 0.0, 1.0)
-    k = 17
+    k = 11
     head = np.zeros(n)
     for f0, f1 in calm:             # widened by half the smoothing so it is whole inside the interval
         head[max(0, f0 - k // 2):max(0, f1 + k // 2)] = 1.0

@@ -69,17 +69,17 @@ class Persona:
         # ranges wide enough that posture and arm carriage differ visibly between performers
         # (generator 1.0 drew a near-identical stance: the corpus's pose std was 0.66x the real one)
         return Persona(
-            width=float(rng.uniform(0.07, 0.15)),
-            toe_out=float(rng.uniform(0.05, 0.4)),
-            arm_rest=(float(rng.uniform(-0.06, 0.22)), float(rng.uniform(0.06, 0.32)), float(rng.uniform(0.1, 0.8))),
+            width=float(rng.uniform(0.06, 0.18)),
+            toe_out=float(rng.uniform(0.0, 0.45)),
+            arm_rest=(float(rng.uniform(-0.1, 0.3)), float(rng.uniform(0.04, 0.4)), float(rng.uniform(0.1, 1.0))),
             arm_pole=(0.3, 0.0, -1.0),
             sway=float(rng.uniform(0.012, 0.03)),
-            head_pitch=float(rng.uniform(-0.12, 0.3)),
+            head_pitch=float(rng.uniform(-0.15, 0.35)),
             tempo=float(rng.uniform(0.85, 1.15)),
-            slouch=float(rng.uniform(-0.08, 0.25)),
-            tilt=float(rng.uniform(-0.06, 0.06)),
+            slouch=float(rng.uniform(-0.1, 0.32)),
+            tilt=float(rng.uniform(-0.09, 0.09)),
             liveliness=float(rng.uniform(0.6, 1.4)),
-            arm_asym=float(rng.uniform(-0.12, 0.12)),
+            arm_asym=float(rng.uniform(-0.18, 0.18)),
         )
 
 
