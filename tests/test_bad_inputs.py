@@ -304,3 +304,19 @@ def test_viz_refuses_collapsed_joints_nan_fps_and_oversize_frames(sample_dir, tm
     with pytest.raises(TypeError, match="must hold real numbers, got dtype complex128"):
         animate(joints.astype(complex), "humanml3d", tmp_path / "c.gif")
     assert list(tmp_path.iterdir()) == []                              # nothing was created
+
+
+def test_a_dataset_motion_that_is_really_a_text_file_is_named(features, tmp_path):
+    from salad_core.data.dataset import MotionTextDataset
+
+    root = tmp_path / "data"
+    (root / "new_joint_vecs").mkdir(parents=True)
+    (root / "texts").mkdir()
+    np.save(root / "new_joint_vecs" / "good.npy", features)
+    (root / "new_joint_vecs" / "bad.npy").write_text("0.1 0.2 0.3\n")
+    for name in ("good", "bad"):
+        (root / "texts" / f"{name}.txt").write_text("a person walks.#a/DET person/NOUN walk/VERB#0.0#0.0\n")
+    (root / "train.txt").write_text("good\nbad\n")
+    with pytest.raises(ValueError, match=r"bad.npy is not a .npy array \(a text, pickled") as err:
+        MotionTextDataset(root, normalize=False)
+    assert "allow_pickle" not in str(err.value)

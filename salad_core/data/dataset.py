@@ -172,7 +172,14 @@ def _load_motion(path: Path, sk: Skeleton) -> np.ndarray | str:
     """``(N, D)`` float32 features, or ``"nonfinite"``; wrong shape raises naming the file."""
     if not path.is_file():
         raise FileNotFoundError(f"split id {path.stem!r} has no motion file: looked for {path}")
-    arr = np.load(path, allow_pickle=False)
+    try:
+        arr = np.load(path, allow_pickle=False)     # never unpickle
+    except (ValueError, OSError, EOFError):
+        # numpy calls any file without the .npy header "pickled data" and suggests allow_pickle
+        raise ValueError(f"{path} is not a .npy array (a text, pickled, truncated or corrupt file); motion files "
+                         "hold float (N, D) features written by numpy.save") from None
+    if arr.dtype.kind not in "iuf":
+        raise ValueError(f"{path} holds {arr.dtype} values; motion files hold float (N, D) features")
     if arr.ndim != 2 or arr.shape[1] != sk.feature_dim:
         found = arr.shape[1] if arr.ndim == 2 else f"shape {arr.shape}"
         raise ValueError(f"{path}: expected width {sk.feature_dim} (skeleton {sk.name!r}, (N, D) array), found {found}")
