@@ -780,10 +780,37 @@ def cmd_eval(args: argparse.Namespace, rest: list[str]) -> int:
     return int(eval_main(rest) or 0)
 
 
+def _option_value(rest: list[str], flag: str) -> str | None:
+    """The value of ``flag`` (``--flag V`` or ``--flag=V``) among pass-through arguments."""
+    for i, item in enumerate(rest):
+        if item == flag and i + 1 < len(rest):
+            return rest[i + 1]
+        if item.startswith(flag + "="):
+            return item.split("=", 1)[1]
+    return None
+
+
 def cmd_train(args: argparse.Namespace, rest: list[str]) -> int:
+    import json
+
     from salad_core.train import main as train_main
 
-    return int(train_main(([args.what] if args.what else []) + rest) or 0)
+    try:
+        return int(train_main(([args.what] if args.what else []) + rest) or 0)
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        # the trainers' parser reads --config without naming it in the error: say which file and why
+        config = _option_value(rest, "--config")
+        try:
+            if config is None:
+                raise ValueError
+            json.loads(Path(config).read_text(encoding="utf-8"))
+        except (OSError, ValueError):        # the --config file is the culprit (JSONDecodeError is a ValueError)
+            what = (f"{exc.msg} at line {exc.lineno}, column {exc.colno}" if isinstance(exc, json.JSONDecodeError)
+                    else "it is not UTF-8 text")
+            if config is not None:
+                raise UserError(f"--config {config} is not a JSON document ({what}); see "
+                                "configs/default_vae.json for the format") from None
+        raise
 
 
 def cmd_bench(args: argparse.Namespace, rest: list[str]) -> int:

@@ -320,3 +320,13 @@ def test_a_dataset_motion_that_is_really_a_text_file_is_named(features, tmp_path
     with pytest.raises(ValueError, match=r"bad.npy is not a .npy array \(a text, pickled") as err:
         MotionTextDataset(root, normalize=False)
     assert "allow_pickle" not in str(err.value)
+
+
+def test_train_config_that_is_not_json_is_named(sample_dir, tmp_path, capsys):
+    binary, text = tmp_path / "not_json.npy", tmp_path / "bad.json"
+    np.save(binary, np.zeros(3))
+    text.write_text('{"a":\n')
+    for config, why in ((binary, "it is not UTF-8 text"), (text, "Expecting value at line 2, column 1")):
+        out = tmp_path / "run"
+        _fails_cleanly(["train", "vae", "--config", str(config), "--data", str(sample_dir), "--out", str(out)],
+                       capsys, out, f"--config {config} is not a JSON document ({why})")
