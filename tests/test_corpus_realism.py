@@ -129,3 +129,36 @@ def test_clips_start_facing_forward_at_the_origin():
     assert np.allclose(clip.joints[0, 0, [0, 2]], 0.0)
     c = canonical_pose(clip.joints[:1])
     assert c.shape == (1, SK.num_joints, 3)
+
+
+def _stride_lengths(seg) -> np.ndarray:
+    """Distances between consecutive plants of the same foot of a locomotion segment (m)."""
+    out = []
+    for k in range(2):
+        a = seg.pose.ankle[:, k]
+        still = np.r_[False, np.linalg.norm(np.diff(a, axis=0), axis=1) < 1e-9]
+        starts = np.nonzero(still & ~np.r_[False, still[:-1]])[0]
+        plants = a[starts]
+        out.append(np.linalg.norm(np.diff(plants[:, [0, 2]], axis=0), axis=1))
+    return np.concatenate([s[2:-2] for s in out])          # cruise only: drop the speed-up and slow-down
+
+
+def test_steps_vary_in_length_by_a_few_percent():
+    import dataclasses
+
+    from salad_core.data.procedural.footwork import Persona, Stance
+    from salad_core.data.procedural.gait import Route, gait_style, locomotion
+    from salad_core.data.procedural.kinematics import body_model
+
+    body = body_model("humanml3d")
+    persona = Persona.sample(np.random.default_rng(0))
+    style = gait_style("walk", np.random.default_rng(1), tempo=persona.tempo)
+    start = Stance.at((0.0, 0.0), 0.0, persona)
+    varied = _stride_lengths(locomotion(start, persona, style, Route(), 14, body))
+    even = _stride_lengths(locomotion(start, persona, dataclasses.replace(style, step_var=()), Route(), 14, body))
+    assert varied.size >= 6
+    assert np.std(even) / np.mean(even) < 0.005                     # one cadence: identical strides
+    assert 0.01 < np.std(varied) / np.mean(varied) < 0.06           # real walkers: 2-4 %
+    assert np.mean(varied) == pytest.approx(np.mean(even), rel=0.05)
+    with pytest.raises(ValueError, match="step_var"):
+        dataclasses.replace(style, step_var=(0.5,))

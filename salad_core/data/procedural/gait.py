@@ -52,6 +52,7 @@ class GaitStyle:
     ramp_strides: float = 0.8  # strides to speed up and to slow down
     plant_at: float = 0.5   # where in its stance the root passes over a foot plant (0 touch-down, 1 lift-off)
     arm_center: float = 0.0  # running: upper-arm flexion the swing is centred on (rad, heading frame)
+    step_var: tuple = ()    # relative deviation of each step's duration from 1/cadence, cycled (e.g. +-0.03)
 
     def __post_init__(self) -> None:
         if not 0.1 <= self.duty <= 0.8:
@@ -62,6 +63,8 @@ class GaitStyle:
             raise ValueError(f"GaitStyle.speed={self.speed} must be >= 0 (use Route.heading to go backwards)")
         if not 0.2 <= self.plant_at <= 0.8:
             raise ValueError(f"GaitStyle.plant_at={self.plant_at} must lie in [0.2, 0.8]")
+        if any(not -0.15 <= v <= 0.15 for v in self.step_var):
+            raise ValueError(f"GaitStyle.step_var={self.step_var} must hold deviations in [-0.15, 0.15]")
 
 
 @dataclass(frozen=True)
@@ -125,7 +128,11 @@ def locomotion(start: Stance, persona: Persona, style: GaitStyle, route: Route, 
     step_t = 1.0 / style.cadence
     swing_t = max(0.18, (1.0 - style.duty) * 2.0 * step_t)
     pre, post = 0.25, 0.35
-    lifts = pre + np.arange(n_steps) * step_t
+    # steps differ a little in duration (and so, over a smoothly moving root, in length)
+    var = np.array([style.step_var[k % len(style.step_var)] if style.step_var else 0.0 for k in range(n_steps)])
+    if style.running:               # a long stance pushes off far behind the hips: runners vary less
+        var = 0.5 * var
+    lifts = pre + np.concatenate([[0.0], np.cumsum(step_t * (1.0 + var[:-1]))])
     lands = lifts + swing_t
     total = lands[-1] + post
     n = num_frames(total)
@@ -182,6 +189,10 @@ def locomotion(start: Stance, persona: Persona, style: GaitStyle, route: Route, 
             fwd, left = heading_vectors(hd[0])
             sign = 1.0 if f == 0 else -1.0
             ankle = pos[0] + left * (sign * style.width) - fwd * PELVIS_AHEAD
+            # walkers' steps also vary in length independently of the timing (a runner's longer
+            # step would over-reach its push-off: runs vary through the timing alone)
+            if style.step_var and not style.running:
+                ankle = ankle + fwd * (style.step_var[(k + 7) % len(style.step_var)] * style.speed / style.cadence)
             ankle[1] = ANKLE_HEIGHT
             yaw = float(hd[0] + sign * persona.toe_out)
             roll_out = style.roll_out
@@ -202,7 +213,7 @@ def locomotion(start: Stance, persona: Persona, style: GaitStyle, route: Route, 
     fwd, left = heading_vectors(heading)
     act = ease(t, 0.05, pre) * (1.0 - ease(t, lands[-1], lands[-1] + 0.8 * post))
     # stride phase: the foot that steps at step k goes from behind (-1) to ahead (+1)
-    c = np.clip((t - lifts[0]) / step_t, 0.0, n_steps)
+    c = np.interp(t, np.append(lifts, lifts[-1] + step_t), np.arange(n_steps + 1.0))
     lead_first = -np.cos(np.pi * c) * act
     lead = np.stack([lead_first, -lead_first], 1) if first == 0 else np.stack([-lead_first, lead_first], 1)
     sig = max(1.0, 0.2 * step_t * FPS)
@@ -326,8 +337,20 @@ def _pace(mods: tuple[str, ...]) -> int:
     return -1 if "slowly" in mods else (1 if "quickly" in mods else 0)
 
 
+#: Std of the step-to-step variation of step duration and of step length (real walkers: 2-4 %).
+STEP_VARIATION = 0.04
+
+
 def gait_style(kind: str, rng: np.random.Generator, mods: tuple[str, ...] = (), tempo: float = 1.0,
                in_place: bool = False) -> GaitStyle:
+    """A randomised :class:`GaitStyle` of a gait ``kind`` (see :data:`GAITS`), whose steps vary
+    in duration and length by about :data:`STEP_VARIATION` (std) from step to step."""
+    st = _gait_style(kind, rng, mods, tempo, in_place)
+    return replace(st, step_var=tuple(np.clip(rng.normal(0.0, STEP_VARIATION, 16), -0.1, 0.1).round(4).tolist()))
+
+
+def _gait_style(kind: str, rng: np.random.Generator, mods: tuple[str, ...], tempo: float,
+                in_place: bool) -> GaitStyle:
     """A randomised :class:`GaitStyle` of a gait ``kind`` (see :data:`GAITS`).
 
     ``mods`` may hold "slowly" / "quickly", which change the speed and cadence measurably.
