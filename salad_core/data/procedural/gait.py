@@ -199,7 +199,7 @@ def locomotion(start: Stance, persona: Persona, style: GaitStyle, route: Route, 
         stance_t = (nxt - lands[k]) if np.isfinite(nxt) else 1.0
         plants[f].append(Plant(lands[k], nxt, ankle, yaw, roll_in=style.roll_in,
                                roll_in_time=min(0.12, 0.3 * stance_t), roll_out=roll_out,
-                               roll_out_time=min(0.25, 0.45 * stance_t)))
+                               roll_out_time=min(0.25, (0.7 if style.running else 0.45) * stance_t)))
         airs[f].append(style.swing)
     ankle = np.zeros((n, 2, 3))
     toe = np.zeros((n, 2, 3))
