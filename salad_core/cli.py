@@ -132,8 +132,9 @@ def _slug(text: str, n: int = 40) -> str:
 
 
 def _write_motion_files(out: Path, stem: str, features, joints, skeleton, *, force: bool,
-                        gif: bool = True, bvh: bool = True) -> list[Path]:
-    """Features/joints .npy, a GIF and a BVH for one motion (each written atomically)."""
+                        gif: bool = True, bvh: bool = True, title: str | None = None) -> list[Path]:
+    """Features/joints .npy, a GIF (titled ``title``, wrapped) and a BVH for one motion (each written
+    atomically)."""
     import numpy as np
 
     from salad_core.io import atomic_path
@@ -148,7 +149,8 @@ def _write_motion_files(out: Path, stem: str, features, joints, skeleton, *, for
                 np.save(fh, np.asarray(arr, dtype=np.float32))
     written = paths[:2]
     if gif:
-        written.append(animate(joints, skeleton, out / f"{stem}.gif", size=(320, 320), stride=2))
+        written.append(animate(joints, skeleton, out / f"{stem}.gif", size=(320, 320), stride=2,
+                               titles=None if title is None else [title]))
     if bvh:
         written.append(export_bvh(joints, skeleton, out / f"{stem}.bvh"))
     return written
@@ -297,7 +299,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
         stem = stems[b]
         n = result.lengths[b]
         files = _write_motion_files(out, stem, result.features[b, :n], result.joints[b], pipe.skeleton,
-                                    force=args.force, gif=not args.no_render, bvh=True)
+                                    force=args.force, gif=not args.no_render, bvh=True, title=text)
         if figures[b]:
             fig = _attention_figure(out, stem, result, b, args.force)
             files += [fig] if fig else []
@@ -456,8 +458,10 @@ def _load_motion_array(motion: str, skeleton: str):
         raise UserError(f"motion file not found: {path}")
     try:
         arr = np.load(path, allow_pickle=False)   # never unpickle: a .npy must not run code
-    except (ValueError, OSError, EOFError) as exc:
-        raise UserError(f"cannot read {path} as a .npy array (truncated, corrupt or pickled?): {exc}") from None
+    except (ValueError, OSError, EOFError):
+        # numpy calls any file without the .npy header "pickled" and suggests allow_pickle: never that
+        raise UserError(f"cannot read {path} as a .npy array (a text, pickled, truncated or corrupt file); motion "
+                        "files hold float arrays written by numpy.save") from None
     if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "iuf":     # complex parts would be dropped
         raise UserError(f"{path} does not hold a numeric array (got {getattr(arr, 'dtype', type(arr).__name__)})")
     if arr.ndim == 2:
@@ -603,7 +607,8 @@ def _motion_input(args: argparse.Namespace, check_length: bool = True):
     try:
         loaded = load_motion(path, sk.name, **given)
     except JointsConversionError as exc:
-        raise UserError(f"inversion needs HumanML3D features (N, {sk.feature_dim}); {exc}") from None
+        needs = "inversion needs" if getattr(args, "command", "") in ("invert", "edit") else "salad works on"
+        raise UserError(f"{needs} HumanML3D features (N, {sk.feature_dim}); {exc}") from None
     except (FileNotFoundError, ValueError) as exc:   # BvhError and RigError name the file (and line)
         raise UserError(str(exc)) from None
     if loaded.bvh is not None:

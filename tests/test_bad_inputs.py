@@ -330,3 +330,12 @@ def test_train_config_that_is_not_json_is_named(sample_dir, tmp_path, capsys):
         out = tmp_path / "run"
         _fails_cleanly(["train", "vae", "--config", str(config), "--data", str(sample_dir), "--out", str(out)],
                        capsys, out, f"--config {config} is not a JSON document ({why})")
+
+
+def test_a_motion_npy_that_is_really_text_never_suggests_unpickling(tmp_path, capsys):
+    path = tmp_path / "text.npy"
+    path.write_text("0.1 0.2 0.3\n")
+    out = tmp_path / "e"
+    line = _fails_cleanly(["export", str(path), "--out", str(out)], capsys, out,
+                          f"cannot read {path} as a .npy array (a text, pickled, truncated or corrupt file)")
+    assert "allow_pickle" not in line and "pickle.load" not in line
