@@ -339,3 +339,27 @@ def test_a_motion_npy_that_is_really_text_never_suggests_unpickling(tmp_path, ca
     line = _fails_cleanly(["export", str(path), "--out", str(out)], capsys, out,
                           f"cannot read {path} as a .npy array (a text, pickled, truncated or corrupt file)")
     assert "allow_pickle" not in line and "pickle.load" not in line
+
+
+def test_ctrl_c_exits_130_and_removes_what_the_call_wrote(tiny_weights, tmp_path, capsys, monkeypatch):
+    import salad_viz
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(salad_viz, "export_bvh", interrupted)
+    out = tmp_path / "gen"
+    code = cli.main(["-q", "generate", "a person walks", "--length", "8", "--steps", "1", "--no-render",
+                     "--no-attention", "--weights", str(tiny_weights), "--out", str(out)])
+    assert code == 130 and capsys.readouterr().err.strip() == "salad generate: interrupted"
+    assert not out.exists()
+
+
+def test_invert_says_once_that_it_crops(tiny_weights, sample_dir, tmp_path, capsys):
+    path = tmp_path / "take_features.npy"
+    np.save(path, np.load(sample_dir / "new_joint_vecs" / "012314.npy")[:42])
+    code = cli.main(["-q", "invert", str(path), "--prompt", "a person walks", "--steps", "1", "--no-render",
+                     "--weights", str(tiny_weights), "--out", str(tmp_path / "inv")])
+    assert code == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if "salad_viz.export" not in line]
+    assert err == ["salad invert: note: the motion has 42 frames, not a multiple of 4; inverting the first 40"]
+    assert np.load(tmp_path / "inv" / "take_features_reconstruction_features.npy").shape == (40, 263)
