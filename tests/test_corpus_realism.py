@@ -162,3 +162,23 @@ def test_steps_vary_in_length_by_a_few_percent():
     assert np.mean(varied) == pytest.approx(np.mean(even), rel=0.05)
     with pytest.raises(ValueError, match="step_var"):
         dataclasses.replace(style, step_var=(0.5,))
+
+
+def test_jumping_jack_wrists_stay_under_real_accelerations():
+    w = [SK.joint_names.index("left_wrist"), SK.joint_names.index("right_wrist")]
+    peaks = []
+    for seed in range(4):
+        clip = realise(Plan((Step(Action("jumping_jacks", None, (), 2, "")),)), np.random.default_rng(seed))
+        acc = np.linalg.norm(np.diff(clip.joints[:, w], 2, axis=0), axis=-1) * SK.fps ** 2
+        peaks.append(acc.max())
+        assert (clip.joints[:, w, 1] > clip.joints[:, [SK.joint_names.index("head")], 1]).any()   # arms overhead
+    assert max(peaks) < 140.0, peaks                 # real maximum ~128 m/s^2 (issue 27); 1.0: 168-205
+
+
+def test_kick_upper_body_counters_the_leg():
+    for seed in range(3):
+        clip = _clip("kick", seed, side="left")
+        f0, f1 = clip.events[0].frames
+        flex = upper_arm_flexion(clip.joints[f0:f1])
+        # the arm opposite the kicking leg swings forward, well past the kicking side's arm
+        assert (flex[:, 1] - flex[:, 0]).max() > 55.0, (seed, flex.min(0), flex.max(0))   # 1.0: 28-36 deg

@@ -42,6 +42,8 @@ class Hop:
     arms_back: tuple = (-0.6, 0.15, 0.35)  # arms at the bottom of the crouch
     lean: float = 0.35          # trunk lean at the bottom of the crouch (rad)
     toe_roll: float = 0.75      # heel lift at take-off and landing (rad): the feet leave toes last
+    arms_through: bool = True   # arms keyed half-way at take-off (a jump's swing); False: one sweep
+                                # from the crouch to the apex (jacks: a gentler wrist acceleration)
 
     def __post_init__(self) -> None:
         if not self.height > 0:
@@ -112,7 +114,10 @@ def hops(start: Stance, persona: Persona, chain: list[Hop], body: BodyModel, lan
         t_to = t
         # the arms swing through: past the front at take-off, fully up at the apex
         mid_arms = tuple(0.5 * (a + b) for a, b in zip(hop.arms_back, hop.arms))
-        arm_k[-1] = (t,) + mid_arms
+        if hop.arms_through:
+            arm_k[-1] = (t,) + mid_arms
+        else:
+            arm_k.pop()
         arm_k.append((t + 0.5 * flight,) + tuple(hop.arms))
         t += flight
         keys_t.append(t); keys_p.append(p_land); keys_v.append(v_h + np.array([0, -v_dn, 0]))
@@ -230,16 +235,17 @@ def jumping_jacks(start: Stance, persona: Persona, body: BodyModel, rng: np.rand
     tempo = 1.35 if "slowly" in mods else (0.8 if "quickly" in mods else 1.0)
     width_in = np.linalg.norm(start.ankles[0] - start.ankles[1]) / 2
     width_out = u(0.24, 0.32)
-    up = (u(0.0, 0.15), u(2.65, 2.95), u(0.1, 0.35))
-    down = (u(0.0, 0.1), u(0.12, 0.25), u(0.2, 0.4))
+    # real jacks keep the wrists under ~130 m/s^2: the arms do not travel the full 2.9 rad each hop
+    up = (u(0.0, 0.15), u(2.35, 2.7), u(0.15, 0.4))
+    down = (u(0.0, 0.1), u(0.22, 0.4), u(0.2, 0.4))
     chain = []
     for r in range(reps):
         for out in (True, False):
             chain.append(Hop(height=u(0.05, 0.08), crouch=u(0.04, 0.07),
-                             crouch_time=(u(0.25, 0.35) if not chain else u(0.1, 0.14)) * tempo,
+                             crouch_time=(u(0.25, 0.35) if not chain else u(0.14, 0.19)) * tempo,
                              push_time=u(0.08, 0.12) * tempo, land_width=width_out if out else width_in,
                              arms=up if out else down, arms_back=up if not out else down, lean=0.08,
-                             toe_roll=0.4))
+                             toe_roll=0.4, arms_through=False))
     pose, end, flights = hops(start, persona, chain, body, land_crouch=0.05, recover_time=0.3)
     n = pose.num_frames
     core = _frames(0.05, flights[-1][1] + 0.2, n)
@@ -328,6 +334,7 @@ def kick(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Genera
     t_lift = t
     keys: list = []
     lean_keys = [(0.0, 0.0), (t, 0.0)]
+    counter_keys = [(0.0, 0.0), (t, 0.0)]
     sgn = 1.0 if side == 0 else -1.0
     width = np.linalg.norm(start.ankles[0] - start.ankles[1]) / 2
     for r in range(reps):
@@ -338,15 +345,28 @@ def kick(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Genera
         ext = np.array([-sgn * 0.5 * width, hip_h - ANKLE_HEIGHT + reach * np.sin(elev), reach * np.cos(elev)])
         keys.append((t, ext, 0.7))
         lean_keys.append((t, -0.12 - 0.35 * max(elev, 0.0)))
+        counter_keys.append((t, 1.0))
         t += u(0.05, 0.1)
         keys.append((t, ext + np.array([0, 0.01, -0.02]), 0.7))
+        counter_keys.append((t, 1.0))
         t += u(0.16, 0.22) * tempo                      # retract
         keys.append((t, np.array([-sgn * 0.3 * width, 0.3, 0.1]), 0.4))
         lean_keys.append((t, -0.04))
+        counter_keys.append((t, 0.3))
     t_plant = t + u(0.2, 0.28) * tempo
     lean_keys += [(t_plant, 0.0)]
+    counter_keys += [(t_plant, 0.0)]
     total = t_plant + u(0.35, 0.45)
     pose = _leg_action(start, persona, body, rng, side, keys, lean_keys, t_lift, t_plant, total, knee_up=1.2)
+    # the upper body counters the kick: the kicking side's arm swings back, the other one forward,
+    # and the shoulders turn against the kicking hip
+    ck = np.array(counter_keys)
+    c = keyframes(frame_times(pose.num_frames, FPS), ck[:, 0], ck[:, 1])
+    swing = 1.0 + 0.4 * max(elev, 0.0)             # (the trunk's lean back already carries both arms back)
+    pose.arm[:, side, 0] -= u(0.1, 0.3) * swing * c
+    pose.arm[:, 1 - side, 0] += u(0.5, 0.9) * swing * c
+    pose.arm[:, :, 2] += (u(0.1, 0.4) * c)[:, None]
+    pose.spine[:, 0] -= sgn * u(0.1, 0.22) * c
     core = _frames(t_lift - 0.2, t_plant + 0.05, pose.num_frames)
     return Segment(pose, start, core, info=dict(foot_height=float(hip_h + reach * np.sin(elev))))
 
@@ -395,7 +415,7 @@ def squat(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gener
     """Squat down and up ``reps`` times; "low" squats deeper, "slowly"/"quickly" set the pace."""
     u = rng.uniform
     tempo = 1.4 if "slowly" in mods else (0.7 if "quickly" in mods else 1.0)
-    depth = u(0.4, 0.47) if "low" in mods else u(0.27, 0.34)     # pelvis drop (m)
+    depth = u(0.4, 0.47) if "low" in mods else u(0.22, 0.35)     # pelvis drop (m)
     arms_forward = bool(rng.random() < 0.6) if arms_forward is None else arms_forward
     fwd, _ = heading_vectors(start.yaw)
     h = standing_height(start, body, pitch=0.03)
@@ -481,7 +501,7 @@ def bow(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generat
     """Bend forward from the hips and come back up; "low" (deeply) bends further."""
     u = rng.uniform
     tempo = 1.4 if "slowly" in mods else (0.7 if "quickly" in mods else 1.0)
-    angle = u(0.95, 1.2) if "low" in mods else u(0.5, 0.75)
+    angle = u(0.95, 1.25) if "low" in mods else u(0.4, 0.8)
     fwd, _ = heading_vectors(start.yaw)
     kt, kb = [0.0], [0.0]
     t = u(0.2, 0.3)
