@@ -317,7 +317,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def _edit_args(p: argparse.ArgumentParser) -> None:
     """The edit flags shared by ``salad edit`` and ``salad invert`` (parsed by :func:`_edit_specs`)."""
-    p.add_argument("--target", default=None, help="target prompt (word swap, refinement); default: the source")
+    p.add_argument("--target", default=None,
+                   help="target prompt; needed by --swap (same number of words) and --refine; default: the source")
     p.add_argument("--swap", type=float, default=None, metavar="TAU",
                    help="word swap: source maps while t >= TAU*T, TAU in [0, 1) (paper: 0.8)")
     p.add_argument("--refine", action="store_true", help="prompt refinement (aligned words keep the source maps)")
@@ -829,8 +830,7 @@ def _generation_args(p: argparse.ArgumentParser, length: int) -> None:
                    help=f"frames at 20 fps, 4..196 (default {length}); other values are rounded down to a "
                         "multiple of 4, with a note")
     p.add_argument("--seed", type=int, default=0,
-                   help="noise seed (default 0); prompt b of a batch uses SEED + b, so a motion does not depend on "
-                        "the other prompts")
+                   help="noise seed (default 0); prompt b of a batch uses SEED + b")
     p.add_argument("--guidance", type=float, default=7.5,
                    help="classifier-free guidance weight w, -100..100 (default 7.5; 1 = no guidance; negative "
                         "steers away from the prompt)")
