@@ -405,16 +405,20 @@ class SaladPipeline:
         lengths : int or list of int, optional
             Frames per motion (default 120 = 6 s at 20 fps), multiples of 4, at most 196.
         seed : int or list of int
-            Sample ``b`` uses noise seed ``seed + b`` (or ``seed[b]`` for a list).
+            Sample ``b`` uses noise seed ``seed + b`` (or ``seed[b]`` for a list); seeds must lie in
+            :data:`SEED_RANGE` (what ``torch.Generator`` accepts).
         guidance_scale : float or Guidance, optional
             Classifier-free guidance: None uses the weights' default (:attr:`guidance`); a number
-            replaces its weight ``w`` only (paper default 7.5; 1 disables guidance); a
+            (not a string) in ``-MAX_GUIDANCE..MAX_GUIDANCE`` replaces its weight ``w`` only (paper
+            default 7.5; 1 disables guidance; a negative weight steers away from the prompt and is
+            warned about); a
             :class:`~salad_core.sampling.Guidance` (weight, rescale, interval) is used as given
             (``Guidance(7.5)`` is the paper's sampler).
         num_steps : int
-            Sampler steps (50 DDIM steps by default).
+            Sampler steps (50 DDIM steps by default), at most the diffusion's training timesteps.
         solver : str, optional
-            Scheduler name (default: the pipeline's, "ddim"); e.g. "dpm++".
+            Scheduler name of :data:`salad_core.sampling.SOLVERS` (default: the pipeline's, "ddim");
+            e.g. "dpm++". Anything else (``""``, a number) is refused.
         capture_attention : bool or CaptureConfig
             Record the cross-attention maps (see :mod:`salad_core.attention`); never changes the
             motion.
@@ -521,13 +525,16 @@ class SaladPipeline:
             :class:`~salad_core.attention.WordSwap`, :class:`~salad_core.attention.Refine`,
             :class:`~salad_core.attention.Reweight`, :class:`~salad_core.attention.Mirror`,
             :class:`~salad_core.attention.InjectSelfAttention`, composed in order; empty: the
-            edited motion is a plain generation of the target from the same noise.
+            edited motion is a plain generation of the target from the same noise (with the
+            source as target that is the source itself: warned). A word swap or a refinement
+            needs a target that differs from the source (refused otherwise); a refinement whose
+            target shares no word with the source keeps no source map (warned).
         lengths, seed, solver, noise
             As :meth:`__call__`.
         guidance_scale, num_steps : optional
             As :meth:`__call__` (default: :attr:`guidance` and 50), or the inversion's.
         inversion : Inversion, optional
-            From :meth:`invert`: edit a given motion. Its prompts, lengths, noise, guidance,
+            From :meth:`invert` (anything else is refused): edit a given motion. Its prompts, lengths, noise, guidance,
             steps and per-step null texts / corrections are used.
         capture_attention : bool or CaptureConfig
             Record the source maps and the maps the edited motion used.
@@ -650,8 +657,9 @@ class SaladPipeline:
         Parameters
         ----------
         motions : array or list of arrays
-            Raw (de-normalised) features ``(N, D)``, ``(B, N, D)`` or a list of ``(N_b, D)``;
-            each is cropped to a multiple of 4 frames (at most ``skeleton.max_length``).
+            Raw (de-normalised) features ``(N, D)``, ``(B, N, D)`` or a list of ``(N_b, D)``, real
+            numbers of magnitude at most :data:`salad_core.motion.MAX_FEATURE_MAGNITUDE`; each is
+            cropped to a multiple of 4 frames (with a warning; at most ``skeleton.max_length``).
         prompts : str or list of str
             One source prompt per motion: what the motion shows.
         method : str
