@@ -182,3 +182,20 @@ def test_kick_upper_body_counters_the_leg():
         flex = upper_arm_flexion(clip.joints[f0:f1])
         # the arm opposite the kicking leg swings forward, well past the kicking side's arm
         assert (flex[:, 1] - flex[:, 0]).max() > 55.0, (seed, flex.min(0), flex.max(0))   # 1.0: 28-36 deg
+
+
+def test_hand_wave_is_sideways_and_overhead_waving_is_wide():
+    from salad_core.data.procedural.stats import canonical_pose
+
+    lw = SK.joint_names.index("left_wrist")
+    for variant, side in (("", "left"), ("arms", "both")):
+        for seed in range(3):
+            clip = realise(Plan((Step(Action("wave", side, (), 1, variant)),)), np.random.default_rng(seed))
+            f0, f1 = clip.events[0].frames
+            w = canonical_pose(clip.joints)[f0:f1, lw]
+            mid = w[len(w) // 4: 3 * len(w) // 4]                    # while waving (not rising / lowering)
+            sideways, vertical = np.ptp(mid[:, 0]), np.ptp(mid[:, 1])
+            if variant == "":
+                assert sideways > 2.5 * vertical, (seed, sideways, vertical)     # 1.0: about equal
+            else:
+                assert sideways > 0.38, (seed, sideways)                       # 1.0: 0.26-0.38 m

@@ -87,7 +87,7 @@ def wave(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str,
     rise, lower = u(0.35, 0.5) * pace, u(0.35, 0.5) * pace
     if variant == "arms":
         target = np.array([u(0.18, 0.25), u(0.44, 0.5), u(0.04, 0.1)])
-        freq, amp = u(0.8, 1.1) / pace, u(0.3, 0.4)
+        freq, amp = u(0.8, 1.1) / pace, u(0.45, 0.6)
         pole = np.array([1.0, 0.0, -0.3])
     else:
         if "high" in mods:
@@ -96,7 +96,7 @@ def wave(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str,
             target = np.array([u(0.18, 0.25), u(-0.12, -0.04), u(0.26, 0.32)])
         else:
             target = np.array([u(0.14, 0.2), u(0.22, 0.32), u(0.1, 0.18)])
-        freq, amp = u(1.6, 2.4) / pace, u(0.25, 0.35)
+        freq, amp = u(1.6, 2.4) / pace, u(0.1, 0.15)     # amp: sideways travel of the hand (m)
         pole = np.array([1.0, -0.6, 0.0])
     cycles = rng.integers(2, 4) if duration is None else max(1, int(round((duration - rise - lower) * freq)))
     wave_t = cycles / freq
@@ -113,8 +113,11 @@ def wave(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str,
             sign = 1.0 if k == 0 else -1.0  # both hands sway to the same side of the body
             base[:, 1] += sign * amp * osc
         else:
-            base[:, 1] += amp * osc
-            base[:, 2] -= 0.4 * amp * osc
+            # the hand swings from side to side at a constant height (the forearm pivots at the
+            # elbow): the oscillation is solved in wrist positions, not added to the angles
+            path = np.tile(target, (n, 1))
+            path[:, 0] += amp * osc
+            base += arm_angles_for_target(path, body.upper_arm[k], body.forearm[k]) - pose
         _set_arms(g, (k,), base, pole, t)
     g.info = dict(wrist_target_height=float(target[1]), frequency=float(freq))
     return g
