@@ -199,3 +199,12 @@ def test_hand_wave_is_sideways_and_overhead_waving_is_wide():
                 assert sideways > 2.5 * vertical, (seed, sideways, vertical)     # 1.0: about equal
             else:
                 assert sideways > 0.38, (seed, sideways)                       # 1.0: 0.26-0.38 m
+
+
+def test_seated_hands_rest_on_the_floor():
+    w = [SK.joint_names.index("left_wrist"), SK.joint_names.index("right_wrist")]
+    for seed in range(4):
+        j = _clip("sit", seed).joints
+        floor = j[..., 1].min() - 0.012                   # the toes rest 1.2 cm over the floor
+        assert (j[-1, w, 1] - floor < 0.10).all(), (seed, j[-1, w, 1] - floor)     # 1.0: 13-17 cm
+        assert (j[:, w, 1] - floor > 0.0).all()                                    # never through it

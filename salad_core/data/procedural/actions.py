@@ -15,6 +15,7 @@ from .curves import ease, envelope, frame_times, keyframes, min_jerk
 from .footwork import (ANKLE_HEIGHT, Persona, Plant, Stance, flat_pitch, foot_track, max_pelvis_height,
                        plant_pose, standing_height)
 from .kinematics import FPS, BodyModel, Pose, foot_vector, heading_vectors, ypr_matrix
+from .reach import arm_controls_for
 from .segment import Segment, knee_poles, num_frames, standing_pose
 
 __all__ = ["GRAVITY", "Hop", "hops", "jump", "jumping_jacks", "kick", "knee_lift", "squat", "sit", "bow"]
@@ -454,6 +455,10 @@ def squat(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gener
                    info=dict(depth=float(depth), arms_forward=arms_forward))
 
 
+#: Height (m) of the wrist joint over the floor when the palm rests on it.
+WRIST_ON_FLOOR = 0.04
+
+
 def sit(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *,
         mods: tuple[str, ...] = (), hold: float = 1.0) -> Segment:
     """Sit down on the ground (knees up, hands on the floor behind) and stay seated."""
@@ -478,8 +483,8 @@ def sit(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generat
     tt = frame_times(n, FPS)
     pose = _planted_action(start, persona, body, n)
     pose.pelvis = keyframes(tt, kt, kp, kv)
-    lean = keyframes(tt, kt, [0.0, 0.0, 0.6, 0.05, -0.12])
-    spine = keyframes(tt, kt, [0.0, 0.0, 0.1, 0.3, 0.25])
+    lean = keyframes(tt, kt, [0.0, 0.0, 0.6, 0.0, -0.4])           # leaning back onto the hands
+    spine = keyframes(tt, kt, [0.0, 0.0, 0.1, 0.25, 0.2])
     arms = keyframes(tt, kt, [0.0, 0.0, 0.5, 1.0, 1.0])
     pose.pelvis_ypr[:, 1] += lean
     pose.spine[:, 1] += spine
@@ -490,6 +495,15 @@ def sit(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generat
     pose.arm[:, :, 2] *= (1.0 - 0.6 * arms)[:, None]
     seated = keyframes(tt, kt, [0.0, 0.0, 0.5, 1.0, 1.0])
     pose.knee_pole += (np.array([0.0, 0.8, 0.0]) * seated[:, None])[:, None, :]
+    # the hands land on the floor behind the hips and stay there (1.0: they hovered 13-17 cm up)
+    _, left = heading_vectors(start.yaw)
+    behind, out = u(0.08, 0.16), u(0.15, 0.21)
+    on_floor = keyframes(tt, kt, [0.0, 0.0, 0.0, 1.0, 1.0])[:, None]
+    for k, sign in enumerate((1.0, -1.0)):
+        palm = seat - fwd * behind + left * (sign * out)
+        palm[1] = start.ground[1] + WRIST_ON_FLOOR
+        solved = arm_controls_for(pose, body, k, np.tile(palm, (n, 1)))
+        pose.arm[:, k] = (1.0 - on_floor) * pose.arm[:, k] + on_floor * solved
     core = _frames(t1 - 0.05, t4 + 0.1, n)
     # breathing while seated
     pose.spine[:, 1] += 0.01 * np.sin(2 * np.pi * 0.25 * tt) * ease(tt, t4, t4 + 0.5)

@@ -265,8 +265,10 @@ def _hold_mask(pose: Pose, body: BodyModel, calm: list[tuple[int, int]]) -> np.n
 
     w = np.clip(smooth(still * upright), 0.0, 1.0)
     head = np.clip(smooth(head), 0.0, 1.0)
+    # a low pelvis (sitting, kneeling) may rest the hands on the floor: they stay there
+    low = np.clip(smooth((j[:, 0, 1] - 0.45) / 0.2), 0.0, 1.0)
     # (trunk, head, arms): during a head gesture the arms stay put and the trunk nearly so
-    return np.stack([w * (1.0 - (1.0 - _HEAD_EVENT_CALM) * head), w, w * (1.0 - head)], 1)
+    return np.stack([w * (1.0 - (1.0 - _HEAD_EVENT_CALM) * head), w, w * (1.0 - head) * low], 1)
 
 
 def _lively_holds(pose: Pose, weight: np.ndarray, persona: Persona, rng: np.random.Generator) -> None:
