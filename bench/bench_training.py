@@ -70,7 +70,7 @@ if spec["what"] in ("pst", "mmae"):
 else:
     train = {k: v for k, v in doc["train"].items() if k in known}
 train.update(max_steps=spec["steps"], log_every=spec["log_every"], progress=False, num_threads=spec["threads"],
-             ckpt_every=0, val_every=0)
+             ckpt_every=0, val_every=0, **({"seed": spec["seed"]} if spec.get("seed") is not None else {}))
 tc = TC(**train) if spec["what"] in ("pst", "mmae") else config_from_dict(TC, train)
 t0 = time.perf_counter()
 if spec["what"] in ("pst", "mmae"):
@@ -109,7 +109,7 @@ def _spec(root: Path, args: argparse.Namespace, out: Path, steps: int, cache_dir
     return {"root": str(root), "what": args.what, "data": str(args.data), "vae": str(args.vae), "config": config,
             "kf_vae": str(HERE / "salad_core" / "weights" / "keymotion" / "kf_vae"),
             "steps": steps, "log_every": args.log_every, "threads": args.threads, "out": str(out),
-            "cache_dir": str(cache_dir) if cache_dir else None}
+            "cache_dir": str(cache_dir) if cache_dir else None, "seed": args.seed}
 
 
 def _launch(spec: dict, log_path: Path) -> subprocess.Popen:
@@ -218,6 +218,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="frozen VAE of the denoiser runs (default: the shipped one)")
     p.add_argument("--steps", type=int, default=300)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--seed", type=int, default=None, help="training seed of both sides (default: the config's)")
     p.add_argument("--log-every", type=int, default=10)
     p.add_argument("--window", type=int, default=50, help="steps per window of the loss-curve table")
     p.add_argument("--out", type=Path, default=None, help="folder for the runs (default: a temporary one)")
