@@ -102,12 +102,18 @@ def test_default_fit_barely_moves_good_motion(walk_features):
 def test_fk_follows_the_positions_heading_after_a_half_turn():
     # turning past 180 degrees flips the sign of the stored yaw step (arcsin of a w<0 quaternion):
     # the rotation features then disagree with the positions by a yaw of the whole body
-    feats = joints_to_features(_rigid_motion(n=60, turn=2 * np.pi, swing=0.3)).astype(np.float64)
+    # (the official code's quirk, which joints_to_features reproduces with official_heading=True)
+    motion = _rigid_motion(n=60, turn=2 * np.pi, swing=0.3)
+    feats = joints_to_features(motion, official_heading=True).astype(np.float64)
     truth = features_to_joints(feats)
     raw_fk = recover_joints(feats, "fk", config=RecoveryConfig(align_heading=False))
     aligned = recover_joints(feats, "fk")
     assert np.linalg.norm(raw_fk - truth, axis=-1).max() > 0.05
     assert np.linalg.norm(aligned - truth, axis=-1).max() < 1e-3
+    # salad's own features store the right yaw step: rotations and positions agree without alignment
+    fixed = joints_to_features(motion).astype(np.float64)
+    plain_fk = recover_joints(fixed, "fk", config=RecoveryConfig(align_heading=False))
+    assert np.linalg.norm(plain_fk - features_to_joints(fixed), axis=-1).max() < 1e-3
 
 
 def test_motion_lengths_are_the_median_of_the_positions(walk_features):
