@@ -185,14 +185,16 @@ def test_kick_upper_body_counters_the_leg():
 
 
 def test_hand_wave_is_sideways_and_overhead_waving_is_wide():
-    from salad_core.data.procedural.stats import canonical_pose
+    from salad_core.data.procedural.checks import _chest_frames
 
-    lw = SK.joint_names.index("left_wrist")
+    lw, ls = SK.joint_names.index("left_wrist"), SK.joint_names.index("left_shoulder")
     for variant, side in (("", "left"), ("arms", "both")):
         for seed in range(3):
             clip = realise(Plan((Step(Action("wave", side, (), 1, variant)),)), np.random.default_rng(seed))
             f0, f1 = clip.events[0].frames
-            w = canonical_pose(clip.joints)[f0:f1, lw]
+            j = clip.joints[f0:f1]
+            # the hand about its shoulder in the chest frame (the trunk may lean with the arm)
+            w = np.einsum("nij,nj->ni", _chest_frames(j, SK), j[:, lw] - j[:, ls])
             mid = w[len(w) // 4: 3 * len(w) // 4]                    # while waving (not rising / lowering)
             sideways, vertical = np.ptp(mid[:, 0]), np.ptp(mid[:, 1])
             if variant == "":
@@ -208,3 +210,25 @@ def test_seated_hands_rest_on_the_floor():
         floor = j[..., 1].min() - 0.012                   # the toes rest 1.2 cm over the floor
         assert (j[-1, w, 1] - floor < 0.10).all(), (seed, j[-1, w, 1] - floor)     # 1.0: 13-17 cm
         assert (j[:, w, 1] - floor > 0.0).all()                                    # never through it
+
+
+def test_trunk_turns_with_one_arm_but_not_with_both():
+    from salad_core.data.procedural.composition import TRUNK_YAW_PER_FLEX, _trunk_follows_arms
+    from salad_core.data.procedural.footwork import Persona, Stance
+    from salad_core.data.procedural.kinematics import body_model
+    from salad_core.data.procedural.segment import standing_pose
+
+    body = body_model("humanml3d")
+    persona = Persona.sample(np.random.default_rng(0))
+    stance = Stance.at((0.0, 0.0), 0.0, persona)
+    one = standing_pose(stance, persona, 60, body, rng=None, idle=False)
+    both = one.copy()
+    one.arm[30:, 1, 0] += 1.0                                   # the right arm swings forward and stays
+    both.arm[30:, :, 0] += 1.0
+    yaw0 = one.spine[:, 0].copy()
+    _trunk_follows_arms(one, persona)
+    _trunk_follows_arms(both, persona)
+    turn = one.spine[:, 0] - yaw0
+    assert turn[59] == pytest.approx(TRUNK_YAW_PER_FLEX, rel=0.02)   # turns left (+yaw) with the right arm
+    assert abs(turn[5]) < 1e-3                                       # long before the arm moves: nothing
+    np.testing.assert_allclose(both.spine[:, 0], yaw0, atol=1e-12)    # symmetric arms: no turn

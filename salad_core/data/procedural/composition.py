@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .curves import min_jerk, wrap_angle
+from .curves import min_jerk, smooth, wrap_angle
 from .footwork import Persona, Stance, max_pelvis_height
 from .gestures import Gesture
 from .kinematics import FPS, BodyModel, Pose, assemble, body_model, rot_y, ypr_matrix
@@ -291,6 +291,33 @@ def _lively_holds(pose: Pose, weight: np.ndarray, persona: Persona, rng: np.rand
     pose.arm[:, :, 2] = np.maximum(pose.arm[:, :, 2] + arm[:, 0:2] * 0.12, 0.02)
 
 
+#: Trunk response to asymmetric arm motion: spine yaw per rad of flexion difference, spine roll
+#: per rad of abduction difference (see :func:`_trunk_follows_arms`).
+TRUNK_YAW_PER_FLEX, TRUNK_ROLL_PER_ABD = 0.25, 0.1
+
+
+def _trunk_follows_arms(pose: Pose, persona: Persona, weight: np.ndarray | None = None) -> None:
+    """Turn and bend the trunk with the arms (secondary motion, in place).
+
+    ``weight`` ``(N, 2)`` (left, right arm; default 1) limits it to the arms of gestures: a base
+    action that puts a hand at a world point (picking up, hands on the floor) must keep it there.
+
+    An arm swung forward brings its shoulder with it (the trunk turns to the other side); an arm
+    raised to the side bends the trunk a little away from it. The response is proportional to
+    the difference between the arms (smoothed over about 0.3 s), so symmetric motions (jumps,
+    claps) leave the trunk alone.
+    """
+    rest = np.asarray(persona.arm_rest, dtype=np.float64)
+    # the trunk follows the held arm pose, not an oscillation (a waving hand, a gait's swing),
+    # which would make an un-annotated spine move as much as the waving arm
+    d = pose.arm - rest[None, None]
+    if weight is not None:
+        d = d * weight[:, :, None]
+    d = smooth(d, 6.0)
+    pose.spine[:, 0] += TRUNK_YAW_PER_FLEX * (d[:, 1, 0] - d[:, 0, 0])
+    pose.spine[:, 2] -= TRUNK_ROLL_PER_ABD * (d[:, 0, 1] - d[:, 1, 1])
+
+
 def _anchor(joints: np.ndarray, body: BodyModel) -> np.ndarray:
     """``joints`` moved so that frame 0's pelvis is over the origin and frame 0 faces +Z, with
     the facing HumanML3D's processing measures (hips and shoulders), as clips always started."""
@@ -389,8 +416,12 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
         pad = _rest_seated(acc, n_pad, rng) if seated else _idle(stance, persona, n_pad, body, rng)
         acc = _join(acc, pad.pose, 1)
     pose = acc
+    gesture_arms = np.zeros((pose.num_frames, 2))
     for at, g in placed:
         _blend(pose, g, at)
+        sl = slice(at, at + g.num_frames)
+        gesture_arms[sl] = np.maximum(gesture_arms[sl], g.arm_weight)
+    _trunk_follows_arms(pose, persona, gesture_arms)
     _alive(pose, persona, rng)
     calm = [events[(role, i)][0] for role, i, a in plan.actions() if a.spec.category == "head"]
     _lively_holds(pose, _hold_mask(pose, body, calm), persona, rng)
