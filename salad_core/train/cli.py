@@ -55,6 +55,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="keymotion only: max optimiser steps of each stage (overrides the config)")
     parser.add_argument("--batch-size", type=int, help="global batch size (overrides the config)")
     parser.add_argument("--vae", help="denoiser only: VAE run folder or checkpoint")
+    parser.add_argument("--general", metavar="DIR",
+                        help="vae only: uncaptioned general-motion folder mixed into training "
+                             "(scripts/build_general_motion.py; overrides the config's general_data)")
+    parser.add_argument("--general-ratio", type=float, metavar="R",
+                        help="vae only: share of windows drawn from --general (default 0.5)")
     parser.add_argument("--text-encoder", help="denoiser, keymotion: 'minilm' (default) or a local CLIP folder")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -112,6 +117,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"--steps-per-stage {args.steps_per_stage} must be integers >= 0")
     if args.vae is not None and args.what == "keymotion":
         parser.error("--vae is for the denoiser only (keymotion trains its own keyframe VAE)")
+    if (args.general is not None or args.general_ratio is not None) and args.what != "vae":
+        parser.error("--general/--general-ratio are for 'salad train vae' only")
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     from salad_core.allocator import tune_from_environment
@@ -123,6 +130,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     cls = VAETrainConfig if args.what == "vae" else DenoiserTrainConfig
     train_doc = doc.get("train", {k: v for k, v in doc.items() if k not in ("model", "diffusion", "text_encoder", "model_type", "task", "_path")})
     overrides = {"max_steps": args.steps, "batch_size": args.batch_size}
+    if args.what == "vae":
+        overrides.update(general_data=args.general, general_ratio=args.general_ratio)
     if args.no_progress:
         overrides["progress"] = False
     train_config = config_from_dict(cls, {**train_doc, **{k: v for k, v in overrides.items() if v is not None}})

@@ -117,11 +117,18 @@ class VAETrainConfig(TrainConfig):
     gamma: float = 0.05                        # official option (the paper text says 0.1)
     weight_decay: float = 0.0
     window: int = 64                           # frames per training window (latent gets window/4)
+    general_data: str | None = None            # uncaptioned general-motion folder mixed in (scripts/build_general_motion.py)
+    general_ratio: float = 0.5                 # share of training windows drawn from general_data
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if not isinstance(self.window, int) or self.window < 4:
             raise ValueError(f"VAETrainConfig.window={self.window!r} is invalid; use an integer >= 4")
+        if self.general_data is not None and not isinstance(self.general_data, str):
+            raise ValueError(f"VAETrainConfig.general_data must be a folder path (str) or None, got {self.general_data!r}")
+        if isinstance(self.general_ratio, bool) or not isinstance(self.general_ratio, (int, float)) \
+                or not 0.0 <= float(self.general_ratio) < 1.0:
+            raise ValueError(f"VAETrainConfig.general_ratio must be in [0, 1), got {self.general_ratio!r}")
 
 
 @dataclass(frozen=True)

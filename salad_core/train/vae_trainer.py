@@ -40,25 +40,26 @@ class VAEObjective(nn.Module):
         The model being trained.
     """
 
-    def __init__(self, vae: nn.Module) -> None:
+    def __init__(self, vae: nn.Module, stats: tuple[torch.Tensor, torch.Tensor] | None = None) -> None:
         super().__init__()
         self.vae = vae
+        self.stats = stats          # (mean, std) (D,): the bone-length term measures de-normalised features
 
-    def forward(self, motion: torch.Tensor, eps: torch.Tensor) -> dict[str, torch.Tensor]:
-        """``motion (B, N, D)`` normalised windows; ``eps (B, N', P, Dz)`` standard normal noise."""
+    def forward(self, motion: torch.Tensor, eps: torch.Tensor,
+                eps_latent: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """``motion (B, N, D)`` normalised windows; ``eps (B, N', P, Dz)`` standard normal noise;
+        ``eps_latent`` (same shape, with ``latent_noise > 0``) the extra latent perturbation."""
         enc = self.vae.encode(motion, sample=False)
         z = enc.mu + eps * torch.exp(0.5 * enc.logvar)      # reparameterisation (official forward)
+        if eps_latent is not None:
+            # decoder robustness (an addition): decode latents near, not only on, the posterior
+            z = z + self.vae.config.latent_noise * eps_latent
         recon = self.vae.decode(z)                           # (B, N, D)
-        return self.vae.loss(motion, recon, enc.mu, enc.logvar)
+        return self.vae.loss(motion, recon, enc.mu, enc.logvar, stats=self.stats)
 
 
 def _collate_windows(items: list[dict[str, Any]]) -> dict[str, torch.Tensor]:
     return default_collate(items)
-
-
-def _mean_std(dataset: Any) -> dict[str, torch.Tensor]:
-    return {"mean": torch.as_tensor(dataset.mean, dtype=torch.float32),
-            "std": torch.as_tensor(dataset.std, dtype=torch.float32)}
 
 
 def build_vae_task(data_dir: str | os.PathLike, model_config: Any, train_config: VAETrainConfig,
@@ -74,10 +75,28 @@ def build_vae_task(data_dir: str | os.PathLike, model_config: Any, train_config:
     if train_config.window % model_config.downsample:
         raise ValueError(f"VAETrainConfig.window={train_config.window} must be a multiple of the VAE's temporal "
                          f"down-sampling {model_config.downsample}")
-    train_set = MotionWindowDataset(data_dir, "train", window=train_config.window, skeleton=model_config.skeleton)
+    general = train_config.general_data
+    if general is None:
+        train_set = MotionWindowDataset(data_dir, "train", window=train_config.window, skeleton=model_config.skeleton)
+        mean, std = train_set.mean, train_set.std
+    else:
+        # corpus + uncaptioned general motion at general_ratio, normalised with the mixture's own
+        # statistics (the general clips' spread is 2-6x the corpus's)
+        from salad_core.data.general_dataset import MixtureWindowDataset, general_windows, mixture_mean_std
+
+        ratio = float(train_config.general_ratio)
+        mean, std = mixture_mean_std(data_dir, general, ratio, skeleton=model_config.skeleton)
+        corpus = MotionWindowDataset(data_dir, "train", window=train_config.window, skeleton=model_config.skeleton,
+                                     mean=mean, std=std)
+        extra = general_windows(general, "train", window=train_config.window, mean=mean, std=std,
+                                skeleton=model_config.skeleton)
+        train_set = MixtureWindowDataset(corpus, extra, ratio=ratio, seed=train_config.seed)
+        log.info("VAE data: %d corpus and %d general windows, general share %.2f per epoch (%d items)",
+                 len(corpus), len(extra), ratio, len(train_set))
     try:
+        # validation on the captioned corpus (what the denoiser's latents come from)
         val_set = MotionWindowDataset(data_dir, "val", window=train_config.window, skeleton=model_config.skeleton,
-                                      mean=train_set.mean, std=train_set.std)
+                                      mean=mean, std=std)
     except (FileNotFoundError, ValueError) as exc:
         log.warning("no validation windows (%s)", exc)
         val_set = None
@@ -86,16 +105,27 @@ def build_vae_task(data_dir: str | os.PathLike, model_config: Any, train_config:
     vae = MotionVAE(model_config).to(env.device)
     latent_shape = (train_config.window // vae.downsample, vae.num_parts, vae.latent_dim)
 
+    noisy = model_config.latent_noise > 0
+
     def prepare(batch: dict[str, torch.Tensor], ctx: StepContext) -> dict[str, torch.Tensor]:
         motion = batch["motion"].to(ctx.env.device, non_blocking=True)
-        return {"motion": motion, "eps": ctx.rand.randn(motion.shape[0], latent_shape)}
+        out = {"motion": motion, "eps": ctx.rand.randn(motion.shape[0], latent_shape)}
+        if noisy:
+            out["eps_latent"] = ctx.rand.randn(motion.shape[0], latent_shape)
+        return out
 
+    stats = (torch.as_tensor(mean, dtype=torch.float32), torch.as_tensor(std, dtype=torch.float32))
+    meta = {"data": str(Path(data_dir)), "window": train_config.window}
+    extra_config = {"kind": "vae", "data": str(Path(data_dir).resolve())}
+    if general is not None:
+        meta.update(general_data=str(Path(general)), general_ratio=float(train_config.general_ratio))
+        extra_config["general_data"] = str(Path(general).resolve())
     return TrainTask(
-        model=vae, model_type="salad_vae", model_config=model_config, objective=VAEObjective(vae),
+        model=vae, model_type="salad_vae", model_config=model_config,
+        objective=VAEObjective(vae, stats if model_config.lambda_bone > 0 else None),
         train_set=train_set, val_set=val_set, collate=_collate_windows, prepare=prepare,
-        meta={"data": str(Path(data_dir)), "window": train_config.window},
-        extra_config={"kind": "vae", "data": str(Path(data_dir).resolve())},
-        extra_files={"mean_std.safetensors": _mean_std(train_set)},
+        meta=meta, extra_config=extra_config,
+        extra_files={"mean_std.safetensors": {"mean": stats[0], "std": stats[1]}},
     )
 
 
