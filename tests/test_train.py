@@ -592,3 +592,42 @@ def test_vae_with_general_motion_bone_term_and_latent_noise(corpus, tmp_path):
     assert_same_tensors(weights(tmp_path / "a" / "latest.safetensors"), weights(tmp_path / "b" / "latest.safetensors"))
     with pytest.raises(ValueError, match="general_ratio"):
         vae_train_config(general_ratio=1.0)
+
+
+def test_denoiser_latent_norm_trains_on_normalised_latents_and_assembles(corpus, tiny_vae_run, tmp_path):
+    from salad_core.data.dataset import MotionTextDataset
+    from salad_core.io import load_tensors
+    from salad_core.pipeline import SaladPipeline
+    from salad_core.train.assemble import assemble_pipeline
+    from salad_core.train.denoiser_trainer import denoiser_latent_stats, load_frozen_vae
+
+    run = tmp_path / "run"
+    train_denoiser(corpus, run, tiny_vae_run, tiny_denoiser_config(), den_train_config(latent_norm=True),
+                   HashTextEncoder())
+    stats = load_tensors(run / "latent_stats.safetensors")
+    vae = load_frozen_vae(tiny_vae_run)
+    assert stats["latent_mean"].shape == stats["latent_std"].shape == (vae.num_parts, vae.latent_dim)
+    # the statistics are those of the training clips' latents: recomputed by hand
+    ds = MotionTextDataset(corpus, "train", max_length=196, unit_length=vae.downsample,
+                           mean=load_tensors(tiny_vae_run / "mean_std.safetensors")["mean"].numpy(),
+                           std=load_tensors(tiny_vae_run / "mean_std.safetensors")["std"].numpy())
+    mus, variances = [], []
+    seen = set()
+    for mid, offset, length in ds.crops():
+        if mid in seen:
+            continue
+        seen.add(mid)
+        clip = torch.from_numpy(ds.crop_features(mid, offset, length))[None]
+        enc = vae.encode(clip[:, : (length // vae.downsample) * vae.downsample], sample=False)
+        mus.append(enc.mu[0].reshape(-1, vae.num_parts, vae.latent_dim))
+        variances.append(enc.logvar[0].exp().reshape(-1, vae.num_parts, vae.latent_dim))
+    mu, var = torch.cat(mus).double(), torch.cat(variances).double()
+    want_std = (mu.var(0, unbiased=False) + var.mean(0)).sqrt()
+    torch.testing.assert_close(stats["latent_mean"], mu.mean(0).float(), atol=1e-5, rtol=1e-4)
+    torch.testing.assert_close(stats["latent_std"], want_std.float(), atol=1e-5, rtol=1e-4)
+    torch.testing.assert_close(denoiser_latent_stats(vae, ds)[1], stats["latent_std"])
+    # the pipeline assembled from the runs diffuses in the same normalised space
+    out = assemble_pipeline(tiny_vae_run, run, tmp_path / "pipe", dtype=None, text_encoder=HashTextEncoder())
+    pipe = SaladPipeline.from_pretrained(out, text_encoder=HashTextEncoder())
+    torch.testing.assert_close(pipe.latent_stats[0], stats["latent_mean"])
+    assert json.loads((run / "config.json").read_text())["task"]["numerics"]["latent_norm"].startswith("per part")

@@ -125,7 +125,13 @@ def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | 
     task = json.loads((denoiser_run / "config.json").read_text()).get("task", {})
     diffusion = config_from_dict(DiffusionConfig, task["diffusion"]) if task.get("diffusion") else DiffusionConfig()
     encoder = text_encoder if text_encoder is not None else load_text_encoder(task.get("text_encoder", "minilm"))
-    pipe = SaladPipeline(vae, den, encoder, stats["mean"].numpy(), stats["std"].numpy(), diffusion=diffusion)
+    latent = denoiser_run / "latent_stats.safetensors"       # runs with latent_norm (absent: identity)
+    latent_stats = None
+    if latent.is_file():
+        lat = load_tensors(latent)
+        latent_stats = (lat["latent_mean"], lat["latent_std"])
+    pipe = SaladPipeline(vae, den, encoder, stats["mean"].numpy(), stats["std"].numpy(), diffusion=diffusion,
+                         latent_stats=latent_stats)
     pipe.save_pretrained(out, dtype=dtype)
     runs = {"vae": _run_record(vae_run), "denoiser": _run_record(denoiser_run)}
     atomic_write_text(out / "runs.json", json.dumps(runs, indent=2) + "\n")

@@ -151,6 +151,8 @@ class DenoiserTrainConfig(TrainConfig):
     latent_cache: bool = True                  # VAE posteriors of every training window encoded once (train.latent_cache)
     latent_cache_dir: str | None = None        # where the cache lives (None: the run folder's latent_cache/)
     latent_cache_dtype: str = "float32"        # "float32" (exact) or "float16" (half the disk, ~5e-4 relative)
+    latent_norm: bool = False                  # diffuse (z - mean) / std, per part and channel, with the training
+                                               # set's latent statistics (an addition; stored with the weights)
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -51,7 +51,7 @@ from .config import DenoiserTrainConfig
 from .distributed import DistEnv, all_reduce_sum, init_distributed
 
 __all__ = ["DenoiserObjective", "CaptionFeatureCache", "train_denoiser", "build_denoiser_task", "load_frozen_vae",
-           "resolve_checkpoint", "denoiser_latent_cache"]
+           "resolve_checkpoint", "denoiser_latent_cache", "denoiser_latent_stats"]
 
 log = logging.getLogger(__name__)
 
@@ -199,12 +199,14 @@ def _vae_stats(vae_path: str | os.PathLike) -> tuple[Any, Any]:
 
 def _prepare(batch: dict[str, Any], ctx: StepContext, *, vae: nn.Module, text: CaptionFeatureCache, scheduler: Any,
              config: DenoiserTrainConfig, prediction_type: str, latent_shape: tuple[int, int, int],
-             latents: Any = None, frames_norm: float | None = None) -> dict[str, Any]:
+             latents: Any = None, frames_norm: float | None = None,
+             latent_stats: tuple[torch.Tensor, torch.Tensor] | None = None) -> dict[str, Any]:
     """Objective inputs of a batch.
 
     ``latents`` (a :class:`~salad_core.train.latent_cache.LatentCache` keyed by ``(motion_id, offset,
     length)``) replaces the VAE encoder; ``frames_norm`` (expected valid latent frames per item) makes
     the training loss ``sum of squared errors / (batch x frames_norm x P x Dz)`` (see the module docstring).
+    ``latent_stats`` ``(mean, std)`` of shape ``(P, Dz)``: diffuse the normalised latent ``(z - mean) / std``.
     """
     env, rand, dev = ctx.env, ctx.rand, ctx.env.device
     motion = batch["motion"].to(dev, non_blocking=True)                 # (B, max_length, D)
@@ -233,7 +235,10 @@ def _prepare(batch: dict[str, Any], ctx: StepContext, *, vae: nn.Module, text: C
                 motion = motion[:, : n_lat * ds]                         # faster; latents then depend on the batch
             enc = vae.encode(motion, sample=False)                       # (B, N/4, P, Dz)
             mu, logvar = enc.mu[:, :n_lat], enc.logvar[:, :n_lat]
-        z = (mu + eps * torch.exp(0.5 * logvar)) * m
+        z = mu + eps * torch.exp(0.5 * logvar)
+        if latent_stats is not None:
+            z = (z - latent_stats[0].to(z)) / latent_stats[1].to(z)
+        z = z * m
         noisy = scheduler.add_noise(z, noise, t)
         target = training_target(scheduler, z, noise, t, prediction_type)
         captions = ["" if d else c for d, c in zip(drop.tolist(), batch["caption"])]
@@ -347,12 +352,13 @@ def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike
             log.warning("no latent cache folder given: using %s (removed by nobody; pass cache_dir)", where)
         latents = denoiser_latent_cache(vae, [d for d in (train_set, val_set) if d is not None], train_config,
                                         where, env, prune=own)
+    latent_stats = denoiser_latent_stats(vae, train_set) if train_config.latent_norm else None
     bucketing = train_config.batching == "buckets"
     frames_norm = expected_latent_frames(train_set.lengths, vae.downsample) if bucketing else None
     prepare = partial(_prepare, vae=vae, text=text_cache,
                       scheduler=scheduler, config=train_config,
                       prediction_type=diffusion_config.prediction_type, latent_shape=latent_shape,
-                      latents=latents, frames_norm=frames_norm)
+                      latents=latents, frames_norm=frames_norm, latent_stats=latent_stats)
     meta = {"diffusion": config_to_dict(diffusion_config), "text_encoder": encoder_name,
             "vae": str(resolve_checkpoint(vae_path)), "data": str(Path(data_dir))}
     numerics = {
@@ -361,15 +367,56 @@ def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike
                     else "encoded at every step"),
         "loss_normaliser": (f"batch x expected valid latent frames per item ({frames_norm:.4g}) x parts x latent dim"
                             if frames_norm is not None else "valid latent elements of the batch"),
+        "latent_norm": "per part and channel, training-set statistics" if latent_stats is not None else "none",
     }
+    extra_files = {"mean_std.safetensors": {"mean": torch.as_tensor(train_set.mean, dtype=torch.float32),
+                                            "std": torch.as_tensor(train_set.std, dtype=torch.float32)}}
+    if latent_stats is not None:
+        extra_files["latent_stats.safetensors"] = {"latent_mean": latent_stats[0], "latent_std": latent_stats[1]}
     return TrainTask(
         model=denoiser, model_type="denoiser", model_config=model_config, objective=DenoiserObjective(denoiser),
         train_set=train_set, val_set=val_set, collate=partial(collate_motion_text, trim=False), prepare=prepare,
         meta=meta, extra_config={"kind": "denoiser", **meta, "data": str(Path(data_dir).resolve()), "numerics": numerics},
-        lengths=train_set.lengths,
-        extra_files={"mean_std.safetensors": {"mean": torch.as_tensor(train_set.mean, dtype=torch.float32),
-                                              "std": torch.as_tensor(train_set.std, dtype=torch.float32)}},
+        lengths=train_set.lengths, extra_files=extra_files,
     )
+
+
+def denoiser_latent_stats(vae: nn.Module, dataset: Any, batch: int = 64) -> tuple[torch.Tensor, torch.Tensor]:
+    """Mean and std ``(P, Dz)`` of the sampled training latents ``z = mu + sigma * eps`` over every valid
+    latent frame of every clip of ``dataset`` (each clip encoded whole, up to its max length, once).
+
+    ``std^2 = var(mu) + mean(sigma^2)``: the spread of the latents the diffusion is trained on, as
+    latent diffusion models scale theirs (Rombach et al. 2022, sec. 4.3: "rescale the latent"); per part
+    and channel because the seven parts' latents need not share a scale. Deterministic for a VAE and a
+    corpus (no sampling), so a resumed run recomputes the same numbers.
+    """
+    ds = vae.downsample
+    p, dz = vae.num_parts, vae.latent_dim
+    total = torch.zeros(p, dz, dtype=torch.float64)
+    total_sq = torch.zeros(p, dz, dtype=torch.float64)
+    total_var = torch.zeros(p, dz, dtype=torch.float64)
+    count = 0
+    first: dict[str, tuple[int, int]] = {}
+    for mid, offset, length in dataset.crops():           # one (the first, longest) window per clip
+        if mid not in first or length > first[mid][1]:
+            first[mid] = (offset, length)
+    with torch.no_grad():
+        for mid, (offset, length) in first.items():
+            clip = dataset.crop_features(mid, offset, length)         # (length, D) normalised
+            n = (clip.shape[0] // ds) * ds
+            if n == 0:
+                continue
+            enc = vae.encode(torch.as_tensor(clip[None, :n], dtype=torch.float32), sample=False)
+            mu = enc.mu[0].double().reshape(-1, p, dz)
+            total += mu.sum(0)
+            total_sq += (mu ** 2).sum(0)
+            total_var += enc.logvar[0].double().exp().reshape(-1, p, dz).sum(0)
+            count += mu.shape[0]
+    if count == 0:
+        raise ValueError("no latent frames to measure the latent statistics on")
+    mean = total / count
+    var = (total_sq / count - mean ** 2).clamp_min(0) + total_var / count
+    return mean.float(), var.sqrt().clamp_min(1e-6).float()
 
 
 def train_denoiser(data_dir: str | os.PathLike, out_dir: str | os.PathLike, vae_path: str | os.PathLike,
