@@ -19,7 +19,6 @@ import hashlib
 import io
 import json
 import logging
-import multiprocessing as mp
 import os
 import shutil
 from collections import Counter
@@ -35,6 +34,7 @@ from .composition import Clip, generate_clip
 from .kinematics import FPS, body_model
 from .language import Caption, mirror_caption, parse_prompt, render_captions
 from .primitives import PRIMITIVES, Action, primitive_parts
+from .parallel import run_jobs
 
 __all__ = ["build_corpus", "corpus_figures", "corpus_digest", "make_motion", "SIZES", "GENERATOR_VERSION", "SPLITS"]
 
@@ -185,8 +185,6 @@ def build_corpus(out_dir: str | os.PathLike, size: str | int = "default", seed: 
     -------
     dict: the summary also written to ``corpus.json``.
     """
-    from tqdm.auto import tqdm
-
     n = _resolve_size(size)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed={seed!r} must be a non-negative int")
@@ -195,21 +193,7 @@ def build_corpus(out_dir: str | os.PathLike, size: str | int = "default", seed: 
     if workers is None:
         workers = 1 if n <= 400 else max(1, min(2, os.cpu_count() or 1))
     jobs = [(int(seed), i, str(out)) for i in range(n)]
-    metas: list[dict] = []
-    bar = tqdm(total=n, desc="procedural corpus", unit="motion", disable=not progress)
-    try:
-        if workers == 1:
-            for job in jobs:
-                metas.append(_job(job))
-                bar.update()
-        else:
-            ctx = mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
-            with ctx.Pool(workers) as pool:
-                for meta in pool.imap(_job, jobs, chunksize=8):
-                    metas.append(meta)
-                    bar.update()
-    finally:
-        bar.close()
+    metas: list[dict] = run_jobs(_job, jobs, workers, desc="procedural corpus", chunksize=8, progress=progress)
 
     splits = _split_ids(n, int(seed))
     for name, ids in splits.items():

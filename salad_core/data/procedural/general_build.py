@@ -16,7 +16,6 @@ number of workers and two builds with the same seed are byte-identical.
 from __future__ import annotations
 
 import json
-import multiprocessing as mp
 import os
 from collections import Counter
 from pathlib import Path
@@ -27,6 +26,7 @@ from ...motion import compute_mean_std, features_to_joints, joints_to_features, 
 from ...skeleton import get_skeleton
 from .corpus import SPLITS, _npy_bytes
 from .general import GeneralConfig, generate_general
+from .parallel import run_jobs
 
 __all__ = ["build_general", "make_general_motion", "GENERAL_VERSION"]
 
@@ -93,8 +93,6 @@ def build_general(out_dir: str | os.PathLike, n: int = 4000, seed: int = 0, work
     -------
     dict: the summary also written to ``general.json``.
     """
-    from tqdm.auto import tqdm
-
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 20:
         raise ValueError(f"n={n!r} must be an int >= 20 (the splits need it)")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -115,21 +113,7 @@ def build_general(out_dir: str | os.PathLike, n: int = 4000, seed: int = 0, work
     if workers is None:
         workers = 1 if n <= 200 else max(1, min(2, os.cpu_count() or 1))
     jobs = [(int(seed), i, str(out), config) for i in range(int(n))]
-    metas: list[dict] = []
-    bar = tqdm(total=int(n), desc="general motion", unit="motion", disable=not progress)
-    try:
-        if workers == 1:
-            for job in jobs:
-                metas.append(_job(job))
-                bar.update()
-        else:
-            ctx = mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
-            with ctx.Pool(workers) as pool:
-                for meta in pool.imap(_job, jobs, chunksize=16):
-                    metas.append(meta)
-                    bar.update()
-    finally:
-        bar.close()
+    metas: list[dict] = run_jobs(_job, jobs, workers, desc="general motion", chunksize=16, progress=progress)
 
     splits = _split_ids(int(n), int(seed))
     for name, ids in splits.items():
