@@ -35,7 +35,7 @@ def corpus(tiny_procedural_corpus):
 @pytest.fixture(scope="module")
 def run(corpus, tmp_path_factory):
     out = tmp_path_factory.mktemp("evalrun") / "run"
-    cfg = EvaluatorTrainConfig(max_steps=STEPS, movement_steps=AE_STEPS, lr=2e-3, movement_lr=2e-3, val_every=10,
+    cfg = EvaluatorTrainConfig(max_steps=STEPS, movement_steps=AE_STEPS, lr=4e-3, movement_lr=2e-3, val_every=10,
                                ckpt_every=20, log_every=10, num_threads=1, progress=False, seed=7)
     report = train_evaluator(corpus, out, cfg, sizes=SIZES, report_replications=2)
     return out, report
@@ -96,6 +96,7 @@ def test_training_lowers_the_matching_loss(run):
     train = [e["loss"] for e in _log(out / "log.jsonl") if "loss" in e]
     # the contrastive loss starts on its plateau (positive ~ negative ~ 25, i.e. every distance ~ margin / 2)
     # and leaves it slowly; a few dozen steps already lower it on the deterministic validation batch
+    # (lr 4e-3: at 2e-3 the corpus 2.0 tiny corpus, with its wider language, stays on the plateau for 40 steps)
     assert len(train) == STEPS // 10 and train[-1] < train[0]
     val = [e["val_loss"] for e in _log(out / "log.jsonl") if "val_loss" in e]
     assert len(val) == STEPS // 10 and val[-1] < val[0] - 1.0
@@ -132,7 +133,7 @@ def test_retrieval_report(run):
 def test_resume_after_the_end_changes_nothing(run, corpus):
     out, report = run
     before = read_checkpoint(out / "latest")[1]
-    cfg = EvaluatorTrainConfig(max_steps=STEPS, movement_steps=AE_STEPS, lr=2e-3, movement_lr=2e-3, val_every=10,
+    cfg = EvaluatorTrainConfig(max_steps=STEPS, movement_steps=AE_STEPS, lr=4e-3, movement_lr=2e-3, val_every=10,
                                ckpt_every=20, log_every=10, num_threads=1, progress=False, seed=7)
     again = train_evaluator(corpus, out, cfg, sizes=SIZES, resume=True, report_split=None)
     assert again.matching.step == STEPS and again.movement is None
