@@ -24,6 +24,15 @@ batch by ``batch_size x expected valid frames per item`` (a constant of the data
 :func:`expected_latent_frames`): every frame has the same weight in every batch, the expected
 gradient is the per-frame mean of the whole corpus (what random batches estimate), and only its
 batch-to-batch spread changes.
+
+Measured cost of the sorting (default denoiser config, small procedural corpus, shipped VAE, 300
+steps, two seeds; ``bench/bench_training.py`` and one evaluation of every step-300 checkpoint with
+the same noise): the bucketed trainer runs 2.33x / 2.35x the steps per second of release 0.5, but
+learns less per step: validation loss 0.803 / 0.806 against 0.763 / 0.753 (random batches), 0.785
+with ``pool_batches=4``. Batches of equal length hold similar clips (on the procedural corpus length
+follows the action), so their gradients vary more. At equal wall-clock time the bucketed run is
+ahead (training loss 0.80 at its step 300 against 0.88 at the old trainer's step 130). A smaller
+pool trades padding (1.30x at 4 batches against 1.09x at 16) for batch diversity.
 """
 from __future__ import annotations
 
