@@ -29,7 +29,8 @@ Measured cost of the sorting (default denoiser config, small procedural corpus, 
 steps, two seeds; ``bench/bench_training.py`` and one evaluation of every step-300 checkpoint with
 the same noise): the bucketed trainer runs 2.33x / 2.35x the steps per second of release 0.5, but
 learns less per step: validation loss 0.803 / 0.806 against 0.763 / 0.753 (random batches), 0.785
-with ``pool_batches=4``. Batches of equal length hold similar clips (on the procedural corpus length
+with ``pool_batches=4``, 0.762 with random batches and the latent cache (so the cache is not the
+cause). Batches of equal length hold similar clips (on the procedural corpus length
 follows the action), so their gradients vary more. At equal wall-clock time the bucketed run is
 ahead (training loss 0.80 at its step 300 against 0.88 at the old trainer's step 130). A smaller
 pool trades padding (1.30x at 4 batches against 1.09x at 16) for batch diversity.
