@@ -10,10 +10,15 @@ import pytest
 from salad_core import openmp
 
 
-def test_sets_passive_when_nothing_chose_a_policy():
+def test_auto_goes_passive_only_on_a_busy_machine():
     env: dict[str, str] = {}
-    assert openmp.configure(env) == "passive"
+    assert openmp.configure(env, load=1.6, cores=2) == "passive"          # 1.6 >= 0.75 x 2
     assert env["OMP_WAIT_POLICY"] == "PASSIVE"
+    quiet: dict[str, str] = {}
+    assert openmp.configure(quiet, load=0.4, cores=2) == "runtime default"
+    assert "OMP_WAIT_POLICY" not in quiet
+    forced = {openmp.ENV_VAR: "passive"}
+    assert openmp.configure(forced, load=0.0, cores=2) == "passive"
 
 
 def test_the_users_variables_and_keep_win():
@@ -34,6 +39,7 @@ def test_bad_choice_names_the_variable():
 
 
 def _child(code: str, **extra: str) -> str:
+    extra.setdefault(openmp.ENV_VAR, "passive")          # independent of how busy the test machine is
     env = {k: v for k, v in os.environ.items() if k not in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT", openmp.ENV_VAR)}
     env.update(extra)
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
