@@ -114,17 +114,7 @@ def test_training_target_values():
 # -------------------------------------------------------------------------- the loop
 def _two_pass_reference(model, sched, cond, uncond, noise, frame_mask, w, steps):
     """CFG with two separate forwards per step (the official ``cfg_step``)."""
-    model.eval()
-    sched.set_timesteps(steps)
-    keep = frame_mask[:, :, None, None].float()
-    z = noise * keep
-    b = noise.shape[0]
-    with torch.no_grad():
-        for t in sched.timesteps:
-            u = model(z, t, uncond[0].expand(b, -1, -1), uncond[1].expand(b, -1), frame_mask)
-            c = model(z, t, cond[0], cond[1], frame_mask)
-            z = sched.step(u + w * (c - u), t, z).prev_sample * keep
-    return z
+    return _reference_with(model, sched, cond, uncond, noise, frame_mask, lambda u, c, t, keep: u + w * (c - u), steps)
 
 
 def test_batched_cfg_equals_two_separate_passes():
