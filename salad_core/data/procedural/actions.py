@@ -499,15 +499,19 @@ def sit(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generat
     _, left = heading_vectors(start.yaw)
     behind, out = u(0.08, 0.16), u(0.15, 0.21)
     on_floor = keyframes(tt, kt, [0.0, 0.0, 0.0, 1.0, 1.0])[:, None]
+    hand_t = np.zeros((n, 2, 3))
     for k, sign in enumerate((1.0, -1.0)):
         palm = seat - fwd * behind + left * (sign * out)
         palm[1] = start.ground[1] + WRIST_ON_FLOOR
-        solved = arm_controls_for(pose, body, k, np.tile(palm, (n, 1)))
+        hand_t[:, k] = palm
+        solved = arm_controls_for(pose, body, k, hand_t[:, k])
         pose.arm[:, k] = (1.0 - on_floor) * pose.arm[:, k] + on_floor * solved
     core = _frames(t1 - 0.05, t4 + 0.1, n)
     # breathing while seated
     pose.spine[:, 1] += 0.01 * np.sin(2 * np.pi * 0.25 * tt) * ease(tt, t4, t4 + 0.5)
-    return Segment(pose, start, core, arms_free=False, seated=True, info=dict(seat_height=float(seat[1])))
+    hands = (on_floor.repeat(2, 1), hand_t)
+    return Segment(pose, start, core, arms_free=False, seated=True, hands=hands,
+                   info=dict(seat_height=float(seat[1])))
 
 
 def bow(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *,

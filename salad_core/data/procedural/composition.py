@@ -18,6 +18,7 @@ from .footwork import Persona, Stance, max_pelvis_height
 from .gestures import Gesture
 from .kinematics import FPS, BodyModel, Pose, assemble, body_model, rot_y, ypr_matrix
 from .primitives import PRIMITIVES, Action, build_base, build_gesture, primitive_parts
+from .reach import arm_controls_for
 from .segment import Segment, standing_pose
 
 __all__ = ["Step", "Plan", "Event", "Clip", "realise", "sample_action", "sample_plan", "generate_clip",
@@ -318,6 +319,38 @@ def _trunk_follows_arms(pose: Pose, persona: Persona, weight: np.ndarray | None 
     pose.spine[:, 2] -= TRUNK_ROLL_PER_ABD * (d[:, 0, 1] - d[:, 1, 1])
 
 
+def _hold_hands(pose: Pose, body: BodyModel, held: list[tuple[int, tuple[np.ndarray, np.ndarray]]]) -> None:
+    """Put the hands of base actions back on their world points (in place).
+
+    ``held`` lists ``(offset, (weights (M, 2), targets (M, 2, 3)))`` of segments whose hands
+    touch something (the floor, a knee; :attr:`.segment.Segment.hands`) starting at frame
+    ``offset``. The posture and the wander (:func:`_alive`) turn the trunk after the segment
+    solved its arms, which moved such hands by up to 6 cm (into the floor when picking up): the
+    arms are solved again on the final trunk and blended in by the weights (exact at 1). A
+    seated segment's last hold carries over the seated rest that pads the clip.
+    """
+    n = pose.num_frames
+    w, tgt = np.zeros((n, 2)), np.zeros((n, 2, 3))
+    for at, (hw, ht) in held:
+        m = min(len(hw), n - at)
+        if m <= 0:
+            continue
+        sel = hw[:m] > w[at:at + m]
+        w[at:at + m] = np.where(sel, hw[:m], w[at:at + m])
+        tgt[at:at + m] = np.where(sel[..., None], ht[:m], tgt[at:at + m])
+    if held:
+        at, (hw, ht) = held[-1]
+        end = at + len(hw)
+        if end < n:                       # the padding after the last segment keeps its hands
+            w[end:], tgt[end:] = hw[-1], ht[-1]
+    for k in range(2):
+        wk = w[:, k]
+        if not (wk > 0).any():
+            continue
+        solved = arm_controls_for(pose, body, k, tgt[:, k])
+        pose.arm[:, k] += wk[:, None] * (solved - pose.arm[:, k])
+
+
 def _anchor(joints: np.ndarray, body: BodyModel) -> np.ndarray:
     """``joints`` moved so that frame 0's pelvis is over the origin and frame 0 faces +Z, with
     the facing HumanML3D's processing measures (hips and shoulders), as clips always started."""
@@ -363,6 +396,7 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
         return at
 
     placed: list[tuple[int, Gesture]] = []
+    held_hands: list[tuple[int, tuple[np.ndarray, np.ndarray]]] = []   # (offset, Segment.hands)
     events: dict[tuple[str, int], tuple[tuple[int, int], dict]] = {}
     seated = False
     for i, step in enumerate(plan.steps):
@@ -372,6 +406,8 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
             seg = build_base(main, stance, persona, body, rng, keep_arms=arm_layer)
             seated = seg.seated
             at = append(seg, seg.core)
+            if seg.hands is not None:
+                held_hands.append((at, seg.hands))
             core = (at + seg.core[0], at + seg.core[1])
             events[("main", i)] = (core, seg.info)
             stance = seg.end
@@ -425,6 +461,7 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
     _alive(pose, persona, rng)
     calm = [events[(role, i)][0] for role, i, a in plan.actions() if a.spec.category == "head"]
     _lively_holds(pose, _hold_mask(pose, body, calm), persona, rng)
+    _hold_hands(pose, body, held_hands)
     joints = _anchor(assemble(pose, body)[s0:stop], body)
 
     out: list[Event] = []

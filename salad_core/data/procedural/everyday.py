@@ -23,8 +23,9 @@ from .segment import Segment, num_frames, standing_pose
 
 __all__ = ["throw", "pick_up", "step_over", "stumble", "FLOOR_WRIST_HEIGHT"]
 
-#: Wrist height (m) when the fingers touch the floor (the hand is about 0.1 m long).
-FLOOR_WRIST_HEIGHT = 0.07
+#: Wrist height (m) when the hand rests on the floor to pick something up (as a palm on the
+#: floor, :data:`.actions.WRIST_ON_FLOOR`).
+FLOOR_WRIST_HEIGHT = 0.04
 
 
 def _tempo(mods: tuple[str, ...]) -> float:
@@ -71,7 +72,9 @@ def throw(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gener
                                                               rest_target(persona, body, side)])
     path = keyframes(tt, kt, keys)
     pose.arm[:, side] = arm_angles_for_target(path, up, fo)
-    pose.arm_pole[:, side] = (0.6, -0.3, -1.0) if not underhand else (0.6, -1.0, 0.0)
+    # the elbow points back and out for either throw: a downward pole (2.0's underhand) bent the
+    # hanging arm's forearm backwards (the physics benchmark's elbow rule flagged every toss)
+    pose.arm_pole[:, side] = (0.6, -0.3, -1.0)
     other = 1 - side
     o_rest = pose.arm[0, other].copy()
     o_point = np.array([u(1.0, 1.3), u(0.1, 0.25), u(0.2, 0.4)])
@@ -137,8 +140,12 @@ def pick_up(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gen
         drop, lean = min(drop + 0.02, 0.56), lean + 0.05
     reach_w = keyframes(tt, kt, [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0])
     hold_w = keyframes(tt, kt, [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0])
+    hand_w, hand_t = np.zeros((n, 2)), np.zeros((n, 2, 3))
     for k in arms:
         target = spot + left * ((0.1 if k == 0 else -0.1) if len(arms) == 2 else 0.0)
+        # the composer re-solves the reach after the posture is laid on (exact at the floor)
+        hand_w[:, k] = reach_w
+        hand_t[:, k] = target
         touch = arm_controls_for(pose, body, k, np.tile(target, (n, 1)))
         held = arm_angles_for_target(np.array([-0.06 if len(arms) == 1 else -0.1, -u(0.32, 0.36), u(0.22, 0.28)]),
                                      body.upper_arm[k], body.forearm[k])
@@ -148,7 +155,7 @@ def pick_up(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gen
     for k in set((0, 1)) - set(arms):             # the free arm hangs forward of the knees
         pose.arm[:, k, 0] += 0.6 * keyframes(tt, kt, [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0])
     core = (max(0, int(np.floor((t1 - 0.05) * FPS))), min(n, int(np.ceil((t5 + 0.05) * FPS)) + 1))
-    return Segment(pose, start, core, arms_free=False,
+    return Segment(pose, start, core, arms_free=False, hands=(hand_w, hand_t),
                    info=dict(floor_point=spot.tolist(), bottom_frame=bottom, drop=float(drop)))
 
 

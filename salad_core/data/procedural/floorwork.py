@@ -165,7 +165,16 @@ def lie_down(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Ge
                   reversed_pose(sit.pose).slice(1, sit.num_frames)]
     pose = Pose.concat(parts)
     n = pose.num_frames
+    # the seated hands stay on the floor (re-solved by the composer) until the trunk lies back
+    sw, st = sit.hands
+    off = 1.0 - keyframes(frame_times(down.num_frames, FPS), [0.0, 0.3 * down.num_frames / FPS], [0.0, 1.0])
+    hand_w = [sw, (sw[-1:] * off[:, None])[1:]]
+    hand_t = [st, np.repeat(st[-1:], down.num_frames - 1, 0)]
+    if get_up:
+        hand_w += [np.zeros((rest.num_frames - 1, 2)), hand_w[1][::-1], sw[::-1][1:]]
+        hand_t += [np.repeat(st[-1:], rest.num_frames - 1 + down.num_frames - 1, 0), st[::-1][1:]]
+    hands = (np.concatenate(hand_w), np.concatenate(hand_t))
     f0 = sit.core[0]
     f1 = n - max(1, sit.core[0]) if get_up else n
-    return Segment(pose, start if get_up else None, (f0, f1), arms_free=False, seated=not get_up,
+    return Segment(pose, start if get_up else None, (f0, f1), arms_free=False, seated=not get_up, hands=hands,
                    info=dict(lying_height=float(down.pelvis[-1, 1]), gets_up=bool(get_up)))

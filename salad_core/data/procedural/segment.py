@@ -31,6 +31,10 @@ class Segment:
     arms_free: bool = True                  # may an arm gesture be layered on top?
     seated: bool = False                    # ends seated (nothing standing can follow)
     info: dict = field(default_factory=dict)  # measured facts (speed, jump height, ...)
+    #: hands held at world points: ``(weights (N, 2) in [0, 1], wrist targets (N, 2, 3) world)``
+    #: per arm (left, right), or None. The composer re-solves these arms after it has laid the
+    #: performer's posture and wander on the trunk, so a hand on the floor stays on it.
+    hands: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def num_frames(self) -> int:

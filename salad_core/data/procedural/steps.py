@@ -261,4 +261,6 @@ def touch_knee(start: Stance, persona: Persona, body: BodyModel, rng: np.random.
     core = (max(0, int(np.floor((t_lift - 0.15) * FPS))), min(n, int(np.ceil((t_plant + 0.05) * FPS)) + 1))
     held = w > 0.99
     gap = float(np.max(reach[held] - wrist_reach(body, hand))) if held.any() else 0.0
-    return Segment(pose, start, core, arms_free=False, info=dict(touch_gap=max(0.0, gap)))
+    hand_w, hand_t = np.zeros((n, 2)), np.zeros((n, 2, 3))
+    hand_w[:, hand], hand_t[:, hand] = w, target
+    return Segment(pose, start, core, arms_free=False, hands=(hand_w, hand_t), info=dict(touch_gap=max(0.0, gap)))
