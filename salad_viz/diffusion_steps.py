@@ -22,7 +22,7 @@ import numpy as np
 from salad_core.skeleton import Skeleton, get_skeleton
 
 from ._arrays import to_numpy
-from .attention import AXES, _figure, merge_tokens, reduce_attention
+from .attention import _WORD_CHARS, AXES, _figure, merge_tokens, reduce_attention
 
 __all__ = ["word_share_by_step", "plot_word_share_by_step", "denoising_strips", "SPECIAL_LABEL"]
 
@@ -48,7 +48,8 @@ def word_share_by_step(attention, tokens: Sequence[str], *, axes: str = "slhnpw"
     batch : int, optional
         Batch element, when ``attention`` has a batch axis ``b``.
     special : bool
-        Add a last column with the share of every token that is not part of a word.
+        Add a last column with the share of every token that is not part of a word (special tokens
+        and punctuation).
 
     Returns
     -------
@@ -73,7 +74,7 @@ def word_share_by_step(attention, tokens: Sequence[str], *, axes: str = "slhnpw"
     # one (P, N', W) map per step, averaged over the parts and frames: (S, W)
     per_token = np.stack([reduce_attention(arr, axes, steps=s, batch=batch).mean(axis=(0, 1))
                           for s in range(n_steps)])
-    groups = merge_tokens(toks)
+    groups = [(w, ids) for w, ids in merge_tokens(toks) if _WORD_CHARS.search(w)]   # punctuation is no word
     if not groups:
         raise ValueError(f"tokens {toks} contain no word")
     labels, columns, seen = [], [], {}

@@ -13,7 +13,7 @@ from salad_viz.diffusion_steps import SPECIAL_LABEL, denoising_strips, plot_word
 from salad_viz.render import keyframe_strip
 from salad_viz.synthetic import synthetic_motion
 
-TOKENS = ["[CLS]", "a", "man", "jump", "##s", "and", "a", "man", "walks", "[SEP]"]
+TOKENS = ["[CLS]", "a", "man", "jump", "##s", ",", "a", "man", "walks", "[SEP]"]
 P = len(PART_NAMES)
 
 
@@ -32,13 +32,13 @@ def _steps_attention(n_steps=6, layers=2, heads=3, n_lat=5, seed=0) -> np.ndarra
 def test_word_shares_merge_pieces_label_repeats_and_sum_to_one():
     att = _steps_attention()
     shares, labels = word_share_by_step(att, TOKENS)
-    assert labels == ["a", "man", "jumps", "and", "a (2)", "man (2)", "walks", SPECIAL_LABEL]
+    assert labels == ["a", "man", "jumps", "a (2)", "man (2)", "walks", SPECIAL_LABEL]   # "," is no word
     assert shares.shape == (6, len(labels))
     np.testing.assert_allclose(shares.sum(axis=1), 1.0, atol=1e-12)
     # by hand: the mean over layers, heads, frames and parts of the two 'jump' pieces at each step
     by_hand = att[..., 3:5].sum(-1).mean(axis=(1, 2, 3, 4))
     np.testing.assert_allclose(shares[:, labels.index("jumps")], by_hand, rtol=1e-12)
-    special = att[..., [0, 9]].sum(-1).mean(axis=(1, 2, 3, 4))
+    special = att[..., [0, 5, 9]].sum(-1).mean(axis=(1, 2, 3, 4))
     np.testing.assert_allclose(shares[:, -1], special, rtol=1e-12)
     # the built-in ramp: 'jumps' rises and the special tokens fall over the steps
     assert np.all(np.diff(shares[:, labels.index("jumps")]) > 0)
@@ -48,7 +48,7 @@ def test_word_shares_merge_pieces_label_repeats_and_sum_to_one():
 def test_word_shares_without_special_and_with_a_batch_axis():
     att = _steps_attention(seed=1)
     shares, labels = word_share_by_step(att, TOKENS, special=False)
-    assert SPECIAL_LABEL not in labels and shares.shape == (6, 7)
+    assert SPECIAL_LABEL not in labels and shares.shape == (6, 6)
     assert np.all(shares.sum(axis=1) < 1.0)
     batched = np.stack([_steps_attention(seed=2), att])              # (B, S, L, H, N', P, W)
     again, _ = word_share_by_step(batched, TOKENS, axes="bslhnpw", batch=1, special=False)
