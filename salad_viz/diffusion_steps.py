@@ -131,9 +131,12 @@ def plot_word_share_by_step(attention, tokens: Sequence[str], *, axes: str = "sl
             ax.plot(steps, shares[:, i], "--", color="0.5", label=labels[i])
         else:
             ax.plot(steps, shares[:, i], marker=".", label=labels[i])
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))      # steps are whole numbers
     ax.set_xlabel("denoising step (1 = pure noise)")
     ax.set_ylabel("share of cross-attention")
-    ax.legend(fontsize=8, ncol=2)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)   # beside, not on, the lines
     ax.grid(alpha=0.3)
     if title:
         ax.set_title(title)
