@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .carriage import FREE_ARM_KINDS, apply_carriage, sample_carriages
 from .curves import min_jerk, smooth, wrap_angle
 from .footwork import Persona, Stance, max_pelvis_height
 from .gestures import Gesture
@@ -29,8 +30,11 @@ MIN_FRAMES, MAX_FRAMES = 41, 197
 #: Plan shapes and how often the sampler draws them (short clips dominate).
 #: Corpus 2.0 draws more sequences and layers than 1.0 (0.35 / 0.19 / 0.25 / 0.15 / 0.02 / 0.04), whose
 #: captions had no connective in half the cases.
-PLAN_TYPES = {"single": 0.25, "gesture": 0.14, "layered": 0.25, "sequence": 0.25, "sequence3": 0.05,
-              "overlay": 0.06}
+#: Corpus 2.1 draws longer sequences (three and four co-articulated actions): a clip that goes
+#: through several poses spreads its joints further (2.0's within-clip spread was 4.1 cm, 12 %
+#: of its single-action clips under 2.5 cm; the real clip 9.7).
+PLAN_TYPES = {"single": 0.16, "gesture": 0.09, "layered": 0.2, "sequence": 0.25, "sequence3": 0.17,
+              "sequence4": 0.07, "overlay": 0.06}
 
 
 @dataclass(frozen=True)
@@ -66,6 +70,9 @@ class Plan:
         for i, s in enumerate(self.steps[:-1]):
             if s.main.spec.terminal:
                 raise ValueError(f"Plan step {i} ({s.main.kind!r}) must end the plan")
+        for i, s in enumerate(self.steps[1:], 1):
+            if s.main.spec.initial:
+                raise ValueError(f"Plan step {i} ({s.main.kind!r}) must start the plan")
         if self.overlay is not None:
             if self.overlay.spec.category != "arms":
                 raise ValueError(f"Plan.overlay must be an arm gesture, got {self.overlay.kind!r}")
@@ -223,12 +230,13 @@ def _alive(pose: Pose, persona: Persona, rng: np.random.Generator) -> None:
     pose.arm[:, 1, 0] -= 0.5 * persona.arm_asym
     # amplitudes (rad, std) small enough that a resting arm or head stays well below an
     # annotated action's part speed (the phrase-activity checks), large enough to never freeze
+    # (2.1: about twice 2.0's, whose spine and head rotations varied 0.5-0.6x as much as real ones)
     noise = _wander(n, rng, 12, period=(1.8, 4.0)) * live
-    pose.spine += noise[:, 0:3] * np.array([0.05, 0.035, 0.03])
-    pose.neck += noise[:, 3:6] * np.array([0.06, 0.04, 0.025])
-    pose.arm[:, :, 0] += noise[:, 6:8] * 0.018
-    pose.arm[:, :, 1] += noise[:, 8:10] * 0.012
-    pose.arm[:, :, 2] = np.maximum(pose.arm[:, :, 2] + noise[:, 10:12] * 0.025, 0.02)
+    pose.spine += noise[:, 0:3] * np.array([0.09, 0.06, 0.06])
+    pose.neck += noise[:, 3:6] * np.array([0.1, 0.07, 0.05])
+    pose.arm[:, :, 0] += noise[:, 6:8] * 0.035
+    pose.arm[:, :, 1] += noise[:, 8:10] * 0.025
+    pose.arm[:, :, 2] = np.maximum(pose.arm[:, :, 2] + noise[:, 10:12] * 0.05, 0.02)
 
 
 #: Body speed (m/s) above which a stretch of motion needs no extra liveliness (see :func:`_hold_mask`).
@@ -294,7 +302,7 @@ def _lively_holds(pose: Pose, weight: np.ndarray, persona: Persona, rng: np.rand
 
 #: Trunk response to asymmetric arm motion: spine yaw per rad of flexion difference, spine roll
 #: per rad of abduction difference (see :func:`_trunk_follows_arms`).
-TRUNK_YAW_PER_FLEX, TRUNK_ROLL_PER_ABD = 0.25, 0.1
+TRUNK_YAW_PER_FLEX, TRUNK_ROLL_PER_ABD = 0.35, 0.2
 
 
 def _trunk_follows_arms(pose: Pose, persona: Persona, weight: np.ndarray | None = None) -> None:
@@ -452,6 +460,9 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
         pad = _rest_seated(acc, n_pad, rng) if seated else _idle(stance, persona, n_pad, body, rng)
         acc = _join(acc, pad.pose, 1)
     pose = acc
+    if all(s.main.spec.track == "gesture" or s.main.kind in FREE_ARM_KINDS for s in plan.steps):
+        # free arms keep the performer's carriage (each arm its own); gestures take them from it
+        apply_carriage(pose, body, sample_carriages(rng))
     gesture_arms = np.zeros((pose.num_frames, 2))
     for at, g in placed:
         _blend(pose, g, at)
@@ -530,9 +541,9 @@ def sample_action(rng: np.random.Generator, kinds: list[str]) -> Action:
     return Action(kind, side, tuple(sorted(mods)), reps, variant)
 
 
-def _bases(accepting: str | None = None, terminal: bool = True) -> list[str]:
+def _bases(accepting: str | None = None, terminal: bool = True, initial: bool = True) -> list[str]:
     return [k for k, s in PRIMITIVES.items() if s.track == "base" and (terminal or not s.terminal)
-            and (accepting is None or accepting in s.accepts)]
+            and (initial or not s.initial) and (accepting is None or accepting in s.accepts)]
 
 
 def _gestures(category: str | None = None) -> list[str]:
@@ -548,14 +559,14 @@ def _layer_for(rng, base: Action) -> Action | None:
     return sample_action(rng, kinds)
 
 
-def _step(rng, terminal: bool, allow_gesture: bool = True, layer_p: float = 0.15) -> Step:
+def _step(rng, terminal: bool, allow_gesture: bool = True, layer_p: float = 0.15, initial: bool = True) -> Step:
     if allow_gesture and rng.random() < 0.25:
         main = sample_action(rng, _gestures())
         layer = None
         if main.spec.category == "arms" and rng.random() < layer_p:
             layer = sample_action(rng, _gestures("head"))
         return Step(main, layer)
-    main = sample_action(rng, _bases(terminal=terminal))
+    main = sample_action(rng, _bases(terminal=terminal, initial=initial))
     layer = _layer_for(rng, main) if rng.random() < layer_p else None
     return Step(main, layer)
 
@@ -575,11 +586,11 @@ def sample_plan(rng: np.random.Generator, plan_type: str | None = None) -> Plan:
     if plan_type == "layered":
         base = sample_action(rng, [k for k in _bases() if PRIMITIVES[k].accepts])
         return Plan((Step(base, _layer_for(rng, base)),))
-    if plan_type in ("sequence", "sequence3"):
-        n = 2 if plan_type == "sequence" else 3
+    if plan_type in ("sequence", "sequence3", "sequence4"):
+        n = {"sequence": 2, "sequence3": 3, "sequence4": 4}[plan_type]
         steps: list[Step] = []
         while len(steps) < n:
-            s = _step(rng, terminal=len(steps) == n - 1)
+            s = _step(rng, terminal=len(steps) == n - 1, initial=not steps)
             if steps and s.main.kind == steps[-1].main.kind:
                 continue
             steps.append(s)

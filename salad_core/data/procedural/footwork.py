@@ -73,13 +73,13 @@ class Persona:
             toe_out=float(rng.uniform(0.0, 0.45)),
             arm_rest=(float(rng.uniform(-0.1, 0.3)), float(rng.uniform(0.04, 0.4)), float(rng.uniform(0.1, 1.0))),
             arm_pole=(0.3, 0.0, -1.0),
-            sway=float(rng.uniform(0.012, 0.03)),
+            sway=float(rng.uniform(0.015, 0.04)),
             head_pitch=float(rng.uniform(-0.15, 0.35)),
             tempo=float(rng.uniform(0.85, 1.15)),
-            slouch=float(rng.uniform(-0.1, 0.32)),
-            tilt=float(rng.uniform(-0.09, 0.09)),
+            slouch=float(rng.uniform(-0.12, 0.4)),
+            tilt=float(rng.uniform(-0.14, 0.14)),
             liveliness=float(rng.uniform(0.6, 1.4)),
-            arm_asym=float(rng.uniform(-0.18, 0.18)),
+            arm_asym=float(rng.uniform(-0.3, 0.3)),
         )
 
 

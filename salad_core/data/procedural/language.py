@@ -95,7 +95,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "fly": ("flies", "flying"), "sunbathe": ("sunbathes", "sunbathing"),
     "change": ("changes", "changing"), "tidy": ("tidies", "tidying"), "sleep": ("sleeps", "sleeping"),
     "watch": ("watches", "watching"), "drop": ("drops", "dropping"), "settle": ("settles", "settling"),
-    "mount": ("mounts", "mounting"),
+    "mount": ("mounts", "mounting"), "crawl": ("crawls", "crawling"),
     "ask": ("asks", "asking"), "chase": ("chases", "chasing"), "lean": ("leans", "leaning"), "loosen": ("loosens", "loosening"), "dash": ("dashes", "dashing"), "lower": ("lowers", "lowering"), "attract": ("attracts", "attracting"), "punctuate": ("punctuates", "punctuating"),
 }
 
@@ -177,7 +177,7 @@ _lex("NOUN", "confidence ease determination enthusiasm purpose force power song 
              "breath seatbelt dog match seconds", {"seconds": "second"})
 _lex("PRON", "nobody")
 _lex("ADJ", "slim slender muscular older bald bearded easy full second")
-_lex("NOUN", "model speed rush hit general wedding pop gym class curb defender baby")
+_lex("NOUN", "model speed rush hit general wedding pop gym class curb defender baby fours")
 _lex("ADV", "thereafter subsequently so")
 LEXICON["followed"] = ("follow", "VERB")
 _lex("ADV", "out")
@@ -800,7 +800,13 @@ INTENT.update({
     "climb_stairs": ("as if climbing/VERB to the second/ADJ floor/NOUN", "as if going/VERB home/NOUN", "as if in a hurry"),
     "pivot": ("as if dodging/VERB a defender/NOUN", "as if changing/VERB direction/NOUN", "like a basketball/NOUN player/NOUN", "as if dancing/VERB"),
     "touch_knee": ("as if stretching/VERB", "as if warming/VERB up", "as part of a workout", "as if exercising/VERB"),
+    "crawl": ("like a baby/NOUN", "as if looking/VERB for something on the floor",
+              "as if searching/VERB for something"),
 })
+# corpus 2.1: on all fours
+RULES["crawl"] = _rules(_R("V:crawl forward"), _R("V:crawl"), _RS("V:crawl on [all/DET fours/NOUN|{poss} hands and knees]"),
+                        _RS("V:crawl [across|along] the floor"), _R("V:move forward on all/DET fours/NOUN"),
+                        _R("V:move forward on {poss} hands and knees"), _R("V:crawl ahead on the floor"))
 
 
 def _style_options(kind: str) -> list[tuple[str, bool]]:

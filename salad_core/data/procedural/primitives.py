@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import actions, boxing, dance, everyday, floorwork, gestures, poses, steps
+from . import actions, boxing, crawl, dance, everyday, floorwork, gestures, poses, steps
 from .footwork import Persona, Stance
 from .gait import Route, gait_style, locomotion
 from .kinematics import BodyModel
@@ -83,6 +83,7 @@ class PrimitiveSpec:
     accepts: tuple[str, ...] = ()       # base: gesture categories that may be layered on it
     weight: float = 1.0                 # sampling weight
     terminal: bool = False              # base: must end the clip (ends seated)
+    initial: bool = False               # base: must start the clip (starts off the feet)
 
     def __post_init__(self) -> None:
         if self.category not in CATEGORIES:
@@ -108,9 +109,9 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("kick", "legs", "base", sides=("left", "right"), mods=("high", "low", "quickly"), reps=(1, 2), accepts=("head",), weight=1.3),
     PrimitiveSpec("knee_lift", "legs", "base", sides=("left", "right"), mods=("high", "slowly", "quickly"), reps=(1, 2), accepts=("arms", "head"), weight=1.0),
     # whole body
-    PrimitiveSpec("squat", "whole body", "base", mods=("low", "slowly", "quickly"), reps=(1, 2, 3), accepts=("arms", "head"), weight=1.2),
-    PrimitiveSpec("sit", "whole body", "base", mods=("slowly",), weight=0.8, terminal=True),
-    PrimitiveSpec("bow", "whole body", "base", mods=("low", "slowly"), reps=(1, 2), weight=0.8),
+    PrimitiveSpec("squat", "whole body", "base", mods=("low", "slowly", "quickly"), reps=(1, 2, 3), accepts=("arms", "head"), weight=1.6),
+    PrimitiveSpec("sit", "whole body", "base", mods=("slowly",), weight=1.1, terminal=True),
+    PrimitiveSpec("bow", "whole body", "base", mods=("low", "slowly"), reps=(1, 2), weight=1.1),
     PrimitiveSpec("jumping_jacks", "whole body", "base", mods=_SPEED, reps=(2, 3, 4), accepts=("head",), weight=0.9),
     PrimitiveSpec("spin", "whole body", "base", sides=("left", "right"), accepts=("arms",), weight=0.8),
     # arms
@@ -121,28 +122,28 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("clap", "arms", "gesture", sides=("both",), mods=_SPEED, reps=(1, 3, 4, 5), weight=0.9),
     PrimitiveSpec("arms_out", "arms", "gesture", sides=("both",), mods=_SPEED, weight=0.9),
     # head
-    PrimitiveSpec("nod", "head", "gesture", mods=_SPEED, reps=(2, 3), weight=0.8),
-    PrimitiveSpec("shake_head", "head", "gesture", mods=_SPEED, reps=(2, 3), weight=0.7),
-    PrimitiveSpec("look", "head", "gesture", sides=("left", "right"), mods=_SPEED, weight=0.8),
+    PrimitiveSpec("nod", "head", "gesture", mods=_SPEED, reps=(2, 3), weight=0.55),
+    PrimitiveSpec("shake_head", "head", "gesture", mods=_SPEED, reps=(2, 3), weight=0.5),
+    PrimitiveSpec("look", "head", "gesture", sides=("left", "right"), mods=_SPEED, weight=0.55),
     # --- corpus 2.0: wider coverage
     # dance
     PrimitiveSpec("dance", "whole body", "base", mods=_SPEED, accepts=("head",), weight=1.2),
-    PrimitiveSpec("sway", "whole body", "base", mods=_SPEED, accepts=("arms", "head"), weight=0.7),
+    PrimitiveSpec("sway", "whole body", "base", mods=_SPEED, accepts=("arms", "head"), weight=0.5),
     # everyday whole-body actions
     PrimitiveSpec("throw", "arms", "base", sides=("left", "right"), mods=_SPEED, variants=("", "underhand"), weight=1.1),
-    PrimitiveSpec("pick_up", "whole body", "base", sides=SIDE_WORDS, mods=("slowly",), weight=1.0),
+    PrimitiveSpec("pick_up", "whole body", "base", sides=SIDE_WORDS, mods=("slowly",), weight=1.4),
     PrimitiveSpec("step_over", "locomotion", "base", mods=("slowly",), accepts=("head",), weight=0.8),
     PrimitiveSpec("stumble", "locomotion", "base", weight=0.7),
     # down to the floor
-    PrimitiveSpec("kneel", "legs", "base", sides=("left", "right"), mods=_SPEED, weight=0.9),
+    PrimitiveSpec("kneel", "legs", "base", sides=("left", "right"), mods=_SPEED, weight=1.3),
     PrimitiveSpec("lie_down", "whole body", "base", mods=("slowly",), weight=0.6, terminal=True),
-    PrimitiveSpec("lie_down_get_up", "whole body", "base", mods=("slowly",), weight=0.6),
+    PrimitiveSpec("lie_down_get_up", "whole body", "base", mods=("slowly",), weight=0.8),
     # footwork: steps, stairs, pivots, a cross-body knee touch
     PrimitiveSpec("step_up", "legs", "base", mods=_SPEED, reps=(1, 2), accepts=("arms", "head"), weight=0.8),
     PrimitiveSpec("climb_stairs", "locomotion", "base", mods=_SPEED, accepts=("head",), weight=0.8, terminal=True),
     PrimitiveSpec("pivot", "locomotion", "base", sides=("left", "right"), mods=_SPEED, variants=("", "around"),
                   accepts=("arms", "head"), weight=0.8),
-    PrimitiveSpec("touch_knee", "whole body", "base", sides=("left", "right"), mods=_SPEED, reps=(1, 2), weight=0.8),
+    PrimitiveSpec("touch_knee", "whole body", "base", sides=("left", "right"), mods=_SPEED, reps=(1, 2), weight=1.1),
     # boxing
     PrimitiveSpec("guard", "arms", "gesture", sides=("both",), weight=0.5),
     PrimitiveSpec("jab_cross", "arms", "gesture", sides=("left", "right"), mods=("quickly",), reps=(1, 2), weight=0.8),
@@ -155,6 +156,8 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("cross_arms", "arms", "gesture", sides=("both",), mods=_SPEED, weight=0.6),
     PrimitiveSpec("reach_across", "arms", "gesture", sides=("left", "right"), mods=_SPEED, weight=0.6),
     PrimitiveSpec("arm_circles", "arms", "gesture", sides=("both",), mods=_SPEED, weight=0.6),
+    # --- corpus 2.1: on all fours (a whole clip: starts and ends there)
+    PrimitiveSpec("crawl", "locomotion", "base", mods=_SPEED, weight=0.7, terminal=True, initial=True),
 ]}
 
 
@@ -224,6 +227,8 @@ def primitive_parts(action: Action) -> tuple[tuple[str, ...], tuple[str, ...]]:
         return arms[side] + (knee_leg, "spine"), ("root", support, other, "head")
     if k == "look":
         return ("head",), ("spine",)
+    if k == "crawl":
+        return _LOWER + ("left arm", "right arm"), ("spine", "head")
     raise ValueError(f"no parts defined for primitive {k!r}")
 
 
@@ -319,6 +324,8 @@ def build_base(action: Action, start: Stance, persona: Persona, body: BodyModel,
     if k == "pivot":
         angle = np.pi if action.variant == "around" else rng.uniform(0.45, 0.55) * np.pi
         return steps.pivot(start, persona, body, rng, side=side, angle=angle, mods=mods)
+    if k == "crawl":
+        return crawl.crawl(start, persona, body, rng, mods=mods)
     if k == "touch_knee":
         return steps.touch_knee(start, persona, body, rng, hand=side, mods=mods, reps=action.reps)
     raise ValueError(f"primitive {k!r} is not a base action")
