@@ -1,25 +1,31 @@
 """Diffusion schedules and the denoising loop (SALAD §3.2, eqs. 7-9; fact sheet §2.3).
 
 Schedulers are diffusers' (they know nothing of the model); the denoiser knows nothing of
-sampling; :func:`denoise` is the one visible loop joining them:
+sampling; :func:`denoise` is the one reverse-diffusion loop of salad, joining them. Per step:
 
-1. both classifier-free-guidance branches run in **one** batched forward, unconditional half
-   first, conditional half second;
-2. ``pred = uncond + w * (cond - uncond)`` (eq. 9);
-3. ``scheduler.step`` and re-masking of padded frames after every step.
+1. the hooks learn the step (:class:`StepInfo`);
+2. a *guided prediction strategy* (:class:`Prediction`) asks the model for the prediction:
+   :class:`GuidedPrediction` runs both classifier-free-guidance branches in **one** batched
+   forward, unconditional half first, and combines them, ``pred = uncond + w * (cond - uncond)``
+   (eq. 9; :class:`Guidance` adds rescale and a guidance interval). Editing
+   (:class:`salad_core.attention.editing.EditPrediction`, Algorithm 1) and KeyMotion's PST
+   (:class:`salad_core.keymotion.pst.PSTPrediction`, its eq. 8) are the other strategies;
+3. ``scheduler.step``, per-step corrections (exact inversion) and re-masking of padded frames;
+4. the callback sees the new latents.
 
 Callers provide the initial noise (so a source generation and its edits can share it) and can
 follow progress through ``controller_hooks`` (called with a :class:`StepInfo` *before* each
 forward, which is how attention controllers learn the current step) and ``callback`` (called
-after each step with the new latents).
+with the same :class:`StepInfo` and the new latents after each step).
 """
 from __future__ import annotations
 
 import inspect
 import logging
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Sequence, Union
+from typing import Any, Callable, ContextManager, Iterable, Iterator, Protocol, Sequence, Union, runtime_checkable
 
 import torch
 
@@ -34,7 +40,11 @@ __all__ = [
     "StepInfo",
     "Guidance",
     "as_guidance",
+    "Prediction",
+    "GuidedPrediction",
     "denoise",
+    "eval_mode",
+    "progress_bar",
     "training_target",
     "PREDICTION_TYPES",
 ]
@@ -250,38 +260,186 @@ def _as_context(denoiser: Denoiser, text: TextInput, name: str) -> TextContext:
                     f"got {type(text).__name__}")
 
 
-def denoise(denoiser: Denoiser, scheduler, cond: TextInput, uncond: TextInput | None,
-            latents: torch.Tensor, frame_mask: torch.Tensor | None = None, *,
-            guidance_scale: "float | Guidance" = 7.5, num_steps: int = 50,
-            controller_hooks: Iterable[Callable[[StepInfo], None]] | None = None,
-            callback: Callable[[StepInfo, torch.Tensor], None] | None = None,
-            progress: bool = False, generator: torch.Generator | None = None) -> torch.Tensor:
-    """Run the reverse diffusion from ``latents`` with classifier-free guidance.
+# ================================================================== the guided prediction
+@runtime_checkable
+class Prediction(Protocol):
+    """A guided prediction strategy: what :func:`denoise` asks of it at every step.
+
+    The loop owns everything the samplers share (scheduler set-up, the model's eval mode,
+    ``inference_mode``, ``init_noise_sigma``, re-masking, the generator, the progress bar, hooks
+    and the callback); a strategy owns how the model is asked for the prediction the scheduler
+    steps with. Three exist: :class:`GuidedPrediction` (classifier-free guidance, eq. 9),
+    :class:`salad_core.attention.editing.EditPrediction` (Algorithm 1's batched row layout) and
+    :class:`salad_core.keymotion.pst.PSTPrediction` (KeyMotion's eq. 8).
+    """
+
+    model: torch.nn.Module   # run in eval mode for the loop (its mode is restored afterwards)
+    batch_size: int          # B samples (StepInfo.batch_size)
+    desc: str                # progress-bar label
+
+    def session(self, timesteps: torch.Tensor, num_train_timesteps: int) -> ContextManager[Any]:
+        """Entered once around the loop, inside ``inference_mode``: per-call caches, processors."""
+
+    def guided(self, timestep: float) -> bool:
+        """``StepInfo.cfg`` at ``timestep``: whether the step's forward has unconditional rows."""
+
+    def __call__(self, z: torch.Tensor, t: torch.Tensor, info: StepInfo) -> torch.Tensor:
+        """The prediction for the scaled model input ``z`` at timestep ``t`` (same shape as ``z``)."""
+
+
+class GuidedPrediction:
+    """Classifier-free guidance (eq. 9) of the SALAD denoiser as a :class:`Prediction`.
+
+    Both branches run in **one** batched forward, unconditional rows first, then
+    ``Guidance.combine`` (eq. 9, optional rescale); steps outside a guidance interval (and
+    ``w = 1``) run the conditional rows alone. Also used directly, outside the loop, by inversion
+    (:mod:`salad_core.attention.inversion`), where ``num_train_timesteps`` must be given.
 
     Parameters
     ----------
     denoiser : Denoiser
-        Run in eval mode for the loop (its previous mode is restored afterwards).
+    cond, uncond : TextContext or (text, text_mask)
+        Conditional and unconditional (null-prompt) text, batch ``B`` or 1 (broadcast); ``uncond``
+        may be None only without guidance.
+    guidance : float or Guidance
+        CFG weight ``w`` or a :class:`Guidance`.
+    frame_mask : torch.Tensor, optional
+        ``(B, N')`` bool, True = valid latent frame.
+    batch_size : int, optional
+        ``B`` (default: the batch of ``cond``).
+    num_train_timesteps : int, optional
+        ``T`` of the guidance interval; set by :meth:`session` inside :func:`denoise`.
+    """
+
+    desc = "denoising"
+
+    def __init__(self, denoiser: Denoiser, cond: TextInput, uncond: TextInput | None,
+                 guidance: "float | Guidance" = 7.5, frame_mask: torch.Tensor | None = None, *,
+                 batch_size: int | None = None, num_train_timesteps: int | None = None) -> None:
+        self.model = denoiser
+        self.guidance = as_guidance(guidance)
+        if self.guidance.cfg and uncond is None:
+            raise ValueError(f"guidance_scale={self.guidance.scale} needs an unconditional text (uncond); "
+                             "pass the null prompt's features or use guidance_scale=1")
+        cond_ctx = _as_context(denoiser, cond, "cond")
+        b = cond_ctx.batch_size if batch_size is None else int(batch_size)
+        self.batch_size = b
+        self.cond = cond_ctx.repeat(b)
+        # one context for the whole loop: text keys/values are projected once, not per step
+        self.both = (TextContext.concat([_as_context(denoiser, uncond, "uncond").repeat(b), self.cond])
+                     if self.guidance.cfg else None)
+        if frame_mask is not None:
+            if frame_mask.dim() != 2 or frame_mask.shape[0] != b:
+                raise ValueError(f"frame_mask must be (B, N') with B = {b}, got {tuple(frame_mask.shape)}")
+            frame_mask = frame_mask.to(dtype=torch.bool)
+        self.frame_mask = frame_mask
+        self._both_masks = None if frame_mask is None else torch.cat([frame_mask, frame_mask])
+        self._keep = None if frame_mask is None else frame_mask[:, :, None, None]
+        self.num_train_timesteps = num_train_timesteps
+
+    @contextmanager
+    def session(self, timesteps: torch.Tensor, num_train_timesteps: int) -> Iterator[None]:
+        self.num_train_timesteps = int(num_train_timesteps)
+        if hasattr(self.model, "prepare_timesteps"):
+            self.model.prepare_timesteps(timesteps)      # every step's FiLMs in one product
+        yield
+
+    def guided(self, timestep: float) -> bool:
+        if not self.guidance.cfg:
+            return False
+        if self.num_train_timesteps is None:
+            raise RuntimeError("GuidedPrediction needs num_train_timesteps outside denoise()")
+        return self.guidance.active(timestep, self.num_train_timesteps)
+
+    def forward_rows(self, timestep: float) -> int:
+        """Rows of the denoiser forward at ``timestep`` (``2 B`` when guided, else ``B``)."""
+        return (2 if self.guided(timestep) else 1) * self.batch_size
+
+    def __call__(self, z: torch.Tensor, t: torch.Tensor, info: StepInfo | None = None) -> torch.Tensor:
+        """Guided prediction ``(B, N', P, Dz)`` for ``z`` at ``t`` (``info.cfg``, or :meth:`guided`,
+        says whether the unconditional rows run)."""
+        guided = self.guided(float(t)) if info is None else info.cfg
+        t = t.reshape(1).to(z.device)
+        if not guided:    # w = 1, or outside the guidance interval: the conditional rows alone
+            return self.model(z, t, frame_mask=self.frame_mask, text_context=self.cond)
+        out = self.model(torch.cat([z, z]), t, frame_mask=self._both_masks, text_context=self.both)
+        keep = None if self._keep is None else self._keep.to(out.dtype)
+        return self.guidance.combine(*out.chunk(2), keep=keep)                # eq. 9 (+ rescale)
+
+
+# ======================================================================= the loop's helpers
+@contextmanager
+def eval_mode(model: torch.nn.Module) -> Iterator[torch.nn.Module]:
+    """``model`` in eval mode for the ``with`` block; its previous mode is restored on exit."""
+    was_training = model.training
+    model.eval()
+    try:
+        yield model
+    finally:
+        model.train(was_training)
+
+
+def progress_bar(items: Iterable, desc: str, enabled: bool, total: int | None = None) -> Iterable:
+    """``items`` wrapped in a tqdm bar when ``enabled``, else as they are."""
+    if not enabled:
+        return items
+    from tqdm.auto import tqdm
+
+    return tqdm(items, desc=desc, leave=False, total=total)
+
+
+def _step_kwargs(scheduler, generator: torch.Generator | None) -> dict[str, Any]:
+    """``generator=`` for the schedulers whose ``step`` takes one (DDPM, Euler ancestral)."""
+    return {"generator": generator} if "generator" in inspect.signature(scheduler.step).parameters else {}
+
+
+# ============================================================================== the loop
+def denoise(denoiser: torch.nn.Module, scheduler, cond: TextInput | None = None, uncond: TextInput | None = None,
+            latents: torch.Tensor | None = None, frame_mask: torch.Tensor | None = None, *,
+            guidance_scale: "float | Guidance | None" = None, num_steps: int = 50,
+            prediction: Prediction | None = None, corrections: torch.Tensor | None = None,
+            controller_hooks: Iterable[Callable[[StepInfo], None]] | None = None,
+            callback: Callable[[StepInfo, torch.Tensor], None] | None = None,
+            progress: bool = False, generator: torch.Generator | None = None) -> torch.Tensor:
+    """Run the reverse diffusion from ``latents``: the one sampling loop of salad.
+
+    Per step ``i`` with timestep ``t``: the hooks learn the step (:class:`StepInfo`); the strategy
+    predicts from ``scheduler.scale_model_input(z, t)``; ``scheduler.step``; the per-step
+    correction is added (exact inversion); padded frames are zeroed; the callback sees the new
+    latents. Give either the texts (``cond``, ``uncond``, ``guidance_scale``: classifier-free
+    guidance by :class:`GuidedPrediction`) or a ``prediction`` strategy.
+
+    Parameters
+    ----------
+    denoiser : torch.nn.Module
+        Run in eval mode for the loop (its previous mode is restored afterwards); with a
+        ``prediction`` it must be the strategy's model.
     scheduler
         A diffusers scheduler (:func:`make_scheduler`); ``set_timesteps`` is called here.
     cond, uncond : TextContext or (text, text_mask)
         Conditional and unconditional (null-prompt) text; batch ``B`` or 1 (broadcast).
         ``uncond`` may be None only when ``guidance_scale == 1``.
     latents : torch.Tensor
-        ``(B, N', P, Dz)`` initial standard-normal noise (multiplied by the scheduler's
-        ``init_noise_sigma`` here); not modified.
+        ``(R, ...)`` initial standard-normal noise (multiplied by the scheduler's
+        ``init_noise_sigma`` here; not modified): ``(B, N', P, Dz)`` with texts; with a strategy,
+        whatever it predicts for (e.g. the edit's stacked ``[z (B); z* (B)]``, PST's ``(B, Lz, Dz)``).
     frame_mask : torch.Tensor, optional
-        ``(B, N')`` bool, True = valid latent frame. Padded frames are zeroed initially and
-        after every step.
-    guidance_scale : float or Guidance
-        CFG weight ``w`` (eq. 9; 1 runs the conditional branch only), or a :class:`Guidance` with
-        rescale and/or a guidance interval (steps outside it run the conditional rows only).
+        ``(R, N')`` bool, True = valid latent frame. Padded frames are zeroed initially and after
+        every step.
+    guidance_scale : float or Guidance, optional
+        With texts: CFG weight ``w`` (eq. 9; 1 runs the conditional branch only; default 7.5, the
+        paper's), or a :class:`Guidance` with rescale and/or a guidance interval (steps outside it run
+        the conditional rows only).
     num_steps : int
         Inference steps passed to ``scheduler.set_timesteps``.
+    prediction : Prediction, optional
+        The guided prediction strategy (instead of the texts).
+    corrections : torch.Tensor, optional
+        ``(S, R, ...)`` added to the latents after step ``i`` (exact inversion).
     controller_hooks : iterable of callables, optional
         ``hook(step_info)`` called before each forward.
     callback : callable, optional
-        ``callback(step_info, latents)`` called after each step with the new ``(B, N', P, Dz)``.
+        ``callback(step_info, latents)`` called after each step with the new ``(R, ...)`` latents.
     progress : bool
         Show a tqdm bar.
     generator : torch.Generator, optional
@@ -290,71 +448,65 @@ def denoise(denoiser: Denoiser, scheduler, cond: TextInput, uncond: TextInput | 
     Returns
     -------
     torch.Tensor
-        ``(B, N', P, Dz)`` denoised latents (created under ``torch.inference_mode``).
+        ``(R, ...)`` denoised latents (created under ``torch.inference_mode``).
     """
-    if latents.dim() != 4:
-        raise ValueError(f"latents must be (B, N', P, Dz), got shape {tuple(latents.shape)}")
-    b, n = latents.shape[:2]
-    guidance = as_guidance(guidance_scale)
-    use_cfg = guidance.cfg
-    if use_cfg and uncond is None:
-        raise ValueError(f"guidance_scale={guidance.scale} needs an unconditional text (uncond); "
-                         "pass the null prompt's features or use guidance_scale=1")
+    if latents is None:
+        raise ValueError("denoise needs the initial noise: latents=(B, N', P, Dz)")
+    if prediction is None:
+        if latents.dim() != 4:
+            raise ValueError(f"latents must be (B, N', P, Dz), got shape {tuple(latents.shape)}")
+        if cond is None:
+            raise ValueError("denoise needs the conditional text (cond) or a prediction strategy (prediction=)")
+        if frame_mask is not None:
+            frame_mask = _check_frame_mask(frame_mask, latents)
+        prediction = GuidedPrediction(denoiser, cond, uncond, 7.5 if guidance_scale is None else guidance_scale,
+                                      frame_mask, batch_size=latents.shape[0])
+    else:
+        if cond is not None or uncond is not None or guidance_scale is not None:
+            raise ValueError("give either the texts (cond, uncond, guidance_scale) or prediction=, not both")
+        if prediction.model is not denoiser:
+            raise ValueError(f"prediction= runs {type(prediction.model).__name__}, not the denoiser given")
     if num_steps < 1:
         raise ValueError(f"num_steps must be >= 1, got {num_steps}")
-    hooks = list(controller_hooks or ())
-    cond_ctx = _as_context(denoiser, cond, "cond").repeat(b)
-    if use_cfg:
-        # one context for the whole loop: text keys/values are projected once, not per step
-        ctx = TextContext.concat([_as_context(denoiser, uncond, "uncond").repeat(b), cond_ctx])
-    else:
-        ctx = cond_ctx
+    keep = None
     if frame_mask is not None:
-        if frame_mask.shape != (b, n):
-            raise ValueError(f"frame_mask must be (B, N') = {(b, n)}, got {tuple(frame_mask.shape)}")
-        frame_mask = frame_mask.to(device=latents.device, dtype=torch.bool)
-    keep = None if frame_mask is None else frame_mask[:, :, None, None].to(latents.dtype)
-    both_masks = None if frame_mask is None else torch.cat([frame_mask, frame_mask])
-    step_kwargs = {"generator": generator} if "generator" in inspect.signature(scheduler.step).parameters else {}
+        frame_mask = _check_frame_mask(frame_mask, latents)
+        keep = frame_mask.view(*frame_mask.shape, *(1,) * (latents.dim() - 2)).to(latents.dtype)
+    hooks = list(controller_hooks or ())
+    step_kwargs = _step_kwargs(scheduler, generator)
 
     scheduler.set_timesteps(num_steps, device=latents.device)
     timesteps = scheduler.timesteps
-    log.debug("denoise: %s, %d steps, batch %d, %s", type(scheduler).__name__, len(timesteps), b, guidance)
+    if corrections is not None and tuple(corrections.shape) != (len(timesteps), *latents.shape):
+        raise ValueError(f"corrections must have shape {(len(timesteps), *latents.shape)}, "
+                         f"got {tuple(corrections.shape)}")
     num_train = int(scheduler.config.num_train_timesteps)
-    was_training = denoiser.training
-    denoiser.eval()
-    try:
-        with torch.inference_mode():
-            if hasattr(denoiser, "prepare_timesteps"):
-                denoiser.prepare_timesteps(timesteps)   # every step's FiLMs in one product
-            z = latents * scheduler.init_noise_sigma
+    log.debug("denoise: %s, %d steps, %s, batch %d", type(scheduler).__name__, len(timesteps),
+              type(prediction).__name__, prediction.batch_size)
+    with eval_mode(denoiser), torch.inference_mode(), prediction.session(timesteps, num_train):
+        z = latents * scheduler.init_noise_sigma
+        if keep is not None:
+            z = z * keep
+        for i, t in enumerate(progress_bar(timesteps, prediction.desc, progress)):
+            info = StepInfo(i, len(timesteps), float(t), prediction.guided(float(t)), prediction.batch_size)
+            for hook in hooks:
+                hook(info)
+            out = prediction(scheduler.scale_model_input(z, t), t, info)
+            z = scheduler.step(out, t, z, **step_kwargs).prev_sample
+            if corrections is not None:
+                z = z + corrections[i]
             if keep is not None:
                 z = z * keep
-            iterator = timesteps
-            if progress:
-                from tqdm.auto import tqdm
-                iterator = tqdm(timesteps, desc="denoising", leave=False)
-            for i, t in enumerate(iterator):
-                guided = guidance.active(float(t), num_train)
-                info = StepInfo(i, len(timesteps), float(t), guided, b)
-                for hook in hooks:
-                    hook(info)
-                model_in = scheduler.scale_model_input(z, t)
-                if guided:
-                    out = denoiser(torch.cat([model_in, model_in]), t.reshape(1).to(latents.device),
-                                   frame_mask=both_masks, text_context=ctx)
-                    out = guidance.combine(*out.chunk(2), keep=keep)             # eq. 9 (+ rescale)
-                else:    # w = 1, or outside the guidance interval: the conditional rows alone
-                    out = denoiser(model_in, t.reshape(1).to(latents.device), frame_mask=frame_mask,
-                                   text_context=cond_ctx)
-                z = scheduler.step(out, t, z, **step_kwargs).prev_sample
-                if keep is not None:
-                    z = z * keep
-                if callback is not None:
-                    callback(info, z)
-    finally:
-        denoiser.train(was_training)
+            if callback is not None:
+                callback(info, z)
     return z
+
+
+def _check_frame_mask(frame_mask: torch.Tensor, latents: torch.Tensor) -> torch.Tensor:
+    """``frame_mask`` as a bool tensor on the latents' device, if it is ``(R, N')`` of ``latents``."""
+    if tuple(frame_mask.shape) != tuple(latents.shape[:2]):
+        raise ValueError(f"frame_mask must be (B, N') = {tuple(latents.shape[:2])}, got {tuple(frame_mask.shape)}")
+    return frame_mask.to(device=latents.device, dtype=torch.bool)
 
 
 def training_target(scheduler, latents: torch.Tensor, noise: torch.Tensor, timesteps: torch.Tensor,

@@ -281,6 +281,44 @@ def test_pst_cfg_batched_equals_two_passes_and_padding_is_ignored():
         pst(torch.randn(2, 3, 16), t, tb.features, tb.mask, lens)
 
 
+def test_sample_latents_is_the_one_loop_with_two_pass_cfg_and_step_infos():
+    """PST sampling through salad's one loop equals a literal two-pass CFG loop (eq. 8), and its
+    callback gets the loop's StepInfo like every sampler."""
+    from salad_core.keymotion.pst import sample_latents
+    from salad_core.sampling import make_scheduler
+
+    torch.manual_seed(0)
+    pst = ParallelSkipTransformer(tiny_pst_config())                 # train mode: restored afterwards
+    enc = HashTextEncoder()
+    tb, null = enc.encode(["a person walks forward", "jumps"]), enc.encode([""], allow_empty=True)
+    noise = torch.randn(2, 2, 16, generator=torch.Generator().manual_seed(1))
+    lens, w = torch.tensor([40, 120]), 3.0
+    seen = []
+    z = sample_latents(pst, make_scheduler(PST_DIFFUSION, "ddim"), tb.features, tb.mask, null.features, null.mask,
+                       noise, lengths=lens, guidance_scale=w, num_steps=4,
+                       callback=lambda info, latents: seen.append((info, latents.clone())))
+    assert pst.training
+    sched = make_scheduler(PST_DIFFUSION, "ddim")
+    sched.set_timesteps(4)
+    ref = noise.clone()
+    pst.eval()
+    with torch.no_grad():
+        for i, t in enumerate(sched.timesteps):
+            c = pst(ref, t, tb.features, tb.mask, lens)
+            u = pst(ref, t, null.features.expand(2, -1, -1), null.mask.expand(2, -1), lens)
+            ref = sched.step(u + w * (c - u), t, ref).prev_sample
+            info, latents = seen[i]
+            assert (info.index, info.num_steps, info.timestep, info.cfg, info.batch_size) == (i, 4, float(t), True, 2)
+            torch.testing.assert_close(latents, ref, atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(z, ref, atol=1e-5, rtol=1e-5)
+    only_cond = sample_latents(pst, make_scheduler(PST_DIFFUSION, "ddim"), tb.features, tb.mask, None, None, noise,
+                               lengths=lens, guidance_scale=1.0, num_steps=2)
+    assert only_cond.shape == noise.shape
+    with pytest.raises(ValueError, match="needs the empty prompt"):
+        sample_latents(pst, make_scheduler(PST_DIFFUSION, "ddim"), tb.features, tb.mask, None, None, noise,
+                       lengths=lens, guidance_scale=2.0, num_steps=2)
+
+
 def test_pst_learns_epsilon_on_a_fixed_latent():
     """A short ε-prediction fit on two latents: the loss falls well below the untrained one."""
     from salad_core.sampling import make_scheduler

@@ -295,6 +295,66 @@ def test_text_context_is_projected_once_per_call(monkeypatch):
     assert calls == [4]  # one projection of the stacked [uncond, cond] batch for all 6 steps
 
 
+# ------------------------------------------------------------------ the one loop
+class _Zero:
+    """A strategy that predicts zeros: one DDIM step is then ``z <- alpha_i z`` (v-prediction)."""
+
+    desc = "zero"
+
+    def __init__(self, model, b):
+        self.model, self.batch_size, self.steps = model, b, []
+
+    def session(self, timesteps, num_train_timesteps):
+        from contextlib import nullcontext
+
+        return nullcontext()
+
+    def guided(self, timestep):
+        return False
+
+    def __call__(self, z, t, info):
+        assert not torch.is_grad_enabled() and not self.model.training
+        self.steps.append(info.index)
+        return torch.zeros_like(z)
+
+
+def test_denoise_takes_a_prediction_strategy_and_owns_the_loop():
+    from salad_core.attention.inversion import ddim_schedule, ddim_step_coefficients
+    from salad_core.sampling import GuidedPrediction, Prediction
+
+    model, cond, null, noise, fm = _setup()
+    text_path = denoise(model, make_scheduler(), cond, null, noise, fm, guidance_scale=Guidance(5.0, rescale=0.5),
+                        num_steps=4)
+    strategy = GuidedPrediction(model, cond, null, Guidance(5.0, rescale=0.5), fm)
+    assert isinstance(strategy, Prediction)
+    assert torch.equal(denoise(model, make_scheduler(), latents=noise, frame_mask=fm, num_steps=4,
+                               prediction=strategy), text_path)
+    # the loop: init, prediction, scheduler step, correction, re-masking, callback, in that order
+    model.train()
+    zero = _Zero(model, 2)
+    corrections = torch.randn(3, *noise.shape, generator=torch.Generator().manual_seed(7))
+    seen = []
+    out = denoise(model, make_scheduler(), latents=noise, frame_mask=fm, num_steps=3, prediction=zero,
+                  corrections=corrections, callback=lambda info, z: seen.append((info, z.clone())))
+    assert model.training and zero.steps == [0, 1, 2]                 # mode restored
+    keep = fm[:, :, None, None].float()
+    z = noise * keep
+    for i, (t, a_t, a_next) in enumerate(ddim_schedule(make_scheduler(), 3)):
+        alpha, _ = ddim_step_coefficients(a_t, a_next, "v_prediction")
+        z = (alpha * z + corrections[i]) * keep
+        torch.testing.assert_close(seen[i][1], z)
+        assert seen[i][0].index == i and seen[i][0].timestep == float(t) and not seen[i][0].cfg
+    torch.testing.assert_close(out, z)
+    with pytest.raises(ValueError, match="not both"):
+        denoise(model, make_scheduler(), cond, latents=noise, prediction=zero)
+    with pytest.raises(ValueError, match="not the denoiser given"):
+        denoise(Denoiser(CFG), make_scheduler(), latents=noise, prediction=zero)
+    with pytest.raises(ValueError, match="corrections must have shape"):
+        denoise(model, make_scheduler(), latents=noise, num_steps=3, prediction=zero, corrections=corrections[:2])
+    with pytest.raises(ValueError, match="frame_mask must be"):
+        denoise(model, make_scheduler(), latents=noise, frame_mask=fm[:1], prediction=zero)
+
+
 # ------------------------------------------------------------- a tiny trained model
 def test_tiny_trained_denoiser_with_cfg_moves_samples_to_the_class_mean():
     """Train on a 2-class latent toy problem with v-prediction and condition dropout, then sample."""

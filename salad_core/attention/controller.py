@@ -218,6 +218,14 @@ class EditController:
         return self.layout
 
     @property
+    def site_kinds(self) -> set[str]:
+        """Attention kinds whose sites the controller edits, injects into or records."""
+        kinds = {"cross"} | {k for e in self.injections for k in e.kinds}
+        for store in self.stores.values():
+            kinds |= set(store.kinds)
+        return kinds
+
+    @property
     def modifies(self) -> bool:
         """Whether the current step changes any attention of the edited rows."""
         return self._cross_active or bool(self._inject_kinds)

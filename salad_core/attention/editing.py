@@ -1,6 +1,7 @@
-"""The batched edit loop (SALAD supplement B, Algorithm 1): source and edited sample side by side.
+"""Batched editing (SALAD supplement B, Algorithm 1): source and edited sample side by side.
 
-:func:`edit_latents` is the one visible loop. Per step ``i`` with timestep ``t``:
+The loop is :func:`salad_core.sampling.denoise`; :class:`EditPrediction` is its strategy for
+editing, and :func:`edit_latents` joins the two. Per step ``i`` with timestep ``t``:
 
 1. the controller plans the step (:meth:`EditController.on_step`): which rows the forward batch
    needs (:class:`~salad_core.attention.controller.RowLayout`);
@@ -8,31 +9,31 @@
    builds ``M_hat`` from the source rows (and the target's own maps) and substitutes it in the
    edited rows (:class:`~salad_core.attention.processor.HookedProcessor`);
 3. classifier-free guidance per branch, ``pred = uncond + w (cond - uncond)`` (eq. 9);
-4. one ``scheduler.step`` on the stacked latents ``[z (B); z* (B)]`` (so multistep solvers keep
-   one consistent state), optional per-step corrections (exact inversion), re-masking.
+4. the loop's one ``scheduler.step`` on the stacked latents ``[z (B); z* (B)]`` (so multistep
+   solvers keep one consistent state), optional per-step corrections (exact inversion), re-masking.
 
-Both branches start from the same noise (Algorithm 1 line 4). The loop also reconstructs an
-inverted motion (``edited=False``: source rows only) with per-step null texts (null-text
-inversion) and per-step corrections.
+Both branches start from the same noise (Algorithm 1 line 4). The same strategy also
+reconstructs an inverted motion (``edited=False``: source rows only) with per-step null texts
+(null-text inversion) and per-step corrections.
 """
 from __future__ import annotations
 
-import inspect
 import logging
+from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Iterator, Sequence
 
 import torch
 import torch.nn.functional as F
 
 from salad_core.models.attention import use_processors
 from salad_core.models.denoiser import Denoiser, TextContext
-from salad_core.sampling import StepInfo, Guidance, as_guidance
+from salad_core.sampling import Guidance, StepInfo, as_guidance, denoise
 
 from .controller import EditController, RowLayout
 from .processor import HookedProcessor
 
-__all__ = ["EditRun", "edit_latents", "pad_context"]
+__all__ = ["EditRun", "EditPrediction", "edit_latents", "pad_context"]
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +60,130 @@ def pad_context(ctx: TextContext, width: int) -> TextContext:
 
 def _expand(ctx: TextContext, b: int) -> TextContext:
     return ctx.repeat(b) if ctx.batch_size != b else ctx
+
+
+class EditPrediction:
+    """Algorithm 1's batched row layout as a :class:`~salad_core.sampling.Prediction`.
+
+    The latents it predicts for are the stacked ``[z (B); z* (B)]`` (source, edited; the source
+    alone when ``controller.edited`` is False). Per step the controller plans the rows
+    (:meth:`EditController.on_step`), one forward computes them all with the hooked processors
+    installed (:meth:`session`), and classifier-free guidance combines each branch's rows (eq. 9).
+
+    Parameters
+    ----------
+    denoiser : Denoiser
+    controller : EditController
+    source, target : TextContext
+        ``B`` source and target prompts (``target`` unused without editing).
+    null : TextContext or sequence of TextContext or None
+        The null text (batch 1 or ``B``), or one per step (null-text inversion).
+    frame_mask : torch.Tensor
+        ``(B, N')`` bool, True = valid latent frame.
+    guidance : float or Guidance
+    num_steps : int
+        Steps the per-step null texts and the schedule must have.
+    """
+
+    def __init__(self, denoiser: Denoiser, controller: EditController, *, source: TextContext,
+                 target: TextContext | None, null: TextContext | Sequence[TextContext] | None,
+                 frame_mask: torch.Tensor, guidance: "float | Guidance", num_steps: int) -> None:
+        self.model, self.controller = denoiser, controller
+        self.guidance = as_guidance(guidance)
+        b = controller.batch
+        self.batch_size, self.num_steps = b, int(num_steps)
+        self.edited = controller.edited
+        self.branches = 2 if self.edited else 1
+        self.desc = "editing" if self.edited else "reconstructing"
+        if self.guidance.cfg != controller.cfg:
+            raise ValueError(f"controller built with cfg={controller.cfg} but guidance_scale={self.guidance.scale}")
+        if self.guidance.cfg and null is None:
+            raise ValueError(f"guidance_scale={self.guidance.scale} needs the null text; pass null= or use "
+                             "guidance_scale=1")
+        self.per_step_null = isinstance(null, (list, tuple))
+        if self.per_step_null and len(null) != num_steps:
+            raise ValueError(f"got {len(null)} per-step null texts for num_steps={num_steps}")
+        if self.edited and target is None:
+            raise ValueError("editing needs the target prompts' text context")
+        width = controller.width
+        self.null = null
+        self.source = pad_context(_expand(source, b), width)
+        self.target = pad_context(_expand(target, b), width) if self.edited else None
+        self.frame_mask = frame_mask
+        self.keep = frame_mask[:, :, None, None]
+        self._contexts: dict[tuple, TextContext] = {}
+        self._num_train = 0
+
+    @contextmanager
+    def session(self, timesteps: torch.Tensor, num_train_timesteps: int) -> Iterator[None]:
+        """The hooked processors on the sites the controller reads or records, for the whole loop."""
+        if len(timesteps) != self.num_steps:
+            raise ValueError(f"the scheduler made {len(timesteps)} timesteps for num_steps={self.num_steps}")
+        self._num_train = int(num_train_timesteps)
+        kinds = {"cross"} | set(self.controller.site_kinds)
+        hook = HookedProcessor(self.controller)
+        processors = {name: hook for name, mod in self.model.attention_sites.items() if mod.kind in kinds}
+        with use_processors(self.model, processors):
+            self.model.prepare_timesteps(timesteps)       # every step's FiLMs in one product
+            yield
+
+    def guided(self, timestep: float) -> bool:
+        # the unconditional rows run at every step here, also outside a guidance interval (their
+        # output is then not used), so source and edit follow the plain sampler's guided prediction
+        return self.guidance.cfg
+
+    def context(self, lay: RowLayout, step: int) -> TextContext:
+        """The text of the step's rows (cached per layout; per step with per-step null texts)."""
+        key = (lay.probe, lay.share_uncond, step if self.per_step_null else -1)
+        if key not in self._contexts:
+            if self.per_step_null:
+                # a new step's null text: the previous steps' contexts (and their cached text
+                # projections) are not needed again
+                for old in [k for k in self._contexts if k[2] != key[2]]:
+                    del self._contexts[old]
+            parts: list[TextContext] = []
+            if lay.cfg:
+                null = self.null[step] if self.per_step_null else self.null
+                parts += [pad_context(_expand(null, self.batch_size), self.controller.width)] * (
+                    lay.num_uncond // self.batch_size)
+            parts.append(self.source)
+            if lay.probe:
+                parts.append(self.target)
+            if lay.edited:
+                parts.append(self.target)
+            self._contexts[key] = TextContext.concat(parts)
+        return self._contexts[key]
+
+    def __call__(self, z: torch.Tensor, t: torch.Tensor, info: StepInfo) -> torch.Tensor:
+        """Guided predictions ``(branches * B, N', P, Dz)`` of the stacked latents ``z``."""
+        b = self.batch_size
+        zs, ze = z[:b], (z[b:] if self.edited else None)
+        lay = self.controller.on_step(info, latents_equal=self.edited and torch.equal(zs, ze))
+        rows = []
+        if lay.cfg:
+            rows.append(zs)
+            if lay.num_uncond > b:
+                rows.append(ze)
+        rows.append(zs)
+        if lay.probe:
+            rows.append(ze)
+        if lay.edited:
+            rows.append(ze)
+        mask = self.frame_mask.repeat(len(rows), 1)
+        out = self.model(torch.cat(rows), t.reshape(1).to(z.device), frame_mask=mask,
+                         text_context=self.context(lay, info.index))
+        pairs = [(lay.source_uncond, lay.source_cond)]
+        if self.edited:
+            pairs.append((lay.edited_uncond, lay.edited_cond))
+        active = self.guidance.active(float(t), self._num_train)
+        keep = self.keep.to(out.dtype)
+        preds = []
+        for u_rows, c_rows in pairs:
+            cond = out[c_rows]
+            if lay.cfg:
+                cond = self.guidance.combine(out[u_rows], cond, keep=keep, active=active)   # eq. 9
+            preds.append(cond)
+        return torch.cat(preds)
 
 
 def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, source: TextContext,
@@ -101,111 +226,20 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
     b, n = noise.shape[:2]
     if controller.batch != b:
         raise ValueError(f"the controller pairs {controller.batch} prompts but the noise has batch {b}")
-    edited = controller.edited
-    guidance = as_guidance(guidance_scale)
-    use_cfg = guidance.cfg
-    if use_cfg != controller.cfg:
-        raise ValueError(f"controller built with cfg={controller.cfg} but guidance_scale={guidance.scale}")
-    if use_cfg and null is None:
-        raise ValueError(f"guidance_scale={guidance.scale} needs the null text; pass null= or use guidance_scale=1")
-    per_step_null = isinstance(null, (list, tuple))
-    if per_step_null and len(null) != num_steps:
-        raise ValueError(f"got {len(null)} per-step null texts for num_steps={num_steps}")
     if corrections is not None and tuple(corrections.shape) != (num_steps, *noise.shape):
         raise ValueError(f"corrections must have shape {(num_steps, *noise.shape)}, got {tuple(corrections.shape)}")
-    if edited and target is None:
-        raise ValueError("editing needs the target prompts' text context")
-    width = controller.width
-    source = pad_context(_expand(source, b), width)
-    target = pad_context(_expand(target, b), width) if edited else None
     if frame_mask is None:
         frame_mask = torch.ones(b, n, dtype=torch.bool, device=noise.device)
     elif tuple(frame_mask.shape) != (b, n):
         raise ValueError(f"frame_mask must be (B, N') = {(b, n)}, got {tuple(frame_mask.shape)}")
     frame_mask = frame_mask.to(device=noise.device, dtype=torch.bool)
-    keep = frame_mask[:, :, None, None].to(noise.dtype)
-    branches = 2 if edited else 1
-
-    contexts: dict[tuple, TextContext] = {}
-
-    def context(lay: RowLayout, step: int) -> TextContext:
-        key = (lay.probe, lay.share_uncond, step if per_step_null else -1)
-        if key not in contexts:
-            if per_step_null:
-                # a new step's null text: the previous steps' contexts (and their cached text
-                # projections) are not needed again
-                for old in [k for k in contexts if k[2] != key[2]]:
-                    del contexts[old]
-            parts: list[TextContext] = []
-            if lay.cfg:
-                nul = pad_context(_expand(null[step] if per_step_null else null, b), width)
-                parts += [nul] * (lay.num_uncond // b)
-            parts.append(source)
-            if lay.probe:
-                parts.append(target)
-            if lay.edited:
-                parts.append(target)
-            contexts[key] = TextContext.concat(parts)
-        return contexts[key]
-
-    step_kwargs = {"generator": generator} if "generator" in inspect.signature(scheduler.step).parameters else {}
-    scheduler.set_timesteps(num_steps, device=noise.device)
-    timesteps = scheduler.timesteps
-    num_train = int(scheduler.config.num_train_timesteps)
-    if len(timesteps) != num_steps:
-        raise ValueError(f"the scheduler made {len(timesteps)} timesteps for num_steps={num_steps}")
-    kinds = {"cross"} | {k for e in controller.injections for k in e.kinds}
-    for store in controller.stores.values():
-        kinds |= set(store.kinds)
-    hook = HookedProcessor(controller)
-    processors = {name: hook for name, mod in denoiser.attention_sites.items() if mod.kind in kinds}
-
-    was_training = denoiser.training
-    denoiser.eval()
-    try:
-        with torch.inference_mode(), use_processors(denoiser, processors):
-            denoiser.prepare_timesteps(timesteps)       # every step's FiLMs in one product, as denoise() does
-            z = torch.cat([noise] * branches) * scheduler.init_noise_sigma
-            z = z * torch.cat([keep] * branches)
-            iterator = timesteps
-            if progress:
-                from tqdm.auto import tqdm
-                iterator = tqdm(timesteps, desc="editing" if edited else "reconstructing", leave=False)
-            for i, t in enumerate(iterator):
-                info = StepInfo(i, num_steps, float(t), use_cfg, b)
-                equal = edited and torch.equal(z[:b], z[b:])
-                lay = controller.on_step(info, latents_equal=equal)
-                model_in = scheduler.scale_model_input(z, t)
-                zs, ze = model_in[:b], (model_in[b:] if edited else None)
-                rows = []
-                if lay.cfg:
-                    rows.append(zs)
-                    if lay.num_uncond > b:
-                        rows.append(ze)
-                rows.append(zs)
-                if lay.probe:
-                    rows.append(ze)
-                if lay.edited:
-                    rows.append(ze)
-                x = torch.cat(rows)
-                mask = frame_mask.repeat(len(rows), 1)
-                out = denoiser(x, t.reshape(1).to(noise.device), frame_mask=mask, text_context=context(lay, i))
-                preds = []
-                pairs = [(lay.source_uncond, lay.source_cond)]
-                if edited:
-                    pairs.append((lay.edited_uncond, lay.edited_cond))
-                active = guidance.active(float(t), num_train)
-                for u_rows, c_rows in pairs:
-                    cond = out[c_rows]
-                    if lay.cfg:
-                        cond = guidance.combine(out[u_rows], cond, keep=keep, active=active)   # eq. 9
-                    preds.append(cond)
-                z = scheduler.step(torch.cat(preds), t, z, **step_kwargs).prev_sample
-                if corrections is not None:
-                    z = z + torch.cat([corrections[i]] * branches)
-                z = z * torch.cat([keep] * branches)
-    finally:
-        denoiser.train(was_training)
+    prediction = EditPrediction(denoiser, controller, source=source, target=target, null=null,
+                                frame_mask=frame_mask, guidance=guidance_scale, num_steps=num_steps)
+    k = prediction.branches
+    # both branches start from the same noise (Algorithm 1, line 4) and take the same corrections
+    z = denoise(denoiser, scheduler, latents=torch.cat([noise] * k), frame_mask=frame_mask.repeat(k, 1),
+                num_steps=num_steps, prediction=prediction, progress=progress, generator=generator,
+                corrections=None if corrections is None else corrections.repeat(1, k, 1, 1, 1))
     log.debug("edit loop: %d steps, %d forward rows, %d probe steps", num_steps, controller.rows_total,
               controller.probe_steps)
-    return EditRun(z[:b], z[b:] if edited else None, controller.rows_total, controller.probe_steps)
+    return EditRun(z[:b], z[b:] if prediction.edited else None, controller.rows_total, controller.probe_steps)

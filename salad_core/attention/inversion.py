@@ -80,7 +80,7 @@ import numpy as np
 import torch
 
 from salad_core.models.denoiser import Denoiser, TextContext
-from salad_core.sampling import Guidance, as_guidance
+from salad_core.sampling import Guidance, GuidedPrediction, as_guidance, eval_mode, progress_bar
 
 __all__ = [
     "INVERSION_METHODS",
@@ -155,17 +155,6 @@ class LatentInversion:
     seconds: float                            # wall time
 
 
-def _guided(denoiser: Denoiser, x: torch.Tensor, t: torch.Tensor, cond: TextContext, both: TextContext | None,
-            mask: torch.Tensor, guidance: Guidance, num_train: int = 1000) -> torch.Tensor:
-    """Guided prediction (eq. 9, :meth:`Guidance.combine`); ``both`` = ``[null (B); cond (B)]`` context,
-    None when w = 1. Outside the guidance interval the conditional rows run alone, as in
-    :func:`~salad_core.sampling.denoise`."""
-    if both is None or not guidance.active(float(t), num_train):
-        return denoiser(x, t, frame_mask=mask, text_context=cond)
-    out = denoiser(torch.cat([x, x]), t, frame_mask=torch.cat([mask, mask]), text_context=both)
-    return guidance.combine(*out.chunk(2), keep=mask[:, :, None, None].to(out.dtype))
-
-
 def _rms(x: torch.Tensor, keep: torch.Tensor) -> float:
     return float(((x * keep) ** 2).sum().div(keep.expand_as(x).sum().clamp(min=1)).sqrt())
 
@@ -224,7 +213,10 @@ def invert_latents(denoiser: Denoiser, scheduler, latents: torch.Tensor, cond: T
     frame_mask = frame_mask.to(device=latents.device, dtype=torch.bool)
     keep = frame_mask[:, :, None, None].to(latents.dtype)
     null_b = None if null is None else (null.repeat(b) if null.batch_size != b else null)
-    both = None if w == 1.0 else TextContext.concat([null_b, cond])
+    # the sampler's own guided prediction (eq. 9, one batched forward; the conditional rows alone
+    # outside a guidance interval), and the plain conditional one (w = 1) of DDIM inversion
+    guided = GuidedPrediction(denoiser, cond, null_b, guidance, frame_mask, num_train_timesteps=num_train)
+    plain = GuidedPrediction(denoiser, cond, None, 1.0, frame_mask, num_train_timesteps=num_train)
     pt = scheduler.config.prediction_type
     schedule = ddim_schedule(scheduler, num_steps)
     start = time.perf_counter()
@@ -234,25 +226,18 @@ def invert_latents(denoiser: Denoiser, scheduler, latents: torch.Tensor, cond: T
     traj[s_count] = latents * keep
     residuals = np.full(s_count, np.nan)
     corrections = torch.zeros((s_count, *latents.shape), dtype=latents.dtype) if exact else None
-    was_training = denoiser.training
-    denoiser.eval()
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-        bar = tqdm(total=s_count, desc=f"inverting ({method})", leave=False)
-    try:
+    with eval_mode(denoiser):
         with torch.inference_mode():
             # backwards through the sampler: step i maps level i to level i + 1
-            for i in reversed(range(s_count)):
+            for i in progress_bar(reversed(range(s_count)), f"inverting ({method})", progress, total=s_count):
                 t, abar_t, abar_next = schedule[i]
                 alpha, beta = ddim_step_coefficients(abar_t, abar_next, pt)
-                tt = t.reshape(1).to(latents.device)
                 z_a = traj[i + 1]
                 if method == "fixed_point":
                     z_b, best, best_res, best_pred = z_a, None, math.inf, None
                     for k in range(iterations + 1):
-                        pred = _guided(denoiser, z_b, tt, cond, both, frame_mask, guidance, num_train)
-                        rows += 2 * b if both is not None and guidance.active(float(t), num_train) else b
+                        pred = guided(z_b, t)
+                        rows += guided.forward_rows(float(t))
                         if k > 0:
                             res = _rms(alpha * z_b + beta * pred - z_a, keep)
                             if res < best_res:
@@ -270,32 +255,26 @@ def invert_latents(denoiser: Denoiser, scheduler, latents: torch.Tensor, cond: T
                     if exact:
                         corrections[i] = (z_a - (alpha * best + beta * best_pred)) * keep
                 else:
-                    pred = _guided(denoiser, z_a, tt, cond, None, frame_mask, Guidance(1.0))   # plain: w = 1
-                    rows += b
+                    pred = plain(z_a, t)                                          # plain: w = 1
+                    rows += plain.forward_rows(float(t))
                     traj[i] = ((z_a - beta * pred) / alpha) * keep
-                if bar is not None:
-                    bar.update()
             null_texts = None
             if method == "ddim" and exact:
                 # corrections of the guided sampler along the plain trajectory
                 for i in range(s_count):
                     t, abar_t, abar_next = schedule[i]
                     alpha, beta = ddim_step_coefficients(abar_t, abar_next, pt)
-                    pred = _guided(denoiser, traj[i], t.reshape(1), cond, both, frame_mask, guidance, num_train)
-                    rows += 2 * b if both is not None and guidance.active(float(t), num_train) else b
+                    pred = guided(traj[i], t)
+                    rows += guided.forward_rows(float(t))
                     miss = (traj[i + 1] - (alpha * traj[i] + beta * pred)) * keep
                     corrections[i] = miss
                     residuals[i] = _rms(miss, keep)
         if method == "null_text":
             if w == 1.0:
                 raise ValueError("null-text inversion needs guidance (guidance_scale != 1); with w = 1 use 'ddim'")
-            null_texts, n_rows = _null_text(denoiser, schedule, traj, cond, null_b, frame_mask, keep, w, pt,
+            null_texts, n_rows = _null_text(denoiser, schedule, traj, cond, null_b, frame_mask, keep, guidance, pt,
                                             iterations, learning_rate, residuals, corrections)
             rows += n_rows
-    finally:
-        denoiser.train(was_training)
-        if bar is not None:
-            bar.close()
     seconds = time.perf_counter() - start
     log.info("inversion %s: %d steps, %d forward rows, %.1f s, max step residual %.3g", method, s_count, rows,
              seconds, np.nanmax(residuals) if np.isfinite(residuals).any() else float("nan"))
@@ -304,7 +283,7 @@ def invert_latents(denoiser: Denoiser, scheduler, latents: torch.Tensor, cond: T
 
 
 def _null_text(denoiser: Denoiser, schedule, traj, cond: TextContext, null: TextContext, frame_mask, keep,
-               w: float, pt: str, iterations: int, lr: float, residuals: np.ndarray,
+               guidance: Guidance, pt: str, iterations: int, lr: float, residuals: np.ndarray,
                corrections: torch.Tensor | None) -> tuple[list[torch.Tensor], int]:
     """Null-text optimisation (Mokady et al. 2023) along the pivot trajectory ``traj``."""
     b = cond.batch_size
@@ -330,7 +309,7 @@ def _null_text(denoiser: Denoiser, schedule, traj, cond: TextContext, null: Text
             for _ in range(iterations):
                 u = denoiser(zc, tt, frame_mask=frame_mask, text_context=TextContext(feat, mask))
                 rows += b
-                pred = u + w * (c - u)
+                pred = guidance.combine(u, c)                              # eq. 9
                 loss = (((alpha * zc + beta * pred - target) * keep) ** 2).sum() / keep.expand_as(zc).sum()
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
@@ -342,7 +321,7 @@ def _null_text(denoiser: Denoiser, schedule, traj, cond: TextContext, null: Text
         with torch.inference_mode():
             u = denoiser(z, tt, frame_mask=frame_mask, text_context=TextContext(features, mask))
             rows += b
-            z_next = (alpha * z + beta * (u + w * (c - u))) * keep
+            z_next = (alpha * z + beta * guidance.combine(u, c)) * keep
             miss = (target - z_next) * keep
             residuals[i] = _rms(miss, keep)
             if corrections is not None:

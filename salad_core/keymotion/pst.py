@@ -31,16 +31,19 @@ Choices where the paper is silent or that we made:
 * **Diffusion**: ε-prediction on a scaled-linear schedule (beta 0.00085 -> 0.012, 1000 steps,
   as MLD/Stable Diffusion): :data:`PST_DIFFUSION`. Classifier-free guidance (eq. 8)
   ``eps = eps_u + w (eps_c - eps_u)`` with the empty prompt as the unconditional text; both
-  branches run in one batched forward in :meth:`ParallelSkipTransformer.guided` and in
-  :func:`sample_latents`. The VAE latents are diffused as they are (no rescaling, as MLD).
+  branches run in one batched forward in :meth:`ParallelSkipTransformer.guided`, which
+  :class:`PSTPrediction` asks at every step of salad's one sampling loop
+  (:func:`salad_core.sampling.denoise`, through :func:`sample_latents`). The VAE latents are
+  diffused as they are (no rescaling, as MLD).
 * **Sizes**: width 128, 4 heads, one condition encoder layer and 4 parallel cross layers (the
   paper's layer counts were lost in our copy; its width is 272), about 2 M parameters.
 """
 from __future__ import annotations
 
 import logging
+from contextlib import nullcontext
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, ContextManager
 
 import torch
 from torch import nn
@@ -49,11 +52,12 @@ from salad_core.io import register_model
 from salad_core.models.embeddings import timestep_sinusoid
 from salad_core.models.gemm import Linear
 from salad_core.models.layers import ACTIVATIONS
-from salad_core.sampling import DiffusionConfig
+from salad_core.sampling import DiffusionConfig, Guidance, StepInfo, denoise
 
 from .models import TransformerBlock, check_positive_int, check_unit_interval, position_sinusoid
 
-__all__ = ["PSTConfig", "ParallelSkipTransformer", "ParallelCrossLayer", "PST_DIFFUSION", "sample_latents"]
+__all__ = ["PSTConfig", "ParallelSkipTransformer", "ParallelCrossLayer", "PST_DIFFUSION", "PSTPrediction",
+           "sample_latents"]
 
 log = logging.getLogger(__name__)
 
@@ -270,8 +274,7 @@ class ParallelSkipTransformer(nn.Module):
             lens = lens.expand(b) if lens.numel() == 1 else lens
         out = self(torch.cat([x, x]), torch.cat([t, t]), texts, masks,
                    None if lens is None else torch.cat([lens, lens]))
-        eps_u, eps_c = out.chunk(2)
-        return eps_u + guidance_scale * (eps_c - eps_u)
+        return Guidance(float(guidance_scale)).combine(*out.chunk(2))         # eq. 8: eps_u + w (eps_c - eps_u)
 
     def num_parameters(self) -> int:
         return sum(p.numel() for p in self.parameters())
@@ -285,12 +288,47 @@ def _pad_mask(m: torch.Tensor, width: int) -> torch.Tensor:
     return torch.nn.functional.pad(m.to(torch.bool), (0, width - m.shape[1]), value=False)
 
 
+class PSTPrediction:
+    """KeyMotion's guided noise prediction (eq. 8) as a :class:`~salad_core.sampling.Prediction`.
+
+    Without guidance (``w = 1``) the conditional branch alone; otherwise both branches in one
+    batched forward (:meth:`ParallelSkipTransformer.guided`).
+    """
+
+    desc = "keyframe denoising"
+
+    def __init__(self, pst: ParallelSkipTransformer, text: torch.Tensor, text_mask: torch.Tensor,
+                 null_text: torch.Tensor | None, null_mask: torch.Tensor | None, guidance_scale: float,
+                 lengths: torch.Tensor | None = None) -> None:
+        if guidance_scale != 1.0 and (null_text is None or null_mask is None):
+            raise ValueError(f"guidance_scale={guidance_scale} needs the empty prompt's features (null_text, null_mask)")
+        self.model = pst
+        self.batch_size = text.shape[0]
+        self.text, self.text_mask, self.null_text, self.null_mask = text, text_mask, null_text, null_mask
+        self.guidance_scale, self.lengths = guidance_scale, lengths
+
+    def session(self, timesteps: torch.Tensor, num_train_timesteps: int) -> ContextManager[None]:
+        return nullcontext()
+
+    def guided(self, timestep: float) -> bool:
+        return self.guidance_scale != 1.0
+
+    def __call__(self, z: torch.Tensor, t: torch.Tensor, info: StepInfo) -> torch.Tensor:
+        """Predicted noise ``(B, Lz, Dz)`` of the keyframe latents ``z`` at ``t``."""
+        if not info.cfg:
+            return self.model(z, t, self.text, self.text_mask, self.lengths)
+        return self.model.guided(z, t, self.text, self.text_mask, self.null_text, self.null_mask,
+                                 self.guidance_scale, self.lengths)
+
+
 def sample_latents(pst: ParallelSkipTransformer, scheduler, text: torch.Tensor, text_mask: torch.Tensor,
                    null_text: torch.Tensor | None, null_mask: torch.Tensor | None, noise: torch.Tensor, *,
                    lengths: torch.Tensor | None = None, guidance_scale: float = 4.0, num_steps: int = 50,
                    progress: bool = False, generator: torch.Generator | None = None,
-                   callback: Callable[[int, torch.Tensor], None] | None = None) -> torch.Tensor:
+                   callback: Callable[[StepInfo, torch.Tensor], None] | None = None) -> torch.Tensor:
     """Reverse diffusion of keyframe latents with classifier-free guidance (eq. 8).
+
+    The loop is :func:`salad_core.sampling.denoise` with :class:`PSTPrediction`.
 
     Parameters
     ----------
@@ -316,41 +354,18 @@ def sample_latents(pst: ParallelSkipTransformer, scheduler, text: torch.Tensor, 
     generator : torch.Generator, optional
         For stochastic schedulers' ``step``.
     callback : callable, optional
-        ``callback(step_index, latents)`` after each step.
+        ``callback(step_info, latents)`` after each step (:class:`~salad_core.sampling.StepInfo`, as
+        every sampler of salad).
 
     Returns
     -------
     Tensor ``(B, Lz, Dz)``: the denoised latents.
     """
-    import inspect
-
     if num_steps < 1:
         raise ValueError(f"num_steps must be >= 1, got {num_steps}")
-    if guidance_scale != 1.0 and (null_text is None or null_mask is None):
-        raise ValueError(f"guidance_scale={guidance_scale} needs the empty prompt's features (null_text, null_mask)")
-    step_kwargs = {"generator": generator} if "generator" in inspect.signature(scheduler.step).parameters else {}
-    scheduler.set_timesteps(num_steps, device=noise.device)
-    was_training = pst.training
-    pst.eval()
-    try:
-        with torch.inference_mode():
-            z = noise * scheduler.init_noise_sigma
-            steps = scheduler.timesteps
-            if progress:
-                from tqdm.auto import tqdm
-                steps = tqdm(steps, desc="keyframe denoising", leave=False)
-            for i, t in enumerate(steps):
-                model_in = scheduler.scale_model_input(z, t)
-                if guidance_scale == 1.0:
-                    eps = pst(model_in, t, text, text_mask, lengths)
-                else:
-                    eps = pst.guided(model_in, t, text, text_mask, null_text, null_mask, guidance_scale, lengths)
-                z = scheduler.step(eps, t, z, **step_kwargs).prev_sample
-                if callback is not None:
-                    callback(i, z)
-    finally:
-        pst.train(was_training)
-    return z
+    prediction = PSTPrediction(pst, text, text_mask, null_text, null_mask, guidance_scale, lengths)
+    return denoise(pst, scheduler, latents=noise, num_steps=num_steps, prediction=prediction, callback=callback,
+                   progress=progress, generator=generator)
 
 
 register_model("keymotion_pst", PSTConfig, ParallelSkipTransformer)
