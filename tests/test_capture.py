@@ -190,7 +190,7 @@ def test_capture_refuses_the_ablation_without_cross_attention(pipe):
 
 
 def test_softmax_last_matches_torch_softmax_and_leaves_its_input():
-    from salad_core.models.attention import softmax_last
+    from salad_core.models.kernels import softmax_last
 
     g = torch.Generator().manual_seed(0)
     for width in (1, 5, 14, 32, 77):
@@ -225,7 +225,7 @@ def test_row_taker_slices_consecutive_rows_and_gathers_others():
 def test_fast_attention_matches_sdpa_with_and_without_a_key_mask(keys):
     import torch.nn.functional as F
 
-    from salad_core.models.attention import SHORT_KEYS, fast_attention
+    from salad_core.models.kernels import SHORT_KEYS, fast_attention
 
     g = torch.Generator().manual_seed(keys)
     q, k, v = (torch.randn(3, 2, 10, 8, generator=g) for _ in range(3))
@@ -242,7 +242,7 @@ def test_fast_attention_matches_sdpa_with_and_without_a_key_mask(keys):
 def test_trailing_padding_is_trimmed_and_gives_the_same_attention():
     import torch.nn.functional as F
 
-    from salad_core.models.attention import fast_attention, trim_masked_keys
+    from salad_core.models.kernels import fast_attention, trim_masked_keys
 
     g = torch.Generator().manual_seed(0)
     q, k, v = (torch.randn(2, 2, 9, 8, generator=g) for _ in range(3))
@@ -265,7 +265,8 @@ def test_trailing_padding_is_trimmed_and_gives_the_same_attention():
 @pytest.mark.parametrize("keys", [12, 60])          # explicit route (probabilities reused) and SDPA route
 def test_hooked_processor_output_is_plain_attention_and_hook_sees_all_keys(keys):
     from salad_core.attention.processor import HookedProcessor
-    from salad_core.models.attention import SiteInfo, attention_probs, fast_attention
+    from salad_core.models.attention import SiteInfo
+    from salad_core.models.kernels import attention_probs, fast_attention
 
     g = torch.Generator().manual_seed(keys)
     b, h, frames, parts = 2, 2, 3, NUM_PARTS
@@ -294,7 +295,7 @@ def test_hooked_processor_output_is_plain_attention_and_hook_sees_all_keys(keys)
 
 
 def test_prefix_key_runs_finds_runs_and_refuses_other_masks():
-    from salad_core.models.attention import MAX_KEY_RUNS, prefix_key_runs
+    from salad_core.models.kernels import MAX_KEY_RUNS, prefix_key_runs
 
     mask = torch.zeros(5, 9, dtype=torch.bool)
     mask[:3, :6] = True                  # three prompts of 6 tokens, then two empty prompts (2 tokens)
@@ -317,7 +318,8 @@ def test_attention_by_row_runs_matches_masked_attention_and_hook_gets_zeros_for_
     import torch.nn.functional as F
 
     from salad_core.attention.processor import HookedProcessor
-    from salad_core.models.attention import SiteInfo, attention_probs, fast_attention, prefix_key_runs
+    from salad_core.models.attention import SiteInfo
+    from salad_core.models.kernels import attention_probs, fast_attention, prefix_key_runs
 
     g = torch.Generator().manual_seed(1)
     b, h, frames, parts, keys = 4, 2, 3, NUM_PARTS, 11
@@ -388,15 +390,21 @@ def test_folded_cross_attention_equals_the_projected_route_and_follows_weight_ch
 
 
 def test_fold_is_skipped_where_it_does_not_pay_or_the_mask_has_holes():
+    from salad_core.models.kernels import fold_text
+
     model = _fold_model()
     attn = model.transformer.layers[0].cross_attn
+
+    def fold(k, v, mask):
+        return fold_text(k, v, mask, attn.Wq, attn.Wo, attn.heads)
+
     k, v = torch.randn(2, 2, 20, 16), torch.randn(2, 2, 20, 16)
     long = torch.arange(20)[None] < torch.tensor([16, 3])[:, None]         # 2 heads x 16 keys = width
-    assert attn.fold_text(k, v, long) is None
+    assert fold(k, v, long) is None
     holes = torch.arange(20)[None] < torch.tensor([6, 3])[:, None]
     holes[0, 2] = False
-    assert attn.fold_text(k, v, holes) is None
-    assert attn.fold_text(k[..., :10, :], v[..., :10, :], None).keys == (10, 10)
+    assert fold(k, v, holes) is None
+    assert fold(k[..., :10, :], v[..., :10, :], None).keys == (10, 10)
 
 
 def test_hooked_processor_on_the_folded_route_keeps_outputs_and_serves_the_hook():

@@ -18,6 +18,7 @@ from salad_core.models.attention import (
     use_processors,
 )
 from salad_core.models.denoiser import Denoiser, DenoiserConfig, TextContext
+from salad_core.models.inference import stacked_qkv, timestep_table
 from salad_core.skeleton import NUM_PARTS
 
 TINY = DenoiserConfig(latent_dim=4, width=32, heads=4, ff_dim=48, layers=5, text_dim=12, max_len=256)
@@ -461,14 +462,14 @@ def test_timestep_table_is_filled_once_and_follows_weight_changes():
     t = torch.tensor([981])
     with torch.inference_mode():
         model.prepare_timesteps(torch.tensor([981, 961, 941]))
-        table = model._timestep_table()
+        table = timestep_table(model).rows(model)
         assert sorted(table) == [941.0, 961.0, 981.0]
         row = table[981.0]
         a = model(x, t, text, tm, fm)
-        assert model._timestep_table()[981.0] is row        # a hit, not recomputed
+        assert timestep_table(model).rows(model)[981.0] is row        # a hit, not recomputed
         temb, films = model.timestep_conditioning(torch.tensor([981, 5]))
         assert temb.shape == (2, TINY.width) and len(films) == TINY.layers
-        assert films[0][0][0].shape == (2, 1, 1, TINY.width) and 5.0 in model._timestep_table()
+        assert films[0][0][0].shape == (2, 1, 1, TINY.width) and 5.0 in timestep_table(model).rows(model)
         expect = model.transformer.layers[2].cross_film(model.timestep_emb(torch.tensor([5])))
         torch.testing.assert_close(films[2][2][0][1:], expect[0])
         torch.testing.assert_close(films[2][2][1][1:], expect[1])
@@ -476,7 +477,7 @@ def test_timestep_table_is_filled_once_and_follows_weight_changes():
         model.transformer.layers[1].ffn_film.linear[1].bias.add_(0.5)   # in-place change: table rebuilt
     with torch.inference_mode():
         b = model(x, t, text, tm, fm)
-        assert 961.0 not in model._timestep_table()
+        assert 961.0 not in timestep_table(model).rows(model)
     with torch.enable_grad():
         ref = model(x, t, text, tm, fm)
     assert not torch.allclose(a, b)
@@ -486,14 +487,14 @@ def test_timestep_table_is_filled_once_and_follows_weight_changes():
 
 
 def test_timestep_table_starts_over_when_full_and_keeps_the_call_s_timesteps(monkeypatch):
-    import salad_core.models.denoiser as D
+    import salad_core.models.inference as inference
 
-    monkeypatch.setattr(D, "_TIMESTEP_CACHE", 3)
+    monkeypatch.setattr(inference, "TIMESTEP_CACHE", 3)
     model = _model()
     with torch.inference_mode():
         model.prepare_timesteps(torch.tensor([1, 2, 3]))
         temb, films = model.timestep_conditioning(torch.tensor([3, 7, 7]))   # 3 cached, 7 new: overflow
-        assert sorted(model._timestep_table()) == [3.0, 7.0]
+        assert sorted(timestep_table(model).rows(model)) == [3.0, 7.0]
     with torch.enable_grad():
         ref = model.timestep_emb(torch.tensor([3, 7, 7]))
     torch.testing.assert_close(temb, ref.detach())
@@ -583,17 +584,17 @@ def test_stacked_qkv_cache_follows_weight_changes_and_lets_gradients_through():
     torch.manual_seed(0)
     attn = Attention(8, 2, 0.0, "temporal")
     with torch.inference_mode():
-        w1, b1 = attn.qkv_parameters()
-        assert attn.qkv_parameters()[0] is w1                     # cached while nothing changed
+        w1, b1 = stacked_qkv(attn)
+        assert stacked_qkv(attn)[0] is w1                         # cached while nothing changed
     torch.testing.assert_close(w1, torch.cat([attn.Wq.weight, attn.Wk.weight, attn.Wv.weight]).detach())
     with torch.no_grad():
         attn.Wk.weight.add_(1.0)                                  # an in-place update (optimiser step)
-        w2, _ = attn.qkv_parameters()
+        w2, _ = stacked_qkv(attn)
     assert w2 is not w1 and torch.equal(w2[8:16], attn.Wk.weight)
     attn.load_state_dict({k: torch.zeros_like(v) for k, v in attn.state_dict().items()})
     with torch.no_grad():
-        assert float(attn.qkv_parameters()[0].abs().sum()) == 0.0
+        assert float(stacked_qkv(attn)[0].abs().sum()) == 0.0
     assert "_qkv_cache" not in "".join(attn.state_dict())          # not a buffer
-    w3, b3 = attn.qkv_parameters()                                 # with gradients: a differentiable cat
+    w3, b3 = stacked_qkv(attn)                                     # with gradients: a differentiable cat
     (w3.sum() + b3.sum()).backward()
     assert attn.Wv.weight.grad is not None and float(attn.Wv.weight.grad.sum()) == 64.0

@@ -284,13 +284,13 @@ def test_hooks_let_a_controller_know_the_step():
 def test_text_context_is_projected_once_per_call(monkeypatch):
     model, cond, null, noise, fm = _setup()
     calls = []
-    original = Denoiser._text_kv
+    original = Denoiser.text_kv
 
     def counting(self, ctx):
         calls.append(ctx.batch_size)
         return original(self, ctx)
 
-    monkeypatch.setattr(Denoiser, "_text_kv", counting)
+    monkeypatch.setattr(Denoiser, "text_kv", counting)
     denoise(model, make_scheduler(), cond, null, noise, fm, num_steps=6)
     assert calls == [4]  # one projection of the stacked [uncond, cond] batch for all 6 steps
 

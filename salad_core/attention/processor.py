@@ -8,7 +8,7 @@ generated motion slightly. :class:`HookedProcessor` instead
 1. asks its hook which batch rows it needs (``hook.rows(site)``; ``None`` = none at this call,
    the common case for self-attention sites, which then cost nothing extra),
 2. computes the output of every row exactly as sampling without hooks does
-   (:func:`~salad_core.models.attention.fast_attention`); on its explicit route (key axes shorter
+   (:func:`~salad_core.models.kernels.fast_attention`); on its explicit route (key axes shorter
    than ``SHORT_KEYS``, e.g. typical prompts) the probabilities it computes anyway are the ones
    the hook gets, so capture costs only what the hook does with them; on the SDPA route
    ``softmax(q k^T / sqrt(d))`` is computed again for the hook's rows only,
@@ -31,8 +31,9 @@ from typing import Optional, Protocol
 import torch
 import torch.nn.functional as F
 
-from salad_core.models.attention import (AttentionProcessor, FoldedText, SiteInfo, attention_probs,
-                                         attention_with_probs, fast_attention, folded_cross_attention)
+from salad_core.models.attention import AttentionProcessor, SiteInfo
+from salad_core.models.kernels import (FoldedText, attention_probs, attention_with_probs, fast_attention,
+                                       folded_cross_attention)
 
 __all__ = ["SiteHook", "HookedProcessor", "flat_rows", "named_rows", "flat_from_named"]
 
@@ -146,7 +147,7 @@ class HookedProcessor(AttentionProcessor):
     takes_folded = True
 
     def folded(self, site: SiteInfo, x: torch.Tensor, fold: FoldedText) -> torch.Tensor:
-        """The folded cross-attention of plain sampling (:class:`~salad_core.models.attention.FoldedText`)
+        """The folded cross-attention of plain sampling (:class:`~salad_core.models.kernels.FoldedText`)
         for every row, with the hook served as in :meth:`__call__`: it gets the probabilities the
         folded route mixed the values with (zeros for padding keys), and rows it replaces are
         recomputed as ``Wo(new_probs @ v)`` over all keys of the row's own prompt.

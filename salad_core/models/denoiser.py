@@ -1,4 +1,4 @@
-"""The skeleto-temporal denoiser of SALAD (paper §3.2, supplement A.2; fact sheet §2.1).
+"""The skeleto-temporal denoiser of SALAD (paper §3.2, Fig. 3, supplement A.2; fact sheet §2.1).
 
 Input and output are latents ``(B, N', P, Dz)`` (``N'`` latent frames, ``P`` body parts). One
 layer (:class:`STTransformerLayer`) is, with pre-LayerNorm and a timestep FiLM on every
@@ -21,9 +21,12 @@ tokens; the sentence token is ``word_emb`` of the pooled sentence feature, norma
 by ``cross_tgt_norm``, and is the same at every layer); ``film=False`` drops the FiLMs and adds
 the timestep embedding to the input tokens instead.
 
-Text work is done once per sampling call through a :class:`TextContext`: the ``word_emb``
-projection and, when gradients are off, every layer's text keys and values are cached on the
-context and recomputed automatically if the weights change.
+This file is the architecture. What sampling reuses across steps (the text keys and values of a
+:class:`TextContext`, the folded cross-attention, every timestep's FiLMs, the stacked Q/K/V) lives
+in :mod:`salad_core.models.inference`, and the CPU attention kernels in
+:mod:`salad_core.models.kernels`: the forward asks them for its text and timestep inputs
+(:func:`~salad_core.models.inference.text_inputs`, :func:`~salad_core.models.inference.timestep_inputs`),
+which are cached when gradients are off and computed afresh when training.
 """
 from __future__ import annotations
 
@@ -35,9 +38,11 @@ import torch
 from torch import nn
 
 from salad_core.io import CheckpointError, load_state_into, register_model
-from salad_core.models.attention import Attention, AttnProcessorMixin, CallDims, FoldedText, site_names
+from salad_core.models.attention import Attention, AttnProcessorMixin, CallDims, site_names
 from salad_core.models.embeddings import PositionalEmbedding, TimestepEmbedding
 from salad_core.models.gemm import Linear, linear
+from salad_core.models.inference import TextContext, text_inputs, timestep_inputs, timestep_table
+from salad_core.models.kernels import FoldedText
 from salad_core.skeleton import NUM_PARTS
 
 __all__ = ["DenoiserConfig", "TextContext", "FiLM", "STTransformerLayer", "SkipTransformer", "Denoiser"]
@@ -46,10 +51,8 @@ log = logging.getLogger(__name__)
 
 _ACTIVATIONS = {"gelu": nn.GELU, "relu": nn.ReLU}
 
-#: Most timesteps whose conditioning :meth:`Denoiser.timestep_conditioning` keeps (about 40 KB each
-#: for the paper model); the table starts over when a schedule would overflow it.
-_TIMESTEP_CACHE = 1024
-
+#: ``axis`` of :meth:`Attention.attend_within` for the two self-attentions of a layer.
+_FRAMES, _PARTS = 1, 2
 
 @dataclass(frozen=True)
 class DenoiserConfig:
@@ -87,124 +90,11 @@ class DenoiserConfig:
             raise ValueError(f"DenoiserConfig.max_len ({self.max_len}) must hold at least one frame of {self.num_parts} parts")
 
 
-class TextContext:
-    """Text conditioning of a batch, prepared once and reused for every denoising step.
-
-    Holds the raw token features and mask; the denoiser-dependent work (``word_emb`` projection,
-    each layer's ``cross_tgt_norm`` + key/value projections) is cached lazily on first use when
-    gradients are disabled, and recomputed if the denoiser's weights change (tracked through the
-    parameters' storage and version counters). With gradients enabled nothing is cached, so
-    training back-propagates into ``word_emb``.
-
-    Parameters
-    ----------
-    text : torch.Tensor
-        ``(B, W, C)`` token features.
-    mask : torch.Tensor
-        ``(B, W)`` bool, True = valid token; every row needs at least one valid token.
-    pooled : torch.Tensor, optional
-        ``(B, C)`` sentence feature, used only by the "w/o CrossAttn" ablation; defaults to the
-        mean of the valid token features.
-    """
-
-    def __init__(self, text: torch.Tensor, mask: torch.Tensor, pooled: torch.Tensor | None = None) -> None:
-        if text.dim() != 3:
-            raise ValueError(f"text must be (B, W, C) token features, got shape {tuple(text.shape)}")
-        if mask.shape != text.shape[:2]:
-            raise ValueError(f"text_mask must be (B, W) = {tuple(text.shape[:2])}, got {tuple(mask.shape)}")
-        mask = mask.to(device=text.device, dtype=torch.bool)
-        if not bool(mask.any(dim=1).all()):
-            bad = (~mask.any(dim=1)).nonzero().flatten().tolist()
-            raise ValueError(f"text_mask rows {bad} have no valid token; every prompt needs at least one "
-                             "(the empty prompt still has its start/end tokens)")
-        if pooled is None:
-            m = mask.to(text.dtype)[..., None]
-            pooled = (text * m).sum(1) / m.sum(1)
-        elif pooled.shape != (text.shape[0], text.shape[2]):
-            raise ValueError(f"pooled must be (B, C) = {(text.shape[0], text.shape[2])}, got {tuple(pooled.shape)}")
-        self.text, self.mask, self.pooled = text, mask, pooled
-        self._signature: tuple | None = None
-        self._cache: list[tuple[torch.Tensor, torch.Tensor]] | None = None
-        self._fold_signature: tuple | None = None
-        self._folds: list | None = None
-
-    @property
-    def batch_size(self) -> int:
-        return self.text.shape[0]
-
-    @property
-    def num_tokens(self) -> int:
-        return self.text.shape[1]
-
-    @property
-    def text_dim(self) -> int:
-        return self.text.shape[2]
-
-    @classmethod
-    def concat(cls, contexts: Sequence["TextContext"]) -> "TextContext":
-        """Stack contexts along the batch (e.g. ``[uncond, cond]`` for batched CFG).
-
-        Different token counts are padded with masked zero tokens. The cache is not carried over.
-        """
-        if not contexts:
-            raise ValueError("contexts must be a non-empty sequence of TextContext")
-        width = max(c.num_tokens for c in contexts)
-        texts, masks = [], []
-        for c in contexts:
-            pad = width - c.num_tokens
-            texts.append(torch.nn.functional.pad(c.text, (0, 0, 0, pad)))
-            masks.append(torch.nn.functional.pad(c.mask, (0, pad), value=False))
-        return cls(torch.cat(texts), torch.cat(masks), torch.cat([c.pooled for c in contexts]))
-
-    def repeat(self, batch: int) -> "TextContext":
-        """A batch-1 context repeated to ``batch`` rows (other sizes must already match)."""
-        if self.batch_size == batch:
-            return self
-        if self.batch_size != 1:
-            raise ValueError(f"cannot repeat a text context of batch {self.batch_size} to batch {batch}; "
-                             "only batch 1 broadcasts")
-        return TextContext(self.text.expand(batch, -1, -1), self.mask.expand(batch, -1),
-                           self.pooled.expand(batch, -1))
-
-    def layer_kv(self, denoiser: "Denoiser") -> list[tuple[torch.Tensor, torch.Tensor]]:
-        """Per-layer text keys and values ``(B, H, W, dh)`` (``W = 1`` for sentence tokens)."""
-        if torch.is_grad_enabled():
-            return denoiser._text_kv(self)
-        sig = denoiser._text_signature()
-        if self._cache is None or self._signature != sig:
-            self._cache = denoiser._text_kv(self)
-            self._signature = sig
-        return self._cache
-
-    def layer_folds(self, denoiser: "Denoiser") -> list:
-        """Per layer the cross-attention's :class:`~salad_core.models.attention.FoldedText` of these
-        text keys and values (or None where folding does not pay), cached like :meth:`layer_kv` and
-        also rebuilt when the cross-attention ``Wq``/``Wo`` change. Only without gradients."""
-        if torch.is_grad_enabled():
-            raise RuntimeError("folded text is for sampling without gradients")
-        return self._layer_folds(denoiser, self.layer_kv(denoiser))
-
-    def _layer_folds(self, denoiser: "Denoiser", kv: list[tuple[torch.Tensor, torch.Tensor]]) -> list:
-        """:meth:`layer_folds` given ``kv``, the :meth:`layer_kv` just returned (the denoiser's forward
-        has it already, so the text signature is not checked twice per call)."""
-        sig = (self._signature, denoiser._fold_signature())
-        if self._folds is None or self._fold_signature != sig:
-            mask = None if bool(self.mask.all()) else self.mask
-            self._folds = [layer.cross_attn.fold_text(k, v, mask)
-                           for layer, (k, v) in zip(denoiser.transformer.layers, kv)]
-            self._fold_signature = sig
-        return self._folds
-
-    def clear_cache(self) -> None:
-        """Drop the cached projections (they are rebuilt on next use)."""
-        self._cache, self._signature = None, None
-        self._folds, self._fold_signature = None, None
-
-
 class FiLM(nn.Module):
     """Timestep FiLM (official ``DenseFiLM``): ``SiLU -> Linear(w, 2w)`` -> (scale, shift).
 
-    Applied as ``out * (1 + scale) + shift`` (supplement eq. 10 with gamma = 1 + scale).
+    Applied as ``out * (1 + scale) + shift`` (supplement eq. 10 with gamma = 1 + scale) by
+    :meth:`residual`.
     """
 
     def __init__(self, width: int) -> None:
@@ -216,23 +106,18 @@ class FiLM(nn.Module):
         scale, shift = self.linear(temb)[:, None, None, :].chunk(2, dim=-1)
         return scale, shift
 
+    @staticmethod
+    def residual(x: torch.Tensor, out: torch.Tensor, film: tuple[torch.Tensor, torch.Tensor] | None) -> torch.Tensor:
+        """Residual update ``x + out * (1 + scale) + shift`` (``x + out`` without FiLM).
 
-def _weight_and_bias(modules: Sequence[nn.Module]) -> list[torch.Tensor]:
-    """``weight`` and ``bias`` (when present) of Linear / LayerNorm modules, in order."""
-    return [t for mod in modules for t in (mod.weight, mod.bias) if t is not None]
-
-
-def _add_modulated(x: torch.Tensor, out: torch.Tensor, film: tuple[torch.Tensor, torch.Tensor] | None) -> torch.Tensor:
-    """Residual update ``x + out * (1 + scale) + shift`` (``x + out`` without FiLM).
-
-    One fused ``addcmul`` and an in-place add on its fresh result instead of three new tensors:
-    at batch 32 each new activation costs an allocation of tens of MB, and the three-op form took
-    26 ms against 11 ms per residual of the paper model on this machine.
-    """
-    if film is None:
-        return x + out
-    scale, shift = film
-    return torch.addcmul(x, out, 1 + scale).add_(shift)
+        One fused ``addcmul`` and an in-place add on its fresh result instead of three new tensors:
+        at batch 32 each new activation costs an allocation of tens of MB, and the three-op form took
+        26 ms against 11 ms per residual of the paper model on this machine.
+        """
+        if film is None:
+            return x + out
+        scale, shift = film
+        return torch.addcmul(x, out, 1 + scale).add_(shift)
 
 
 @dataclass
@@ -242,6 +127,19 @@ class _Masks:
     temporal: torch.Tensor | None   # (B*P, N')
     text: torch.Tensor | None       # (B, W)
     sentence: torch.Tensor | None   # (B, 1 + N'*P)
+
+
+@dataclass
+class LayerInputs:
+    """What one layer gets besides the tokens in one call: the call's key masks and sizes, this
+    layer's text keys and values ``(B, H, W, dh)``, and, when sampling, its four FiLM
+    ``(scale, shift)`` from the timestep table and its folded text (else None)."""
+
+    masks: _Masks
+    dims: CallDims
+    text_kv: tuple[torch.Tensor, torch.Tensor]
+    films: Sequence[tuple[torch.Tensor, torch.Tensor]] | None = None
+    fold: FoldedText | None = None
 
 
 class STTransformerLayer(nn.Module):
@@ -283,45 +181,44 @@ class STTransformerLayer(nn.Module):
         """The four FiLMs in application order (temporal, skeletal, cross, FFN); empty without FiLM."""
         return (self.temp_film, self.skel_film, self.cross_film, self.ffn_film) if self.use_film else ()
 
-    def forward(self, x: torch.Tensor, temb: torch.Tensor, text_kv: tuple[torch.Tensor, torch.Tensor],
-                masks: _Masks, dims: CallDims, films: Sequence[tuple[torch.Tensor, torch.Tensor]] | None = None,
-                fold: FoldedText | None = None) -> torch.Tensor:
-        """``x`` ``(B, N', P, w)`` -> ``(B, N', P, w)``; ``temb`` ``(B, w)``.
-
-        ``films``: this layer's four ``(scale, shift)`` pairs, each ``(B or 1, 1, 1, w)``, when the
-        caller computed them already (:meth:`Denoiser.timestep_conditioning`); else from ``temb``.
-        """
-        b, n, p, w = x.shape
-        if not self.use_film:
-            films = (None,) * 4
-        elif films is None:
-            films = tuple(film(temb) for film in self.films)
-
-        # temporal attention: every part is a sequence over frames, rows ordered (batch, part)
-        h = self.temp_attn.attend_within(self.temp_norm(x), 1, key_mask=masks.temporal, dims=dims)
-        x = _add_modulated(x, self.temp_dropout(h), films[0])
-
-        # skeletal attention: every frame is a sequence over its parts (no skeleton mask, as official)
-        h = self.skel_attn.attend_within(self.skel_norm(x), 2, dims=dims)
-        x = _add_modulated(x, self.skel_dropout(h), films[1])
-
-        # cross attention over words (query index t * P + j), or the ablation's sentence token
-        q = self.cross_src_norm(x.reshape(b, n * p, w))
-        if self.cross_attention:
-            h = self.cross_attn(q, kv=text_kv, key_mask=masks.text, fold=fold, dims=dims)
-        else:
-            kx, vx = self.cross_attn.project_kv(q)
-            kv = (torch.cat([text_kv[0], kx], dim=2), torch.cat([text_kv[1], vx], dim=2))
-            h = self.cross_attn(q, kv=kv, key_mask=masks.sentence, dims=dims)
-        x = _add_modulated(x, self.cross_dropout(h.view(b, n, p, w)), films[2])
-
-        h = self.ffn_norm(x)
+    def feed_forward(self, h: torch.Tensor) -> torch.Tensor:
+        """``FFN(h) = W2 act(W1 h + b1) + b2`` per token (GELU fused into the first product on oneDNN)."""
         if self.ffn_fused_gelu:
             h = linear(h, self.ffn_linear1.weight, self.ffn_linear1.bias, activation="gelu")
         else:
             h = self.ffn_activation(self.ffn_linear1(h))
-        h = self.ffn_linear2(h)
-        return _add_modulated(x, self.ffn_dropout(h), films[3])
+        return self.ffn_linear2(h)
+
+    def forward(self, x: torch.Tensor, temb: torch.Tensor, inputs: LayerInputs) -> torch.Tensor:
+        """``x`` ``(B, N', P, w)`` -> ``(B, N', P, w)``; ``temb`` ``(B, w)`` (FiLMs computed from it
+        unless ``inputs.films`` holds them already)."""
+        b, n, p, w = x.shape
+        masks, dims = inputs.masks, inputs.dims
+        if not self.use_film:
+            films = (None,) * 4
+        else:
+            films = inputs.films if inputs.films is not None else tuple(film(temb) for film in self.films)
+
+        # temporal attention: every part is a sequence over frames, rows ordered (batch, part)
+        h = self.temp_attn.attend_within(self.temp_norm(x), _FRAMES, key_mask=masks.temporal, dims=dims)
+        x = FiLM.residual(x, self.temp_dropout(h), films[0])
+
+        # skeletal attention: every frame is a sequence over its parts (no skeleton mask, as official)
+        h = self.skel_attn.attend_within(self.skel_norm(x), _PARTS, dims=dims)
+        x = FiLM.residual(x, self.skel_dropout(h), films[1])
+
+        # cross attention over words (query index t * P + j), or the ablation's sentence token
+        q = self.cross_src_norm(x.reshape(b, n * p, w))
+        if self.cross_attention:
+            h = self.cross_attn(q, kv=inputs.text_kv, key_mask=masks.text, fold=inputs.fold, dims=dims)
+        else:
+            kx, vx = self.cross_attn.project_kv(q)
+            kv = (torch.cat([inputs.text_kv[0], kx], dim=2), torch.cat([inputs.text_kv[1], vx], dim=2))
+            h = self.cross_attn(q, kv=kv, key_mask=masks.sentence, dims=dims)
+        x = FiLM.residual(x, self.cross_dropout(h.view(b, n, p, w)), films[2])
+
+        h = self.feed_forward(self.ffn_norm(x))
+        return FiLM.residual(x, self.ffn_dropout(h), films[3])
 
 
 class SkipTransformer(nn.Module):
@@ -340,24 +237,18 @@ class SkipTransformer(nn.Module):
         """Layers in execution order (index = the layer index of the attention sites)."""
         return [*self.input_blocks, self.middle_block, *self.output_blocks]
 
-    def forward(self, x: torch.Tensor, temb: torch.Tensor, text_kv: list[tuple[torch.Tensor, torch.Tensor]],
-                masks: _Masks, dims: CallDims, films: list | None = None, folds: list | None = None
-                ) -> torch.Tensor:
-        """``films``: per layer (execution order) its FiLM pairs, or None to compute them from ``temb``;
-        ``folds``: per layer its folded text (:meth:`TextContext.layer_folds`) or None."""
+    def forward(self, x: torch.Tensor, temb: torch.Tensor, inputs: Sequence[LayerInputs]) -> torch.Tensor:
+        """``x`` ``(B, N', P, w)``; ``inputs``: per layer (execution order) its :class:`LayerInputs`."""
         half = len(self.input_blocks)
-        films = films or [None] * (2 * half + 1)
-        folds = folds or [None] * (2 * half + 1)
         skips = []
         for i, block in enumerate(self.input_blocks):
-            x = block(x, temb, text_kv[i], masks, dims, films[i], folds[i])
+            x = block(x, temb, inputs[i])
             skips.append(x)
-        x = self.middle_block(x, temb, text_kv[half], masks, dims, films[half], folds[half])
+        x = self.middle_block(x, temb, inputs[half])
         for i, (block, merge) in enumerate(zip(self.output_blocks, self.skip_blocks)):
             # the last input block's output pairs with the first output block (U-Net symmetry)
             x = merge(torch.cat([x, skips.pop()], dim=-1))
-            j = half + 1 + i
-            x = block(x, temb, text_kv[j], masks, dims, films[j], folds[j])
+            x = block(x, temb, inputs[half + 1 + i])
         return x
 
 
@@ -442,38 +333,43 @@ class Denoiser(AttnProcessorMixin, nn.Module):
             raise ValueError(f"text must be (B, W, C={self.config.text_dim}) token features, got {tuple(text.shape)}")
         return TextContext(text, text_mask, pooled)
 
-    def _param_signature(self, params) -> tuple:
-        # identity, storage and in-place version of the weights a cache was built from:
-        # optimizer steps, load_state_dict (also with assign=True) and .to() all change it
-        return (id(self),) + tuple((id(p), p.data_ptr(), p._version, p.dtype) for p in params)
-
-    def _text_signature(self) -> tuple:
-        # weight and bias read directly: walking .parameters() of 16 modules at every forward cost
-        # about 0.2 ms of Python per call of the paper model
-        return self._param_signature(_weight_and_bias([self.word_emb] + [
-            mod for layer in self.transformer.layers
-            for mod in (layer.cross_tgt_norm, layer.cross_attn.Wk, layer.cross_attn.Wv)
-        ]))
-
-    def _fold_signature(self) -> tuple:
-        return self._param_signature(_weight_and_bias([
-            mod for layer in self.transformer.layers for mod in (layer.cross_attn.Wq, layer.cross_attn.Wo)
-        ]))
-
-    def _text_kv(self, ctx: TextContext) -> list[tuple[torch.Tensor, torch.Tensor]]:
+    def text_kv(self, text: TextContext) -> list[tuple[torch.Tensor, torch.Tensor]]:
+        """Per layer (execution order) the text keys and values ``(B, H, W, dh)``: the words
+        ``E c`` (``word_emb``; the pooled sentence token ``(B, 1, w)`` in the "w/o CrossAttn"
+        ablation), normalised by the layer's ``cross_tgt_norm`` and projected by its ``Wk``, ``Wv``.
+        :class:`TextContext` caches them for sampling."""
         dtype = self.word_emb.weight.dtype
         if self.config.cross_attention:
-            memory = self.word_emb(ctx.text.to(dtype))               # (B, W, w)
+            memory = self.word_emb(text.text.to(dtype))               # (B, W, w)
         else:
-            memory = self.word_emb(ctx.pooled.to(dtype))[:, None]    # (B, 1, w): the sentence token
+            memory = self.word_emb(text.pooled.to(dtype))[:, None]    # (B, 1, w): the sentence token
         return [layer.text_kv(memory) for layer in self.transformer.layers]
+
+    # ------------------------------------------------------------------- timestep
+    def prepare_timesteps(self, timesteps: torch.Tensor) -> None:
+        """Compute every FiLM of the timesteps ``(S,)`` of a schedule in one product and keep them
+        (:class:`~salad_core.models.inference.TimestepTable`); a no-op with gradients enabled or
+        without FiLM."""
+        if not torch.is_grad_enabled() and self.config.film:
+            timestep_table(self).fill(self, timesteps)
+
+    def timestep_conditioning(self, timesteps: torch.Tensor) -> tuple[torch.Tensor, list]:
+        """Timestep embedding ``(R, w)`` and every layer's four FiLM ``(scale, shift)``, each
+        ``(R, 1, 1, w)``, for ``timesteps`` ``(R,)`` (``R = 1`` broadcasts over the batch): from the
+        cached table when gradients are off, computed afresh otherwise."""
+        if not self.config.film:
+            raise ValueError("this denoiser has no FiLM (config.film=False)")
+        if torch.is_grad_enabled():
+            temb = self.timestep_emb(timesteps)
+            return temb, [tuple(f(temb) for f in layer.films) for layer in self.transformer.layers]
+        return timestep_table(self).conditioning(self, timesteps)
 
     # -------------------------------------------------------------------- forward
     def forward(self, x: torch.Tensor, timesteps: torch.Tensor | int | float,
                 text: torch.Tensor | None = None, text_mask: torch.Tensor | None = None,
                 frame_mask: torch.Tensor | None = None, *,
                 text_context: TextContext | None = None) -> torch.Tensor:
-        """Predict the diffusion target for noisy latents.
+        """Predict the diffusion target for noisy latents (paper Fig. 3).
 
         Parameters
         ----------
@@ -499,118 +395,41 @@ class Denoiser(AttnProcessorMixin, nn.Module):
         if x.dim() != 4 or x.shape[2] != cfg.num_parts or x.shape[3] != cfg.latent_dim:
             raise ValueError(f"x must be (B, N', P={cfg.num_parts}, Dz={cfg.latent_dim}), got {tuple(x.shape)}")
         b, n, p, _ = x.shape
+        text_context = self._text_context(text, text_mask, text_context, b)
+        timesteps = self._timesteps(timesteps, b, x.device)      # (1,) or (B,)
+
+        # the conditions: text keys/values per layer (E c), the timestep embedding and FiLMs
+        text_kv, folds = text_inputs(self, text_context)
+        temb, films = timestep_inputs(self, timesteps, b)
+        masks = self._masks(frame_mask, text_context.mask, b, n, p)
+        dims = CallDims(b, n, p, text_context.num_tokens if cfg.cross_attention else 1 + n * p)
+        inputs = [LayerInputs(masks, dims, text_kv[i], None if films is None else films[i],
+                              None if folds is None else folds[i]) for i in range(cfg.layers)]
+
+        # tokens: every (frame, part) latent embedded, plus the positional embedding of its flattened
+        # index t * P + j (supplement A.2)
+        h = self.input_process(x).reshape(b, n * p, cfg.width)
+        h = self.pos_emb(h).view(b, n, p, cfg.width)
+        if not cfg.film:
+            # "w/o FiLM" ablation (supplement C.4): timestep embedding added to the input
+            h = h + temb[:, None, None, :]
+        h = self.transformer(h, temb, inputs)
+        return self.output_process(h)
+
+    def _text_context(self, text: torch.Tensor | None, text_mask: torch.Tensor | None,
+                      text_context: TextContext | None, batch: int) -> TextContext:
+        """The call's text as a :class:`TextContext`, checked against the latent batch."""
         if text_context is None:
             if text is None or text_mask is None:
                 raise ValueError("pass either text and text_mask, or text_context")
             text_context = self.prepare_text(text, text_mask)
         elif text is not None:
             raise ValueError("pass either text/text_mask or text_context, not both")
-        if text_context.batch_size != b:
-            raise ValueError(f"text batch ({text_context.batch_size}) must equal the latent batch ({b})")
-        if text_context.text_dim != cfg.text_dim:
-            raise ValueError(f"text features have C={text_context.text_dim}, the denoiser expects {cfg.text_dim}")
-        timesteps = self._timesteps(timesteps, b, x.device)      # (1,) or (B,)
-        masks = self._masks(frame_mask, text_context.mask, b, n, p)
-        kv = text_context.layer_kv(self)
-        # sampling: the text side folded into the cross-attention's Wq / Wo where that is less work
-        folds = None
-        if cfg.cross_attention and not torch.is_grad_enabled() and any(
-                getattr(layer.cross_attn.processor, "takes_folded", False) for layer in self.transformer.layers):
-            folds = text_context._layer_folds(self, kv)
-        dims = CallDims(b, n, p, text_context.num_tokens if cfg.cross_attention else 1 + n * p)
-
-        h = self.input_process(x).reshape(b, n * p, cfg.width)
-        h = self.pos_emb(h).view(b, n, p, cfg.width)       # index t * P + j (supplement A.2)
-        films = None
-        if cfg.film and not torch.is_grad_enabled():
-            # sampling: the timestep embedding and all FiLMs from the per-timestep cache, one row per
-            # given timestep (a scalar timestep: one row broadcast over the batch)
-            temb, films = self.timestep_conditioning(timesteps)
-        else:
-            temb = self.timestep_emb(timesteps.expand(b))     # (B, w)
-        if not cfg.film:
-            # "w/o FiLM" ablation (supplement C.4): timestep embedding added to the input
-            h = h + temb[:, None, None, :]
-        h = self.transformer(h, temb, kv, masks, dims, films, folds)
-        return self.output_process(h)
-
-    # ---------------------------------------------------------- timestep conditioning
-    def _film_signature(self) -> tuple:
-        return self._param_signature([*self.timestep_emb.parameters()] + _weight_and_bias([
-            film.linear[1] for layer in self.transformer.layers for film in layer.films
-        ]))
-
-    def timestep_conditioning(self, timesteps: torch.Tensor) -> tuple[torch.Tensor, list]:
-        """Timestep embedding and every layer's FiLM ``(scale, shift)`` for ``timesteps``, cached.
-
-        The FiLMs depend on the timestep only, so with gradients disabled each distinct timestep is
-        computed once (all layers' FiLMs in one product of the stacked FiLM weights, which costs the
-        same as one layer's: reading the 2.6 M FiLM weights of the paper model is what takes the
-        time) and kept until the timestep or FiLM weights change (storage and version counters are
-        checked as for the text cache). :meth:`prepare_timesteps` fills the cache for a whole
-        schedule in one product. With gradients enabled nothing is cached.
-
-        Parameters
-        ----------
-        timesteps : torch.Tensor
-            ``(R,)`` timesteps (``R = 1`` broadcasts over the batch).
-
-        Returns
-        -------
-        temb : torch.Tensor
-            ``(R, w)``.
-        films : list
-            Per layer (execution order) a tuple of four ``(scale, shift)``, each ``(R, 1, 1, w)``.
-        """
-        if not self.config.film:
-            raise ValueError("this denoiser has no FiLM (config.film=False)")
-        w, layers = self.config.width, self.config.layers
-        if torch.is_grad_enabled():
-            temb = self.timestep_emb(timesteps)
-            return temb, [tuple(f(temb) for f in layer.films) for layer in self.transformer.layers]
-        table, keys = self._fill_timesteps(timesteps)
-        rows = torch.stack([table[t] for t in keys])                          # (R, w + L*4*2w)
-        temb = rows[:, :w]
-        per = rows[:, w:].view(len(keys), layers, 4, 2, w)[:, :, :, :, None, None, :]   # (R, L, 4, 2, 1, 1, w)
-        films = [tuple((per[:, i, k, 0], per[:, i, k, 1]) for k in range(4)) for i in range(layers)]
-        return temb, films
-
-    def _timestep_table(self) -> dict:
-        sig = self._film_signature()
-        if getattr(self, "_t_signature", None) != sig:
-            self._t_table: dict[float, torch.Tensor] = {}
-            self._t_signature = sig
-            weights = [film.linear[1] for layer in self.transformer.layers for film in layer.films]
-            self._t_weight = torch.cat([lin.weight for lin in weights])       # (L*4*2w, w)
-            self._t_bias = torch.cat([lin.bias for lin in weights])           # (L*4*2w,)
-        return self._t_table
-
-    def prepare_timesteps(self, timesteps: torch.Tensor) -> None:
-        """Compute and cache the conditioning of the timesteps in ``timesteps`` ``(S,)`` that are not
-        cached yet, in one product (see :meth:`timestep_conditioning`); a no-op with gradients enabled
-        or without FiLM."""
-        if not torch.is_grad_enabled() and self.config.film:
-            self._fill_timesteps(timesteps)
-
-    def _fill_timesteps(self, timesteps: torch.Tensor) -> tuple[dict, list[float]]:
-        """The (valid) table with every timestep of ``timesteps`` in it, and their keys in order."""
-        table = self._timestep_table()
-        t = timesteps.detach().reshape(-1)
-        keys = [float(v) for v in t.tolist()]
-        first: dict[float, int] = {}
-        for i, key in enumerate(keys):
-            first.setdefault(key, i)
-        missing = [i for key, i in first.items() if key not in table]
-        if missing and len(table) + len(missing) > _TIMESTEP_CACHE:
-            table.clear()                                   # start over, with all of this call's timesteps
-            missing = list(first.values())
-        if missing:
-            t = t[missing]
-            temb = self.timestep_emb(t)                                            # (S, w)
-            films = torch.nn.functional.linear(torch.nn.functional.silu(temb), self._t_weight, self._t_bias)
-            for i, row in zip(missing, torch.cat([temb, films], dim=1)):
-                table[keys[i]] = row
-        return table, keys
+        if text_context.batch_size != batch:
+            raise ValueError(f"text batch ({text_context.batch_size}) must equal the latent batch ({batch})")
+        if text_context.text_dim != self.config.text_dim:
+            raise ValueError(f"text features have C={text_context.text_dim}, the denoiser expects {self.config.text_dim}")
+        return text_context
 
     @staticmethod
     def _timesteps(timesteps, batch: int, device) -> torch.Tensor:
