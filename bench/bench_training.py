@@ -152,7 +152,7 @@ import json, os, sys, time, statistics, torch
 spec = json.loads(sys.argv[1])
 from salad_core.io import config_from_dict
 from salad_core.train.distributed import DistEnv
-from salad_core.train.profile import _Runner
+from salad_core.train.profile import StepRunner
 doc = spec["config"]
 if spec["what"] == "denoiser":
     from salad_core.models.denoiser import DenoiserConfig
@@ -168,7 +168,7 @@ else:
     tc = config_from_dict(TC, {**doc["train"], "progress": False})
     mc = config_from_dict(VAEConfig, doc["model"])
     build = lambda c: build_vae_task(spec["data"], mc, c, DistEnv())
-runner = _Runner("ab", build, tc)
+runner = StepRunner("ab", build, tc)
 times = {1: [], 2: []}
 loads = []
 for r in range(spec["rounds"]):

@@ -10,6 +10,7 @@ raster      scikit-image 2D rasteriser of the same scenes (no OpenGL needed)
 animate     GIF/MP4 (side by side or overlaid), inline display in Jupyter
 export      BVH, GLB, NPY
 widgets     ipywidgets explorer (words, layers, steps, frames)
+plots       evaluation figures from result tables (the CFG sweep of SALAD Fig. 5)
 camera      the pinhole camera both backends share; kinematics: rotations from positions, FK
 synthetic   a procedural walk for demos and tests
 
@@ -35,6 +36,7 @@ from .attention import (
 from .camera import Camera, fixed_camera, follow_camera, project_points
 from .export import export_bvh, export_glb, export_npy
 from .kinematics import forward_kinematics, rest_pose, solve_rotations
+from .plots import plot_cfg_sweep
 from .raster import rasterize_skeleton
 from .render import SkeletonRenderer, keyframe_strip, offscreen_available, render_skeleton
 from .synthetic import synthetic_motion
@@ -68,6 +70,7 @@ __all__ = [
     "forward_kinematics",
     "rest_pose",
     "solve_rotations",
+    "plot_cfg_sweep",
     "rasterize_skeleton",
     "SkeletonRenderer",
     "keyframe_strip",

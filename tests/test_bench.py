@@ -1,5 +1,6 @@
 """salad_core.bench: the FLOP count against a hand count and torch's counter, and tiny runs of the
-measuring helpers (``salad bench --quick`` itself takes a minute and is not run here)."""
+measuring helpers (``salad bench --quick`` itself takes a minute and is not run here); the package's
+entry points (``salad bench``, ``python -m salad_core.bench``)."""
 from __future__ import annotations
 
 import datetime
@@ -151,7 +152,9 @@ def test_recipe_and_cases_come_from_the_weights_folder(tiny_pipe, tmp_path):
 
 
 def test_run_benchmarks_prints_one_table_with_the_machine(monkeypatch, tmp_path, capsys):
-    monkeypatch.setattr(bench, "train_recipe", lambda weights=None: _tiny_recipe())
+    from salad_core.bench import run
+
+    monkeypatch.setattr(run, "train_recipe", lambda weights=None: _tiny_recipe())   # where run_benchmarks looks
     threads = torch.get_num_threads()
     df = bench.run_benchmarks(quick=True, threads=1, sections=["training"])
     assert torch.get_num_threads() == threads                      # restored
@@ -217,7 +220,7 @@ def test_batching_rows_time_three_ways_and_restore_max_batch(tiny_pipe):
 def test_prompts_and_attended_tokens_of_the_speed_rows():
     case = bench.Case("tiny", TINY, 77)
     for batch in (1, 32):
-        (text, mask), (_, null_mask), noise, fm = bench._random_inputs(case, batch, latent_frames=4)
+        (text, mask), (_, null_mask), noise, fm = bench.random_inputs(case, batch, latent_frames=4)
         lengths = mask.sum(1)
         lo, hi = bench.PROMPT_TOKENS
         assert text.shape == (batch, 77, TINY.text_dim) and bool(((lengths >= lo) & (lengths <= hi)).all())
@@ -302,3 +305,20 @@ def test_train_profile_rows_time_every_part_before_and_after(tmp_path, single_th
     pad = by["padding"]
     assert 1.0 <= pad.value < pad.reference                      # buckets pad less than random batches
     assert by["samples x frames/s"].value > 0 and "interleaved" in notes[0]
+
+
+def test_python_dash_m_and_salad_bench_share_one_parser(monkeypatch):
+    """``python -m salad_core.bench`` runs the package's ``main``; ``salad bench --help`` shows its parser."""
+    import re
+    import subprocess
+    import sys
+
+    monkeypatch.setenv("COLUMNS", "100")           # argparse wraps help to the terminal: the same width in both
+    out = subprocess.run([sys.executable, "-m", "salad_core.bench", "--help"], capture_output=True, text=True,
+                         timeout=120, env=dict(os.environ))
+    assert out.returncode == 0, out.stderr
+    threads = lambda text: re.sub(r"here \d+", "here N", text)  # noqa: E731  (torch threads may differ)
+    assert threads(out.stdout) == threads(bench.build_parser().format_help())
+    assert out.stdout.startswith("usage: salad bench") and "--sections" in out.stdout
+    for section in bench.SECTIONS + bench.OPTIONAL_SECTIONS:
+        assert section in out.stdout

@@ -10,23 +10,10 @@ import pytest
 
 from salad_core.data.dataset import load_mean_std
 from salad_core.eval.metrics import mean_ci
-from salad_core.eval.protocol import (
-    METRICS,
-    REAL_NAME,
-    EvalResult,
-    EvalSettings,
-    cfg_sweep,
-    evaluate_generator,
-    evaluate_real,
-    format_mean_ci,
-    paper_cfg_sweep,
-    plot_cfg_sweep,
-    real_batches,
-    results_frame,
-    run_ablation,
-    to_latex,
-    to_markdown,
-)
+from salad_core.eval.paper_tables import paper_cfg_sweep
+from salad_core.eval.protocol import cfg_sweep, evaluate_generator, evaluate_real, real_batches, run_ablation
+from salad_core.eval.settings import METRICS, REAL_NAME, EvalResult, EvalSettings
+from salad_core.eval.tables import format_mean_ci, results_frame, to_latex, to_markdown
 from salad_core.skeleton import get_skeleton
 
 
@@ -207,14 +194,14 @@ def test_capped_real_row_is_referenced_against_the_same_items(corpus, evaluator,
     import salad_core.eval.protocol as protocol
 
     seen = []
-    original = protocol._batches_for
+    original = protocol.batches_for
 
     def spy(dataset, settings, epoch, order_tag):
         out = original(dataset, settings, epoch, order_tag)
         seen.append((epoch, sorted(n for b in out for n in b.names)))
         return out
 
-    monkeypatch.setattr(protocol, "_batches_for", spy)
+    monkeypatch.setattr(protocol, "batches_for", spy)
     evaluate_real(corpus, evaluator, EvalSettings.quick_mode(max_samples=32, replications=1))
     (epoch_a, names_a), (epoch_b, names_b) = seen
     assert epoch_a != epoch_b                      # independent crops and captions
@@ -296,6 +283,8 @@ def test_cfg_sweep_and_plot(corpus, evaluator):
     assert results[2].values["FID"][0] > results[1].values["FID"][0]    # more noise, larger FID
     df = results_frame(results)
     assert to_markdown(df).splitlines()[2].startswith("| Method      | w ")  # the varying setting is a column
+    from salad_viz.plots import plot_cfg_sweep
+
     fig = plot_cfg_sweep(df)
     assert len(fig.axes) == 2
     for ax, metric in zip(fig.axes, ("FID", "R-precision top-3")):
@@ -314,3 +303,50 @@ def test_run_ablation(corpus, evaluator):
     assert res[2].values["FID"][0] > res[1].values["FID"][0]
     with pytest.raises(ValueError, match="generators"):
         run_ablation({}, corpus, evaluator, s)
+
+
+# ------------------------------------------------------------------------------ module layout
+def test_moved_names_stay_reachable_from_their_old_modules():
+    """The protocol module keeps only the protocol; tables, published numbers and the plot moved,
+    and the old import paths still reach the very same objects."""
+    import salad_core.eval as ev
+    import salad_core.eval.protocol as protocol
+    import salad_viz
+    from salad_core.eval import paper_tables, settings, tables
+    from salad_viz import plots
+
+    for name in ("results_frame", "format_mean_ci", "to_markdown", "to_latex", "paper_row", "paper_frame"):
+        assert getattr(protocol, name) is getattr(tables, name), name
+    assert protocol.paper_cfg_sweep is paper_tables.paper_cfg_sweep
+    assert protocol.CI_SUFFIX == settings.CI_SUFFIX == " ±"
+    assert protocol.plot_cfg_sweep is ev.plot_cfg_sweep is plots.plot_cfg_sweep is salad_viz.plot_cfg_sweep
+    assert "plot_cfg_sweep" not in protocol.__all__
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        protocol.nope
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        ev.nope
+
+
+def test_plot_takes_a_plain_table(real, noise, tmp_path):
+    """salad_viz.plots needs only the table's columns: a results frame written to CSV and read back
+    (no salad_core objects) draws the same points; a missing column is named."""
+    from salad_viz.plots import plot_cfg_sweep
+
+    a = EvalResult("Fake w=2", {"FID": (1.0, 3.0), "R-precision top-3": (0.5, 0.7)},
+                   {"kind": "generator", "guidance_scale": 2.0, "quick": True})
+    b = EvalResult("Fake w=5", {"FID": (4.0, 6.0), "R-precision top-3": (0.6, 0.6)},
+                   {"kind": "generator", "guidance_scale": 5.0, "quick": True})
+    results_frame([real, b, a]).to_csv(tmp_path / "r.csv", index=False)
+    df = pd.read_csv(tmp_path / "r.csv")
+    fig = plot_cfg_sweep(df)
+    fid, top3 = fig.axes
+    xy = fid.containers[0].lines[0].get_xydata()
+    assert xy.tolist() == [[2.0, 2.0], [5.0, 5.0]]                     # sorted by w; means of the replications
+    assert top3.containers[0].lines[0].get_xydata()[:, 1] == pytest.approx([0.6, 0.6])
+    assert "QUICK MODE" in fig.get_suptitle()
+    with pytest.raises(ValueError, match=r"lacks the columns \['FID ±'\]"):
+        plot_cfg_sweep(df.drop(columns=["FID ±"]))
+    with pytest.raises(ValueError, match="r_precision='MM-Dist'"):
+        plot_cfg_sweep(df, r_precision="MM-Dist")
+    with pytest.raises(ValueError, match="no generator rows"):
+        plot_cfg_sweep(df[df["kind"] == "real"])

@@ -1,5 +1,7 @@
-"""salad_core.eval.report: published Table 1, held-out corpus clips, official-release loading,
-length-bucketed generation and the KeyMotion round trips used by the notebooks.
+"""The notebooks' evaluation building blocks: published tables (eval.paper_tables), held-out corpus
+clips (eval.heldout), official-release loading (eval.official), length-bucketed generation
+(eval.length_buckets) and the KeyMotion round trips (eval.keymotion_roundtrip); eval.report still
+re-exports them for old imports.
 
 Tiny seeded models, one CPU thread, a hashing text encoder (no MiniLM) and a 40-motion corpus.
 """
@@ -14,19 +16,12 @@ import torch
 
 from salad_core.eval import EvalResult, results_frame, to_markdown
 from salad_core.eval.metrics import mpjpe
-from salad_core.eval.protocol import METRICS
-from salad_core.eval.report import (
-    PAPER_TABLE1,
-    LengthBucketed,
-    heldout_corpus,
-    infill_from_keyframes,
-    keyframe_roundtrip,
-    length_groups,
-    official_salad_pipeline,
-    paper_denoiser_ablations,
-    paper_table1,
-    read_official_options,
-)
+from salad_core.eval.heldout import heldout_corpus
+from salad_core.eval.keymotion_roundtrip import infill_from_keyframes, keyframe_roundtrip
+from salad_core.eval.length_buckets import LengthBucketed, length_groups
+from salad_core.eval.official import official_salad_pipeline, read_official_options
+from salad_core.eval.paper_tables import PAPER_CFG_SWEEP, PAPER_TABLE1, paper_denoiser_ablations, paper_table1
+from salad_core.eval.settings import METRICS
 from salad_core.keymotion import select_keyframes
 from salad_core.keymotion.kf_vae import KeyframeVAE, KeyframeVAEConfig
 from salad_core.keymotion.mmae import MMAEConfig, MotionMaskedAutoencoder
@@ -267,7 +262,7 @@ def test_infill_from_keyframes_against_interpolation(keymotion_pipe, sample_feat
 
 
 def test_procedural_eval_corpus_picks_heldout_clips_or_the_given_root(tmp_path):
-    from salad_core.eval.report import procedural_eval_corpus
+    from salad_core.eval.heldout import procedural_eval_corpus
 
     quick = procedural_eval_corpus(True, tmp_path, heldout_motions=2)
     ids = (quick / "test.txt").read_text().split()
@@ -276,19 +271,54 @@ def test_procedural_eval_corpus_picks_heldout_clips_or_the_given_root(tmp_path):
 
 
 def test_evaluation_data_picks_the_procedural_or_the_official_setting(tmp_path, monkeypatch):
-    from salad_core.eval import report
+    from salad_core.eval import heldout
 
-    data, ev = report.evaluation_data(True, tmp_path, heldout_motions=2)
+    data, ev = heldout.evaluation_data(True, tmp_path, heldout_motions=2)
     assert (data / "test.txt").is_file() and "evaluator" in str(ev.source)
-    assert report.evaluation_data(False, tmp_path, data_root=tmp_path / "mine")[0] == tmp_path / "mine"
+    assert heldout.evaluation_data(False, tmp_path, data_root=tmp_path / "mine")[0] == tmp_path / "mine"
     with pytest.raises(ValueError, match="needs DATA_ROOT"):
-        report.evaluation_data(False, tmp_path, checkpoints=tmp_path)
+        heldout.evaluation_data(False, tmp_path, checkpoints=tmp_path)
     calls = []
     from salad_core.eval import t2m
 
     monkeypatch.setattr(t2m.T2MEvaluator, "from_official",
                         classmethod(lambda cls, ckpt, ds: calls.append((ckpt, ds)) or types.SimpleNamespace()))
-    data, ev = report.evaluation_data(False, tmp_path, data_root=tmp_path / "hml", checkpoints="ck", dataset="kit")
+    data, ev = heldout.evaluation_data(False, tmp_path, data_root=tmp_path / "hml", checkpoints="ck", dataset="kit")
     assert calls == [("ck", "kit")] and data == tmp_path / "hml" and ev.source == "official T2M evaluator (kit)"
     # QUICK ignores the official release
-    assert report.evaluation_data(True, tmp_path, checkpoints="ck", heldout_motions=2)[1].source != ev.source
+    assert heldout.evaluation_data(True, tmp_path, checkpoints="ck", heldout_motions=2)[1].source != ev.source
+
+
+# ------------------------------------------------------------------------------ module layout
+def test_old_report_imports_reach_the_modules_of_each_job():
+    """eval.report is a re-export for old imports (the notebooks): the very same objects."""
+    from salad_core.eval import heldout, keymotion_roundtrip, length_buckets, official, paper_tables, report
+
+    homes = {"heldout_corpus": heldout, "procedural_eval_corpus": heldout, "evaluation_data": heldout,
+             "read_official_options": official, "official_salad_pipeline": official,
+             "LengthBucketed": length_buckets, "BucketedOutput": length_buckets, "length_groups": length_buckets,
+             "KeyframeRoundTrip": keymotion_roundtrip, "Infilling": keymotion_roundtrip,
+             "keyframe_roundtrip": keymotion_roundtrip, "infill_from_keyframes": keymotion_roundtrip,
+             "PAPER_TABLE1": paper_tables, "PAPER_TABLE1_DEFAULT_ROWS": paper_tables, "paper_table1": paper_tables,
+             "PAPER_DENOISER_ABLATIONS": paper_tables, "paper_denoiser_ablations": paper_tables}
+    assert sorted(homes) == sorted(report.__all__)
+    for name, module in homes.items():
+        assert getattr(report, name) is getattr(module, name), name
+
+
+def test_the_papers_table1_and_its_supplement_table1_have_distinct_names():
+    """Table 1 compares methods at w = 7.5; supplement Table 1 sweeps SALAD's CFG weight. They share
+    SALAD's w = 7.5 row and the real row, nothing else."""
+    from salad_core.eval.paper_tables import paper_cfg_sweep
+
+    assert set(PAPER_TABLE1["humanml3d"]) - {"Real motion"} == {"T2M", "AttT2M", "ParCo", "MoMask", "MDM", "MLD",
+                                                              "MotionDiffuse", "ReMoDiffuse", "SALAD"}
+    assert set(PAPER_CFG_SWEEP["humanml3d"]) - {"Real motion"} == {1.5 + k for k in range(12)}
+    for ds in ("humanml3d", "kit"):
+        # the real rows agree on the six metrics both print
+        assert PAPER_TABLE1[ds]["Real motion"][:6] == PAPER_CFG_SWEEP[ds]["Real motion"]
+    # HumanML3D: the sweep's w = 7.5 row is Table 1's SALAD row (Table 1 adds MultiModality)
+    assert PAPER_TABLE1["humanml3d"]["SALAD"][:6] == PAPER_CFG_SWEEP["humanml3d"][7.5]
+    sweep = paper_cfg_sweep("kit")
+    assert sweep.iloc[0]["data"] == "SALAD paper, supplement Table 1 (kit)"
+    assert paper_table1("kit").iloc[0]["data"] == "SALAD paper (CVPR 2025), Table 1 (kit)"

@@ -374,7 +374,8 @@ def test_denoiser_batch_prep_drops_captions_masks_and_targets(corpus, tiny_vae_r
     from salad_core.data.dataset import MotionTextDataset, collate_motion_text
     from salad_core.sampling import make_scheduler
     from salad_core.train.common import StepContext
-    from salad_core.train.denoiser_trainer import CaptionFeatureCache, DenoiserObjective, _prepare, load_frozen_vae
+    from salad_core.train.denoiser_trainer import (CaptionFeatureCache, DenoiserObjective, load_frozen_vae,
+                                                   prepare_denoiser_batch)
 
     vae = load_frozen_vae(tiny_vae_run)
     assert not any(p.requires_grad for p in vae.parameters()) and not vae.training
@@ -385,8 +386,8 @@ def test_denoiser_batch_prep_drops_captions_masks_and_targets(corpus, tiny_vae_r
     sched = make_scheduler()
     cfg = den_train_config(cond_drop_prob=0.25)
     ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(0), DistEnv()), DistEnv(), train=True, step=0)
-    inp = _prepare(batch, ctx, vae=vae, text=CaptionFeatureCache(enc, 100), scheduler=sched, config=cfg,
-                   prediction_type="v_prediction", latent_shape=(18, 7, 8))
+    inp = prepare_denoiser_batch(batch, ctx, vae=vae, text=CaptionFeatureCache(enc, 100), scheduler=sched,
+                                 config=cfg, prediction_type="v_prediction", latent_shape=(18, 7, 8))
     n_lat = int(batch["length"].max()) // 4
     assert inp["noisy"].shape == (200, n_lat, 7, 8) and inp["frame_mask"].shape == (200, n_lat)
     assert torch.equal(inp["frame_mask"], torch.arange(n_lat)[None] < (batch["length"] // 4)[:, None])
@@ -397,8 +398,8 @@ def test_denoiser_batch_prep_drops_captions_masks_and_targets(corpus, tiny_vae_r
     assert int(inp["timesteps"].min()) >= 0 and int(inp["timesteps"].max()) < 1000
     # same seed, same draws; validation keeps every caption
     ctx2 = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(0), DistEnv()), DistEnv(), train=False, step=0)
-    val = _prepare(batch, ctx2, vae=vae, text=CaptionFeatureCache(enc, 0), scheduler=sched, config=cfg,
-                   prediction_type="v_prediction", latent_shape=(18, 7, 8))
+    val = prepare_denoiser_batch(batch, ctx2, vae=vae, text=CaptionFeatureCache(enc, 0), scheduler=sched,
+                                 config=cfg, prediction_type="v_prediction", latent_shape=(18, 7, 8))
     assert torch.equal(val["noisy"], inp["noisy"]) and bool((val["text_mask"].sum(1) > 2).all())
 
     class Zero(nn.Module):

@@ -18,7 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
-from salad_core.data.procedural.checks import part_speeds
+from salad_core.part_activity import part_speeds
 from salad_core.motion import mirror_joints
 from salad_core.skeleton import PART_NAMES, Skeleton, get_skeleton
 

@@ -112,7 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _settings(args):
-    from .protocol import EvalSettings
+    from .settings import EvalSettings
 
     changes = dict(split=args.split, num_steps=args.steps,
                    guidance_scale=7.5 if args.guidance is None else args.guidance, solver=args.solver,
@@ -127,7 +127,7 @@ def _settings(args):
 
 
 def _scales(text: str | None) -> list[float]:
-    from .protocol import DEFAULT_CFG_SCALES
+    from .settings import DEFAULT_CFG_SCALES
 
     if text is None:
         return list(DEFAULT_CFG_SCALES)
@@ -141,9 +141,7 @@ def _scales(text: str | None) -> list[float]:
 
 
 def _write(out_dir: Path, results, df, md: str, tex: str) -> list[Path]:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    from .protocol import plot_cfg_sweep
+    from salad_viz.plots import plot_cfg_sweep
 
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [out_dir / "results.csv", out_dir / "results.md", out_dir / "results.tex", out_dir / "results.json"]
@@ -154,8 +152,7 @@ def _write(out_dir: Path, results, df, md: str, tex: str) -> list[Path]:
             "settings": dict(r.settings)} for r in results]
     paths[3].write_text(json.dumps(doc, indent=2, default=str) + "\n", encoding="utf-8")
     if (df["kind"] == "generator").any():
-        fig = plot_cfg_sweep(df)
-        FigureCanvasAgg(fig)
+        fig = plot_cfg_sweep(df)                     # on an Agg canvas: savefig needs no pyplot
         png = out_dir / "results.png"
         fig.savefig(png, dpi=120)
         paths.append(png)
@@ -292,7 +289,8 @@ def run_physics(args) -> int:
 def run(args) -> int:
     import torch
 
-    from .protocol import cfg_sweep, evaluate_generator, evaluate_real, results_frame, to_latex, to_markdown
+    from .protocol import cfg_sweep, evaluate_generator, evaluate_real
+    from .tables import results_frame, to_latex, to_markdown
     from .train_evaluator import load_packaged_evaluator
 
     if args.threads is not None:

@@ -598,7 +598,7 @@ def targets(result: Mapping) -> list[dict]:
     add(f"seed diversity >= the corpus's paraphrases ({_fmt(dv, '{:.1f}')} cm)",
         lambda a, g: (a.get("seed_diversity_cm"), None if dv is None else _ge(a.get("seed_diversity_cm"), dv)))
     add("[issue 22] walking stride >= 0.4 m (stride checks passed)", lambda a, g: _count_cell(g, "stride_m"))
-    add(f"[issue 22] foot skating on the forward walks and runs <= 2x the corpus's",
+    add("[issue 22] foot skating on the forward walks and runs <= 2x the corpus's",
         lambda a, g: ratio(_pooled(g, _FORWARD_GAITS, "skate_mean_ms", "contact_count"),
                            None if sk is None else 2 * sk))
     add("[issue 22] jumps near-ballistic: pelvis acceleration in flight on the jump prompts within 25 % of "

@@ -1,9 +1,9 @@
 """VAE reconstruction quality as in SALAD Table 2 and supplement Table 4: FID and MPJPE.
 
 Each replication takes the same real batches as :func:`~salad_core.eval.protocol.evaluate_real`
-(random crops of the split, lengths multiples of the unit length), passes every clip through the
-VAE (normalise with the VAE's statistics, encode, decode the posterior mean, de-normalise) and
-scores
+(:func:`~salad_core.eval.batches.batches_for`: random crops of the split, lengths multiples of the
+unit length), passes every clip through the VAE (normalise with the VAE's statistics, encode,
+decode the posterior mean, de-normalise) and scores
 
 * **FID** between the evaluator embeddings of the real clips and of their reconstructions (the
   official ``evaluation_vae``: same clips, so this measures what the VAE loses, with no sampling
@@ -13,8 +13,8 @@ scores
 
 Results are mean ± 1.96·std/√R over R replications, like the generation tables.
 :func:`reconstruction_frame` puts several VAEs in one DataFrame (with their trainable-parameter
-counts) and :func:`reconstruction_markdown` renders it; :func:`paper_vae_tables` holds the paper's
-numbers, labelled as such.
+counts) and :func:`reconstruction_markdown` renders it (also the paper's numbers, which
+:func:`~salad_core.eval.paper_tables.paper_vae_tables` gives, labelled as such).
 """
 from __future__ import annotations
 
@@ -29,7 +29,10 @@ import pandas as pd
 import torch
 
 from . import metrics as M
-from .protocol import EvalSettings, _batches_for, _dataset, _motion_embeddings, _skeleton_of, format_mean_ci
+from .batches import batches_for, evaluation_dataset, motion_embeddings, skeleton_of
+from .paper_tables import paper_vae_tables  # noqa: F401  (kept importable from here: notebook 06)
+from .settings import EvalSettings
+from .tables import format_mean_ci
 
 __all__ = ["RECONSTRUCTION_METRICS", "ReconstructionResult", "reconstruct_features", "evaluate_reconstruction",
            "part_errors", "reconstruction_frame", "reconstruction_markdown", "paper_vae_tables"]
@@ -150,17 +153,17 @@ def evaluate_reconstruction(vae, mean, std, dataset_root: str | PathLike, evalua
 
     settings = settings or EvalSettings()
     evaluator.eval()
-    sk = _skeleton_of(evaluator)
-    ds = _dataset(dataset_root, settings, sk)
+    sk = skeleton_of(evaluator)
+    ds = evaluation_dataset(dataset_root, settings, sk)
     vals: dict[str, list[float]] = {m: [] for m in RECONSTRUCTION_METRICS}
     samples = 0
     for r in range(settings.replications):
         real_emb, rec_emb, errors, poses = [], [], 0.0, 0
-        for i, batch in enumerate(_batches_for(ds, settings, r, r)):
+        for i, batch in enumerate(batches_for(ds, settings, r, r)):
             rec = reconstruct_features(vae, mean, std, batch.motions, batch.lengths, sample=sample,
                                        seed=settings.seed * 1_000_003 + r * 1_009 + i)
-            real_emb.append(_motion_embeddings(evaluator, batch.motions, batch.lengths))
-            rec_emb.append(_motion_embeddings(evaluator, rec, batch.lengths))
+            real_emb.append(motion_embeddings(evaluator, batch.motions, batch.lengths))
+            rec_emb.append(motion_embeddings(evaluator, rec, batch.lengths))
             for k, length in enumerate(batch.lengths):
                 gt = features_to_joints(batch.motions[k, :length], sk)
                 pred = features_to_joints(rec[k, :length], sk)
@@ -227,7 +230,7 @@ def _params(n) -> str:
 
 def reconstruction_markdown(df: pd.DataFrame, digits: int = 3, mpjpe_scale: float = 100.0,
                             mpjpe_unit: str = "cm") -> str:
-    """A Markdown table of :func:`reconstruction_frame` (or :func:`paper_vae_tables`) rows.
+    """A Markdown table of :func:`reconstruction_frame` (or :func:`~salad_core.eval.paper_tables.paper_vae_tables`) rows.
 
     MPJPE is shown times ``mpjpe_scale`` (default: metres -> cm); the header names the unit.
     """
@@ -245,35 +248,3 @@ def reconstruction_markdown(df: pd.DataFrame, digits: int = 3, mpjpe_scale: floa
         cells.append(format_mean_ci(r["MPJPE"] * mpjpe_scale, r.get("MPJPE ±", np.nan) * mpjpe_scale, digits))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
-
-
-# SALAD (CVPR 2025) Table 2 and supplement Table 4, HumanML3D test set: (params, FID, MPJPE in metres)
-# as (mean, 95% half-width). Copied from the paper; never computed.
-_PAPER_TABLE2 = {
-    "MoMask (VQ-VAE)": (19.44e6, (0.020, 0.000), (0.030, 0.000)),
-    "ParCo (part-aware VQ-VAE)": (6.35e6, (0.021, 0.000), (0.108, 0.000)),
-    "SALAD (skeleton-aware VAE)": (0.16e6, (0.003, 0.000), (0.016, 0.000)),
-}
-_PAPER_SUPP_TABLE4 = {
-    "Full model": (None, (0.003, 0.000), (0.016, 0.000)),
-    "without L_pos": (None, (0.005, 0.000), (0.023, 0.000)),
-    "without L_vel": (None, (0.009, 0.000), (0.016, 0.000)),
-    "without both": (None, (0.012, 0.000), (0.024, 0.000)),
-}
-
-
-def paper_vae_tables(which: str = "table2") -> pd.DataFrame:
-    """The paper's VAE numbers (HumanML3D test set), rows named ``"paper: ..."``.
-
-    ``which``: ``"table2"`` (MoMask, ParCo and SALAD VAEs: parameters, FID, MPJPE) or
-    ``"supp_table4"`` (the VAE loss-term ablation). MPJPE in metres, as :func:`reconstruction_frame`.
-    """
-    tables = {"table2": _PAPER_TABLE2, "supp_table4": _PAPER_SUPP_TABLE4}
-    if which not in tables:
-        raise ValueError(f"which={which!r}; choose one of {sorted(tables)}")
-    rows = []
-    for method, (params, fid, err) in tables[which].items():
-        rows.append({"name": f"paper: {method}", "parameters": params, "FID": fid[0], "FID ±": fid[1],
-                     "MPJPE": err[0], "MPJPE ±": err[1], "kind": "paper",
-                     "data": f"SALAD paper (CVPR 2025), {'Table 2' if which == 'table2' else 'supp. Table 4'}"})
-    return pd.DataFrame(rows)

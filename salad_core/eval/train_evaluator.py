@@ -408,7 +408,8 @@ def retrieval_accuracy(evaluator: T2MEvaluator, data_dir: str | os.PathLike, spl
         ``mm_dist``, ``mm_dist_ci``, ``fid_real_vs_real``, ``diversity``, ``chance`` (k/32),
         ``split``, ``replications``, ``samples``.
     """
-    from .protocol import METRICS, EvalSettings, evaluate_real
+    from .protocol import evaluate_real
+    from .settings import METRICS, EvalSettings
 
     settings = EvalSettings(split=split, replications=replications, mm=False, seed=seed)
     res = evaluate_real(data_dir, evaluator, settings)

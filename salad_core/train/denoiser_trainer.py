@@ -51,7 +51,7 @@ from .config import DenoiserTrainConfig
 from .distributed import DistEnv, all_reduce_sum, init_distributed
 
 __all__ = ["DenoiserObjective", "CaptionFeatureCache", "train_denoiser", "build_denoiser_task", "load_frozen_vae",
-           "resolve_checkpoint", "denoiser_latent_cache", "denoiser_latent_stats"]
+           "resolve_checkpoint", "denoiser_latent_cache", "denoiser_latent_stats", "prepare_denoiser_batch"]
 
 log = logging.getLogger(__name__)
 
@@ -197,11 +197,16 @@ def _vae_stats(vae_path: str | os.PathLike) -> tuple[Any, Any]:
     return stats["mean"].numpy(), stats["std"].numpy()
 
 
-def _prepare(batch: dict[str, Any], ctx: StepContext, *, vae: nn.Module, text: CaptionFeatureCache, scheduler: Any,
-             config: DenoiserTrainConfig, prediction_type: str, latent_shape: tuple[int, int, int],
-             latents: Any = None, frames_norm: float | None = None,
-             latent_stats: tuple[torch.Tensor, torch.Tensor] | None = None) -> dict[str, Any]:
-    """Objective inputs of a batch.
+def prepare_denoiser_batch(batch: dict[str, Any], ctx: StepContext, *, vae: nn.Module, text: CaptionFeatureCache,
+                           scheduler: Any, config: DenoiserTrainConfig, prediction_type: str,
+                           latent_shape: tuple[int, int, int], latents: Any = None, frames_norm: float | None = None,
+                           latent_stats: tuple[torch.Tensor, torch.Tensor] | None = None) -> dict[str, Any]:
+    """The :class:`DenoiserObjective` inputs of a training batch: steps 1-4 of the module docstring.
+
+    ``batch`` has ``motion`` ``(B, N, D)`` (normalised), ``length`` ``(B,)`` and ``caption`` (and,
+    with ``latents``, ``motion_id`` and ``offset``); ``latent_shape`` is ``(N', P, Dz)`` at the
+    padded length. Every draw comes from ``ctx.rand`` (global batch), so the result depends only
+    on the batch and the step.
 
     ``latents`` (a :class:`~salad_core.train.latent_cache.LatentCache` keyed by ``(motion_id, offset,
     length)``) replaces the VAE encoder; ``frames_norm`` (expected valid latent frames per item) makes
@@ -252,6 +257,10 @@ def _prepare(batch: dict[str, Any], ctx: StepContext, *, vae: nn.Module, text: C
             count = all_reduce_sum(count, env) / env.world_size
     return {"noisy": noisy, "timesteps": t, "text": text_feats.to(dev), "text_mask": text_mask.to(dev),
             "frame_mask": frame_mask, "target": target, "denom": count.clamp_min(1.0).to(motion.dtype)}
+
+
+#: The name before issue 26; tests/test_latent_cache.py still imports it.
+_prepare = prepare_denoiser_batch
 
 
 def denoiser_latent_cache(vae: nn.Module, datasets: Sequence[Any], config: DenoiserTrainConfig,
@@ -355,7 +364,7 @@ def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike
     latent_stats = denoiser_latent_stats(vae, train_set) if train_config.latent_norm else None
     bucketing = train_config.batching == "buckets"
     frames_norm = expected_latent_frames(train_set.lengths, vae.downsample) if bucketing else None
-    prepare = partial(_prepare, vae=vae, text=text_cache,
+    prepare = partial(prepare_denoiser_batch, vae=vae, text=text_cache,
                       scheduler=scheduler, config=train_config,
                       prediction_type=diffusion_config.prediction_type, latent_shape=latent_shape,
                       latents=latents, frames_norm=frames_norm, latent_stats=latent_stats)

@@ -28,10 +28,9 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
-import numpy as np
 import torch
 
-__all__ = ["PARTS", "StepProfile", "profile_denoiser_training"]
+__all__ = ["PARTS", "StepProfile", "StepRunner", "profile_denoiser_training"]
 
 PARTS = ("data", "latents", "text", "noise", "forward", "backward", "clip", "optimizer", "logging", "validation")
 
@@ -81,8 +80,13 @@ class _Timed:
         return timed
 
 
-class _Runner:
-    """One trainer setting: its task, optimiser, loader and part timers."""
+class StepRunner:
+    """One trainer setting: its task, optimiser, loader and part timers.
+
+    ``build(config)`` returns the :class:`~salad_core.train.common.TrainTask`; :meth:`step` runs one
+    optimiser step (adding its part times to the totals when ``record``), :meth:`result` gives the
+    :class:`StepProfile`. ``bench/bench_training.py`` also drives it to time steps at other thread counts.
+    """
 
     def __init__(self, name: str, build: Any, config: Any) -> None:
         from salad_core.train.common import ResumableBatchSampler, StepContext, _loader, _sampler
@@ -222,7 +226,8 @@ def profile_denoiser_training(data_dir: Any, vae_path: Any, model_config: Any, t
                                    cache_dir=cache_dir)
 
     before_cfg = dataclasses.replace(train_config, batching="random", latent_cache=False, progress=False)
-    runners = [_Runner("before", build, before_cfg), _Runner("after", build, dataclasses.replace(train_config, progress=False))]
+    runners = [StepRunner("before", build, before_cfg),
+               StepRunner("after", build, dataclasses.replace(train_config, progress=False))]
     for i in range(warmup + steps):
         for r in runners:
             r.step(record=i >= warmup)
