@@ -36,6 +36,8 @@ ANKLE_HEIGHT = 0.058
 TOE_HEIGHT = 0.012
 #: The pelvis stands this far ahead of the midpoint of the ankles (m).
 PELVIS_AHEAD = 0.03
+#: Shortest pivot (s) on the ball of a planted foot.
+PIVOT_MIN = 0.12
 #: Hip-to-ankle distance of a standing leg, as a fraction of the straight leg (knees soft).
 STAND_REACH = 0.975
 
@@ -69,8 +71,8 @@ class Persona:
         # ranges wide enough that posture and arm carriage differ visibly between performers
         # (generator 1.0 drew a near-identical stance: the corpus's pose std was 0.66x the real one)
         return Persona(
-            width=float(rng.uniform(0.06, 0.18)),
-            toe_out=float(rng.uniform(0.0, 0.45)),
+            width=float(rng.uniform(0.05, 0.21)),
+            toe_out=float(rng.uniform(0.0, 0.5)),
             arm_rest=(float(rng.uniform(-0.1, 0.3)), float(rng.uniform(0.04, 0.4)), float(rng.uniform(0.1, 1.0))),
             arm_pole=(0.3, 0.0, -1.0),
             sway=float(rng.uniform(0.015, 0.04)),
@@ -133,12 +135,31 @@ class Plant:
     roll_in_time: float = 0.0
     roll_out: float = 0.0
     roll_out_time: float = 0.0
+    #: a pivot on the ball of the foot in mid-stance: the heel rises by ``pivot_lift`` rad about
+    #: the toe while the foot turns by ``yaw_turn`` rad about it (finite stances only)
+    yaw_turn: float = 0.0
+    pivot_lift: float = 0.25
 
     def __post_init__(self) -> None:
         if not self.t_off >= self.t_on:
             raise ValueError(f"Plant: t_off={self.t_off} must not precede t_on={self.t_on}")
         if self.roll_in_time < 0 or self.roll_out_time < 0:
             raise ValueError(f"Plant: roll times must be >= 0, got {self.roll_in_time}, {self.roll_out_time}")
+        if self.yaw_turn and not self.pivot_window():
+            raise ValueError(f"Plant: yaw_turn={self.yaw_turn} needs a finite stance with at least "
+                             f"{PIVOT_MIN} s between the rolls, got t_on={self.t_on}, t_off={self.t_off}")
+
+    def pivot_window(self) -> tuple[float, float] | None:
+        """(start, end) times of the mid-stance pivot, or None when the stance is too short."""
+        if not (np.isfinite(self.t_on) and np.isfinite(self.t_off)):
+            return None
+        a, b = self.t_on + self.roll_in_time + 0.03, self.t_off - self.roll_out_time - 0.02
+        return (a, b) if b - a >= PIVOT_MIN else None
+
+    @property
+    def yaw_end(self) -> float:
+        """Foot yaw at lift-off (after any pivot)."""
+        return self.yaw + self.yaw_turn
 
 
 @dataclass(frozen=True)
@@ -171,8 +192,15 @@ def plant_pose(p: Plant, t: np.ndarray, body: BodyModel, k: int) -> tuple[np.nda
     if p.roll_out and p.roll_out_time > 0:
         d = d + p.roll_out * min_jerk((t - (p.t_off - p.roll_out_time)) / p.roll_out_time)
     flat_toe = p.ankle + foot_vector(p.yaw, phi0, length)
-    vec = foot_vector(np.full_like(t, p.yaw), phi0 - d, np.full_like(t, length))
-    ankle = np.where((d >= 0)[:, None], p.ankle[None, :], flat_toe[None, :] - vec)
+    yaw = np.full_like(t, p.yaw)
+    win = p.pivot_window() if p.yaw_turn else None
+    if win is not None:         # turn about the toe with the heel up (ball of the foot)
+        tau = np.clip((t - win[0]) / (win[1] - win[0]), 0.0, 1.0)
+        yaw = yaw + p.yaw_turn * min_jerk(np.clip((tau - 0.15) / 0.7, 0.0, 1.0))   # inside the heel's rise
+        d = d - p.pivot_lift * np.sin(np.pi * tau)
+    vec = foot_vector(yaw, phi0 - d, np.full_like(t, length))
+    flat = flat_toe[None, :] - foot_vector(yaw, np.full_like(t, phi0), np.full_like(t, length))
+    ankle = np.where((d >= 0)[:, None], flat, flat_toe[None, :] - vec)
     return ankle, ankle + vec
 
 
@@ -191,7 +219,7 @@ def _swing_pose(a: Plant, b: Plant, s: Swing, t: np.ndarray, body: BodyModel, k:
     ankle = a0 + (b0 - a0) * m
     bump = _bump(tau, s.peak)
     ankle[:, 1] += s.height * bump
-    yaw = a.yaw + wrap_angle(b.yaw - a.yaw) * m[:, 0]
+    yaw = a.yaw_end + wrap_angle(b.yaw - a.yaw_end) * m[:, 0]
     if s.lead:
         fwd, _ = heading_vectors(yaw)
         ankle += fwd * (s.lead * bump)[:, None]

@@ -129,12 +129,16 @@ def raise_arm(persona: Persona, body: BodyModel, rng: np.random.Generator, side:
     u = rng.uniform
     pace = _pace(mods)
     arms = SIDES[side]
+    # each raised arm draws its own pose (2.1: both arms of "both" moved as one, and the ranges
+    # were narrow; the corpus's arm poses varied less, and less independently, than real ones)
     if "high" in mods:
-        pose = np.array([u(2.8, 3.0), -u(0.05, 0.2), u(0.0, 0.1)])
+        ranges = ((2.75, 3.05), (-0.25, 0.05), (0.0, 0.15))
     elif "low" in mods:
-        pose = np.array([u(1.3, 1.55), u(0.1, 0.25), u(0.05, 0.2)])
+        ranges = ((1.25, 1.6), (0.05, 0.5), (0.05, 0.3))
     else:
-        pose = np.array([u(2.3, 2.55), -u(0.15, 0.3), u(0.15, 0.35)])
+        ranges = ((2.15, 2.6), (-0.35, 0.1), (0.1, 0.4))
+    poses = np.array([[u(lo, hi) for lo, hi in ranges] for _ in range(2)])
+    pose = poses[arms[0]]
     rise, lower = u(0.45, 0.7) * pace, u(0.45, 0.7) * pace
     hold = _hold_time(duration, rise + lower, u(0.5, 1.4) * pace)
     total = rise + hold + lower
@@ -142,8 +146,8 @@ def raise_arm(persona: Persona, body: BodyModel, rng: np.random.Generator, side:
     t = frame_times(n, FPS)
     g = _empty(n, persona)
     rest = np.asarray(persona.arm_rest, dtype=np.float64)
-    angles = keyframes(t, [0.0, rise, rise + hold, total], np.stack([rest, pose, pose, rest]))
-    angles[:, 0] += 0.03 * np.sin(2 * np.pi * 0.7 * t) * envelope(t, rise, rise + hold, 0.2)
+    angles = np.stack([keyframes(t, [0.0, rise, rise + hold, total], np.stack([rest, p, p, rest])) for p in poses], 1)
+    angles[:, :, 0] += (0.03 * np.sin(2 * np.pi * 0.7 * t) * envelope(t, rise, rise + hold, 0.2))[:, None]
     _set_arms(g, arms, angles, np.array([1.0, 0.0, -0.4]), t)
     g.info = dict(flex=float(pose[0]))
     return g
@@ -190,7 +194,7 @@ def _hold_arm_pose(persona: Persona, rng: np.random.Generator, side: str, mods: 
     u = rng.uniform
     pace = _pace(mods)
     arms = SIDES[side]
-    pose = np.array([u(lo, hi) for lo, hi in pose_ranges])
+    poses = np.array([[u(lo, hi) for lo, hi in pose_ranges] for _ in range(2)])     # each arm its own
     rise, lower = u(0.45, 0.65) * pace, u(0.45, 0.65) * pace
     hold = _hold_time(duration, rise + lower, u(0.8, 1.8) * pace)
     total = rise + hold + lower
@@ -198,7 +202,7 @@ def _hold_arm_pose(persona: Persona, rng: np.random.Generator, side: str, mods: 
     t = frame_times(n, FPS)
     g = _empty(n, persona)
     rest = np.asarray(persona.arm_rest, dtype=np.float64)
-    angles = keyframes(t, [0.0, rise, rise + hold, total], np.stack([rest, pose, pose, rest]))
+    angles = np.stack([keyframes(t, [0.0, rise, rise + hold, total], np.stack([rest, p, p, rest])) for p in poses], 1)
     _set_arms(g, arms, angles, np.asarray(swivel, dtype=np.float64), t)
     return g
 
@@ -206,7 +210,7 @@ def _hold_arm_pose(persona: Persona, rng: np.random.Generator, side: str, mods: 
 def stretch_forward(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str = "both", *,
                     mods: tuple[str, ...] = (), duration: float | None = None) -> Gesture:
     """Stretch the arms straight forward at shoulder height and hold."""
-    return _hold_arm_pose(persona, rng, side, mods, duration, ((1.48, 1.6), (0.02, 0.1), (0.02, 0.12)),
+    return _hold_arm_pose(persona, rng, side, mods, duration, ((1.35, 1.75), (-0.1, 0.2), (0.02, 0.2)),
                           (0.5, -1.0, 0.0))
 
 
@@ -246,7 +250,7 @@ def clap(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str 
 def arms_out(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str = "both", *,
              mods: tuple[str, ...] = (), duration: float | None = None) -> Gesture:
     """Hold the arms straight out to the sides at shoulder height."""
-    return _hold_arm_pose(persona, rng, side, mods, duration, ((0.0, 0.15), (1.45, 1.62), (0.02, 0.1)),
+    return _hold_arm_pose(persona, rng, side, mods, duration, ((-0.15, 0.35), (1.3, 1.75), (0.02, 0.25)),
                           (0.0, -1.0, -0.4))
 
 
