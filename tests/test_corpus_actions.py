@@ -26,7 +26,8 @@ J = {n: i for i, n in enumerate(SK.joint_names)}
 #: The primitives corpus 2.0 added (the first 25 are covered by test_procedural).
 NEW = ("dance", "sway", "throw", "pick_up", "step_over", "stumble", "kneel", "lie_down", "lie_down_get_up",
        "step_up", "climb_stairs", "pivot", "touch_knee", "guard", "jab_cross", "hook", "uppercut",
-       "hands_on_hips", "scratch_head", "salute", "cross_arms", "reach_across", "arm_circles")
+       "hands_on_hips", "scratch_head", "salute", "cross_arms", "reach_across", "arm_circles",
+       "crawl")                                                # corpus 2.1
 
 
 def _action(kind: str, k: int = 0) -> Action:
@@ -220,3 +221,116 @@ def test_mirrored_left_action_looks_like_the_right_one():
         # the skeleton's left and right bones differ by up to ~1 cm, hence the tolerance
         assert np.abs(mirror_joints(left) - right).max() < 0.06, kind
         assert np.abs(left - right).max() > 0.1, kind                         # and the sides differ
+
+
+# ============================================================================ corpus 2.1
+def test_crawl_is_clean_and_moves_on_hands_and_knees():
+    from salad_core.data.procedural.crawl import HAND_ON_FLOOR
+
+    clip = realise(Plan((Step(Action("crawl")),)), np.random.default_rng(5))
+    j, ev = clip.joints, clip.events[0]
+    err = bone_length_error(j)
+    assert err["max_std"] < 1e-6 and err["max_error"] < 1e-6
+    assert j[..., 1].min() > -1e-9
+    assert j[:, J["pelvis"], 1].max() < 0.6 and j[:, J["head"], 1].max() < 0.9     # on all fours
+    for side in ("left", "right"):
+        knee, wrist = j[:, J[f"{side}_knee"], 1], j[:, J[f"{side}_wrist"], 1]
+        assert 0.04 < knee.min() < 0.07 and knee.max() < 0.14                       # knees on the floor
+        assert wrist.min() == pytest.approx(HAND_ON_FLOOR, abs=2e-3)                # palms on it
+        assert (wrist < HAND_ON_FLOOR + 2e-3).mean() > 0.5                          # most of the time
+    assert np.linalg.norm(j[-1, 0, [0, 2]] - j[0, 0, [0, 2]]) > 0.25                 # it goes somewhere
+    r = phrase_activity(part_speeds(j), [{"frames": ev.frames, "parts": ev.parts}], [ev.secondary])[0]
+    assert r["ratio_others"] > 2.0, r
+    ang = joint_angles(j)
+    lo, hi = ANKLE_RANGE
+    assert lo - 1 <= ang["ankle"].min() and ang["ankle"].max() <= hi + 1
+
+
+def test_crawl_is_a_whole_clip():
+    assert PRIMITIVES["crawl"].initial and PRIMITIVES["crawl"].terminal
+    with pytest.raises(ValueError, match="must start the plan"):
+        Plan((Step(Action("walk")), Step(Action("crawl"))))
+    from salad_core.data.procedural.composition import sample_plan
+
+    for i in range(300):                                     # the sampler never puts it later
+        plan = sample_plan(np.random.default_rng([9, i]))
+        assert all(s.main.kind != "crawl" for s in plan.steps[1:])
+
+
+def test_hands_stay_on_their_points_under_the_posture():
+    """The performer's posture and wander turn the trunk after a segment solved its arms; the
+    composer solves hands that touch something again (2.0's pick-up put wrists 0-2 cm up)."""
+    for seed in range(6):
+        side = ("left", "right", "both")[seed % 3]
+        j = realise(Plan((Step(Action("pick_up", side)),)), np.random.default_rng(seed)).joints
+        names = {"left": ["left_wrist"], "right": ["right_wrist"], "both": ["left_wrist", "right_wrist"]}[side]
+        low = min(j[:, J[n], 1].min() for n in names)
+        assert FLOOR_WRIST_HEIGHT - 0.006 < low < FLOOR_WRIST_HEIGHT + 1e-3, (side, low)
+        j = realise(Plan((Step(Action("sit")),)), np.random.default_rng(seed)).joints
+        for n in ("left_wrist", "right_wrist"):                  # seated: the palms stay on the floor
+            assert j[-1, J[n], 1] == pytest.approx(0.04, abs=1e-6)
+
+
+def _elbows_bent_backwards(j: np.ndarray) -> int:
+    """Frames with a hanging upper arm whose forearm bends backwards (the physics benchmark's rule)."""
+    from salad_core.data.procedural.checks import _chest_frames
+
+    chest = _chest_frames(j, SK)
+    bad = 0
+    for side in ("left", "right"):
+        upper = j[:, J[f"{side}_elbow"]] - j[:, J[f"{side}_shoulder"]]
+        upper /= np.linalg.norm(upper, axis=-1, keepdims=True)
+        fore = j[:, J[f"{side}_wrist"]] - j[:, J[f"{side}_elbow"]]
+        bend = fore - (fore * upper).sum(-1, keepdims=True) * upper
+        bend /= np.maximum(np.linalg.norm(bend, axis=-1, keepdims=True), 1e-9)
+        hangs = (upper * -chest[:, 1]).sum(-1) > np.cos(np.radians(45))
+        flexed = np.degrees(np.arccos(np.clip((upper * fore).sum(-1) / np.linalg.norm(fore, axis=-1), -1, 1))) > 15
+        bad += int((hangs & flexed & ((bend * chest[:, 2]).sum(-1) < -0.5)).sum())
+    return bad
+
+
+def test_underhand_toss_bends_the_elbow_forwards():
+    for seed in range(6):
+        side = ("left", "right")[seed % 2]
+        j = realise(Plan((Step(Action("throw", side, (), 1, "underhand")),)), np.random.default_rng(100 + seed)).joints
+        assert _elbows_bent_backwards(j) == 0, seed
+
+
+def test_turning_steps_pivot_on_the_ball_of_the_foot():
+    from salad_core.data.procedural.footwork import Plant, plant_pose
+    from salad_core.data.procedural.stats import contact_motion_share
+
+    p = Plant(0.0, 1.0, np.array([0.1, ANKLE_HEIGHT, 0.0]), 0.2, roll_in=0.1, roll_in_time=0.1,
+              roll_out=-0.4, roll_out_time=0.2, yaw_turn=0.5)
+    t = np.linspace(0.0, 0.79, 80)                            # before the heel-off roll
+    ankle, toe = plant_pose(p, t, BODY, 0)
+    assert np.abs(toe[12:] - toe[12]).max() < 1e-9            # the toe is the pivot (after the heel strike)
+    assert ankle[40, 1] > ANKLE_HEIGHT + 0.02                 # heel up while turning
+    assert ankle[-1, 1] == pytest.approx(ANKLE_HEIGHT)        # and down again, turned
+    d = toe[-1] - ankle[-1]
+    assert np.arctan2(d[0], d[2]) == pytest.approx(p.yaw_end, abs=1e-6)
+    with pytest.raises(ValueError, match="yaw_turn"):
+        Plant(0.0, np.inf, np.zeros(3), 0.0, yaw_turn=0.3)
+    clip = realise(Plan((Step(Action("turn", "left", (), 1, "around")),)), np.random.default_rng(2))
+    moving, total = contact_motion_share(clip.joints)
+    assert moving / total > 0.05                              # 2.0's turns: about 2 %
+
+
+def test_carriage_holds_each_arm_its_own_way():
+    from salad_core.data.procedural.carriage import CARRIAGES, apply_carriage, sample_carriages
+    from salad_core.data.procedural.reach import chest_frames
+
+    rng = np.random.default_rng(0)
+    persona = Persona.sample(rng)
+    pose = standing_pose(Stance.at((0.0, 0.0), 0.4, persona), persona, 4, BODY)
+    before = assemble(pose, BODY)
+    target = np.array([-0.04, -0.4, 0.0])                     # a hand on the hip
+    apply_carriage(pose, BODY, [(CARRIAGES[1], target), None])
+    j = assemble(pose, BODY)
+    local = np.einsum("nji,nj->ni", chest_frames(pose), j[:, J["left_wrist"]] - j[:, J["left_shoulder"]])
+    assert np.abs(local - target).max() < 1e-9
+    assert np.abs(j[:, J["right_wrist"]] - before[:, J["right_wrist"]]).max() < 1e-12
+    draws = [sample_carriages(np.random.default_rng([1, i])) for i in range(400)]
+    both = [(a[0].name, b[0].name) for a, b in draws if a is not None and b is not None]
+    assert len(both) > 50 and np.mean([x != y for x, y in both]) > 0.4  # the arms choose apart
+    assert any(a is None for a, _ in draws)                              # some arms just hang

@@ -232,3 +232,19 @@ def test_trunk_turns_with_one_arm_but_not_with_both():
     assert turn[59] == pytest.approx(TRUNK_YAW_PER_FLEX, rel=0.02)   # turns left (+yaw) with the right arm
     assert abs(turn[5]) < 1e-3                                       # long before the arm moves: nothing
     np.testing.assert_allclose(both.spine[:, 0], yaw0, atol=1e-12)    # symmetric arms: no turn
+
+
+def test_long_sequences_are_drawn_and_said():
+    """Corpus 2.1 draws plans of four co-articulated actions; their captions parse back."""
+    from salad_core.data.procedural import GENERATOR_VERSION, in_language, render_captions
+    from salad_core.data.procedural.composition import PLAN_TYPES, sample_plan
+
+    assert GENERATOR_VERSION == "2.1"
+    assert PLAN_TYPES["sequence3"] + PLAN_TYPES["sequence4"] >= 0.2
+    for i in range(5):
+        rng = np.random.default_rng([12, i])
+        plan = sample_plan(rng, "sequence4")
+        assert len(plan.steps) == 4
+        assert all(a.main.kind != b.main.kind for a, b in zip(plan.steps, plan.steps[1:]))
+        for cap in render_captions(plan, rng, 2):
+            assert in_language(cap.text), cap.text

@@ -214,25 +214,28 @@ def _wander(n: int, rng: np.random.Generator, dims: int, period: tuple[float, fl
     return out / np.sqrt(1.5)
 
 
-def _alive(pose: Pose, persona: Persona, rng: np.random.Generator) -> None:
+def _alive(pose: Pose, persona: Persona, rng: np.random.Generator, propped: np.ndarray | None = None) -> None:
     """Lay the performer's posture and a low-frequency wander of the joint angles on ``pose``.
 
     Posture (slouch, sideways tilt, arm asymmetry) is constant over the clip; the wander
     (trunk, head, arms; amplitude set by ``persona.liveliness``) keeps held poses from freezing.
     Neither touches the pelvis position or the feet, so contact and reach are unchanged.
+    ``propped`` ``(N,)`` in [0, 1]: where the hands hold the body up (sitting back on them, on all
+    fours) the trunk wanders a quarter as much, so the hands stay within reach of the floor.
     """
     n = pose.num_frames
     live = persona.liveliness
-    pose.spine[:, 1] += persona.slouch
+    trunk = 1.0 if propped is None else (1.0 - 0.75 * smooth(np.asarray(propped, dtype=np.float64), 4.0))[:, None]
+    pose.spine[:, 1] += persona.slouch * trunk[:, 0] if propped is not None else persona.slouch
     pose.neck[:, 1] -= 0.5 * persona.slouch               # the gaze stays level
-    pose.spine[:, 2] += persona.tilt
+    pose.spine[:, 2] += persona.tilt * trunk[:, 0] if propped is not None else persona.tilt
     pose.arm[:, 0, 0] += 0.5 * persona.arm_asym
     pose.arm[:, 1, 0] -= 0.5 * persona.arm_asym
     # amplitudes (rad, std) small enough that a resting arm or head stays well below an
     # annotated action's part speed (the phrase-activity checks), large enough to never freeze
     # (2.1: about twice 2.0's, whose spine and head rotations varied 0.5-0.6x as much as real ones)
     noise = _wander(n, rng, 12, period=(1.8, 4.0)) * live
-    pose.spine += noise[:, 0:3] * np.array([0.09, 0.06, 0.06])
+    pose.spine += noise[:, 0:3] * np.array([0.09, 0.06, 0.06]) * trunk
     pose.neck += noise[:, 3:6] * np.array([0.1, 0.07, 0.05])
     pose.arm[:, :, 0] += noise[:, 6:8] * 0.035
     pose.arm[:, :, 1] += noise[:, 8:10] * 0.025
@@ -327,17 +330,8 @@ def _trunk_follows_arms(pose: Pose, persona: Persona, weight: np.ndarray | None 
     pose.spine[:, 2] -= TRUNK_ROLL_PER_ABD * (d[:, 0, 1] - d[:, 1, 1])
 
 
-def _hold_hands(pose: Pose, body: BodyModel, held: list[tuple[int, tuple[np.ndarray, np.ndarray]]]) -> None:
-    """Put the hands of base actions back on their world points (in place).
-
-    ``held`` lists ``(offset, (weights (M, 2), targets (M, 2, 3)))`` of segments whose hands
-    touch something (the floor, a knee; :attr:`.segment.Segment.hands`) starting at frame
-    ``offset``. The posture and the wander (:func:`_alive`) turn the trunk after the segment
-    solved its arms, which moved such hands by up to 6 cm (into the floor when picking up): the
-    arms are solved again on the final trunk and blended in by the weights (exact at 1). A
-    seated segment's last hold carries over the seated rest that pads the clip.
-    """
-    n = pose.num_frames
+def _held_hands(n: int, held: list[tuple[int, tuple[np.ndarray, np.ndarray]]]) -> tuple[np.ndarray, np.ndarray]:
+    """``(weights (n, 2), wrist targets (n, 2, 3))`` of the clip from its segments' held hands."""
     w, tgt = np.zeros((n, 2)), np.zeros((n, 2, 3))
     for at, (hw, ht) in held:
         m = min(len(hw), n - at)
@@ -351,6 +345,20 @@ def _hold_hands(pose: Pose, body: BodyModel, held: list[tuple[int, tuple[np.ndar
         end = at + len(hw)
         if end < n:                       # the padding after the last segment keeps its hands
             w[end:], tgt[end:] = hw[-1], ht[-1]
+    return w, tgt
+
+
+def _hold_hands(pose: Pose, body: BodyModel, hands: tuple[np.ndarray, np.ndarray]) -> None:
+    """Put the hands of base actions back on their world points (in place).
+
+    ``hands`` (from :func:`_held_hands`) holds the weights and world wrist targets of hands that
+    touch something (the floor, a knee; :attr:`.segment.Segment.hands`). The posture and the
+    wander (:func:`_alive`) turn the trunk after the segment solved its arms, which moved such
+    hands by up to 6 cm (into the floor when picking up): the arms are solved again on the final
+    trunk and blended in by the weights (exact at 1 when within reach). A seated segment's last
+    hold carries over the seated rest that pads the clip.
+    """
+    w, tgt = hands
     for k in range(2):
         wk = w[:, k]
         if not (wk > 0).any():
@@ -469,11 +477,12 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
         sl = slice(at, at + g.num_frames)
         gesture_arms[sl] = np.maximum(gesture_arms[sl], g.arm_weight)
     _trunk_follows_arms(pose, persona, gesture_arms)
-    _alive(pose, persona, rng)
+    hands = _held_hands(pose.num_frames, held_hands)
+    _alive(pose, persona, rng, propped=hands[0].max(1))
     calm = [events[(role, i)][0] for role, i, a in plan.actions() if a.spec.category == "head"]
     _lively_holds(pose, _hold_mask(pose, body, calm), persona, rng)
-    _hold_hands(pose, body, held_hands)
-    joints = _anchor(assemble(pose, body)[s0:stop], body)
+    _hold_hands(pose, body, hands)
+    joints = _anchor(assemble(pose, body, keep_toes=True)[s0:stop], body)
 
     out: list[Event] = []
     n = joints.shape[0]

@@ -68,16 +68,15 @@ def crawl(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gener
     x = speed * np.clip(tt - lead, 0.0, cycles * period)
     pelvis_xz = start.ground[None] + fwd[None] * x[:, None]
 
-    # ---- trunk: near horizontal, the head up to look ahead; the performer's posture is taken
-    # off here because the composer lays it on again (a slouch would drop the shoulders)
+    # ---- trunk: near horizontal, the head up to look ahead (the head's share of the posture is
+    # taken off here: the composer lays it on again)
     pitch = u(1.25, 1.4)
     ypr = np.tile(np.array([start.yaw, pitch, 0.0]), (n, 1))
     w = 2 * np.pi * tt / period
     ypr[:, 2] += u(0.03, 0.06) * np.sin(w)                     # hips roll with the knees
     spine = np.zeros((n, 3))
     spine[:, 0] += u(0.04, 0.08) * np.sin(w + np.pi / 2)       # shoulders turn with the hands
-    spine[:, 1] = u(-0.1, 0.1) - persona.slouch
-    spine[:, 2] -= persona.tilt
+    spine[:, 1] = u(-0.1, 0.1)          # (the composer lays a quarter of the posture on a propped trunk)
     neck = np.tile(np.array([0.0, -u(0.6, 0.9) + 0.5 * persona.slouch, 0.0]), (n, 1))
     g0 = ypr_matrix(ypr)
     hip_off = np.einsum("nij,kj->nki", g0, body.hip_offsets)   # (N, 2, 3)

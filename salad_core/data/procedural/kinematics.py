@@ -310,12 +310,17 @@ def arm_angles_for_target(target, upper: float, fore: float) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- assembly
-def assemble(pose: Pose, body: BodyModel | None = None) -> np.ndarray:
+def assemble(pose: Pose, body: BodyModel | None = None, keep_toes: bool = False) -> np.ndarray:
     """Joint positions ``(N, J, 3)`` of a :class:`Pose` (float64).
 
     Torso: ``p_child = p_joint + G_joint @ rest_offset_child`` with ``G_joint = G_parent @ R_joint``.
     Limbs: two-bone IK (legs to the ankle targets with the knee poles, arms to the wrist targets
     given by the arm controls), then the toe at the foot length along the toe target direction.
+
+    ``keep_toes``: where the ankle's range of motion (:func:`clamp_ankle`) would push a toe below
+    its target (a shin leaning far over a flat foot), lift the heel about the toe target instead
+    and solve the leg again, so the toe stays where it was put (2.1; a few run steps of slow
+    runners sank the toe 0.4-1.2 cm and slid it).
     """
     body = body or body_model("humanml3d")
     j = body.j
@@ -365,9 +370,21 @@ def assemble(pose: Pose, body: BodyModel | None = None) -> np.ndarray:
     # turned back into the ankle's range of motion if the leg pose asks too much of it
     for k, side in enumerate(("left", "right")):
         hip = out[:, j(f"{side}_hip")]
-        knee, ankle = two_bone_ik(hip, pose.ankle[:, k], body.thigh[k], body.shin[k], pose.knee_pole[:, k])
-        foot_dir = _unit(pose.toe[:, k] - pose.ankle[:, k], np.array([0.0, 0.0, 1.0]))
-        foot_dir = clamp_ankle(knee - ankle, foot_dir)
+        target = pose.ankle[:, k].copy()
+        toe_t = pose.toe[:, k]
+        length = body.foot[k]
+        for _ in range(4 if keep_toes else 1):
+            knee, ankle = two_bone_ik(hip, target, body.thigh[k], body.shin[k], pose.knee_pole[:, k])
+            want = _unit(toe_t - target, np.array([0.0, 0.0, 1.0]))
+            foot_dir = clamp_ankle(knee - ankle, want)
+            sink = toe_t[:, 1] - (ankle + foot_dir * length)[:, 1]
+            bad = sink > 1e-4
+            if not keep_toes or not bad.any():
+                break
+            # pitch the foot further toe-down about the toe target by the angle that lifts the toe back
+            pitch = np.arcsin(np.clip(-want[bad, 1], -1.0, 1.0)) + np.arcsin(np.clip(sink[bad] / length, 0.0, 1.0)) + 0.02
+            yaw = np.arctan2(want[bad, 0], want[bad, 2])
+            target[bad] = toe_t[bad] - foot_vector(yaw, pitch, np.full(bad.sum(), length))
         out[:, j(f"{side}_knee")] = knee
         out[:, j(f"{side}_ankle")] = ankle
         out[:, j(f"{side}_foot")] = ankle + foot_dir * body.foot[k]
