@@ -27,19 +27,22 @@ import math
 import warnings
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 import torch
 
 from salad_core.io import (CheckpointError, atomic_write_text, config_from_dict, config_to_dict, load_model,
                            load_tensors, save_checkpoint, save_tensors)
-from salad_core.models.denoiser import Denoiser
+from salad_core.models.denoiser import Denoiser, TextContext
 from salad_core.models.vae import MotionVAE
 from salad_core.motion import MAX_FEATURE_MAGNITUDE, denormalize, features_to_joints, normalize
 from salad_core.sampling import DiffusionConfig, Guidance, denoise, make_scheduler
 from salad_core.skeleton import Skeleton
-from salad_core.text import TextBatch, load_text_encoder
+from salad_core.text import TextBatch, TextEncoder, load_text_encoder
+
+if TYPE_CHECKING:  # pragma: no cover - annotations only: salad_core.attention is imported when used
+    from salad_core.attention import AttentionMaps, CaptureConfig, EditController, EditSpec, Inversion
 
 __all__ = ["SaladPipeline", "MotionOutput", "EditOutput", "default_weights_dir", "validate_prompts",
            "validate_lengths"]
@@ -74,7 +77,7 @@ class MotionOutput:
         ``(B, N'_max, P, Dz)`` the initial noise, so the same start can be reused for edits.
     seeds : list of int
         Per-sample noise seeds.
-    attention : object or None
+    attention : AttentionMaps or None
         Captured attention maps (:class:`salad_core.attention.AttentionMaps`) when requested.
     settings : dict
         Guidance scale, steps, solver: everything needed to regenerate.
@@ -87,7 +90,7 @@ class MotionOutput:
     latents: torch.Tensor
     noise: torch.Tensor
     seeds: list[int]
-    attention: Any = None
+    attention: AttentionMaps | None = None
     settings: dict = field(default_factory=dict)
 
     def __len__(self) -> int:
@@ -127,7 +130,7 @@ class EditOutput:
     source: MotionOutput
     edited: MotionOutput
     noise: torch.Tensor
-    edits: tuple
+    edits: tuple[EditSpec, ...]
     settings: dict = field(default_factory=dict)
 
 
@@ -193,8 +196,9 @@ class SaladPipeline:
     ----------
     vae : MotionVAE
     denoiser : Denoiser
-    text_encoder
-        An encoder from :func:`salad_core.text.load_text_encoder` (``dim`` must equal the
+    text_encoder : TextEncoder
+        An encoder following :class:`salad_core.text.TextEncoder`, e.g. from
+        :func:`salad_core.text.load_text_encoder` (``dim`` must equal the
         denoiser's ``text_dim``).
     mean, std : np.ndarray
         ``(D,)`` feature statistics the models were trained with.
@@ -211,10 +215,13 @@ class SaladPipeline:
     #: 0.77 s in chunks of 8 with the tuned allocator of :mod:`salad_core.allocator`.
     max_batch: int | None = None
 
-    def __init__(self, vae: MotionVAE, denoiser: Denoiser, text_encoder, mean: np.ndarray, std: np.ndarray,
-                 diffusion: DiffusionConfig | None = None, solver: str = "ddim", source: str | None = None,
+    def __init__(self, vae: MotionVAE, denoiser: Denoiser, text_encoder: TextEncoder, mean: np.ndarray,
+                 std: np.ndarray, diffusion: DiffusionConfig | None = None, solver: str = "ddim", source: str | None = None,
                  guidance: Guidance | None = None, recovery: str | None = None,
                  latent_stats: tuple[Any, Any] | None = None) -> None:
+        if not isinstance(text_encoder, TextEncoder):
+            raise TypeError(f"text_encoder must follow salad_core.text.TextEncoder (name, dim, max_tokens, encode, "
+                            f"encode_null), e.g. load_text_encoder('minilm'); got {type(text_encoder).__name__}")
         self.vae = vae.eval()
         self.denoiser = denoiser.eval()
         self.text_encoder = text_encoder
@@ -257,7 +264,8 @@ class SaladPipeline:
 
     # ------------------------------------------------------------------ loading
     @classmethod
-    def from_pretrained(cls, path: str | Path | None = None, *, text_encoder=None) -> "SaladPipeline":
+    def from_pretrained(cls, path: str | Path | None = None, *,
+                        text_encoder: TextEncoder | None = None) -> "SaladPipeline":
         """Load a pipeline folder (``None``: the shipped default weights)."""
         root = Path(path) if path is not None else default_weights_dir()
         cfg_path = root / "pipeline.json"
@@ -395,7 +403,8 @@ class SaladPipeline:
     # ------------------------------------------------------------------ generate
     def __call__(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None = None,
                  seed: int | Sequence[int] = 0, guidance_scale: "float | Guidance | None" = None,
-                 num_steps: int = 50, solver: str | None = None, capture_attention: bool | Any = False,
+                 num_steps: int = 50, solver: str | None = None,
+                 capture_attention: bool | CaptureConfig | dict = False,
                  noise: torch.Tensor | None = None, progress: bool = False) -> MotionOutput:
         """Generate one motion per prompt.
 
@@ -481,7 +490,7 @@ class SaladPipeline:
 
         return 32 if allocator_tuned() else 8
 
-    def _denoise_in_chunks(self, text: TextBatch, uncond: Any, noise: torch.Tensor, lengths: Sequence[int],
+    def _denoise_in_chunks(self, text: TextBatch, uncond: TextContext, noise: torch.Tensor, lengths: Sequence[int],
                            guidance: Guidance, num_steps: int, solver: str, progress: bool) -> torch.Tensor:
         """Denoise the ``B`` motions in consecutive chunks of at most :meth:`chunk_size` motions (one
         chunk when ``B`` is not larger), each at its own longest length; returns latents ``(B, N', P, Dz)`` as one
@@ -504,10 +513,11 @@ class SaladPipeline:
 
     # ------------------------------------------------------------------ edit
     def edit(self, source: str | Sequence[str] | None = None, target: str | Sequence[str] | None = None,
-             edits: Any = (), lengths: int | Sequence[int] | None = None, seed: int | Sequence[int] = 0,
+             edits: EditSpec | Sequence[EditSpec] = (), lengths: int | Sequence[int] | None = None,
+             seed: int | Sequence[int] = 0,
              guidance_scale: "float | Guidance | None" = None, num_steps: int | None = None,
-             solver: str | None = None, noise: torch.Tensor | None = None, inversion: Any = None,
-             capture_attention: bool | Any = False,
+             solver: str | None = None, noise: torch.Tensor | None = None, inversion: Inversion | None = None,
+             capture_attention: bool | CaptureConfig | dict = False,
              probe: bool = False, progress: bool = False) -> EditOutput:
         """Zero-shot editing by attention modulation (SALAD supplement B, Algorithm 1).
 
@@ -547,7 +557,7 @@ class SaladPipeline:
         -------
         EditOutput
         """
-        from salad_core.attention.capture import AttentionStore, TokenInfo, as_capture_config
+        from salad_core.attention.capture import TokenInfo
         from salad_core.attention.controller import EditController
         from salad_core.attention.editing import edit_latents
         from salad_core.attention.edits import validate_edits
@@ -598,14 +608,7 @@ class SaladPipeline:
         controller = EditController(edits, TokenInfo.from_batch(text_src), TokenInfo.from_batch(text_tgt), width,
                                     cfg=guidance.cfg, probe=probe)
         if capture_attention:
-            cap = as_capture_config(capture_attention)
-            dc = self.denoiser.config
-            controller.stores = {
-                "source": AttentionStore(text_src, lengths, cap, dc.layers, dc.heads, self.skeleton.unit_length,
-                                         rows=lambda info: controller.layout.source_cond),
-                "edited": AttentionStore(text_tgt, lengths, cap, dc.layers, dc.heads, self.skeleton.unit_length,
-                                         rows=lambda info: controller.layout.edited_cond),
-            }
+            self._record(controller, capture_attention, lengths)
         solver = solver or self.solver
         scheduler = make_scheduler(self.diffusion, solver)
         mask = self.frame_mask(lengths, noise.shape[1])
@@ -620,15 +623,18 @@ class SaladPipeline:
         out = []
         for branch, latents, texts in (("source", run.source, prompts), ("edited", run.edited, targets)):
             feats, joints = self.decode(latents, lengths)
-            maps = controller.stores[branch].result() if capture_attention else None
-            out.append(MotionOutput(feats, joints, list(texts), list(lengths), latents, noise, seeds, maps,
-                                    dict(settings)))
+            out.append(MotionOutput(feats, joints, list(texts), list(lengths), latents, noise, seeds,
+                                    controller.maps(branch), dict(settings)))
         settings.update(probe=bool(probe), forward_rows=run.rows, probe_steps=run.probe_steps,
                         cost_vs_generation=run.rows / generation_rows,
                         inversion=None if inversion is None else inversion.method)
         return EditOutput(out[0], out[1], noise, edits, settings)
 
-    def _from_inversion(self, inversion, source, lengths, noise, guidance_scale, num_steps, solver):
+    def _from_inversion(self, inversion: Inversion, source: str | Sequence[str] | None,
+                        lengths: int | Sequence[int] | None, noise: torch.Tensor | None,
+                        guidance_scale: float | Guidance | None, num_steps: int | None, solver: str | None
+                        ) -> tuple[list[str], list[int], torch.Tensor, Guidance, int]:
+        """Prompts, lengths, noise, guidance and steps of an inversion; refuses settings that differ."""
         prompts = list(inversion.prompts)
         if source is not None and validate_prompts(source) != prompts:
             raise ValueError(f"source={source!r} differs from the inversion's prompts {prompts}; omit source when "
@@ -651,7 +657,7 @@ class SaladPipeline:
     def invert(self, motions: Any, prompts: str | Sequence[str], *, method: str = "fixed_point",
                guidance_scale: "float | Guidance | None" = None, num_steps: int = 50,
                iterations: int | None = None, exact: bool = True, reconstruct: bool = True,
-               progress: bool = False) -> Any:
+               progress: bool = False) -> Inversion:
         """Invert given motions to noise under their prompts, so that :meth:`edit` can edit them.
 
         Parameters
@@ -739,10 +745,10 @@ class SaladPipeline:
             }
         return inv
 
-    def reconstruct(self, inversion: Any, *, capture_attention: bool | Any = False,
+    def reconstruct(self, inversion: Inversion, *, capture_attention: bool | CaptureConfig | dict = False,
                     progress: bool = False) -> MotionOutput:
         """Regenerate an inverted motion (no edit): the source branch of :meth:`edit` alone."""
-        from salad_core.attention.capture import AttentionStore, TokenInfo, as_capture_config
+        from salad_core.attention.capture import TokenInfo
         from salad_core.attention.controller import EditController
         from salad_core.attention.editing import edit_latents
 
@@ -759,21 +765,25 @@ class SaladPipeline:
         controller = EditController((), info, info, max(text.features.shape[1], null_width), cfg=w.cfg,
                                     edited=False)
         if capture_attention:
-            dc = self.denoiser.config
-            controller.stores = {"source": AttentionStore(text, lengths, as_capture_config(capture_attention),
-                                                          dc.layers, dc.heads, self.skeleton.unit_length,
-                                                          rows=lambda i: controller.layout.source_cond)}
+            self._record(controller, capture_attention, lengths)
         ctx = self.denoiser.prepare_text(text.features, text.mask)
         mask = self.frame_mask(lengths, inversion.noise.shape[1])
         run = edit_latents(self.denoiser, make_scheduler(self.diffusion, "ddim"), controller, source=ctx, target=None,
                            null=nulls, noise=inversion.noise, frame_mask=mask, guidance_scale=w, num_steps=steps,
                            corrections=inversion.corrections, progress=progress)
         feats, joints = self.decode(run.source, lengths)
-        maps = controller.stores["source"].result() if capture_attention else None
-        return MotionOutput(feats, joints, prompts, lengths, run.source, inversion.noise, [], maps,
+        return MotionOutput(feats, joints, prompts, lengths, run.source, inversion.noise, [], controller.maps("source"),
                             dict(_guidance_settings(w), num_steps=steps, solver="ddim", weights=self.source,
                                  **self._output_settings(),
                                  inversion=inversion.method))
+
+
+    def _record(self, controller: EditController, capture: bool | CaptureConfig | dict,
+                lengths: Sequence[int]) -> None:
+        """Have the controller record the attention of its branches at this denoiser's sites."""
+        dc = self.denoiser.config
+        controller.record_attention(capture, lengths, num_layers=dc.layers, num_heads=dc.heads,
+                                    unit_length=self.skeleton.unit_length)
 
 
 def _check_recovery(method: Any) -> str:
@@ -796,13 +806,13 @@ def _describe_guidance(guidance: Guidance) -> str:
     return f"{guidance.scale:g}" + (f" ({', '.join(extra)})" if extra else "")
 
 
-def _inversion_guidance(inversion: Any) -> Guidance:
+def _inversion_guidance(inversion: Inversion) -> Guidance:
     """The guidance an inversion is faithful to (older inversions carry only the weight)."""
     made = getattr(inversion, "guidance", None)
     return made if made is not None else Guidance(inversion.guidance_scale)
 
 
-def check_compatible(vae: MotionVAE, denoiser: Denoiser, text_encoder=None) -> None:
+def check_compatible(vae: MotionVAE, denoiser: Denoiser, text_encoder: TextEncoder | None = None) -> None:
     """Raise if the VAE latent, the denoiser and the text encoder do not fit together."""
     dc = denoiser.config
     if dc.num_parts != vae.num_parts or dc.latent_dim != vae.latent_dim:

@@ -79,6 +79,71 @@ def test_reweight_and_refine_kernels():
     assert torch.equal(out[..., [2, 5]], tgt[..., [2, 5]])
 
 
+def test_reweight_kernel_per_row_and_each_spec_binds_its_own_kernel(pipe):
+    """One re-weighting implementation: per-row columns equal the shared-column form row by row;
+    every spec's bound kernel is its pure kernel on the prompts' tokens."""
+    g = torch.Generator().manual_seed(3)
+    maps = torch.rand(2, 3, 4, len(PART_NAMES), 9, generator=g)              # (B, H, N', P, W)
+    rows = reweight_columns(maps, [[1, 2], [5]], -1.5, per_row=True)
+    torch.testing.assert_close(rows[0], reweight_columns(maps[0], [1, 2], -1.5))
+    torch.testing.assert_close(rows[1], reweight_columns(maps[1], [5], -1.5))
+    with pytest.raises(ValueError, match="one sequence per map"):
+        reweight_columns(maps, [[1]], 2.0, per_row=True)
+
+    src = TokenInfo.from_batch(pipe.text_encoder.encode(["a man walks forward", "a person jumps high"]))
+    tgt = TokenInfo.from_batch(pipe.text_encoder.encode(["a man runs forward", "a person jumps low"]))
+    width = max(len(t) for t in src.tokens + tgt.tokens)
+    maps = torch.rand(2, 3, 4, len(PART_NAMES), width, generator=g)
+    own = torch.rand(2, 3, 4, len(PART_NAMES), width, generator=g)
+    walkers = TokenInfo.from_batch(pipe.text_encoder.encode(["a man walks forward", "walks"]))
+    out = Reweight("walks", 2.0).bind(src, src, width, maps_of=walkers)(maps, None)
+    for b in range(2):                          # the word's columns of each prompt: scaled, the rest kept
+        cols = walkers.word_columns(b, "walks")
+        others = [j for j in range(width) if j not in cols]
+        assert cols != walkers.word_columns(1 - b, "walks")
+        torch.testing.assert_close(out[b][..., cols], 2.0 * maps[b][..., cols])
+        assert torch.equal(out[b][..., others], maps[b][..., others])
+    torch.testing.assert_close(Mirror("legs").bind(src, src, width, maps_of=src)(maps, None),
+                               mirror_parts(maps, "legs", part_axis=3))
+    swapped = WordSwap().bind(src, tgt, width, maps_of=tgt)(maps, own)
+    for b in range(2):
+        m = torch.from_numpy(word_swap_matrix(src.tokens[b], src.token_to_word[b], src.words[b], tgt.tokens[b],
+                                              tgt.token_to_word[b], tgt.words[b]))
+        k, j = m.shape
+        torch.testing.assert_close(swapped[b:b + 1, ..., :k], map_columns(maps[b:b + 1, ..., :j], m[None]))
+    refine = Refine().bind(src, tgt, width, maps_of=tgt)
+    mapping = torch.full((2, width), -1, dtype=torch.long)
+    for b in range(2):
+        aligned = global_align(src.tokens[b], tgt.tokens[b])
+        mapping[b, :len(aligned)] = torch.tensor(aligned)
+    torch.testing.assert_close(refine(maps, own), refine_columns(maps, own, mapping))
+    with pytest.raises(RuntimeError, match="needs the probe's maps"):
+        refine(maps, None)
+    assert InjectSelfAttention().bind(src, tgt, width, maps_of=tgt)(maps, own) is maps
+    assert [e.role for e in (WordSwap(), Refine(), Reweight("a", 2), Mirror(), InjectSelfAttention())] == \
+        ["replace", "replace", "modify", "modify", "inject"]
+    assert Refine().reads_target and not WordSwap().reads_target
+
+
+def test_controller_records_its_own_stores(pipe):
+    text = pipe.text_encoder.encode([SRC])
+    info = TokenInfo.from_batch(text)
+    ctrl = EditController([Mirror()], info, info, text.features.shape[1], cfg=True)
+    assert ctrl.stores == {} and ctrl.maps("source") is None
+    ctrl.record_attention(True, [40], num_layers=3, num_heads=2)
+    assert set(ctrl.stores) == {"source", "edited"}
+    recon = EditController((), info, info, text.features.shape[1], cfg=True, edited=False)
+    recon.record_attention(CaptureConfig(self_attention=True), [40], num_layers=3, num_heads=2)
+    assert set(recon.stores) == {"source"} and recon.site_kinds == {"cross", "temporal", "skeletal"}
+    with pytest.raises(ValueError, match="branch must be"):
+        ctrl.maps("probe")
+
+
+def test_pipeline_takes_a_text_encoder_that_follows_the_protocol(pipe):
+    with pytest.raises(TypeError, match="salad_core.text.TextEncoder"):
+        SaladPipeline(pipe.vae, pipe.denoiser, object(), pipe.mean, pipe.std)
+
+
 def test_global_alignment_pairs_equal_tokens_in_order():
     s = ["[CLS]", "a", "man", "walks", "[SEP]"]
     assert global_align(s, ["[CLS]", "a", "man", "slowly", "walks", "[SEP]"]) == [0, 1, 2, -1, 3, 4]

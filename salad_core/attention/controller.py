@@ -31,10 +31,8 @@ import torch
 
 from salad_core.models.attention import SiteInfo
 
-from .align import global_align, word_swap_matrix
-from .capture import AttentionStore, TokenInfo
-from .edits import (EditSpec, InjectSelfAttention, Mirror, Refine, Reweight, WordSwap, map_columns,
-                    mirror_parts, refine_columns, validate_edits)
+from .capture import AttentionMaps, AttentionStore, CaptureConfig, TokenInfo, as_capture_config
+from .edits import EditKernel, EditSpec, validate_edits
 
 __all__ = ["RowLayout", "EditController"]
 
@@ -95,6 +93,10 @@ class RowLayout:
 class EditController:
     """Builds ``M_hat`` at every cross site (and injects self-attention) for the edited rows.
 
+    Each spec's kernel (:meth:`EditSpec.bind <salad_core.attention.edits.EditSpec.bind>`) does the
+    editing; the controller only plans the rows of each step and composes the active kernels. It
+    records attention on request (:meth:`record_attention`, then :meth:`maps`).
+
     Parameters
     ----------
     edits : sequence of EditSpec
@@ -125,64 +127,62 @@ class EditController:
         self.source, self.target, self.width, self.cfg, self.edited = source, target, int(width), cfg, edited
         self.batch = len(source)
         self.same_prompt = [source.tokens[b] == target.tokens[b] for b in range(self.batch)]
-        repl = [e for e in self.edits if e.replaces]
-        self.replacement: EditSpec | None = repl[0] if repl else None
-        self.modifiers = [e for e in self.edits if isinstance(e, (Reweight, Mirror))]
-        self.injections = [e for e in self.edits if isinstance(e, InjectSelfAttention)]
+        repl = [i for i, e in enumerate(self.edits) if e.role == "replace"]
+        self._repl_index = repl[0] if repl else None
+        self.replacement: EditSpec | None = self.edits[repl[0]] if repl else None
+        self.modifiers = [e for e in self.edits if e.role == "modify"]
+        self.injections = [e for e in self.edits if e.role == "inject"]
         if self.replacement is None and self.modifiers and not all(self.same_prompt):
             bad = [b for b in range(self.batch) if not self.same_prompt[b]]
             raise ValueError(
                 f"pairs {bad} have a target prompt different from the source (e.g. {target.prompts[bad[0]]!r} vs "
                 f"{source.prompts[bad[0]]!r}) but no WordSwap or Refine: re-weighting and mirroring modulate the "
                 "source's own maps (paper supplement B), so give the same prompt or add Refine() first")
-        self._swap: torch.Tensor | None = None
-        self._refine: torch.Tensor | None = None
-        if isinstance(self.replacement, WordSwap):
-            self._swap = self._swap_matrices()
-        elif isinstance(self.replacement, Refine):
-            self._refine = self._refine_mappings()
-        # the words of a Reweight are looked up in the prompt whose maps are edited
-        words_of = target if self.replacement is not None else source
-        self._reweights: dict[int, torch.Tensor] = {}
-        for i, e in enumerate(self.edits):
-            if isinstance(e, Reweight):
-                cols = torch.ones(self.batch, self.width)
-                for b in range(self.batch):
-                    for word in e.words:
-                        try:
-                            idx = words_of.word_columns(b, word)
-                        except ValueError:
-                            raise ValueError(f"Reweight word {word!r} is not in the prompt {words_of.prompts[b]!r}; "
-                                             f"its words are {words_of.words[b]}") from None
-                        cols[b, idx] = e.scale
-                self._reweights[i] = cols
+        # every spec looks up what it needs in the prompts once; the modifiers edit the maps of the
+        # target after a replacement, else the source's own
+        maps_of = target if self.replacement is not None else source
+        self._kernels: list[EditKernel] = [e.bind(source, target, self.width, maps_of=maps_of) for e in self.edits]
         self.layout = RowLayout(self.batch, cfg, probe=False, edited=edited)
         self.stores: dict[str, AttentionStore] = {}
         self._fraction = 0.0
         self._cross_active = False
         self._repl_active = False
         self._mods_active: list[int] = []
-        self._inject_kinds: set[str] = set()
+        self._inject_active: dict[str, EditKernel] = {}
         self._reads_own = False
         self.probe_steps = 0
         self.rows_total = 0
 
-    # ------------------------------------------------------------ token maps
-    def _swap_matrices(self) -> torch.Tensor:
-        out = torch.zeros(self.batch, self.width, self.width)
-        s, t = self.source, self.target
-        for b in range(self.batch):
-            m = word_swap_matrix(s.tokens[b], s.token_to_word[b], s.words[b], t.tokens[b], t.token_to_word[b],
-                                 t.words[b])
-            out[b, :m.shape[0], :m.shape[1]] = torch.from_numpy(m)
-        return out
+    # -------------------------------------------------------------- capture
+    def record_attention(self, config: bool | CaptureConfig | dict, lengths: Sequence[int], *, num_layers: int,
+                         num_heads: int, unit_length: int | None = None) -> None:
+        """Record the source rows' maps ``M`` (store ``"source"``) and, when editing, the maps the
+        edited rows used (``"edited"``: ``M_hat`` where the edit replaced them); read them with
+        :meth:`maps` after the loop.
 
-    def _refine_mappings(self) -> torch.Tensor:
-        out = torch.full((self.batch, self.width), -1, dtype=torch.long)
-        for b in range(self.batch):
-            mapping = global_align(self.source.tokens[b], self.target.tokens[b])
-            out[b, :len(mapping)] = torch.tensor(mapping, dtype=torch.long)
-        return out
+        Parameters
+        ----------
+        config : True, CaptureConfig or dict
+        lengths : sequence of int
+            Motion lengths in frames.
+        num_layers, num_heads : int
+            Of the denoiser.
+        unit_length : int, optional
+            Frames per latent frame (default: the skeletons' 4).
+        """
+        cap = as_capture_config(config)
+        self.stores = {"source": AttentionStore(self.source, lengths, cap, num_layers, num_heads, unit_length,
+                                                rows=lambda info: self.layout.source_cond)}
+        if self.edited:
+            self.stores["edited"] = AttentionStore(self.target, lengths, cap, num_layers, num_heads, unit_length,
+                                                   rows=lambda info: self.layout.edited_cond)
+
+    def maps(self, branch: str) -> AttentionMaps | None:
+        """The maps recorded for ``branch`` (``"source"`` or ``"edited"``), None without capture."""
+        if branch not in ("source", "edited"):
+            raise ValueError(f"branch must be 'source' or 'edited', got {branch!r}")
+        store = self.stores.get(branch)
+        return None if store is None else store.result()
 
     # ----------------------------------------------------------------- steps
     def needs_probe(self, fraction: float) -> bool:
@@ -193,7 +193,7 @@ class EditController:
         if repl is None:
             return False
         if repl.active(fraction):
-            return isinstance(repl, Refine)        # word swap copies the source only
+            return repl.reads_target               # word swap copies the source only
         # after the replacement's window the base is M*; unmodified, it is the edited row's own
         return mods
 
@@ -202,10 +202,10 @@ class EditController:
         p = info.index / info.num_steps
         self._fraction = p
         self._repl_active = self.replacement is not None and self.replacement.active(p)
-        self._mods_active = [i for i, e in enumerate(self.edits)
-                             if isinstance(e, (Reweight, Mirror)) and e.active(p)]
+        self._mods_active = [i for i, e in enumerate(self.edits) if e.role == "modify" and e.active(p)]
         self._cross_active = self.edited and (self._repl_active or bool(self._mods_active))
-        self._inject_kinds = {k for e in self.injections if e.active(p) for k in e.kinds} if self.edited else set()
+        self._inject_active = {k: self._kernels[i] for i, e in enumerate(self.edits)
+                               if e.role == "inject" and self.edited and e.active(p) for k in e.site_kinds}
         reads_own = self.edited and self.needs_probe(p)
         probe = reads_own and self.use_probe
         self._reads_own = reads_own and not probe
@@ -220,7 +220,7 @@ class EditController:
     @property
     def site_kinds(self) -> set[str]:
         """Attention kinds whose sites the controller edits, injects into or records."""
-        kinds = {"cross"} | {k for e in self.injections for k in e.kinds}
+        kinds = {"cross"} | {k for e in self.injections for k in e.site_kinds}
         for store in self.stores.values():
             kinds |= set(store.kinds)
         return kinds
@@ -228,7 +228,7 @@ class EditController:
     @property
     def modifies(self) -> bool:
         """Whether the current step changes any attention of the edited rows."""
-        return self._cross_active or bool(self._inject_kinds)
+        return self._cross_active or bool(self._inject_active)
 
     # --------------------------------------------------------- SiteHook API
     def rows(self, site: SiteInfo) -> torch.Tensor | None:
@@ -240,7 +240,7 @@ class EditController:
                 need.append(lay.probe_cond)
             elif self._reads_own:
                 need.append(lay.edited_cond)
-        if site.kind in self._inject_kinds:
+        if site.kind in self._inject_active:
             need.append(lay.source_cond)
         src = self.stores.get("source")
         if src is not None and src.wants(site):
@@ -264,8 +264,8 @@ class EditController:
             src = pick(lay.source_cond)
             own = pick(lay.probe_cond) if lay.probe else (pick(lay.edited_cond) if self._reads_own else None)
             new = self.edit_cross(src, own)
-        elif site.kind in self._inject_kinds:
-            new = pick(lay.source_cond)             # source self-attention into the edited rows
+        elif site.kind in self._inject_active:
+            new = self._inject_active[site.kind](pick(lay.source_cond), None)   # source self-attention
         src_store, ed_store = self.stores.get("source"), self.stores.get("edited")
         if src_store is not None and src_store.wants(site):
             src_store.record(site, pick(lay.source_cond))
@@ -279,25 +279,19 @@ class EditController:
     def edit_cross(self, source: torch.Tensor, target: torch.Tensor | None) -> torch.Tensor:
         """``M_hat`` ``(B, H, N', P, W)`` from the source maps and (if probed) the target's own.
 
-        The composition of the active specs at the current step (see :mod:`.edits`).
+        The composition of the active specs at the current step (see :mod:`.edits`): the
+        replacement's kernel builds the base in its window (the target's own maps after it; the
+        source's own without a replacement), then each active modifier's kernel, in order.
         """
         repl = self.replacement
         if repl is None:
             out = source                                          # paper: modulate M_t
-        elif self._repl_active and isinstance(repl, WordSwap):
-            out = map_columns(source, self._swap.to(source.device))
         elif self._repl_active:
-            if target is None:
-                raise RuntimeError("prompt refinement needs the probe's maps at this step")
-            out = refine_columns(source, target, self._refine)
+            out = self._kernels[self._repl_index](source, target)
         else:
             if target is None:
                 raise RuntimeError("the target's own maps are needed but the step has no probe")
             out = target
         for i in self._mods_active:
-            e = self.edits[i]
-            if isinstance(e, Reweight):
-                out = out * self._reweights[i].to(out.device, out.dtype)[:, None, None, None, :]
-            else:
-                out = mirror_parts(out, e.parts, part_axis=3)
+            out = self._kernels[i](out, None)
         return out

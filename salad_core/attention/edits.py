@@ -20,22 +20,33 @@ fractions ``p = i / S`` of the sampling steps (the official code's ``p``; step 0
 Specs compose in order, Prompt-to-Prompt style: at most one *replacement* (WordSwap or Refine)
 builds the base map from ``M`` and ``M*``; *modifiers* (Reweight, Mirror) then change the map in
 the order given; with no replacement the base is the source's own map ``M`` (paper: reweighting
-and mirroring modulate ``M_t``), which needs the target to be the source prompt. The kernels below
-are pure functions of tensors: they never modify their inputs.
+and mirroring modulate ``M_t``), which needs the target to be the source prompt.
+
+Each spec applies its own kernel: :meth:`EditSpec.bind` looks up what the spec needs in the
+prompts (the word-swap token matrix, the refinement alignment, the re-weighted columns) once and
+returns an :data:`EditKernel` ``kernel(maps, own) -> maps`` that the controller
+(:class:`~salad_core.attention.controller.EditController`) composes without knowing the kinds. The
+kernels below are pure functions of tensors: they never modify their inputs.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence, Union
+from typing import TYPE_CHECKING, Callable, ClassVar, Optional, Sequence, Union
 
 import torch
 
 from salad_core.data.texts import split_words
 from salad_core.skeleton import PART_MIRROR, PART_NAMES
 
+from .align import global_align, word_swap_matrix
+
+if TYPE_CHECKING:  # pragma: no cover - annotations only (capture imports nothing from here)
+    from .capture import TokenInfo
+
 __all__ = [
     "EditSpec",
+    "EditKernel",
     "WordSwap",
     "Refine",
     "Reweight",
@@ -60,6 +71,14 @@ MIRROR_GROUPS: dict[str, tuple[str, ...]] = {
     "all": tuple(p for p, q in zip(PART_NAMES, PART_MIRROR) if PART_NAMES.index(p) != q),
 }
 _SELF_KINDS = ("temporal", "skeletal")
+#: Axis of the body parts in the cross maps the controller edits, ``(B, H, N', P, W)``.
+_PART_AXIS = 3
+
+#: ``kernel(maps, own) -> maps``: a bound edit (:meth:`EditSpec.bind`). ``maps`` ``(B, H, N', P, W)``
+#: are the maps it edits (the source's for a replacement, the base built so far for a modifier, the
+#: source's self-attention for an injection); ``own`` the target's own maps ``M*`` where the step
+#: has them (else None; only prompt refinement reads them).
+EditKernel = Callable[[torch.Tensor, Optional[torch.Tensor]], torch.Tensor]
 
 
 def _window(value, name: str) -> tuple[float, float]:
@@ -75,7 +94,16 @@ def _window(value, name: str) -> tuple[float, float]:
 
 @dataclass(frozen=True)
 class EditSpec:
-    """Base of the edit specifications (see the module docstring)."""
+    """Base of the edit specifications (see the module docstring).
+
+    ``role`` says how the controller composes it: ``"replace"`` builds the base map from ``M`` (and
+    ``M*``), ``"modify"`` changes the map built so far, ``"inject"`` hands the source's
+    self-attention to the edited rows. ``reads_target`` is True when the kernel reads the target's
+    own maps ``M*`` during its window.
+    """
+
+    role: ClassVar[str] = "modify"
+    reads_target: ClassVar[bool] = False
 
     def active(self, fraction: float) -> bool:
         """Whether the edit applies at step fraction ``p = i / S``."""
@@ -89,12 +117,18 @@ class EditSpec:
     @property
     def replaces(self) -> bool:
         """True for the replacement edits (WordSwap, Refine) that build the base map."""
-        return False
+        return self.role == "replace"
 
     @property
     def site_kinds(self) -> tuple[str, ...]:
         """Attention kinds the edit touches."""
         return ("cross",)
+
+    def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
+        """This edit's kernel for ``B`` source/target prompt pairs whose maps have ``width`` token
+        columns; ``maps_of`` is the prompt whose maps the modifiers edit (the target after a
+        replacement, else the source)."""
+        raise NotImplementedError  # pragma: no cover - every subclass defines it
 
 
 @dataclass(frozen=True)
@@ -108,6 +142,8 @@ class WordSwap(EditSpec):
     CLIP columns position by position; with MiniLM's variable token counts words must be paired.
     """
 
+    role: ClassVar[str] = "replace"
+
     tau: float = 0.8   # switch point in diffusion time: source maps while t >= tau * T
 
     def __post_init__(self) -> None:
@@ -120,9 +156,14 @@ class WordSwap(EditSpec):
     def window(self) -> tuple[float, float]:
         return (0.0, 1.0 - self.tau)
 
-    @property
-    def replaces(self) -> bool:
-        return True
+    def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
+        """:func:`map_columns` by the word-pairing matrices ``(B, W, W)`` of the prompt pairs."""
+        matrices = torch.zeros(len(source), width, width)
+        for b in range(len(source)):
+            m = word_swap_matrix(source.tokens[b], source.token_to_word[b], source.words[b], target.tokens[b],
+                                 target.token_to_word[b], target.words[b])
+            matrices[b, :m.shape[0], :m.shape[1]] = torch.from_numpy(m)
+        return lambda maps, own: map_columns(maps, matrices.to(maps.device))
 
 
 @dataclass(frozen=True)
@@ -136,6 +177,9 @@ class Refine(EditSpec):
     words after an insertion receive their neighbours' maps.
     """
 
+    role: ClassVar[str] = "replace"
+    reads_target: ClassVar[bool] = True
+
     steps: tuple[float, float] = (0.0, 1.0)   # window of step fractions where the source maps are injected
 
     def __post_init__(self) -> None:
@@ -145,9 +189,18 @@ class Refine(EditSpec):
     def window(self) -> tuple[float, float]:
         return self.steps
 
-    @property
-    def replaces(self) -> bool:
-        return True
+    def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
+        """:func:`refine_columns` by the alignments ``(B, W)`` of the prompt pairs."""
+        mapping = torch.full((len(source), width), -1, dtype=torch.long)
+        for b in range(len(source)):
+            aligned = global_align(source.tokens[b], target.tokens[b])
+            mapping[b, :len(aligned)] = torch.tensor(aligned, dtype=torch.long)
+
+        def kernel(maps: torch.Tensor, own: torch.Tensor | None) -> torch.Tensor:
+            if own is None:
+                raise RuntimeError("prompt refinement needs the probe's maps at this step")
+            return refine_columns(maps, own, mapping)
+        return kernel
 
 
 @dataclass(frozen=True)
@@ -183,6 +236,20 @@ class Reweight(EditSpec):
     def window(self) -> tuple[float, float]:
         return self.steps
 
+    def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
+        """:func:`reweight_columns` of the words' token columns in each prompt of ``maps_of``."""
+        columns = []
+        for b in range(len(maps_of)):
+            cols: list[int] = []
+            for word in self.words:
+                try:
+                    cols += maps_of.word_columns(b, word)
+                except ValueError:
+                    raise ValueError(f"Reweight word {word!r} is not in the prompt {maps_of.prompts[b]!r}; "
+                                     f"its words are {maps_of.words[b]}") from None
+            columns.append(cols)
+        return lambda maps, own: reweight_columns(maps, columns, self.scale, per_row=True)
+
 
 @dataclass(frozen=True)
 class Mirror(EditSpec):
@@ -208,6 +275,10 @@ class Mirror(EditSpec):
     def window(self) -> tuple[float, float]:
         return self.steps
 
+    def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
+        """:func:`mirror_parts` along the body-part axis of the cross maps."""
+        return lambda maps, own: mirror_parts(maps, self.parts, part_axis=_PART_AXIS)
+
 
 @dataclass(frozen=True)
 class InjectSelfAttention(EditSpec):
@@ -216,6 +287,8 @@ class InjectSelfAttention(EditSpec):
 
     It fixes the overall composition (timing, skeleton coordination) of the source early on.
     """
+
+    role: ClassVar[str] = "inject"
 
     steps: tuple[float, float] = (0.0, 0.2)                      # window of step fractions
     kinds: tuple[str, ...] = ("temporal", "skeletal")             # which self-attention to inject
@@ -235,6 +308,10 @@ class InjectSelfAttention(EditSpec):
     def site_kinds(self) -> tuple[str, ...]:
         return self.kinds
 
+    def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
+        """The source's self-attention maps, as they are, for the edited rows."""
+        return lambda maps, own: maps
+
 
 def validate_edits(edits: EditSpec | Sequence[EditSpec] | None) -> tuple[EditSpec, ...]:
     """A spec or a sequence of specs -> a validated tuple (at most one replacement, first)."""
@@ -249,10 +326,10 @@ def validate_edits(edits: EditSpec | Sequence[EditSpec] | None) -> tuple[EditSpe
     for i, e in enumerate(out):
         if not isinstance(e, EditSpec) or type(e) is EditSpec:
             raise TypeError(f"edits[{i}] must be WordSwap, Refine, Reweight, Mirror or InjectSelfAttention, got {e!r}")
-    replacements = [e for e in out if e.replaces]
+    replacements = [e for e in out if e.role == "replace"]
     if len(replacements) > 1:
         raise ValueError(f"at most one replacement edit (WordSwap or Refine) per edit, got {replacements}")
-    if replacements and any(isinstance(e, (Reweight, Mirror)) for e in out[:out.index(replacements[0])]):
+    if replacements and any(e.role == "modify" for e in out[:out.index(replacements[0])]):
         raise ValueError("the replacement edit (WordSwap or Refine) must come before the modifiers "
                          "(Reweight, Mirror): it builds the map they modify")
     return out
@@ -278,11 +355,24 @@ def mirror_parts(maps: torch.Tensor, parts: str = "all", part_axis: int = -2) ->
     return maps.index_select(part_axis, torch.tensor(perm, device=maps.device))
 
 
-def reweight_columns(maps: torch.Tensor, columns: Sequence[int] | torch.Tensor, scale: float) -> torch.Tensor:
-    """Multiply token columns (last axis) by ``scale``; a new tensor (no re-normalisation)."""
-    weights = torch.ones(maps.shape[-1], dtype=maps.dtype, device=maps.device)
-    weights[torch.as_tensor(columns, dtype=torch.long, device=maps.device)] = scale
-    return maps * weights
+def reweight_columns(maps: torch.Tensor, columns: Sequence[int] | Sequence[Sequence[int]] | torch.Tensor,
+                     scale: float, *, per_row: bool = False) -> torch.Tensor:
+    """Multiply token columns (last axis) by ``scale``; a new tensor (no re-normalisation, as the
+    paper and the official code).
+
+    ``columns``: the column indices of every map, or with ``per_row`` one sequence of indices per
+    entry of the leading axis (``maps (R, ..., W)``: per prompt of a batch).
+    """
+    if not per_row:
+        weights = torch.ones(maps.shape[-1], dtype=maps.dtype, device=maps.device)
+        weights[torch.as_tensor(columns, dtype=torch.long, device=maps.device)] = scale
+        return maps * weights
+    if len(columns) != maps.shape[0]:
+        raise ValueError(f"per_row columns need one sequence per map ({maps.shape[0]}), got {len(columns)}")
+    weights = torch.ones(maps.shape[0], maps.shape[-1], dtype=maps.dtype, device=maps.device)
+    for r, cols in enumerate(columns):
+        weights[r, torch.as_tensor(cols, dtype=torch.long, device=maps.device)] = scale
+    return maps * weights.view(maps.shape[0], *(1,) * (maps.dim() - 2), maps.shape[-1])
 
 
 def map_columns(source: torch.Tensor, matrix: torch.Tensor) -> torch.Tensor:

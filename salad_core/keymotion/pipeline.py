@@ -46,6 +46,7 @@ import torch
 from salad_core.io import atomic_write_text, config_from_dict, config_to_dict, load_model, save_checkpoint
 from salad_core.motion import features_to_joints
 from salad_core.sampling import DiffusionConfig, make_scheduler
+from salad_core.text import TextEncoder
 
 from .kf_vae import KeyframeVAE, positions_to_indices
 from .mmae import MotionMaskedAutoencoder
@@ -130,7 +131,7 @@ class KeyMotionPipeline:
     """
 
     def __init__(self, kf_vae: KeyframeVAE, pst: ParallelSkipTransformer, mmae: MotionMaskedAutoencoder,
-                 text_encoder: Any, *, diffusion: DiffusionConfig | None = None, solver: str = "ddim",
+                 text_encoder: TextEncoder, *, diffusion: DiffusionConfig | None = None, solver: str = "ddim",
                  default_length: int = 120, text_encoder_name: str | None = None) -> None:
         self.kf_vae = kf_vae.eval()
         self.pst = pst.eval()
@@ -195,9 +196,9 @@ class KeyMotionPipeline:
 
     # -------------------------------------------------------------------------- loading
     @classmethod
-    def from_pretrained(cls, path: str | os.PathLike | None = None, *, text_encoder: Any = None,
-                        device: str | torch.device = "cpu", solver: str = "ddim",
-                        default_length: int | None = None) -> "KeyMotionPipeline":
+    def from_pretrained(cls, path: str | os.PathLike | None = None, *,
+                        text_encoder: str | TextEncoder | None = None, device: str | torch.device = "cpu",
+                        solver: str = "ddim", default_length: int | None = None) -> "KeyMotionPipeline":
         """Load a pretrained folder or a training root; ``path=None`` loads the shipped weights.
 
         Parameters
