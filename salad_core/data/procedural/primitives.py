@@ -131,13 +131,13 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("sway", "whole body", "base", mods=_SPEED, accepts=("arms", "head"), weight=0.5),
     # everyday whole-body actions
     PrimitiveSpec("throw", "arms", "base", sides=("left", "right"), mods=_SPEED, variants=("", "underhand"), weight=1.1),
-    PrimitiveSpec("pick_up", "whole body", "base", sides=SIDE_WORDS, mods=("slowly",), weight=1.4),
+    PrimitiveSpec("pick_up", "whole body", "base", sides=SIDE_WORDS, mods=("slowly",), weight=1.0),
     PrimitiveSpec("step_over", "locomotion", "base", mods=("slowly",), accepts=("head",), weight=0.8),
     PrimitiveSpec("stumble", "locomotion", "base", weight=0.7),
     # down to the floor
     PrimitiveSpec("kneel", "legs", "base", sides=("left", "right"), mods=_SPEED, weight=1.3),
     PrimitiveSpec("lie_down", "whole body", "base", mods=("slowly",), weight=0.6, terminal=True),
-    PrimitiveSpec("lie_down_get_up", "whole body", "base", mods=("slowly",), weight=0.8),
+    PrimitiveSpec("lie_down_get_up", "whole body", "base", mods=("slowly",), weight=0.6),
     # footwork: steps, stairs, pivots, a cross-body knee touch
     PrimitiveSpec("step_up", "legs", "base", mods=_SPEED, reps=(1, 2), accepts=("arms", "head"), weight=0.8),
     PrimitiveSpec("climb_stairs", "locomotion", "base", mods=_SPEED, accepts=("head",), weight=0.8, terminal=True),
