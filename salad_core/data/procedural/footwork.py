@@ -71,8 +71,8 @@ class Persona:
         # ranges wide enough that posture and arm carriage differ visibly between performers
         # (generator 1.0 drew a near-identical stance: the corpus's pose std was 0.66x the real one)
         return Persona(
-            width=float(rng.uniform(0.05, 0.21)),
-            toe_out=float(rng.uniform(0.0, 0.5)),
+            width=float(rng.uniform(0.06, 0.18)),
+            toe_out=float(rng.uniform(0.0, 0.45)),
             arm_rest=(float(rng.uniform(-0.1, 0.3)), float(rng.uniform(0.04, 0.4)), float(rng.uniform(0.1, 1.0))),
             arm_pole=(0.3, 0.0, -1.0),
             sway=float(rng.uniform(0.015, 0.04)),
