@@ -376,15 +376,14 @@ def test_recovery_reader_reads_raw_positions_or_fixed_bones(sample_features):
     """``--recovery``: 'positions' is the raw position-feature read; 'fk' has the reference bones."""
     from types import SimpleNamespace
 
-    from salad_core.eval.cli import _joints_reader
     from salad_core.motion import features_to_joints
 
     feats = sample_features[:40].astype(np.float32)
     out = SimpleNamespace(features=feats[None], lengths=[40], joints=["shown"])
-    raw = _joints_reader("positions", SK)(out)[0]
+    raw = ph.joints_reader("positions", SK)(out)[0]
     np.testing.assert_allclose(raw, features_to_joints(feats, SK))
-    assert _joints_reader("pipeline", SK)(out) == ["shown"]
-    fk = _joints_reader("fk", SK)(out)[0]
+    assert ph.joints_reader("pipeline", SK)(out) == ["shown"]
+    fk = ph.joints_reader("fk", SK)(out)[0]
     assert ph.measure_motion(fk).bone_ref_max_cm < 1e-3
     with pytest.raises(ValueError, match="allowed: pipeline"):
-        _joints_reader("magic", SK)
+        ph.joints_reader("magic", SK)

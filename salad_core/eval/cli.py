@@ -171,34 +171,17 @@ def _default_sample() -> Path | None:
     return path if (path / "new_joints").is_dir() else None
 
 
-def _joints_reader(method: str, skeleton):
-    """``output -> list of joints``: the generated features read by ``method`` ('positions': the raw
-    model output; 'fk' / 'fit': :func:`salad_core.recovery.recover_joints`; 'pipeline': ``out.joints``)."""
-    if method == "pipeline":
-        return lambda out: list(out.joints)
-    if method == "positions":
-        from salad_core.motion import features_to_joints
-
-        return lambda out: [features_to_joints(out.features[b, :n], skeleton) for b, n in enumerate(out.lengths)]
-    try:
-        from salad_core.recovery import METHODS, recover_joints
-    except ImportError:
-        raise ValueError(f"--recovery {method!r}: this installation has no salad_core.recovery; use "
-                         "'positions' or 'pipeline'") from None
-    if method not in METHODS:
-        raise ValueError(f"--recovery {method!r} is not known; allowed: pipeline, {', '.join(METHODS)}")
-    return lambda out: [recover_joints(out.features[b, :n], method, skeleton) for b, n in enumerate(out.lengths)]
-
-
 def _physics_generators(args, settings) -> tuple[dict, dict]:
     """The generators of ``--physics`` (SALAD, and KeyMotion with ``--keymotion``) and their settings."""
     from salad_core.pipeline import SaladPipeline
+
+    from .physics import joints_reader
 
     pipe = SaladPipeline.from_pretrained(args.weights)
     # None keeps each model's own default guidance (a SALAD pipeline folder may set rescale/interval)
     g = settings.guidance
 
-    joints_of = _joints_reader(args.recovery, pipe.skeleton)
+    joints_of = joints_reader(args.recovery, pipe.skeleton)
 
     def salad(texts, lengths, seed):
         return joints_of(pipe(texts, lengths=lengths, seed=[seed] * len(texts), num_steps=settings.steps,

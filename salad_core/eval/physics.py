@@ -71,7 +71,7 @@ __all__ = [
     "bone_length_errors", "contact_level", "foot_contacts", "foot_skating", "strides", "pooled_bone_p95",
     "ground_penetration", "floating", "jitter", "acceleration", "flexion_angles", "hyperextension",
     "standing_height", "flight_frames", "flight_acceleration", "heading_yaw", "root_travel", "limb_activity",
-    "seed_diversity", "GRAVITY", "report_table",
+    "seed_diversity", "GRAVITY", "report_table", "joints_reader",
 ]
 
 #: Standard gravity (m/s^2), what the pelvis's acceleration in flight should be near (negative: down).
@@ -608,3 +608,27 @@ def report_table(rows: Mapping[str, Mapping[str, float]], columns=TABLE_COLUMNS)
             cells.append("-" if v is None or not np.isfinite(v) else fmt.format(v))
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def joints_reader(method: str, skeleton: str | Skeleton = "humanml3d"):
+    """``output -> list of joints`` (``(N_b, J, 3)`` metres each): which joints of a generator's output
+    the benchmark measures (``salad eval --physics --recovery METHOD``).
+
+    ``method``: ``'positions'`` reads the raw position features (the model's own output);
+    ``'fk'`` / ``'fit'``: :func:`salad_core.recovery.recover_joints`; ``'pipeline'``: ``out.joints``.
+    The output needs ``features`` ``(B, N, D)`` and ``lengths`` (and ``joints`` for 'pipeline').
+    """
+    if method == "pipeline":
+        return lambda out: list(out.joints)
+    if method == "positions":
+        from salad_core.motion import features_to_joints
+
+        return lambda out: [features_to_joints(out.features[b, :n], skeleton) for b, n in enumerate(out.lengths)]
+    try:
+        from salad_core.recovery import METHODS, recover_joints
+    except ImportError:
+        raise ValueError(f"--recovery {method!r}: this installation has no salad_core.recovery; use "
+                         "'positions' or 'pipeline'") from None
+    if method not in METHODS:
+        raise ValueError(f"--recovery {method!r} is not known; allowed: pipeline, {', '.join(METHODS)}")
+    return lambda out: [recover_joints(out.features[b, :n], method, skeleton) for b, n in enumerate(out.lengths)]
