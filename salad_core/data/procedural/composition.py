@@ -235,7 +235,7 @@ def _alive(pose: Pose, persona: Persona, rng: np.random.Generator, propped: np.n
     # annotated action's part speed (the phrase-activity checks), large enough to never freeze
     # (2.1: about twice 2.0's, whose spine and head rotations varied 0.5-0.6x as much as real ones)
     noise = _wander(n, rng, 12, period=(1.8, 4.0)) * live
-    pose.spine += noise[:, 0:3] * np.array([0.09, 0.06, 0.06]) * trunk
+    pose.spine += noise[:, 0:3] * np.array([0.09, 0.09, 0.09]) * trunk
     pose.neck += noise[:, 3:6] * np.array([0.1, 0.07, 0.05])
     pose.arm[:, :, 0] += noise[:, 6:8] * 0.035
     pose.arm[:, :, 1] += noise[:, 8:10] * 0.025
@@ -295,7 +295,7 @@ def _lively_holds(pose: Pose, weight: np.ndarray, persona: Persona, rng: np.rand
     live = np.sqrt(persona.liveliness) * weight     # a calm performer still sways (0: frozen)
     # amplitudes (rad, std at liveliness 1): enough to lift a held body over 5 cm/s mean joint speed
     noise = _wander(n, rng, 9, period=(1.0, 2.6))
-    pose.spine += noise[:, 0:3] * live[:, 0:1] * np.array([0.10, 0.08, 0.06])
+    pose.spine += noise[:, 0:3] * live[:, 0:1] * np.array([0.10, 0.11, 0.09])
     pose.neck += (noise[:, 3:5] * live[:, 1:2]) @ np.array([[0.12, 0.0, 0.0], [0.0, 0.07, 0.0]])
     arm = noise[:, 5:9] * live[:, 2:3]
     pose.arm[:, :, 0] += arm[:, 0:2] * 0.12
@@ -507,8 +507,9 @@ _HEIGHT = ("high", "low")
 _SPEED = ("quickly", "slowly")
 _VARIANT_P = {"walk": {"in_place": 0.12}, "jog": {"in_place": 0.2}, "march": {"in_place": 0.4},
               "jump": {"forward": 0.4}, "turn": {"around": 0.4}, "wave": {"arms": 0.3}, "throw": {"underhand": 0.35}}
-#: Chance of a speed modifier where one is allowed (1.0: 0.25; "slowly" was in 16 % of captions).
-_SPEED_P = 0.2
+#: Chance of a speed modifier where one is allowed (1.0: 0.25, "slowly" was in 16 % of captions; 2.0: 0.2;
+#: 2.1 draws longer sequences, so 0.17 keeps "slowly" and "quickly" each under 10 % of captions).
+_SPEED_P = 0.17
 #: Arm gestures that can last a whole sequence (an overlay).
 _OVERLAYS = ("wave", "raise", "stretch", "arms_out", "clap", "hands_on_hips", "cross_arms", "arm_circles", "guard")
 #: Gestures a spin does not take (a spinning body does not strike).
