@@ -157,7 +157,8 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("reach_across", "arms", "gesture", sides=("left", "right"), mods=_SPEED, weight=0.6),
     PrimitiveSpec("arm_circles", "arms", "gesture", sides=("both",), mods=_SPEED, weight=0.6),
     # --- corpus 2.1: on all fours (a whole clip: starts and ends there)
-    PrimitiveSpec("crawl", "locomotion", "base", mods=_SPEED, weight=0.7, terminal=True, initial=True),
+    # (it only ever fills a one-action clip, so its weight is high for about 1 % of the motions)
+    PrimitiveSpec("crawl", "locomotion", "base", mods=_SPEED, weight=3.0, terminal=True, initial=True),
 ]}
 
 
