@@ -7,12 +7,12 @@ from the pipeline's :class:`~salad_core.attention.AttentionMaps`); the widget ho
 Threads. JupyterLab (4.4 and later) sends widget messages over kernel *subshells* by default
 ("Kernel Comms over subshells"), so ipykernel 7 runs the widget callbacks on ``subshell-...``
 threads, one per comm or per comm target, possibly at the same time. An OpenGL context may only be
-used by the thread it is current on: a pyvista plotter made on the main thread draws black frames
-or noise when a subshell thread renders with it. The explorer therefore renders every skeleton
-frame on one thread of its own (:class:`RenderThread`), which creates the renderer, draws each frame
-and closes it; callbacks hand it the frame and wait for the image. A lock keeps callbacks that run
-at the same time on different subshells from interleaving. The explorer works the same with the
-setting on ("One subshell per comm", "One subshell per comm-target") and off ("Disabled").
+used by the thread it is current on: a pyvista plotter made on the main thread draws black or stale
+frames, or noise, when a subshell thread renders with it. The explorer therefore renders every
+skeleton frame on one thread of its own (:class:`RenderThread`), which creates the renderer, draws
+each frame and closes it; callbacks hand it the frame and wait for the image. A lock keeps callbacks
+that run at the same time on different subshells from interleaving. The explorer works the same with
+the setting on ("One subshell per comm", "One subshell per comm-target") and off ("Disabled").
 
 Examples
 --------
@@ -34,6 +34,8 @@ notebook cell displays the explorer:
 (9, 5)
 >>> ex.words.value = ex.word_ids("jumps", "walks")   # what Ctrl-clicking both words does
 >>> ex.frame.value = 30                     # scrub: both views follow
+>>> ex.drawn                                # what the heatmap and the skeleton now show
+{'words': ['jumps', 'walks'], 'layers': [0, 1, 2, 3, 4], 'steps': [0, 9], 'frame': 30}
 >>> ex.close()
 
 An ``AttentionMaps`` from the default capture (``capture_attention=True``, means over 10 step bins)

@@ -95,7 +95,8 @@ class LabServer:
         for sub in ("config", "data", "runtime", "settings", "workspaces"):
             (self.home / sub).mkdir(parents=True, exist_ok=True)
         # no announcements feed and no update check: the server stays off the network
-        config = {"LabApp": {"news_url": None, "check_for_updates_class": "jupyterlab.handlers.announcements.NeverCheckForUpdate",
+        config = {"LabApp": {"news_url": None,
+                             "check_for_updates_class": "jupyterlab.handlers.announcements.NeverCheckForUpdate",
                              "expose_app_in_browser": True, "extension_manager": "readonly",
                              "user_settings_dir": str(self.home / "settings"),
                              "workspaces_dir": str(self.home / "workspaces")},
@@ -293,11 +294,4 @@ JS_RUN_ALL = """() => {
   window.__saladRun = null;
   window.jupyterapp.commands.execute('notebook:run-all-cells')
     .then((ok) => { window.__saladRun = {ok: ok}; }, (e) => { window.__saladRun = {error: String(e)}; });
-}"""
-
-JS_CELLS = """() => {
-  const nb = window.jupyterapp.shell.currentWidget.content;
-  const k = window.jupyterapp.shell.currentWidget.sessionContext.session.kernel;
-  return {kernel: k ? k.status : null,
-          counts: nb.widgets.filter((c) => c.model.type === 'code').map((c) => c.model.executionCount)};
 }"""

@@ -14,6 +14,7 @@ Skips (with the reason) where Chromium, Playwright or JupyterLab is missing. Env
 """
 from __future__ import annotations
 
+import base64
 import hashlib
 import json
 import os
@@ -24,8 +25,8 @@ from pathlib import Path
 
 import pytest
 
-from _browser import (CHROMIUM_FLAGS, JS_CELLS, JS_IMAGE_B64, JS_NOTEBOOK_READY, JS_RUN_ALL, SUBSHELL_MODES,
-                      LabServer, b64png, chromium_path, pixel_agreement, unavailable_reason)
+from _browser import (CHROMIUM_FLAGS, JS_IMAGE_B64, JS_NOTEBOOK_READY, JS_RUN_ALL, SUBSHELL_MODES, SUBSHELL_PLUGIN,
+                      LabServer, b64png, chromium_path, decode_png, pixel_agreement, unavailable_reason)
 
 REASON = unavailable_reason()
 if REASON:
@@ -54,7 +55,8 @@ EXPLORER_CELLS = [
     CACHE = Path("explorer_data.npz")
     if CACHE.exists():
         saved = np.load(CACHE)
-        attention, tokens, joints, axes = saved["attention"], [str(t) for t in saved["tokens"]], saved["joints"], "slhnpw"
+        attention, joints, axes = saved["attention"], saved["joints"], "slhnpw"
+        tokens = [str(t) for t in saved["tokens"]]
     else:
         from salad_core.attention import CaptureConfig
         from salad_core.pipeline import SaladPipeline
@@ -172,13 +174,18 @@ class Session:
         self.lab, self.notebook = lab, notebook
         self.log_start = lab.log_size()
         self.context = browser.new_context(viewport={"width": 1500, "height": 1100})
+        # generous: on a loaded 2-core machine JupyterLab's bundles take a while to load
+        self.context.set_default_timeout(120_000)
         self.page = self.context.new_page()
         # ?reset: a fresh workspace, so the tabs of earlier sessions are not reopened (with kernels)
-        self.page.goto(lab.url(f"/lab/tree/{notebook}?reset"))
+        self.page.goto(lab.url(f"/lab/tree/{notebook}?reset"), wait_until="domcontentloaded", timeout=180_000)
         ready = self.page.wait_for_function(JS_NOTEBOOK_READY, polling=500, timeout=180_000).json_value()
         assert ready["path"] == notebook
         self.kernel_id = ready["id"]
-        assert self.page.evaluate("() => window.jupyterapp.serviceManager.settings !== undefined")
+        # the page runs with the setting asked for
+        loaded = self.page.evaluate(f"""async () => (await window.jupyterapp.serviceManager.settings.fetch(
+            '{SUBSHELL_PLUGIN}')).settings.commsOverSubshells""")
+        assert loaded == subshells, f"JupyterLab loaded commsOverSubshells={loaded!r}, asked for {subshells!r}"
 
     def run_all(self, timeout_s: float) -> dict:
         """Run every cell, save, and return the saved notebook (with outputs)."""
@@ -226,8 +233,8 @@ def _check_widgets_rendered(page, expected: int) -> None:
     """Every widget output is a rendered view (no 'Error displaying widget', nothing left loading)."""
     if not expected:
         return
-    page.wait_for_function(f"() => document.querySelectorAll('.jp-OutputArea-output .jupyter-widgets').length >= {expected}",
-                           polling=500, timeout=60_000)
+    rendered = "document.querySelectorAll('.jp-OutputArea-output .jupyter-widgets').length"
+    page.wait_for_function(f"() => {rendered} >= {expected}", polling=500, timeout=60_000)
     text = page.inner_text(".jp-NotebookPanel:not(.lm-mod-hidden) .jp-Notebook")
     assert "Error displaying widget" not in text and "Loading widget..." not in text
 
@@ -247,8 +254,6 @@ class ExplorerDriver:
         return self.probe.run_json(f"print(json.dumps(_salad_state({self.uid!r})))")
 
     def browser_image(self, part: str) -> bytes | None:
-        import base64
-
         data = self.page.evaluate(JS_IMAGE_B64, f"{self.root} .salad-explorer-{part} img, "
                                                 f"{self.root} img.salad-explorer-{part}")
         return None if data is None else base64.b64decode(data)
@@ -268,8 +273,8 @@ class ExplorerDriver:
                 return st | {"shown": shown}
             if time.monotonic() > deadline:
                 raise AssertionError(f"the explorer did not settle on {want} within {timeout_s:.0f} s: kernel state "
-                                     f"{ {k: st[k] for k in want} }, drawn {st['drawn']}, browser image up to date: {same}, "
-                                     f"status {st['status']!r}")
+                                     f"{ {k: st[k] for k in want} }, drawn {st['drawn']}, "
+                                     f"browser image up to date: {same}, status {st['status']!r}")
             time.sleep(0.3)
 
     def check(self, label: str, want: dict, shots) -> dict:
@@ -278,8 +283,6 @@ class ExplorerDriver:
         ref = b64png(self.probe.run_json(
             f"print(json.dumps(_salad_reference({self.uid!r}, {st['words']!r}, {st['layers']!r}, {st['steps']!r}, "
             f"{st['frame']})))"))
-        from _browser import decode_png
-
         shown = decode_png(st["shown"])
         agree = pixel_agreement(shown, ref)
         shots(self.page, label)
