@@ -157,11 +157,13 @@ def test_render_thread_reports_a_bad_backend_to_the_caller():
         RenderThread(SKEL, backend="opengl")
 
 
-def _expected_skeleton(ex, frame: int) -> np.ndarray:
+def _expected_skeleton(ex, frame: int, renderer: SkeletonRenderer | None = None) -> np.ndarray:
     """A render of ``frame`` made here, on this thread, from the public functions."""
     colors = joint_attention_colors(ex.selected_map, SKEL, len(ex.joints), frames_per_latent=ex.fpl, cmap=ex.cmap)
-    with SkeletonRenderer(SKEL, size=ex.size, backend=ex.backend) as r:
-        return r.render(ex.joints, frame, view=ex.view, joint_colors=colors, title=f"frame {frame}")
+    if renderer is None:
+        with SkeletonRenderer(SKEL, size=ex.size, backend=ex.backend) as r:
+            return _expected_skeleton(ex, frame, r)
+    return renderer.render(ex.joints, frame, view=ex.view, joint_colors=colors, title=f"frame {frame}")
 
 
 def _callbacks_from_other_threads(ex, frames) -> None:
@@ -190,15 +192,17 @@ def test_pyvista_explorer_renders_from_subshell_like_threads():
     att = rng.random((NL, len(PART_NAMES), len(TOKENS)))
     ex = explore_attention(att, TOKENS, synthetic_motion(SKEL, NL * 4), SKEL, axes="npw", backend="pyvista",
                            size=(96, 80))
+    reference = SkeletonRenderer(SKEL, size=ex.size, backend="pyvista")    # this thread's own context
     try:
         assert ex.backend == "pyvista"
         for frames in ([4], [9, 2], [13, 6, 17]):
             _callbacks_from_other_threads(ex, frames)
             shown = _png_array(ex.skeleton_view.value)
-            expected = _expected_skeleton(ex, ex.frame.value)
+            expected = _expected_skeleton(ex, ex.frame.value, reference)
             agree = (np.abs(shown.astype(int) - expected.astype(int)).max(-1) <= 24).mean()
             assert agree > 0.98, f"frames {frames}: {agree:.1%} of the pixels agree"
     finally:
+        reference.close()
         ex.close()
     assert not ex._renderer.thread.is_alive()
 
