@@ -141,3 +141,48 @@ def test_fixed_normaliser_makes_the_epoch_objective_independent_of_grouping():
     assert epoch(sorted_batches, True) == pytest.approx(per_frame, rel=1e-5)
     # the per-batch mean over sorted batches is a different (per-clip) weighting
     assert abs(epoch(sorted_batches, False) - per_frame) > 1e-3
+
+
+# ----------------------------------------------------------------- equal valid frames per batch
+def test_equal_frame_batches_hold_about_the_same_frames_and_cover_the_epoch():
+    lengths = skewed_lengths(640, seed=3)
+    s = LengthBucketBatchSampler(lengths, 16, seed=2, pool_batches=8, equal_frames=True)
+    batches = s.global_batches(0)
+    flat = np.concatenate(batches)
+    assert sorted(flat.tolist()) == list(range(640))            # every item once, none dropped
+    frames = np.array([lengths[b].sum() for b in batches], dtype=float)
+    target = 16 * lengths.mean()
+    assert abs(len(batches) - 640 / 16) <= 2                     # about as many steps per epoch as fixed batches
+    assert np.all(np.abs(frames / target - 1) < 0.25)           # each batch close to batch x mean length
+    sizes = np.array([len(b) for b in batches])
+    assert sizes.max() > 16 > sizes.min()                        # short clips come in bigger batches
+    for b in batches:
+        assert np.all(np.diff(lengths[b]) >= 0)
+    assert padding_ratio(lengths, batches) < 1.15
+
+
+def test_equal_frame_batches_are_deterministic_and_resume_exactly():
+    lengths = skewed_lengths(400, seed=4)
+    a = LengthBucketBatchSampler(lengths, 16, seed=9, pool_batches=4, equal_frames=True)
+    a.set_epoch(2)
+    full = list(a)
+    assert len(full) == a.batches_per_epoch
+    b = LengthBucketBatchSampler(lengths, 16, seed=9, pool_batches=4, equal_frames=True, start=5)
+    b.set_epoch(2)
+    assert list(b) == full[5:]
+    a.set_epoch(3)
+    assert list(a) != full
+
+
+@pytest.mark.parametrize("world", [2, 4])
+def test_equal_frame_batches_split_into_equal_disjoint_rank_shares(world):
+    lengths = skewed_lengths(300, seed=5)
+    single = LengthBucketBatchSampler(lengths, 16, seed=1, pool_batches=4, equal_frames=True, world_size=world)
+    ranks = [LengthBucketBatchSampler(lengths, 16, seed=1, pool_batches=4, equal_frames=True,
+                                      rank=r, world_size=world) for r in range(world)]
+    shares = [list(r) for r in ranks]
+    assert len({len(s) for s in shares}) == 1
+    for step, global_batch in enumerate(single.global_batches(0)):
+        parts = [shares[r][step] for r in range(world)]
+        assert len({len(p) for p in parts}) == 1                 # every rank the same number of items
+        assert sorted(sum(parts, [])) == sorted(global_batch.tolist())

@@ -323,3 +323,24 @@ def test_mmae_buckets_weigh_every_frame_alike(fake_corpus, hash_encoder):
     plain = build_mmae_task(fake_corpus, task.model_config, random_cfg, env, "minilm", 8)
     ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(1), env), env, train=True, step=0)
     assert "frame_weight" not in plain.prepare(batch, ctx)
+
+
+def test_mmae_equal_frame_batches_divide_by_the_nominal_batch(fake_corpus, hash_encoder):
+    """With ``batching="frames"`` a batch holds a varying number of items: the frame weight divides by
+    the configured batch x expected frames, never by the items this batch happens to have."""
+    from salad_core.keymotion.mmae import MMAEConfig
+    from salad_core.keymotion.train import build_mmae_task
+    from salad_core.train.batching import expected_latent_frames
+    from salad_core.train.common import StepContext
+    from salad_core.train.distributed import DistEnv, GlobalBatchRandom
+
+    env = DistEnv()
+    cfg = KeyMotionTrainConfig(max_length=96, num_threads=1, progress=False, batch_size=4, batching="frames")
+    task = build_mmae_task(fake_corpus, MMAEConfig(text_dim=hash_encoder.dim, max_length=96, width=32, num_layers=1,
+                                                   num_heads=4, ff_dim=64, dropout=0.0), cfg, env, "minilm", 8)
+    norm = 4 * expected_latent_frames(task.lengths, 4)
+    for n_items in (2, 3, 6):
+        batch = task.collate([task.train_set[i % len(task.train_set)] for i in range(n_items)])
+        ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(1), env), env, train=True, step=0)
+        weight = float(task.prepare(batch, ctx)["frame_weight"])
+        assert weight == pytest.approx(float(batch["length"].sum()) / (4 * norm), rel=1e-6)

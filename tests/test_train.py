@@ -632,3 +632,39 @@ def test_denoiser_latent_norm_trains_on_normalised_latents_and_assembles(corpus,
     pipe = SaladPipeline.from_pretrained(out, text_encoder=HashTextEncoder())
     torch.testing.assert_close(pipe.latent_stats[0], stats["latent_mean"])
     assert json.loads((run / "config.json").read_text())["task"]["numerics"]["latent_norm"].startswith("per part")
+
+
+def test_micro_batches_give_the_batch_loss_and_gradient(corpus, tiny_vae_run):
+    """Length-sorted micro-batches, each trimmed to its longest item, sum to the unsplit batch's loss
+    and gradient (the denoiser's key-padding masks make every item independent of trimmed frames)."""
+    from salad_core.data.dataset import MotionTextDataset, collate_motion_text
+    from salad_core.models.denoiser import Denoiser, DenoiserConfig
+    from salad_core.sampling import make_scheduler
+    from salad_core.train.common import StepContext
+    from salad_core.train.denoiser_trainer import (CaptionFeatureCache, DenoiserObjective, load_frozen_vae,
+                                                   prepare_denoiser_batch, split_denoiser_inputs)
+
+    torch.manual_seed(0)
+    vae = load_frozen_vae(tiny_vae_run)
+    ds = MotionTextDataset(corpus, "train", max_length=72, seed=0)
+    batch = collate_motion_text([ds[i] for i in range(len(ds))] * 2, trim=False)
+    pattern = [72, 40, 56, 44, 64, 48, 68, 52]
+    batch["length"] = torch.tensor([pattern[i % 8] for i in range(len(batch["length"]))])
+    enc = HashTextEncoder()
+    ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(0), DistEnv()), DistEnv(), train=True, step=0)
+    inp = prepare_denoiser_batch(batch, ctx, vae=vae, text=CaptionFeatureCache(enc, 100), scheduler=make_scheduler(),
+                                 config=den_train_config(), prediction_type="v_prediction", latent_shape=(18, 7, 8))
+    model = Denoiser(DenoiserConfig(latent_dim=8, width=16, heads=2, ff_dim=32, layers=1, dropout=0.0,
+                                    text_dim=enc.dim, max_len=18 * 7))
+    obj = DenoiserObjective(model)
+    whole = obj(**inp)["loss"]
+    g_whole = torch.autograd.grad(whole, list(model.parameters()))
+    parts = split_denoiser_inputs(inp, 3)
+    assert len(parts) == 3 and sum(p["noisy"].shape[0] for p in parts) == len(batch["length"])
+    assert [p["noisy"].shape[1] for p in parts] == sorted(p["noisy"].shape[1] for p in parts)
+    assert parts[0]["noisy"].shape[1] < inp["noisy"].shape[1]         # the short group is trimmed
+    losses = [obj(**p)["loss"] for p in parts]
+    torch.testing.assert_close(sum(losses), whole, rtol=1e-5, atol=1e-7)
+    g_parts = [torch.autograd.grad(l, list(model.parameters())) for l in losses]
+    for i, g in enumerate(g_whole):
+        torch.testing.assert_close(sum(gp[i] for gp in g_parts), g, rtol=1e-4, atol=1e-6)

@@ -491,3 +491,31 @@ def test_bone_term_measures_stretched_limbs_in_metres():
 def test_robustness_options_are_validated(field):
     with pytest.raises(ValueError, match=field):
         VAEConfig(**{field: -1.0})
+
+
+def _two_branch_stconv(conv: STConv, x: torch.Tensor) -> torch.Tensor:
+    """Paper eq. 1 as written: a Conv1d over every joint's time series plus the graph convolution."""
+    b, n, j, c = x.shape
+    t = conv.temp_conv(x.permute(0, 2, 3, 1).reshape(b * j, c, n)).reshape(b, j, c, n).permute(0, 3, 1, 2)
+    return t if conv.graph_conv is None else t + conv.graph_conv(x, conv.adj_matrix)
+
+
+@pytest.mark.parametrize("edges, nodes, kernel", [([(0, 1), (1, 2), (1, 3), (3, 4)], 5, 3), (None, 1, 5), ([(0, 1)], 2, 1)])
+def test_stconv_single_product_equals_the_two_branch_form_with_gradients(edges, nodes, kernel):
+    torch.manual_seed(0)
+    conv = STConv(6, edges, nodes, kernel_size=kernel).double()
+    x = torch.randn(3, 7, nodes, 6, dtype=torch.float64, requires_grad=True)
+    out = conv(x)
+    ref = _two_branch_stconv(conv, x)
+    torch.testing.assert_close(out, ref, rtol=1e-12, atol=1e-12)
+    w = torch.randn_like(out)
+    params = [x] + [p for p in conv.parameters() if p.requires_grad]
+    grads = torch.autograd.grad((out * w).sum(), params, retain_graph=True)
+    ref_grads = torch.autograd.grad((ref * w).sum(), params)
+    for g, r in zip(grads, ref_grads):
+        torch.testing.assert_close(g, r, rtol=1e-10, atol=1e-12)
+    # zero padding at the clip's ends: the first frame never sees a frame before it
+    x2 = x.detach().clone()
+    x2[:, -1] += 5.0
+    if kernel == 1 or x.shape[1] > kernel:
+        torch.testing.assert_close(conv(x2)[:, 0], out[:, 0].detach())

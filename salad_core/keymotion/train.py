@@ -380,7 +380,9 @@ def _prepare_mmae(batch: dict[str, Any], ctx: StepContext, *, text: PrefilledCap
     out = {"motion": motion, "inputs": inputs, "keyframe_mask": kf_mask, "frame_mask": frame_mask,
            "text": feats.to(dev), "text_mask": mask.to(dev)}
     if ctx.train and frames_norm is not None:
-        out["frame_weight"] = frame_mask.sum().to(motion.dtype) / (b * frames_norm)
+        # the nominal per-rank batch, not b: with equal-frame batches b varies and the weight must not
+        nominal = config.batch_size // ctx.env.world_size
+        out["frame_weight"] = frame_mask.sum().to(motion.dtype) / (nominal * frames_norm)
     return out
 
 
@@ -550,7 +552,7 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
     mmae = MotionMaskedAutoencoder(model_config).to(env.device)
     mmae.set_normalization(train_set.mean, train_set.std)
     text = _stage_captions(text_cache, encoder, train_config, train_set, val_set)
-    bucketing = train_config.batching == "buckets"
+    bucketing = train_config.batching in ("buckets", "frames")
     u = train_set.base.unit_length
     frames_norm = u * expected_latent_frames(train_set.lengths, u) if bucketing else None
     prepare = partial(_prepare_mmae, text=text, config=train_config, frames_norm=frames_norm)

@@ -19,6 +19,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from .vae_kernels import st_conv
+
 __all__ = [
     "ACTIVATIONS",
     "NORMS",
@@ -229,14 +231,9 @@ class STConv(nn.Module):
         self.temp_conv = nn.Conv1d(channels, channels, kernel_size, stride=1, padding=kernel_size // 2)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        b, n, j, c = x.shape
-        # (B, N, J, C) -> (B, J, C, N) -> (B*J, C, N): every joint's time series through one Conv1d
-        t = x.permute(0, 2, 3, 1).reshape(b * j, c, n)
-        # (B*J, C, N) -> (B, J, C, N) -> (B, N, J, C)
-        out = self.temp_conv(t).reshape(b, j, c, n).permute(0, 3, 1, 2)
-        if self.graph_conv is not None:
-            out = out + self.graph_conv(x, self.adj_matrix)
-        return out
+        # TempConv(x) + SkelConv(x), computed as one matrix product over channels-last inputs
+        # (salad_core.models.vae_kernels.st_conv: the same sum, without the Conv1d layout copies)
+        return st_conv(x, self.temp_conv, self.graph_conv, self.adj_matrix)
 
 
 class ResSTConv(nn.Module):

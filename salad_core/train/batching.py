@@ -72,7 +72,7 @@ class LengthBucketBatchSampler(Sampler[list[int]]):
     """
 
     def __init__(self, lengths: Sequence[int], batch_size: int, *, rank: int = 0, world_size: int = 1,
-                 seed: int = 0, pool_batches: int = 16, start: int = 0) -> None:
+                 seed: int = 0, pool_batches: int = 16, start: int = 0, equal_frames: bool = False) -> None:
         lengths = np.asarray(lengths)
         if lengths.ndim != 1 or lengths.size == 0:
             raise ValueError(f"lengths must be a non-empty 1-d sequence, got shape {lengths.shape}")
@@ -88,7 +88,10 @@ class LengthBucketBatchSampler(Sampler[list[int]]):
         self.lengths = lengths.astype(np.int64)
         self.batch_size, self.rank, self.world_size = int(batch_size), int(rank), int(world_size)
         self.seed, self.pool_batches, self.start = int(seed), int(pool_batches), int(start)
+        self.equal_frames = bool(equal_frames)
+        self.frames_per_batch = float(batch_size * self.lengths.mean())
         self.epoch = 0
+        self._cached: tuple[int, list[np.ndarray]] | None = None
 
     def set_epoch(self, epoch: int) -> None:
         """Select the epoch whose batches :meth:`__iter__` yields."""
@@ -96,11 +99,22 @@ class LengthBucketBatchSampler(Sampler[list[int]]):
 
     @property
     def batches_per_epoch(self) -> int:
+        """Global batches of the current epoch (with ``equal_frames`` it varies a little by epoch)."""
+        if self.equal_frames:
+            return len(self.global_batches())
         return len(self.lengths) // self.batch_size
 
     def global_batches(self, epoch: int | None = None) -> list[np.ndarray]:
-        """The epoch's global batches in order, each ``(batch_size,)`` item indices sorted by length."""
+        """The epoch's global batches in order, each an array of item indices sorted by length.
+
+        Fixed mode: ``(batch_size,)`` items each. ``equal_frames``: a multiple of ``world_size`` items
+        each, about ``batch_size x mean length`` valid frames each.
+        """
         epoch = self.epoch if epoch is None else int(epoch)
+        if self.equal_frames:
+            if self._cached is None or self._cached[0] != epoch:
+                self._cached = (epoch, self._equal_frame_batches(epoch))
+            return self._cached[1]
         rng = np.random.default_rng([self.seed, epoch, 0x5A1AD])
         n_batches, bs = self.batches_per_epoch, self.batch_size
         used = rng.permutation(len(self.lengths))[: n_batches * bs]
@@ -111,6 +125,32 @@ class LengthBucketBatchSampler(Sampler[list[int]]):
             # stable sort of a shuffled chunk: equal lengths stay in random order
             chunk = chunk[np.argsort(self.lengths[chunk], kind="stable")]
             batches += [chunk[i: i + bs] for i in range(0, len(chunk), bs)]
+        order = rng.permutation(len(batches))
+        return [batches[i] for i in order]
+
+    def _equal_frame_batches(self, epoch: int) -> list[np.ndarray]:
+        """Length-sorted pools cut where the running sum of lengths crosses multiples of the pool's
+        frames / round(pool's frames / frames_per_batch), at item counts that are multiples of
+        ``world_size``: every batch holds about the same number of valid frames."""
+        rng = np.random.default_rng([self.seed, epoch, 0xF4A3E])
+        w = self.world_size
+        n = len(self.lengths) - len(self.lengths) % w
+        used = rng.permutation(len(self.lengths))[:n]
+        pool = self.pool_batches * self.batch_size
+        batches: list[np.ndarray] = []
+        for p0 in range(0, n, pool):
+            chunk = used[p0: p0 + pool]
+            chunk = chunk[np.argsort(self.lengths[chunk], kind="stable")]
+            sizes = self.lengths[chunk].astype(np.float64)
+            n_b = max(1, int(round(sizes.sum() / self.frames_per_batch)))
+            n_b = min(n_b, len(chunk) // w)
+            if n_b == 0:        # a last pool smaller than one item per rank: nothing to share out
+                continue
+            cum = np.cumsum(sizes)
+            cuts = np.searchsorted(cum, cum[-1] * np.arange(1, n_b) / n_b, side="left") + 1
+            cuts = np.clip(np.round(cuts / w).astype(np.int64) * w, w, len(chunk) - w)
+            edges = np.unique(np.concatenate([[0], cuts, [len(chunk)]]))
+            batches += [chunk[a: b] for a, b in zip(edges[:-1], edges[1:]) if b > a]
         order = rng.permutation(len(batches))
         return [batches[i] for i in order]
 

@@ -30,6 +30,7 @@ the learning rate is a function of the step, and all RNG states (per rank) are r
 """
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import logging
@@ -104,6 +105,9 @@ class TrainTask:
     extra_config: dict[str, Any] = field(default_factory=dict)  # stored in config.json under "task"
     extra_files: dict[str, dict[str, torch.Tensor]] = field(default_factory=dict)  # name -> tensors, written once
     lengths: Any = None                                # (len(train_set),) item frames: enables length bucketing
+    # (inputs, k) -> k input dicts whose losses sum to the batch's loss (micro-batches trimmed to their
+    # own longest item); None: the task is never split
+    split: Callable[[dict[str, Any], int], list[dict[str, Any]]] | None = None
 
 
 @dataclass(frozen=True)
@@ -232,8 +236,27 @@ def _check_resume_config(out_dir: Path, config: TrainConfig) -> None:
                     ", ".join(f"{k}: {old.get(k)!r} -> {new[k]!r}" for k in changed))
 
 
+def _forward_backward(objective: nn.Module, inputs: dict[str, Any], task: TrainTask, config: TrainConfig,
+                      env: DistEnv) -> dict[str, torch.Tensor]:
+    """Losses of one batch with their gradients accumulated; with ``config.micro_batches > 1`` and a
+    task that can ``split``, as length-sorted micro-batches whose losses (each already divided by the
+    whole batch's normaliser) sum to the batch's: the same gradient, fewer padded frames computed.
+    Under DDP only the last micro-batch synchronises gradients."""
+    parts = task.split(inputs, config.micro_batches) if task.split is not None and config.micro_batches > 1 else [inputs]
+    total: dict[str, torch.Tensor] = {}
+    for i, part in enumerate(parts):
+        sync = contextlib.nullcontext() if i == len(parts) - 1 or not hasattr(objective, "no_sync") \
+            else objective.no_sync()
+        with sync:
+            losses = objective(**part)
+            losses["loss"].backward()
+        for k, v in losses.items():
+            total[k] = total[k] + v.detach() if k in total else v.detach()
+    return total
+
+
 def _bucketing(task: TrainTask, config: TrainConfig) -> bool:
-    return config.batching == "buckets" and task.lengths is not None
+    return config.batching in ("buckets", "frames") and task.lengths is not None
 
 
 def _runtime(task: TrainTask, config: TrainConfig) -> dict[str, Any]:
@@ -241,8 +264,11 @@ def _runtime(task: TrainTask, config: TrainConfig) -> dict[str, Any]:
     from salad_core.allocator import allocator_tuned
 
     return {"torch_threads": torch.get_num_threads(),
-            "batching": f"length buckets (pools of {config.bucket_pool} batches)" if _bucketing(task, config)
+            "batching": (f"length buckets (pools of {config.bucket_pool} batches"
+                         + (", equal valid frames per batch)" if config.batching == "frames" else ")"))
+            if _bucketing(task, config)
             else "random",
+            "micro_batches": config.micro_batches if task.split is not None else 1,
             "allocator": "tuned" if allocator_tuned() else "system default"}
 
 
@@ -409,7 +435,8 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
             raise ValueError(f"task.lengths has {len(task.lengths)} entries for {len(task.train_set)} training items")
         train_sampler: Any = LengthBucketBatchSampler(task.lengths, config.batch_size, rank=env.rank,
                                                       world_size=env.world_size, seed=config.seed,
-                                                      pool_batches=config.bucket_pool)
+                                                      pool_batches=config.bucket_pool,
+                                                      equal_frames=config.batching == "frames")
         steps_per_epoch = train_sampler.batches_per_epoch
     else:
         train_sampler = _sampler(task.train_set, env, shuffle=True, seed=config.seed)
@@ -528,9 +555,8 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
                     set_lr(optimizer, lr)
                     ctx.step = step
                     inputs = task.prepare(batch, ctx)
-                    losses = objective(**inputs)
                     optimizer.zero_grad(set_to_none=True)
-                    losses["loss"].backward()
+                    losses = _forward_backward(objective, inputs, task, config, env)
                     if config.grad_clip is not None:
                         torch.nn.utils.clip_grad_norm_(params, config.grad_clip)
                     optimizer.step()

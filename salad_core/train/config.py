@@ -40,7 +40,7 @@ RESUME_MUTABLE_FIELDS = frozenset({
 })
 
 #: Values of :attr:`TrainConfig.batching`.
-BATCHING_MODES = ("buckets", "random")
+BATCHING_MODES = ("buckets", "frames", "random")
 
 
 @dataclass(frozen=True)
@@ -68,8 +68,11 @@ class TrainConfig:
     device: str = "auto"                       # "auto" (cuda if available), "cpu", "cuda"
     progress: bool = True                      # tqdm progress bar on rank 0
     batching: str = "buckets"                  # "buckets": length-sorted pools (tasks that declare item lengths,
-                                               # see train.batching); "random": the release-0.5 random batches
+                                               # see train.batching); "frames": the same pools cut into batches
+                                               # of equal valid frames; "random": the release-0.5 random batches
     bucket_pool: int = 16                      # global batches per length-sorted pool (1: random batches)
+    micro_batches: int = 1                     # split each batch into K length-sorted micro-batches, each trimmed
+                                               # to its own longest item (tasks with a ``split``; same gradient)
 
     def __post_init__(self) -> None:
         def need(cond: bool, name: str, allowed: str) -> None:
@@ -97,6 +100,7 @@ class TrainConfig:
         need(isinstance(self.log_every, int) and self.log_every >= 1, "log_every", "use an integer >= 1")
         need(self.batching in BATCHING_MODES, "batching", f"use one of {BATCHING_MODES}")
         need(isinstance(self.bucket_pool, int) and self.bucket_pool >= 1, "bucket_pool", "use an integer >= 1")
+        need(isinstance(self.micro_batches, int) and self.micro_batches >= 1, "micro_batches", "use an integer >= 1")
         need(isinstance(self.seed, int) and 0 <= self.seed < 2**62, "seed", "use an integer in [0, 2**62)")
         need(self.device in ("auto", "cpu", "cuda") or self.device.startswith("cuda:"), "device",
              "use 'auto', 'cpu', 'cuda' or 'cuda:N'")

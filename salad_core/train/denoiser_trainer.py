@@ -51,7 +51,8 @@ from .config import DenoiserTrainConfig
 from .distributed import DistEnv, all_reduce_sum, init_distributed
 
 __all__ = ["DenoiserObjective", "CaptionFeatureCache", "train_denoiser", "build_denoiser_task", "load_frozen_vae",
-           "resolve_checkpoint", "denoiser_latent_cache", "denoiser_latent_stats", "prepare_denoiser_batch"]
+           "resolve_checkpoint", "denoiser_latent_cache", "denoiser_latent_stats", "prepare_denoiser_batch",
+           "split_denoiser_inputs"]
 
 log = logging.getLogger(__name__)
 
@@ -250,7 +251,9 @@ def prepare_denoiser_batch(batch: dict[str, Any], ctx: StepContext, *, vae: nn.M
         text_feats, text_mask = text.encode(captions)                    # (B, W, C), (B, W)
     if ctx.train and frames_norm is not None:
         # a constant per item: every valid element weighs the same in every (length-sorted) batch
-        count = torch.tensor(b * frames_norm * latent_shape[1] * latent_shape[2], dtype=torch.float64, device=dev)
+        # (the nominal per-rank batch, not b: with equal-frame batches b varies and the weight must not)
+        nominal = config.batch_size // env.world_size
+        count = torch.tensor(nominal * frames_norm * latent_shape[1] * latent_shape[2], dtype=torch.float64, device=dev)
     else:
         count = frame_mask.sum().to(torch.float64) * (latent_shape[1] * latent_shape[2])
         if ctx.train and env.distributed:
@@ -362,7 +365,7 @@ def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike
         latents = denoiser_latent_cache(vae, [d for d in (train_set, val_set) if d is not None], train_config,
                                         where, env, prune=own)
     latent_stats = denoiser_latent_stats(vae, train_set) if train_config.latent_norm else None
-    bucketing = train_config.batching == "buckets"
+    bucketing = train_config.batching in ("buckets", "frames")
     frames_norm = expected_latent_frames(train_set.lengths, vae.downsample) if bucketing else None
     prepare = partial(prepare_denoiser_batch, vae=vae, text=text_cache,
                       scheduler=scheduler, config=train_config,
@@ -386,8 +389,37 @@ def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike
         model=denoiser, model_type="denoiser", model_config=model_config, objective=DenoiserObjective(denoiser),
         train_set=train_set, val_set=val_set, collate=partial(collate_motion_text, trim=False), prepare=prepare,
         meta=meta, extra_config={"kind": "denoiser", **meta, "data": str(Path(data_dir).resolve()), "numerics": numerics},
-        lengths=train_set.lengths, extra_files=extra_files,
+        lengths=train_set.lengths, extra_files=extra_files, split=split_denoiser_inputs,
     )
+
+
+def split_denoiser_inputs(inputs: dict[str, Any], parts: int) -> list[dict[str, Any]]:
+    """Cut one batch's objective inputs into ``parts`` micro-batches of similar length.
+
+    The items are sorted by valid latent frames, cut into ``parts`` groups and each group is trimmed
+    to its own longest item; ``denom`` (the whole batch's normaliser) is kept, so the micro-batches'
+    losses sum to the batch's loss and their gradients to its gradient (the key-padding masks make
+    each item's prediction independent of the frames trimmed away). The batch's composition, and so
+    the learning per step, is that of the unsplit batch; only fewer padded frames are computed.
+
+    Parameters
+    ----------
+    inputs : dict
+        :func:`prepare_denoiser_batch`'s output: ``noisy``/``target`` ``(B, N', P, Dz)``, ``timesteps``
+        ``(B,)``, ``text`` ``(B, W, C)``, ``text_mask`` ``(B, W)``, ``frame_mask`` ``(B, N')``, ``denom`` ``()``.
+    parts : int
+        Micro-batches wanted (fewer when the batch has fewer items).
+    """
+    frames = inputs["frame_mask"].sum(dim=1)                                   # (B,)
+    order = torch.argsort(frames, stable=True)
+    out = []
+    for idx in torch.tensor_split(order, min(parts, len(order))):
+        n = max(int(frames[idx].max()), 1)
+        out.append({"noisy": inputs["noisy"][idx, :n], "timesteps": inputs["timesteps"][idx],
+                    "text": inputs["text"][idx], "text_mask": inputs["text_mask"][idx],
+                    "frame_mask": inputs["frame_mask"][idx, :n], "target": inputs["target"][idx, :n],
+                    "denom": inputs["denom"]})
+    return out
 
 
 def denoiser_latent_stats(vae: nn.Module, dataset: Any, batch: int = 64) -> tuple[torch.Tensor, torch.Tensor]:
