@@ -20,7 +20,8 @@ of the VAE's training step. The result equals the two-branch form up to float ro
 (``tests/test_vae.py``).
 
 Measured (``bench/bench_vae_step.py``, v2 VAE config, batch 64 x 40 frames, one thread, forward +
-backward + AdamW, the two forms interleaved in one process): 863 -> 768 ms per step (1.12x).
+backward + AdamW, the two forms interleaved in one process, on a loaded machine): 863 -> 768 and
+814 -> 763 ms per step in two runs (1.12x, 1.07x).
 Tried and not kept: the 22 per-joint input/output MLPs as two batched products over a joint axis
 (exact, but no faster: 791 ms), and ``torch.compile`` of the whole objective (1.08x more, after a
 98 s compilation).
