@@ -138,7 +138,7 @@ def test_prepare_with_the_cache_equals_encoding_on_the_fly(vae, corpus, tmp_path
     from salad_core.data.dataset import collate_motion_text
     from salad_core.sampling import DiffusionConfig, make_scheduler
     from salad_core.train.common import StepContext
-    from salad_core.train.denoiser_trainer import _prepare
+    from salad_core.train.denoiser_trainer import prepare_denoiser_batch
     from salad_core.train.distributed import GlobalBatchRandom
 
     class Text:
@@ -155,7 +155,7 @@ def test_prepare_with_the_cache_equals_encoding_on_the_fly(vae, corpus, tmp_path
     out = {}
     for name, latents in (("fly", None), ("cache", cache)):
         ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(4), env), env, train=True, step=0)
-        out[name] = _prepare(batch, ctx, latents=latents, **kw)
+        out[name] = prepare_denoiser_batch(batch, ctx, latents=latents, **kw)
     for k in ("noisy", "target"):
         torch.testing.assert_close(out["cache"][k], out["fly"][k], rtol=1e-5, atol=1e-6)
     assert torch.equal(out["cache"]["frame_mask"], out["fly"]["frame_mask"])

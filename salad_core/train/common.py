@@ -72,7 +72,8 @@ from .state import (
     save_train_state,
 )
 
-__all__ = ["TrainTask", "TrainResult", "fit", "StepContext", "ResumableBatchSampler", "seed_everything"]
+__all__ = ["TrainTask", "TrainResult", "fit", "StepContext", "ResumableBatchSampler", "seed_everything", "make_loader",
+           "make_sampler", "validate"]
 
 log = logging.getLogger(__name__)
 
@@ -204,7 +205,7 @@ def _resolve_threads(config: TrainConfig, env: DistEnv) -> None:
         torch.set_num_threads(n)
 
 
-def _loader(dataset: Dataset, sampler: Sampler, collate: Callable, config: TrainConfig, env: DistEnv,
+def make_loader(dataset: Dataset, sampler: Sampler, collate: Callable, config: TrainConfig, env: DistEnv,
             seed: int) -> DataLoader:
     # A dedicated generator keeps DataLoader (worker base seeds) from drawing on the global RNG,
     # which would make the model's dropout stream depend on how many loaders were created.
@@ -214,7 +215,7 @@ def _loader(dataset: Dataset, sampler: Sampler, collate: Callable, config: Train
                       persistent_workers=False)
 
 
-def _sampler(dataset: Dataset, env: DistEnv, shuffle: bool, seed: int) -> DistributedSampler:
+def make_sampler(dataset: Dataset, env: DistEnv, shuffle: bool, seed: int) -> DistributedSampler:
     # DistributedSampler also serves world size 1, so the data order of one process equals the
     # concatenation of the ranks' orders under DDP (rank r takes every W-th index).
     return DistributedSampler(dataset, num_replicas=env.world_size, rank=env.rank, shuffle=shuffle,
@@ -318,7 +319,7 @@ class _Averager:
 
 
 @torch.no_grad()
-def _validate(task: TrainTask, config: TrainConfig, device: str, step: int) -> dict[str, float]:
+def validate(task: TrainTask, config: TrainConfig, device: str, step: int) -> dict[str, float]:
     """Mean losses over the validation split, computed by one process with the unwrapped objective.
 
     Under DDP only rank 0 calls this and broadcasts the result: the figures (and so the choice of
@@ -328,9 +329,9 @@ def _validate(task: TrainTask, config: TrainConfig, device: str, step: int) -> d
     assert task.val_set is not None
     env = DistEnv(device=device)
     objective = task.objective
-    sampler = _sampler(task.val_set, env, shuffle=False, seed=config.seed)
+    sampler = make_sampler(task.val_set, env, shuffle=False, seed=config.seed)
     batches = ResumableBatchSampler(sampler, config.batch_size, drop_last=False)
-    loader = _loader(task.val_set, batches, task.collate, config, env, seed=config.seed)
+    loader = make_loader(task.val_set, batches, task.collate, config, env, seed=config.seed)
     gen = torch.Generator().manual_seed(config.seed + 7919)
     ctx = StepContext(GlobalBatchRandom(gen, env, device), env, train=False, step=step)
     was_training = objective.training
@@ -439,7 +440,7 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
                                                       equal_frames=config.batching == "frames")
         steps_per_epoch = train_sampler.batches_per_epoch
     else:
-        train_sampler = _sampler(task.train_set, env, shuffle=True, seed=config.seed)
+        train_sampler = make_sampler(task.train_set, env, shuffle=True, seed=config.seed)
         steps_per_epoch = len(train_sampler) // local_bs
     if steps_per_epoch == 0:
         raise ValueError(f"the train split has {len(task.train_set)} items, fewer than one batch of "
@@ -548,7 +549,7 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
                     batches = train_sampler
                 else:
                     batches = ResumableBatchSampler(train_sampler, local_bs, drop_last=True, start=batch_in_epoch)
-                loader = _loader(task.train_set, batches, task.collate, config, env, seed=config.seed * 100_003 + epoch)
+                loader = make_loader(task.train_set, batches, task.collate, config, env, seed=config.seed * 100_003 + epoch)
                 finished_epoch = True
                 for batch in loader:
                     lr = lr_at_step(step, config.lr, config.warmup_steps, config.milestones, config.gamma)
@@ -584,7 +585,7 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
                         bar.set_postfix(loss=f"{last_loss:.4g}" if last_loss is not None else "-", lr=f"{lr:.2e}")
                     if has_val and config.val_every and (step % config.val_every == 0 or step == total_steps):
                         t_aux = time.perf_counter()
-                        val = _validate(task, config, env.device, step) if env.is_main else None
+                        val = validate(task, config, env.device, step) if env.is_main else None
                         val = broadcast_object(val, env)
                         is_best = best_val is None or val["loss"] < best_val
                         write_log({"step": step, "epoch": epoch, **{f"val_{k}": v for k, v in val.items()},

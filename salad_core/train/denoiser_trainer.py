@@ -262,10 +262,6 @@ def prepare_denoiser_batch(batch: dict[str, Any], ctx: StepContext, *, vae: nn.M
             "frame_mask": frame_mask, "target": target, "denom": count.clamp_min(1.0).to(motion.dtype)}
 
 
-#: The name before issue 26; tests/test_latent_cache.py still imports it.
-_prepare = prepare_denoiser_batch
-
-
 def denoiser_latent_cache(vae: nn.Module, datasets: Sequence[Any], config: DenoiserTrainConfig,
                           cache_dir: str | os.PathLike, env: DistEnv, *, prune: bool = False) -> Any:
     """The :class:`~salad_core.train.latent_cache.LatentCache` of every window of ``datasets`` under ``vae``.

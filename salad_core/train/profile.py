@@ -89,7 +89,7 @@ class StepRunner:
     """
 
     def __init__(self, name: str, build: Any, config: Any) -> None:
-        from salad_core.train.common import ResumableBatchSampler, StepContext, _loader, _sampler
+        from salad_core.train.common import ResumableBatchSampler, StepContext, make_loader, make_sampler
         from salad_core.train.distributed import DistEnv, GlobalBatchRandom
 
         t0 = time.perf_counter()
@@ -116,9 +116,9 @@ class StepRunner:
             sampler: Any = LengthBucketBatchSampler(self.task.lengths, config.batch_size, seed=config.seed,
                                                     pool_batches=config.bucket_pool)
         else:
-            sampler = ResumableBatchSampler(_sampler(self.task.train_set, env, shuffle=True, seed=config.seed),
+            sampler = ResumableBatchSampler(make_sampler(self.task.train_set, env, shuffle=True, seed=config.seed),
                                             config.batch_size, drop_last=True)
-        self.loader = _loader(self.task.train_set, sampler, self.task.collate, config, env, seed=config.seed)
+        self.loader = make_loader(self.task.train_set, sampler, self.task.collate, config, env, seed=config.seed)
         self.batches = iter(self.loader)
         self.ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(config.seed), env), env, True, 0)
         self.totals = {p: 0.0 for p in PARTS}
@@ -178,12 +178,12 @@ class StepRunner:
                             else float(motion.shape[0] * motion.shape[1]))
 
     def validation_per_step(self) -> float:
-        from salad_core.train.common import _validate
+        from salad_core.train.common import validate
 
         if self.task.val_set is None or not self.config.val_every:
             return 0.0
         t0 = time.perf_counter()
-        _validate(self.task, self.config, "cpu", 0)
+        validate(self.task, self.config, "cpu", 0)
         return (time.perf_counter() - t0) / self.config.val_every
 
     def result(self) -> StepProfile:
