@@ -216,8 +216,8 @@ class SaladPipeline:
     max_batch: int | None = None
 
     def __init__(self, vae: MotionVAE, denoiser: Denoiser, text_encoder: TextEncoder, mean: np.ndarray,
-                 std: np.ndarray, diffusion: DiffusionConfig | None = None, solver: str = "ddim", source: str | None = None,
-                 guidance: Guidance | None = None, recovery: str | None = None,
+                 std: np.ndarray, diffusion: DiffusionConfig | None = None, solver: str = "ddim",
+                 source: str | None = None, guidance: Guidance | None = None, recovery: str | None = None,
                  latent_stats: tuple[Any, Any] | None = None) -> None:
         if not isinstance(text_encoder, TextEncoder):
             raise TypeError(f"text_encoder must follow salad_core.text.TextEncoder (name, dim, max_tokens, encode, "

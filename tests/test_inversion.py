@@ -142,7 +142,9 @@ _WEIGHTS = default_weights_dir() / "pipeline.json"
 def test_trained_inversion_is_faithful(sample_features):
     trained = SaladPipeline.from_pretrained()
     motion = sample_features[:80]
-    plain = trained.invert(motion, "a person walks forward", method="ddim", num_steps=20)
-    fixed = trained.invert(motion, "a person walks forward", method="fixed_point", num_steps=20)
-    assert fixed.errors["inversion_mpjpe"] < plain.errors["inversion_mpjpe"]
+    # the methods themselves, without the exact replay (with it both errors are float round-off, ~3e-7 m)
+    plain = trained.invert(motion, "a person walks forward", method="ddim", num_steps=20, exact=False)
+    fixed = trained.invert(motion, "a person walks forward", method="fixed_point", num_steps=20, exact=False)
+    # measured: 0.16 m against 0.0009 m
+    assert fixed.errors["inversion_mpjpe"] < 0.1 * plain.errors["inversion_mpjpe"]
     assert fixed.errors["inversion_mpjpe"] < 0.05

@@ -301,7 +301,8 @@ class PSTPrediction:
                  null_text: torch.Tensor | None, null_mask: torch.Tensor | None, guidance_scale: float,
                  lengths: torch.Tensor | None = None) -> None:
         if guidance_scale != 1.0 and (null_text is None or null_mask is None):
-            raise ValueError(f"guidance_scale={guidance_scale} needs the empty prompt's features (null_text, null_mask)")
+            raise ValueError(f"guidance_scale={guidance_scale} needs the empty prompt's features "
+                             "(null_text, null_mask)")
         self.model = pst
         self.batch_size = text.shape[0]
         self.text, self.text_mask, self.null_text, self.null_mask = text, text_mask, null_text, null_mask

@@ -54,6 +54,7 @@ _ACTIVATIONS = {"gelu": nn.GELU, "relu": nn.ReLU}
 #: ``axis`` of :meth:`Attention.attend_within` for the two self-attentions of a layer.
 _FRAMES, _PARTS = 1, 2
 
+
 @dataclass(frozen=True)
 class DenoiserConfig:
     """Hyper-parameters of :class:`Denoiser` (defaults = the paper / official release)."""
@@ -107,7 +108,8 @@ class FiLM(nn.Module):
         return scale, shift
 
     @staticmethod
-    def residual(x: torch.Tensor, out: torch.Tensor, film: tuple[torch.Tensor, torch.Tensor] | None) -> torch.Tensor:
+    def residual(x: torch.Tensor, out: torch.Tensor,
+                 film: tuple[torch.Tensor, torch.Tensor] | None) -> torch.Tensor:
         """Residual update ``x + out * (1 + scale) + shift`` (``x + out`` without FiLM).
 
         One fused ``addcmul`` and an in-place add on its fresh result instead of three new tensors:
@@ -428,7 +430,8 @@ class Denoiser(AttnProcessorMixin, nn.Module):
         if text_context.batch_size != batch:
             raise ValueError(f"text batch ({text_context.batch_size}) must equal the latent batch ({batch})")
         if text_context.text_dim != self.config.text_dim:
-            raise ValueError(f"text features have C={text_context.text_dim}, the denoiser expects {self.config.text_dim}")
+            raise ValueError(f"text features have C={text_context.text_dim}, the denoiser expects "
+                             f"{self.config.text_dim}")
         return text_context
 
     @staticmethod
