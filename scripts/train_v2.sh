@@ -8,7 +8,10 @@
 # Every stage resumes where it stopped when run again with RESUME=1 (Ctrl-C writes a checkpoint);
 # the data stage skips what is already built (both builds are deterministic: the same commit and
 # seed give byte-identical files, so a lost run folder is rebuilt from this recipe alone).
-# Environment: VAE_STEPS, DEN_STEPS override the configs' step budgets; PY the python to use.
+# Environment: VAE_STEPS, DEN_STEPS override the configs' step budgets; PYTHON the python to use;
+# DEN_DATA the denoiser's corpus (default: WORK_DIR/corpus, the VAE's). The first v2 run trained its VAE
+# on corpus 2.0 (commit f1f8697) and its denoiser on corpus 2.1 (commit 33c5adb, DEN_DATA=WORK_DIR/corpus21):
+# the denoiser normalises motions with the VAE's statistics, so any corpus of the same layout works.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 WORK=${1:-$HOME/salad-runs/v2}
@@ -17,6 +20,9 @@ STAGES=${*:-data vae denoiser}
 PY=${PYTHON:-.venv/bin/python}
 RESUME=${RESUME:+--resume}
 mkdir -p "$WORK"
+# Long runs share the machine: OpenMP workers sleep between parallel regions (a 2-thread trainer whose
+# workers spin fell from 1.6 to 0.05 steps/s when other sessions loaded the cores; docs/performance.md).
+export SALAD_OMP_WAIT=${SALAD_OMP_WAIT:-passive}
 has() { [[ " $STAGES " == *" $1 "* ]]; }
 
 if has data; then
@@ -32,6 +38,6 @@ if has vae; then
       --config configs/v2_vae.json ${VAE_STEPS:+--steps "$VAE_STEPS"} --no-progress $RESUME
 fi
 if has denoiser; then
-  "$PY" -m salad_core.train denoiser --data "$WORK/corpus" --out "$WORK/denoiser" --vae "$WORK/vae" \
+  "$PY" -m salad_core.train denoiser --data "${DEN_DATA:-$WORK/corpus}" --out "$WORK/denoiser" --vae "$WORK/vae" \
       --config configs/v2_denoiser.json ${DEN_STEPS:+--steps "$DEN_STEPS"} --no-progress $RESUME
 fi

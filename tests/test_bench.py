@@ -276,7 +276,7 @@ def test_folded_step_products_replace_the_cross_attention_products(single_thread
 
 def test_train_profile_rows_time_every_part_before_and_after(tmp_path, single_thread):
     """The ``train`` section on a fake corpus of 40-120-frame clips with a tiny VAE and denoiser:
-    every part is timed for both settings, and the buckets cut the padding of random batches."""
+    every part is timed for both settings, and the micro-batches cut the padding of random batches."""
     from salad_core.io import save_checkpoint
     from salad_core.models.vae import MotionVAE, VAEConfig
     from salad_core.sampling import DiffusionConfig
@@ -303,7 +303,7 @@ def test_train_profile_rows_time_every_part_before_and_after(tmp_path, single_th
     assert step.value == pytest.approx(sum(by[f"part: {p}"].value for p in PARTS), rel=1e-9)
     assert step.ratio == pytest.approx(step.reference / step.value)
     pad = by["padding"]
-    assert 1.0 <= pad.value < pad.reference                      # buckets pad less than random batches
+    assert 1.0 <= pad.value < pad.reference                      # micro-batches pad less than whole random batches
     assert by["samples x frames/s"].value > 0 and "interleaved" in notes[0]
 
 

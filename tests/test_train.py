@@ -511,17 +511,19 @@ def test_run_config_records_batching_threads_numerics_and_the_card_says_so(corpu
                          HashTextEncoder())
     assert res.threads == 1 and res.frames_per_s > 0
     doc = json.loads((new / "config.json").read_text())
-    assert doc["runtime"]["torch_threads"] == 1 and doc["runtime"]["batching"].startswith("length buckets")
+    assert doc["runtime"]["torch_threads"] == 1 and doc["runtime"]["batching"] == "random"
+    assert doc["runtime"]["micro_batches"] == 4                       # the denoiser's default
     assert doc["task"]["numerics"]["latents"].startswith("cached")
     assert (new / "latent_cache").is_dir()
     lines = [r for r in map(json.loads, (new / "log.jsonl").read_text().splitlines()) if "lr" in r]
     assert len(lines) == 2 and all(r["threads"] == 1 and r["frames_per_s"] > 0 for r in lines)
     old = tmp_path / "old"
     train_denoiser(corpus, old, tiny_vae_run, tiny_denoiser_config(),
-                   den_train_config(max_steps=2, batching="random", latent_cache=False), HashTextEncoder())
+                   den_train_config(max_steps=2, batching="random", latent_cache=False, micro_batches=1),
+                   HashTextEncoder())
     assert numerics_note({"denoiser": old}) is None and not (old / "latent_cache").exists()
     note = numerics_note({"vae": tiny_vae_run, "denoiser": new})
-    assert "**denoiser**" in note and "length buckets" in note and "**vae**" not in note
+    assert "**denoiser**" in note and "4 length-sorted micro-batches" in note and "**vae**" not in note
     card = tmp_path / "MODEL_CARD.md"
     card.write_text("# My model\n\nhand-written text\n")
     write_numerics_section(card, note)

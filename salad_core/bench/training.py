@@ -190,11 +190,13 @@ def train_profile_rows(recipe: TrainRecipe, steps: int, warmup: int, data: str |
         Row("train", "samples x frames/s", "valid motion frames per second", after.frames_per_s, "frames/s",
             before.frames_per_s, after.frames_per_s / before.frames_per_s, note="ratio = after / before"),
         Row("train", "padding", "latent frames computed / valid", after.padded_frames_per_step / after.frames_per_step,
-            "x", before.padded_frames_per_step / before.frames_per_step, note="batch x longest item over valid frames"),
+            "x", before.padded_frames_per_step / before.frames_per_step, note="items x longest item (per micro-batch) over valid frames"),
         Row("train", "start-up", "data, text prefill (+ latent cache after)", after.startup_s, "s", before.startup_s,
             note="before the first step; the cache is built once per VAE and corpus"),
     ]
-    notes = [f"train: value = after (length buckets of {cfg.bucket_pool} batches, latent cache), reference = before "
+    how = (f"random batches in {cfg.micro_batches} length-sorted micro-batches" if cfg.batching == "random"
+           else f"length buckets of {cfg.bucket_pool} batches" + (", equal frames" if cfg.batching == "frames" else ""))
+    notes = [f"train: value = after ({how}, latent cache), reference = before "
              f"(random batches, VAE encoder per step), {steps} timed steps each after {warmup} warm-up, interleaved "
              f"one by one in one process; part ratio = before / after; data: {data}; VAE: {vae}; "
              f"validation amortised over val_every={cfg.val_every} steps, logging over log_every={cfg.log_every}"]

@@ -64,6 +64,9 @@ def numerics_note(runs: dict[str, str | Path]) -> str | None:
         batching = runtime.get("batching", "random")
         if batching != "random":
             changes.append(f"batches: {batching}")
+        if int(runtime.get("micro_batches", 1)) > 1:
+            changes.append(f"each batch in {runtime['micro_batches']} length-sorted micro-batches "
+                           "(the same gradient, summed in another order)")
         if numerics.get("loss_normaliser") and batching != "random":
             changes.append(f"loss normaliser: {numerics['loss_normaliser']}")
         if numerics.get("latents", "").startswith("cached"):
@@ -77,8 +80,8 @@ def numerics_note(runs: dict[str, str | Path]) -> str | None:
     return ("## Training numerics\n\n"
             "These weights were trained with the issue-19 trainers, whose numerics differ from release 0.5 "
             "(random batches, VAE encoder at every step): the runs are not bit-comparable with older runs of the same "
-            "config, while the objective is the same in expectation. Set `batching: \"random\"` and "
-            "`latent_cache: false` in the training config to train as release 0.5 did.\n\n" + "\n".join(lines) + "\n")
+            "config, while the objective is the same in expectation. Set `batching: \"random\"`, `micro_batches: 1` "
+            "and `latent_cache: false` in the training config to train as release 0.5 did.\n\n" + "\n".join(lines) + "\n")
 
 
 def write_numerics_section(card: str | Path, note: str | None) -> Path | None:

@@ -2,7 +2,8 @@
 
 :func:`profile_denoiser_training` builds the denoiser task twice on the same data, frozen VAE and
 text encoder: *before* (``batching="random"``, ``latent_cache=False``: the release-0.5 trainer's
-data path) and *after* (the configured defaults: length buckets and the latent cache), then runs
+data path) and *after* (the configured defaults: random batches cut into length-sorted micro-batches, and
+the latent cache; or length buckets when so configured), then runs
 their optimiser steps interleaved (one step of each in turn, so the machine's speed swings hit both
 alike) and times every part of a step:
 
@@ -110,11 +111,12 @@ class StepRunner:
         self.params = [p for p in self.task.model.parameters() if p.requires_grad]
         self.optimizer = torch.optim.AdamW(self.params, lr=config.lr, betas=tuple(config.betas), eps=config.adam_eps,
                                            weight_decay=config.weight_decay)
-        if config.batching == "buckets" and self.task.lengths is not None:
+        if config.batching in ("buckets", "frames") and self.task.lengths is not None:
             from salad_core.train.batching import LengthBucketBatchSampler
 
             sampler: Any = LengthBucketBatchSampler(self.task.lengths, config.batch_size, seed=config.seed,
-                                                    pool_batches=config.bucket_pool)
+                                                    pool_batches=config.bucket_pool,
+                                                    equal_frames=config.batching == "frames")
         else:
             sampler = ResumableBatchSampler(make_sampler(self.task.train_set, env, shuffle=True, seed=config.seed),
                                             config.batch_size, drop_last=True)
@@ -147,14 +149,20 @@ class StepRunner:
         t["latents"], t["text"] = self.sink.get("latents", 0.0), self.sink.get("text", 0.0)
         t["noise"] = max(prep - t["latents"] - t["text"], 0.0)
         t0 = time.perf_counter()
-        losses = self.task.objective(**inputs)
-        t["forward"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
         self.optimizer.zero_grad(set_to_none=True)
         t_zero = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        losses["loss"].backward()
-        t["backward"] = time.perf_counter() - t0
+        parts = ([inputs] if self.task.split is None or self.config.micro_batches <= 1
+                 else self.task.split(inputs, self.config.micro_batches))
+        t["forward"] = t["backward"] = 0.0
+        total = None
+        for part in parts:                       # as train.common's forward/backward with micro-batches
+            t0 = time.perf_counter()
+            losses = self.task.objective(**part)
+            t["forward"] += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            losses["loss"].backward()
+            t["backward"] += time.perf_counter() - t0
+            total = losses["loss"].detach() if total is None else total + losses["loss"].detach()
         t0 = time.perf_counter()
         torch.nn.utils.clip_grad_norm_(self.params, self.config.grad_clip or float("inf"))
         t["clip"] = time.perf_counter() - t0
@@ -162,7 +170,7 @@ class StepRunner:
         self.optimizer.step()
         t["optimizer"] = t_zero + time.perf_counter() - t0
         t0 = time.perf_counter()
-        self.losses.append(losses["loss"].detach())
+        self.losses.append(total)
         if len(self.losses) >= self.config.log_every:
             float(torch.stack(self.losses).mean())
             self.losses.clear()
@@ -173,9 +181,9 @@ class StepRunner:
             self.steps += 1
             motion = batch["motion"]
             self.frames += float(batch["length"].sum()) if "length" in batch else float(motion.shape[0] * motion.shape[1])
-            mask = inputs.get("frame_mask")
-            self.padded += (float(mask.shape[0] * mask.shape[1] * 4) if mask is not None   # latent frames x 4
-                            else float(motion.shape[0] * motion.shape[1]))
+            masks = [part.get("frame_mask") for part in parts]
+            self.padded += (sum(float(m.shape[0] * m.shape[1] * 4) for m in masks)   # latent frames x 4
+                            if all(m is not None for m in masks) else float(motion.shape[0] * motion.shape[1]))
 
     def validation_per_step(self) -> float:
         from salad_core.train.common import validate
@@ -195,7 +203,8 @@ class StepRunner:
 def profile_denoiser_training(data_dir: Any, vae_path: Any, model_config: Any, train_config: Any, *,
                               text_encoder: Any = "minilm", steps: int = 10, warmup: int = 2,
                               cache_dir: Any = None, diffusion_config: Any = None) -> tuple[StepProfile, StepProfile]:
-    """Profile the denoiser step before (random batches, VAE per step) and after (buckets, latent cache).
+    """Profile the denoiser step before (random batches, VAE per step) and after (as configured: micro-batches
+    or buckets, latent cache).
 
     Parameters
     ----------
@@ -225,7 +234,8 @@ def profile_denoiser_training(data_dir: Any, vae_path: Any, model_config: Any, t
         return build_denoiser_task(data_dir, vae_path, model_config, config, DistEnv(), encoder, diffusion_config,
                                    cache_dir=cache_dir)
 
-    before_cfg = dataclasses.replace(train_config, batching="random", latent_cache=False, progress=False)
+    before_cfg = dataclasses.replace(train_config, batching="random", latent_cache=False, micro_batches=1,
+                                     progress=False)
     runners = [StepRunner("before", build, before_cfg),
                StepRunner("after", build, dataclasses.replace(train_config, progress=False))]
     for i in range(warmup + steps):
