@@ -48,6 +48,7 @@ eq. 7    v_t = alpha_t eps - sigma_t x                  salad_core.sampling.trai
 eq. 8    L_denoiser = ||v_hat - v||^2                   salad_core.train.denoiser_trainer.DenoiserObjective
          caption dropping with p_uncond                 salad_core.train.denoiser_trainer.prepare_denoiser_batch
 eq. 9    CFG: v_hat = v(null) + w (v(c) - v(null))      salad_core.sampling.Guidance.combine
+         the guided prediction of a step (a strategy)   salad_core.sampling.GuidedPrediction
          DDIM sampling (50 steps), the loop             salad_core.sampling.denoise
 eq. 13   scaled-linear betas (supp. A.3)                salad_core.sampling.DiffusionConfig
          schedulers and solvers                         salad_core.sampling.make_scheduler
@@ -55,6 +56,7 @@ eq. 13   scaled-linear betas (supp. A.3)                salad_core.sampling.Diff
 Algorithm 1 (zero-shot editing, supp. B), batched into one forward per step:
          the entry point                                salad_core.pipeline.SaladPipeline.edit
          the loop over both branches                    salad_core.attention.editing.edit_latents
+         their rows in one forward (a loop strategy)    salad_core.attention.editing.EditPrediction
          Edit(M_t, M*_t, t) and its stores              salad_core.attention.controller.EditController
          word swap (tau = 0.8 T)                        salad_core.attention.edits.WordSwap
          prompt refinement                              salad_core.attention.edits.Refine

@@ -15,7 +15,7 @@ The pipeline entry points are ``pipe(..., capture_attention=True)``, ``pipe.edit
 from .align import alignment_matrix, global_align, word_swap_matrix
 from .capture import AttentionMaps, AttentionStore, CaptureConfig, TokenInfo, as_capture_config, capture_cross_attention
 from .controller import EditController, RowLayout
-from .editing import EditRun, edit_latents
+from .editing import EditPrediction, EditRun, edit_latents
 from .edits import (MIRROR_GROUPS, REWEIGHT_RANGE, EditSpec, InjectSelfAttention, Mirror, Refine, Reweight, WordSwap,
                     map_columns, mirror_parts, mirror_permutation, refine_columns, reweight_columns, validate_edits)
 from .inversion import INVERSION_METHODS, Inversion, LatentInversion, ddim_step_coefficients, invert_latents
@@ -26,7 +26,7 @@ __all__ = [
     "EditSpec", "WordSwap", "Refine", "Reweight", "Mirror", "InjectSelfAttention", "validate_edits",
     "MIRROR_GROUPS", "REWEIGHT_RANGE", "mirror_parts", "mirror_permutation", "reweight_columns", "map_columns",
     "refine_columns", "global_align", "alignment_matrix", "word_swap_matrix",
-    "EditController", "RowLayout", "edit_latents", "EditRun",
+    "EditController", "RowLayout", "edit_latents", "EditRun", "EditPrediction",
     "invert_latents", "Inversion", "LatentInversion", "INVERSION_METHODS", "ddim_step_coefficients",
     "HookedProcessor", "flat_rows", "named_rows",
 ]

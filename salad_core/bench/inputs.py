@@ -12,7 +12,7 @@ from pathlib import Path
 
 import torch
 
-from salad_core.models.attention import fold_pays
+from salad_core.models.kernels import fold_pays
 from salad_core.models.denoiser import DenoiserConfig
 
 from .plan import PROMPT_TOKENS, Case
@@ -63,7 +63,7 @@ def attended_tokens(case: Case, batch: int) -> int:
 
 def folded_keys(case: Case, batch: int) -> list[int] | None:
     """Valid text keys of every row of a guided step of :func:`_random_inputs`, if sampling folds
-    the cross-attention for them (:meth:`~salad_core.models.attention.Attention.fold_text`:
+    the cross-attention for them (:func:`~salad_core.models.kernels.fold_text`:
     ``heads * keys < width`` in every row), else None."""
     (_, mask), (_, null_mask), _, _ = random_inputs(case, batch, 1)
     keys = [int(n) for n in mask.sum(1)] + [int(null_mask.sum())] * batch

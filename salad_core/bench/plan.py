@@ -20,7 +20,7 @@ SAMPLING_STEPS = 50                            # DDIM steps of the paper's sampl
 GUIDANCE = 7.5                                 # classifier-free guidance (paper default)
 #: Valid tokens of the random prompts (start/end tokens included), drawn uniformly: HumanML3D captions
 #: are about 12 words. The rest of the padded width (CLIP: 77) is masked padding, which the denoiser
-#: does not attend to (:func:`salad_core.models.attention.trim_masked_keys`).
+#: does not attend to (:func:`salad_core.models.kernels.trim_masked_keys`).
 PROMPT_TOKENS = (8, 24)
 BATCHES = (1, 32)
 SECTIONS = ("memory", "overheads", "speed", "training")

@@ -100,7 +100,7 @@ def step_products(cfg: DenoiserConfig, rows: int, frames: int, tokens: int,
     layer norm.
 
     ``fold_keys`` (valid keys of every row) gives instead the products sampling actually runs when
-    the cross-attention is folded (:class:`~salad_core.models.attention.FoldedText`): per layer and
+    the cross-attention is folded (:class:`~salad_core.models.kernels.FoldedText`): per layer and
     row ``(N'P, w) x (w, H W_b)`` and ``(N'P, H W_b) x (H W_b, w)`` in place of the cross Q/O
     projections and the cross-attention products (fewer FLOPs than :func:`step_flops`).
 

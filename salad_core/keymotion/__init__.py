@@ -13,7 +13,7 @@ from salad_core.keymotion.selection import (KEYFRAME_METHODS, interpolation_erro
 _LAZY = {
     "KeyframeVAE": "kf_vae", "KeyframeVAEConfig": "kf_vae", "indices_to_positions": "kf_vae",
     "positions_to_indices": "kf_vae", "gather_keyframes": "kf_vae",
-    "ParallelSkipTransformer": "pst", "PSTConfig": "pst", "PST_DIFFUSION": "pst", "sample_latents": "pst",
+    "ParallelSkipTransformer": "pst", "PSTConfig": "pst", "PST_DIFFUSION": "pst", "sample_latents": "pst", "PSTPrediction": "pst",
     "MotionMaskedAutoencoder": "mmae", "MMAEConfig": "mmae", "keyframe_lerp": "mmae", "scatter_keyframes": "mmae",
     "KeyMotionPipeline": "pipeline", "KeyMotionOutput": "pipeline",
     "KeyMotionTrainConfig": "train", "train_keymotion": "train", "train_kf_vae": "train", "train_pst": "train",
