@@ -11,6 +11,7 @@ animate     GIF/MP4 (side by side or overlaid), inline display in Jupyter
 export      BVH, GLB, NPY
 widgets     ipywidgets explorer (words, layers, steps, frames)
 plots       evaluation figures from result tables (the CFG sweep of SALAD Fig. 5)
+diffusion_steps  the denoising process step by step: word share of attention per step, key poses per step
 camera      the pinhole camera both backends share; kinematics: rotations from positions, FK
 synthetic   a procedural walk for demos and tests
 
@@ -34,6 +35,7 @@ from .attention import (
     word_token_ids,
 )
 from .camera import Camera, fixed_camera, follow_camera, project_points
+from .diffusion_steps import denoising_strips, plot_word_share_by_step, word_share_by_step
 from .export import export_bvh, export_glb, export_npy
 from .kinematics import forward_kinematics, rest_pose, solve_rotations
 from .plots import plot_cfg_sweep
@@ -42,6 +44,9 @@ from .render import SkeletonRenderer, keyframe_strip, offscreen_available, rende
 from .synthetic import synthetic_motion
 
 __all__ = [
+    "denoising_strips",
+    "plot_word_share_by_step",
+    "word_share_by_step",
     "animate",
     "render_frames",
     "show_animation",
