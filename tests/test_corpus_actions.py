@@ -273,9 +273,9 @@ def test_hands_stay_on_their_points_under_the_posture():
 
 def _elbows_bent_backwards(j: np.ndarray) -> int:
     """Frames with a hanging upper arm whose forearm bends backwards (the physics benchmark's rule)."""
-    from salad_core.data.procedural.checks import _chest_frames
+    from salad_core.part_activity import chest_frames
 
-    chest = _chest_frames(j, SK)
+    chest = chest_frames(j, SK)
     bad = 0
     for side in ("left", "right"):
         upper = j[:, J[f"{side}_elbow"]] - j[:, J[f"{side}_shoulder"]]

@@ -185,7 +185,7 @@ def test_kick_upper_body_counters_the_leg():
 
 
 def test_hand_wave_is_sideways_and_overhead_waving_is_wide():
-    from salad_core.data.procedural.checks import _chest_frames
+    from salad_core.part_activity import chest_frames
 
     lw, ls = SK.joint_names.index("left_wrist"), SK.joint_names.index("left_shoulder")
     for variant, side in (("", "left"), ("arms", "both")):
@@ -194,7 +194,7 @@ def test_hand_wave_is_sideways_and_overhead_waving_is_wide():
             f0, f1 = clip.events[0].frames
             j = clip.joints[f0:f1]
             # the hand about its shoulder in the chest frame (the trunk may lean with the arm)
-            w = np.einsum("nij,nj->ni", _chest_frames(j, SK), j[:, lw] - j[:, ls])
+            w = np.einsum("nij,nj->ni", chest_frames(j, SK), j[:, lw] - j[:, ls])
             mid = w[len(w) // 4: 3 * len(w) // 4]                    # while waving (not rising / lowering)
             sideways, vertical = np.ptp(mid[:, 0]), np.ptp(mid[:, 1])
             if variant == "":

@@ -11,18 +11,20 @@ reference frame so that it says what the part itself does:
 * legs and spine: joints relative to the pelvis, in the heading frame of the hips;
 * arms and head: joints relative to spine3, in the chest frame (the collars), so that bending
   the trunk does not count as arm motion.
+
+The part speeds live in :mod:`salad_core.part_activity` (shared with the attention measures) and
+are re-exported here.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ...part_activity import YAW_LEVER, heading_frames, part_activity, part_speeds
 from ...skeleton import PART_NAMES, Skeleton, get_skeleton
 
 __all__ = ["bone_length_error", "foot_sliding", "part_speeds", "part_activity", "joint_angles",
            "phrase_activity", "YAW_LEVER", "CONTACT_HEIGHTS"]
 
-#: Lever arm (m) that turns the root's yaw rate into a speed.
-YAW_LEVER = 0.5
 #: Height (m) below which an (ankle, toe) joint counts as touching the floor (clip floored to 0).
 CONTACT_HEIGHTS = (0.08, 0.035)
 
@@ -63,67 +65,6 @@ def foot_sliding(joints: np.ndarray, skeleton: str | Skeleton = "humanml3d",
             "p95": float(np.percentile(v, 95)) if v.size else 0.0}
 
 
-def _heading_frames(joints: np.ndarray, sk: Skeleton) -> np.ndarray:
-    """``(N, 3, 3)`` rows = (left, up, forward) of the hips' heading."""
-    across = joints[:, _idx(sk, "left_hip")] - joints[:, _idx(sk, "right_hip")]
-    across[:, 1] = 0.0
-    across /= np.maximum(np.linalg.norm(across, axis=-1, keepdims=True), 1e-9)
-    up = np.broadcast_to(np.array([0.0, 1.0, 0.0]), across.shape)
-    fwd = np.cross(across, up)
-    return np.stack([across, up, fwd], 1)
-
-
-def _chest_frames(joints: np.ndarray, sk: Skeleton) -> np.ndarray:
-    """``(N, 3, 3)`` rows = (left, up, forward) of the chest, from spine3 and the collars."""
-    lc, rc = joints[:, _idx(sk, "left_collar")], joints[:, _idx(sk, "right_collar")]
-    x = lc - rc
-    x /= np.maximum(np.linalg.norm(x, axis=-1, keepdims=True), 1e-9)
-    up = 0.5 * (lc + rc) - joints[:, _idx(sk, "spine3")]
-    z = np.cross(x, up)
-    z /= np.maximum(np.linalg.norm(z, axis=-1, keepdims=True), 1e-9)
-    y = np.cross(z, x)
-    return np.stack([x, y, z], 1)
-
-
-def part_speeds(joints: np.ndarray, skeleton: str | Skeleton = "humanml3d") -> np.ndarray:
-    """``(N-1, P)`` speed (m/s) of each body part's fastest joint per frame (see module doc)."""
-    sk = get_skeleton(skeleton)
-    joints = np.asarray(joints, dtype=np.float64)
-    fps = sk.fps
-    n = joints.shape[0]
-    pelvis = joints[:, 0]
-    head = _heading_frames(joints, sk)
-    chest = _chest_frames(joints, sk)
-    in_pelvis = np.einsum("nij,nkj->nki", head, joints - pelvis[:, None])
-    anchor = joints[:, _idx(sk, "spine3")]
-    in_chest = np.einsum("nij,nkj->nki", chest, joints - anchor[:, None])
-    out = np.zeros((n - 1, len(PART_NAMES)))
-    for p, name in enumerate(PART_NAMES):
-        members = [j for j, q in enumerate(sk.joint_to_part) if q == p]
-        if name == "root":
-            lin = np.linalg.norm(np.diff(pelvis, axis=0), axis=-1) * fps
-            yaw = np.arctan2(head[:, 2, 0], head[:, 2, 2])
-            dyaw = np.abs((np.diff(yaw) + np.pi) % (2 * np.pi) - np.pi) * fps
-            out[:, p] = lin + YAW_LEVER * dyaw
-            continue
-        local = in_chest if name in ("left arm", "right arm", "head") else in_pelvis
-        sp = np.linalg.norm(np.diff(local[:, members], axis=0), axis=-1) * fps      # (N-1, m)
-        out[:, p] = sp.max(-1)
-    return out
-
-
-def part_activity(joints: np.ndarray, frames: tuple[int, int] | None = None,
-                  skeleton: str | Skeleton = "humanml3d", speeds: np.ndarray | None = None) -> np.ndarray:
-    """``(P,)`` mean part speed over frames ``[f0, f1)`` (all frames by default)."""
-    s = part_speeds(joints, skeleton) if speeds is None else speeds
-    if frames is None:
-        return s.mean(0)
-    f0, f1 = int(frames[0]), min(int(frames[1]), s.shape[0])
-    if f1 <= f0:
-        return np.zeros(s.shape[1])
-    return s[f0:f1].mean(0)
-
-
 def joint_angles(joints: np.ndarray, skeleton: str | Skeleton = "humanml3d") -> dict[str, np.ndarray]:
     """Knee and elbow flexion (0 = straight), ankle angle (shin to foot) and knee bend sense.
 
@@ -139,7 +80,7 @@ def joint_angles(joints: np.ndarray, skeleton: str | Skeleton = "humanml3d") -> 
         cos = (u * v).sum(-1) / np.maximum(np.linalg.norm(u, axis=-1) * np.linalg.norm(v, axis=-1), 1e-9)
         return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
-    heading = _heading_frames(joints, sk)
+    heading = heading_frames(joints, sk)
     out = {"knee": [], "elbow": [], "ankle": [], "knee_bend": []}
     for side in ("left", "right"):
         hip, knee, ankle, toe = (j[f"{side}_{n}"] for n in ("hip", "knee", "ankle", "foot"))

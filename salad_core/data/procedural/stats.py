@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...part_activity import heading_frames
 from ...skeleton import Skeleton, get_skeleton
 from ..texts import split_words
 from .checks import CONTACT_HEIGHTS, foot_sliding
@@ -91,22 +92,11 @@ def body_speed(joints: np.ndarray, fps: float = 20.0) -> np.ndarray:
     return np.linalg.norm(np.diff(joints, axis=0), axis=-1).mean(-1) * fps
 
 
-def _heading_rotation(joints: np.ndarray, sk: Skeleton) -> np.ndarray:
-    """``(N, 3, 3)`` rotations taking world vectors to the hips' heading frame (x left, y up, z fwd)."""
-    lh, rh = sk.joint_names.index("left_hip"), sk.joint_names.index("right_hip")
-    across = joints[:, lh] - joints[:, rh]
-    across[:, 1] = 0.0
-    across /= np.maximum(np.linalg.norm(across, axis=-1, keepdims=True), 1e-9)
-    up = np.broadcast_to(np.array([0.0, 1.0, 0.0]), across.shape)
-    fwd = np.cross(across, up)
-    return np.stack([across, up, fwd], 1)
-
-
 def canonical_pose(joints: np.ndarray, skeleton: str | Skeleton = "humanml3d") -> np.ndarray:
     """``(N, J, 3)`` joints relative to the pelvis in the hips' heading frame (x left, z forward)."""
     sk = get_skeleton(skeleton)
     joints = np.asarray(joints, dtype=np.float64)
-    rot = _heading_rotation(joints, sk)
+    rot = heading_frames(joints, sk)     # world -> hips heading (x left, y up, z forward)
     return np.einsum("nij,nkj->nki", rot, joints - joints[:, :1])
 
 
