@@ -13,6 +13,13 @@ no better than it under load. So the default (``auto``) decides once, at import:
 1-minute load average is at least 3/4 of the cores (other work is running), the runtime's spinning
 default otherwise.
 
+Training runs are the exception: they last hours, and a machine quiet when one starts rarely stays
+quiet. A 2-thread VAE trainer started on a quiet machine (spinning workers) fell from 1.6 to 0.05
+steps/s once other CPU-bound work arrived, while the passive policy costs a training step nothing on a
+quiet machine (VAE step at 2 threads, ``bench/bench_training.py --threads-ab --what vae``, load 1.5:
+473 ms passive against 476 ms spinning). So ``auto`` is passive for a training command
+(``python -m salad_core.train``, ``torchrun -m salad_core.train``, ``salad train``) whatever the load.
+
 libgomp reads these variables once, when the library is loaded (that is, when ``torch`` is first
 imported), so :func:`configure` must run before that: ``import salad_core`` does it, and it is a
 no-op when torch (libgomp) is already loaded, when the user set ``OMP_WAIT_POLICY`` or
@@ -58,8 +65,26 @@ def _busy(load: float | None, cores: int | None) -> bool:
     return load >= BUSY_SHARE * cores
 
 
+def _is_training_command(argv: list[str] | None = None) -> bool:
+    """Whether this process was started as a training run (the module or the ``salad train`` verb).
+
+    ``sys.orig_argv`` keeps the interpreter's own arguments (``-m salad_core.train``), which
+    ``sys.argv`` does not show while the package is being imported.
+    """
+    argv = list(getattr(sys, "orig_argv", sys.argv)) if argv is None else list(argv)
+    for i, arg in enumerate(argv):
+        if arg == "-m" and i + 1 < len(argv) and argv[i + 1].startswith("salad_core.train"):
+            return True
+        if arg.startswith("-msalad_core.train"):
+            return True
+    for i, arg in enumerate(argv[:-1]):
+        if os.path.basename(arg) == "salad" and argv[i + 1] == "train":
+            return True
+    return False
+
+
 def configure(environ: dict[str, str] | None = None, *, load: float | None = None,
-              cores: int | None = None) -> str:
+              cores: int | None = None, argv: list[str] | None = None) -> str:
     """Set ``OMP_WAIT_POLICY`` for this process if nothing chose one yet; returns the policy in force.
 
     Parameters
@@ -68,6 +93,8 @@ def configure(environ: dict[str, str] | None = None, *, load: float | None = Non
         The environment to read and change (default ``os.environ``; tests pass a dict).
     load, cores : optional
         The 1-minute load average and the core count ``auto`` compares (default: this machine's).
+    argv : list of str, optional
+        The command line ``auto`` reads to recognise a training run (default ``sys.orig_argv``).
 
     Returns
     -------
@@ -80,11 +107,12 @@ def configure(environ: dict[str, str] | None = None, *, load: float | None = Non
     if choice not in ("auto", "passive", "active", "keep"):
         raise ValueError(f"{ENV_VAR}={env.get(ENV_VAR)!r}; allowed: auto, passive, active, keep")
     user = [f"{k}={env[k]}" for k in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT") if k in env]
+    training = choice == "auto" and _is_training_command(argv)
     if user:
         policy, reason = "user: " + ", ".join(user), "set in the environment"
     elif choice == "keep":
         policy, reason = "runtime default", f"{ENV_VAR}=keep"
-    elif choice == "auto" and not _busy(load, cores):
+    elif choice == "auto" and not training and not _busy(load, cores):
         policy, reason = "runtime default", "auto: the machine was not busy at import"
     elif environ is None and _openmp_loaded():
         policy, reason = "runtime default", "torch was imported before salad_core"
@@ -92,8 +120,8 @@ def configure(environ: dict[str, str] | None = None, *, load: float | None = Non
         chosen = "passive" if choice == "auto" else choice
         env["OMP_WAIT_POLICY"] = chosen.upper()
         policy = chosen
-        reason = ("auto: the machine was busy at import; " if choice == "auto" else "") + \
-            "set by salad_core before torch loaded"
+        why = "a training run; " if training else "the machine was busy at import; "
+        reason = (f"auto: {why}" if choice == "auto" else "") + "set by salad_core before torch loaded"
     if environ is None:
         _state.update(policy=policy, reason=reason)
     return policy

@@ -50,6 +50,7 @@ from torch import nn
 from torch.utils.data import DataLoader, Dataset, DistributedSampler, Sampler
 
 from salad_core.io import atomic_write_text, config_to_dict, load_state_into, save_checkpoint, save_tensors
+from salad_core.openmp import wait_policy
 
 from .config import RESUME_MUTABLE_FIELDS, TrainConfig
 from .distributed import (
@@ -530,8 +531,9 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
     t_log, steps_at_log = t_start, step
     frames_this_call, frames_at_log = 0, 0
     if env.is_main:
-        log.info("training %s on %s: %d torch thread(s)%s, %s batches of %d, %d process(es)", task.model_type,
-                 env.device, torch.get_num_threads(), "" if env.device.startswith("cuda") else " per process",
+        log.info("training %s on %s: %d torch thread(s)%s (OpenMP wait: %s), %s batches of %d, %d process(es)",
+                 task.model_type, env.device, torch.get_num_threads(),
+                 "" if env.device.startswith("cuda") else " per process", wait_policy(),
                  _runtime(task, config)["batching"], config.batch_size, env.world_size)
     steps_this_call = 0
     aux_seconds = 0.0  # validation and checkpoint time, left out of the reported speed

@@ -64,7 +64,7 @@ class TrainConfig:
     log_every: int = 10                        # log (log.jsonl, progress bar) every K steps
     seed: int = 1234                           # seeds model init, data order and the noise/cond-drop stream
     num_workers: int = 0                       # DataLoader worker processes per rank
-    num_threads: int = 0                       # torch CPU threads per rank (0: cores / local ranks; use 1 on a busy machine)
+    num_threads: int = 0                       # torch CPU threads per rank (0: cores / local ranks: 1.49-1.63x over 1 on 2 quiet cores)
     device: str = "auto"                       # "auto" (cuda if available), "cpu", "cuda"
     progress: bool = True                      # tqdm progress bar on rank 0
     batching: str = "buckets"                  # "buckets": length-sorted pools (tasks that declare item lengths,
