@@ -113,7 +113,7 @@ def test_default_config_file_parses_into_three_stages():
         train = getattr(recipe, f"{stage}_train")
         assert isinstance(train, KeyMotionTrainConfig)
         assert train.max_steps == doc[stage]["train"]["max_steps"]        # stage field
-        assert train.num_threads == 1 and train.seed == doc["train"]["seed"]  # shared field
+        assert train.num_threads == doc["train"]["num_threads"] and train.seed == doc["train"]["seed"]  # shared
         model = getattr(recipe, f"{stage}_model")
         assert {k: getattr(model, k) for k in doc[stage]["model"]} == doc[stage]["model"]
     # the PST denoises the VAE's latents, the text stages read MiniLM's 384-d features
