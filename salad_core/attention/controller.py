@@ -136,8 +136,8 @@ class EditController:
             bad = [b for b in range(self.batch) if not self.same_prompt[b]]
             raise ValueError(
                 f"pairs {bad} have a target prompt different from the source (e.g. {target.prompts[bad[0]]!r} vs "
-                f"{source.prompts[bad[0]]!r}) but no WordSwap or Refine: re-weighting and mirroring modulate the "
-                "source's own maps (paper supplement B), so give the same prompt or add Refine() first")
+                f"{source.prompts[bad[0]]!r}) but no WordSwap or Refine: re-weighting, mirroring, erasing and shifting "
+                "modulate the source's own maps (paper supplement B), so give the same prompt or add Refine() first")
         # every spec looks up what it needs in the prompts once; the modifiers edit the maps of the
         # target after a replacement, else the source's own
         maps_of = target if self.replacement is not None else source

@@ -12,7 +12,9 @@ editing, and :func:`edit_latents` joins the two. Per step ``i`` with timestep ``
 4. the loop's one ``scheduler.step`` on the stacked latents ``[z (B); z* (B)]`` (so multistep
    solvers keep one consistent state), optional per-step corrections (exact inversion), re-masking.
 
-Both branches start from the same noise (Algorithm 1 line 4). The same strategy also
+Both branches start from the same noise (Algorithm 1 line 4), except when an edit gives the edited
+sample its own (:class:`~salad_core.attention.edits.ExampleBased`: variations of an example, drawn by
+:func:`~salad_core.attention.edits.seeded_noise`). The same strategy also
 reconstructs an inverted motion (``edited=False``: source rows only) with per-step null texts
 (null-text inversion) and per-step corrections.
 """
@@ -31,6 +33,7 @@ from salad_core.models.denoiser import Denoiser, TextContext
 from salad_core.sampling import Guidance, StepInfo, as_guidance, denoise
 
 from .controller import EditController, RowLayout
+from .edits import seeded_noise
 from .processor import HookedProcessor
 
 __all__ = ["EditRun", "EditPrediction", "edit_latents", "pad_context"]
@@ -46,6 +49,7 @@ class EditRun:
     edited: torch.Tensor | None     # (B, N', P, Dz) final edited latents (None if edited=False)
     rows: int                       # forward rows summed over the steps (plain CFG generation: 2 B S)
     probe_steps: int                # steps that ran probe rows
+    edited_noise: torch.Tensor | None = None   # (B, N', P, Dz) the edited sample's own noise, if not the source's
 
 
 def pad_context(ctx: TextContext, width: int) -> TextContext:
@@ -191,7 +195,7 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
                  noise: torch.Tensor, frame_mask: torch.Tensor | None = None,
                  guidance_scale: "float | Guidance" = 7.5,
                  num_steps: int = 50, corrections: torch.Tensor | None = None, progress: bool = False,
-                 generator: torch.Generator | None = None) -> EditRun:
+                 generator: torch.Generator | None = None, edited_noise: torch.Tensor | None = None) -> EditRun:
     """Sample the source and the edited motion latents together (see the module docstring).
 
     Parameters
@@ -215,7 +219,12 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
         interval still runs the unconditional rows at every step here; outside the interval their
         output is not used, so source and edit follow the plain sampler's guided prediction).
     corrections : torch.Tensor, optional
-        ``(S, B, N', P, Dz)`` added to both branches after step ``i`` (exact inversion).
+        ``(S, B, N', P, Dz)`` added to both branches after step ``i`` (exact inversion); only to the
+        source when the edited sample has its own noise (they belong to the source's trajectory).
+    edited_noise : torch.Tensor, optional
+        ``(B, N', P, Dz)`` the edited sample's own initial noise. Default: the source's ``noise``, or,
+        when an edit asks for its own (:attr:`EditSpec.edited_seed
+        <salad_core.attention.edits.EditSpec.edited_seed>`), :func:`seeded_noise` of that seed.
 
     Returns
     -------
@@ -236,10 +245,23 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
     prediction = EditPrediction(denoiser, controller, source=source, target=target, null=null,
                                 frame_mask=frame_mask, guidance=guidance_scale, num_steps=num_steps)
     k = prediction.branches
-    # both branches start from the same noise (Algorithm 1, line 4) and take the same corrections
-    z = denoise(denoiser, scheduler, latents=torch.cat([noise] * k), frame_mask=frame_mask.repeat(k, 1),
+    seeds = [e.edited_seed for e in controller.edits if e.edited_seed is not None]
+    if edited_noise is None and seeds and prediction.edited:
+        edited_noise = seeded_noise(seeds[0], noise.shape).to(noise)
+    elif edited_noise is not None and tuple(edited_noise.shape) != tuple(noise.shape):
+        raise ValueError(f"edited_noise must have the noise's shape {tuple(noise.shape)}, got "
+                         f"{tuple(edited_noise.shape)}")
+    own_noise = edited_noise is not None and prediction.edited
+    # both branches start from the same noise (Algorithm 1, line 4) and take the same corrections,
+    # unless the edited sample has its own noise: then the corrections are the source's alone
+    latents = torch.cat([noise, edited_noise.to(noise)]) if own_noise else torch.cat([noise] * k)
+    if corrections is not None:
+        corrections = (torch.cat([corrections, torch.zeros_like(corrections)], 1) if own_noise
+                       else corrections.repeat(1, k, 1, 1, 1))
+    z = denoise(denoiser, scheduler, latents=latents, frame_mask=frame_mask.repeat(k, 1),
                 num_steps=num_steps, prediction=prediction, progress=progress, generator=generator,
-                corrections=None if corrections is None else corrections.repeat(1, k, 1, 1, 1))
+                corrections=corrections)
     log.debug("edit loop: %d steps, %d forward rows, %d probe steps", num_steps, controller.rows_total,
               controller.probe_steps)
-    return EditRun(z[:b], z[b:] if prediction.edited else None, controller.rows_total, controller.probe_steps)
+    return EditRun(z[:b], z[b:] if prediction.edited else None, controller.rows_total, controller.probe_steps,
+                   edited_noise if own_noise else None)

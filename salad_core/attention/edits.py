@@ -17,8 +17,20 @@ fractions ``p = i / S`` of the sampling steps (the official code's ``p``; step 0
                             self-attention for an early window (official default 0.2)
 ==========================  ================================================================
 
+Edits beyond the paper (MotionCLR, Chen et al. 2024, describes what they mean; written here for
+SALAD's 7-part x frame x word maps):
+
+==========================  ================================================================
+:class:`Erase`              remove a phrase: its token columns lose their mass (given to the
+                            prompt's other words, to the special tokens, or to nobody)
+:class:`Shift`              move a phrase in time: its columns slide ``frames / unit_length``
+                            latent frames along the frame axis
+:class:`ExampleBased`       variations of an example: the edited sample starts from its own
+                            noise and takes the example's temporal self-attention early on
+==========================  ================================================================
+
 Specs compose in order, Prompt-to-Prompt style: at most one *replacement* (WordSwap or Refine)
-builds the base map from ``M`` and ``M*``; *modifiers* (Reweight, Mirror) then change the map in
+builds the base map from ``M`` and ``M*``; *modifiers* (Reweight, Mirror, Erase, Shift) change the map in
 the order given; with no replacement the base is the source's own map ``M`` (paper: reweighting
 and mirroring modulate ``M_t``), which needs the target to be the source prompt.
 
@@ -52,6 +64,10 @@ __all__ = [
     "Reweight",
     "Mirror",
     "InjectSelfAttention",
+    "Erase",
+    "Shift",
+    "ExampleBased",
+    "ERASE_MODES",
     "MIRROR_GROUPS",
     "REWEIGHT_RANGE",
     "mirror_permutation",
@@ -59,6 +75,9 @@ __all__ = [
     "reweight_columns",
     "map_columns",
     "refine_columns",
+    "erase_columns",
+    "shift_columns",
+    "seeded_noise",
     "validate_edits",
 ]
 
@@ -73,6 +92,10 @@ MIRROR_GROUPS: dict[str, tuple[str, ...]] = {
 _SELF_KINDS = ("temporal", "skeletal")
 #: Axis of the body parts in the cross maps the controller edits, ``(B, H, N', P, W)``.
 _PART_AXIS = 3
+#: Axis of the latent frames in those maps.
+_FRAME_AXIS = 2
+#: Where :class:`Erase` puts the mass it takes from the phrase's columns (see :func:`erase_columns`).
+ERASE_MODES: tuple[str, ...] = ("others", "special", "zero")
 
 #: ``kernel(maps, own) -> maps``: a bound edit (:meth:`EditSpec.bind`). ``maps`` ``(B, H, N', P, W)``
 #: are the maps it edits (the source's for a replacement, the base built so far for a modifier, the
@@ -90,6 +113,48 @@ def _window(value, name: str) -> tuple[float, float]:
         raise ValueError(f"{name}={value!r} must satisfy 0 <= start < stop <= 1 (fractions i/S of the "
                          "sampling steps; step 0 is the noisiest)")
     return start, stop
+
+
+def _is_span(value) -> bool:
+    return (isinstance(value, (tuple, list)) and len(value) == 2
+            and all(isinstance(v, int) and not isinstance(v, bool) for v in value))
+
+
+def _phrases(value, name: str) -> tuple[Union[str, tuple[int, int]], ...]:
+    """Words of an edit: a word or phrase, a ``(start, stop)`` word span, or a sequence of those."""
+    items = (value,) if isinstance(value, str) or _is_span(value) else value
+    try:
+        items = tuple(items)
+    except TypeError:
+        raise TypeError(f"{name}={value!r} must be a word or phrase, a (start, stop) word span, or a sequence of "
+                        "those") from None
+    out: list[Union[str, tuple[int, int]]] = []
+    for item in items:
+        if isinstance(item, str) and split_words(item):
+            out.append(" ".join(split_words(item)))
+        elif _is_span(item) and 0 <= item[0] < item[1]:
+            out.append((int(item[0]), int(item[1])))
+        else:
+            raise ValueError(f"{name}={value!r}: {item!r} is neither a word or phrase (with at least one letter) "
+                             "nor a (start, stop) word span with 0 <= start < stop")
+    if not out:
+        raise ValueError(f"{name}={value!r} is empty; name at least one word, phrase or word span")
+    return tuple(out)
+
+
+def _phrase_columns(maps_of: "TokenInfo", words, kind: str) -> list[list[int]]:
+    """Per prompt of ``maps_of``, the sorted token columns of ``words`` (errors list the prompt's words)."""
+    columns = []
+    for b in range(len(maps_of)):
+        cols: set[int] = set()
+        for word in words:
+            try:
+                cols.update(maps_of.word_columns(b, word))
+            except (ValueError, IndexError):
+                raise ValueError(f"{kind} word {word!r} is not in the prompt {maps_of.prompts[b]!r}; "
+                                 f"its words are {maps_of.words[b]}") from None
+        columns.append(sorted(cols))
+    return columns
 
 
 @dataclass(frozen=True)
@@ -113,6 +178,12 @@ class EditSpec:
     @property
     def window(self) -> tuple[float, float]:  # pragma: no cover - every subclass defines it
         raise NotImplementedError
+
+    @property
+    def edited_seed(self) -> int | None:
+        """Noise seed of the edited sample when it must not share the source's noise (None: it
+        shares it, Algorithm 1 line 4; :class:`ExampleBased` sets one)."""
+        return None
 
     @property
     def replaces(self) -> bool:
@@ -238,16 +309,7 @@ class Reweight(EditSpec):
 
     def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
         """:func:`reweight_columns` of the words' token columns in each prompt of ``maps_of``."""
-        columns = []
-        for b in range(len(maps_of)):
-            cols: list[int] = []
-            for word in self.words:
-                try:
-                    cols += maps_of.word_columns(b, word)
-                except ValueError:
-                    raise ValueError(f"Reweight word {word!r} is not in the prompt {maps_of.prompts[b]!r}; "
-                                     f"its words are {maps_of.words[b]}") from None
-            columns.append(cols)
+        columns = _phrase_columns(maps_of, self.words, "Reweight")
         return lambda maps, own: reweight_columns(maps, columns, self.scale, per_row=True)
 
 
@@ -313,6 +375,141 @@ class InjectSelfAttention(EditSpec):
         return lambda maps, own: maps
 
 
+@dataclass(frozen=True)
+class Erase(EditSpec):
+    """Erase a phrase (MotionCLR's erasing): its token columns lose all their attention.
+
+    ``words`` is a word or phrase ("waves his right hand"), a ``(start, stop)`` word span (the
+    corpus annotations' spans) or a sequence of those, looked up in the prompt whose maps are
+    edited. ``mode`` says where the removed mass goes (:func:`erase_columns`): ``"others"``
+    (default) re-normalises every (part, frame) over the prompt's remaining tokens, so the parts
+    follow the other words there; ``"special"`` gives it to the special tokens (``[CLS]``,
+    ``[SEP]``), which carry the sentence but no word of their own; ``"zero"`` drops it, which is
+    ``Reweight(words, 0)``. The default was chosen by ``scripts/measure_new_edits.py``.
+    """
+
+    words: Union[str, tuple, Sequence] = ()   # word(s), phrase(s) or (start, stop) word span(s)
+    mode: str = "others"                       # where the removed mass goes: "others", "special", "zero"
+    steps: tuple[float, float] = (0.0, 1.0)   # window of step fractions
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "words", _phrases(self.words, "Erase.words"))
+        if self.mode not in ERASE_MODES:
+            raise ValueError(f"Erase.mode={self.mode!r}; allowed: {ERASE_MODES}")
+        object.__setattr__(self, "steps", _window(self.steps, "Erase.steps"))
+
+    @property
+    def window(self) -> tuple[float, float]:
+        return self.steps
+
+    def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
+        """:func:`erase_columns` of the phrase's columns in each prompt of ``maps_of``."""
+        columns = _phrase_columns(maps_of, self.words, "Erase")
+        keep = [[j for j in range(len(maps_of.tokens[b])) if j not in set(columns[b])] for b in range(len(maps_of))]
+        special = [[j for j, w in enumerate(maps_of.token_to_word[b]) if w is None and j not in set(columns[b])]
+                   for b in range(len(maps_of))]
+        receivers = {"others": keep, "special": special, "zero": None}[self.mode]
+        if receivers is not None and not all(receivers):
+            bad = next(b for b in range(len(maps_of)) if not receivers[b])
+            raise ValueError(f"Erase(mode={self.mode!r}) has no token left to take the mass in prompt "
+                             f"{maps_of.prompts[bad]!r}; use mode='zero' or erase fewer words")
+        return lambda maps, own: erase_columns(maps, columns, receivers)
+
+
+@dataclass(frozen=True)
+class Shift(EditSpec):
+    """Move a phrase in time (MotionCLR's sequence shifting, on the cross-attention):
+    ``M_hat[..., t, :, k] = M[..., t - n, :, k]`` for the phrase's token columns ``k``.
+
+    ``frames`` is the shift in motion frames (positive: later); one latent frame covers
+    ``unit_length`` motion frames (4 for HumanML3D and KIT-ML, 0.2 s at 20 fps), so ``frames`` must be
+    a multiple of it and the maps move by ``n = frames / unit_length`` latent frames. Frames the phrase
+    leaves get none of its attention; what slides past either end is dropped. With ``keep_sums``
+    (default) the other columns of each (part, frame) are rescaled so that its total attention is
+    what it was, i.e. the phrase's mass is exchanged with the other words' (see :func:`shift_columns`).
+    """
+
+    words: Union[str, tuple, Sequence] = ()   # word(s), phrase(s) or (start, stop) word span(s)
+    frames: int = 0                            # shift in motion frames (positive: later)
+    unit_length: int = 4                       # motion frames per latent frame
+    keep_sums: bool = True                     # rescale the other columns to keep each row's total
+    steps: tuple[float, float] = (0.0, 1.0)   # window of step fractions
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "words", _phrases(self.words, "Shift.words"))
+        for name in ("frames", "unit_length"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise TypeError(f"Shift.{name} must be an int, got {value!r}")
+        if self.unit_length < 1:
+            raise ValueError(f"Shift.unit_length={self.unit_length!r} must be a positive number of motion frames")
+        if self.frames % self.unit_length:
+            lo = self.frames - self.frames % self.unit_length
+            raise ValueError(f"Shift.frames={self.frames} is not a multiple of unit_length={self.unit_length} "
+                             f"(one latent frame); use {lo} or {lo + self.unit_length}")
+        if not isinstance(self.keep_sums, bool):
+            raise TypeError(f"Shift.keep_sums must be a bool, got {self.keep_sums!r}")
+        object.__setattr__(self, "steps", _window(self.steps, "Shift.steps"))
+
+    @property
+    def latent_frames(self) -> int:
+        """The shift in latent frames, ``frames / unit_length``."""
+        return self.frames // self.unit_length
+
+    @property
+    def window(self) -> tuple[float, float]:
+        return self.steps
+
+    def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
+        """:func:`shift_columns` of the phrase's columns in each prompt of ``maps_of``."""
+        columns = _phrase_columns(maps_of, self.words, "Shift")
+        return lambda maps, own: shift_columns(maps, columns, self.latent_frames, keep_sums=self.keep_sums)
+
+
+@dataclass(frozen=True)
+class ExampleBased(EditSpec):
+    """Variations of an example motion (MotionCLR's example-based generation).
+
+    The source branch is the example (usually an inverted motion: ``pipe.edit(inversion=inv,
+    edits=[ExampleBased(seed=1)])``); the edited sample starts from its *own* noise, drawn from
+    ``seed`` (sample ``b``: ``seed + b``, the noise ``pipe(..., seed=seed)`` would use), and during
+    ``steps`` its temporal self-attention (each part's frame-to-frame map) is the example's. The
+    example's timing and structure then drive new content: similar yet not the same motion.
+    Outside the window, or with a window that holds no step, it is plain sampling from ``seed``.
+    """
+
+    role: ClassVar[str] = "inject"
+
+    seed: int = 1                                      # noise seed of the variation
+    steps: tuple[float, float] = (0.0, 0.5)           # window of step fractions with the example's maps
+    kinds: tuple[str, ...] = ("temporal",)            # which self-attention of the example to use
+
+    def __post_init__(self) -> None:
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2 ** 63:
+            raise ValueError(f"ExampleBased.seed={self.seed!r} must be an int in 0..2**63-1")
+        object.__setattr__(self, "steps", _window(self.steps, "ExampleBased.steps"))
+        kinds = (self.kinds,) if isinstance(self.kinds, str) else tuple(self.kinds)
+        if not kinds or any(k not in _SELF_KINDS for k in kinds) or len(set(kinds)) != len(kinds):
+            raise ValueError(f"ExampleBased.kinds={self.kinds!r} must be distinct entries of {_SELF_KINDS}")
+        object.__setattr__(self, "kinds", kinds)
+
+    @property
+    def window(self) -> tuple[float, float]:
+        return self.steps
+
+    @property
+    def site_kinds(self) -> tuple[str, ...]:
+        return self.kinds
+
+    @property
+    def edited_seed(self) -> int | None:
+        return self.seed
+
+    def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
+        """The example's self-attention maps, as they are, for the edited rows."""
+        return lambda maps, own: maps
+
+
 def validate_edits(edits: EditSpec | Sequence[EditSpec] | None) -> tuple[EditSpec, ...]:
     """A spec or a sequence of specs -> a validated tuple (at most one replacement, first)."""
     if edits is None:
@@ -321,17 +518,21 @@ def validate_edits(edits: EditSpec | Sequence[EditSpec] | None) -> tuple[EditSpe
         edits = (edits,)
     if isinstance(edits, (str, bytes)) or not isinstance(edits, Sequence):
         raise TypeError(f"edits must be an EditSpec or a sequence of them (WordSwap, Refine, Reweight, Mirror, "
-                        f"InjectSelfAttention), got {type(edits).__name__}")
+                        f"InjectSelfAttention, Erase, Shift, ExampleBased), got {type(edits).__name__}")
     out = tuple(edits)
     for i, e in enumerate(out):
         if not isinstance(e, EditSpec) or type(e) is EditSpec:
-            raise TypeError(f"edits[{i}] must be WordSwap, Refine, Reweight, Mirror or InjectSelfAttention, got {e!r}")
+            raise TypeError(f"edits[{i}] must be WordSwap, Refine, Reweight, Mirror or InjectSelfAttention (or Erase, "
+                            f"Shift, ExampleBased), got {e!r}")
+    seeded = [e for e in out if e.edited_seed is not None]
+    if len(seeded) > 1:
+        raise ValueError(f"at most one edit may give the edited sample its own noise, got {seeded}")
     replacements = [e for e in out if e.role == "replace"]
     if len(replacements) > 1:
         raise ValueError(f"at most one replacement edit (WordSwap or Refine) per edit, got {replacements}")
     if replacements and any(e.role == "modify" for e in out[:out.index(replacements[0])]):
         raise ValueError("the replacement edit (WordSwap or Refine) must come before the modifiers "
-                         "(Reweight, Mirror): it builds the map they modify")
+                         "(Reweight, Mirror, Erase, Shift): it builds the map they modify")
     return out
 
 
@@ -394,3 +595,87 @@ def refine_columns(source: torch.Tensor, target: torch.Tensor, mapping: torch.Te
     gathered = torch.gather(source, -1, idx[:, None, None, None, :].expand(r, h, n, p, idx.shape[1]))
     keep = (mapping >= 0).to(source.device)[:, None, None, None, :]
     return torch.where(keep, gathered, target)
+
+
+def erase_columns(maps: torch.Tensor, columns: Sequence[Sequence[int]],
+                  receivers: Sequence[Sequence[int]] | None = None) -> torch.Tensor:
+    """Take all attention from the token ``columns`` of each map; a new tensor.
+
+    ``maps`` ``(R, ..., W)``: one entry of ``columns`` (and of ``receivers``) per leading row. The mass
+    removed from each query (each (part, frame) of the cross maps) goes to the ``receivers`` columns in
+    proportion to what they hold (so a probability row stays a probability row), or, where they hold
+    nothing, equally to them; ``receivers=None`` drops it (``reweight_columns(maps, columns, 0)``).
+    """
+    if len(columns) != maps.shape[0] or (receivers is not None and len(receivers) != maps.shape[0]):
+        raise ValueError(f"erase_columns needs one column list per map ({maps.shape[0]}), got {len(columns)}"
+                         + ("" if receivers is None else f" and {len(receivers)} receiver lists"))
+    w = maps.shape[-1]
+    view = (maps.shape[0], *(1,) * (maps.dim() - 2), w)
+    gone = torch.zeros(maps.shape[0], w, dtype=torch.bool, device=maps.device)
+    for r, cols in enumerate(columns):
+        gone[r, torch.as_tensor(list(cols), dtype=torch.long, device=maps.device)] = True
+    out = maps.masked_fill(gone.view(view), 0.0)
+    if receivers is None:
+        return out
+    take = torch.zeros(maps.shape[0], w, dtype=maps.dtype, device=maps.device)
+    for r, cols in enumerate(receivers):
+        take[r, torch.as_tensor(list(cols), dtype=torch.long, device=maps.device)] = 1.0
+    take = take.view(view)
+    removed = (maps - out).sum(-1, keepdim=True)                     # (R, ..., 1)
+    held = (out * take).sum(-1, keepdim=True)
+    # where the receivers hold some mass, add in proportion to it; else share it equally
+    share = torch.where(held > 1e-12, out * take / held.clamp_min(1e-12), take / take.sum(-1, keepdim=True))
+    return out + removed * share
+
+
+def shift_columns(maps: torch.Tensor, columns: Sequence[Sequence[int]], shift: int, *,
+                  frame_axis: int = _FRAME_AXIS, keep_sums: bool = True) -> torch.Tensor:
+    """Slide the token ``columns`` of each map by ``shift`` steps along ``frame_axis``; a new tensor.
+
+    ``maps`` ``(R, ..., W)`` (cross maps ``(R, H, N', P, W)``: ``frame_axis`` 2), one column list per
+    leading row: ``out[..., t, ..., k] = maps[..., t - shift, ..., k]`` where ``0 <= t - shift < N'``,
+    else 0. With ``keep_sums`` each query's other columns are scaled by ``(total - new) / (total - old)``
+    (``old``/``new``: the phrase's mass there before/after), so every query keeps its total; a query
+    whose other columns hold nothing keeps them as they are. ``shift = 0`` returns a copy.
+    """
+    if len(columns) != maps.shape[0]:
+        raise ValueError(f"shift_columns needs one column list per map ({maps.shape[0]}), got {len(columns)}")
+    axis = frame_axis % maps.dim()
+    if axis in (0, maps.dim() - 1):
+        raise ValueError(f"frame_axis={frame_axis} must be an inner axis of maps with shape {tuple(maps.shape)}")
+    n, w = maps.shape[axis], maps.shape[-1]
+    chosen = torch.zeros(maps.shape[0], w, dtype=maps.dtype, device=maps.device)
+    for r, cols in enumerate(columns):
+        chosen[r, torch.as_tensor(list(cols), dtype=torch.long, device=maps.device)] = 1.0
+    chosen = chosen.view(maps.shape[0], *(1,) * (maps.dim() - 2), w)
+    phrase = maps * chosen
+    moved = torch.zeros_like(phrase)
+    if abs(shift) < n:
+        src = phrase.narrow(axis, max(0, -shift), n - abs(shift))
+        moved.narrow(axis, max(0, shift), n - abs(shift)).copy_(src)
+    rest = maps - phrase
+    if keep_sums:
+        old, new = phrase.sum(-1, keepdim=True), moved.sum(-1, keepdim=True)
+        rest_sum = rest.sum(-1, keepdim=True)
+        scale = torch.where(rest_sum > 1e-12, (rest_sum + old - new).clamp_min(0.0) / rest_sum.clamp_min(1e-12),
+                            torch.ones_like(rest_sum))
+        rest = rest * scale
+    return rest + moved
+
+
+def seeded_noise(seed: int, shape: Sequence[int], full_frames: int | None = None) -> torch.Tensor:
+    """``(B, N', P, Dz)`` standard-normal noise, sample ``b`` from ``torch.Generator(seed + b)``, drawn at
+    ``full_frames`` latent frames and cropped to ``N'`` (default: the skeletons' 196 / 4 = 49), exactly as
+    :meth:`salad_core.pipeline.SaladPipeline.make_noise` draws it for ``seed=seed``."""
+    from salad_core.skeleton import get_skeleton
+
+    b, n, p, dz = (int(v) for v in shape)
+    if full_frames is None:
+        sk = get_skeleton()
+        full_frames = sk.max_length // sk.unit_length
+    full_frames = max(int(full_frames), n)
+    out = []
+    for i in range(b):
+        g = torch.Generator().manual_seed(int(seed) + i)
+        out.append(torch.randn(full_frames, p, dz, generator=g)[:n])
+    return torch.stack(out)
