@@ -43,6 +43,7 @@ from salad_core.text import TextBatch, TextEncoder, load_text_encoder
 
 if TYPE_CHECKING:  # pragma: no cover - annotations only: salad_core.attention is imported when used
     from salad_core.attention import AttentionMaps, CaptureConfig, EditController, EditSpec, Inversion
+    from salad_core.attention.hooks import ActivationCache, HookFn
 
 __all__ = ["SaladPipeline", "MotionOutput", "EditOutput", "default_weights_dir", "validate_prompts",
            "validate_lengths"]
@@ -405,7 +406,8 @@ class SaladPipeline:
                  seed: int | Sequence[int] = 0, guidance_scale: "float | Guidance | None" = None,
                  num_steps: int = 50, solver: str | None = None,
                  capture_attention: bool | CaptureConfig | dict = False,
-                 noise: torch.Tensor | None = None, progress: bool = False) -> MotionOutput:
+                 noise: torch.Tensor | None = None, progress: bool = False,
+                 hooks: Sequence[tuple[str, HookFn]] | None = None) -> MotionOutput:
         """Generate one motion per prompt.
 
         Parameters
@@ -433,7 +435,79 @@ class SaladPipeline:
             motion.
         noise : torch.Tensor, optional
             ``(B, N', P, Dz)`` initial noise to reuse (overrides ``seed``).
+        hooks : list of (name, fn), optional
+            Read or replace activations at named hook points for this call only
+            (:mod:`salad_core.attention.hooks`): ``name`` is a hook point or a glob
+            (``"layers.3.cross"`` the probabilities, ``"layers.3.cross.out"`` the site's output,
+            ``".q"``, ``".k"``, ``".v"`` read-only), ``fn(tensor, ctx)`` returns None (read) or a
+            tensor of the same shape (replace). ``fn`` gets every row of the guided batch
+            ``[uncond (B); cond (B)]``; ``ctx.cond`` / ``ctx.uncond`` slice it. Nothing stays
+            installed afterwards, also after an error.
         """
+        out, _ = self._generate(prompts, lengths, seed, guidance_scale, num_steps, solver, capture_attention, noise,
+                                progress, hooks)
+        return out
+
+    def run_with_cache(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None = None, *,
+                       names: Any = None, layers: int | Sequence[int] | None = None,
+                       steps: tuple[float, float] = (0.0, 1.0), store: str | Sequence[str] = "probs",
+                       hooks: Sequence[tuple[str, HookFn]] | None = None, **kwargs: Any
+                       ) -> tuple[MotionOutput, ActivationCache]:
+        """Generate and keep the activations of the chosen hook points (TransformerLens'
+        ``run_with_cache``); the motion is bit for bit the one :meth:`__call__` gives.
+
+        Parameters
+        ----------
+        prompts, lengths
+            As :meth:`__call__`.
+        names : str, callable or list of these, optional
+            Hook points by exact name or glob (``"layers.*.cross"``; a site name also selects its
+            outputs and inputs when ``store`` asks for them) or a predicate on the name; None: every
+            site (:func:`salad_core.attention.hooks.select_hook_points`).
+        layers : int or list of int, optional
+            Only these layers (execution order).
+        steps : (start, stop)
+            Keep the steps whose fraction ``i / S`` lies in ``[start, stop)``.
+        store : str or tuple of str
+            ``"probs"`` (post-softmax probabilities), ``"inputs"`` (per-head q, k, v),
+            ``"outputs"`` (the sites' outputs after ``Wo``), or several.
+        hooks : list of (name, fn), optional
+            As :meth:`__call__`; the cache keeps what the run used (after the hooks).
+        **kwargs
+            ``seed``, ``guidance_scale``, ``num_steps``, ``solver``, ``capture_attention``, ``noise``,
+            ``progress``, as :meth:`__call__`.
+
+        Returns
+        -------
+        (MotionOutput, ActivationCache)
+            The cache maps hook point names to CPU tensors ``(S, B, ...)`` of the conditional rows
+            (:class:`salad_core.attention.hooks.ActivationCache` documents the axes).
+        """
+        from salad_core.attention.hooks import CacheRecorder, select_hook_points
+
+        unknown = sorted(set(kwargs) - {"seed", "guidance_scale", "num_steps", "solver", "capture_attention", "noise",
+                                        "progress"})
+        if unknown:
+            raise TypeError(f"run_with_cache got unexpected argument(s) {unknown}")
+        recorder = CacheRecorder(select_hook_points(self.denoiser, names, layers, store), steps)
+        if not recorder.points:
+            raise ValueError(f"names={names!r}, layers={layers!r} and store={store!r} select no hook point")
+        out, text = self._generate(prompts, lengths, kwargs.get("seed", 0), kwargs.get("guidance_scale"),
+                                   kwargs.get("num_steps", 50), kwargs.get("solver"),
+                                   kwargs.get("capture_attention", False), kwargs.get("noise"),
+                                   kwargs.get("progress", False), [*(hooks or ()), *recorder.hooks],
+                                   rows="all" if hooks else "cond")
+        from salad_core.attention.capture import TokenInfo
+
+        cache = recorder.result(TokenInfo.from_batch(text), out.lengths, self.skeleton.unit_length,
+                                self.denoiser.config.layers)
+        return out, cache
+
+    def _generate(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None, seed: int | Sequence[int],
+                  guidance_scale: "float | Guidance | None", num_steps: int, solver: str | None,
+                  capture_attention: bool | CaptureConfig | dict, noise: torch.Tensor | None, progress: bool,
+                  hooks: Sequence[tuple[str, HookFn]] | None, rows: str = "all") -> tuple[MotionOutput, TextBatch]:
+        """:meth:`__call__`, also returning the encoded prompts; ``rows``: what the hooks get."""
         prompts = validate_prompts(prompts)
         lengths = validate_lengths(lengths, len(prompts), self.skeleton)
         guidance = self.resolve_guidance(guidance_scale)
@@ -450,7 +524,10 @@ class SaladPipeline:
         settings = dict(_guidance_settings(guidance), num_steps=int(num_steps), solver=solver or self.solver,
                         weights=self.source, **self._output_settings())
         attention = None
-        if capture_attention:
+        if hooks:
+            latents, attention = self._denoise_hooked(text, uncond, noise, lengths, guidance, int(num_steps),
+                                                      solver or self.solver, progress, capture_attention, hooks, rows)
+        elif capture_attention:
             from salad_core.attention.capture import capture_cross_attention
 
             cond = self.denoiser.prepare_text(text.features, text.mask)
@@ -464,7 +541,26 @@ class SaladPipeline:
             latents = self._denoise_in_chunks(text, uncond, noise, lengths, guidance, int(num_steps),
                                               solver or self.solver, progress)
         feats, joints = self.decode(latents, lengths)
-        return MotionOutput(feats, joints, prompts, lengths, latents, noise, seeds, attention, settings)
+        return MotionOutput(feats, joints, prompts, lengths, latents, noise, seeds, attention, settings), text
+
+    def _denoise_hooked(self, text: TextBatch, uncond: TextContext, noise: torch.Tensor, lengths: Sequence[int],
+                        guidance: Guidance, num_steps: int, solver: str, progress: bool,
+                        capture: bool | CaptureConfig | dict, hooks: Sequence[tuple[str, HookFn]], rows: str
+                        ) -> tuple[torch.Tensor, AttentionMaps | None]:
+        """One batched denoising with the hooks installed (and the attention store, if capturing,
+        served by the same processors after the hooks); the hooks are removed on exit."""
+        from salad_core.attention.capture import attention_store, store_sites
+        from salad_core.attention.hooks import use_hooks
+
+        store = attention_store(self.denoiser, text, lengths, capture) if capture else None
+        observed = store_sites(self.denoiser, store) if store is not None else ()
+        cond = self.denoiser.prepare_text(text.features, text.mask)
+        mask = self.frame_mask(lengths, noise.shape[1])
+        with use_hooks(self.denoiser, hooks, rows=rows, observer=store, observer_sites=observed) as session:
+            steps = [session.on_step] if store is None else [store.on_step, session.on_step]
+            latents = denoise(self.denoiser, make_scheduler(self.diffusion, solver), cond, uncond, noise, mask,
+                              guidance_scale=guidance, num_steps=num_steps, controller_hooks=steps, progress=progress)
+        return latents, None if store is None else store.result()
 
     def _output_settings(self) -> dict[str, str]:
         return {"recovery": self.recovery, "skeleton": self.skeleton.name}

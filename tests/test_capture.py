@@ -211,14 +211,14 @@ def test_softmax_last_matches_torch_softmax_and_leaves_its_input():
 
 
 def test_row_taker_slices_consecutive_rows_and_gathers_others():
-    from salad_core.attention.processor import _row_taker
+    from salad_core.attention.processor import row_taker
 
     x = torch.arange(40.0).view(10, 4)
-    view = _row_taker(torch.tensor([3, 4, 5]))(x)
+    view = row_taker(torch.tensor([3, 4, 5]))(x)
     assert torch.equal(view, x[3:6]) and view.data_ptr() == x[3:6].data_ptr()      # no copy
     for rows in ([1, 3, 5], [5, 4], [2]):
-        torch.testing.assert_close(_row_taker(torch.tensor(rows))(x), x[torch.tensor(rows)])
-    assert _row_taker(torch.tensor([7]))(x).data_ptr() == x[7:8].data_ptr()
+        torch.testing.assert_close(row_taker(torch.tensor(rows))(x), x[torch.tensor(rows)])
+    assert row_taker(torch.tensor([7]))(x).data_ptr() == x[7:8].data_ptr()
 
 
 @pytest.mark.parametrize("keys", [7, 15, 16, 40])

@@ -49,6 +49,8 @@ __all__ = [
     "AttentionStore",
     "AttentionMaps",
     "capture_cross_attention",
+    "attention_store",
+    "store_sites",
     "as_capture_config",
     "CAPTURE_MODES",
 ]
@@ -585,13 +587,25 @@ def capture_cross_attention(denoiser: Any, text: Any, lengths: Sequence[int],
     ...     z = denoise(denoiser, sched, cond, uncond, noise, controller_hooks=[store.on_step])
     >>> maps = store.result()
     """
+    store = attention_store(denoiser, text, lengths, config, unit_length=unit_length, rows=rows)
+    processors = {name: HookedProcessor(store) for name in store_sites(denoiser, store)}
+    with use_processors(denoiser, processors):
+        yield store
+
+
+def attention_store(denoiser: Any, text: Any, lengths: Sequence[int], config: bool | CaptureConfig | dict = True, *,
+                    unit_length: int | None = None, rows: Callable[[Any], torch.Tensor] | None = None
+                    ) -> AttentionStore:
+    """The :class:`AttentionStore` that :func:`capture_cross_attention` installs (arguments as
+    there), for callers that serve it through their own processors (``pipe(..., hooks=...)``)."""
     cfg = as_capture_config(config)
     dcfg = denoiser.config
     if not dcfg.cross_attention:
         raise ValueError("attention capture needs cross-attention sites; this denoiser is the 'w/o CrossAttn' "
                          "ablation (cross_attention=False), whose sentence attention has no word axis")
-    store = AttentionStore(text, lengths, cfg, dcfg.layers, dcfg.heads, unit_length, rows)
-    processors = {name: HookedProcessor(store) for name, mod in denoiser.attention_sites.items()
-                  if mod.kind in store.kinds}
-    with use_processors(denoiser, processors):
-        yield store
+    return AttentionStore(text, lengths, cfg, dcfg.layers, dcfg.heads, unit_length, rows)
+
+
+def store_sites(denoiser: Any, store: AttentionStore) -> list[str]:
+    """The sites of ``denoiser`` whose attention ``store`` records (its kinds, every layer)."""
+    return [name for name, mod in denoiser.attention_sites.items() if mod.kind in store.kinds]

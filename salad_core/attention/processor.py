@@ -26,7 +26,7 @@ probabilities have ``B * P`` rows ordered (batch, part), skeletal ones ``B * N'`
 """
 from __future__ import annotations
 
-from typing import Optional, Protocol
+from typing import Callable, Optional, Protocol
 
 import torch
 import torch.nn.functional as F
@@ -35,7 +35,7 @@ from salad_core.models.attention import AttentionProcessor, SiteInfo
 from salad_core.models.kernels import (FoldedText, attention_probs, attention_with_probs, fast_attention,
                                        folded_cross_attention)
 
-__all__ = ["SiteHook", "HookedProcessor", "flat_rows", "named_rows", "flat_from_named"]
+__all__ = ["SiteHook", "HookedProcessor", "flat_rows", "named_rows", "flat_from_named", "row_taker"]
 
 
 class SiteHook(Protocol):
@@ -91,9 +91,10 @@ def flat_from_named(site: SiteInfo, named: torch.Tensor) -> torch.Tensor:
     return named.reshape(n, h, nf * p, named.shape[-1])
 
 
-def _row_taker(flat: torch.Tensor):
-    """``x -> x[flat]``; a slice (a view, no copy) when ``flat`` is a run of consecutive rows, as the
-    conditional rows of one guidance branch are."""
+def row_taker(flat: torch.Tensor) -> Callable[[torch.Tensor], torch.Tensor]:
+    """A function ``x (R, ...) -> x[flat] (n, ...)`` for the rows ``flat (n,)`` (long): a slice (a
+    view, no copy) when ``flat`` is a run of consecutive rows, as the conditional rows of one
+    guidance branch are, else a gather (a copy)."""
     n = flat.numel()
     if n and int(flat[-1]) - int(flat[0]) == n - 1 and (n == 1 or bool((flat.diff() == 1).all())):
         start = int(flat[0])
@@ -119,7 +120,7 @@ class HookedProcessor(AttentionProcessor):
         if rows is None or rows.numel() == 0:
             return fast_attention(q, k, v, key_mask, dropout_p)  # what plain sampling computes, bit for bit
         flat = flat_rows(site, rows)
-        take = _row_taker(flat)
+        take = row_taker(flat)
         out, all_probs = attention_with_probs(q, k, v, key_mask, dropout_p)
         if all_probs is not None:                        # explicit route: the probabilities plain sampling used
             probs = take(all_probs)
