@@ -3,6 +3,11 @@
 * :mod:`.capture`: :func:`capture_cross_attention` records the cross-attention (and on request
   the self-attention) of the conditional branch while sampling; the result,
   :class:`AttentionMaps`, carries its tokens and words (``word_map``, ``token_map``, ``select``).
+* :mod:`.hooks`: hook points on every site (``layers.{i}.{kind}`` probabilities, ``.out``,
+  ``.q``/``.k``/``.v``), :func:`use_hooks` for one call, :class:`ActivationCache`
+  (``pipe(..., hooks=...)``, ``pipe.run_with_cache(...)``).
+* :mod:`.patching`: :func:`patch_activations` between a clean and a corrupt prompt, measured per
+  body part.
 * :mod:`.edits`: typed edit specifications (:class:`WordSwap`, :class:`Refine`,
   :class:`Reweight`, :class:`Mirror`, :class:`InjectSelfAttention`) and their pure kernels.
 * :mod:`.align`: token alignment of source and target prompts.
@@ -19,7 +24,10 @@ from .editing import EditPrediction, EditRun, edit_latents
 from .edits import (MIRROR_GROUPS, REWEIGHT_RANGE, EditSpec, InjectSelfAttention, Mirror, Refine, Reweight, WordSwap,
                     map_columns, mirror_parts, mirror_permutation, refine_columns, reweight_columns, validate_edits)
 from .inversion import INVERSION_METHODS, Inversion, LatentInversion, ddim_step_coefficients, invert_latents
-from .processor import HookedProcessor, flat_rows, named_rows
+from .hooks import (ActivationCache, HookContext, HookPoint, hook_point_names, hook_points, select_hook_points,
+                    use_hooks)
+from .patching import PatchingResult, patch_activations
+from .processor import HookedProcessor, flat_rows, named_rows, row_taker
 
 __all__ = [
     "capture_cross_attention", "CaptureConfig", "AttentionStore", "AttentionMaps", "TokenInfo", "as_capture_config",
@@ -28,5 +36,7 @@ __all__ = [
     "refine_columns", "global_align", "alignment_matrix", "word_swap_matrix",
     "EditController", "RowLayout", "edit_latents", "EditRun", "EditPrediction",
     "invert_latents", "Inversion", "LatentInversion", "INVERSION_METHODS", "ddim_step_coefficients",
-    "HookedProcessor", "flat_rows", "named_rows",
+    "HookedProcessor", "flat_rows", "named_rows", "row_taker",
+    "use_hooks", "HookContext", "HookPoint", "hook_points", "hook_point_names", "select_hook_points",
+    "ActivationCache", "patch_activations", "PatchingResult",
 ]
