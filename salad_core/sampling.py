@@ -268,9 +268,11 @@ class Prediction(Protocol):
     The loop owns everything the samplers share (scheduler set-up, the model's eval mode,
     ``inference_mode``, ``init_noise_sigma``, re-masking, the generator, the progress bar, hooks
     and the callback); a strategy owns how the model is asked for the prediction the scheduler
-    steps with. Three exist: :class:`GuidedPrediction` (classifier-free guidance, eq. 9),
-    :class:`salad_core.attention.editing.EditPrediction` (Algorithm 1's batched row layout) and
-    :class:`salad_core.keymotion.pst.PSTPrediction` (KeyMotion's eq. 8).
+    steps with. Four exist: :class:`GuidedPrediction` (classifier-free guidance, eq. 9),
+    :class:`salad_core.attention.editing.EditPrediction` (Algorithm 1's batched row layout),
+    :class:`salad_core.keymotion.pst.PSTPrediction` (KeyMotion's eq. 8) and, as the bench's
+    reference, :class:`salad_core.bench.naive_algorithm1.NaiveAlgorithm1Prediction` (Algorithm 1
+    with three separate forwards per step, as the official code).
     """
 
     model: torch.nn.Module   # run in eval mode for the loop (its mode is restored afterwards)

@@ -60,7 +60,8 @@ One job per module:
 ``roofline``          matmul rates, a step's own products, steps and products timed side by side
 ``speed``             the ``speed`` section (and the forward variants)
 ``overheads``         the ``overheads`` section and pipeline batching
-``naive_algorithm1``  the official code's three-forward Algorithm 1, the overheads' reference
+``naive_algorithm1``  the official code's three-forward Algorithm 1 (a strategy of the one
+                      denoising loop), the overheads' reference
 ``memory``            the ``memory`` section (peak RSS)
 ``training``          the ``training`` and ``train`` sections
 ``compile_trial``     the opt-in ``compile`` section
@@ -74,7 +75,7 @@ from .compile_trial import compile_rows
 from .flops import ONCE_PER_CALL, gemm_flops, step_flops
 from .inputs import attended_tokens, denoiser_cases, folded_keys, random_inputs
 from .memory import memory_rows, peak_rss_delta
-from .naive_algorithm1 import naive_algorithm1
+from .naive_algorithm1 import NaiveAlgorithm1Prediction, naive_algorithm1
 from .overheads import batching_rows, bench_pipeline, overhead_rows
 from .plan import (
     BATCHES,
@@ -114,5 +115,6 @@ __all__ = ["Row", "Case", "Plan", "SECTIONS", "OPTIONAL_SECTIONS", "compile_rows
            "bench_pipeline", "machine_header", "run_benchmarks", "format_table", "main",
            # public since the split into a package (issue 26)
            "ONCE_PER_CALL", "step_products", "paired_step_times", "folded_keys", "best_rates", "random_inputs",
-           "naive_algorithm1", "build_parser", "BATCHES", "COLUMNS", "GUIDANCE", "MOTION_FRAMES", "PROMPT_TOKENS",
-           "REFINED", "SAMPLING_STEPS", "SHORT_FRAMES", "SKELETON", "SOURCE", "SWAPPED"]
+           "naive_algorithm1", "NaiveAlgorithm1Prediction", "build_parser", "BATCHES", "COLUMNS", "GUIDANCE",
+           "MOTION_FRAMES", "PROMPT_TOKENS", "REFINED", "SAMPLING_STEPS", "SHORT_FRAMES", "SKELETON", "SOURCE",
+           "SWAPPED"]
