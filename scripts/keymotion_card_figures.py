@@ -115,7 +115,8 @@ def generations(pipe: KeyMotionPipeline, seeds: int, length: int, renders: Path 
 
 
 def evaluation(pipe: KeyMotionPipeline, data: Path, samples: int, reps: int) -> dict:
-    from salad_core.eval.protocol import EvalSettings, evaluate_generator, evaluate_real
+    from salad_core.eval.protocol import evaluate_generator, evaluate_real
+    from salad_core.eval.settings import EvalSettings
     from salad_core.eval.tables import results_frame, to_markdown
     from salad_core.eval.train_evaluator import load_packaged_evaluator
 

@@ -9,9 +9,10 @@ import pandas as pd
 import pytest
 
 from salad_core.data.dataset import load_mean_std
+from salad_core.eval.batches import real_batches
 from salad_core.eval.metrics import mean_ci
 from salad_core.eval.paper_tables import paper_cfg_sweep
-from salad_core.eval.protocol import cfg_sweep, evaluate_generator, evaluate_real, real_batches, run_ablation
+from salad_core.eval.protocol import cfg_sweep, evaluate_generator, evaluate_real, run_ablation
 from salad_core.eval.settings import METRICS, REAL_NAME, EvalResult, EvalSettings
 from salad_core.eval.tables import format_mean_ci, results_frame, to_latex, to_markdown
 from salad_core.skeleton import get_skeleton
@@ -306,23 +307,22 @@ def test_run_ablation(corpus, evaluator):
 
 
 # ------------------------------------------------------------------------------ module layout
-def test_moved_names_stay_reachable_from_their_old_modules():
-    """The protocol module keeps only the protocol; tables, published numbers and the plot moved,
-    and the old import paths still reach the very same objects."""
+def test_protocol_holds_only_the_protocol():
+    """Tables, published numbers, settings and the plot live in the modules of their jobs only (no
+    re-exports left in the protocol); the package keeps its public API, the plot included."""
     import salad_core.eval as ev
     import salad_core.eval.protocol as protocol
     import salad_viz
-    from salad_core.eval import paper_tables, settings, tables
     from salad_viz import plots
 
-    for name in ("results_frame", "format_mean_ci", "to_markdown", "to_latex", "paper_row", "paper_frame"):
-        assert getattr(protocol, name) is getattr(tables, name), name
-    assert protocol.paper_cfg_sweep is paper_tables.paper_cfg_sweep
-    assert protocol.CI_SUFFIX == settings.CI_SUFFIX == " ±"
-    assert protocol.plot_cfg_sweep is ev.plot_cfg_sweep is plots.plot_cfg_sweep is salad_viz.plot_cfg_sweep
-    assert "plot_cfg_sweep" not in protocol.__all__
-    with pytest.raises(AttributeError, match="no attribute 'nope'"):
-        protocol.nope
+    for name in protocol.__all__:
+        assert getattr(protocol, name).__module__ == protocol.__name__, name
+    for name in ("results_frame", "to_markdown", "paper_cfg_sweep", "CI_SUFFIX", "plot_cfg_sweep", "real_batches"):
+        assert not hasattr(protocol, name), name
+    assert ev.plot_cfg_sweep is plots.plot_cfg_sweep is salad_viz.plot_cfg_sweep
+    assert ev.results_frame is results_frame and ev.EvalSettings is EvalSettings and ev.cfg_sweep is cfg_sweep
+    for name in ev.__all__:
+        assert getattr(ev, name) is not None, name
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
         ev.nope
 

@@ -9,8 +9,8 @@ import pytest
 import torch
 
 from salad_core.data.dataset import load_mean_std
+from salad_core.eval.batches import real_batches
 from salad_core.eval.metrics import mpjpe
-from salad_core.eval.protocol import EvalSettings, real_batches
 from salad_core.eval.reconstruction import (
     evaluate_reconstruction,
     part_errors,
@@ -19,6 +19,7 @@ from salad_core.eval.reconstruction import (
     reconstruction_frame,
     reconstruction_markdown,
 )
+from salad_core.eval.settings import EvalSettings
 from salad_core.models import MotionVAE, VAEConfig
 from salad_core.motion import features_to_joints
 from salad_core.skeleton import get_skeleton

@@ -1,7 +1,6 @@
 """The notebooks' evaluation building blocks: published tables (eval.paper_tables), held-out corpus
 clips (eval.heldout), official-release loading (eval.official), length-bucketed generation
-(eval.length_buckets) and the KeyMotion round trips (eval.keymotion_roundtrip); eval.report still
-re-exports them for old imports.
+(eval.length_buckets) and the KeyMotion round trips (eval.keymotion_roundtrip).
 
 Tiny seeded models, one CPU thread, a hashing text encoder (no MiniLM) and a 40-motion corpus.
 """
@@ -290,22 +289,6 @@ def test_evaluation_data_picks_the_procedural_or_the_official_setting(tmp_path, 
 
 
 # ------------------------------------------------------------------------------ module layout
-def test_old_report_imports_reach_the_modules_of_each_job():
-    """eval.report is a re-export for old imports (the notebooks): the very same objects."""
-    from salad_core.eval import heldout, keymotion_roundtrip, length_buckets, official, paper_tables, report
-
-    homes = {"heldout_corpus": heldout, "procedural_eval_corpus": heldout, "evaluation_data": heldout,
-             "read_official_options": official, "official_salad_pipeline": official,
-             "LengthBucketed": length_buckets, "BucketedOutput": length_buckets, "length_groups": length_buckets,
-             "KeyframeRoundTrip": keymotion_roundtrip, "Infilling": keymotion_roundtrip,
-             "keyframe_roundtrip": keymotion_roundtrip, "infill_from_keyframes": keymotion_roundtrip,
-             "PAPER_TABLE1": paper_tables, "PAPER_TABLE1_DEFAULT_ROWS": paper_tables, "paper_table1": paper_tables,
-             "PAPER_DENOISER_ABLATIONS": paper_tables, "paper_denoiser_ablations": paper_tables}
-    assert sorted(homes) == sorted(report.__all__)
-    for name, module in homes.items():
-        assert getattr(report, name) is getattr(module, name), name
-
-
 def test_the_papers_table1_and_its_supplement_table1_have_distinct_names():
     """Table 1 compares methods at w = 7.5; supplement Table 1 sweeps SALAD's CFG weight. They share
     SALAD's w = 7.5 row and the real row, nothing else."""

@@ -58,7 +58,6 @@ from .batches import (
     evaluation_dataset,
     motion_embeddings,
     num_batches,
-    real_batches,
     skeleton_of,
     text_embeddings,
 )
@@ -66,13 +65,6 @@ from .settings import DEFAULT_CFG_SCALES, METRICS, REAL_NAME, EvalResult, EvalSe
 
 __all__ = [
     "MotionGenerator",
-    "EvalSettings",
-    "EvalResult",
-    "RealBatch",
-    "METRICS",
-    "REAL_NAME",
-    "DEFAULT_CFG_SCALES",
-    "real_batches",
     "evaluate_real",
     "evaluate_generator",
     "cfg_sweep",
@@ -327,22 +319,3 @@ def run_ablation(generators: Mapping[str, MotionGenerator], dataset_root: str | 
         out.append(evaluate_generator(gen, dataset_root, evaluator, settings, name=name, progress=progress))
     return out
 
-
-# Names that lived here before the split (issue 26); old imports keep working for this release.
-_MOVED = {
-    **{name: "tables" for name in ("results_frame", "format_mean_ci", "to_markdown", "to_latex")},
-    **{name: "paper_tables" for name in ("paper_cfg_sweep", "paper_row", "paper_frame")},
-    **{name: "settings" for name in ("CI_SUFFIX", "SETTING_COLUMNS", "PROTOCOL_REPLICATIONS")},
-}
-
-
-def __getattr__(name: str) -> Any:
-    if name == "plot_cfg_sweep":
-        from salad_viz.plots import plot_cfg_sweep
-
-        return plot_cfg_sweep
-    if name in _MOVED:
-        import importlib
-
-        return getattr(importlib.import_module(f"{__package__}.{_MOVED[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
