@@ -160,7 +160,7 @@ def _store_points(store: str | Sequence[str]) -> tuple[str, ...]:
 
 
 def select_hook_points(denoiser: Any, names: NameFilter = None, layers: int | Sequence[int] | None = None,
-                       store: str | Sequence[str] = "probs") -> list[HookPoint]:
+                       store: str | Sequence[str] = "probs", *, expand_sites: bool = True) -> list[HookPoint]:
     """Hook points filtered by name, layer and kind of activation.
 
     Parameters
@@ -174,6 +174,9 @@ def select_hook_points(denoiser: Any, names: NameFilter = None, layers: int | Se
         Layer indices (execution order).
     store : str or sequence of str
         ``"probs"``, ``"inputs"`` (q, k, v) and/or ``"outputs"`` (``.out``).
+    expand_sites : bool
+        Whether a string that matches a site name selects that site's other points too (else
+        strings match hook point names only).
 
     Raises
     ------
@@ -202,7 +205,7 @@ def select_hook_points(denoiser: Any, names: NameFilter = None, layers: int | Se
                 hits = [hp for hp in points if item(hp.name)]
             elif isinstance(item, str):
                 hits = [hp for hp in points if fnmatch.fnmatchcase(hp.name, item)
-                        or (hp.point != "probs" and fnmatch.fnmatchcase(hp.site, item))]
+                        or (expand_sites and hp.point != "probs" and fnmatch.fnmatchcase(hp.site, item))]
                 if not hits:
                     raise KeyError(f"no hook point matches {item!r}; known hook points: "
                                    f"{hook_point_names(denoiser)}")

@@ -117,14 +117,15 @@ def patch_activations(pipe: Any, clean_prompt: str, corrupt_prompt: str, site: A
         if not isinstance(prompt, str):
             raise TypeError(f"{name} must be one prompt (a string), got {type(prompt).__name__} {prompt!r}")
     empty = isinstance(site, (list, tuple)) and len(site) == 0
-    points = [] if empty else select_hook_points(pipe.denoiser, site, store=("probs", "outputs"))
+    points = [] if empty else select_hook_points(pipe.denoiser, site, store=("probs", "outputs"), expand_sites=False)
     if not empty and not points:
         raise ValueError(f"site={site!r} names no probabilities or outputs to patch (q, k and v are read-only)")
     common = dict(lengths=lengths, seed=seed, num_steps=num_steps, guidance_scale=guidance_scale, solver=solver,
                   progress=progress)
     if points:
-        clean, cache = pipe.run_with_cache(clean_prompt, names=[hp.name for hp in points], store=("probs", "outputs"),
-                                           steps=steps, **common)
+        wanted = {hp.name for hp in points}
+        clean, cache = pipe.run_with_cache(clean_prompt, names=lambda name: name in wanted,
+                                           store=("probs", "outputs"), steps=steps, **common)
         patched_steps = cache.steps()
     else:
         clean, cache, patched_steps = pipe(clean_prompt, **common), None, ()
