@@ -643,6 +643,8 @@ def shift_columns(maps: torch.Tensor, columns: Sequence[Sequence[int]], shift: i
     axis = frame_axis % maps.dim()
     if axis in (0, maps.dim() - 1):
         raise ValueError(f"frame_axis={frame_axis} must be an inner axis of maps with shape {tuple(maps.shape)}")
+    if shift == 0:
+        return maps.clone()
     n, w = maps.shape[axis], maps.shape[-1]
     chosen = torch.zeros(maps.shape[0], w, dtype=maps.dtype, device=maps.device)
     for r, cols in enumerate(columns):

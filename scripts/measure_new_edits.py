@@ -1,0 +1,411 @@
+#!/usr/bin/env python
+"""Measure the edits beyond the paper (Erase, Shift, ExampleBased) and repetition counting on the
+procedural corpus's ground-truth annotations.
+
+Usage::
+
+    python scripts/measure_new_edits.py                      # shipped weights, held-out corpus clips
+    python scripts/measure_new_edits.py --data CORPUS --n 20 --json out.json
+    python scripts/measure_new_edits.py --calibrate          # choose the motion counter's settings
+    python scripts/measure_new_edits.py --quick              # 2 items, 10 steps: checks the script
+
+Without ``--data`` it writes held-out test clips of the corpus the shipped weights were trained on
+(:func:`salad_core.eval.heldout.heldout_corpus`) to a temporary folder. Every motion is *generated*
+from a corpus caption at its clip's length; the caption's annotation (phrase word span, driven parts,
+frame interval) says which phrase to edit, which parts it drives and where to look. Sections:
+
+(a) erase: ``Erase(phrase span)`` on captions with two or more phrases: the drop of the phrase's parts'
+    activity over its annotated frames, and how much the other parts change (root-aligned MPJPE of
+    their joints, source vs edit), against deleting the phrase's words from the prompt (same noise);
+(b) shift: ``Shift(phrase span, N)`` with N = +-``--shift`` frames (toward the side with room): the lag
+    of the phrase's parts' activity between source and edit (cross-correlation over the annotated
+    interval widened by 2N); the target is ``|lag - N| <= 0.1 |N|``;
+(c) example: ``ExampleBased`` variations of an inverted corpus clip (``pipe.invert``, DDIM with the
+    exact replay) against plain samples of its caption with the same seeds: diversity (mean pairwise
+    root-aligned MPJPE) and distance to the example;
+(d) counting: captions that say how many times ("twice", "three times", "do three squats"):
+    ``count_repetitions`` on the phrase's attention against the generated motion's own count
+    (``motion_repetitions``) and against the caption's number; the motion counter is also checked on
+    the corpus clips themselves.
+"""
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import math
+import re
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from salad_core.attention.counting import MOTION_COUNT, count_repetitions, motion_repetitions
+from salad_core.attention.edits import Erase, ExampleBased, Shift
+from salad_core.data.texts import split_words
+from salad_core.eval.metrics import mpjpe
+from salad_core.part_activity import part_speeds
+from salad_core.pipeline import SaladPipeline
+from salad_core.skeleton import PART_NAMES, get_skeleton
+
+#: Words that say how many times an action happens.
+COUNT_WORDS = {"twice": 2, "two": 2, "three": 3, "four": 4, "five": 5}
+
+
+# ------------------------------------------------------------------------------ corpus
+def read_clips(root: Path, split: str, n: int | None = None) -> list[dict]:
+    """Annotated clips of a split: id, features, joints, first caption and its phrases."""
+    ids = [i for i in (root / f"{split}.txt").read_text().split() if i and not i.startswith("M")]
+    out = []
+    for cid in ids:
+        ann = root / "annotations" / f"{cid}.json"
+        if not ann.is_file():
+            continue
+        doc = json.loads(ann.read_text())
+        feats = np.load(root / "new_joint_vecs" / f"{cid}.npy").astype(np.float32)
+        length = min(len(feats) - len(feats) % 4, 196)
+        if length < 40:
+            continue
+        joints = np.load(root / "new_joints" / f"{cid}.npy").astype(np.float32)[:length]
+        for cap in doc["captions"]:
+            out.append({"id": cid, "features": feats[:length], "joints": joints, "length": length,
+                        "caption": cap["caption"],
+                        "phrases": [dict(ph, frames=[min(ph["frames"][0], length), min(ph["frames"][1], length)])
+                                    for ph in cap["phrases"]]})
+        if n is not None and len({c["id"] for c in out}) >= n:
+            break
+    if not out:
+        raise SystemExit(f"no annotated clips in {root}/{split}.txt; is {root} a procedural corpus?")
+    return out
+
+
+def stated_count(text: str) -> int | None:
+    """The number of times a phrase says its action happens, or None."""
+    words = split_words(text)
+    for i, w in enumerate(words):
+        if w == "twice":
+            return 2
+        if w in COUNT_WORDS and (i + 1 < len(words)) and (words[i + 1] == "times" or i > 0):
+            return COUNT_WORDS[w]
+    return None
+
+
+def _mean(xs) -> float:
+    xs = [float(x) for x in xs if x is not None and math.isfinite(float(x))]
+    return float(np.mean(xs)) if xs else float("nan")
+
+
+def _part_joints(parts, skeleton) -> list[int]:
+    sk = get_skeleton(skeleton)
+    return [j for j, p in enumerate(sk.joint_to_part) if PART_NAMES[p] in parts]
+
+
+def activity(joints: np.ndarray, parts, frames) -> float:
+    """Mean speed (m/s) of ``parts`` over motion frames ``[f0, f1)``."""
+    s = part_speeds(joints)
+    f0, f1 = int(frames[0]), min(int(frames[1]), len(s))
+    return float(s[f0:max(f1, f0 + 1), [PART_NAMES.index(p) for p in parts]].mean())
+
+
+def _without(caption: str, span) -> str:
+    words = split_words(caption)
+    rest = words[:span[0]] + words[span[1]:]
+    return " ".join(rest) or "a person"
+
+
+# ------------------------------------------------------------------------------ sections
+def erase_items(clips, n):
+    items, seen = [], set()
+    for c in clips:
+        if len(c["phrases"]) < 2 or c["id"] in seen:
+            continue
+        # the phrase that drives the fewest parts and leaves the root alone: its erasure is local
+        cands = [ph for ph in c["phrases"] if "root" not in ph["parts"] and ph["frames"][1] - ph["frames"][0] >= 8]
+        if not cands:
+            continue
+        ph = min(cands, key=lambda p: len(p["parts"]))
+        others = [p for p in PART_NAMES if p not in ph["parts"]]
+        items.append({**c, "phrase": ph, "others": others})
+        seen.add(c["id"])
+        if len(items) >= n:
+            break
+    return items
+
+
+def measure_erase(pipe, items, args) -> dict:
+    rows = []
+    deleted = pipe([_without(it["caption"], it["phrase"]["words"]) for it in items],
+                   lengths=[it["length"] for it in items], seed=[args.seed + i for i in range(len(items))],
+                   num_steps=args.steps, guidance_scale=args.guidance)
+    for i, it in enumerate(items):
+        ph = it["phrase"]
+        for mode in args.erase_modes:
+            out = pipe.edit(it["caption"], edits=[Erase(tuple(ph["words"]), mode=mode)], lengths=it["length"],
+                            seed=args.seed + i, num_steps=args.steps, guidance_scale=args.guidance)
+            src, ed = out.source.raw_joints[0], out.edited.raw_joints[0]
+            dl = deleted.raw_joints[i]
+            oj = _part_joints(it["others"], pipe.skeleton)
+            a_src, a_ed, a_del = (activity(x, ph["parts"], ph["frames"]) for x in (src, ed, dl))
+            rows.append({"id": it["id"], "phrase": ph["text"], "parts": ph["parts"], "mode": mode,
+                         "activity_source": a_src, "activity_erased": a_ed, "activity_deleted": a_del,
+                         "drop_erased": 1 - a_ed / max(a_src, 1e-9), "drop_deleted": 1 - a_del / max(a_src, 1e-9),
+                         "others_mpjpe_erased": mpjpe(ed[:, oj], src[:, oj]),
+                         "others_mpjpe_deleted": mpjpe(dl[:, oj], src[:, oj])})
+    summary = {}
+    for mode in args.erase_modes:
+        sub = [r for r in rows if r["mode"] == mode]
+        summary[mode] = {k: _mean(r[k] for r in sub) for k in ("drop_erased", "drop_deleted", "others_mpjpe_erased",
+                                                              "others_mpjpe_deleted")}
+        summary[mode]["dropped_rate"] = _mean(float(r["activity_erased"] < r["activity_source"]) for r in sub)
+        summary[mode]["kept_better_rate"] = _mean(float(r["others_mpjpe_erased"] < r["others_mpjpe_deleted"])
+                                                  for r in sub)
+    return {"summary": summary, "items": rows}
+
+
+def shift_items(clips, n, shift):
+    items, seen = [], set()
+    for c in clips:
+        if c["id"] in seen:
+            continue
+        for ph in c["phrases"]:
+            f0, f1 = ph["frames"]
+            if f1 - f0 < 12 or f1 - f0 > c["length"] - 2 * shift:
+                continue
+            room_after, room_before = c["length"] - f1, f0
+            n_frames = shift if room_after >= room_before else -shift
+            if max(room_after, room_before) < shift:
+                continue
+            items.append({**c, "phrase": ph, "shift": n_frames})
+            seen.add(c["id"])
+            break
+        if len(items) >= n:
+            break
+    return items
+
+
+def activity_lag(a: np.ndarray, b: np.ndarray, frames, max_lag: int) -> int:
+    """The lag ``L`` (frames) that best aligns ``b[f + L]`` with ``a[f]`` over ``frames``
+    (Pearson correlation of the activity profiles; ties to the smaller |L|)."""
+    f0, f1 = int(frames[0]), int(frames[1])
+    best, best_corr = 0, -np.inf
+    for lag in sorted(range(-max_lag, max_lag + 1), key=abs):
+        lo, hi = max(f0, -lag, 0), min(f1, len(a), len(b) - lag)
+        if hi - lo < 6:
+            continue
+        x, y = a[lo:hi], b[lo + lag:hi + lag]
+        if x.std() < 1e-9 or y.std() < 1e-9:
+            continue
+        corr = float(np.corrcoef(x, y)[0, 1])
+        if corr > best_corr + 1e-9:
+            best, best_corr = lag, corr
+    return best
+
+
+def measure_shift(pipe, items, args) -> dict:
+    rows = []
+    for i, it in enumerate(items):
+        ph, n = it["phrase"], it["shift"]
+        out = pipe.edit(it["caption"], edits=[Shift(tuple(ph["words"]), n)], lengths=it["length"],
+                        seed=args.seed + i, num_steps=args.steps, guidance_scale=args.guidance)
+        idx = [PART_NAMES.index(p) for p in ph["parts"]]
+        a = part_speeds(out.source.raw_joints[0])[:, idx].mean(1)
+        b = part_speeds(out.edited.raw_joints[0])[:, idx].mean(1)
+        f0, f1 = ph["frames"]
+        window = (max(f0 - abs(n), 0), min(f1 + abs(n), len(a)))
+        lag = activity_lag(a, b, window, 2 * abs(n))
+        rows.append({"id": it["id"], "phrase": ph["text"], "parts": ph["parts"], "frames": [f0, f1], "shift": n,
+                     "lag": lag, "error": abs(lag - n), "met": abs(lag - n) <= 0.1 * abs(n),
+                     "sign_right": bool(np.sign(lag) == np.sign(n))})
+    summary = {"mean_abs_shift": _mean(abs(r["shift"]) for r in rows),
+               "lag_along_shift": _mean(r["lag"] * np.sign(r["shift"]) for r in rows),
+               "mean_abs_error": _mean(r["error"] for r in rows),
+               "met_rate": _mean(float(r["met"]) for r in rows),
+               "right_direction_rate": _mean(float(r["sign_right"]) for r in rows),
+               "zero_lag_rate": _mean(float(r["lag"] == 0) for r in rows)}
+    return {"summary": summary, "items": rows}
+
+
+def _pairwise(motions) -> float:
+    return _mean(mpjpe(a, b) for a, b in itertools.combinations(motions, 2))
+
+
+def measure_example(pipe, clips, args) -> dict:
+    rows, seen = [], set()
+    for c in clips:
+        if c["id"] in seen:
+            continue
+        seen.add(c["id"])
+        k = args.variations
+        inv = pipe.invert([c["features"]] * k, [c["caption"]] * k, method="ddim", num_steps=args.steps,
+                          guidance_scale=args.guidance, reconstruct=False)
+        var = pipe.edit(inversion=inv, edits=[ExampleBased(seed=args.seed + 100, steps=(0.0, args.example_window))])
+        plain = pipe([c["caption"]] * k, lengths=c["length"], seed=args.seed + 100, num_steps=args.steps,
+                     guidance_scale=args.guidance)
+        example = var.source.raw_joints[0]
+        v, p = var.edited.raw_joints, plain.raw_joints
+        rows.append({"id": c["id"], "caption": c["caption"],
+                     "diversity_variations": _pairwise(v), "diversity_plain": _pairwise(p),
+                     "to_example_variations": _mean(mpjpe(x, example) for x in v),
+                     "to_example_plain": _mean(mpjpe(x, example) for x in p),
+                     "example_vs_corpus": mpjpe(example, c["joints"][:len(example)])})
+        if len(rows) >= args.n_example:
+            break
+    keys = ("diversity_variations", "diversity_plain", "to_example_variations", "to_example_plain",
+            "example_vs_corpus")
+    summary = {key: _mean(r[key] for r in rows) for key in keys}
+    summary["closer_than_plain_rate"] = _mean(float(r["to_example_variations"] < r["to_example_plain"]) for r in rows)
+    return {"summary": summary, "items": rows}
+
+
+def count_items(clips, n):
+    items, seen = [], set()
+    for c in clips:
+        for ph in c["phrases"]:
+            reps = stated_count(ph["text"])
+            if reps is None or (c["id"], ph["text"]) in seen:
+                continue
+            items.append({**c, "phrase": ph, "reps": reps})
+            seen.add((c["id"], ph["text"]))
+            break
+        if len(items) >= n:
+            break
+    return items
+
+
+def measure_counting(pipe, items, args) -> dict:
+    rows = []
+    for start in range(0, len(items), args.batch):
+        chunk = items[start:start + args.batch]
+        out = pipe([it["caption"] for it in chunk], lengths=[it["length"] for it in chunk],
+                   seed=[args.seed + start + i for i in range(len(chunk))], num_steps=args.steps,
+                   guidance_scale=args.guidance, capture_attention=True)
+        for i, it in enumerate(chunk):
+            ph = it["phrase"]
+            frames = tuple(ph["frames"])
+            att = count_repetitions(out.attention, tuple(ph["words"]), i, parts=ph["parts"], frames=frames)
+            att_all = count_repetitions(out.attention, tuple(ph["words"]), i, parts=ph["parts"])
+            mot = motion_repetitions(out.raw_joints[i], ph["parts"], frames)
+            corpus = motion_repetitions(it["joints"], ph["parts"], frames)
+            rows.append({"id": it["id"], "phrase": ph["text"], "parts": ph["parts"], "truth": it["reps"],
+                         "attention": att, "attention_whole_clip": att_all, "motion": mot, "corpus_motion": corpus})
+    summary = {"attention_vs_truth": _mean(float(r["attention"] == r["truth"]) for r in rows),
+               "attention_vs_motion": _mean(float(r["attention"] == r["motion"]) for r in rows),
+               "motion_vs_truth": _mean(float(r["motion"] == r["truth"]) for r in rows),
+               "corpus_motion_vs_truth": _mean(float(r["corpus_motion"] == r["truth"]) for r in rows),
+               "attention_whole_clip_vs_truth": _mean(float(r["attention_whole_clip"] == r["truth"]) for r in rows),
+               "mean_truth": _mean(r["truth"] for r in rows), "mean_attention": _mean(r["attention"] for r in rows),
+               "mean_motion": _mean(r["motion"] for r in rows),
+               "always_two_baseline": _mean(float(r["truth"] == 2) for r in rows)}
+    return {"summary": summary, "items": rows}
+
+
+def calibrate_motion_counter(root: Path, split: str) -> dict:
+    """Accuracy of ``motion_repetitions`` against the stated counts on corpus clips, per setting."""
+    clips = read_clips(root, split)
+    items = [(c, ph, stated_count(ph["text"])) for c in clips for ph in c["phrases"] if stated_count(ph["text"])]
+    items = list({(c["id"], ph["text"]): (c, ph, r) for c, ph, r in items}.values())
+    table = {}
+    for prom, smooth in itertools.product((0.2, 0.3, 0.4, 0.5, 0.6, 0.7), (0.0, 1.0, 2.0)):
+        hits = [motion_repetitions(c["joints"], ph["parts"], tuple(ph["frames"]), prominence=prom, smooth=smooth) == r
+                for c, ph, r in items]
+        table[f"prominence={prom} smooth={smooth}"] = float(np.mean(hits))
+    return {"phrases": len(items), "accuracy": table}
+
+
+# ------------------------------------------------------------------------------ main
+def _print(title: str, summary: dict) -> None:
+    print(f"\n== {title}")
+    for key, value in summary.items():
+        if isinstance(value, dict):
+            print(f"  {key:24s} " + "  ".join(f"{k}={v:.3g}" for k, v in value.items()))
+        else:
+            print(f"  {key:24s} {value:.4g}")
+
+
+def parse_args(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", type=Path, default=None, help="procedural corpus folder (default: held-out clips)")
+    ap.add_argument("--weights", type=Path, default=None, help="pipeline folder (default: the shipped weights)")
+    ap.add_argument("--split", default="test")
+    ap.add_argument("--clips", type=int, default=300, help="held-out motions written when --data is not given")
+    ap.add_argument("--n", type=int, default=20, help="prompts per section (a), (b), (d)")
+    ap.add_argument("--n-example", type=int, default=3, help="examples for (c)")
+    ap.add_argument("--variations", type=int, default=3, help="variations (and plain samples) per example")
+    ap.add_argument("--example-window", type=float, default=0.5, help="(c): step fractions with the example's maps")
+    ap.add_argument("--shift", type=int, default=20, help="(b): shift in motion frames (a multiple of 4)")
+    ap.add_argument("--erase-modes", nargs="+", default=["others", "special", "zero"])
+    ap.add_argument("--steps", type=int, default=50)
+    ap.add_argument("--guidance", type=float, default=7.5)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--batch", type=int, default=8, help="(d): prompts per generation")
+    ap.add_argument("--sections", default="abcd")
+    ap.add_argument("--calibrate", action="store_true", help="only: the motion counter's accuracy per setting "
+                    "on the --split clips (use a training split)")
+    ap.add_argument("--quick", action="store_true", help="tiny run (2 items, 10 steps) to check the script")
+    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--threads", type=int, default=None)
+    args = ap.parse_args(argv)
+    if set(args.sections) - set("abcd"):
+        ap.error(f"--sections {args.sections!r}: use letters from 'abcd'")
+    if args.quick:
+        args.n, args.n_example, args.variations, args.steps, args.clips = 2, 1, 2, 10, 40
+        args.erase_modes = args.erase_modes[:1]
+    return args
+
+
+def main(argv=None) -> dict:
+    args = parse_args(argv)
+    if args.threads:
+        import torch
+        torch.set_num_threads(args.threads)
+    start = time.perf_counter()
+    tmp = None
+    root = args.data
+    if root is None:
+        from salad_core.eval.heldout import heldout_corpus
+
+        tmp = tempfile.TemporaryDirectory(prefix="salad_new_edits_")
+        root = heldout_corpus(Path(tmp.name) / "heldout", motions=args.clips, split=args.split)
+    if args.calibrate:
+        res = calibrate_motion_counter(root, args.split)
+        best = max(res["accuracy"], key=res["accuracy"].get)
+        print(f"motion counter on {res['phrases']} stated-count phrases of {root} ({args.split}); "
+              f"current {MOTION_COUNT}")
+        for key, acc in res["accuracy"].items():
+            print(f"  {key:28s} {acc:.3f}" + ("   <- best" if key == best else ""))
+        return res
+    pipe = SaladPipeline.from_pretrained(args.weights)
+    clips = read_clips(root, args.split)
+    results: dict = {"settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()}}
+    print(f"weights: {pipe.source}; corpus {root} ({args.split}): {len({c['id'] for c in clips})} clips; "
+          f"{args.steps} steps, w = {args.guidance}")
+    if "a" in args.sections:
+        results["erase"] = measure_erase(pipe, erase_items(clips, args.n), args)
+        _print(f"(a) erase a phrase ({len(results['erase']['items']) // len(args.erase_modes)} prompts): "
+               "activity drop of its parts, other parts' MPJPE (m) vs deleting its words", results["erase"]["summary"])
+    if "b" in args.sections:
+        results["shift"] = measure_shift(pipe, shift_items(clips, args.n, args.shift), args)
+        _print(f"(b) shift a phrase by +-{args.shift} frames ({len(results['shift']['items'])} prompts): lag of its "
+               "parts' activity (frames)", results["shift"]["summary"])
+    if "c" in args.sections:
+        results["example"] = measure_example(pipe, clips, args)
+        _print(f"(c) example-based ({len(results['example']['items'])} examples x {args.variations}): root-aligned "
+               "MPJPE (m)", results["example"]["summary"])
+    if "d" in args.sections:
+        results["counting"] = measure_counting(pipe, count_items(clips, args.n), args)
+        _print(f"(d) counting ({len(results['counting']['items'])} phrases): accuracy", results["counting"]["summary"])
+    results["seconds"] = time.perf_counter() - start
+    print(f"\ntotal {results['seconds']:.1f} s")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(results, indent=2, default=float) + "\n")
+        print(f"wrote {args.json}")
+    if tmp is not None:
+        tmp.cleanup()
+    return results
+
+
+if __name__ == "__main__":
+    sys.exit(0 if main() else 1)
