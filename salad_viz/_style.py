@@ -22,6 +22,7 @@ __all__ = [
     "FLOOR_DARK",
     "TRAJECTORY",
     "THEME_HUES",
+    "SIDE_COLORS",
     "chain_sides",
     "chain_palette",
     "joint_chain",
@@ -37,9 +38,9 @@ FLOOR_LIGHT = (0.90, 0.90, 0.90)
 FLOOR_DARK = (0.78, 0.78, 0.78)
 TRAJECTORY = (0.15, 0.35, 0.85)
 
-# Chain colours by body side: left = blues, right = reds, mid-line (spine, head) = charcoal.
-# Two shades per side so that a leg and an arm on the same side stay distinct.
-_SIDE_COLORS = {
+#: Chain colours (RGB floats) by body side: left = blues, right = reds, mid-line (spine, head) =
+#: charcoal. Two shades per side so that a leg and an arm on the same side stay distinct.
+SIDE_COLORS = {
     "left": ((0.12, 0.35, 0.80), (0.30, 0.65, 0.95)),
     "right": ((0.80, 0.15, 0.15), (0.95, 0.55, 0.15)),
     "mid": ((0.22, 0.22, 0.22), (0.45, 0.45, 0.45)),
@@ -93,7 +94,7 @@ def chain_palette(skeleton: Skeleton) -> np.ndarray:
     used = {"left": 0, "right": 0, "mid": 0}
     out = []
     for side in chain_sides(skeleton):
-        shades = _SIDE_COLORS[side]
+        shades = SIDE_COLORS[side]
         out.append(shades[used[side] % len(shades)])
         used[side] += 1
     return np.asarray(out, dtype=np.float64)

@@ -15,7 +15,7 @@ import numpy as np
 from salad_core.skeleton import Skeleton, get_skeleton
 
 from ._arrays import as_joints_list, atomic_output, check_frames_memory, check_size
-from ._style import _SIDE_COLORS, THEME_HUES
+from ._style import SIDE_COLORS, THEME_HUES
 from .camera import fixed_camera, follow_camera, shared_follow_framing
 from .raster import hstack_images
 from .render import SkeletonRenderer
@@ -167,7 +167,7 @@ def _side_key(img: np.ndarray) -> np.ndarray:
     draw = ImageDraw.Draw(pil)
     x, y = 6, h - 6
     for text, side in (("left", "left"), ("right", "right")):
-        col = tuple(int(round(c * 255)) for c in _SIDE_COLORS[side][0])
+        col = tuple(int(round(c * 255)) for c in SIDE_COLORS[side][0])
         box = draw.textbbox((x, 0), text, font=font)
         draw.text((x, y - (box[3] - box[1]) - box[1]), text, fill=col, font=font, stroke_width=2,
                   stroke_fill=(255, 255, 255))

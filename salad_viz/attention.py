@@ -30,6 +30,8 @@ from ._arrays import to_numpy
 __all__ = [
     "AXES",
     "SPECIAL_TOKENS",
+    "WORD_CHARS",
+    "new_figure",
     "reduce_attention",
     "merge_tokens",
     "word_token_ids",
@@ -53,7 +55,9 @@ SPECIAL_TOKENS = frozenset({
     "[cls]", "[sep]", "[pad]", "[mask]", "[unk]", "<|startoftext|>", "<|endoftext|>", "<s>", "</s>",
     "<pad>", "<unk>", "<bos>", "<eos>", "",
 })
-_WORD_CHARS = re.compile(r"[a-z0-9']+")
+#: What a word is made of (lower-case letters, digits, apostrophes): tokens without any are
+#: punctuation or special tokens, not words.
+WORD_CHARS = re.compile(r"[a-z0-9']+")
 
 
 # --------------------------------------------------------------------------- reduction
@@ -201,7 +205,7 @@ def word_token_ids(tokens: Sequence[str], word) -> tuple[int, ...]:
             raise ValueError(f"token index {word} is out of range for {n} tokens")
         return (int(word) % n,)
     if isinstance(word, str):
-        query = _WORD_CHARS.findall(word.lower())
+        query = WORD_CHARS.findall(word.lower())
         if not query:
             raise ValueError(f"word {word!r} contains no letters")
         merged = merge_tokens(tokens)
@@ -264,7 +268,7 @@ def select_words(attention, tokens: Sequence[str], word_ids=None) -> tuple[np.nd
         raise ValueError(f"tokens has {len(tokens)} entries but attention has W = {arr.shape[2]} tokens")
     if word_ids is None:
         # every word; pure punctuation tokens ("," ".") are left out
-        groups = [(w, ids) for w, ids in merge_tokens(tokens) if _WORD_CHARS.search(w)]
+        groups = [(w, ids) for w, ids in merge_tokens(tokens) if WORD_CHARS.search(w)]
         if not groups:
             raise ValueError("tokens contain no words (only special tokens and punctuation)")
         labels = [w for w, _ in groups]
@@ -390,8 +394,9 @@ def _ensure_notebook_display() -> None:
         png.for_type(Figure, _figure_png)
 
 
-def _figure(figsize):
-    """A figure outside pyplot's global state: no leaks, no double display in notebooks.
+def new_figure(figsize: tuple[float, float]):
+    """A ``matplotlib.figure.Figure`` of ``figsize`` (inches) outside pyplot's global state: no
+    leaks, no double display in notebooks.
 
     A notebook shows it when it is a cell's value (or through ``display(fig)``).
     """
@@ -407,7 +412,7 @@ def _figure(figsize):
 def _new_axes(ax, figsize):
     if ax is not None:
         return ax.figure, ax
-    fig = _figure(figsize)
+    fig = new_figure(figsize)
     return fig, fig.subplots()
 
 
@@ -499,7 +504,7 @@ def _grid(maps: np.ndarray, titles: Sequence[str], *, ncols, fpl, cmap, normaliz
     if ncols < 1:
         raise ValueError(f"ncols must be >= 1, got {ncols}")
     nrows = int(np.ceil(k / ncols))
-    fig = _figure((panel_size[0] * ncols + 1.2, panel_size[1] * nrows + 0.6))
+    fig = new_figure((panel_size[0] * ncols + 1.2, panel_size[1] * nrows + 0.6))
     axs = fig.subplots(nrows, ncols, squeeze=False)
     shown, vmin, vmax = _normalise(maps, normalize)
     im = None
@@ -711,7 +716,7 @@ def _pairs(a, b, tokens_a, tokens_b, word_ids):
         words_b = merge_tokens(tokens_b)
         seen: dict[str, int] = {}
         for text, ids in merge_tokens(tokens_a):
-            if not _WORD_CHARS.search(text):
+            if not WORD_CHARS.search(text):
                 continue
             k = seen.get(text, 0)
             seen[text] = k + 1
@@ -740,7 +745,7 @@ def _pairs(a, b, tokens_a, tokens_b, word_ids):
 def _comparison_figure(rows, labels, diff_label, *, fpl, cmap, diff_cmap, normalize, suptitle, panel_size):
     """Rows of [A | B | B - A']: A, B on a per-row shared scale, the difference symmetric about 0."""
     n = len(rows)
-    fig = _figure((panel_size[0] * 3 + 1.6, panel_size[1] * n + 0.6))
+    fig = new_figure((panel_size[0] * 3 + 1.6, panel_size[1] * n + 0.6))
     axs = fig.subplots(n, 3, squeeze=False)
     for r, (word, a, b, diff) in enumerate(rows):
         both = np.stack([np.nan_to_num(a), np.nan_to_num(b)])
@@ -883,7 +888,7 @@ def plot_joint_attention(joints, skeleton: str | Skeleton, maps, word: str | Non
                            joint_colors=colors, backend=backend)
     aspect = strip.shape[0] / strip.shape[1]
     width = 9.0
-    fig = _figure((width, width * aspect + 2.6))
+    fig = new_figure((width, width * aspect + 2.6))
     ax_img, ax_map = fig.subplots(2, 1, gridspec_kw={"height_ratios": [width * aspect, 2.2]})
     ax_img.imshow(strip)
     ax_img.axis("off")

@@ -22,7 +22,7 @@ import numpy as np
 from salad_core.skeleton import Skeleton, get_skeleton
 
 from ._arrays import to_numpy
-from .attention import _WORD_CHARS, AXES, _figure, merge_tokens, reduce_attention
+from .attention import AXES, WORD_CHARS, merge_tokens, new_figure, reduce_attention
 
 __all__ = ["word_share_by_step", "plot_word_share_by_step", "denoising_strips", "SPECIAL_LABEL"]
 
@@ -74,7 +74,7 @@ def word_share_by_step(attention, tokens: Sequence[str], *, axes: str = "slhnpw"
     # one (P, N', W) map per step, averaged over the parts and frames: (S, W)
     per_token = np.stack([reduce_attention(arr, axes, steps=s, batch=batch).mean(axis=(0, 1))
                           for s in range(n_steps)])
-    groups = [(w, ids) for w, ids in merge_tokens(toks) if _WORD_CHARS.search(w)]   # punctuation is no word
+    groups = [(w, ids) for w, ids in merge_tokens(toks) if WORD_CHARS.search(w)]   # punctuation is no word
     if not groups:
         raise ValueError(f"tokens {toks} contain no word")
     labels, columns, seen = [], [], {}
@@ -121,7 +121,7 @@ def plot_word_share_by_step(attention, tokens: Sequence[str], *, axes: str = "sl
             raise ValueError(f"words {unknown} are not among the prompt's labels {labels}")
         keep = [i for i, label in enumerate(labels) if label in words or (special and label == SPECIAL_LABEL)]
     if ax is None:
-        fig = _figure(figsize)
+        fig = new_figure(figsize)
         ax = fig.subplots()
     else:
         fig = ax.figure

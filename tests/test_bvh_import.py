@@ -384,9 +384,9 @@ def _dist_to_segment(p, a, b):
 
 
 def _stature_m(joints):
-    from salad_core.bvh.convert import _stature
+    from salad_core.bvh.convert import stature
 
-    return _stature(joints)
+    return stature(joints)
 
 
 def _legs(joints):

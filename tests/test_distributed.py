@@ -80,9 +80,9 @@ def _tiny_bert(folder: Path) -> Path:
     """A randomly initialised 1-layer BERT with MiniLM's tokenizer: a fast stand-in text encoder."""
     from transformers import AutoTokenizer, BertConfig, BertModel
 
-    from salad_core.text import _minilm_default_path
+    from salad_core.text import minilm_default_path
 
-    tok = AutoTokenizer.from_pretrained(str(_minilm_default_path()), local_files_only=True)
+    tok = AutoTokenizer.from_pretrained(str(minilm_default_path()), local_files_only=True)
     tok.save_pretrained(folder)
     torch.manual_seed(0)
     BertModel(BertConfig(vocab_size=tok.vocab_size, hidden_size=16, num_hidden_layers=1, num_attention_heads=2,

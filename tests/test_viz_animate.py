@@ -141,17 +141,17 @@ def test_side_panels_share_one_scale_and_are_labelled(walk):
 
 
 def test_left_right_key_in_the_chain_colours(walk):
-    from salad_viz._style import _SIDE_COLORS
+    from salad_viz._style import SIDE_COLORS
 
     with_key = render_frames(walk, SKEL, size=(160, 160), frames=[0], backend="raster")[0]
     without = render_frames(walk, SKEL, size=(160, 160), frames=[0], backend="raster", side_legend=False)[0]
     corner = (slice(130, 160), slice(0, 80))
     diff = np.abs(with_key.astype(int) - without.astype(int))
     assert diff[corner].sum() > 0 and diff.sum() == diff[corner].sum()      # only the bottom-left corner
-    assert _colour_pixels(with_key[corner], _SIDE_COLORS["left"][0]) > _colour_pixels(without[corner],
-                                                                                      _SIDE_COLORS["left"][0])
-    assert _colour_pixels(with_key[corner], _SIDE_COLORS["right"][0]) > _colour_pixels(without[corner],
-                                                                                       _SIDE_COLORS["right"][0])
+    assert _colour_pixels(with_key[corner], SIDE_COLORS["left"][0]) > _colour_pixels(without[corner],
+                                                                                      SIDE_COLORS["left"][0])
+    assert _colour_pixels(with_key[corner], SIDE_COLORS["right"][0]) > _colour_pixels(without[corner],
+                                                                                       SIDE_COLORS["right"][0])
     # an overlay of two motions uses theme colours, not the chain colours: no key
     over = render_frames([walk, walk + 0.5], SKEL, layout="overlay", size=(160, 160), frames=[0], backend="raster")
     over_nokey = render_frames([walk, walk + 0.5], SKEL, layout="overlay", size=(160, 160), frames=[0],

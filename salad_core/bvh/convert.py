@@ -40,7 +40,7 @@ from .reader import BvhMotion, read_bvh
 from .rigs import HML_NAMES, RigMapping, map_rig
 
 __all__ = ["BvhImportOptions", "BvhImport", "import_bvh", "bvh_to_joints", "bvh_to_features", "LoadedMotion",
-           "load_motion", "JointsConversionError", "UNITS", "UP_AXES"]
+           "load_motion", "JointsConversionError", "UNITS", "UP_AXES", "TARGET_STATURE", "stature"]
 
 #: Metres per file unit of the length units :func:`import_bvh` knows.
 UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "ft": 0.3048}
@@ -67,8 +67,12 @@ def _chain_length(joints: np.ndarray, chain) -> np.ndarray:
     return np.linalg.norm(np.diff(joints[..., idx, :], axis=-2), axis=-1).sum(-1)
 
 
-def _stature(joints: np.ndarray) -> float:
-    """Median over frames of the mean leg length plus the spine length (pelvis -> head)."""
+def stature(joints: np.ndarray) -> float:
+    """Median over frames of the mean leg length plus the spine length (pelvis -> head).
+
+    ``joints`` ``(T, 22, 3)`` in HumanML3D's joint order, any length unit; the result is in that
+    unit (compare :data:`TARGET_STATURE`, metres).
+    """
     legs = 0.5 * (_chain_length(joints, _LEG[0]) + _chain_length(joints, _LEG[1]))
     return float(np.median(legs + _chain_length(joints, _SPINE)))
 
@@ -216,13 +220,14 @@ def _choose_up(rest: str | None, moving: str | None, path: str) -> str:
     return rest or moving
 
 
-def _detect_units(stature: float) -> tuple[str, float]:
-    """Closest known unit by the legs + spine length; ``("fit", scale)`` when none is close."""
-    if not stature > 0:
+def _detect_units(size: float) -> tuple[str, float]:
+    """Closest known unit by the legs + spine length ``size`` (file units); ``("fit", scale)`` when
+    none is close."""
+    if not size > 0:
         raise ValueError("the rig has zero size (legs and spine of length 0); cannot detect its units")
-    name, per = min(UNITS.items(), key=lambda kv: abs(math.log(stature * kv[1] / TARGET_STATURE)))
-    if abs(math.log(stature * per / TARGET_STATURE)) > math.log(_FIT_FACTOR):
-        return "fit", TARGET_STATURE / stature
+    name, per = min(UNITS.items(), key=lambda kv: abs(math.log(size * kv[1] / TARGET_STATURE)))
+    if abs(math.log(size * per / TARGET_STATURE)) > math.log(_FIT_FACTOR):
+        return "fit", TARGET_STATURE / size
     return name, per
 
 
@@ -286,7 +291,7 @@ def import_bvh(source: str | os.PathLike | BvhMotion, options: BvhImportOptions 
         detected.append("up")
     joints = joints @ UP_AXES[up].T
     if options.units is None:
-        units, per = _detect_units(_stature(joints))
+        units, per = _detect_units(stature(joints))
         detected.append("units")
     elif isinstance(options.units, str):
         units, per = options.units, UNITS[options.units]
