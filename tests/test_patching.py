@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from salad_core.attention import PatchingResult, patch_activations
+from salad_core.attention.patching import MIN_GAP
 from salad_core.part_activity import part_activity
 from salad_core.skeleton import NUM_PARTS, PART_NAMES
 
@@ -62,7 +63,7 @@ def test_a_partial_patch_is_measured_per_body_part(pipe, everything):
     np.testing.assert_allclose(res.corrupt, everything.corrupt)
     np.testing.assert_allclose(res.change, res.patched - res.corrupt)
     gap = res.clean - res.corrupt
-    ok = np.abs(gap) >= 1e-3
+    ok = np.abs(gap) >= MIN_GAP
     np.testing.assert_allclose(res.recovered[ok], res.change[ok] / gap[ok])
     assert res.recovered_total == pytest.approx(float(res.change @ gap / (gap @ gap)))
     rows = res.table()
