@@ -281,7 +281,7 @@ def test_cached_probabilities_follow_from_the_cached_queries_and_keys(cached, pi
         torch.testing.assert_close(scores.softmax(-1), cache["layers.1.temporal"][:, b], rtol=1e-5, atol=1e-6)
         # cross (the folded route: the queries are projected for the cache): padding tokens masked
         w = len(text.tokens[b])
-        q, k = cache["layers.2.cross.q"][:, b], cache["layers.2.cross.k"][:, b]           # (S, H, N', P, dh), (S, H, W, dh)
+        q, k = cache["layers.2.cross.q"][:, b], cache["layers.2.cross.k"][:, b]     # (S, H, N', P, dh), (S, H, W, dh)
         scores = torch.einsum("shnpd,shwd->shnpw", q, k) / math.sqrt(q.shape[-1])
         scores[..., w:] = float("-inf")
         torch.testing.assert_close(scores.softmax(-1), cache["layers.2.cross"][:, b], rtol=1e-5, atol=1e-6)

@@ -53,7 +53,9 @@ from .processor import HookedProcessor, SiteHook
 
 __all__ = [
     "HOOK_POINTS",
+    "WRITABLE_POINTS",
     "STORE_KINDS",
+    "NameFilter",
     "HookContext",
     "HookPoint",
     "HookFn",
@@ -534,7 +536,11 @@ class ActivationCache(Mapping):
     (:meth:`axes`; see :mod:`salad_core.attention.hooks`). Sizes are the batch's: ``N'`` latent
     frames of the longest motion and ``W`` tokens of the longest prompt; shorter prompts have
     probability 0 on the padding tokens, shorter motions carry padded frames (crop them with
-    :attr:`lengths`, or use :meth:`to_attention_maps`, which does).
+    :attr:`lengths`, or use :meth:`to_attention_maps`, which does). The mapping is read-only; the
+    tensors are the cache's own, so clone one before changing it in place. Memory: every kept step
+    of every chosen point in float32 (by arithmetic: the paper model's 5 cross sites' probabilities
+    over 50 steps for one 24-token prompt of 196 frames are 5 x 50 x 8 x 49 x 7 x 24 floats, 66 MB;
+    choose ``names``, ``layers`` and ``steps`` accordingly).
 
     Examples
     --------
@@ -594,7 +600,8 @@ class ActivationCache(Mapping):
     def to_attention_maps(self) -> Any:
         """The cached cross-attention probabilities as :class:`~salad_core.attention.AttentionMaps`
         (``mode="full"``, every cached step, layer and head; temporal and skeletal maps too when
-        they were cached at the same layers), cropped per prompt to its frames and tokens."""
+        they were cached at the same layers), cropped per prompt to its frames and tokens, kept in
+        float32 (a full capture keeps float16)."""
         from .capture import AttentionMaps, _crop
 
         if self.tokens is None or self.lengths is None or self.unit_length is None:
