@@ -16,6 +16,8 @@ Example::
 
     python bench/bench_training.py --old /tmp/h3_old --data /tmp/h3_corpus --what denoiser --steps 300
     python bench/bench_training.py --old /tmp/h3_old --data /tmp/h3_corpus --what vae --steps 200
+    python bench/bench_training.py --old /tmp/f_old --data /tmp/h3_corpus --what vae --steps 200 \
+        --config configs/v2_vae.json --new-train autocast=bf16   # a field for the new side only
     python bench/bench_training.py --threads-ab --data /tmp/h3_corpus --what vae   # 1 vs 2 threads, this checkout
 
 ``--threads-ab`` alternates 1 and 2 torch threads in one process of this checkout's trainer (rounds of a
@@ -103,9 +105,31 @@ print("RESULT " + json.dumps({"steps": res.step, "steps_per_s": res.steps_per_s,
 '''
 
 
-def _spec(root: Path, args: argparse.Namespace, out: Path, steps: int, cache_dir: Path | None) -> dict:
+def _config_path(args: argparse.Namespace) -> Path:
+    """``--config`` or the default config of ``--what`` (``configs/default_<what>.json``)."""
     name = "keymotion" if args.what in ("pst", "mmae") else args.what
-    config = json.loads((HERE / "configs" / f"default_{name}.json").read_text())
+    return args.config if args.config is not None else HERE / "configs" / f"default_{name}.json"
+
+
+def _train_overrides(pairs: list[str]) -> dict:
+    """``KEY=VALUE`` strings (VALUE read as JSON when it parses, else as a string) -> dict."""
+    out = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise SystemExit(f"--new-train expects KEY=VALUE, got {pair!r}")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
+def _spec(root: Path, args: argparse.Namespace, out: Path, steps: int, cache_dir: Path | None,
+          overrides: dict | None = None) -> dict:
+    config = json.loads(_config_path(args).read_text())
+    if overrides:
+        config["train"] = {**config.get("train", {}), **overrides}
     return {"root": str(root), "what": args.what, "data": str(args.data), "vae": str(args.vae), "config": config,
             "kf_vae": str(HERE / "salad_core" / "weights" / "keymotion" / "kf_vae"),
             "steps": steps, "log_every": args.log_every, "threads": args.threads, "out": str(out),
@@ -188,7 +212,8 @@ def threads_ab(args: argparse.Namespace, out: Path) -> int:
     """1 vs 2 torch threads for this checkout's trainer alone, alternating in one process (medians)."""
     import statistics
 
-    config = json.loads((HERE / "configs" / f"default_{args.what}.json").read_text())
+    config = json.loads(_config_path(args).read_text())
+    config["train"] = {**config["train"], **_train_overrides(args.new_train)}
     spec = {"what": args.what, "data": str(args.data), "vae": str(args.vae), "config": config,
             "cache_dir": str(out / "latent_cache"), "rounds": args.rounds, "steps": args.ab_steps}
     env = {**os.environ, "PYTHONPATH": str(HERE)}
@@ -216,6 +241,10 @@ def main(argv: list[str] | None = None) -> int:
                    help="the model trained (pst, mmae: KeyMotion's stages; the PST on the shipped keyframe VAE)")
     p.add_argument("--vae", type=Path, default=HERE / "salad_core" / "weights" / "salad" / "vae",
                    help="frozen VAE of the denoiser runs (default: the shipped one)")
+    p.add_argument("--config", type=Path, default=None,
+                   help="config JSON of both sides (default: configs/default_<what>.json)")
+    p.add_argument("--new-train", action="append", default=[], metavar="KEY=VALUE",
+                   help="a training-config field for the new side only (repeatable), e.g. autocast=bf16")
     p.add_argument("--steps", type=int, default=300)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--seed", type=int, default=None, help="training seed of both sides (default: the config's)")
@@ -242,7 +271,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"latent cache prebuilt in {time.perf_counter() - t0:.0f} s (data loading and text features included; "
               f"{_result(out / 'prebuild.log')['build_s']:.0f} s task build)")
     load0 = os.getloadavg()[0]
-    procs = {name: _launch(_spec(root, args, out / name, args.steps, cache if name == "new" else None),
+    overrides = _train_overrides(args.new_train)
+    procs = {name: _launch(_spec(root, args, out / name, args.steps, cache if name == "new" else None,
+                                 overrides if name == "new" else None),
                            out / f"{name}.log") for name, root in (("old", args.old.resolve()), ("new", HERE))}
     codes = {name: proc.wait() for name, proc in procs.items()}
     load1 = os.getloadavg()[0]
@@ -250,7 +281,9 @@ def main(argv: list[str] | None = None) -> int:
         if code:
             raise RuntimeError(f"{name} failed:\n{(out / f'{name}.log').read_text()[-3000:]}")
     res = {name: _result(out / f"{name}.log") for name in procs}
-    print(f"{args.what}, {args.steps} steps each, both processes at once, {args.threads} torch thread(s) each; "
+    print(f"{args.what} ({_config_path(args).name}"
+          + (f"; new side: {', '.join(args.new_train)}" if args.new_train else "") + "), "
+          f"{args.steps} steps each, both processes at once, {args.threads} torch thread(s) each; "
           f"load average {load0:.2f} at the start, {load1:.2f} at the end; runs in {out}")
     print(f"{'':8s} {'steps/s':>9s} {'frames/s':>10s} {'frames/step':>12s}  code")
     for name, r in res.items():

@@ -32,7 +32,118 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-__all__ = ["st_conv"]
+__all__ = ["st_conv", "st_conv_product"]
+
+
+def _compute_dtype(x: torch.Tensor) -> torch.dtype:
+    """The dtype of the products: the CPU autocast dtype when autocast is on, else ``x.dtype``."""
+    if x.device.type == "cpu" and torch.is_autocast_enabled("cpu"):
+        return torch.get_autocast_dtype("cpu")
+    if x.device.type == "cuda" and torch.is_autocast_enabled("cuda"):
+        return torch.get_autocast_dtype("cuda")
+    return x.dtype
+
+
+def _shifted_copy(dst: torch.Tensor, x: torch.Tensor, shift: int) -> None:
+    """``dst[:, t] = x[:, t + shift]`` where ``0 <= t + shift < N``, zeros elsewhere (``(B, N, ...)``)."""
+    n = x.shape[1]
+    if shift == 0:
+        dst.copy_(x)
+    elif abs(shift) >= n:
+        dst.zero_()
+    elif shift > 0:
+        dst[:, : n - shift].copy_(x[:, shift:])
+        dst[:, n - shift:].zero_()
+    else:
+        dst[:, -shift:].copy_(x[:, : n + shift])
+        dst[:, :-shift].zero_()
+
+
+class _STConvProduct(torch.autograd.Function):
+    """``out = [x[t-p], ..., x[t+p], (A x)[t]] @ W^T + bias`` with a hand-written backward.
+
+    Autograd's own backward of the stacked-input form (pad, k slices, ``cat``) builds a zero-filled
+    gradient of the padded input per tap and adds them up; here the input gradient is one product
+    ``g @ W`` read back as shifted slices, and the stacked input is written once, in the compute
+    dtype, without the padded copy.
+    """
+
+    @staticmethod
+    def forward(ctx, x, weight, bias, norm, kernel_size: int, dtype: torch.dtype):  # noqa: ANN001
+        b, n, j, c = x.shape
+        k, pad = kernel_size, kernel_size // 2
+        slots = k + (norm is not None)
+        with torch.autocast(x.device.type, enabled=False):
+            stacked = torch.empty((b, n, j, slots * c), dtype=dtype, device=x.device)
+            for i in range(k):
+                _shifted_copy(stacked[..., i * c: (i + 1) * c], x, i - pad)
+            if norm is not None:
+                stacked[..., k * c:].copy_(torch.matmul(norm.to(x.dtype), x))   # neighbourhood means
+            w = weight.to(dtype)
+            out = torch.matmul(stacked.view(-1, slots * c), w.t()).view(b, n, j, -1)
+            # under autocast the result stays in the lower precision, as nn.Linear's does: the GELU and
+            # dropout after it then run in bf16 too (the residual sum promotes back to float32)
+            out = out.add_(bias.to(dtype))
+        ctx.save_for_backward(stacked, w, norm)
+        ctx.kernel_size, ctx.x_dtype, ctx.w_dtype, ctx.bias_shape = k, x.dtype, weight.dtype, bias.shape
+        return out
+
+    @staticmethod
+    def backward(ctx, grad):  # noqa: ANN001
+        stacked, w, norm = ctx.saved_tensors
+        k, pad = ctx.kernel_size, ctx.kernel_size // 2
+        b, n, j, width = stacked.shape
+        c = width // (k + (norm is not None))
+        grad = grad.contiguous()
+        g2 = grad.view(-1, grad.shape[-1])
+        gc = g2.to(stacked.dtype)
+        grad_x = grad_w = grad_b = None
+        with torch.autocast(grad.device.type, enabled=False):
+            if ctx.needs_input_grad[1]:
+                grad_w = torch.matmul(gc.t(), stacked.view(-1, width)).to(ctx.w_dtype)     # (C_out, slots C)
+            if ctx.needs_input_grad[2]:
+                acc = torch.promote_types(grad.dtype, torch.float32)            # bf16 gradients summed in fp32
+                grad_b = grad.sum(dim=(0, 1), dtype=acc).sum_to_size(ctx.bias_shape).to(grad.dtype)  # (J, C_out)
+            if ctx.needs_input_grad[0]:
+                gs = torch.matmul(gc, w).view(b, n, j, width)                   # d loss / d stacked
+                grad_x = torch.empty((b, n, j, c), dtype=ctx.x_dtype, device=grad.device)
+                grad_x.copy_(gs[..., pad * c: (pad + 1) * c])
+                for i in range(k):
+                    s = i - pad                    # tap i reads x[t + s]: x[u] gets the tap's gradient at u - s
+                    if s == 0 or abs(s) >= n:
+                        continue
+                    tap = gs[..., i * c: (i + 1) * c]
+                    if s > 0:
+                        grad_x[:, s:].add_(tap[:, : n - s])
+                    else:
+                        grad_x[:, : n + s].add_(tap[:, -s:])
+                if norm is not None:
+                    grad_x.add_(torch.matmul(norm.t().to(gs.dtype), gs[..., k * c:]))
+        return grad_x, grad_w, grad_b, None, None, None
+
+
+def st_conv_product(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor, norm: torch.Tensor | None,
+                    kernel_size: int) -> torch.Tensor:
+    """The stacked product of :func:`st_conv` with its hand-written backward.
+
+    Parameters
+    ----------
+    x : Tensor ``(B, N, J, C)``
+    weight : Tensor ``(C_out, S C)``
+        ``S = kernel_size`` temporal taps (oldest first), plus one slot for the neighbourhood means
+        when ``norm`` is given.
+    bias : Tensor ``(J, C_out)`` or ``(C_out,)``
+    norm : Tensor ``(J, J)`` or None
+        Row-normalised adjacency.
+    kernel_size : int
+        Odd number of temporal taps.
+
+    Returns
+    -------
+    Tensor ``(B, N, J, C_out)``: in the autocast dtype when CPU (or CUDA) autocast is on (the products
+    run in it, as ``nn.Linear``'s do), else in ``x.dtype``.
+    """
+    return _STConvProduct.apply(x.contiguous(), weight, bias, norm, kernel_size, _compute_dtype(x))
 
 
 def st_conv(x: torch.Tensor, temp_conv: nn.Conv1d, graph_conv: nn.Module | None,
@@ -54,22 +165,16 @@ def st_conv(x: torch.Tensor, temp_conv: nn.Conv1d, graph_conv: nn.Module | None,
     -------
     Tensor ``(B, N, J, C)``
     """
-    b, n, j, c = x.shape
     w_t = temp_conv.weight                                   # (C_out, C_in, k)
     k = w_t.shape[-1]
     pad = k // 2
-    xp = F.pad(x, (0, 0, 0, 0, pad, pad))                    # zeros before and after the clip on N
-    taps = [xp[:, i: i + n] for i in range(k)]               # k x (B, N, J, C): h[t + i - k//2]
-    weights = [w_t[:, :, i] for i in range(k)]               # k x (C_out, C_in)
+    weights = [w_t[:, :, i] for i in range(k)]               # k x (C_out, C_in): tap i reads h[t + i - k//2]
     bias = temp_conv.bias
+    norm = None
     if graph_conv is not None:
         norm = adj_matrix / (adj_matrix.sum(dim=1, keepdim=True) + 1e-6)      # (J, J), as GraphConv
-        taps.append(torch.matmul(norm, x))                   # (B, N, J, C): neighbourhood means
         weights[pad] = weights[pad] + graph_conv.linear1.weight
-        weights.append(graph_conv.linear2.weight)
+        weights.append(graph_conv.linear2.weight)            # applied to the neighbourhood means
         # b_t + b_1 + b_2 * rowsum(norm): a bias per joint, (J, C_out)
         bias = (bias + graph_conv.linear1.bias)[None, :] + norm.sum(dim=1)[:, None] * graph_conv.linear2.bias[None, :]
-    stacked = torch.cat(taps, dim=-1)                        # (B, N, J, (k [+1]) C)
-    out = stacked @ torch.cat(weights, dim=1).t()            # (B, N, J, C_out)
-    return out + bias
-
+    return st_conv_product(x, torch.cat(weights, dim=1), bias, norm, k)

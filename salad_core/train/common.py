@@ -74,7 +74,7 @@ from .state import (
 )
 
 __all__ = ["TrainTask", "TrainResult", "fit", "StepContext", "ResumableBatchSampler", "seed_everything", "make_loader",
-           "make_sampler", "validate"]
+           "make_sampler", "validate", "autocast_context"]
 
 log = logging.getLogger(__name__)
 
@@ -250,11 +250,24 @@ def _forward_backward(objective: nn.Module, inputs: dict[str, Any], task: TrainT
         sync = contextlib.nullcontext() if i == len(parts) - 1 or not hasattr(objective, "no_sync") \
             else objective.no_sync()
         with sync:
-            losses = objective(**part)
-            losses["loss"].backward()
+            with autocast_context(config, env.device):
+                losses = objective(**part)
+            losses["loss"].backward()   # outside autocast: the backward runs in the forward's dtypes
         for k, v in losses.items():
             total[k] = total[k] + v.detach() if k in total else v.detach()
     return total
+
+
+def autocast_context(config: TrainConfig, device: str) -> contextlib.AbstractContextManager:
+    """``torch.autocast`` for ``config.autocast`` on ``device`` (a no-op context when it is None).
+
+    With ``"bf16"`` the forward's matrix products (and the ops autocast lists for lower precision) run in
+    bfloat16 while the weights, their gradients, the optimiser and the loss reductions stay in float32.
+    """
+    if config.autocast is None:
+        return contextlib.nullcontext()
+    dtypes = {"bf16": torch.bfloat16}
+    return torch.autocast(torch.device(device).type, dtype=dtypes[config.autocast])
 
 
 def _bucketing(task: TrainTask, config: TrainConfig) -> bool:
@@ -271,6 +284,7 @@ def _runtime(task: TrainTask, config: TrainConfig) -> dict[str, Any]:
             if _bucketing(task, config)
             else "random",
             "micro_batches": config.micro_batches if task.split is not None else 1,
+            "autocast": config.autocast,
             "allocator": "tuned" if allocator_tuned() else "system default"}
 
 
@@ -531,10 +545,11 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
     t_log, steps_at_log = t_start, step
     frames_this_call, frames_at_log = 0, 0
     if env.is_main:
-        log.info("training %s on %s: %d torch thread(s)%s (OpenMP wait: %s), %s batches of %d, %d process(es)",
+        log.info("training %s on %s: %d torch thread(s)%s (OpenMP wait: %s), %s batches of %d, %d process(es)%s",
                  task.model_type, env.device, torch.get_num_threads(),
                  "" if env.device.startswith("cuda") else " per process", wait_policy(),
-                 _runtime(task, config)["batching"], config.batch_size, env.world_size)
+                 _runtime(task, config)["batching"], config.batch_size, env.world_size,
+                 f", forward under {config.autocast} autocast" if config.autocast else "")
     steps_this_call = 0
     aux_seconds = 0.0  # validation and checkpoint time, left out of the reported speed
     objective.train()

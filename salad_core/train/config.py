@@ -27,6 +27,7 @@ __all__ = [
     "save_train_config",
     "RESUME_MUTABLE_FIELDS",
     "BATCHING_MODES",
+    "AUTOCAST_MODES",
 ]
 
 C = TypeVar("C", bound="TrainConfig")
@@ -41,6 +42,8 @@ RESUME_MUTABLE_FIELDS = frozenset({
 
 #: Values of :attr:`TrainConfig.batching`.
 BATCHING_MODES = ("buckets", "frames", "random")
+#: Values of :attr:`TrainConfig.autocast` besides None (full precision).
+AUTOCAST_MODES = ("bf16",)
 
 
 @dataclass(frozen=True)
@@ -73,6 +76,10 @@ class TrainConfig:
     bucket_pool: int = 16                      # global batches per length-sorted pool (1: random batches)
     micro_batches: int = 1                     # split each batch into K length-sorted micro-batches, each trimmed
                                                # to its own longest item (tasks with a ``split``; same gradient)
+    autocast: str | None = None                # "bf16": forward passes under torch.autocast(bfloat16) with float32
+                                               # weights, gradients, optimiser and loss reductions (faster on CPUs
+                                               # with bf16 instructions: docs/performance.md); None: full precision.
+                                               # Changes the numerics (opt-in; validation stays in float32)
 
     def __post_init__(self) -> None:
         def need(cond: bool, name: str, allowed: str) -> None:
@@ -101,6 +108,8 @@ class TrainConfig:
         need(self.batching in BATCHING_MODES, "batching", f"use one of {BATCHING_MODES}")
         need(isinstance(self.bucket_pool, int) and self.bucket_pool >= 1, "bucket_pool", "use an integer >= 1")
         need(isinstance(self.micro_batches, int) and self.micro_batches >= 1, "micro_batches", "use an integer >= 1")
+        need(self.autocast is None or self.autocast in AUTOCAST_MODES, "autocast",
+             f"use None (full precision) or one of {AUTOCAST_MODES}")
         need(isinstance(self.seed, int) and 0 <= self.seed < 2**62, "seed", "use an integer in [0, 2**62)")
         need(self.device in ("auto", "cpu", "cuda") or self.device.startswith("cuda:"), "device",
              "use 'auto', 'cpu', 'cuda' or 'cuda:N'")
