@@ -239,7 +239,7 @@ def test_long_sequences_are_drawn_and_said():
     from salad_core.data.procedural import GENERATOR_VERSION, in_language, render_captions
     from salad_core.data.procedural.composition import PLAN_TYPES, sample_plan
 
-    assert GENERATOR_VERSION == "2.1"
+    assert GENERATOR_VERSION == "2.2"
     assert PLAN_TYPES["sequence3"] + PLAN_TYPES["sequence4"] >= 0.2
     for i in range(5):
         rng = np.random.default_rng([12, i])

@@ -269,7 +269,7 @@ def test_mirrored_left_action_looks_like_the_right_one():
 
     # a symmetric performer without idle sway or wander: those are (deliberately) not mirrored
     persona = dataclasses.replace(Persona.sample(np.random.default_rng(3)), tilt=0.0, arm_asym=0.0,
-                                  liveliness=0.0, sway=0.0)
+                                  liveliness=0.0, sway=0.0, twist=0.0, arm_offsets=((0.0,) * 3,) * 2)
 
     def clip(side):
         return realise(Plan((Step(Action("wave", side)),)), np.random.default_rng(3), persona=persona)

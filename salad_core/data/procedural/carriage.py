@@ -51,7 +51,7 @@ CARRIAGES: tuple[Carriage, ...] = (
 #: performer: walking with a hand in a pocket is common, jumping with one is not). Gesture
 #: steps (the performer stands) also do.
 FREE_ARM_KINDS = frozenset({"walk", "walk_backward", "sidestep", "circle", "turn", "pivot", "step_over",
-                            "step_up", "climb_stairs"})
+                            "step_up", "climb_stairs", "descend_stairs", "shuffle"})
 
 #: Chance that an arm of a clip that allows it takes a carriage, and that the second arm copies
 #: the first's (both hands in the pockets, behind the back, ...).

@@ -214,32 +214,41 @@ def _wander(n: int, rng: np.random.Generator, dims: int, period: tuple[float, fl
     return out / np.sqrt(1.5)
 
 
-def _alive(pose: Pose, persona: Persona, rng: np.random.Generator, propped: np.ndarray | None = None) -> None:
+def _alive(pose: Pose, persona: Persona, rng: np.random.Generator, propped: np.ndarray | None = None,
+           gesture_arms: np.ndarray | None = None, head_calm: np.ndarray | None = None) -> None:
     """Lay the performer's posture and a low-frequency wander of the joint angles on ``pose``.
 
     Posture (slouch, sideways tilt, arm asymmetry) is constant over the clip; the wander
     (trunk, head, arms; amplitude set by ``persona.liveliness``) keeps held poses from freezing.
     Neither touches the pelvis position or the feet, so contact and reach are unchanged.
     ``propped`` ``(N,)`` in [0, 1]: where the hands hold the body up (sitting back on them, on all
-    fours) the trunk wanders a quarter as much, so the hands stay within reach of the floor.
+    fours) the trunk wanders a tenth as much (2.2; a quarter before the wider postures), so the hands stay within reach of the floor.
+    ``gesture_arms`` ``(N, 2)`` in [0, 1]: where a gesture drives an arm, the persona's per-arm
+    carriage offsets (``arm_offsets``) fade out, so claps still meet and salutes reach the brow.
+    ``head_calm`` ``(N,)`` in [0, 1]: where a head gesture is annotated the arms wander half as
+    much (a turn of the head is the slowest annotated motion; the idle arms must not out-move it).
     """
     n = pose.num_frames
     live = persona.liveliness
-    trunk = 1.0 if propped is None else (1.0 - 0.75 * smooth(np.asarray(propped, dtype=np.float64), 4.0))[:, None]
+    trunk = 1.0 if propped is None else (1.0 - 0.9 * smooth(np.asarray(propped, dtype=np.float64), 4.0))[:, None]
     pose.spine[:, 1] += persona.slouch * trunk[:, 0] if propped is not None else persona.slouch
     pose.neck[:, 1] -= 0.5 * persona.slouch               # the gaze stays level
     pose.spine[:, 2] += persona.tilt * trunk[:, 0] if propped is not None else persona.tilt
+    pose.spine[:, 0] += persona.twist * trunk[:, 0] if propped is not None else persona.twist
     pose.arm[:, 0, 0] += 0.5 * persona.arm_asym
     pose.arm[:, 1, 0] -= 0.5 * persona.arm_asym
+    free = np.ones((n, 2)) if gesture_arms is None else 1.0 - np.clip(gesture_arms, 0.0, 1.0)
+    pose.arm += free[:, :, None] * np.asarray(persona.arm_offsets, dtype=np.float64)[None]
     # amplitudes (rad, std) small enough that a resting arm or head stays well below an
     # annotated action's part speed (the phrase-activity checks), large enough to never freeze
     # (2.1: about twice 2.0's, whose spine and head rotations varied 0.5-0.6x as much as real ones)
     noise = _wander(n, rng, 12, period=(1.8, 4.0)) * live
-    pose.spine += noise[:, 0:3] * np.array([0.09, 0.09, 0.09]) * trunk
+    pose.spine += noise[:, 0:3] * np.array([0.1, 0.12, 0.11]) * trunk
     pose.neck += noise[:, 3:6] * np.array([0.1, 0.07, 0.05])
-    pose.arm[:, :, 0] += noise[:, 6:8] * 0.035
-    pose.arm[:, :, 1] += noise[:, 8:10] * 0.025
-    pose.arm[:, :, 2] = np.maximum(pose.arm[:, :, 2] + noise[:, 10:12] * 0.05, 0.02)
+    arm_scale = 1.0 if head_calm is None else (1.0 - 0.5 * np.clip(head_calm, 0.0, 1.0))[:, None]
+    pose.arm[:, :, 0] += noise[:, 6:8] * 0.035 * arm_scale
+    pose.arm[:, :, 1] += noise[:, 8:10] * 0.025 * arm_scale
+    pose.arm[:, :, 2] = np.maximum(pose.arm[:, :, 2] + noise[:, 10:12] * 0.05 * arm_scale, 0.02)
 
 
 #: Body speed (m/s) above which a stretch of motion needs no extra liveliness (see :func:`_hold_mask`).
@@ -478,9 +487,15 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
         gesture_arms[sl] = np.maximum(gesture_arms[sl], g.arm_weight)
     _trunk_follows_arms(pose, persona, gesture_arms)
     hands = _held_hands(pose.num_frames, held_hands)
-    _alive(pose, persona, rng, propped=hands[0].max(1))
     calm = [events[(role, i)][0] for role, i, a in plan.actions() if a.spec.category == "head"]
-    _lively_holds(pose, _hold_mask(pose, body, calm), persona, rng)
+    head_calm = np.zeros(pose.num_frames)
+    for f0, f1 in calm:
+        head_calm[max(0, f0 - 6):max(0, f1 + 6)] = 1.0
+    _alive(pose, persona, rng, propped=hands[0].max(1), gesture_arms=gesture_arms, head_calm=smooth(head_calm, 2.0))
+    mask = _hold_mask(pose, body, calm)
+    # a trunk propped on its hands sways a tenth as much (as in _alive): the hands stay within reach
+    mask[:, 0] *= 1.0 - 0.9 * smooth(hands[0].max(1), 4.0)
+    _lively_holds(pose, mask, persona, rng)
     _hold_hands(pose, body, hands)
     joints = _anchor(assemble(pose, body, keep_toes=True)[s0:stop], body)
 
@@ -508,8 +523,9 @@ _SPEED = ("quickly", "slowly")
 _VARIANT_P = {"walk": {"in_place": 0.12}, "jog": {"in_place": 0.2}, "march": {"in_place": 0.4},
               "jump": {"forward": 0.4}, "turn": {"around": 0.4}, "wave": {"arms": 0.3}, "throw": {"underhand": 0.35}}
 #: Chance of a speed modifier where one is allowed (1.0: 0.25, "slowly" was in 16 % of captions; 2.0: 0.2;
-#: 2.1 draws longer sequences, so 0.17 keeps "slowly" and "quickly" each under 10 % of captions).
-_SPEED_P = 0.17
+#: 2.1 draws longer sequences, so 0.17 keeps "slowly" and "quickly" each under 10 % of captions;
+#: 2.2: 0.14, with three more primitives that take them, "slowly" was back in 12 %).
+_SPEED_P = 0.14
 #: Arm gestures that can last a whole sequence (an overlay).
 _OVERLAYS = ("wave", "raise", "stretch", "arms_out", "clap", "hands_on_hips", "cross_arms", "arm_circles", "guard")
 #: Gestures a spin does not take (a spinning body does not strike).

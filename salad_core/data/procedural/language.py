@@ -96,6 +96,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "change": ("changes", "changing"), "tidy": ("tidies", "tidying"), "sleep": ("sleeps", "sleeping"),
     "watch": ("watches", "watching"), "drop": ("drops", "dropping"), "settle": ("settles", "settling"),
     "mount": ("mounts", "mounting"), "crawl": ("crawls", "crawling"),
+    "descend": ("descends", "descending"), "come": ("comes", "coming"), "lunge": ("lunges", "lunging"),
     "ask": ("asks", "asking"), "chase": ("chases", "chasing"), "lean": ("leans", "leaning"), "loosen": ("loosens", "loosening"), "dash": ("dashes", "dashing"), "lower": ("lowers", "lowering"), "attract": ("attracts", "attracting"), "punctuate": ("punctuates", "punctuating"),
 }
 
@@ -190,6 +191,7 @@ _lex("DET", "which")
 _lex("ADP", "without")
 LEXICON["done"] = ("do", "VERB")
 LEXICON["lost"] = ("lose", "VERB")
+_lex("NOUN", "lunge ice")
 
 #: Subjects: (words, possessives, object pronoun per possessive, subject pronoun or None).
 SUBJECTS: tuple[tuple[str, tuple[str, ...], str | None], ...] = (
@@ -237,7 +239,7 @@ _LR, _B, _N = ("left", "right"), ("both",), (None,)
 _HIGH_DEFAULT = {"jump": ("high", "very high"), "kick": ("high",), "knee_lift": ("high", "up high"),
                  "wave": ("high", "above {poss} head", "high above {poss} head"),
                  "raise": ("high", "up high", "high above {poss} head", "high into the air")}
-_LOW_DEFAULT = {"squat": ("low", "down low"), "bow": ("low", "deeply"), "kick": ("low",), "wave": ("low",),
+_LOW_DEFAULT = {"squat": ("low", "down low"), "bow": ("low", "deeply"), "lunge": ("low", "deeply"), "kick": ("low",), "wave": ("low",),
                 "raise": ("to shoulder height", "to shoulder level")}
 _LOCOMOTION = {"walk", "run", "jog", "march", "walk_backward", "sidestep", "circle", "turn", "spin"}
 
@@ -261,7 +263,7 @@ RULES: dict[str, list[Rule]] = {
     "walk_backward": [_R("V:walk backward"), _R("V:walk backwards"), _R("V:step backward"), _R("V:move backward"),
                       _R("V:take a few steps/NOUN back"), _R("V:walk back")],
     "sidestep": [_R("V:sidestep to the {side:NOUN}", _LR), _R("V:step sideways to the {side:NOUN}", _LR),
-                 _R("V:walk sideways to the {side:NOUN}", _LR), _R("V:shuffle to the {side:NOUN}", _LR),
+                 _R("V:walk sideways to the {side:NOUN}", _LR),
                  _R("V:move sideways to the {side:NOUN}", _LR), _R("V:step to the {side:NOUN}", _LR)],
     "circle": [_R("V:walk in a circle", _LR), _R("V:walk around in a circle", _LR), _R("V:walk in a big circle", _LR),
                _R("V:walk in a circle {cw}", _LR), _R("V:walk {cw} in a circle", _LR),
@@ -468,6 +470,18 @@ RULES.update({
                            _RS("V:climb [the stairs|some stairs|a flight of stairs|up the stairs|up some steps/NOUN]"),
                            _RS("V:go up [the stairs|some stairs|a few steps/NOUN]"), _R("V:ascend a flight of stairs"),
                            _R("V:ascend the stairs"), _R("V:climb up a staircase"), _R("V:walk up a staircase")),
+    "descend_stairs": _rules(_RS("V:walk down [the stairs|some stairs|a flight of stairs|the steps/NOUN|a few steps/NOUN]"),
+                             _RS("V:go down [the stairs|some stairs|a few steps/NOUN]"),
+                             _R("V:descend a flight of stairs"), _R("V:descend the stairs"),
+                             _RS("V:come down [the stairs|a staircase]"), _R("V:walk down a staircase")),
+    "shuffle": _rules(_R("V:shuffle forward"), _R("V:shuffle ahead"), _R("V:shuffle {poss} feet/NOUN forward"),
+                      _R("V:take small shuffling/VERB steps/NOUN forward"),
+                      _R("V:shuffle to the {side:NOUN}", _LR), _R("V:shuffle sideways to the {side:NOUN}", _LR),
+                      _R("V:shuffle {poss} feet/NOUN to the {side:NOUN}", _LR)),
+    "lunge": _rules(_R("V:lunge forward with {poss} {side} leg", _LR), _R("V:lunge forward on {poss} {side} leg", _LR),
+                    _R("V:do a lunge/NOUN with {poss} {side} leg", _LR),
+                    _R("V:step forward into a lunge/NOUN with {poss} {side} leg", _LR),
+                    _R("V:lunge with {poss} {side} leg forward", _LR)),
     "pivot": _rules(_R("V:pivot to the {side:NOUN}", _LR), _R("V:pivot on {poss} {side} foot", _LR),
                     _R("V:pivot {side:ADV} on the ball of {poss} {side} foot", _LR),
                     _R("V:turn {side:ADV} on {poss} {side} foot", _LR),
@@ -798,6 +812,9 @@ INTENT.update({
     "lie_down_get_up": ("as if doing/VERB an exercise", "as part of a workout"),
     "step_up": ("as if stepping/VERB onto a curb/NOUN", "as if exercising/VERB", "as part of a workout", "as if training/VERB"),
     "climb_stairs": ("as if climbing/VERB to the second/ADJ floor/NOUN", "as if going/VERB home/NOUN", "as if in a hurry"),
+    "descend_stairs": ("as if going/VERB down to the street/NOUN", "as if in a hurry", "as if going/VERB home/NOUN"),
+    "shuffle": ("as if tired", "as if dancing/VERB", "as if on ice/NOUN"),
+    "lunge": ("as if exercising/VERB", "as part of a workout", "as if training/VERB", "as if warming/VERB up"),
     "pivot": ("as if dodging/VERB a defender/NOUN", "as if changing/VERB direction/NOUN", "like a basketball/NOUN player/NOUN", "as if dancing/VERB"),
     "touch_knee": ("as if stretching/VERB", "as if warming/VERB up", "as part of a workout", "as if exercising/VERB"),
     "crawl": ("like a baby/NOUN", "as if looking/VERB for something on the floor",

@@ -157,8 +157,16 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("reach_across", "arms", "gesture", sides=("left", "right"), mods=_SPEED, weight=0.6),
     PrimitiveSpec("arm_circles", "arms", "gesture", sides=("both",), mods=_SPEED, weight=0.6),
     # --- corpus 2.1: on all fours (a whole clip: starts and ends there)
-    # (it only ever fills a one-action clip, so its weight is high for about 1 % of the motions)
-    PrimitiveSpec("crawl", "locomotion", "base", mods=_SPEED, weight=3.0, terminal=True, initial=True),
+    # (it only ever fills a one-action clip, so its weight is high for about 1 % of the motions;
+    # 2.2: 1.0, as 3.0 gave 2.1 % and its horizontal trunk took 33-57 % of the pose variance)
+    PrimitiveSpec("crawl", "locomotion", "base", mods=_SPEED, weight=1.0, terminal=True, initial=True),
+    # --- corpus 2.2: down a flight of stairs (from the top landing: it opens a clip), shuffling
+    # steps (the soles glide over the floor), lunges (legs far beyond walking)
+    PrimitiveSpec("descend_stairs", "locomotion", "base", mods=_SPEED, accepts=("head",), weight=0.8, initial=True),
+    PrimitiveSpec("shuffle", "locomotion", "base", sides=(None, "left", "right"), mods=_SPEED,
+                  accepts=("arms", "head"), weight=0.9),
+    PrimitiveSpec("lunge", "legs", "base", sides=("left", "right"), mods=("low", "slowly", "quickly"), reps=(1, 2),
+                  accepts=("arms", "head"), weight=1.1),
 ]}
 
 
@@ -219,7 +227,9 @@ def primitive_parts(action: Action) -> tuple[tuple[str, ...], tuple[str, ...]]:
         return _LOWER, ("spine", "left arm", "right arm", "head")
     if k in ("lie_down", "lie_down_get_up"):
         return _LOWER + ("spine",), ("left arm", "right arm", "head")
-    if k in ("step_up", "climb_stairs", "pivot"):
+    if k in ("step_up", "climb_stairs", "pivot", "descend_stairs", "shuffle"):
+        return _LOWER, _UPPER
+    if k == "lunge":
         return _LOWER, _UPPER
     if k == "touch_knee":     # the side is the hand; it touches the other knee, which rises
         knee_leg = "right leg" if side == "left" else "left leg"
@@ -322,6 +332,12 @@ def build_base(action: Action, start: Stance, persona: Persona, body: BodyModel,
         return steps.step_up(start, persona, body, rng, mods=mods, reps=action.reps)
     if k == "climb_stairs":
         return steps.climb_stairs(start, persona, body, rng, mods=mods)
+    if k == "descend_stairs":
+        return steps.descend_stairs(start, persona, body, rng, mods=mods)
+    if k == "shuffle":
+        return steps.shuffle(start, persona, body, rng, side=None if action.side is None else side, mods=mods)
+    if k == "lunge":
+        return steps.lunge(start, persona, body, rng, side=side, mods=mods, reps=action.reps)
     if k == "pivot":
         angle = np.pi if action.variant == "around" else rng.uniform(0.45, 0.55) * np.pi
         return steps.pivot(start, persona, body, rng, side=side, angle=angle, mods=mods)

@@ -17,7 +17,7 @@ from .kinematics import FPS, BodyModel, assemble, foot_vector, heading_vectors, 
 from .reach import arm_controls_for, shoulders, wrist_reach
 from .segment import Segment, knee_poles, num_frames, standing_pose
 
-__all__ = ["step_up", "climb_stairs", "pivot", "touch_knee"]
+__all__ = ["step_up", "climb_stairs", "descend_stairs", "shuffle", "lunge", "pivot", "touch_knee"]
 
 
 def _tempo(mods: tuple[str, ...]) -> float:
@@ -25,11 +25,15 @@ def _tempo(mods: tuple[str, ...]) -> float:
 
 
 def _stepping(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator,
-              moves: list[tuple[int, np.ndarray, float]], swing_t: float, total: float, lift: float):
+              moves: list[tuple[int, np.ndarray, float]], swing_t: float, total: float, lift: float,
+              roll_out: float = -0.3, roll_in: float = 0.1, pitch_mid: float = 0.15):
     """A standing pose whose feet make ``moves`` (foot, new flat ankle, lift-off time).
 
     The pelvis follows the feet (their mean, smoothed), rises with their height and stays
-    within the legs' reach. Returns the pose, the planted flags ``(N, 2)`` and the final ankles.
+    within the legs' reach. ``roll_out`` / ``roll_in`` (rad) roll the foot off its toe and onto
+    its heel, ``pitch_mid`` pitches it toe-up in mid-swing (0, 0, 0 with a small ``lift``: a
+    shuffle, the sole gliding just over the floor). Returns the pose, the planted flags
+    ``(N, 2)`` and the final ankles.
     """
     n = num_frames(total)
     tt = frame_times(n, FPS)
@@ -38,12 +42,13 @@ def _stepping(start: Stance, persona: Persona, body: BodyModel, rng: np.random.G
     for foot, to, t_lift in moves:
         last = plants[foot][-1]
         plants[foot][-1] = Plant(last.t_on, t_lift, last.ankle, last.yaw, roll_in=last.roll_in,
-                                 roll_in_time=last.roll_in_time, roll_out=-0.3, roll_out_time=0.12)
-        plants[foot].append(Plant(t_lift + swing_t, np.inf, to, float(start.foot_yaw[foot]), roll_in=0.1,
-                                  roll_in_time=0.08))
+                                 roll_in_time=last.roll_in_time, roll_out=roll_out,
+                                 roll_out_time=0.12 if roll_out else 0.0)
+        plants[foot].append(Plant(t_lift + swing_t, np.inf, to, float(start.foot_yaw[foot]), roll_in=roll_in,
+                                  roll_in_time=0.08 if roll_in else 0.0))
     planted = np.zeros((n, 2))
     for k in range(2):
-        airs = [Swing(lift, 0.45, 0.15)] * (len(plants[k]) - 1)
+        airs = [Swing(lift, 0.45, pitch_mid)] * (len(plants[k]) - 1)
         pose.ankle[:, k], pose.toe[:, k], planted[:, k] = foot_track(tt, plants[k], airs, body, k)
     feet = smooth(pose.ankle.mean(1), 0.3 * FPS)
     rise = feet[:, 1] - feet[0, 1]
@@ -120,6 +125,160 @@ def climb_stairs(start: Stance, persona: Persona, body: BodyModel, rng: np.rando
     core = (max(0, int(np.floor((t0 - 0.1) * FPS))), min(n, int(np.ceil((t + 0.05) * FPS)) + 1))
     end = Stance(ends, start.foot_yaw, start.yaw)
     return Segment(pose, end, core, info=dict(stairs=stairs, rise=float(rise), top=float(stairs * rise)))
+
+
+def _within_reach(pose, body: BodyModel, sigma: float = 2.0) -> None:
+    """Keep the pelvis within reach of both ankle targets in every frame, smoothly (in place).
+
+    A foot reaching down to a lower stair must get there before it lands: bounding the pelvis
+    by the planted feet only would drop it in one frame at touch-down.
+    """
+    bound = max_pelvis_height(pose.pelvis, ypr_matrix(pose.pelvis_ypr), pose.ankle, body) - 0.006
+    y = np.minimum(pose.pelvis[:, 1], bound)
+    # smoothing a minimum can lift it back over the bound where the bound dips: take the lower
+    pose.pelvis[:, 1] = np.minimum(smooth(y, sigma), bound)
+
+
+def descend_stairs(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *,
+                   mods: tuple[str, ...] = ()) -> Segment:
+    """Walk down a flight of 3-5 stairs (one foot per stair) onto the floor.
+
+    The performer starts on the top landing, the flight's height above ``start`` (an initial
+    primitive: it opens a clip) and ends standing on the floor at ``start``'s level, about a
+    metre further on. The gaze goes down to the steps.
+    """
+    u = rng.uniform
+    tempo = _tempo(mods) * persona.tempo
+    fwd, _ = heading_vectors(start.yaw)
+    rise, run = u(0.14, 0.18), u(0.27, 0.31)
+    stairs = int(rng.integers(3, 6))
+    top = stairs * rise
+    high = Stance(start.ankles + np.array([0.0, top, 0.0]), start.foot_yaw, start.yaw)
+    beat = u(0.6, 0.75) * tempo
+    lead = int(rng.integers(2))
+    t = u(0.25, 0.35)
+    t0 = t
+    moves = []
+    for i in range(1, stairs + 1):
+        foot = (lead + i - 1) % 2
+        moves.append((foot, high.ankles[foot] + fwd * (0.12 + i * run) - np.array([0.0, i * rise, 0.0]), t))
+        t += beat
+    last = (lead + stairs) % 2                                  # the trailing foot joins on the floor
+    moves.append((last, start.ankles[last] + fwd * (0.12 + stairs * run), t))
+    t += beat
+    total = t + u(0.3, 0.4)
+    pose, _, ends = _stepping(high, persona, body, rng, moves, 0.7 * beat, total, 0.05 + 0.3 * rise)
+    _within_reach(pose, body)
+    tt = frame_times(pose.num_frames, FPS)
+    act = envelope(tt, t0 - 0.1, t, 0.4)
+    pose.neck[:, 1] += u(0.2, 0.4) * act                        # watching the steps
+    pose.spine[:, 1] += 0.04 * act
+    phase = np.clip((tt - t0) / beat, 0.0, None)
+    swing = 0.15 * np.sin(np.pi * phase) * act
+    pose.arm[:, 0, 0] += swing if lead == 1 else -swing
+    pose.arm[:, 1, 0] += -swing if lead == 1 else swing
+    pose.arm[:, :, 1] += (0.12 * act)[:, None]                 # arms a little out for balance
+    n = pose.num_frames
+    core = (max(0, int(np.floor((t0 - 0.1) * FPS))), min(n, int(np.ceil((t + 0.05) * FPS)) + 1))
+    end = Stance(ends, start.foot_yaw, start.yaw)
+    return Segment(pose, end, core, info=dict(stairs=stairs, rise=float(rise), top=float(top)))
+
+
+def shuffle(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *,
+            side: int | None = None, mods: tuple[str, ...] = ()) -> Segment:
+    """Shuffle a few short steps forward (``side`` None) or sideways (0 left, 1 right).
+
+    The soles glide a centimetre or two over the floor (no heel-toe roll): the moving foot
+    stays within contact height, as in real shuffling, while the other one is planted.
+    Sideways, the leading foot steps out and the other one closes up; forward, the feet
+    take turns, each passing the other by a short step.
+    """
+    u = rng.uniform
+    tempo = _tempo(mods) * persona.tempo
+    fwd, left = heading_vectors(start.yaw)
+    beat = u(0.3, 0.42) * tempo
+    glide = u(0.6, 0.75) * beat
+    t = u(0.2, 0.3)
+    t0 = t
+    ankles = start.ankles.copy()
+    moves = []
+    if side is None:
+        step, n_steps = u(0.12, 0.2), int(rng.integers(4, 8))
+        k = int(rng.integers(2))
+        for i in range(n_steps):
+            d = step if i in (0, n_steps - 1) else 2 * step            # start and finish side by side
+            ankles[k] = ankles[k] + fwd * d
+            moves.append((k, ankles[k].copy(), t))
+            t += beat
+            k = 1 - k
+        dist = step * (n_steps - 1)
+    else:
+        step, n_steps = u(0.15, 0.25), int(rng.integers(2, 5))
+        way = left * (1.0 if side == 0 else -1.0)
+        for _ in range(n_steps):
+            for k in (side, 1 - side):                                # lead out, trail closes
+                ankles[k] = ankles[k] + way * step
+                moves.append((k, ankles[k].copy(), t))
+                t += beat * (0.8 if k == side else 1.0)
+        dist = step * n_steps
+    total = t + u(0.3, 0.4)
+    pose, _, ends = _stepping(start, persona, body, rng, moves, glide, total, u(0.004, 0.012),
+                              roll_out=0.0, roll_in=0.0, pitch_mid=0.0)
+    tt = frame_times(pose.num_frames, FPS)
+    act = envelope(tt, t0 - 0.1, t, 0.3)
+    pose.pelvis[:, 1] -= u(0.01, 0.03) * act                   # knees a little softer
+    pose.spine[:, 1] += u(0.02, 0.1) * act
+    pose.arm[:, :, 1] += (u(0.05, 0.2) * act)[:, None]
+    _within_reach(pose, body, sigma=1.0)
+    n = pose.num_frames
+    core = (max(0, int(np.floor((t0 - 0.1) * FPS))), min(n, int(np.ceil((t + 0.05) * FPS)) + 1))
+    end = Stance(ends, start.foot_yaw, start.yaw)
+    return Segment(pose, end, core, info=dict(steps=len(moves), distance=float(dist)))
+
+
+def lunge(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *, side: int,
+          mods: tuple[str, ...] = (), reps: int = 1) -> Segment:
+    """Lunge forward with the ``side`` leg (0 left, 1 right) and push back to standing, ``reps`` times.
+
+    The front foot steps out 0.6-0.85 m, the pelvis sinks between the feet (the front thigh
+    towards level, the rear knee towards the floor, the rear heel rising off it as the shin
+    leans over the foot) and the front foot pushes back to its place.
+    """
+    u = rng.uniform
+    tempo = _tempo(mods) * persona.tempo
+    fwd, _ = heading_vectors(start.yaw)
+    k = side
+    length = u(0.6, 0.85) * float(body.leg[k]) / 0.85
+    depth = u(0.28, 0.38) if "low" in mods else u(0.18, 0.3)
+    swing = u(0.3, 0.4) * tempo
+    t = u(0.2, 0.3)
+    t0 = t
+    moves, sink_t, sink_w = [], [0.0, t], [0.0, 0.0]
+    for _ in range(reps):
+        moves.append((k, start.ankles[k] + fwd * length, t))
+        t += swing
+        sink_t.append(t); sink_w.append(0.15)
+        t += u(0.35, 0.5) * tempo
+        sink_t.append(t); sink_w.append(1.0)
+        t += u(0.2, 0.5) * tempo                                # hold at the bottom
+        sink_t.append(t); sink_w.append(1.0)
+        t += u(0.3, 0.45) * tempo
+        sink_t.append(t); sink_w.append(0.1)
+        moves.append((k, start.ankles[k].copy(), t))
+        t += swing
+        sink_t.append(t); sink_w.append(0.0)
+    total = t + u(0.3, 0.4)
+    pose, _, ends = _stepping(start, persona, body, rng, moves, swing, total, 0.06, roll_out=0.0, roll_in=0.15)
+    tt = frame_times(pose.num_frames, FPS)
+    w = np.clip(keyframes(tt, sink_t, sink_w), 0.0, 1.0)
+    pose.pelvis[:, 1] -= depth * w
+    pose.pelvis_ypr[:, 1] += u(0.0, 0.15) * w                 # a slight forward lean of the trunk
+    pose.spine[:, 1] += u(-0.1, 0.1) * w
+    pose.arm[:, :, 0] += (u(0.0, 0.3) * w)[:, None]
+    _within_reach(pose, body, sigma=1.0)
+    n = pose.num_frames
+    core = (max(0, int(np.floor((t0 - 0.1) * FPS))), min(n, int(np.ceil((t + 0.05) * FPS)) + 1))
+    return Segment(pose, start, core, info=dict(length=float(length), depth=float(depth), reps=reps))
 
 
 def pivot(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *, side: int,
