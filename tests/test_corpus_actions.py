@@ -27,7 +27,8 @@ J = {n: i for i, n in enumerate(SK.joint_names)}
 NEW = ("dance", "sway", "throw", "pick_up", "step_over", "stumble", "kneel", "lie_down", "lie_down_get_up",
        "step_up", "climb_stairs", "pivot", "touch_knee", "guard", "jab_cross", "hook", "uppercut",
        "hands_on_hips", "scratch_head", "salute", "cross_arms", "reach_across", "arm_circles",
-       "crawl")                                                # corpus 2.1
+       "crawl",                                                # corpus 2.1
+       "descend_stairs", "shuffle", "lunge")                   # corpus 2.2
 
 
 def _action(kind: str, k: int = 0) -> Action:
@@ -141,6 +142,58 @@ def test_climbing_stairs_plants_the_feet_on_the_steps():
     assert j[-1, J["right_ankle"], 1] == pytest.approx(ANKLE_HEIGHT + top, abs=1e-6)
     assert seg.end.ankles[:, 1] == pytest.approx(ANKLE_HEIGHT + top)
     assert j[-1, J["pelvis"], 1] - j[0, J["pelvis"], 1] == pytest.approx(top, abs=0.05)
+
+
+def test_descending_stairs_starts_on_the_landing_and_ends_on_the_floor():
+    seg, start, _ = _raw("descend_stairs", 5)
+    j = assemble(seg.pose, BODY, keep_toes=True)
+    top = seg.info["top"]
+    for side in ("left", "right"):
+        assert j[0, J[f"{side}_ankle"], 1] == pytest.approx(ANKLE_HEIGHT + top, abs=1e-6)
+        assert j[-1, J[f"{side}_ankle"], 1] == pytest.approx(ANKLE_HEIGHT, abs=1e-6)
+    assert seg.end.ankles[:, 1] == pytest.approx(ANKLE_HEIGHT)
+    assert j[0, J["pelvis"], 1] - j[-1, J["pelvis"], 1] == pytest.approx(top, abs=0.05)
+    fwd = (seg.end.ankles - start.ankles)[:, 2]
+    assert (fwd > 0.7).all()                                   # a metre or so further on
+    # it opens a clip: the performer cannot walk onto the landing first
+    with pytest.raises(ValueError, match="must start the plan"):
+        Plan((Step(Action("walk")), Step(Action("descend_stairs"))))
+    clip = realise(Plan((Step(Action("descend_stairs")), Step(Action("walk")))), np.random.default_rng(1))
+    assert clip.joints[..., 1].min() > -0.01 and clip.joints[0, J["pelvis"], 1] > clip.joints[-1, J["pelvis"], 1] + 0.3
+
+
+@pytest.mark.parametrize("side", [None, "left", "right"])
+def test_shuffling_feet_glide_within_contact_height(side):
+    from salad_core.data.procedural.checks import CONTACT_HEIGHTS
+    from salad_core.data.procedural.stats import contact_motion_share
+
+    seg, start, _ = _raw("shuffle", 2, side=side)
+    j = assemble(seg.pose, BODY, keep_toes=True)
+    ankle_h, toe_h = CONTACT_HEIGHTS
+    for s in ("left", "right"):                                  # the soles never leave the floor's contact band
+        assert j[:, J[f"{s}_ankle"], 1].max() < ankle_h and j[:, J[f"{s}_foot"], 1].max() < toe_h
+    moving, total = contact_motion_share(j)
+    assert moving / total > 0.15                                  # planted feet: 0; real clips 27.5 %
+    d = (seg.end.ankles - start.ankles).mean(0)
+    if side is None:
+        assert d[2] > 0.2 and abs(d[0]) < 0.02
+    else:
+        assert (d[0] > 0.25) == (side == "left") and abs(d[0]) > 0.25 and abs(d[2]) < 0.02
+
+
+def test_lunge_steps_out_sinks_and_comes_back():
+    seg, start, _ = _raw("lunge", 3, side="left", mods=("low",))
+    j = assemble(seg.pose, BODY, keep_toes=True)
+    reach = j[:, J["left_ankle"], 2] - start.ankles[0, 2]
+    assert reach.max() > 0.5                                      # the left foot steps well out
+    bottom = int(np.argmin(j[:, J["pelvis"], 1]))
+    assert j[0, J["pelvis"], 1] - j[bottom, J["pelvis"], 1] > 0.2  # deep ("low")
+    assert j[bottom, J["right_ankle"], 1] > ANKLE_HEIGHT + 0.01   # the rear heel is up
+    assert j[bottom, J["right_knee"], 1] > 0.05 and j[..., 1].min() > -0.005
+    ang = joint_angles(j)
+    assert ang["knee"][bottom].min() > 60                         # both knees deeply bent
+    assert np.abs(j[-1] - j[0]).max() < 0.02                      # back where it started
+    assert seg.end is start
 
 
 def test_lying_down_and_getting_up():
