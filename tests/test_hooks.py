@@ -327,3 +327,24 @@ def test_cache_with_hooks_keeps_what_the_run_used(pipe):
     out, cache = _cache(pipe, names="layers.0.cross.out", store="outputs",
                         hooks=[("layers.0.cross.out", lambda t, ctx: torch.zeros_like(t))])
     assert float(cache["layers.0.cross.out"].abs().max()) == 0.0
+
+
+def test_hooks_serve_the_ablation_without_cross_attention(pipe):
+    """The "w/o CrossAttn" ablation's sentence sites have hook points too (key 0: the sentence)."""
+    from salad_core.models.denoiser import DenoiserConfig
+
+    torch.manual_seed(1)
+    den = Denoiser(DenoiserConfig(width=32, heads=2, ff_dim=64, layers=3, text_dim=384, cross_attention=False))
+    ablation = SaladPipeline(pipe.vae, den, pipe.text_encoder, pipe.mean, pipe.std)
+    plain = ablation(PROMPTS, lengths=LENGTHS, num_steps=3, seed=SEED)
+    shapes = {}
+
+    def read(t, ctx):
+        shapes[ctx.name] = (tuple(t.shape), ctx.axes)
+
+    out = ablation(PROMPTS, lengths=LENGTHS, num_steps=3, seed=SEED, hooks=[("layers.1.sentence*", read)])
+    assert torch.equal(out.latents, plain.latents)
+    keys = 1 + 10 * NUM_PARTS
+    assert shapes["layers.1.sentence"] == ((4, 2, 10, NUM_PARTS, keys), ("batch", "head", "frame", "part", "key"))
+    assert shapes["layers.1.sentence.out"][0] == (4, 10, NUM_PARTS, 32)
+    assert shapes["layers.1.sentence.k"][0] == (4, 2, keys, 16)
