@@ -40,7 +40,7 @@ differentiable), float32 for float32 input and float64 otherwise.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Union
+from typing import Callable, Union
 
 import numpy as np
 import torch
@@ -157,6 +157,16 @@ def _config(config: RecoveryConfig | None) -> RecoveryConfig:
     return config
 
 
+def _recover(features: Array, skeleton: SkeletonLike, config: RecoveryConfig | None,
+             method: Callable[[np.ndarray, np.ndarray, Skeleton, RecoveryConfig], np.ndarray]) -> np.ndarray:
+    """``method(f, positions, sk, cfg)`` on the features ``f (..., N, D)`` (float64) and their position
+    features ``positions (..., N, J, 3)``; joints in the input's float precision (see :func:`_as_numpy`)."""
+    sk = get_skeleton(skeleton)
+    cfg = _config(config)
+    f, out = _as_numpy(features, sk)
+    return method(f, features_to_joints(f, sk), sk, cfg).astype(out)
+
+
 def motion_bone_lengths(joints: np.ndarray, skeleton: SkeletonLike = "humanml3d") -> np.ndarray:
     """Median length of every bone over frames: joints ``(..., N, J, 3)`` -> ``(..., J)`` (root 0).
 
@@ -230,11 +240,7 @@ def fk_joints(features: Array, skeleton: SkeletonLike = "humanml3d", *,
     ndarray ``(..., N, J, 3)``
         Every bone has exactly its fixed length in every frame; the root is the root channels'.
     """
-    sk = get_skeleton(skeleton)
-    cfg = _config(config)
-    f, out = _as_numpy(features, sk)
-    positions = features_to_joints(f, sk)
-    return _fk(f, positions, sk, cfg).astype(out)
+    return _recover(features, skeleton, config, _fk)
 
 
 # =========================================================================== "fit"
@@ -506,6 +512,13 @@ def _fit_one(f: np.ndarray, positions: np.ndarray, sk: Skeleton, cfg: RecoveryCo
     return q
 
 
+def _fit(f: np.ndarray, positions: np.ndarray, sk: Skeleton, cfg: RecoveryConfig) -> np.ndarray:
+    """:func:`_fit_one` for each motion of a batch ``(..., N, D)``, positions ``(..., N, J, 3)``."""
+    flat_f = f.reshape(-1, *f.shape[-2:])
+    flat_p = positions.reshape(-1, *positions.shape[-3:])
+    return np.stack([_fit_one(a, b, sk, cfg) for a, b in zip(flat_f, flat_p)]).reshape(positions.shape)
+
+
 def fit_joints(features: Array, skeleton: SkeletonLike = "humanml3d", *,
                config: RecoveryConfig | None = None) -> np.ndarray:
     """Skeleton fit with fixed bone lengths, locked feet and a floor (method ``"fit"``).
@@ -523,17 +536,20 @@ def fit_joints(features: Array, skeleton: SkeletonLike = "humanml3d", *,
         Bone lengths fixed in every frame; locked feet keep their place; with ``floor`` no joint
         below y = 0.
     """
-    sk = get_skeleton(skeleton)
-    cfg = _config(config)
-    f, out = _as_numpy(features, sk)
-    positions = features_to_joints(f, sk)
-    flat_f = f.reshape(-1, *f.shape[-2:])
-    flat_p = positions.reshape(-1, *positions.shape[-3:])
-    joints = np.stack([_fit_one(a, b, sk, cfg) for a, b in zip(flat_f, flat_p)])
-    return joints.reshape(positions.shape).astype(out)
+    return _recover(features, skeleton, config, _fit)
 
 
 # =========================================================================== entry point
+def _positions(f: np.ndarray, positions: np.ndarray, sk: Skeleton, cfg: RecoveryConfig) -> np.ndarray:
+    """The position features as they are (method ``"positions"``)."""
+    return positions
+
+
+#: Joints from ``(f, positions, sk, cfg)`` for each of :data:`METHODS`.
+_BY_METHOD: dict[str, Callable[[np.ndarray, np.ndarray, Skeleton, RecoveryConfig], np.ndarray]] = {
+    "positions": _positions, "fk": _fk, "fit": _fit}
+
+
 def recover_joints(features: Array, method: str = DEFAULT_METHOD, skeleton: SkeletonLike = "humanml3d", *,
                    config: RecoveryConfig | None = None) -> np.ndarray:
     """Joints ``(..., N, J, 3)`` from de-normalised features ``(..., N, D)``.
@@ -561,11 +577,4 @@ def recover_joints(features: Array, method: str = DEFAULT_METHOD, skeleton: Skel
         For an unknown method, a feature width that does not match the skeleton, or NaN/inf.
     """
     _check_method(method)
-    sk = get_skeleton(skeleton)
-    cfg = _config(config)
-    if method == "positions":
-        f, out = _as_numpy(features, sk)
-        return features_to_joints(f, sk).astype(out)
-    if method == "fk":
-        return fk_joints(features, sk, config=cfg)
-    return fit_joints(features, sk, config=cfg)
+    return _recover(features, skeleton, config, _BY_METHOD[method])

