@@ -1,22 +1,26 @@
 #!/usr/bin/env bash
-# The v2 training campaign (issues 20 and 21): corpus 2.0, a general motion autoencoder trained on the
-# corpus plus uncaptioned general motion, then the denoiser on its latent space.
+# The v2 training campaign (issues 20, 21 and 22): corpus 2.0, a general motion autoencoder trained on the
+# corpus plus uncaptioned general motion, then the denoiser on its latent space, then KeyMotion.
 #
 # Usage: bash scripts/train_v2.sh [WORK_DIR] [STAGE...]
 #   WORK_DIR   run folder, outside the repository (default: ~/salad-runs/v2)
-#   STAGE      any of: data vae denoiser (default: all, in that order)
+#   STAGE      any of: data vae denoiser keymotion (default: all, in that order)
 # Every stage resumes where it stopped when run again with RESUME=1 (Ctrl-C writes a checkpoint);
 # the data stage skips what is already built (both builds are deterministic: the same commit and
 # seed give byte-identical files, so a lost run folder is rebuilt from this recipe alone).
-# Environment: VAE_STEPS, DEN_STEPS override the configs' step budgets; PYTHON the python to use;
+# Environment: VAE_STEPS, DEN_STEPS override the configs' step budgets, KM_STEPS="KF_VAE PST MMAE" KeyMotion's
+# (three numbers); PYTHON the python to use;
 # DEN_DATA the denoiser's corpus (default: WORK_DIR/corpus, the VAE's). The first v2 run trained its VAE
 # on corpus 2.0 (commit f1f8697) and its denoiser on corpus 2.1 (commit 33c5adb, DEN_DATA=WORK_DIR/corpus21):
 # the denoiser normalises motions with the VAE's statistics, so any corpus of the same layout works.
+# KeyMotion (keyframe VAE, PST, MMAE: configs/v2_keymotion.json, into WORK_DIR/keymotion) trains on the
+# denoiser's corpus, DEN_DATA, so that both generators of the comparison saw the same motions and captions;
+# it needs neither the VAE nor the denoiser and may run before them.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 WORK=${1:-$HOME/salad-runs/v2}
 shift || true
-STAGES=${*:-data vae denoiser}
+STAGES=${*:-data vae denoiser keymotion}
 PY=${PYTHON:-.venv/bin/python}
 RESUME=${RESUME:+--resume}
 mkdir -p "$WORK"
@@ -40,4 +44,9 @@ fi
 if has denoiser; then
   "$PY" -m salad_core.train denoiser --data "${DEN_DATA:-$WORK/corpus}" --out "$WORK/denoiser" --vae "$WORK/vae" \
       --config configs/v2_denoiser.json ${DEN_STEPS:+--steps "$DEN_STEPS"} --no-progress $RESUME
+fi
+if has keymotion; then
+  # three stages in one process; a finished stage is skipped on RESUME=1, an interrupted one continues
+  "$PY" -m salad_core.train keymotion --data "${DEN_DATA:-$WORK/corpus}" --out "$WORK/keymotion" \
+      --config configs/v2_keymotion.json ${KM_STEPS:+--steps-per-stage $KM_STEPS} --no-progress $RESUME
 fi

@@ -319,6 +319,48 @@ def test_sample_latents_is_the_one_loop_with_two_pass_cfg_and_step_infos():
                        lengths=lens, guidance_scale=2.0, num_steps=2)
 
 
+def test_pst_guidance_rescale_and_interval():
+    """A Guidance's rescale gives each sample's guided noise the std of its conditional one
+    (Lin et al.); its interval leaves the steps outside ``lo <= t/T <= hi`` unguided (conditional
+    branch only), and those steps' StepInfo says so."""
+    from salad_core.keymotion.pst import sample_latents
+    from salad_core.sampling import Guidance, make_scheduler
+
+    torch.manual_seed(0)
+    pst = ParallelSkipTransformer(tiny_pst_config()).eval()
+    enc = HashTextEncoder()
+    tb, null = enc.encode(["a person walks forward", "jumps"]), enc.encode([""], allow_empty=True)
+    x, t, lens = torch.randn(2, 2, 16), torch.tensor([999, 20]), torch.tensor([40, 196])
+    with torch.no_grad():
+        cond = pst(x, t, tb.features, tb.mask, lens)
+        plain = pst.guided(x, t, tb.features, tb.mask, null.features, null.mask, 6.0, lens)
+        full = pst.guided(x, t, tb.features, tb.mask, null.features, null.mask, Guidance(6.0, rescale=1.0), lens)
+        half = pst.guided(x, t, tb.features, tb.mask, null.features, null.mask, Guidance(6.0, rescale=0.5), lens)
+    for b in range(2):
+        assert float(full[b].std()) == pytest.approx(float(cond[b].std()), rel=1e-4)
+        assert float(plain[b].std()) > 1.2 * float(cond[b].std())          # w 6 inflates the noise estimate
+    torch.testing.assert_close(full, plain * (cond.flatten(1).std(1) / plain.flatten(1).std(1))[:, None, None])
+    torch.testing.assert_close(half, 0.5 * full + 0.5 * plain)
+    # interval: only the steps with t/T in [0, 0.5] are guided
+    noise = torch.randn(2, 2, 16, generator=torch.Generator().manual_seed(1))
+    seen = []
+    z = sample_latents(pst, make_scheduler(PST_DIFFUSION, "ddim"), tb.features, tb.mask, null.features, null.mask,
+                       noise, lengths=lens, guidance_scale=Guidance(4.0, interval=(0.0, 0.5)), num_steps=4,
+                       callback=lambda info, latents: seen.append(info))
+    assert [(info.timestep, info.cfg) for info in seen] == [(750.0, False), (500.0, True), (250.0, True), (0.0, True)]
+    sched = make_scheduler(PST_DIFFUSION, "ddim")
+    sched.set_timesteps(4)
+    ref = noise.clone()
+    with torch.no_grad():
+        for step in sched.timesteps:
+            c = pst(ref, step, tb.features, tb.mask, lens)
+            if float(step) / 1000 <= 0.5:
+                u = pst(ref, step, null.features.expand(2, -1, -1), null.mask.expand(2, -1), lens)
+                c = u + 4.0 * (c - u)
+            ref = sched.step(c, step, ref).prev_sample
+    torch.testing.assert_close(z, ref, atol=1e-5, rtol=1e-5)
+
+
 def test_pst_learns_epsilon_on_a_fixed_latent():
     """A short ε-prediction fit on two latents: the loss falls well below the untrained one."""
     from salad_core.sampling import make_scheduler
@@ -482,6 +524,38 @@ def test_pipeline_save_load_round_trip(tmp_path):
     with pytest.raises(FileNotFoundError, match="no pst.json"):
         (root / "pst.json").unlink()
         KeyMotionPipeline.from_pretrained(root, text_encoder=HashTextEncoder())
+
+
+def test_pipeline_default_guidance_is_stored_with_the_weights(tmp_path):
+    """keymotion.json's "guidance" is the default of a call; a number replaces only its weight, a
+    Guidance replaces it all; folders without the entry default to w 7.5."""
+    from salad_core.sampling import Guidance
+
+    pipe = tiny_pipeline(seed=2)
+    assert pipe.guidance == Guidance(7.5)
+    kw = dict(lengths=[40], seed=3, num_steps=4)
+    np.testing.assert_array_equal(pipe(["a person waves"], **kw).features,
+                                  pipe(["a person waves"], guidance_scale=7.5, **kw).features)
+    pipe.guidance = Guidance(2.0, interval=(0.0, 0.6))
+    root = pipe.save_pretrained(tmp_path / "km")
+    doc = json.loads((root / "keymotion.json").read_text())
+    assert doc["guidance"] == {"scale": 2.0, "rescale": 0.0, "interval": [0.0, 0.6]}
+    loaded = KeyMotionPipeline.from_pretrained(root, text_encoder=HashTextEncoder())
+    assert loaded.guidance == pipe.guidance
+    assert loaded.resolve_guidance(5.0) == Guidance(5.0, interval=(0.0, 0.6))
+    assert loaded.resolve_guidance(Guidance(3.0)) == Guidance(3.0)
+    default = loaded(["a person waves"], **kw).features
+    np.testing.assert_array_equal(default, loaded(["a person waves"], guidance_scale=pipe.guidance, **kw).features)
+    assert not np.allclose(default, loaded(["a person waves"], guidance_scale=Guidance(2.0), **kw).features)
+    with pytest.raises(TypeError, match="guidance_scale must be a number"):
+        loaded(["a person waves"], guidance_scale="high", **kw)
+    doc["guidance"] = {"scale": 2.0, "rescale": 3.0}
+    (root / "keymotion.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match='bad "guidance" entry'):
+        KeyMotionPipeline.from_pretrained(root, text_encoder=HashTextEncoder())
+    del doc["guidance"]
+    (root / "keymotion.json").write_text(json.dumps(doc))
+    assert KeyMotionPipeline.from_pretrained(root, text_encoder=HashTextEncoder()).guidance == Guidance(7.5)
 
 
 # ------------------------------------------------------------------------------ training

@@ -256,7 +256,7 @@ def test_pst_latent_cache_equals_encoding_the_keyframes(fake_corpus, tmp_path):
     from salad_core.data.dataset import collate_motion_text  # noqa: F401  (collate_keyframes uses it)
     from salad_core.keymotion.kf_vae import KeyframeVAE, KeyframeVAEConfig
     from salad_core.keymotion.pst import PST_DIFFUSION
-    from salad_core.keymotion.train import _prepare_pst, collate_keyframes, kf_vae_latent_cache
+    from salad_core.keymotion.train import collate_keyframes, kf_vae_latent_cache, prepare_pst_batch
     from salad_core.sampling import make_scheduler
     from salad_core.train.common import StepContext
     from salad_core.train.distributed import DistEnv, GlobalBatchRandom
@@ -282,7 +282,7 @@ def test_pst_latent_cache_equals_encoding_the_keyframes(fake_corpus, tmp_path):
     out = {}
     for name, latents in (("fly", None), ("cache", cache)):
         ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(2), env), env, train=True, step=0)
-        out[name] = _prepare_pst(batch, ctx, latents=latents, **kw)
+        out[name] = prepare_pst_batch(batch, ctx, latents=latents, **kw)
     torch.testing.assert_close(out["cache"]["noisy"], out["fly"]["noisy"], rtol=1e-5, atol=1e-6)
     assert torch.equal(out["cache"]["target"], out["fly"]["target"])
     assert kf_vae_latent_cache(vae, [train, val], tmp_path, env).folder == cache.folder      # reused
@@ -344,3 +344,58 @@ def test_mmae_equal_frame_batches_divide_by_the_nominal_batch(fake_corpus, hash_
         ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(1), env), env, train=True, step=0)
         weight = float(task.prepare(batch, ctx)["frame_weight"])
         assert weight == pytest.approx(float(batch["length"].sum()) / (4 * norm), rel=1e-6)
+
+
+# --------------------------------------------------------------------- keyframe ratio (issue 22)
+def test_mmae_keyframe_ratio_places_each_items_own_keyframes(fake_corpus, hash_encoder):
+    """With ``keyframe_ratio`` an item of L frames gets max(2, round(ratio L)) MDO keyframes; a batch
+    pads the shorter lists by repeating the last index, and the MMAE's inputs hold exactly each
+    item's keyframes (with one noise value per keyframe), nothing else."""
+    from salad_core.keymotion.mmae import MMAEConfig
+    from salad_core.keymotion.selection import select_keyframes
+    from salad_core.keymotion.train import build_mmae_task
+    from salad_core.train.common import StepContext
+    from salad_core.train.distributed import DistEnv, GlobalBatchRandom
+
+    env = DistEnv()
+    cfg = KeyMotionTrainConfig(max_length=96, num_threads=1, progress=False, batch_size=4, keyframe_ratio=0.1,
+                               keyframe_noise=0.3)
+    model = MMAEConfig(text_dim=hash_encoder.dim, max_length=96, width=32, num_layers=1, num_heads=4, ff_dim=64,
+                       dropout=0.0)
+    task = build_mmae_task(fake_corpus, model, cfg, env, "minilm", 8)
+    items = [task.train_set[i] for i in range(len(task.train_set))]
+    lengths = [int(it["length"]) for it in items]
+    assert len(set(lengths)) > 1                                           # the fake corpus has 44 and 90 frames
+    for it, n in zip(items, lengths):
+        k = max(2, round(0.1 * n))
+        assert np.array_equal(it["keyframes"], select_keyframes(it["motion"][:n], k, "mdo"))
+    batch = task.collate(items[:4])
+    counts = batch["keyframe_count"].tolist()
+    assert counts == [len(it["keyframes"]) for it in items[:4]] and len(set(counts)) > 1
+    assert batch["keyframes"].shape == (4, max(counts))
+    ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(3), env), env, train=True, step=0)
+    inputs = task.prepare(batch, ctx)
+    assert inputs["keyframe_mask"].sum(1).tolist() == counts               # padding adds no keyframe
+    for b, it in enumerate(items[:4]):
+        frames = torch.nonzero(inputs["keyframe_mask"][b])[:, 0].numpy()
+        assert np.array_equal(frames, it["keyframes"])
+        noise = inputs["inputs"][b, frames] - inputs["motion"][b, frames]
+        assert 0.2 < float(noise.std()) < 0.4                              # keyframe_noise 0.3, one draw per keyframe
+        assert float(inputs["inputs"][b][~inputs["keyframe_mask"][b]].abs().max()) == 0.0
+    # the keyframe VAE and the PST keep a fixed K
+    from salad_core.keymotion.train import build_kf_vae_task
+
+    with pytest.raises(ValueError, match="keyframe_ratio=0.1 is for the MMAE only"):
+        build_kf_vae_task(fake_corpus, None, cfg, env)
+    with pytest.raises(ValueError, match="keyframe_ratio"):
+        KeyMotionTrainConfig(keyframe_ratio=1.5)
+
+
+def test_fixed_keyframes_collate_unchanged(fake_corpus):
+    """Without a ratio every item has K keyframes: no padding, counts all K."""
+    from salad_core.keymotion.train import collate_keyframes
+
+    train, _ = _keyframe_sets(fake_corpus, k=8)
+    batch = collate_keyframes([train[i] for i in range(3)])
+    assert batch["keyframes"].shape == (3, 8) and batch["keyframe_count"].tolist() == [8, 8, 8]
+    assert np.array_equal(batch["keyframes"][0].numpy(), train[0]["keyframes"])

@@ -10,20 +10,25 @@ The pipeline only orchestrates (models know nothing of sampling, the loop is
     --de-normalise (MMAE's statistics)--> features --features_to_joints--> joints (N_b, J, 3)
 
 :class:`KeyMotionPipeline` has the interface of ``SaladPipeline``: ``from_pretrained(path=None)``
-and ``pipe(prompts, lengths=None, seed=0, guidance_scale=7.5, num_steps=50)`` returning an output
+and ``pipe(prompts, lengths=None, seed=0, guidance_scale=None, num_steps=50)`` returning an output
 with ``features``, ``joints``, ``texts``, ``lengths`` (and here ``keyframes``).
 
 Choices: motion lengths are given by the caller (as in the T2M protocol, where the evaluation
 uses the ground-truth lengths) and may be any ``num_keyframes <= L <= max_length``; without them
 every motion gets ``default_length`` (120) frames. The empty prompt ``""`` is the unconditional
-text of classifier-free guidance; ``guidance_scale`` defaults to 7.5 as SALAD's (the KeyMotion
-paper's value was lost in our copy). The MMAE output is the motion (it may correct the decoded
+text of classifier-free guidance. The default guidance of a set of weights is stored with them
+(``keymotion.json`` "guidance", a :class:`~salad_core.sampling.Guidance`: weight, rescale,
+interval), as SALAD's ``pipeline.json``; without the entry it is ``Guidance(7.5)`` as SALAD's (the
+KeyMotion paper's value was lost in our copy). ``docs/keymotion_recipe.md`` says why the weight
+matters so much here: strong guidance pushes the keyframe latents off the data and the seeds
+collapse. The MMAE output is the motion (it may correct the decoded
 keyframes); ``keep_keyframes=True`` pastes the decoded keyframes back. Padded rows of
 ``features`` (``t >= length``) are zero.
 
 A pretrained folder holds::
 
-    keymotion.json                      {"format": "keymotion_pipeline", "text_encoder", "diffusion", ...}
+    keymotion.json                      {"format": "keymotion_pipeline", "text_encoder", "diffusion",
+                                         "default_length", optional "guidance": {"scale", "rescale", "interval"}}
     kf_vae.safetensors / kf_vae.json    the keyframe VAE (salad_core.io checkpoint)
     pst.safetensors / pst.json          the PST denoiser
     mmae.safetensors / mmae.json        the MMAE
@@ -36,7 +41,7 @@ from __future__ import annotations
 import json
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -45,7 +50,7 @@ import torch
 
 from salad_core.io import atomic_write_text, config_from_dict, config_to_dict, load_model, save_checkpoint
 from salad_core.motion import features_to_joints
-from salad_core.sampling import DiffusionConfig, make_scheduler
+from salad_core.sampling import DiffusionConfig, Guidance, make_scheduler
 from salad_core.text import TextEncoder
 
 from .kf_vae import KeyframeVAE, positions_to_indices
@@ -128,11 +133,14 @@ class KeyMotionPipeline:
         Frames generated when ``lengths`` is None.
     text_encoder_name : str, optional
         Recorded by :meth:`save_pretrained` (default: the encoder's ``name``).
+    guidance : Guidance, optional
+        Default classifier-free guidance of these weights (default ``Guidance(7.5)``).
     """
 
     def __init__(self, kf_vae: KeyframeVAE, pst: ParallelSkipTransformer, mmae: MotionMaskedAutoencoder,
                  text_encoder: TextEncoder, *, diffusion: DiffusionConfig | None = None, solver: str = "ddim",
-                 default_length: int = 120, text_encoder_name: str | None = None) -> None:
+                 default_length: int = 120, text_encoder_name: str | None = None,
+                 guidance: Guidance | None = None) -> None:
         self.kf_vae = kf_vae.eval()
         self.pst = pst.eval()
         self.mmae = mmae.eval()
@@ -144,6 +152,11 @@ class KeyMotionPipeline:
         self.text_encoder_name = text_encoder_name or getattr(text_encoder, "name", type(text_encoder).__name__)
         self._check_compatible()
         self.default_length = self._check_length(default_length, "default_length")
+        #: Default guidance (``keymotion.json`` "guidance"); a number passed as ``guidance_scale``
+        #: replaces only its weight, a Guidance replaces it all.
+        self.guidance = Guidance(7.5) if guidance is None else guidance
+        if not isinstance(self.guidance, Guidance):
+            raise TypeError(f"guidance must be a salad_core.sampling.Guidance, got {type(guidance).__name__}")
 
     # ------------------------------------------------------------------------ checks
     def _check_compatible(self) -> None:
@@ -250,8 +263,15 @@ class KeyMotionPipeline:
             encoder = text_encoder
             enc_name = getattr(encoder, "name", type(encoder).__name__)
         length = default_length if default_length is not None else int(doc.get("default_length", 120))
+        guidance = None
+        if doc.get("guidance") is not None:
+            entry = doc["guidance"]
+            try:
+                guidance = Guidance(**entry)
+            except (TypeError, ValueError) as err:
+                raise ValueError(f"{root / 'keymotion.json'}: bad \"guidance\" entry {entry!r} ({err})") from err
         return cls(models["kf_vae"], models["pst"], models["mmae"], encoder, diffusion=diffusion, solver=solver,
-                   default_length=length, text_encoder_name=enc_name)
+                   default_length=length, text_encoder_name=enc_name, guidance=guidance)
 
     def save_pretrained(self, path: str | os.PathLike, *, dtype: torch.dtype | None = None) -> Path:
         """Write the three checkpoints and ``keymotion.json`` into ``path`` (created); returns it.
@@ -263,7 +283,8 @@ class KeyMotionPipeline:
         for name, model in (("kf_vae", self.kf_vae), ("pst", self.pst), ("mmae", self.mmae)):
             save_checkpoint(root / name, model, model_type=COMPONENTS[name], config=model.config, dtype=dtype)
         doc = {"format": _FORMAT, "version": 1, "text_encoder": self.text_encoder_name,
-               "diffusion": config_to_dict(self.diffusion), "default_length": self.default_length}
+               "diffusion": config_to_dict(self.diffusion), "default_length": self.default_length,
+               "guidance": asdict(self.guidance)}
         atomic_write_text(root / "keymotion.json", json.dumps(doc, indent=2) + "\n")
         return root
 
@@ -278,8 +299,20 @@ class KeyMotionPipeline:
             raise ValueError(f"lengths has {len(out)} entries for {b} prompts")
         return out
 
+    def resolve_guidance(self, guidance_scale: "float | Guidance | None" = None) -> Guidance:
+        """The :class:`~salad_core.sampling.Guidance` a call uses: None -> :attr:`guidance`; a number ->
+        :attr:`guidance` with that weight; a Guidance -> itself."""
+        if guidance_scale is None:
+            return self.guidance
+        if isinstance(guidance_scale, Guidance):
+            return guidance_scale
+        if isinstance(guidance_scale, bool) or not isinstance(guidance_scale, (int, float, np.floating)):
+            raise TypeError(f"guidance_scale must be a number, a Guidance or None, got {guidance_scale!r}")
+        return replace(self.guidance, scale=float(guidance_scale))
+
     def __call__(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None = None, seed: int = 0,
-                 guidance_scale: float = 7.5, num_steps: int = 50, *, keep_keyframes: bool = False,
+                 guidance_scale: "float | Guidance | None" = None, num_steps: int = 50, *,
+                 keep_keyframes: bool = False,
                  progress: bool = False) -> KeyMotionOutput:
         """Generate one motion per prompt.
 
@@ -290,8 +323,9 @@ class KeyMotionPipeline:
             Frames per motion (``num_keyframes .. max_length``; default :attr:`default_length`).
         seed : int
             Seeds the initial noise; the same call with the same seed returns the same motions.
-        guidance_scale : float
-            Classifier-free guidance weight (eq. 8); 1 disables guidance.
+        guidance_scale : float or Guidance, optional
+            Classifier-free guidance (eq. 8): None uses the weights' default (:attr:`guidance`), a
+            number replaces its weight (1 disables guidance), a Guidance replaces it all.
         num_steps : int
             Denoising steps.
         keep_keyframes : bool
@@ -313,8 +347,9 @@ class KeyMotionPipeline:
         len_t = torch.tensor(lens, dtype=torch.long, device=dev)
         tb = self.text_encoder.encode(texts)
         text, text_mask = tb.features.to(dev), tb.mask.to(dev)
+        guidance = self.resolve_guidance(guidance_scale)
         null_text = null_mask = None
-        if guidance_scale != 1.0:
+        if guidance.cfg:
             nb = self.text_encoder.encode([""], allow_empty=True)
             null_text, null_mask = nb.features.to(dev), nb.mask.to(dev)
         gen = torch.Generator().manual_seed(int(seed))
@@ -323,7 +358,7 @@ class KeyMotionPipeline:
         noise = torch.randn((b, lz, dz), generator=gen).to(device=dev, dtype=dtype)
         scheduler = make_scheduler(self.diffusion, self.solver)
         z = sample_latents(self.pst, scheduler, text, text_mask, null_text, null_mask, noise, lengths=len_t,
-                           guidance_scale=guidance_scale, num_steps=num_steps, progress=progress, generator=gen)
+                           guidance_scale=guidance, num_steps=num_steps, progress=progress, generator=gen)
         with torch.inference_mode():
             keyframes, indices = decode_keyframes(self.kf_vae, z, len_t)
             motion = self.mmae.infill(keyframes, indices, len_t, text, text_mask, keep_keyframes=keep_keyframes)

@@ -52,7 +52,7 @@ from salad_core.io import register_model
 from salad_core.models.embeddings import timestep_sinusoid
 from salad_core.models.gemm import Linear
 from salad_core.models.layers import ACTIVATIONS
-from salad_core.sampling import DiffusionConfig, Guidance, StepInfo, denoise
+from salad_core.sampling import DiffusionConfig, Guidance, StepInfo, as_guidance, denoise
 
 from .models import TransformerBlock, check_positive_int, check_unit_interval, position_sinusoid
 
@@ -253,15 +253,19 @@ class ParallelSkipTransformer(nn.Module):
         return self.out(self.out_norm(out))
 
     def guided(self, x: torch.Tensor, timesteps, text: torch.Tensor, text_mask: torch.Tensor,
-               null_text: torch.Tensor, null_mask: torch.Tensor, guidance_scale: float,
+               null_text: torch.Tensor, null_mask: torch.Tensor, guidance_scale: "float | Guidance",
                lengths: torch.Tensor | None = None) -> torch.Tensor:
         """Classifier-free guided noise (eq. 8) with both branches in one batched forward.
 
         ``null_text (B or 1, W0, C)`` / ``null_mask`` are the empty prompt's features; the two
         texts are padded to a common width (padding is masked, so it changes nothing).
+        ``guidance_scale`` is the weight ``w`` or a :class:`~salad_core.sampling.Guidance` (its
+        ``rescale`` acts per sample over the ``Lz x Dz`` latent; its interval is applied by
+        :class:`PSTPrediction`, not here).
         """
         b = x.shape[0]
-        if guidance_scale == 1.0:
+        guidance = as_guidance(guidance_scale)
+        if not guidance.cfg:
             return self(x, timesteps, text, text_mask, lengths)
         null_text, null_mask = null_text.expand(b, -1, -1), null_mask.expand(b, -1)
         width = max(text.shape[1], null_text.shape[1])
@@ -274,7 +278,9 @@ class ParallelSkipTransformer(nn.Module):
             lens = lens.expand(b) if lens.numel() == 1 else lens
         out = self(torch.cat([x, x]), torch.cat([t, t]), texts, masks,
                    None if lens is None else torch.cat([lens, lens]))
-        return Guidance(float(guidance_scale)).combine(*out.chunk(2))         # eq. 8: eps_u + w (eps_c - eps_u)
+        uncond, cond = out.chunk(2)
+        # eq. 8: eps_u + w (eps_c - eps_u); Guidance works on (B, N', P, Dz), so the latent is one "frame"
+        return guidance.combine(uncond[:, None], cond[:, None])[:, 0]
 
     def num_parameters(self) -> int:
         return sum(p.numel() for p in self.parameters())
@@ -291,40 +297,50 @@ def _pad_mask(m: torch.Tensor, width: int) -> torch.Tensor:
 class PSTPrediction:
     """KeyMotion's guided noise prediction (eq. 8) as a :class:`~salad_core.sampling.Prediction`.
 
-    Without guidance (``w = 1``) the conditional branch alone; otherwise both branches in one
-    batched forward (:meth:`ParallelSkipTransformer.guided`).
+    Without guidance (``w = 1``, or a step outside a :class:`~salad_core.sampling.Guidance`'s
+    interval) the conditional branch alone; otherwise both branches in one batched forward
+    (:meth:`ParallelSkipTransformer.guided`).
+
+    Parameters
+    ----------
+    guidance_scale : float or Guidance
+        The weight ``w`` (plain eq. 8) or a Guidance with a guidance ``rescale`` and/or a noise
+        ``interval`` (``lo <= t / T <= hi``) outside which the step is unguided.
     """
 
     desc = "keyframe denoising"
 
     def __init__(self, pst: ParallelSkipTransformer, text: torch.Tensor, text_mask: torch.Tensor,
-                 null_text: torch.Tensor | None, null_mask: torch.Tensor | None, guidance_scale: float,
-                 lengths: torch.Tensor | None = None) -> None:
-        if guidance_scale != 1.0 and (null_text is None or null_mask is None):
+                 null_text: torch.Tensor | None, null_mask: torch.Tensor | None,
+                 guidance_scale: "float | Guidance", lengths: torch.Tensor | None = None) -> None:
+        self.guidance = as_guidance(guidance_scale)
+        if self.guidance.cfg and (null_text is None or null_mask is None):
             raise ValueError(f"guidance_scale={guidance_scale} needs the empty prompt's features "
                              "(null_text, null_mask)")
         self.model = pst
         self.batch_size = text.shape[0]
         self.text, self.text_mask, self.null_text, self.null_mask = text, text_mask, null_text, null_mask
         self.guidance_scale, self.lengths = guidance_scale, lengths
+        self.num_train_timesteps = PST_DIFFUSION.num_train_timesteps
 
     def session(self, timesteps: torch.Tensor, num_train_timesteps: int) -> ContextManager[None]:
+        self.num_train_timesteps = int(num_train_timesteps)
         return nullcontext()
 
     def guided(self, timestep: float) -> bool:
-        return self.guidance_scale != 1.0
+        return self.guidance.active(timestep, self.num_train_timesteps)
 
     def __call__(self, z: torch.Tensor, t: torch.Tensor, info: StepInfo) -> torch.Tensor:
         """Predicted noise ``(B, Lz, Dz)`` of the keyframe latents ``z`` at ``t``."""
         if not info.cfg:
             return self.model(z, t, self.text, self.text_mask, self.lengths)
         return self.model.guided(z, t, self.text, self.text_mask, self.null_text, self.null_mask,
-                                 self.guidance_scale, self.lengths)
+                                 self.guidance, self.lengths)
 
 
 def sample_latents(pst: ParallelSkipTransformer, scheduler, text: torch.Tensor, text_mask: torch.Tensor,
                    null_text: torch.Tensor | None, null_mask: torch.Tensor | None, noise: torch.Tensor, *,
-                   lengths: torch.Tensor | None = None, guidance_scale: float = 4.0, num_steps: int = 50,
+                   lengths: torch.Tensor | None = None, guidance_scale: "float | Guidance" = 4.0, num_steps: int = 50,
                    progress: bool = False, generator: torch.Generator | None = None,
                    callback: Callable[[StepInfo, torch.Tensor], None] | None = None) -> torch.Tensor:
     """Reverse diffusion of keyframe latents with classifier-free guidance (eq. 8).
@@ -346,8 +362,9 @@ def sample_latents(pst: ParallelSkipTransformer, scheduler, text: torch.Tensor, 
         Initial standard-normal latents (scaled by ``init_noise_sigma`` here); not modified.
     lengths : Tensor ``(B,)``, optional
         Motion lengths (frames) for a length-conditioned PST.
-    guidance_scale : float
-        CFG weight ``w``; 1 runs only the conditional branch.
+    guidance_scale : float or Guidance
+        CFG weight ``w`` (1 runs only the conditional branch), or a
+        :class:`~salad_core.sampling.Guidance` (weight, rescale, noise interval).
     num_steps : int
         Inference steps.
     progress : bool

@@ -69,6 +69,7 @@ __all__ = [
     "build_kf_vae_task",
     "build_pst_task",
     "build_mmae_task",
+    "prepare_pst_batch",
     "train_kf_vae",
     "train_pst",
     "train_mmae",
@@ -101,6 +102,9 @@ class KeyMotionTrainConfig(TrainConfig):
     text_cache_size: int = 32768               # captions whose token features are kept (0: encode every batch);
                                                # when all fit, they are encoded up front in batches
     keyframe_noise: float = 0.0                # MMAE: std of noise added to the input keyframes (normalised units)
+    keyframe_ratio: float = 0.0                # MMAE: > 0 gives each item max(2, round(ratio x length)) keyframes
+                                               # (the paper's 10 %); 0: num_keyframes whatever the length (the
+                                               # keyframe VAE and PST need 0: their K is fixed by the VAE)
     latent_cache: bool = True                  # PST: keyframe-VAE posteriors of every window encoded once
     latent_cache_dir: str | None = None        # PST: where the cache lives (None: the run folder's latent_cache/)
 
@@ -117,6 +121,10 @@ class KeyMotionTrainConfig(TrainConfig):
             raise ValueError(f"{name}.text_cache_size={self.text_cache_size!r} is invalid; use an integer >= 0")
         if not self.keyframe_noise >= 0.0:
             raise ValueError(f"{name}.keyframe_noise={self.keyframe_noise!r} is invalid; use a float >= 0")
+        if isinstance(self.keyframe_ratio, bool) or not isinstance(self.keyframe_ratio, (int, float)) \
+                or not 0.0 <= self.keyframe_ratio <= 1.0:
+            raise ValueError(f"{name}.keyframe_ratio={self.keyframe_ratio!r} is invalid; use a float in [0, 1] "
+                             "(0: a fixed num_keyframes)")
 
 
 # ----------------------------------------------------------------------------------- data
@@ -130,26 +138,41 @@ class KeyframeDataset(Dataset):
     ----------
     base : MotionTextDataset
     num_keyframes : int
-        ``K``; every item must have at least ``K`` frames.
+        ``K``; every item must have at least ``K`` frames (unused with a ``ratio``).
     method : str
         Selection method (:data:`~salad_core.keymotion.selection.KEYFRAME_METHODS`).
     cache_size : int
         Selections kept (the oldest are dropped beyond it; ~200 bytes each).
+    ratio : float
+        0 (default): ``num_keyframes`` keyframes per item. Above 0: ``max(2, round(ratio x L))``
+        keyframes for an item of ``L`` frames, so the keyframes are a fixed share of the frames
+        (KeyMotion's 10 %), as the MMAE can in-fill from any number of keyframes.
     """
 
-    def __init__(self, base: Any, num_keyframes: int, method: str = "mdo", cache_size: int = 200_000) -> None:
+    def __init__(self, base: Any, num_keyframes: int, method: str = "mdo", cache_size: int = 200_000,
+                 ratio: float = 0.0) -> None:
         if method not in KEYFRAME_METHODS:
             raise ValueError(f"method={method!r} is invalid; choose one of {KEYFRAME_METHODS}")
+        if not 0.0 <= ratio <= 1.0:
+            raise ValueError(f"ratio={ratio!r} is invalid; use a float in [0, 1] (0: num_keyframes per item)")
         u = base.unit_length
         shortest = (base.min_length // u) * u - u   # a floored length, shortened by one unit 1 time in 3
-        if shortest < num_keyframes:
+        need = 2 if ratio > 0 else num_keyframes
+        if shortest < need:
             raise ValueError(f"items of {base.root} may have only {shortest} frames (min_length={base.min_length}), "
-                             f"fewer than num_keyframes={num_keyframes}; raise min_length or lower num_keyframes")
+                             f"fewer than num_keyframes={need}; raise min_length or lower num_keyframes")
         self.base = base
         self.num_keyframes = num_keyframes
         self.method = method
+        self.ratio = float(ratio)
         self.cache_size = cache_size
         self._cache: dict[tuple[str, int, int], np.ndarray] = {}
+
+    def count(self, length: int) -> int:
+        """Keyframes of an item of ``length`` frames: ``num_keyframes``, or ``max(2, round(ratio x length))``."""
+        if self.ratio <= 0:
+            return self.num_keyframes
+        return int(min(length, max(2, round(self.ratio * length))))
 
     @property
     def mean(self) -> np.ndarray:
@@ -176,7 +199,7 @@ class KeyframeDataset(Dataset):
         if idx is None:
             if motion is None:
                 motion = self.base.crop_features(*key)
-            idx = select_keyframes(motion[: key[2]], self.num_keyframes, self.method).astype(np.int64)
+            idx = select_keyframes(motion[: key[2]], self.count(key[2]), self.method).astype(np.int64)
             self._cache[key] = idx
             if len(self._cache) > self.cache_size:
                 self._cache.pop(next(iter(self._cache)))   # dicts keep insertion order: drop the oldest
@@ -190,25 +213,35 @@ class KeyframeDataset(Dataset):
 
 
 def collate_keyframes(items: list[dict[str, Any]]) -> dict[str, Any]:
-    """:func:`collate_motion_text` (trimmed to the longest item) plus ``keyframes`` ``(B, K)`` long."""
+    """:func:`collate_motion_text` (trimmed to the longest item) plus ``keyframes`` ``(B, K)`` long
+    and ``keyframe_count`` ``(B,)``.
+
+    Items with fewer keyframes than the batch's most (a keyframe ratio) repeat their last index up
+    to ``K``: gathering and scattering a repeated keyframe writes the same frame twice, so the
+    padded batch places exactly each item's own keyframes.
+    """
     from salad_core.data.dataset import collate_motion_text
 
     batch = collate_motion_text(items, trim=True)
-    batch["keyframes"] = torch.as_tensor(np.stack([it["keyframes"] for it in items]), dtype=torch.long)
+    counts = [len(it["keyframes"]) for it in items]
+    k = max(counts)
+    batch["keyframes"] = torch.as_tensor(np.stack([np.pad(it["keyframes"], (0, k - c), mode="edge")
+                                                   for it, c in zip(items, counts)]), dtype=torch.long)
+    batch["keyframe_count"] = torch.as_tensor(counts, dtype=torch.long)
     return batch
 
 
-def _datasets(data_dir: str | os.PathLike, skeleton: str, num_keyframes: int, config: KeyMotionTrainConfig
-              ) -> tuple[KeyframeDataset, KeyframeDataset | None]:
+def _datasets(data_dir: str | os.PathLike, skeleton: str, num_keyframes: int, config: KeyMotionTrainConfig,
+              ratio: float = 0.0) -> tuple[KeyframeDataset, KeyframeDataset | None]:
     from salad_core.data.dataset import MotionTextDataset
 
     train = MotionTextDataset(data_dir, "train", skeleton=skeleton, max_length=config.max_length,
                               random_crop=True, seed=config.seed)
-    train_set = KeyframeDataset(train, num_keyframes, config.keyframe_method)
+    train_set = KeyframeDataset(train, num_keyframes, config.keyframe_method, ratio=ratio)
     try:
         val = MotionTextDataset(data_dir, "val", skeleton=skeleton, max_length=config.max_length,
                                 mean=train.mean, std=train.std, random_crop=False)
-        val_set = KeyframeDataset(val, num_keyframes, config.keyframe_method)
+        val_set = KeyframeDataset(val, num_keyframes, config.keyframe_method, ratio=ratio)
     except (FileNotFoundError, ValueError) as exc:
         log.warning("no validation items (%s)", exc)
         val_set = None
@@ -340,9 +373,39 @@ def _prepare_vae(batch: dict[str, Any], ctx: StepContext, *, latent_shape: tuple
             "eps": ctx.rand.randn(keyframes.shape[0], latent_shape)}
 
 
-def _prepare_pst(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, text: PrefilledCaptions,
-                 scheduler: Any, config: KeyMotionTrainConfig, latent_shape: tuple[int, int],
-                 latents: Any = None) -> dict[str, Any]:
+def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, text: PrefilledCaptions,
+                      scheduler: Any, config: KeyMotionTrainConfig, latent_shape: tuple[int, int],
+                      latents: Any = None) -> dict[str, Any]:
+    """The :class:`PSTObjective` inputs of a training batch (eq. 7 with condition dropout).
+
+    Draws, in this order from the step's shared generator: the VAE reparameterisation noise, the
+    timesteps ``t ~ U{0..T-1}``, the diffusion noise and the caption drop mask (``cond_drop_prob``;
+    no caption is dropped outside training). The keyframe latent is ``z = mu + eps sigma`` of the
+    frozen keyframe VAE's posterior, looked up in ``latents`` (a
+    :func:`kf_vae_latent_cache`) or encoded from the batch's keyframes; both give the same ``z``.
+
+    Parameters
+    ----------
+    batch : dict
+        :func:`collate_keyframes` output: ``motion (B, N, D)`` normalised, ``length (B,)``,
+        ``keyframes (B, K)``, ``caption`` (and ``motion_id``, ``offset`` for the cache).
+    ctx : StepContext
+    vae : KeyframeVAE
+        Frozen, for on-the-fly encoding.
+    text : PrefilledCaptions
+        Caption features (``encode(captions) -> (B, W, C), (B, W)``).
+    scheduler
+        The training scheduler of :data:`PST_DIFFUSION` (``add_noise``).
+    config : KeyMotionTrainConfig
+    latent_shape : tuple
+        ``(Lz, Dz)``.
+    latents : LatentCache, optional
+
+    Returns
+    -------
+    dict: ``noisy (B, Lz, Dz)``, ``timesteps (B,)``, ``text (B, W, C)``, ``text_mask (B, W)``,
+    ``lengths (B,)``, ``target (B, Lz, Dz)`` (the noise).
+    """
     dev = ctx.env.device
     _, length, idx, keyframes = _keyframe_inputs(batch, dev)
     b = keyframes.shape[0]
@@ -373,6 +436,11 @@ def _prepare_mmae(batch: dict[str, Any], ctx: StepContext, *, text: PrefilledCap
     motion, length, idx, keyframes = _keyframe_inputs(batch, dev)
     b, n, d = motion.shape
     noise = ctx.rand.randn(b, (idx.shape[1], d)) * config.keyframe_noise
+    if "keyframe_count" in batch:
+        # a padded slot repeats its item's last keyframe: give it that keyframe's noise too, so the
+        # repeated frame is scattered with one value (identity when no item is padded)
+        slot = torch.arange(idx.shape[1], device=dev)[None].minimum(batch["keyframe_count"].to(dev)[:, None] - 1)
+        noise = torch.gather(noise, 1, slot[..., None].expand(-1, -1, d))
     inputs, kf_mask = scatter_keyframes(keyframes + noise, idx, n)
     frame_mask = torch.arange(n, device=dev)[None] < length[:, None]
     with torch.no_grad():
@@ -394,6 +462,7 @@ def build_kf_vae_task(data_dir: str | os.PathLike, model_config: KeyframeVAEConf
     if not isinstance(model_config, KeyframeVAEConfig):
         raise TypeError(f"model_config must be a KeyframeVAEConfig, got {type(model_config).__name__}")
     _check_max_length(model_config.max_length, train_config)
+    _check_fixed_keyframes(train_config, "keyframe VAE")
     train_set, val_set = _datasets(data_dir, model_config.skeleton, model_config.num_keyframes, train_config)
     torch.manual_seed(train_config.seed)  # same initial weights on every rank and every run
     vae = KeyframeVAE(model_config).to(env.device)
@@ -500,6 +569,7 @@ def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, mod
             raise ValueError(f"PSTConfig.{name}={getattr(model_config, name)} does not fit: the "
                              f"{'text encoder' if name == 'text_dim' else 'keyframe VAE'} gives {want}; set {name}={want}")
     _check_max_length(vc.max_length, train_config)
+    _check_fixed_keyframes(train_config, "PST")
     train_set, val_set = _datasets(data_dir, vc.skeleton, vc.num_keyframes, train_config)
     if not (np.allclose(train_set.mean, vae.norm.mean.cpu().numpy()) and np.allclose(train_set.std, vae.norm.std.cpu().numpy())):
         log.warning("the keyframe VAE was trained with other normalisation statistics than %s's", data_dir)
@@ -517,7 +587,7 @@ def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, mod
             log.warning("no latent cache folder given: using %s (pass cache_dir)", where)
         latents = kf_vae_latent_cache(vae, [d for d in (train_set, val_set) if d is not None], where, env,
                                       prune=train_config.latent_cache_dir is None and cache_dir is not None)
-    prepare = partial(_prepare_pst, vae=vae, text=text,
+    prepare = partial(prepare_pst_batch, vae=vae, text=text,
                       scheduler=scheduler, config=train_config, latent_shape=vae.latent_shape, latents=latents)
     meta = {"diffusion": config_to_dict(diffusion_config), "text_encoder": encoder_name,
             "kf_vae": str(resolve_checkpoint(vae_path)), "data": str(Path(data_dir))}
@@ -547,7 +617,8 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
         raise ValueError(f"MMAEConfig.text_dim={model_config.text_dim} does not fit: the text encoder gives "
                          f"{encoder.dim}; set text_dim={encoder.dim}")
     _check_max_length(model_config.max_length, train_config)
-    train_set, val_set = _datasets(data_dir, model_config.skeleton, num_keyframes, train_config)
+    train_set, val_set = _datasets(data_dir, model_config.skeleton, num_keyframes, train_config,
+                                   ratio=train_config.keyframe_ratio)
     torch.manual_seed(train_config.seed)
     mmae = MotionMaskedAutoencoder(model_config).to(env.device)
     mmae.set_normalization(train_set.mean, train_set.std)
@@ -557,7 +628,8 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
     frames_norm = u * expected_latent_frames(train_set.lengths, u) if bucketing else None
     prepare = partial(_prepare_mmae, text=text, config=train_config, frames_norm=frames_norm)
     meta = {"text_encoder": encoder_name, "num_keyframes": num_keyframes,
-            "keyframe_method": train_config.keyframe_method, "data": str(Path(data_dir))}
+            "keyframe_method": train_config.keyframe_method, "keyframe_ratio": train_config.keyframe_ratio,
+            "data": str(Path(data_dir))}
     numerics = {"loss_normaliser": (f"per-batch means x valid frames / (batch x {frames_norm:.4g} expected frames)"
                                     if frames_norm is not None else "per-batch means over valid frames")}
     return TrainTask(
@@ -567,6 +639,12 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
         lengths=train_set.lengths,
         extra_files={"mean_std.safetensors": _mean_std_file(train_set)},
     )
+
+
+def _check_fixed_keyframes(config: KeyMotionTrainConfig, stage: str) -> None:
+    if config.keyframe_ratio:
+        raise ValueError(f"KeyMotionTrainConfig.keyframe_ratio={config.keyframe_ratio} is for the MMAE only: the "
+                         f"{stage} works on the keyframe VAE's fixed num_keyframes; set keyframe_ratio=0 for it")
 
 
 def _check_max_length(model_max: int, config: KeyMotionTrainConfig) -> None:
@@ -604,7 +682,8 @@ def train_mmae(data_dir: str | os.PathLike, out_dir: str | os.PathLike, model_co
                resume: bool = False, *, num_keyframes: int = 20, env: DistEnv | None = None,
                on_step: Callable[[int], None] | None = None,
                text_cache: CaptionFeatureCache | None = None) -> TrainResult:
-    """Train a :class:`MotionMaskedAutoencoder` (in-filling from ``num_keyframes`` keyframes)."""
+    """Train a :class:`MotionMaskedAutoencoder` (in-filling from ``num_keyframes`` keyframes, or
+    from ``train_config.keyframe_ratio`` of the frames when that is set)."""
     train_config = train_config or KeyMotionTrainConfig()
     env = env or init_distributed(train_config.device)
     task = build_mmae_task(data_dir, model_config, train_config, env, text_encoder, num_keyframes,
