@@ -451,7 +451,10 @@ class SaladPipeline:
     def run_with_cache(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None = None, *,
                        names: Any = None, layers: int | Sequence[int] | None = None,
                        steps: tuple[float, float] = (0.0, 1.0), store: str | Sequence[str] = "probs",
-                       hooks: Sequence[tuple[str, HookFn]] | None = None, **kwargs: Any
+                       hooks: Sequence[tuple[str, HookFn]] | None = None, seed: int | Sequence[int] = 0,
+                       guidance_scale: "float | Guidance | None" = None, num_steps: int = 50,
+                       solver: str | None = None, capture_attention: bool | CaptureConfig | dict = False,
+                       noise: torch.Tensor | None = None, progress: bool = False
                        ) -> tuple[MotionOutput, ActivationCache]:
         """Generate and keep the activations of the chosen hook points (TransformerLens'
         ``run_with_cache``); the motion is bit for bit the one :meth:`__call__` gives.
@@ -473,9 +476,8 @@ class SaladPipeline:
             ``"outputs"`` (the sites' outputs after ``Wo``), or several.
         hooks : list of (name, fn), optional
             As :meth:`__call__`; the cache keeps what the run used (after the hooks).
-        **kwargs
-            ``seed``, ``guidance_scale``, ``num_steps``, ``solver``, ``capture_attention``, ``noise``,
-            ``progress``, as :meth:`__call__`.
+        seed, guidance_scale, num_steps, solver, capture_attention, noise, progress
+            As :meth:`__call__`.
 
         Returns
         -------
@@ -483,22 +485,15 @@ class SaladPipeline:
             The cache maps hook point names to CPU tensors ``(S, B, ...)`` of the conditional rows
             (:class:`salad_core.attention.hooks.ActivationCache` documents the axes).
         """
+        from salad_core.attention.capture import TokenInfo
         from salad_core.attention.hooks import CacheRecorder, select_hook_points
 
-        unknown = sorted(set(kwargs) - {"seed", "guidance_scale", "num_steps", "solver", "capture_attention", "noise",
-                                        "progress"})
-        if unknown:
-            raise TypeError(f"run_with_cache got unexpected argument(s) {unknown}")
         recorder = CacheRecorder(select_hook_points(self.denoiser, names, layers, store), steps)
         if not recorder.points:
             raise ValueError(f"names={names!r}, layers={layers!r} and store={store!r} select no hook point")
-        out, text = self._generate(prompts, lengths, kwargs.get("seed", 0), kwargs.get("guidance_scale"),
-                                   kwargs.get("num_steps", 50), kwargs.get("solver"),
-                                   kwargs.get("capture_attention", False), kwargs.get("noise"),
-                                   kwargs.get("progress", False), [*(hooks or ()), *recorder.hooks],
-                                   rows="all" if hooks else "cond")
-        from salad_core.attention.capture import TokenInfo
-
+        # the recorder keeps the conditional rows only: without other hooks, only those are computed
+        out, text = self._generate(prompts, lengths, seed, guidance_scale, num_steps, solver, capture_attention, noise,
+                                   progress, [*(hooks or ()), *recorder.hooks], rows="all" if hooks else "cond")
         cache = recorder.result(TokenInfo.from_batch(text), out.lengths, self.skeleton.unit_length,
                                 self.denoiser.config.layers)
         return out, cache

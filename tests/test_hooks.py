@@ -219,6 +219,8 @@ def test_errors_name_the_problem_and_nothing_stays_installed(pipe, plain):
         _run(pipe, hooks=["layers.0.cross"])
     with pytest.raises(TypeError, match="fn must be callable"):
         _run(pipe, hooks=[("layers.0.cross", 3)])
+    with pytest.raises(TypeError, match=r"hooks must be a list of \(name, fn\) pairs"):
+        _run(pipe, hooks=lambda t, ctx: None)
 
     def boom(t, ctx):
         if ctx.step == 2:
@@ -319,7 +321,7 @@ def test_cache_filters_and_step_window(pipe, cached):
         _cache(pipe, names="layers.1.skeletal.q", store="probs")
     with pytest.raises(RuntimeError, match="nothing was recorded"):
         _cache(pipe, names="layers.0.cross", steps=(0.9, 1.0))
-    with pytest.raises(TypeError, match=r"unexpected argument\(s\) \['edits'\]"):
+    with pytest.raises(TypeError, match="edits"):
         _cache(pipe, edits=[])
 
 

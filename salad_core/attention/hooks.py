@@ -223,6 +223,9 @@ def _resolve_hooks(denoiser: Any, hooks: Sequence[tuple[str, HookFn]]) -> dict[s
     """``[(name or glob, fn), ...]`` -> ``{hook point: [fn, ...]}`` in the order given."""
     if isinstance(hooks, tuple) and len(hooks) == 2 and isinstance(hooks[0], str):
         hooks = [hooks]                      # a single (name, fn) pair
+    if not isinstance(hooks, (list, tuple)):
+        raise TypeError(f"hooks must be a list of (name, fn) pairs, e.g. [('layers.0.cross', fn)], got "
+                        f"{type(hooks).__name__}")
     known = {hp.name: hp for hp in hook_points(denoiser)}
     out: dict[str, list[HookFn]] = {}
     for i, item in enumerate(hooks):
