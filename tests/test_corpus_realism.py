@@ -104,10 +104,13 @@ def test_running_swings_the_arms_across_vertical_and_bobs(kind):
 
 
 def test_running_has_airborne_frames():
-    clip = _clip("run", 1)
-    f0, f1 = clip.events[0].frames
-    feet = clip.joints[f0:f1][:, list(SK.contact_joints), 1].min(-1)
-    assert (feet > 0.03).mean() > 0.2                          # both feet clearly off the floor
+    shares = []
+    for seed in range(4):                                      # one performer may run slowly: pool a few
+        clip = _clip("run", seed)
+        f0, f1 = clip.events[0].frames
+        feet = clip.joints[f0:f1][:, list(SK.contact_joints), 1].min(-1)
+        shares.append((feet > 0.03).mean())                    # both feet clearly off the floor
+    assert np.median(shares) > 0.2 and min(shares) > 0.15, shares
 
 
 def test_sequences_do_not_stop_dead():
