@@ -43,7 +43,7 @@ from salad_core.text import TextBatch, TextEncoder, load_text_encoder
 
 if TYPE_CHECKING:  # pragma: no cover - annotations only: salad_core.attention is imported when used
     from salad_core.attention import AttentionMaps, CaptureConfig, EditController, EditSpec, Inversion
-    from salad_core.attention.hooks import ActivationCache, HookFn
+    from salad_core.attention.hooks import ActivationCache, HookFn, NameFilter
 
 __all__ = ["SaladPipeline", "MotionOutput", "EditOutput", "default_weights_dir", "validate_prompts",
            "validate_lengths"]
@@ -449,7 +449,7 @@ class SaladPipeline:
         return out
 
     def run_with_cache(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None = None, *,
-                       names: Any = None, layers: int | Sequence[int] | None = None,
+                       names: NameFilter = None, layers: int | Sequence[int] | None = None,
                        steps: tuple[float, float] = (0.0, 1.0), store: str | Sequence[str] = "probs",
                        hooks: Sequence[tuple[str, HookFn]] | None = None, seed: int | Sequence[int] = 0,
                        guidance_scale: "float | Guidance | None" = None, num_steps: int = 50,
