@@ -154,9 +154,10 @@ def validate_prompts(prompts: str | Sequence[str]) -> list[str]:
 
 
 def validate_lengths(lengths: int | Sequence[int] | None, n: int, skeleton: Skeleton,
-                     default: int = 120) -> list[int]:
+                     default: int = 120, stacklevel: int = 3) -> list[int]:
     """Per-sample lengths in frames: positive, at most ``skeleton.max_length``; lengths that are
-    not multiples of ``unit_length`` are floored to one, with a warning saying so."""
+    not multiples of ``unit_length`` are floored to one, with a warning saying so (attributed
+    ``stacklevel`` frames up: 3 = the caller of the function that calls this one)."""
     unit, max_len = skeleton.unit_length, skeleton.max_length
     if lengths is None:
         lengths = [default] * n
@@ -184,7 +185,7 @@ def validate_lengths(lengths: int | Sequence[int] | None, n: int, skeleton: Skel
         if length % unit:
             floored = length - length % unit
             warnings.warn(f"{which} = {length} frames is not a multiple of {unit}; using {floored}",
-                          stacklevel=3)
+                          stacklevel=stacklevel)
             length = floored
         out.append(length)
     return out
@@ -501,10 +502,12 @@ class SaladPipeline:
     def _generate(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None, seed: int | Sequence[int],
                   guidance_scale: "float | Guidance | None", num_steps: int, solver: str | None,
                   capture_attention: bool | CaptureConfig | dict, noise: torch.Tensor | None, progress: bool,
-                  hooks: Sequence[tuple[str, HookFn]] | None, rows: str = "all") -> tuple[MotionOutput, TextBatch]:
-        """:meth:`__call__`, also returning the encoded prompts; ``rows``: what the hooks get."""
+                  hooks: Sequence[tuple[str, HookFn]] | None, rows: str = "all", caller_depth: int = 1
+                  ) -> tuple[MotionOutput, TextBatch]:
+        """:meth:`__call__`, also returning the encoded prompts; ``rows``: what the hooks get;
+        ``caller_depth``: frames between the user's call and this one (warnings point at the user)."""
         prompts = validate_prompts(prompts)
-        lengths = validate_lengths(lengths, len(prompts), self.skeleton)
+        lengths = validate_lengths(lengths, len(prompts), self.skeleton, stacklevel=3 + caller_depth)
         guidance = self.resolve_guidance(guidance_scale)
         num_steps = _check_steps(num_steps, self.diffusion.num_train_timesteps)
         solver = _check_solver(solver)
