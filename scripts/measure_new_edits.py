@@ -17,9 +17,10 @@ frame interval) says which phrase to edit, which parts it drives and where to lo
 (a) erase: ``Erase(phrase span)`` on captions with two or more phrases: the drop of the phrase's parts'
     activity over its annotated frames, and how much the other parts change (root-aligned MPJPE of
     their joints, source vs edit), against deleting the phrase's words from the prompt (same noise);
-(b) shift: ``Shift(phrase span, N)`` with N = +-``--shift`` frames (toward the side with room): the lag
-    of the phrase's parts' activity between source and edit (cross-correlation over the annotated
-    interval widened by 2N); the target is ``|lag - N| <= 0.1 |N|``;
+(b) shift: ``Shift(phrase span, N)`` with N = +-``--shift`` frames (toward the side with room), alone
+    and with ``ShiftTemporal(its parts, N)``: the lag of the phrase's parts' activity between source
+    and edit (cross-correlation over the annotated interval widened by N on each side, lags up to
+    2|N|); the target is ``|lag - N| <= 0.1 |N|``;
 (c) example: ``ExampleBased`` variations of an inverted corpus clip (``pipe.invert``, DDIM with the
     exact replay) against plain samples of its caption with the same seeds: diversity (mean pairwise
     root-aligned MPJPE) and distance to the example;
@@ -43,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from salad_core.attention.counting import MOTION_COUNT, count_repetitions, motion_repetitions
-from salad_core.attention.edits import Erase, ExampleBased, Shift
+from salad_core.attention.edits import Erase, ExampleBased, Shift, ShiftTemporal
 from salad_core.data.texts import split_words
 from salad_core.eval.metrics import mpjpe
 from salad_core.part_activity import part_speeds
@@ -203,27 +204,41 @@ def activity_lag(a: np.ndarray, b: np.ndarray, frames, max_lag: int) -> int:
     return best
 
 
+def shift_edits(variant: str, phrase: dict, n: int) -> list:
+    """The edits of a shift variant: ``cross`` (the phrase's columns), ``temporal`` (its parts'
+    temporal self-attention), ``cross+temporal`` (both)."""
+    edits = []
+    if "cross" in variant:
+        edits.append(Shift(tuple(phrase["words"]), n))
+    if "temporal" in variant:
+        edits.append(ShiftTemporal(tuple(phrase["parts"]), n))
+    return edits
+
+
 def measure_shift(pipe, items, args) -> dict:
     rows = []
     for i, it in enumerate(items):
         ph, n = it["phrase"], it["shift"]
-        out = pipe.edit(it["caption"], edits=[Shift(tuple(ph["words"]), n)], lengths=it["length"],
-                        seed=args.seed + i, num_steps=args.steps, guidance_scale=args.guidance)
         idx = [PART_NAMES.index(p) for p in ph["parts"]]
-        a = part_speeds(out.source.raw_joints[0])[:, idx].mean(1)
-        b = part_speeds(out.edited.raw_joints[0])[:, idx].mean(1)
         f0, f1 = ph["frames"]
-        window = (max(f0 - abs(n), 0), min(f1 + abs(n), len(a)))
-        lag = activity_lag(a, b, window, 2 * abs(n))
-        rows.append({"id": it["id"], "phrase": ph["text"], "parts": ph["parts"], "frames": [f0, f1], "shift": n,
-                     "lag": lag, "error": abs(lag - n), "met": abs(lag - n) <= 0.1 * abs(n),
-                     "sign_right": bool(np.sign(lag) == np.sign(n))})
-    summary = {"mean_abs_shift": _mean(abs(r["shift"]) for r in rows),
-               "lag_along_shift": _mean(r["lag"] * np.sign(r["shift"]) for r in rows),
-               "mean_abs_error": _mean(r["error"] for r in rows),
-               "met_rate": _mean(float(r["met"]) for r in rows),
-               "right_direction_rate": _mean(float(r["sign_right"]) for r in rows),
-               "zero_lag_rate": _mean(float(r["lag"] == 0) for r in rows)}
+        for variant in args.shift_variants:
+            out = pipe.edit(it["caption"], edits=shift_edits(variant, ph, n), lengths=it["length"],
+                            seed=args.seed + i, num_steps=args.steps, guidance_scale=args.guidance)
+            a = part_speeds(out.source.raw_joints[0])[:, idx].mean(1)
+            b = part_speeds(out.edited.raw_joints[0])[:, idx].mean(1)
+            window = (max(f0 - abs(n), 0), min(f1 + abs(n), len(a)))
+            lag = activity_lag(a, b, window, 2 * abs(n))
+            rows.append({"id": it["id"], "phrase": ph["text"], "parts": ph["parts"], "frames": [f0, f1], "shift": n,
+                         "variant": variant, "lag": lag, "error": abs(lag - n), "met": abs(lag - n) <= 0.1 * abs(n),
+                         "sign_right": bool(np.sign(lag) == np.sign(n))})
+    summary = {}
+    for variant in args.shift_variants:
+        sub = [r for r in rows if r["variant"] == variant]
+        summary[variant] = {"lag_along_shift": _mean(r["lag"] * np.sign(r["shift"]) for r in sub),
+                            "mean_abs_error": _mean(r["error"] for r in sub),
+                            "met_rate": _mean(float(r["met"]) for r in sub),
+                            "right_direction_rate": _mean(float(r["sign_right"]) for r in sub),
+                            "zero_lag_rate": _mean(float(r["lag"] == 0) for r in sub)}
     return {"summary": summary, "items": rows}
 
 
@@ -335,7 +350,9 @@ def parse_args(argv=None):
     ap.add_argument("--variations", type=int, default=3, help="variations (and plain samples) per example")
     ap.add_argument("--example-window", type=float, default=0.5, help="(c): step fractions with the example's maps")
     ap.add_argument("--shift", type=int, default=20, help="(b): shift in motion frames (a multiple of 4)")
-    ap.add_argument("--erase-modes", nargs="+", default=["others", "special", "zero"])
+    ap.add_argument("--erase-modes", nargs="+", default=["special", "others"])
+    ap.add_argument("--shift-variants", nargs="+", default=["cross", "cross+temporal"],
+                    choices=["cross", "temporal", "cross+temporal"])
     ap.add_argument("--steps", type=int, default=50)
     ap.add_argument("--guidance", type=float, default=7.5)
     ap.add_argument("--seed", type=int, default=0)
@@ -352,6 +369,7 @@ def parse_args(argv=None):
     if args.quick:
         args.n, args.n_example, args.variations, args.steps, args.clips = 2, 1, 2, 10, 40
         args.erase_modes = args.erase_modes[:1]
+        args.shift_variants = args.shift_variants[-1:]
     return args
 
 
@@ -387,7 +405,8 @@ def main(argv=None) -> dict:
                "activity drop of its parts, other parts' MPJPE (m) vs deleting its words", results["erase"]["summary"])
     if "b" in args.sections:
         results["shift"] = measure_shift(pipe, shift_items(clips, args.n, args.shift), args)
-        _print(f"(b) shift a phrase by +-{args.shift} frames ({len(results['shift']['items'])} prompts): lag of its "
+        _print(f"(b) shift a phrase by +-{args.shift} frames ({len(results['shift']['items']) // len(args.shift_variants)} "
+               "prompts): lag of its "
                "parts' activity (frames)", results["shift"]["summary"])
     if "c" in args.sections:
         results["example"] = measure_example(pipe, clips, args)

@@ -11,8 +11,8 @@ import torch
 from salad_core.attention import CaptureConfig, EditController, Mirror, Reweight, TokenInfo, WordSwap, validate_edits
 from salad_core.attention.counting import (attention_signal, count_peaks, count_repetitions, motion_repetitions,
                                            motion_signal)
-from salad_core.attention.edits import (Erase, ExampleBased, Shift, erase_columns, reweight_columns, seeded_noise,
-                                        shift_columns)
+from salad_core.attention.edits import (Erase, ExampleBased, Shift, ShiftTemporal, erase_columns, reweight_columns,
+                                        seeded_noise, shift_columns, shift_temporal)
 from salad_core.pipeline import SaladPipeline
 from salad_core.sampling import StepInfo
 from salad_core.skeleton import PART_NAMES, get_skeleton
@@ -37,12 +37,13 @@ def _probs(*shape, seed=0) -> torch.Tensor:
 # ------------------------------------------------------------------------------ specs
 def test_new_specs_validate_on_construction():
     assert Erase("waves").words == ("waves",) and Erase((2, 6)).words == ((2, 6),)
+    assert Erase("waves").mode == "special"
     assert Erase(["Waves  his", (0, 1)]).words == ("waves his", (0, 1))
     with pytest.raises(ValueError, match="empty"):
         Erase(())
     with pytest.raises(ValueError, match="neither a word"):
         Erase((3, 1))
-    with pytest.raises(ValueError, match=r"Erase.mode='gone'; allowed: \('others', 'special', 'zero'\)"):
+    with pytest.raises(ValueError, match=r"Erase.mode='gone'; allowed: \('special', 'others', 'zero'\)"):
         Erase("waves", mode="gone")
     with pytest.raises(ValueError, match="Erase.steps"):
         Erase("waves", steps=(0.5, 0.5))
@@ -106,6 +107,34 @@ def test_shift_kernel_moves_the_columns_along_frames():
     torch.testing.assert_close(kept[0, :, 2:, :, 1], maps[0, :, :4, :, 1])
     gone = shift_columns(maps, [[1], [2]], 6, keep_sums=False)                 # past the end: nothing left
     assert gone[0, ..., 1].abs().max() == 0
+
+
+def test_shift_temporal_kernel_slides_the_parts_maps():
+    maps = _probs(1, 7, 2, 6, 6, seed=3)                       # (B, P, H, N', N')
+    assert torch.equal(shift_temporal(maps, [5], 0), maps)
+    out = shift_temporal(maps, [5, 6], 2)
+    assert torch.equal(out[:, :5], maps[:, :5])                # other parts as they were
+    torch.testing.assert_close(out.sum(-1), maps.sum(-1))     # rows stay probabilities
+    # inside, query t and key s take the source's (t - 2, s - 2) up to the row's re-normalisation
+    ratio = out[0, 5, :, 2:, 2:] / maps[0, 5, :, :4, :4]
+    torch.testing.assert_close(ratio, ratio[..., :1].expand_as(ratio))
+    assert out[0, 5, :, :, :2].abs().max() == 0               # keys before the shift get nothing
+    with pytest.raises(ValueError, match="ShiftTemporal.parts"):
+        ShiftTemporal(("tail",), 4)
+    with pytest.raises(ValueError, match="not a multiple of unit_length"):
+        ShiftTemporal(("head",), 6)
+
+
+def test_shift_temporal_hands_the_moved_source_maps_to_the_edit(pipe):
+    cap = CaptureConfig(mode="full", self_attention=True)
+    out = pipe.edit(SRC, edits=[Shift("jumps", 8), ShiftTemporal(("left leg", "right leg"), 8, steps=(0.0, 0.5))],
+                    lengths=40, num_steps=STEPS, seed=1, capture_attention=cap)
+    src, ed = out.source.attention.full(0, "temporal"), out.edited.attention.full(0, "temporal")  # (S, L, H, P, N', N')
+    half = STEPS // 2
+    as_rows = lambda a: torch.from_numpy(a[:half].astype(np.float32)).flatten(0, 2).unsqueeze(2)  # (SLH, P, 1, N', N')
+    want, got = shift_temporal(as_rows(src), [1, 2], 2), as_rows(ed)
+    torch.testing.assert_close(got, want, atol=2e-3, rtol=0)   # float16 storage
+    assert (out.edited.latents - out.source.latents).abs().max() > 1e-3
 
 
 def test_seeded_noise_is_the_pipelines_noise(pipe):
@@ -289,6 +318,7 @@ def test_measure_script_runs_on_a_tiny_pipeline(pipe, tmp_path):
                        "--json", str(tmp_path / "out.json")])
     assert set(res) >= {"erase", "shift", "example", "counting"}
     assert res["example"]["items"] and res["example"]["summary"]["diversity_variations"] > 0
+    assert {r["variant"] for r in res["shift"]["items"]} <= {"cross+temporal"}
     for row in res["shift"]["items"]:
         assert abs(row["shift"]) == 20 and row["error"] == abs(row["lag"] - row["shift"])
     saved = json.loads((tmp_path / "out.json").read_text())
