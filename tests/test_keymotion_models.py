@@ -67,9 +67,24 @@ def normalised(sample_features, sample_dir):
 
 
 @pytest.fixture(scope="module")
-def two_clips(normalised):
-    """Two crops of sample 012314 (60 and 80 frames), padded to 80, with their MDO keyframes."""
-    x, mean, std = normalised
+def procedural_normalised():
+    """Procedural motion 0 of seed 0 (111 frames: a walk, then a step over), normalised with its own
+    per-channel mean and std (floored at 0.01, as a corpus's statistics would be). The tests that train
+    (overfit) tiny models use it, never the real sample, which is evaluation data."""
+    import io
+
+    from salad_core.data.procedural.corpus import make_motion
+
+    x = np.load(io.BytesIO(make_motion(0, 0)["000000"]["new_joint_vecs"])).astype(np.float32)
+    mean, std = x.mean(0), np.maximum(x.std(0), 0.01)
+    return ((x - mean) / std).astype(np.float32), mean, std
+
+
+@pytest.fixture(scope="module")
+def two_clips(procedural_normalised):
+    """Two crops of a procedural walk (60 and 80 frames), padded to 80, with their MDO keyframes."""
+    x, mean, std = procedural_normalised
+    assert len(x) >= 110
     clips = [x[:60], x[30:110]]
     n = max(len(c) for c in clips)
     motion = torch.zeros(2, n, D)
