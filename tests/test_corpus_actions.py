@@ -28,7 +28,7 @@ NEW = ("dance", "sway", "throw", "pick_up", "step_over", "stumble", "kneel", "li
        "step_up", "climb_stairs", "pivot", "touch_knee", "guard", "jab_cross", "hook", "uppercut",
        "hands_on_hips", "scratch_head", "salute", "cross_arms", "reach_across", "arm_circles",
        "crawl",                                                # corpus 2.1
-       "descend_stairs", "shuffle", "lunge")                   # corpus 2.2
+       "descend_stairs", "shuffle", "lunge", "side_bend", "twist")   # corpus 2.2
 
 
 def _action(kind: str, k: int = 0) -> Action:

@@ -96,7 +96,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "change": ("changes", "changing"), "tidy": ("tidies", "tidying"), "sleep": ("sleeps", "sleeping"),
     "watch": ("watches", "watching"), "drop": ("drops", "dropping"), "settle": ("settles", "settling"),
     "mount": ("mounts", "mounting"), "crawl": ("crawls", "crawling"),
-    "descend": ("descends", "descending"), "come": ("comes", "coming"), "lunge": ("lunges", "lunging"),
+    "twist": ("twists", "twisting"), "descend": ("descends", "descending"), "come": ("comes", "coming"), "lunge": ("lunges", "lunging"),
     "ask": ("asks", "asking"), "chase": ("chases", "chasing"), "lean": ("leans", "leaning"), "loosen": ("loosens", "loosening"), "dash": ("dashes", "dashing"), "lower": ("lowers", "lowering"), "attract": ("attracts", "attracting"), "punctuate": ("punctuates", "punctuating"),
 }
 
@@ -191,7 +191,8 @@ _lex("DET", "which")
 _lex("ADP", "without")
 LEXICON["done"] = ("do", "VERB")
 LEXICON["lost"] = ("lose", "VERB")
-_lex("NOUN", "lunge ice")
+_lex("NOUN", "lunge ice torso")
+_lex("ADV", "far")
 
 #: Subjects: (words, possessives, object pronoun per possessive, subject pronoun or None).
 SUBJECTS: tuple[tuple[str, tuple[str, ...], str | None], ...] = (
@@ -239,7 +240,7 @@ _LR, _B, _N = ("left", "right"), ("both",), (None,)
 _HIGH_DEFAULT = {"jump": ("high", "very high"), "kick": ("high",), "knee_lift": ("high", "up high"),
                  "wave": ("high", "above {poss} head", "high above {poss} head"),
                  "raise": ("high", "up high", "high above {poss} head", "high into the air")}
-_LOW_DEFAULT = {"squat": ("low", "down low"), "bow": ("low", "deeply"), "lunge": ("low", "deeply"), "kick": ("low",), "wave": ("low",),
+_LOW_DEFAULT = {"squat": ("low", "down low"), "bow": ("low", "deeply"), "lunge": ("low", "deeply"), "side_bend": ("deeply", "far/ADV down"), "kick": ("low",), "wave": ("low",),
                 "raise": ("to shoulder height", "to shoulder level")}
 _LOCOMOTION = {"walk", "run", "jog", "march", "walk_backward", "sidestep", "circle", "turn", "spin"}
 
@@ -482,6 +483,13 @@ RULES.update({
                     _R("V:do a lunge/NOUN with {poss} {side} leg", _LR),
                     _R("V:step forward into a lunge/NOUN with {poss} {side} leg", _LR),
                     _R("V:lunge with {poss} {side} leg forward", _LR)),
+    "side_bend": _rules(_R("V:bend to the {side:NOUN}", _LR), _R("V:bend sideways to the {side:NOUN}", _LR),
+                        _R("V:lean to the {side:NOUN}", _LR), _R("V:lean over to the {side:NOUN}", _LR),
+                        _R("V:stretch sideways to the {side:NOUN}", _LR),
+                        _R("V:bend {poss} upper/ADJ body/NOUN to the {side:NOUN}", _LR)),
+    "twist": _rules(_R("V:twist to the {side:NOUN}", _LR), _R("V:twist {poss} torso to the {side:NOUN}", _LR),
+                    _R("V:rotate {poss} torso to the {side:NOUN}", _LR),
+                    _R("V:twist {poss} upper/ADJ body/NOUN to the {side:NOUN}", _LR)),
     "pivot": _rules(_R("V:pivot to the {side:NOUN}", _LR), _R("V:pivot on {poss} {side} foot", _LR),
                     _R("V:pivot {side:ADV} on the ball of {poss} {side} foot", _LR),
                     _R("V:turn {side:ADV} on {poss} {side} foot", _LR),
@@ -814,6 +822,8 @@ INTENT.update({
     "climb_stairs": ("as if climbing/VERB to the second/ADJ floor/NOUN", "as if going/VERB home/NOUN", "as if in a hurry"),
     "descend_stairs": ("as if going/VERB down to the street/NOUN", "as if in a hurry", "as if going/VERB home/NOUN"),
     "shuffle": ("as if tired", "as if dancing/VERB", "as if on ice/NOUN"),
+    "side_bend": ("as if stretching/VERB", "as part of a workout", "as if warming/VERB up"),
+    "twist": ("as if warming/VERB up", "as part of a workout", "as if dancing/VERB"),
     "lunge": ("as if exercising/VERB", "as part of a workout", "as if training/VERB", "as if warming/VERB up"),
     "pivot": ("as if dodging/VERB a defender/NOUN", "as if changing/VERB direction/NOUN", "like a basketball/NOUN player/NOUN", "as if dancing/VERB"),
     "touch_knee": ("as if stretching/VERB", "as if warming/VERB up", "as part of a workout", "as if exercising/VERB"),

@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import actions, boxing, crawl, dance, everyday, floorwork, gestures, poses, steps
+from . import actions, boxing, crawl, dance, everyday, floorwork, gestures, poses, steps, trunk
 from .footwork import Persona, Stance
 from .gait import Route, gait_style, locomotion
 from .kinematics import BodyModel
@@ -136,11 +136,11 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("stumble", "locomotion", "base", weight=0.7),
     # down to the floor
     PrimitiveSpec("kneel", "legs", "base", sides=("left", "right"), mods=_SPEED, weight=1.3),
-    PrimitiveSpec("lie_down", "whole body", "base", mods=("slowly",), weight=0.6, terminal=True),
-    PrimitiveSpec("lie_down_get_up", "whole body", "base", mods=("slowly",), weight=0.6),
+    PrimitiveSpec("lie_down", "whole body", "base", mods=("slowly",), weight=0.45, terminal=True),
+    PrimitiveSpec("lie_down_get_up", "whole body", "base", mods=("slowly",), weight=0.45),
     # footwork: steps, stairs, pivots, a cross-body knee touch
     PrimitiveSpec("step_up", "legs", "base", mods=_SPEED, reps=(1, 2), accepts=("arms", "head"), weight=0.8),
-    PrimitiveSpec("climb_stairs", "locomotion", "base", mods=_SPEED, accepts=("head",), weight=0.8, terminal=True),
+    PrimitiveSpec("climb_stairs", "locomotion", "base", mods=_SPEED, accepts=("head",), weight=0.6, terminal=True),
     PrimitiveSpec("pivot", "locomotion", "base", sides=("left", "right"), mods=_SPEED, variants=("", "around"),
                   accepts=("arms", "head"), weight=0.8),
     PrimitiveSpec("touch_knee", "whole body", "base", sides=("left", "right"), mods=_SPEED, reps=(1, 2), weight=1.1),
@@ -162,11 +162,16 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("crawl", "locomotion", "base", mods=_SPEED, weight=1.0, terminal=True, initial=True),
     # --- corpus 2.2: down a flight of stairs (from the top landing: it opens a clip), shuffling
     # steps (the soles glide over the floor), lunges (legs far beyond walking)
-    PrimitiveSpec("descend_stairs", "locomotion", "base", mods=_SPEED, accepts=("head",), weight=0.8, initial=True),
+    PrimitiveSpec("descend_stairs", "locomotion", "base", mods=_SPEED, accepts=("head",), weight=0.5, initial=True),
     PrimitiveSpec("shuffle", "locomotion", "base", sides=(None, "left", "right"), mods=_SPEED,
-                  accepts=("arms", "head"), weight=0.9),
+                  accepts=("arms", "head"), weight=0.5),
     PrimitiveSpec("lunge", "legs", "base", sides=("left", "right"), mods=("low", "slowly", "quickly"), reps=(1, 2),
                   accepts=("arms", "head"), weight=1.1),
+    # the trunk alone: a standing side stretch and a torso twist (the upper body sideways and
+    # turned against the hips: pose dimensions little else varies)
+    PrimitiveSpec("side_bend", "whole body", "base", sides=("left", "right"), mods=("low", "slowly", "quickly"),
+                  reps=(1, 2), weight=0.8),
+    PrimitiveSpec("twist", "whole body", "base", sides=("left", "right"), mods=_SPEED, reps=(1, 2), weight=0.7),
 ]}
 
 
@@ -231,6 +236,11 @@ def primitive_parts(action: Action) -> tuple[tuple[str, ...], tuple[str, ...]]:
         return _LOWER, _UPPER
     if k == "lunge":
         return _LOWER, _UPPER
+    if k == "side_bend":     # the side is where the trunk bends; the far arm goes over the head
+        far, near = ("right arm", "left arm") if side == "left" else ("left arm", "right arm")
+        return ("spine", far), ("root", "left leg", "right leg", near, "head")
+    if k == "twist":         # the legs turn a little under the pelvis, the arms swing along
+        return ("spine",), ("root", "left leg", "right leg", "left arm", "right arm", "head")
     if k == "touch_knee":     # the side is the hand; it touches the other knee, which rises
         knee_leg = "right leg" if side == "left" else "left leg"
         support = "left leg" if side == "left" else "right leg"
@@ -338,6 +348,10 @@ def build_base(action: Action, start: Stance, persona: Persona, body: BodyModel,
         return steps.shuffle(start, persona, body, rng, side=None if action.side is None else side, mods=mods)
     if k == "lunge":
         return steps.lunge(start, persona, body, rng, side=side, mods=mods, reps=action.reps)
+    if k == "side_bend":
+        return trunk.side_bend(start, persona, body, rng, side=side, mods=mods, reps=action.reps)
+    if k == "twist":
+        return trunk.twist(start, persona, body, rng, side=side, mods=mods, reps=action.reps)
     if k == "pivot":
         angle = np.pi if action.variant == "around" else rng.uniform(0.45, 0.55) * np.pi
         return steps.pivot(start, persona, body, rng, side=side, angle=angle, mods=mods)
