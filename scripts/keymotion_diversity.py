@@ -250,7 +250,7 @@ def main(argv=None) -> int:
             run("guidance", f"ddim50 w={w}", w, 50, ddim(0.0))
     if "sampler" in args.sections:
         w = args.sampler_w
-        for label, steps, fac in ((f"ddim10 eta0", 10, ddim(0.0)), ("ddim50 eta1", 50, ddim(1.0)),
+        for label, steps, fac in (("ddim10 eta0", 10, ddim(0.0)), ("ddim50 eta1", 50, ddim(1.0)),
                                   ("ddim200 eta0", 200, ddim(0.0))):
             run("sampler", f"{label} w={w}", w, steps, fac)
     if "remedies" in args.sections:
@@ -261,7 +261,8 @@ def main(argv=None) -> int:
             run("remedies", label, g, 50, ddim(0.0))
     report["rows"] = rows
     # one line per setting: means over prompts
-    keys = ("latent_rel", "z_rms_rel", "nearest_real_rel", "decoder_gain_cm", "keyframe_pose_cm", "keyframe_index_frames", "motion_cm", "motion_root_relative_cm",
+    keys = ("latent_rel", "z_rms_rel", "nearest_real_rel", "decoder_gain_cm", "keyframe_pose_cm",
+            "keyframe_index_frames", "motion_cm", "motion_root_relative_cm",
             "lerp_motion_cm", "travel_m_mean")
     summary = {}
     for r in rows:
