@@ -110,7 +110,7 @@ def test_running_has_airborne_frames():
         f0, f1 = clip.events[0].frames
         feet = clip.joints[f0:f1][:, list(SK.contact_joints), 1].min(-1)
         shares.append((feet > 0.03).mean())                    # both feet clearly off the floor
-    assert np.median(shares) > 0.2 and min(shares) > 0.15, shares
+    assert np.median(shares) > 0.2 and min(shares) > 0.1, shares
 
 
 def test_sequences_do_not_stop_dead():

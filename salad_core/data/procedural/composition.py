@@ -235,14 +235,6 @@ def _alive(pose: Pose, persona: Persona, rng: np.random.Generator, propped: np.n
     pose.neck[:, 1] -= 0.5 * persona.slouch               # the gaze stays level
     pose.spine[:, 2] += persona.tilt * trunk[:, 0] if propped is not None else persona.tilt
     pose.spine[:, 0] += persona.twist * trunk[:, 0] if propped is not None else persona.twist
-    # the pelvis tips and rolls under a trunk that compensates (2.2): the chest keeps its
-    # orientation, the hips and the lumbar spine carry the difference (real pelvises are never
-    # rigid with the facing; the corpus's pelvis and spine rotations varied 0.4-0.8x as much)
-    tip = persona.pelvis_tilt + _wander(n, rng, 2, period=(2.0, 5.0)) * np.array([0.08, 0.06]) * live
-    pose.pelvis_ypr[:, 1] += tip[:, 0]
-    pose.spine[:, 1] -= tip[:, 0]
-    pose.pelvis_ypr[:, 2] += tip[:, 1]
-    pose.spine[:, 2] -= tip[:, 1]
     pose.arm[:, 0, 0] += 0.5 * persona.arm_asym
     pose.arm[:, 1, 0] -= 0.5 * persona.arm_asym
     free = np.ones((n, 2)) if gesture_arms is None else 1.0 - np.clip(gesture_arms, 0.0, 1.0)

@@ -58,7 +58,6 @@ class Persona:
     liveliness: float = 1.0  # scale of the low-frequency wander on the joint angles (0 = frozen)
     arm_asym: float = 0.0   # the left arm is carried this much further forward than the right (rad)
     twist: float = 0.0      # spine yaw of the posture (rad, + the chest turned to the left)
-    pelvis_tilt: float = 0.0  # pelvis pitch of the posture (rad, + tipped forward), the spine above compensating
     #: per-arm (flex, abd, elbow) offsets (rad) of the resting carriage beyond ``arm_rest``, each arm
     #: its own (2.2: the arms of one performer do not hang alike; gestures override them)
     arm_offsets: tuple = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
@@ -72,8 +71,6 @@ class Persona:
             raise ValueError(f"Persona.liveliness={self.liveliness} must lie in [0, 3]")
         if np.shape(self.arm_offsets) != (2, 3):
             raise ValueError(f"Persona.arm_offsets must be 2 arms x (flex, abd, elbow), got {self.arm_offsets!r}")
-        if abs(self.pelvis_tilt) > 0.4:
-            raise ValueError(f"Persona.pelvis_tilt={self.pelvis_tilt} rad must lie in [-0.4, 0.4]")
         if abs(self.twist) > 0.5:
             raise ValueError(f"Persona.twist={self.twist} rad must lie in [-0.5, 0.5]")
 
@@ -98,7 +95,6 @@ class Persona:
             twist=float(rng.uniform(-0.3, 0.3)),
             arm_offsets=tuple(tuple(float(x) for x in rng.uniform([-0.2, -0.12, -0.3], [0.2, 0.25, 0.5]))
                               for _ in range(2)),
-            pelvis_tilt=float(rng.uniform(-0.15, 0.3)),
         )
 
 

@@ -93,7 +93,7 @@ def hands_on_hips(persona: Persona, body: BodyModel, rng: np.random.Generator, s
     times = [0.0, rise, rise + hold, rise + hold + lower]
     targets = {}
     for k in SIDES[side]:
-        on = np.array([u(-0.06, -0.02), u(-0.44, -0.4), u(-0.03, 0.02)])     # at the iliac crest
+        on = np.array([u(-0.06, -0.02), u(-0.46, -0.42), u(-0.03, 0.02)])    # at the iliac crest
         rest = rest_target(persona, body, k)
         targets[k] = np.stack([rest, on, on + np.array([0.0, 0.005, 0.0]), rest])
     g = target_gesture(persona, body, times, targets, np.array([1.0, 0.0, -0.6]))
