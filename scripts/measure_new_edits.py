@@ -35,7 +35,6 @@ import argparse
 import itertools
 import json
 import math
-import re
 import sys
 import tempfile
 import time
@@ -246,8 +245,14 @@ def _pairwise(motions) -> float:
     return _mean(mpjpe(a, b) for a, b in itertools.combinations(motions, 2))
 
 
+def example_settings(args) -> list[tuple[float, tuple[str, ...]]]:
+    """(window end, kinds) of every ExampleBased setting measured."""
+    return [(float(w), tuple(k.split("+"))) for w in args.example_window for k in args.example_kinds]
+
+
 def measure_example(pipe, clips, args) -> dict:
     rows, seen = [], set()
+    settings = example_settings(args)
     for c in clips:
         if c["id"] in seen:
             continue
@@ -255,22 +260,28 @@ def measure_example(pipe, clips, args) -> dict:
         k = args.variations
         inv = pipe.invert([c["features"]] * k, [c["caption"]] * k, method="ddim", num_steps=args.steps,
                           guidance_scale=args.guidance, reconstruct=False)
-        var = pipe.edit(inversion=inv, edits=[ExampleBased(seed=args.seed + 100, steps=(0.0, args.example_window))])
         plain = pipe([c["caption"]] * k, lengths=c["length"], seed=args.seed + 100, num_steps=args.steps,
                      guidance_scale=args.guidance)
-        example = var.source.raw_joints[0]
-        v, p = var.edited.raw_joints, plain.raw_joints
-        rows.append({"id": c["id"], "caption": c["caption"],
-                     "diversity_variations": _pairwise(v), "diversity_plain": _pairwise(p),
-                     "to_example_variations": _mean(mpjpe(x, example) for x in v),
-                     "to_example_plain": _mean(mpjpe(x, example) for x in p),
-                     "example_vs_corpus": mpjpe(example, c["joints"][:len(example)])})
-        if len(rows) >= args.n_example:
+        for window, kinds in settings:
+            var = pipe.edit(inversion=inv, edits=[ExampleBased(seed=args.seed + 100, steps=(0.0, window),
+                                                               kinds=kinds)])
+            example = var.source.raw_joints[0]
+            v, p = var.edited.raw_joints, plain.raw_joints
+            rows.append({"id": c["id"], "caption": c["caption"], "setting": f"{'+'.join(kinds)} (0, {window:g})",
+                         "diversity_variations": _pairwise(v), "diversity_plain": _pairwise(p),
+                         "to_example_variations": _mean(mpjpe(x, example) for x in v),
+                         "to_example_plain": _mean(mpjpe(x, example) for x in p),
+                         "example_vs_corpus": mpjpe(example, c["joints"][:len(example)])})
+        if len(seen) >= args.n_example:
             break
     keys = ("diversity_variations", "diversity_plain", "to_example_variations", "to_example_plain",
             "example_vs_corpus")
-    summary = {key: _mean(r[key] for r in rows) for key in keys}
-    summary["closer_than_plain_rate"] = _mean(float(r["to_example_variations"] < r["to_example_plain"]) for r in rows)
+    summary = {}
+    for setting in dict.fromkeys(r["setting"] for r in rows):
+        sub = [r for r in rows if r["setting"] == setting]
+        summary[setting] = {key: _mean(r[key] for r in sub) for key in keys}
+        summary[setting]["closer_than_plain_rate"] = _mean(float(r["to_example_variations"] < r["to_example_plain"])
+                                                           for r in sub)
     return {"summary": summary, "items": rows}
 
 
@@ -348,7 +359,10 @@ def parse_args(argv=None):
     ap.add_argument("--n", type=int, default=20, help="prompts per section (a), (b), (d)")
     ap.add_argument("--n-example", type=int, default=3, help="examples for (c)")
     ap.add_argument("--variations", type=int, default=3, help="variations (and plain samples) per example")
-    ap.add_argument("--example-window", type=float, default=0.5, help="(c): step fractions with the example's maps")
+    ap.add_argument("--example-window", type=float, nargs="+", default=[0.5, 1.0],
+                    help="(c): ends of the step windows (from 0) with the example's maps")
+    ap.add_argument("--example-kinds", nargs="+", default=["temporal", "temporal+skeletal"],
+                    choices=["temporal", "skeletal", "temporal+skeletal"], help="(c): which self-attention to use")
     ap.add_argument("--shift", type=int, default=20, help="(b): shift in motion frames (a multiple of 4)")
     ap.add_argument("--erase-modes", nargs="+", default=["special", "others"])
     ap.add_argument("--shift-variants", nargs="+", default=["cross", "cross+temporal"],
@@ -370,6 +384,7 @@ def parse_args(argv=None):
         args.n, args.n_example, args.variations, args.steps, args.clips = 2, 1, 2, 10, 40
         args.erase_modes = args.erase_modes[:1]
         args.shift_variants = args.shift_variants[-1:]
+        args.example_window, args.example_kinds = args.example_window[:1], args.example_kinds[:1]
     return args
 
 
@@ -405,12 +420,13 @@ def main(argv=None) -> dict:
                "activity drop of its parts, other parts' MPJPE (m) vs deleting its words", results["erase"]["summary"])
     if "b" in args.sections:
         results["shift"] = measure_shift(pipe, shift_items(clips, args.n, args.shift), args)
-        _print(f"(b) shift a phrase by +-{args.shift} frames ({len(results['shift']['items']) // len(args.shift_variants)} "
-               "prompts): lag of its "
+        prompts = len(results["shift"]["items"]) // len(args.shift_variants)
+        _print(f"(b) shift a phrase by +-{args.shift} frames ({prompts} prompts): lag of its "
                "parts' activity (frames)", results["shift"]["summary"])
     if "c" in args.sections:
         results["example"] = measure_example(pipe, clips, args)
-        _print(f"(c) example-based ({len(results['example']['items'])} examples x {args.variations}): root-aligned "
+        examples = len({r["id"] for r in results["example"]["items"]})
+        _print(f"(c) example-based ({examples} examples x {args.variations}): root-aligned "
                "MPJPE (m)", results["example"]["summary"])
     if "d" in args.sections:
         results["counting"] = measure_counting(pipe, count_items(clips, args.n), args)

@@ -219,9 +219,11 @@ def test_composition_applies_the_modifiers_in_order(pipe):
         return ctrl.edit_cross(maps, None)
 
     shift_then_scale = composed([Shift("jumps", 8), Reweight("jumps", 2.0)])
-    torch.testing.assert_close(shift_then_scale, reweight_columns(shift_columns(maps, cols, 2), cols, 2.0, per_row=True))
+    shifted = shift_columns(maps, cols, 2)
+    torch.testing.assert_close(shift_then_scale, reweight_columns(shifted, cols, 2.0, per_row=True))
     scale_then_shift = composed([Reweight("jumps", 2.0), Shift("jumps", 8)])
-    torch.testing.assert_close(scale_then_shift, shift_columns(reweight_columns(maps, cols, 2.0, per_row=True), cols, 2))
+    scaled = reweight_columns(maps, cols, 2.0, per_row=True)
+    torch.testing.assert_close(scale_then_shift, shift_columns(scaled, cols, 2))
     assert (shift_then_scale - scale_then_shift).abs().max() > 1e-3           # these two do not commute
     # erasing acts on columns, mirroring on rows: either order gives the same map
     torch.testing.assert_close(composed([Erase("jumps"), Mirror("arms")]), composed([Mirror("arms"), Erase("jumps")]))
@@ -317,7 +319,7 @@ def test_measure_script_runs_on_a_tiny_pipeline(pipe, tmp_path):
     res = script.main(["--data", str(tmp_path / "corpus"), "--weights", str(tmp_path / "weights"), "--quick",
                        "--json", str(tmp_path / "out.json")])
     assert set(res) >= {"erase", "shift", "example", "counting"}
-    assert res["example"]["items"] and res["example"]["summary"]["diversity_variations"] > 0
+    assert res["example"]["items"] and res["example"]["summary"]["temporal (0, 0.5)"]["diversity_variations"] > 0
     assert {r["variant"] for r in res["shift"]["items"]} <= {"cross+temporal"}
     for row in res["shift"]["items"]:
         assert abs(row["shift"]) == 20 and row["error"] == abs(row["lag"] - row["shift"])

@@ -13,6 +13,13 @@ attention over time. Here:
 A latent frame covers ``unit_length`` motion frames (4, i.e. 0.2 s at 20 fps), so the attention
 signal can separate repetitions at most about 2.5 per second; motion signals are at the motion's
 frame rate. Joints are ``(N, J, 3)`` metres, Y up.
+
+Measured with the shipped weights on 16 held-out captions that state a count (12 say two, 4 say
+three; ``scripts/measure_new_edits.py --sections d``): the attention count equalled the generated
+motion's own count for 11 of 16 (0.69) but the caption's number for 5 (0.31), because the motions
+mostly do the action once (the motion count matched the caption for 3 of 16; answering "2" always
+would score 0.75). The motion counter itself matched the caption on 7 of these 16 corpus clips
+(0.44; 0.755 on the 155 training-split phrases it was tuned on).
 """
 from __future__ import annotations
 
