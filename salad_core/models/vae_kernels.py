@@ -19,9 +19,19 @@ on this project's 2-core CPU machines ``Conv1d``'s backward and those copies wer
 of the VAE's training step. The result equals the two-branch form up to float rounding
 (``tests/test_vae.py``).
 
-Measured (``bench/bench_vae_step.py``, v2 VAE config, batch 64 x 40 frames, one thread, forward +
-backward + AdamW, the two forms interleaved in one process, on a loaded machine): 863 -> 768 and
-814 -> 763 ms per step in two runs (1.12x, 1.07x).
+The product has its own backward (:class:`_STConvProduct`): autograd's backward of the stacked form
+(pad, ``k`` slices, ``cat``) built a zero-filled gradient of the padded input per tap and summed them;
+here the input gradient is one product ``g @ W`` read back as shifted slices, and the stacked input is
+written once (no padded copy), in the compute dtype. Under ``torch.autocast`` (``TrainConfig.autocast``)
+that dtype is bfloat16: the stacked input, the products and the result are bf16 (as ``nn.Linear``'s
+would be), the weight and bias gradients come back in the parameters' dtype.
+
+Measured (``bench/bench_vae_step.py``, batch 64 x 40 frames, one thread, forward + backward + AdamW,
+the forms interleaved in one process, on a loaded machine): the one product against ``Conv1d`` + graph
+convolution 863 -> 768 and 814 -> 763 ms per step (1.12x, 1.07x; v2 config); the hand-written backward
+against autograd's: 4090 -> 3607, 5089 -> 4944 ms (default config) and 9762 -> 9306 ms (v2) at load
+8-15 (1.03-1.13x); the same under bf16 autocast: 2238, 3169 and 6115 ms (1.60-1.83x against autograd's
+fp32 form; docs/performance.md).
 Tried and not kept: the 22 per-joint input/output MLPs as two batched products over a joint axis
 (exact, but no faster: 791 ms), and ``torch.compile`` of the whole objective (1.08x more, after a
 98 s compilation).

@@ -20,6 +20,8 @@ Batches: a task that declares its items' lengths (``TrainTask.lengths``: the den
 MMAE) gets length-bucketed batches (:class:`~salad_core.train.batching.LengthBucketBatchSampler`,
 ``config.batching="buckets"``, the default) so that a batch is padded by a few frames only; other
 tasks, and ``batching="random"``, get the random batches of ``DistributedSampler``.
+``config.autocast="bf16"`` runs the objective's forward under ``torch.autocast`` (opt-in: float32 weights,
+optimiser and validation; :func:`autocast_context`).
 ``config.json`` records the batching, the torch threads and the task's numerics, and every
 ``log.jsonl`` line states the threads and the valid frames per second.
 
