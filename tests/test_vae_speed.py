@@ -108,3 +108,25 @@ def test_bf16_vae_training_follows_the_float32_run(tmp_path):
     assert not torch.equal(f32, b16)                         # the option did change the arithmetic
     assert b16[-1] < 0.9 * b16[0]                            # and it still learns
     torch.testing.assert_close(b16, f32, rtol=3e-2, atol=0.0)  # step for step within bf16 rounding
+
+
+def test_denoiser_trains_and_validates_under_bf16_autocast(tmp_path):
+    # the option lives on TrainConfig: the denoiser (measured for speed: no) must at least run with it
+    from salad_core.models.denoiser import DenoiserConfig
+    from salad_core.models.vae import VAEConfig
+    from salad_core.train import DenoiserTrainConfig, train_denoiser
+    from _doubles import HashTextEncoder
+
+    corpus = make_fake_corpus(tmp_path / "corpus")
+    vae_run = tmp_path / "vae"
+    train_vae(corpus, vae_run, VAEConfig(latent_dim=8, n_extra_layers=0),
+              VAETrainConfig(batch_size=8, max_steps=0, window=64, val_every=0, ckpt_every=0, num_threads=1,
+                             progress=False))
+    cfg = DenoiserTrainConfig(batch_size=4, max_steps=3, lr=2e-3, warmup_steps=1, max_length=72, val_every=3,
+                              ckpt_every=0, log_every=1, num_threads=1, progress=False, seed=11, autocast="bf16")
+    res = train_denoiser(corpus, tmp_path / "den", vae_run,
+                         DenoiserConfig(latent_dim=8, width=16, heads=2, ff_dim=32, layers=1, text_dim=16), cfg,
+                         HashTextEncoder())
+    rows = [json.loads(l) for l in (tmp_path / "den" / "log.jsonl").read_text().splitlines()]
+    assert res.step == 3 and res.best_val is not None and torch.isfinite(torch.tensor(res.best_val))
+    assert all(torch.isfinite(torch.tensor(r["loss"])) for r in rows if "loss" in r)
