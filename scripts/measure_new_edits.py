@@ -136,6 +136,8 @@ def erase_items(clips, n):
 
 def measure_erase(pipe, items, args) -> dict:
     rows = []
+    if not items:
+        return {"summary": {}, "items": rows}
     deleted = pipe([_without(it["caption"], it["phrase"]["words"]) for it in items],
                    lengths=[it["length"] for it in items], seed=[args.seed + i for i in range(len(items))],
                    num_steps=args.steps, guidance_scale=args.guidance)
