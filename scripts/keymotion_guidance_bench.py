@@ -47,7 +47,7 @@ def root_relative_diversity(motions: dict, name: str, n_prompts: int, seeds: tup
     """Mean over prompts of the seed diversity (cm) of pelvis-relative joints (pose, not path)."""
     vals = []
     for p in range(n_prompts):
-        xs = [motions[f"{name}/{p}/{s}"] for s in seeds if f"{name}/{p}/{s}" in motions]
+        xs = [motions[f"{name}/{p:02d}/{s}"] for s in seeds if f"{name}/{p:02d}/{s}" in motions]
         if len(xs) > 1:
             vals.append(seed_diversity([x - x[:, :1] for x in xs]))
     return float(np.mean(vals))
