@@ -130,3 +130,10 @@ def test_denoiser_trains_and_validates_under_bf16_autocast(tmp_path):
     rows = [json.loads(l) for l in (tmp_path / "den" / "log.jsonl").read_text().splitlines()]
     assert res.step == 3 and res.best_val is not None and torch.isfinite(torch.tensor(res.best_val))
     assert all(torch.isfinite(torch.tensor(r["loss"])) for r in rows if "loss" in r)
+
+
+def test_product_rejects_a_weight_of_the_wrong_width():
+    with pytest.raises(ValueError, match="weight must be"):
+        st_conv_product(torch.randn(1, 4, 2, 3), torch.randn(5, 9), torch.zeros(5), torch.eye(2), 3)  # needs 12
+    with pytest.raises(ValueError, match="kernel_size"):
+        st_conv_product(torch.randn(1, 4, 2, 3), torch.randn(5, 6), torch.zeros(5), None, 2)

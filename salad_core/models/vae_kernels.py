@@ -39,7 +39,6 @@ Tried and not kept: the 22 per-joint input/output MLPs as two batched products o
 from __future__ import annotations
 
 import torch
-import torch.nn.functional as F
 from torch import nn
 
 __all__ = ["st_conv", "st_conv_product"]
@@ -95,7 +94,8 @@ class _STConvProduct(torch.autograd.Function):
             # dropout after it then run in bf16 too (the residual sum promotes back to float32)
             out = out.add_(bias.to(dtype))
         ctx.save_for_backward(stacked, w, norm)
-        ctx.kernel_size, ctx.x_dtype, ctx.w_dtype, ctx.bias_shape = k, x.dtype, weight.dtype, bias.shape
+        ctx.kernel_size, ctx.x_dtype, ctx.w_dtype = k, x.dtype, weight.dtype
+        ctx.bias_shape, ctx.b_dtype = bias.shape, bias.dtype
         return out
 
     @staticmethod
@@ -113,7 +113,7 @@ class _STConvProduct(torch.autograd.Function):
                 grad_w = torch.matmul(gc.t(), stacked.view(-1, width)).to(ctx.w_dtype)     # (C_out, slots C)
             if ctx.needs_input_grad[2]:
                 acc = torch.promote_types(grad.dtype, torch.float32)            # bf16 gradients summed in fp32
-                grad_b = grad.sum(dim=(0, 1), dtype=acc).sum_to_size(ctx.bias_shape).to(grad.dtype)  # (J, C_out)
+                grad_b = grad.sum(dim=(0, 1), dtype=acc).sum_to_size(ctx.bias_shape).to(ctx.b_dtype)  # (J, C_out)
             if ctx.needs_input_grad[0]:
                 gs = torch.matmul(gc, w).view(b, n, j, width)                   # d loss / d stacked
                 grad_x = torch.empty((b, n, j, c), dtype=ctx.x_dtype, device=grad.device)
@@ -153,6 +153,14 @@ def st_conv_product(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor, n
     Tensor ``(B, N, J, C_out)``: in the autocast dtype when CPU (or CUDA) autocast is on (the products
     run in it, as ``nn.Linear``'s do), else in ``x.dtype``.
     """
+    if x.ndim != 4:
+        raise ValueError(f"x must be (B, N, J, C), got shape {tuple(x.shape)}")
+    if kernel_size < 1 or kernel_size % 2 == 0:
+        raise ValueError(f"kernel_size must be a positive odd number, got {kernel_size}")
+    slots = kernel_size + (norm is not None)
+    if weight.ndim != 2 or weight.shape[1] != slots * x.shape[-1]:
+        raise ValueError(f"weight must be (C_out, {slots} x C = {slots * x.shape[-1]}) for kernel_size={kernel_size}"
+                         f"{' and a graph' if norm is not None else ''}, got shape {tuple(weight.shape)}")
     return _STConvProduct.apply(x.contiguous(), weight, bias, norm, kernel_size, _compute_dtype(x))
 
 
