@@ -336,7 +336,7 @@ def test_salad_eval_physics_end_to_end(tiny_procedural_corpus, tmp_path, single_
     doc = json.loads((out / "physics.json").read_text())
     md = (out / "physics.md").read_text()
     assert doc["settings"]["steps"] == 5 and doc["settings"]["guidance"] is None      # the models' defaults
-    assert doc["settings"]["salad_guidance"]["scale"] > 1 and doc["settings"]["keymotion_guidance"] > 1
+    assert doc["settings"]["salad_guidance"]["scale"] > 1 and doc["settings"]["keymotion_guidance"]["scale"] > 1
     assert doc["settings"]["recovery"] == "positions"                 # the raw model output by default
     assert doc["settings"]["seeds"] == [0, 1] and doc["settings"]["weights"].endswith("salad")
     assert list(doc["generators"]) == ["SALAD", "KeyMotion"]

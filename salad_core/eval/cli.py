@@ -192,8 +192,6 @@ def _physics_generators(args, settings) -> tuple[dict, dict]:
     info = {"salad_guidance": resolved if isinstance(resolved, float) else _as_dict(resolved),
             "solver": args.solver or pipe.solver, "weights": pipe.source, "recovery": args.recovery}
     if args.keymotion is not None:
-        import inspect
-
         from salad_core.keymotion.pipeline import KeyMotionPipeline
 
         km = KeyMotionPipeline.from_pretrained(None if args.keymotion == "shipped" else args.keymotion)
@@ -203,8 +201,7 @@ def _physics_generators(args, settings) -> tuple[dict, dict]:
                                 **({} if g is None else {"guidance_scale": g})))
 
         generators["KeyMotion"] = keymotion
-        info["keymotion_guidance"] = (inspect.signature(km.__call__).parameters["guidance_scale"].default
-                                      if g is None else g)
+        info["keymotion_guidance"] = _as_dict(km.resolve_guidance(g))
         info["keymotion_weights"] = args.keymotion
     return generators, info
 
