@@ -714,10 +714,16 @@ class SaladPipeline:
         generation_rows = (2 if guidance.cfg else 1) * len(prompts) * int(num_steps)
         settings = dict(_guidance_settings(guidance), num_steps=int(num_steps), solver=solver, weights=self.source,
                         **self._output_settings())
+        # an edit that gives the edited sample its own noise (ExampleBased) reports that noise and its seeds
+        own_seed = next((e.edited_seed for e in edits if e.edited_seed is not None), None)
+        edited_noise, edited_seeds = ((noise, seeds) if run.edited_noise is None else
+                                      (run.edited_noise, [] if own_seed is None else
+                                       [int(own_seed) + b for b in range(len(prompts))]))
         out = []
-        for branch, latents, texts in (("source", run.source, prompts), ("edited", run.edited, targets)):
+        for branch, latents, texts, z0, s0 in (("source", run.source, prompts, noise, seeds),
+                                               ("edited", run.edited, targets, edited_noise, edited_seeds)):
             feats, joints = self.decode(latents, lengths)
-            out.append(MotionOutput(feats, joints, list(texts), list(lengths), latents, noise, seeds,
+            out.append(MotionOutput(feats, joints, list(texts), list(lengths), latents, z0, s0,
                                     controller.maps(branch), dict(settings)))
         settings.update(probe=bool(probe), forward_rows=run.rows, probe_steps=run.probe_steps,
                         cost_vs_generation=run.rows / generation_rows,

@@ -424,7 +424,8 @@ def test_measure_script_runs_on_a_tiny_pipeline_and_corpus(pipe, tmp_path):
     spec = importlib.util.spec_from_file_location("measure_editing", root / "scripts" / "measure_editing.py")
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)
-    build_corpus(tmp_path / "corpus", size=20, progress=False)
+    # 40 motions: the test split must hold captions that name a side (the mirroring section needs them)
+    build_corpus(tmp_path / "corpus", size=40, progress=False)
     pipe.save_pretrained(tmp_path / "weights")
     res = script.main(["--data", str(tmp_path / "corpus"), "--weights", str(tmp_path / "weights"), "--quick",
                        "--json", str(tmp_path / "out.json")])

@@ -161,6 +161,10 @@ def test_example_based_starts_from_its_own_noise(pipe):
     idle = pipe.edit(SRC, edits=[ExampleBased(11, steps=(0.99, 1.0))], lengths=40, num_steps=STEPS, seed=0)
     torch.testing.assert_close(idle.source.latents, example.latents, atol=1e-5, rtol=1e-5)
     torch.testing.assert_close(idle.edited.latents, other.latents, atol=1e-5, rtol=1e-5)
+    # each branch reports the noise and seeds it started from
+    torch.testing.assert_close(idle.edited.noise, other.noise)
+    assert idle.edited.seeds == [11] and idle.source.seeds == [0]
+    torch.testing.assert_close(idle.source.noise, example.noise)
     var = pipe.edit(SRC, edits=[ExampleBased(11)], lengths=40, num_steps=STEPS, seed=0)
     torch.testing.assert_close(var.source.latents, example.latents, atol=1e-5, rtol=1e-5)
     assert (var.edited.latents - other.latents).abs().max() > 1e-3            # the example's maps acted

@@ -9,7 +9,10 @@
 * :mod:`.patching`: :func:`patch_activations` between a clean and a corrupt prompt, measured per
   body part.
 * :mod:`.edits`: typed edit specifications (:class:`WordSwap`, :class:`Refine`,
-  :class:`Reweight`, :class:`Mirror`, :class:`InjectSelfAttention`) and their pure kernels.
+  :class:`Reweight`, :class:`Mirror`, :class:`InjectSelfAttention`; beyond the paper, after MotionCLR:
+  :class:`Erase`, :class:`Shift`, :class:`ShiftTemporal`, :class:`ExampleBased`) and their pure kernels.
+* :mod:`.counting`: counting an action's repetitions from its attention over frames
+  (:func:`count_repetitions`) and from the motion itself (:func:`motion_repetitions`).
 * :mod:`.align`: token alignment of source and target prompts.
 * :mod:`.controller` and :mod:`.editing`: Algorithm 1 in one batched forward per step.
 * :mod:`.inversion`: DDIM inversion made faithful under guidance, to edit given motions.
@@ -21,8 +24,11 @@ from .align import alignment_matrix, global_align, word_swap_matrix
 from .capture import AttentionMaps, AttentionStore, CaptureConfig, TokenInfo, as_capture_config, capture_cross_attention
 from .controller import EditController, RowLayout
 from .editing import EditPrediction, EditRun, edit_latents
-from .edits import (MIRROR_GROUPS, REWEIGHT_RANGE, EditSpec, InjectSelfAttention, Mirror, Refine, Reweight, WordSwap,
-                    map_columns, mirror_parts, mirror_permutation, refine_columns, reweight_columns, validate_edits)
+from .counting import attention_signal, count_peaks, count_repetitions, motion_repetitions, motion_signal
+from .edits import (ERASE_MODES, MIRROR_GROUPS, REWEIGHT_RANGE, EditSpec, Erase, ExampleBased, InjectSelfAttention, Mirror,
+                    Refine, Reweight, Shift, ShiftTemporal, WordSwap, erase_columns, map_columns, mirror_parts,
+                    mirror_permutation, refine_columns, reweight_columns, seeded_noise, shift_columns, shift_temporal,
+                    validate_edits)
 from .inversion import INVERSION_METHODS, Inversion, LatentInversion, ddim_step_coefficients, invert_latents
 from .hooks import (ActivationCache, HookContext, HookPoint, hook_point_names, hook_points, select_hook_points,
                     use_hooks)
@@ -32,6 +38,9 @@ from .processor import HookedProcessor, flat_rows, named_rows, row_taker
 __all__ = [
     "capture_cross_attention", "CaptureConfig", "AttentionStore", "AttentionMaps", "TokenInfo", "as_capture_config",
     "EditSpec", "WordSwap", "Refine", "Reweight", "Mirror", "InjectSelfAttention", "validate_edits",
+    "Erase", "Shift", "ShiftTemporal", "ExampleBased", "ERASE_MODES", "erase_columns", "shift_columns",
+    "shift_temporal", "seeded_noise",
+    "count_repetitions", "motion_repetitions", "count_peaks", "attention_signal", "motion_signal",
     "MIRROR_GROUPS", "REWEIGHT_RANGE", "mirror_parts", "mirror_permutation", "reweight_columns", "map_columns",
     "refine_columns", "global_align", "alignment_matrix", "word_swap_matrix",
     "EditController", "RowLayout", "edit_latents", "EditRun", "EditPrediction",
