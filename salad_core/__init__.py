@@ -10,8 +10,7 @@ Modules
 pipeline       ``SaladPipeline``: text -> motion, ``edit``, ``invert``; the shipped weights by default
 sampling       diffusion schedules, classifier-free guidance and the one denoising loop
 models         the networks: skeleto-temporal VAE, skeleton-aware denoiser, attention sites and kernels
-attention      cross-attention capture; hooks, caches and patching on every site; zero-shot edits (the paper's
-               four, and erase, shift, example-based, counting); inversion of given motions; measures
+attention      cross-attention capture; hooks, caches, patching on every site; the paper's edits and more; inversion
 text           text encoders (CLIP, MiniLM) behind the ``TextEncoder`` protocol, word <-> token maps
 skeleton       the HumanML3D and KIT-ML skeletons: joints, the 7 body parts, the feature layout
 motion         joints <-> 263-d features (``recover_from_ric``), mirroring, normalisation
