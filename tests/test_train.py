@@ -670,3 +670,17 @@ def test_micro_batches_give_the_batch_loss_and_gradient(corpus, tiny_vae_run):
     g_parts = [torch.autograd.grad(l, list(model.parameters())) for l in losses]
     for i, g in enumerate(g_whole):
         torch.testing.assert_close(sum(gp[i] for gp in g_parts), g, rtol=1e-4, atol=1e-6)
+
+
+def test_the_card_says_when_a_run_trained_under_autocast(tmp_path):
+    from salad_core.train.assemble import numerics_note
+
+    run = tmp_path / "vae"
+    run.mkdir()
+    (run / "config.json").write_text(json.dumps({"runtime": {"batching": "random", "autocast": "bf16",
+                                                             "torch_threads": 2}}))
+    note = numerics_note({"vae": run})
+    assert "**vae** (vae): forward passes under bf16 autocast" in note and "2 torch thread(s)" in note
+    assert "`autocast: null`" in note
+    (run / "config.json").write_text(json.dumps({"runtime": {"batching": "random", "autocast": None}}))
+    assert numerics_note({"vae": run}) is None

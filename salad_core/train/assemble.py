@@ -71,6 +71,9 @@ def numerics_note(runs: dict[str, str | Path]) -> str | None:
             changes.append(f"loss normaliser: {numerics['loss_normaliser']}")
         if numerics.get("latents", "").startswith("cached"):
             changes.append(f"latents: {numerics['latents']}")
+        if runtime.get("autocast"):
+            changes.append(f"forward passes under {runtime['autocast']} autocast (float32 weights, optimiser and "
+                           "validation)")
         if changes:
             threads = runtime.get("torch_threads")
             lines.append(f"- **{name}** ({Path(run).name}): " + "; ".join(changes)
@@ -80,8 +83,8 @@ def numerics_note(runs: dict[str, str | Path]) -> str | None:
     return ("## Training numerics\n\n"
             "These weights were trained with the issue-19 trainers, whose numerics differ from release 0.5 "
             "(random batches, VAE encoder at every step): the runs are not bit-comparable with older runs of the same "
-            "config, while the objective is the same in expectation. Set `batching: \"random\"`, `micro_batches: 1` "
-            "and `latent_cache: false` in the training config to train as release 0.5 did.\n\n" + "\n".join(lines) + "\n")
+            "config, while the objective is the same in expectation. Set `batching: \"random\"`, `micro_batches: 1`, "
+            "`latent_cache: false` and `autocast: null` in the training config to train as release 0.5 did.\n\n" + "\n".join(lines) + "\n")
 
 
 def write_numerics_section(card: str | Path, note: str | None) -> Path | None:
