@@ -74,6 +74,8 @@ class VAEConfig:
     lambda_vel: float = 0.5           # weight of the local-velocity slice term
     lambda_kl: float = 0.02           # weight of the KL term (mean over elements)
     lambda_bone: float = 0.0          # weight of the bone-length term (an addition; 0 = official loss)
+    lambda_root: float = 0.0          # weight of the integrated-root term (an addition; 0 = official loss):
+                                      # yaw error (rad) + global joint error (m) over the window, see root_error
     latent_noise: float = 0.0         # training only: std of extra Gaussian noise on the sampled latent, so
                                       # the decoder learns latents near (not only on) the data (an addition)
     pose_latent_dim: int | None = None  # "pose" only: Dz of the one-vector latent; None -> parts x latent_dim
@@ -105,7 +107,7 @@ class VAEConfig:
             raise ValueError(f"dropout must be in [0, 1), got {self.dropout}")
         if self.recon_loss not in RECON_LOSSES:
             raise ValueError(f"recon_loss={self.recon_loss!r} is not supported; choose one of {RECON_LOSSES}")
-        for name in ("lambda_pos", "lambda_vel", "lambda_kl", "lambda_bone", "latent_noise"):
+        for name in ("lambda_pos", "lambda_vel", "lambda_kl", "lambda_bone", "lambda_root", "latent_noise"):
             val = getattr(self, name)
             if not np.isfinite(val) or val < 0:
                 raise ValueError(f"{name} must be a finite number >= 0, got {val}")
@@ -416,7 +418,8 @@ class MotionVAE(nn.Module):
              mask: torch.Tensor | None = None,
              stats: tuple[torch.Tensor, torch.Tensor] | None = None) -> dict[str, torch.Tensor]:
         """Training objective ``L = L_rec + λ_pos L_pos + λ_vel L_vel + λ_kl L_kl`` (paper eq. 3),
-        plus ``λ_bone L_bone`` when ``config.lambda_bone > 0`` (an addition, see :meth:`bone_lengths`).
+        plus ``λ_bone L_bone`` when ``config.lambda_bone > 0`` (an addition, see :meth:`bone_lengths`)
+        and ``λ_root L_root`` when ``config.lambda_root > 0`` (an addition, see :meth:`root_error`).
 
         All reconstruction terms compare **normalised** features, as the official trainer does:
         ``rec`` on the whole vector, ``pos`` on the ``ric`` slice (root-relative joint positions,
@@ -432,13 +435,13 @@ class MotionVAE(nn.Module):
             Valid frames. Reconstruction terms average over valid frames only; the KL averages
             over latent frames that cover at least one valid frame.
         stats : (mean, std) of Tensor ``(D,)``, optional
-            The features' normalisation; needed by the bone-length term (lengths are measured in
-            metres on de-normalised features).
+            The features' normalisation; needed by the bone-length and root terms (both measure
+            de-normalised features: metres and radians).
 
         Returns
         -------
         dict with scalar tensors ``loss``, ``rec``, ``pos``, ``vel``, ``kl`` (and ``bone`` in metres
-        when ``lambda_bone > 0``).
+        when ``lambda_bone > 0``; ``root`` = ``root_yaw`` (rad) + ``root_pos`` (m) when ``lambda_root > 0``).
         """
         if x.shape != recon.shape:
             raise ValueError(f"recon must have the shape of x {tuple(x.shape)}, got {tuple(recon.shape)}")
@@ -482,8 +485,108 @@ class MotionVAE(nn.Module):
             err_len = (self.bone_lengths(recon * std + mean) - self.bone_lengths(x * std + mean)).abs()
             bone = masked_mean(err_len, frame_w)                      # metres, mean over bones and frames
             out["bone"] = bone
-            out["loss"] = total + cfg.lambda_bone * bone
+            total = total + cfg.lambda_bone * bone
+            out["loss"] = total
+        if cfg.lambda_root > 0:
+            if stats is None:
+                raise ValueError("lambda_root > 0 needs stats=(mean, std) of the features to integrate the root")
+            mean, std = (torch.as_tensor(t, dtype=torch.float32, device=x.device) for t in stats)
+            # integration in float32 even under bf16 autocast: sums of N small velocities lose digits
+            with torch.autocast(x.device.type, enabled=False):
+                yaw_err, pos_err = self.root_error(recon.float() * std + mean, x.float() * std + mean, mask)
+            out["root_yaw"], out["root_pos"] = yaw_err, pos_err
+            out["root"] = yaw_err + pos_err
+            out["loss"] = total + cfg.lambda_root * out["root"]
         return out
+
+    def root_trajectory(self, features: torch.Tensor,
+                        mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Integrated root yaw and global joint positions of de-normalised features, in torch.
+
+        The integration is HumanML3D's ``recover_root_rot_pos`` / ``recover_from_ric``
+        (:func:`salad_core.motion.features_to_joints`, tested equal): the half-angle
+        ``a_t = sum_{s<t} f[s, 0]`` starts at 0 on the window's first frame, the root x/z path sums
+        the linear velocities ``f[s-1, 1:3]`` rotated from the heading frame of frame ``s`` to the world,
+        and joint ``j > 0`` is the ``ric`` position rotated by the heading plus the root x/z. It is
+        written here without :mod:`salad_core.motion`'s input checks, which read values back from the
+        tensor every call (a training step must not synchronise or raise on a wild early prediction).
+
+        Parameters
+        ----------
+        features : Tensor ``(B, N, D)``
+            De-normalised features (metres, radians, metres per frame).
+        mask : Tensor ``(B, N)`` bool, optional
+            Valid frames; the root velocities of masked frames count as zero, so padding never moves
+            the integrated root.
+
+        Returns
+        -------
+        yaw : Tensor ``(B, N)``
+            Heading angle in radians (``2 a_t``; 0 on the first frame).
+        joints : Tensor ``(B, N, J, 3)``
+            Global joint positions in metres (root x/z integrated from the window's start).
+        """
+        from salad_core.quaternion import qinv, qrot
+
+        sk = self.skeleton
+        vel = features[..., :3]                                              # (B, N, 3) yaw vel, x vel, z vel
+        if mask is not None:
+            vel = vel * mask[..., None].to(vel.dtype)
+        zero = torch.zeros_like(vel[..., :1, :])
+        prev = torch.cat([zero, vel[..., :-1, :]], dim=-2)                   # row t-1 moves frame t
+        half = torch.cumsum(prev[..., 0], dim=-1)                            # (B, N) half-angle
+        c, s, z = torch.cos(half), torch.sin(half), torch.zeros_like(half)
+        heading = torch.stack([c, z, s, z], dim=-1)                          # (B, N, 4) world -> heading
+        to_world = qinv(heading)
+        step = qrot(to_world, torch.stack([prev[..., 1], z, prev[..., 2]], dim=-1))
+        xz = torch.cumsum(step, dim=-2)                                      # (B, N, 3), y unused
+        root = torch.stack([xz[..., 0], features[..., 3], xz[..., 2]], dim=-1)
+        ric = features[..., sk.feature_slices["ric"]].unflatten(-1, (sk.num_joints - 1, 3))
+        offset = torch.stack([xz[..., 0], z, xz[..., 2]], dim=-1)[..., None, :]
+        body = qrot(to_world[..., None, :], ric) + offset                    # (B, N, J-1, 3)
+        return 2.0 * half, torch.cat([root[..., None, :], body], dim=-2)
+
+    def root_error(self, recon: torch.Tensor, target: torch.Tensor,
+                   mask: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """The integrated-root term: ``(yaw error in rad, global joint error in m)``.
+
+        Why: the other terms compare features frame by frame, so a small bias in the root's angular
+        or linear velocity costs almost nothing while it integrates into a heading that drifts by tens
+        of degrees over a clip (issue 21). Both windows are integrated from the same start
+        (:meth:`root_trajectory`) and compared on valid frames:
+
+        * ``yaw = mean_t |yaw_rec(t) - yaw_in(t)|`` (radians), and
+        * ``pos = mean_{t,j} ||p_rec(t, j) - p_in(t, j)||`` (metres): the global joint positions
+          (ric joints rotated by the integrated yaw plus the integrated root path; the root joint
+          carries the root height).
+
+        A constant yaw-velocity bias ``b`` (half-angle per frame) gives ``yaw(t) = 2 b t``, so the
+        term grows with the window: ``b (N - 1)`` on average over ``N`` frames.
+
+        Parameters
+        ----------
+        recon, target : Tensor ``(B, N, D)``
+            De-normalised features.
+        mask : Tensor ``(B, N)`` bool, optional
+            Valid frames (the others are neither integrated nor averaged).
+
+        Returns
+        -------
+        (Tensor, Tensor)
+            Scalars: mean absolute yaw error (rad) and mean joint distance (m).
+        """
+        yaw_r, joints_r = self.root_trajectory(recon, mask)
+        yaw_t, joints_t = self.root_trajectory(target, mask)
+        sq = (joints_r - joints_t).pow(2).sum(-1)                            # (B, N, J)
+        # sqrt has an infinite slope at 0: take it only where the distance is positive (exact 0 otherwise)
+        pos = sq.gt(0)
+        dist = torch.where(pos, torch.where(pos, sq, torch.ones_like(sq)).sqrt(), torch.zeros_like(sq))
+        yaw = (yaw_r - yaw_t).abs()
+        if mask is None:
+            return yaw.mean(), dist.mean()
+        w = mask.to(yaw.dtype)
+        n = w.sum().clamp_min(1.0)
+        return (yaw * w).sum() / n, (dist.mean(-1) * w).sum() / n
 
     def bone_lengths(self, features: torch.Tensor) -> torch.Tensor:
         """Bone lengths ``(..., N, J-1)`` (metres) of de-normalised features ``(..., N, D)``.

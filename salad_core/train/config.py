@@ -132,9 +132,21 @@ class VAETrainConfig(TrainConfig):
     window: int = 64                           # frames per training window (latent gets window/4)
     general_data: str | None = None            # uncaptioned general-motion folder mixed in (scripts/build_general_motion.py)
     general_ratio: float = 0.5                 # share of training windows drawn from general_data
+    init_from: str | None = None               # VAE run or pipeline folder whose weights (and normalisation)
+                                               # start the model; its architecture must match (fine-tuning)
+    train_parts: str = "all"                   # "all" | "decoder": "decoder" freezes the encoder (motion_enc,
+                                               # conv_enc, dist) so its posteriors, which a trained denoiser
+                                               # relies on, stay bit-identical; needs init_from
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.init_from is not None and (not isinstance(self.init_from, str) or not self.init_from):
+            raise ValueError(f"VAETrainConfig.init_from must be a folder path (str) or None, got {self.init_from!r}")
+        if self.train_parts not in ("all", "decoder"):
+            raise ValueError(f"VAETrainConfig.train_parts={self.train_parts!r} is invalid; use 'all' or 'decoder'")
+        if self.train_parts == "decoder" and self.init_from is None:
+            raise ValueError("VAETrainConfig.train_parts='decoder' needs init_from (a trained VAE): a frozen "
+                             "randomly initialised encoder has no latent space worth keeping")
         if not isinstance(self.window, int) or self.window < 4:
             raise ValueError(f"VAETrainConfig.window={self.window!r} is invalid; use an integer >= 4")
         if self.general_data is not None and not isinstance(self.general_data, str):

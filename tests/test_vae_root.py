@@ -1,0 +1,245 @@
+"""The VAE's integrated-root term (``lambda_root``, issue 21) and decoder fine-tuning
+(``VAETrainConfig.init_from`` / ``train_parts="decoder"``).
+
+Tiny and seeded: hand-made feature windows, one procedural clip (the session's tiny corpus) and
+the fake corpus of ``test_train.py``; no evaluation data.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from salad_core.io import load_tensors
+from salad_core.models.vae import MotionVAE, VAEConfig
+from salad_core.motion import features_to_joints
+from salad_core.skeleton import get_skeleton
+from salad_core.train import VAETrainConfig, train_vae
+from salad_core.train.vae_trainer import build_vae_task, load_init_vae
+from salad_core.train.distributed import DistEnv
+from _doubles import make_fake_corpus
+
+SK = get_skeleton("humanml3d")
+D = SK.feature_dim
+
+
+def _vae(**kw) -> MotionVAE:
+    torch.manual_seed(0)
+    return MotionVAE(VAEConfig(latent_dim=8, n_extra_layers=0, **kw))
+
+
+def _standing_window(n: int, b: int = 1) -> torch.Tensor:
+    """De-normalised features of a motionless pose: zero root velocities, ric = a fixed T-ish pose."""
+    rng = np.random.default_rng(0)
+    f = np.zeros((b, n, D), dtype=np.float64)
+    f[..., 3] = 0.9                                                  # root height
+    ric = rng.uniform(-0.6, 0.6, size=(SK.num_joints - 1, 3))
+    f[..., SK.feature_slices["ric"]] = ric.reshape(-1)
+    return torch.from_numpy(f)
+
+
+def _procedural_window(corpus: Path, n: int = 40) -> np.ndarray:
+    ids = [x for x in (corpus / "train.txt").read_text().split() if x]
+    for i in ids:
+        f = np.load(corpus / "new_joint_vecs" / f"{i}.npy")
+        if len(f) >= n and np.abs(f[:n, 0]).sum() > 0.05:           # a clip that turns
+            return f[:n].astype(np.float64)
+    raise AssertionError("no turning clip in the tiny corpus")
+
+
+# ---------------------------------------------------------------------------- the term
+def test_config_validates_lambda_root():
+    assert VAEConfig().lambda_root == 0.0
+    for bad in (-0.1, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="lambda_root"):
+            VAEConfig(lambda_root=bad)
+
+
+def test_torch_integration_equals_motion_numpy(tiny_procedural_corpus):
+    f = _procedural_window(tiny_procedural_corpus)
+    vae = _vae()
+    yaw, joints = vae.root_trajectory(torch.from_numpy(f)[None])
+    want = features_to_joints(f)                                      # numpy, float64
+    np.testing.assert_allclose(joints[0].numpy(), want, atol=1e-9)
+    # yaw: twice the integrated half-angle, 0 on the first frame
+    half = np.concatenate([[0.0], np.cumsum(f[:-1, 0])])
+    np.testing.assert_allclose(yaw[0].numpy(), 2 * half, atol=1e-12)
+    # float32 (what training uses) agrees to float tolerance
+    _, j32 = vae.root_trajectory(torch.from_numpy(f).float()[None])
+    np.testing.assert_allclose(j32[0].numpy(), want, atol=2e-5)
+
+
+def test_zero_when_recon_equals_input_and_loss_dict():
+    vae = _vae(lambda_root=2.0)
+    x = torch.randn(2, 16, D)
+    mu = logvar = torch.zeros(2, 4, vae.num_parts, vae.latent_dim)
+    stats = (torch.full((D,), 0.1), torch.full((D,), 0.05))
+    out = vae.loss(x, x.clone(), mu, logvar, stats=stats)
+    assert out["root"].item() == 0.0 and out["root_yaw"].item() == 0.0 and out["root_pos"].item() == 0.0
+    recon = x + 0.1 * torch.randn_like(x)
+    out = vae.loss(x, recon, mu, logvar, stats=stats)
+    base = _vae().loss(x, recon, mu, logvar)
+    assert out["root"].item() > 0
+    torch.testing.assert_close(out["loss"], base["loss"] + 2.0 * out["root"])
+    assert "root" not in base                                         # off by default: the official loss
+    with pytest.raises(ValueError, match="stats"):
+        vae.loss(x, recon, mu, logvar)
+
+
+@pytest.mark.parametrize("n", [8, 32])
+def test_constant_yaw_bias_grows_with_window_as_by_hand(n):
+    vae = _vae()
+    x = _standing_window(n)
+    b = 0.01                                                          # half-angle per frame (rad)
+    recon = x.clone()
+    recon[..., 0] += b
+    yaw, pos = vae.root_error(recon, x)
+    # yaw(t) = 2 b t for t = 0..N-1 -> mean b (N - 1)
+    assert yaw.item() == pytest.approx(b * (n - 1), rel=1e-9)
+    # the root stays put; joint j turns by 2 b t about the vertical: chord 2 r_j sin(b t)
+    ric = x[0, 0, SK.feature_slices["ric"]].reshape(-1, 3).numpy()
+    r = np.hypot(ric[:, 0], ric[:, 2])                                # (J-1,) horizontal radius
+    t = np.arange(n)
+    chord = 2 * r[None, :] * np.abs(np.sin(b * t))[:, None]           # (N, J-1)
+    want = np.concatenate([np.zeros((n, 1)), chord], axis=1).mean()
+    assert pos.item() == pytest.approx(want, rel=1e-9)
+    if n == 32:
+        short = vae.root_error(recon[:, :8], x[:, :8])
+        assert yaw.item() > 4 * short[0].item() and pos.item() > 4 * short[1].item()
+
+
+def test_linear_velocity_bias_moves_every_joint():
+    vae = _vae()
+    n = 10
+    x = _standing_window(n)
+    recon = x.clone()
+    recon[..., 1] += 0.02                                             # 2 cm per frame along the heading x
+    yaw, pos = vae.root_error(recon, x)
+    assert yaw.item() == 0.0
+    # every joint is displaced by 0.02 t metres at frame t
+    assert pos.item() == pytest.approx(0.02 * np.arange(n).mean(), rel=1e-9)
+
+
+def test_gradients_flow_to_velocity_and_ric_channels():
+    vae = _vae()
+    x = _standing_window(12).float()
+    recon = (x + 0.01 * torch.randn_like(x)).requires_grad_(True)
+    yaw, pos = vae.root_error(recon, x)
+    (yaw + pos).backward()
+    g = recon.grad
+    assert torch.isfinite(g).all()
+    assert g[..., 0].abs().sum() > 0 and g[..., 1].abs().sum() > 0 and g[..., 2].abs().sum() > 0
+    assert g[..., SK.feature_slices["ric"]].abs().sum() > 0
+    # the last row's velocity moves no frame inside the window
+    assert g[0, -1, :3].abs().sum() == 0
+    # recon == x: finite (zero) gradients, no NaN from the distance's square root
+    same = x.clone().requires_grad_(True)
+    sum(vae.root_error(same, x)).backward()
+    assert torch.isfinite(same.grad).all()
+
+
+def test_masked_frames_neither_integrate_nor_count():
+    vae = _vae()
+    x = _standing_window(16, b=2).float()
+    x[..., 0] = 0.02                                                  # the input turns
+    recon = x.clone()
+    recon[..., 0] += 0.01
+    mask = torch.zeros(2, 16, dtype=torch.bool)
+    mask[0, :10] = True
+    mask[1, :16] = True
+    yaw, pos = vae.root_error(recon, x, mask)
+    # equals the per-item errors on the valid prefixes, averaged over valid frames
+    y0, p0 = vae.root_error(recon[:1, :10], x[:1, :10])
+    y1, p1 = vae.root_error(recon[1:], x[1:])
+    assert yaw.item() == pytest.approx((10 * y0.item() + 16 * y1.item()) / 26, rel=1e-5)
+    assert pos.item() == pytest.approx((10 * p0.item() + 16 * p1.item()) / 26, rel=1e-5)
+    # what lies in the masked frames changes nothing
+    wild = recon.clone()
+    wild[0, 10:] = 50.0
+    assert torch.equal(torch.stack(vae.root_error(wild, x, mask)), torch.stack((yaw, pos)))
+
+
+# ------------------------------------------------------------------------- fine-tuning
+@pytest.fixture(scope="module")
+def fake_corpus(tmp_path_factory) -> Path:
+    return make_fake_corpus(tmp_path_factory.mktemp("corpus"))
+
+
+def _train_cfg(**kw) -> VAETrainConfig:
+    base = dict(batch_size=8, max_steps=4, lr=3e-3, warmup_steps=0, window=64, val_every=0, ckpt_every=0,
+                log_every=1, num_threads=1, progress=False, seed=3)
+    base.update(kw)
+    return VAETrainConfig(**base)
+
+
+@pytest.fixture(scope="module")
+def base_run(fake_corpus, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("base")
+    train_vae(fake_corpus, out, VAEConfig(latent_dim=8, n_extra_layers=0), _train_cfg(val_every=2))
+    return out
+
+
+def test_train_config_validates_fine_tuning_fields():
+    assert VAETrainConfig().init_from is None and VAETrainConfig().train_parts == "all"
+    with pytest.raises(ValueError, match="train_parts='encoder'"):
+        VAETrainConfig(train_parts="encoder")
+    with pytest.raises(ValueError, match="needs init_from"):
+        VAETrainConfig(train_parts="decoder")
+    with pytest.raises(ValueError, match="init_from"):
+        VAETrainConfig(init_from="")
+
+
+def test_decoder_fine_tuning_keeps_the_encoder_bit_identical(fake_corpus, base_run, tmp_path):
+    cfg = VAEConfig(latent_dim=8, n_extra_layers=0, lambda_root=1.0)
+    out = tmp_path / "dec"
+    res = train_vae(fake_corpus, out, cfg, _train_cfg(init_from=str(base_run), train_parts="decoder", max_steps=3))
+    assert res.step == 3
+    before = load_tensors(base_run / "best.safetensors")
+    after = load_tensors(out / "latest.safetensors")
+    enc = [k for k in before if k.split(".")[0] in ("motion_enc", "conv_enc", "dist")]
+    dec = [k for k in before if k.split(".")[0] in ("conv_dec", "motion_dec")]
+    assert enc and dec
+    for k in enc:
+        assert torch.equal(before[k], after[k]), k
+    assert any(not torch.equal(before[k], after[k]) for k in dec)
+    # the posteriors of the fine-tuned model equal the original's exactly
+    from salad_core.io import load_model
+
+    a, _, _ = load_model(base_run / "best")
+    b, _, _ = load_model(out / "latest")
+    x = torch.randn(2, 16, D, generator=torch.Generator().manual_seed(1))
+    ea, eb = a.encode(x, sample=False), b.encode(x, sample=False)
+    assert torch.equal(ea.mu, eb.mu) and torch.equal(ea.logvar, eb.logvar)
+    # the run normalises with the original run's statistics, and logs the root term
+    s0, s1 = load_tensors(base_run / "mean_std.safetensors"), load_tensors(out / "mean_std.safetensors")
+    assert torch.equal(s0["mean"], s1["mean"]) and torch.equal(s0["std"], s1["std"])
+    entries = [json.loads(l) for l in (out / "log.jsonl").read_text().splitlines()]
+    assert all("root" in e and np.isfinite(e["root"]) for e in entries if "loss" in e)
+
+
+def test_decoder_mode_freezes_encoder_and_keeps_it_in_eval(fake_corpus, base_run):
+    task = build_vae_task(fake_corpus, VAEConfig(latent_dim=8, n_extra_layers=0),
+                          _train_cfg(init_from=str(base_run), train_parts="decoder"), DistEnv())
+    vae = task.model
+    assert not any(p.requires_grad for m in (vae.motion_enc, vae.conv_enc, vae.dist) for p in m.parameters())
+    assert all(p.requires_grad for m in (vae.conv_dec, vae.motion_dec) for p in m.parameters()
+               if not getattr(p, "salad_constant", False))           # graph matrices are structure
+    task.objective.train()
+    assert not vae.conv_enc.training and vae.conv_dec.training
+    # "all" trains everything from the same start
+    task_all = build_vae_task(fake_corpus, VAEConfig(latent_dim=8, n_extra_layers=0),
+                              _train_cfg(init_from=str(base_run)), DistEnv())
+    assert all(p.requires_grad for p in task_all.model.parameters() if not getattr(p, "salad_constant", False))
+    ref = load_tensors(base_run / "best.safetensors")
+    assert all(torch.equal(v, ref[k]) for k, v in task_all.model.state_dict().items() if k in ref)
+
+
+def test_init_from_errors_name_the_problem(fake_corpus, base_run, tmp_path):
+    with pytest.raises(ValueError, match=r"another architecture.*latent_dim: 8 \(init_from\) vs 16"):
+        build_vae_task(fake_corpus, VAEConfig(latent_dim=16, n_extra_layers=0),
+                       _train_cfg(init_from=str(base_run)), DistEnv())
+    with pytest.raises(FileNotFoundError, match="neither a pipeline folder"):
+        load_init_vae(tmp_path)
