@@ -242,7 +242,7 @@ def test_long_sequences_are_drawn_and_said():
     from salad_core.data.procedural import GENERATOR_VERSION, in_language, render_captions
     from salad_core.data.procedural.composition import PLAN_TYPES, sample_plan
 
-    assert GENERATOR_VERSION == "2.2"
+    assert GENERATOR_VERSION == "2.3"
     assert PLAN_TYPES["sequence3"] + PLAN_TYPES["sequence4"] >= 0.2
     for i in range(5):
         rng = np.random.default_rng([12, i])
@@ -251,3 +251,70 @@ def test_long_sequences_are_drawn_and_said():
         assert all(a.main.kind != b.main.kind for a, b in zip(plan.steps, plan.steps[1:]))
         for cap in render_captions(plan, rng, 2):
             assert in_language(cap.text), cap.text
+
+
+def test_trunk_joints_bend_each_their_own_way():
+    """Pose.trunk (2.3) bends one trunk joint alone: the bones above it turn, the ones below do
+    not, bone lengths stay exact, and reach.chest_frames is the chest assemble builds."""
+    from salad_core.data.procedural.footwork import Persona, Stance
+    from salad_core.data.procedural.kinematics import assemble, body_model, trunk_frames
+    from salad_core.data.procedural.reach import chest_frames
+    from salad_core.data.procedural.segment import standing_pose
+
+    body = body_model("humanml3d")
+    persona = Persona.sample(np.random.default_rng(3))
+    pose = standing_pose(Stance.at((0.0, 0.0), 0.0, persona), persona, 4, body, rng=None, idle=False)
+    assert pose.trunk.shape == (4, 5, 3) and not pose.trunk.any()
+    before = assemble(pose, body)
+    pose.trunk[:, 2, 1] = 0.3                      # the upper back (spine3) bends forward alone
+    after = assemble(pose, body)
+    J = body.index
+    for name in ("pelvis", "spine1", "spine2", "spine3", "left_hip", "left_knee"):
+        np.testing.assert_allclose(after[:, J[name]], before[:, J[name]], atol=1e-12)
+    for name in ("neck", "head", "left_shoulder", "right_wrist"):
+        assert np.linalg.norm(after[:, J[name]] - before[:, J[name]], axis=-1).min() > 0.02
+    par = np.asarray(body.skeleton.parents[1:])
+    np.testing.assert_allclose(np.linalg.norm(after[:, 1:] - after[:, par], axis=-1),
+                               np.broadcast_to(body.lengths[1:], (4, 21)), atol=1e-9)
+    chest = chest_frames(pose)
+    np.testing.assert_allclose(chest, trunk_frames(pose)[2], atol=1e-12)
+    collar = after[:, J["spine3"]] + chest @ body.rest_offsets[J["left_collar"]]
+    np.testing.assert_allclose(collar, after[:, J["left_collar"]], atol=1e-12)
+
+
+def test_performers_curve_and_share_the_spine_their_own_way():
+    """trunk_curvature keeps the chest's orientation (the spine rows sum to zero per axis) and
+    differs between performers; spine_shares sum to one per axis; bad values are named."""
+    from dataclasses import replace
+
+    from salad_core.data.procedural.composition import _share_spine
+    from salad_core.data.procedural.footwork import Persona, Stance, spine_shares, trunk_curvature
+    from salad_core.data.procedural.kinematics import body_model, trunk_frames
+    from salad_core.data.procedural.segment import standing_pose
+
+    curves = np.array([trunk_curvature(np.random.default_rng(i)) for i in range(200)])   # (200, 5, 3)
+    np.testing.assert_allclose(curves[:, :3].sum(1), 0.0, atol=1e-12)
+    lumbar_pitch = curves[:, 0, 1]
+    assert 0.06 < lumbar_pitch.std() < 0.2 and np.abs(curves).max() <= 0.5
+    assert np.corrcoef(curves[:, 3, 1], curves[:, 4, 1])[0, 1] < -0.5      # a forward neck, a level gaze
+    shares = np.array([spine_shares(np.random.default_rng(i)) for i in range(200)])      # (200, 3, 3)
+    np.testing.assert_allclose(shares.sum(1), 1.0, atol=1e-12)
+    assert 0.05 < shares[:, 0, 1].std() < 0.15 and abs(shares[:, 0, 1].mean() - 0.45) < 0.03
+
+    body = body_model("humanml3d")
+    base = Persona.sample(np.random.default_rng(0))
+    chests, spine2 = [], []
+    for sh in (((0.7,) * 3, (0.2,) * 3, (0.1,) * 3), ((0.2,) * 3, (0.3,) * 3, (0.5,) * 3)):
+        persona = replace(base, spine_share=sh)
+        pose = standing_pose(Stance.at((0.0, 0.0), 0.0, persona), persona, 2, body, rng=None, idle=False)
+        pose.spine[:] = (0.1, 0.6, 0.2)            # a bow, a little turned and leaning
+        _share_spine(pose, persona)
+        chests.append(trunk_frames(pose)[2])
+        spine2.append(trunk_frames(pose)[0])
+    turn = np.degrees(np.arccos(np.clip((np.trace(chests[0][0].T @ chests[1][0]) - 1) / 2, -1, 1)))
+    lumbar = np.degrees(np.arccos(np.clip((np.trace(spine2[0][0].T @ spine2[1][0]) - 1) / 2, -1, 1)))
+    assert turn < 3.0 and lumbar > 15.0            # the same chest, bent from a different place
+    with pytest.raises(ValueError, match="spine_share"):
+        replace(base, spine_share=((0.5,) * 3, (0.5,) * 3, (0.5,) * 3))
+    with pytest.raises(ValueError, match="trunk_posture"):
+        replace(base, trunk_posture=((0.0, 0.9, 0.0),) * 5)

@@ -161,7 +161,7 @@ def _frames(seconds: tuple[float, float], rng) -> int:
 #: Frames by which the next action may begin before the previous one's core has ended.
 OVERLAP_FRAMES = (2, 9)
 #: Pose fields cross-faded where two segments overlap (the feet follow their own rule).
-_BODY_FIELDS = ("pelvis", "pelvis_ypr", "spine", "neck", "arm", "arm_pole", "knee_pole")
+_BODY_FIELDS = ("pelvis", "pelvis_ypr", "spine", "neck", "trunk", "arm", "arm_pole", "knee_pole")
 
 
 def _join(acc: Pose, nxt: Pose, overlap: int) -> Pose:
@@ -201,6 +201,34 @@ def _join(acc: Pose, nxt: Pose, overlap: int) -> Pose:
                               planted=loaded) - 0.004
     mid.pelvis[:, 1] = np.minimum(mid.pelvis[:, 1], bound)
     return Pose.concat([head, mid, nxt.slice(overlap, nxt.num_frames)])
+
+
+def _feet_handover(acc: Pose, nxt: Pose, overlap: int) -> int:
+    """The largest overlap up to ``overlap`` at which :func:`_join` hands each foot over cleanly.
+
+    :func:`_join` keeps a foot on the earlier segment's track until the next segment moves it;
+    if the next one moves a foot before the earlier one has put it down where the next starts
+    it (a pivot still turning its feet when a walk's first step begins), the foot would jump
+    (2.3: a pivot then a quick walk moved a resting toe 30 cm in one frame). Shorter overlaps
+    are tried until every foot the next segment moves inside the overlap is already still there.
+    """
+    for ov in range(int(overlap), 1, -1):
+        a = acc.slice(acc.num_frames - ov, acc.num_frames)
+        ok = True
+        for k in range(2):
+            moved = (np.linalg.norm(nxt.ankle[:ov, k] - nxt.ankle[0, k], axis=-1)
+                     + np.linalg.norm(nxt.toe[:ov, k] - nxt.toe[0, k], axis=-1)) > 1e-6
+            if not moved.any():
+                continue
+            first = int(np.argmax(moved))
+            gap = (np.linalg.norm(a.ankle[:first + 1, k] - nxt.ankle[0, k], axis=-1)
+                   + np.linalg.norm(a.toe[:first + 1, k] - nxt.toe[0, k], axis=-1))
+            if gap[-1] > 1e-6:
+                ok = False
+                break
+        if ok:
+            return ov
+    return 1
 
 
 def _wander(n: int, rng: np.random.Generator, dims: int, period: tuple[float, float] = (1.2, 3.0)) -> np.ndarray:
@@ -245,10 +273,32 @@ def _alive(pose: Pose, persona: Persona, rng: np.random.Generator, propped: np.n
     noise = _wander(n, rng, 12, period=(1.8, 4.0)) * live
     pose.spine += noise[:, 0:3] * np.array([0.1, 0.12, 0.11]) * trunk
     pose.neck += noise[:, 3:6] * np.array([0.1, 0.07, 0.05])
+    # 2.3: each trunk segment its own curvature and its own slow wander (lumbar, thoracic, neck and
+    # head do not bend in lockstep); the spine joints' wander is weighted towards the upper back,
+    # whose bend moves no spine joint (the chest turns on spine3) and so cannot out-move an action
+    pose.trunk += np.asarray(persona.trunk_posture, dtype=np.float64)[None] * (trunk if propped is None else trunk[:, :, None])
+    seg = _wander(n, rng, 15, period=(1.5, 4.0)).reshape(n, 5, 3) * live
+    amp = np.array([[0.04, 0.05, 0.04], [0.06, 0.07, 0.06], [0.12, 0.12, 0.1], [0.05, 0.06, 0.05], [0.03, 0.04, 0.03]])
+    pose.trunk += seg * amp[None] * (trunk if propped is None else trunk[:, :, None])
     arm_scale = 1.0 if head_calm is None else (1.0 - 0.5 * np.clip(head_calm, 0.0, 1.0))[:, None]
     pose.arm[:, :, 0] += noise[:, 6:8] * 0.035 * arm_scale
     pose.arm[:, :, 1] += noise[:, 8:10] * 0.025 * arm_scale
     pose.arm[:, :, 2] = np.maximum(pose.arm[:, :, 2] + noise[:, 10:12] * 0.05 * arm_scale, 0.02)
+
+
+def _share_spine(pose: Pose, persona: Persona) -> None:
+    """Redistribute the spine's bend over spine1-3 by the performer's own shares (in place).
+
+    :func:`.kinematics.assemble` shares ``pose.spine`` by the fixed :data:`.kinematics.SPINE_SHARE`;
+    the difference to ``persona.spine_share`` goes to the per-joint ``pose.trunk``. The shares sum
+    to one, so the chest ends up turned (nearly) as before and held hands are re-solved after.
+    """
+    if persona.spine_share is None:
+        return
+    from .kinematics import SPINE_SHARE
+
+    extra = np.asarray(persona.spine_share, dtype=np.float64) - np.asarray(SPINE_SHARE, dtype=np.float64)[:, None]
+    pose.trunk[:, :3] += extra[None] * pose.spine[:, None, :]
 
 
 #: Body speed (m/s) above which a stretch of motion needs no extra liveliness (see :func:`_hold_mask`).
@@ -415,6 +465,7 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
         extra = int(rng.integers(OVERLAP_FRAMES[0], OVERLAP_FRAMES[1] + 1))
         overlap = prev_tail + core[0] + extra
         overlap = int(np.clip(overlap, 1, min(acc.num_frames - 1, seg.num_frames - 1)))
+        overlap = _feet_handover(acc, seg.pose, overlap)
         at = acc.num_frames - overlap
         acc = _join(acc, seg.pose, overlap)
         prev_tail = seg.num_frames - core[1]
@@ -496,6 +547,7 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
     # a trunk propped on its hands sways a tenth as much (as in _alive): the hands stay within reach
     mask[:, 0] *= 1.0 - 0.9 * smooth(hands[0].max(1), 4.0)
     _lively_holds(pose, mask, persona, rng)
+    _share_spine(pose, persona)
     _hold_hands(pose, body, hands)
     joints = _anchor(assemble(pose, body, keep_toes=True)[s0:stop], body)
 

@@ -20,6 +20,8 @@ __all__ = [
     "TOE_HEIGHT",
     "PELVIS_AHEAD",
     "Persona",
+    "trunk_curvature",
+    "spine_shares",
     "Stance",
     "Plant",
     "Swing",
@@ -61,6 +63,14 @@ class Persona:
     #: per-arm (flex, abd, elbow) offsets (rad) of the resting carriage beyond ``arm_rest``, each arm
     #: its own (2.2: the arms of one performer do not hang alike; gestures override them)
     arm_offsets: tuple = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    #: per trunk joint (spine1, spine2, spine3, neck base, head) (yaw, pitch, roll) offsets (rad) of the
+    #: posture's curvature (2.3: lumbar lordosis, thoracic kyphosis, a forward head, a lateral curve,
+    #: each performer their own; see :func:`trunk_curvature`); the chest's orientation keeps ``slouch``
+    trunk_posture: tuple = ((0.0, 0.0, 0.0),) * 5
+    #: shares of the spine's bend (yaw, pitch, roll) taken by spine1, spine2 and spine3, per axis
+    #: (None: :data:`.kinematics.SPINE_SHARE` on every axis); 2.3: one performer bends more from
+    #: the lower back, another from the upper back
+    spine_share: tuple | None = None
 
     def __post_init__(self) -> None:
         if not 0.03 <= self.width <= 0.3:
@@ -73,6 +83,17 @@ class Persona:
             raise ValueError(f"Persona.arm_offsets must be 2 arms x (flex, abd, elbow), got {self.arm_offsets!r}")
         if abs(self.twist) > 0.5:
             raise ValueError(f"Persona.twist={self.twist} rad must lie in [-0.5, 0.5]")
+        if np.shape(self.trunk_posture) != (5, 3):
+            raise ValueError(f"Persona.trunk_posture must be 5 trunk joints x (yaw, pitch, roll), "
+                             f"got {self.trunk_posture!r}")
+        if self.spine_share is not None:
+            sh = np.asarray(self.spine_share, dtype=np.float64)
+            if sh.shape != (3, 3) or (sh < 0).any() or not np.allclose(sh.sum(0), 1.0):
+                raise ValueError(f"Persona.spine_share must be 3 spine joints x 3 axes of non-negative shares "
+                                 f"summing to 1 per axis, got {self.spine_share!r}")
+        if np.abs(self.trunk_posture).max() > 0.5:
+            raise ValueError(f"Persona.trunk_posture holds {np.abs(self.trunk_posture).max():.2f} rad; "
+                             f"each offset must lie in [-0.5, 0.5]")
 
     @staticmethod
     def sample(rng: np.random.Generator) -> "Persona":
@@ -95,7 +116,43 @@ class Persona:
             twist=float(rng.uniform(-0.3, 0.3)),
             arm_offsets=tuple(tuple(float(x) for x in rng.uniform([-0.2, -0.12, -0.3], [0.2, 0.25, 0.5]))
                               for _ in range(2)),
+            trunk_posture=trunk_curvature(rng),
+            spine_share=spine_shares(rng),
         )
+
+
+def spine_shares(rng: np.random.Generator, concentration: float = 20.0) -> tuple:
+    """A performer's shares ``(3, 3)`` (rows spine1-3, columns yaw, pitch, roll) of the spine's bend.
+
+    Drawn per axis around :data:`.kinematics.SPINE_SHARE` (Dirichlet, ``concentration`` 20: the
+    lumbar share of a bow ranges about 0.25-0.65 between performers).
+    """
+    from .kinematics import SPINE_SHARE
+
+    base = np.asarray(SPINE_SHARE, dtype=np.float64)
+    sh = np.stack([rng.dirichlet(concentration * base) for _ in range(3)], 1)
+    return tuple(tuple(float(x) for x in r) for r in sh)
+
+
+def trunk_curvature(rng: np.random.Generator) -> tuple:
+    """A performer's spinal curvature: ``(5, 3)`` (yaw, pitch, roll) offsets (rad) of spine1,
+    spine2, spine3, the neck base and the head (:attr:`Persona.trunk_posture`).
+
+    The three spine joints' offsets sum to zero on every axis, so the chest keeps the orientation
+    the rest of the posture gives it (hands that touch something stay within reach) while the
+    lumbar, lower and upper thoracic segments bend each their own way: a hollow or flat lower back
+    under a rounder or straighter upper back (about +-10 deg), a slight sideways S and a twist
+    shared unevenly. The neck leans forward or back and the head turns the other way by most of
+    it (a forward head keeps a level gaze), with a habitual tilt and turn of its own.
+    """
+    u = rng.uniform
+    spine = rng.normal(0.0, 1.0, size=(3, 3)) * np.array([0.08, 0.15, 0.08])   # rows spine1-3; (yaw, pitch, roll)
+    spine -= spine.mean(0, keepdims=True)
+    fwd = u(-0.15, 0.3)                                           # + the neck leans forward
+    neck = np.array([u(-0.08, 0.08), fwd, u(-0.08, 0.08)])
+    head = np.array([u(-0.1, 0.1), -u(0.6, 1.0) * fwd, u(-0.1, 0.1)])
+    rows = np.clip(np.concatenate([spine, neck[None], head[None]]), -0.5, 0.5)
+    return tuple(tuple(float(x) for x in r) for r in rows)
 
 
 def flat_pitch(body: BodyModel) -> np.ndarray:

@@ -39,6 +39,8 @@ __all__ = [
     "arm_angles_for_target",
     "foot_vector",
     "heading_vectors",
+    "TRUNK_JOINTS",
+    "trunk_frames",
 ]
 
 #: Frame rate of every clip (HumanML3D).
@@ -66,6 +68,8 @@ _REST_DIRECTIONS: dict[str, tuple[float, float, float]] = {
 SPINE_SHARE = (0.45, 0.35, 0.2)
 #: Share of the head rotation taken by the neck base (the rest turns the head on the neck).
 NECK_SHARE = 0.5
+#: Joints of :attr:`Pose.trunk`, the per-segment rotations laid after the shares (2.3).
+TRUNK_JOINTS = ("spine1", "spine2", "spine3", "neck", "head")
 
 
 # ----------------------------------------------------------------------------- rotations
@@ -222,12 +226,19 @@ class Pose:
     knee_pole: np.ndarray   # (N, 2, 3) direction the knees point to, world
     arm: np.ndarray         # (N, 2, 3) (flex, abd, elbow) per arm (left, right)
     arm_pole: np.ndarray    # (N, 2, 3) elbow pole per arm, chest frame, x outwards
+    #: (N, 5, 3) extra local (yaw, pitch, roll) of each trunk joint (:data:`TRUNK_JOINTS`: spine1,
+    #: spine2, spine3, neck base, head), laid after its share of ``spine`` / ``neck``; None = zeros.
+    #: The shares alone bend the segments in lockstep (2.2: spine rotations varied 0.35-0.65x the
+    #: real Std); this lets lumbar, thoracic and cervical segments bend each their own way.
+    trunk: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = self.pelvis.shape[0]
+        if self.trunk is None:
+            self.trunk = np.zeros((n, len(TRUNK_JOINTS), 3))
         shapes = {"pelvis": (n, 3), "pelvis_ypr": (n, 3), "spine": (n, 3), "neck": (n, 3),
                   "ankle": (n, 2, 3), "toe": (n, 2, 3), "knee_pole": (n, 2, 3), "arm": (n, 2, 3),
-                  "arm_pole": (n, 2, 3)}
+                  "arm_pole": (n, 2, 3), "trunk": (n, len(TRUNK_JOINTS), 3)}
         for name, shape in shapes.items():
             got = getattr(self, name).shape
             if got != shape:
@@ -310,6 +321,25 @@ def arm_angles_for_target(target, upper: float, fore: float) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- assembly
+def trunk_frames(pose: Pose) -> tuple[np.ndarray, ...]:
+    """World orientations ``(N, 3, 3)`` of spine1, spine2, spine3 (the chest), the neck and the head.
+
+    Spine joint ``i`` turns by its share of ``pose.spine`` (:data:`SPINE_SHARE`) and then by its
+    own ``pose.trunk[:, i]``; the neck base by :data:`NECK_SHARE` of ``pose.neck`` and
+    ``trunk[:, 3]``, the head by the rest of ``pose.neck`` and ``trunk[:, 4]``. Each frame orients
+    the bone to the next joint (spine1's frame the spine1 -> spine2 bone, ...).
+    """
+    g = ypr_matrix(pose.pelvis_ypr)
+    out = []
+    for i, share in enumerate(SPINE_SHARE):
+        g = g @ ypr_matrix(pose.spine * share) @ ypr_matrix(pose.trunk[:, i])
+        out.append(g)
+    g = g @ ypr_matrix(pose.neck * NECK_SHARE) @ ypr_matrix(pose.trunk[:, 3])
+    out.append(g)
+    out.append(g @ ypr_matrix(pose.neck * (1.0 - NECK_SHARE)) @ ypr_matrix(pose.trunk[:, 4]))
+    return tuple(out)
+
+
 def assemble(pose: Pose, body: BodyModel | None = None, keep_toes: bool = False) -> np.ndarray:
     """Joint positions ``(N, J, 3)`` of a :class:`Pose` (float64).
 
@@ -333,20 +363,15 @@ def assemble(pose: Pose, body: BodyModel | None = None, keep_toes: bool = False)
     for side in ("left", "right"):
         out[:, j(f"{side}_hip")] = pose.pelvis + g0 @ off[j(f"{side}_hip")]
 
-    # spine: the bend is shared over the three spine joints (lumbar first)
-    g = g0
+    # spine, neck and head: the bends shared over the joints (lumbar first), each joint's own on top
+    frames = trunk_frames(pose)
     prev = j("pelvis")
-    for name, share in zip(("spine1", "spine2", "spine3"), SPINE_SHARE):
+    for name, g in zip(("spine1", "spine2", "spine3"), (g0,) + frames[:2]):
         out[:, j(name)] = out[:, prev] + g @ off[j(name)]
-        g = g @ ypr_matrix(pose.spine * share)
         prev = j(name)
-    chest = g                                                          # spine3's frame
+    chest, g_neck, g_head = frames[2], frames[3], frames[4]            # spine3's, neck's, head's frames
     sp3 = out[:, j("spine3")]
-
-    # neck and head: the neck base takes part of the head rotation
-    g_neck = chest @ ypr_matrix(pose.neck * NECK_SHARE)
     out[:, j("neck")] = sp3 + g_neck @ off[j("neck")]
-    g_head = g_neck @ ypr_matrix(pose.neck * (1.0 - NECK_SHARE))
     out[:, j("head")] = out[:, j("neck")] + g_head @ off[j("head")]
 
     # arms (chest frame, mirrored for the right arm)

@@ -8,17 +8,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kinematics import SPINE_SHARE, BodyModel, Pose, arm_angles_for_target, assemble, ypr_matrix
+from .kinematics import BodyModel, Pose, arm_angles_for_target, assemble, trunk_frames
 
 __all__ = ["chest_frames", "shoulders", "arm_controls_for", "wrist_reach"]
 
 
 def chest_frames(pose: Pose) -> np.ndarray:
     """``(N, 3, 3)`` chest (spine3) orientation of every frame, as :func:`assemble` builds it."""
-    g = ypr_matrix(pose.pelvis_ypr)
-    for share in SPINE_SHARE:
-        g = g @ ypr_matrix(pose.spine * share)
-    return g
+    return trunk_frames(pose)[2]
 
 
 def shoulders(pose: Pose, body: BodyModel) -> np.ndarray:
