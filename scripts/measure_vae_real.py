@@ -10,10 +10,12 @@ Usage::
 ``mean_std.safetensors``). Every clip is encoded and decoded with the posterior mean at its own
 length (floored to a multiple of 4, at most 196 frames) and compared in joint space:
 
-* root-aligned MPJPE (each pose's pelvis subtracted; the VAE-paper metric) and
-* global MPJPE (no alignment: errors of the integrated root path count too),
+* root-aligned MPJPE (each pose's pelvis subtracted; the VAE-paper metric),
+* global MPJPE (no alignment: errors of the integrated root path count too) and
+* the yaw drift: the largest error of the heading integrated from the root's angular velocity
+  (degrees; issue 21 found it drives the root-aligned error on turning clips),
 
-both against ``features_to_joints`` of the clip's own features, in cm; per clip and median / max
+all against ``features_to_joints`` (and the features) of the clip itself, MPJPE in cm; per clip and median / max
 per set. Sets: the real HumanML3D sample (``tests/data/humanml3d_sample``, clip 012314), pybullet's
 DeepMimic clips with at least 40 feature rows (looping clips repeated to reach them, as
 ``scripts/measure_editing.py`` does; converted by :mod:`salad_core.data.deepmimic`; skipped
@@ -78,7 +80,18 @@ def measure_clip(vae, mean, std, feats: np.ndarray) -> dict:
     rec = reconstruct_features(vae, mean, std, f[None], [len(f)])[0]
     gt, pr = features_to_joints(f.astype(np.float64)), features_to_joints(rec.astype(np.float64))
     return {"frames": len(f), "mpjpe_cm": 100 * mpjpe(pr, gt, root_aligned=True),
-            "global_cm": 100 * mpjpe(pr, gt, root_aligned=False)}
+            "global_cm": 100 * mpjpe(pr, gt, root_aligned=False),
+            "yaw_drift_deg": yaw_drift_deg(rec, f)}
+
+
+def yaw_drift_deg(rec: np.ndarray, feats: np.ndarray) -> float:
+    """Largest heading error (degrees) over a clip: the root yaw integrated from the angular-velocity
+    channel (HumanML3D's ``recover_root_rot_pos``: twice the summed half-angles of the rows before
+    each frame) of the reconstruction against the clip's own (issue 21: it dominates the error)."""
+    def yaw(f):
+        f = np.asarray(f, dtype=np.float64)
+        return 2.0 * np.concatenate([[0.0], np.cumsum(f[:-1, 0])])
+    return float(np.degrees(np.abs(yaw(rec) - yaw(feats)).max()))
 
 
 @contextlib.contextmanager
@@ -135,8 +148,10 @@ def split_clips(root: Path, split: str = "test", limit: int | None = None) -> di
 def summarise(rows: dict[str, dict]) -> dict:
     a = np.array([r["mpjpe_cm"] for r in rows.values()])
     g = np.array([r["global_cm"] for r in rows.values()])
+    y = np.array([r["yaw_drift_deg"] for r in rows.values()])
     return {"clips": len(rows), "mpjpe_median_cm": float(np.median(a)), "mpjpe_max_cm": float(a.max()),
-            "global_median_cm": float(np.median(g)), "global_max_cm": float(g.max())}
+            "global_median_cm": float(np.median(g)), "global_max_cm": float(g.max()),
+            "yaw_drift_median_deg": float(np.median(y)), "yaw_drift_max_deg": float(y.max())}
 
 
 def feature_stats(corpus: Path, general: Path, limit: int | None = None) -> dict:
@@ -200,11 +215,13 @@ def main(argv=None) -> int:
         results["sets"][set_name] = {"summary": summary, "clips": rows}
         print(f"\n== {set_name}: {summary['clips']} clips, root-aligned MPJPE median {summary['mpjpe_median_cm']:.1f} cm, "
               f"max {summary['mpjpe_max_cm']:.1f} cm; global median {summary['global_median_cm']:.1f} cm, "
-              f"max {summary['global_max_cm']:.1f} cm")
+              f"max {summary['global_max_cm']:.1f} cm; yaw drift median {summary['yaw_drift_median_deg']:.1f} deg, "
+              f"max {summary['yaw_drift_max_deg']:.1f} deg")
         if set_name in ("humanml3d_012314", "deepmimic"):
-            print(f"  {'clip':24s} {'frames':>6s} {'MPJPE cm':>9s} {'global cm':>10s}")
+            print(f"  {'clip':24s} {'frames':>6s} {'MPJPE cm':>9s} {'global cm':>10s} {'yaw drift deg':>14s}")
             for name, r in rows.items():
-                print(f"  {name:24s} {r['frames']:6d} {r['mpjpe_cm']:9.1f} {r['global_cm']:10.1f}")
+                print(f"  {name:24s} {r['frames']:6d} {r['mpjpe_cm']:9.1f} {r['global_cm']:10.1f} "
+                      f"{r['yaw_drift_deg']:14.1f}")
     real = {**results["sets"]["humanml3d_012314"]["clips"], **results["sets"].get("deepmimic", {}).get("clips", {})}
     results["real_summary"] = summarise(real)
     s = results["real_summary"]

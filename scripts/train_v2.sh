@@ -4,11 +4,12 @@
 #
 # Usage: bash scripts/train_v2.sh [WORK_DIR] [STAGE...]
 #   WORK_DIR   run folder, outside the repository (default: ~/salad-runs/v2)
-#   STAGE      any of: data vae denoiser keymotion (default: all, in that order)
+#   STAGE      any of: data vae denoiser keymotion (default: all, in that order), and vae_decoder (after vae,
+#              never by default: fine-tunes the VAE's decoder with the root term into WORK_DIR/vae_decoder)
 # Every stage resumes where it stopped when run again with RESUME=1 (Ctrl-C writes a checkpoint);
 # the data stage skips what is already built (both builds are deterministic: the same commit and
 # seed give byte-identical files, so a lost run folder is rebuilt from this recipe alone).
-# Environment: VAE_STEPS, DEN_STEPS override the configs' step budgets, KM_STEPS="KF_VAE PST MMAE" KeyMotion's
+# Environment: VAE_STEPS, DEN_STEPS, VAE_DEC_STEPS override the configs' step budgets, KM_STEPS="KF_VAE PST MMAE" KeyMotion's
 # (three numbers); PYTHON the python to use;
 # DEN_DATA the denoiser's corpus (default: WORK_DIR/corpus, the VAE's). The first v2 run trained its VAE
 # on corpus 2.0 (commit f1f8697) and its denoiser on corpus 2.1 (commit 33c5adb, DEN_DATA=WORK_DIR/corpus21):
@@ -40,6 +41,21 @@ if has vae; then
   # with the bone-length term and latent noise (configs/v2_vae.json)
   "$PY" -m salad_core.train vae --data "$WORK/corpus" --general "$WORK/general" --out "$WORK/vae" \
       --config configs/v2_vae.json ${VAE_STEPS:+--steps "$VAE_STEPS"} --no-progress $RESUME
+fi
+if has vae_decoder; then
+  # decoder fine-tuning with the integrated-root term (issue 21: the heading drifts): the v2 VAE's encoder is
+  # frozen (its posteriors, which the denoiser learned, stay bit-identical) and its decoder learns lambda_root
+  # (configs/v2_vae_decoder.json). Not in the default stages; init_from is filled in here, as $WORK/vae.
+  "$PY" - "$WORK" <<'PYEOF'
+import json, sys
+from pathlib import Path
+work = Path(sys.argv[1])
+doc = json.loads(Path("configs/v2_vae_decoder.json").read_text())
+doc["train"]["init_from"] = str((work / "vae").resolve())
+(work / "vae_decoder.config.json").write_text(json.dumps(doc, indent=2) + "\n")
+PYEOF
+  "$PY" -m salad_core.train vae --data "$WORK/corpus" --general "$WORK/general" --out "$WORK/vae_decoder" \
+      --config "$WORK/vae_decoder.config.json" ${VAE_DEC_STEPS:+--steps "$VAE_DEC_STEPS"} --no-progress $RESUME
 fi
 if has denoiser; then
   "$PY" -m salad_core.train denoiser --data "${DEN_DATA:-$WORK/corpus}" --out "$WORK/denoiser" --vae "$WORK/vae" \
