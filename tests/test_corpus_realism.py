@@ -318,3 +318,31 @@ def test_performers_curve_and_share_the_spine_their_own_way():
         replace(base, spine_share=((0.5,) * 3, (0.5,) * 3, (0.5,) * 3))
     with pytest.raises(ValueError, match="trunk_posture"):
         replace(base, trunk_posture=((0.0, 0.9, 0.0),) * 5)
+
+
+def test_feet_are_handed_over_without_a_jump():
+    """_feet_handover shortens an overlap so that the next segment moves a foot only once the
+    earlier one has put it where the next one starts it (2.3: a pivot then a quick walk)."""
+    from salad_core.data.procedural.composition import _feet_handover
+    from salad_core.data.procedural.footwork import Persona, Stance
+    from salad_core.data.procedural.kinematics import body_model
+    from salad_core.data.procedural.segment import standing_pose
+
+    body = body_model("humanml3d")
+    persona = Persona.sample(np.random.default_rng(1))
+    acc = standing_pose(Stance.at((0.0, 0.0), 0.0, persona), persona, 20, body, rng=None, idle=False)
+    nxt = standing_pose(Stance.at((0.0, 0.0), 0.0, persona), persona, 20, body, rng=None, idle=False)
+    slide = np.zeros((20, 3))
+    slide[:17, 0] = np.linspace(0.3, 0.01, 17)           # acc's left foot lands at frame 17
+    acc.ankle[:, 0] += slide
+    acc.toe[:, 0] += slide
+    lift = np.zeros((20, 3))
+    lift[3:, 1] = 0.05                                   # nxt lifts the left foot from frame 3
+    nxt.ankle[:, 0] += lift
+    nxt.toe[:, 0] += lift
+    assert _feet_handover(acc, nxt, 8) == 6              # 20 - 6 + 3 = 17: the foot is down by then
+    assert _feet_handover(acc, nxt, 5) == 5              # already clean
+    still = nxt.copy()
+    still.ankle[:, 0] -= lift
+    still.toe[:, 0] -= lift
+    assert _feet_handover(acc, still, 8) == 8            # a foot the next segment leaves alone

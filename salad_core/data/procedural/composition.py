@@ -278,7 +278,7 @@ def _alive(pose: Pose, persona: Persona, rng: np.random.Generator, propped: np.n
     # whose bend moves no spine joint (the chest turns on spine3) and so cannot out-move an action
     pose.trunk += np.asarray(persona.trunk_posture, dtype=np.float64)[None] * (trunk if propped is None else trunk[:, :, None])
     seg = _wander(n, rng, 15, period=(1.5, 4.0)).reshape(n, 5, 3) * live
-    amp = np.array([[0.04, 0.05, 0.04], [0.06, 0.07, 0.06], [0.12, 0.12, 0.1], [0.05, 0.06, 0.05], [0.03, 0.04, 0.03]])
+    amp = np.array([[0.04, 0.05, 0.04], [0.06, 0.07, 0.06], [0.14, 0.13, 0.11], [0.06, 0.07, 0.06], [0.03, 0.04, 0.03]])
     pose.trunk += seg * amp[None] * (trunk if propped is None else trunk[:, :, None])
     arm_scale = 1.0 if head_calm is None else (1.0 - 0.5 * np.clip(head_calm, 0.0, 1.0))[:, None]
     pose.arm[:, :, 0] += noise[:, 6:8] * 0.035 * arm_scale

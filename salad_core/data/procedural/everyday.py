@@ -54,7 +54,7 @@ def throw(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gener
         release = np.array([u(-0.02, 0.03), -u(0.12, 0.2), u(0.42, 0.47)])
         follow = np.array([u(-0.08, -0.03), u(0.02, 0.1), u(0.42, 0.46)])
     else:
-        back = np.array([u(0.26, 0.32), u(0.12, 0.2), -u(0.18, 0.25)])
+        back = np.array([u(0.26, 0.32), u(0.17, 0.24), -u(0.18, 0.25)])      # the hand winds up over the head
         release = np.array([u(0.12, 0.16), u(0.28, 0.34), u(0.28, 0.34)])
         follow = np.array([-u(0.08, 0.12), -u(0.38, 0.42), u(0.26, 0.32)])
     t_wind = u(0.25, 0.35)
