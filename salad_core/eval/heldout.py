@@ -50,7 +50,7 @@ def heldout_corpus(out_dir: str | os.PathLike, motions: int = 40, *, split: str 
         the evaluator and the pipelines normalise with their own statistics.
     """
     # the corpus's own split rule and writer, so the ids and bytes cannot drift from build_corpus
-    from salad_core.data.procedural.corpus import SIZES, _split_ids, _write_motion, make_motion
+    from salad_core.data.procedural.corpus import SIZES, make_motion, split_ids, write_motion
 
     if isinstance(size, str):
         if size not in SIZES:
@@ -62,7 +62,7 @@ def heldout_corpus(out_dir: str | os.PathLike, motions: int = 40, *, split: str 
         raise ValueError(f"size={size!r}; allowed: {', '.join(SIZES)} or an int >= 20")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed={seed!r} must be a non-negative int")
-    splits = _split_ids(n_total, int(seed))
+    splits = split_ids(n_total, int(seed))
     if split not in splits:
         raise ValueError(f"split={split!r}; allowed: {sorted(splits)}")
     ids = sorted({int(name.lstrip("M")) for name in splits[split]})
@@ -76,7 +76,7 @@ def heldout_corpus(out_dir: str | os.PathLike, motions: int = 40, *, split: str 
     names = []
     for i in ids[:motions]:
         motion = make_motion(int(seed), i)
-        _write_motion(out, motion)
+        write_motion(out, motion)
         names += [k for k in motion if not k.startswith("_")]
     names.sort()
     (out / f"{split}.txt").write_text("\n".join(names) + "\n", encoding="utf-8")

@@ -36,7 +36,8 @@ from .language import Caption, mirror_caption, parse_prompt, render_captions
 from .primitives import PRIMITIVES, Action, primitive_parts
 from .parallel import run_jobs
 
-__all__ = ["build_corpus", "corpus_figures", "corpus_digest", "make_motion", "SIZES", "GENERATOR_VERSION", "SPLITS"]
+__all__ = ["build_corpus", "corpus_figures", "corpus_digest", "make_motion", "SIZES", "GENERATOR_VERSION", "SPLITS",
+           "npy_bytes", "write_motion", "split_indices", "split_ids"]
 
 logger = logging.getLogger(__name__)
 
@@ -51,7 +52,8 @@ _LAYOUT_FILES = ("train.txt", "val.txt", "test.txt", "all.txt", "Mean.npy", "Std
 
 
 # ----------------------------------------------------------------------------- one motion
-def _npy_bytes(arr: np.ndarray) -> bytes:
+def npy_bytes(arr: np.ndarray) -> bytes:
+    """The bytes of ``arr`` as a ``.npy`` file (no pickle), as the build writes them."""
     buf = io.BytesIO()
     np.save(buf, arr, allow_pickle=False)
     return buf.getvalue()
@@ -99,14 +101,15 @@ def make_motion(seed: int, index: int) -> dict:
         caps = [mirror_caption(c) for c in captions] if mirrored else captions
         key = ("M" + name) if mirrored else name
         ann = _annotation(key, feats.shape[0], clip, caps, mirrored)
-        out[key] = {"new_joint_vecs": _npy_bytes(feats), "new_joints": _npy_bytes(rec), "texts": _texts(caps),
+        out[key] = {"new_joint_vecs": npy_bytes(feats), "new_joints": npy_bytes(rec), "texts": _texts(caps),
                     "annotations": json.dumps(ann, separators=(",", ":")) + "\n"}
     out["_meta"] = {"frames": int(clip.num_frames - 1), "captions": len(captions),
                     "kinds": [e.action.kind for e in clip.events]}
     return out
 
 
-def _write_motion(root: Path, motion: dict) -> None:
+def write_motion(root: Path, motion: dict) -> None:
+    """Write one :func:`make_motion` result (the clip and its mirror) into the corpus layout under ``root``."""
     for key, files in motion.items():
         if key.startswith("_"):
             continue
@@ -119,7 +122,7 @@ def _write_motion(root: Path, motion: dict) -> None:
 def _job(args: tuple[int, int, str]) -> dict:
     seed, index, root = args
     motion = make_motion(seed, index)
-    _write_motion(Path(root), motion)
+    write_motion(Path(root), motion)
     return motion["_meta"]
 
 
@@ -151,15 +154,25 @@ def _prepare(out: Path, overwrite: bool) -> None:
         (out / d).mkdir(parents=True, exist_ok=True)
 
 
-def _split_ids(n: int, seed: int) -> dict[str, list[str]]:
-    order = np.random.default_rng([int(seed), 7919]).permutation(n)
+def split_indices(n: int, seed: int, salt: int = 7919) -> dict[str, list[int]]:
+    """Motion indices ``0..n-1`` of each split (:data:`SPLITS` fractions), sorted; a seeded permutation.
+
+    ``salt`` separates independent builds drawn with the same seed (the corpus uses 7919, the general
+    motions 104729).
+    """
+    order = np.random.default_rng([int(seed), int(salt)]).permutation(n)
     bounds, start, out = np.cumsum([f for _, f in SPLITS]), 0, {}
     for (name, _), b in zip(SPLITS, bounds):
         stop = n if name == SPLITS[-1][0] else int(round(b * n))
-        ids = sorted(int(i) for i in order[start:stop])
-        out[name] = sorted([f"{i:06d}" for i in ids] + [f"M{i:06d}" for i in ids])
+        out[name] = sorted(int(i) for i in order[start:stop])
         start = stop
     return out
+
+
+def split_ids(n: int, seed: int) -> dict[str, list[str]]:
+    """The corpus's clip ids of each split: every motion ``000123`` with its mirror ``M000123``."""
+    return {name: sorted([f"{i:06d}" for i in ids] + [f"M{i:06d}" for i in ids])
+            for name, ids in split_indices(n, seed).items()}
 
 
 def build_corpus(out_dir: str | os.PathLike, size: str | int = "default", seed: int = 0,
@@ -195,7 +208,7 @@ def build_corpus(out_dir: str | os.PathLike, size: str | int = "default", seed: 
     jobs = [(int(seed), i, str(out)) for i in range(n)]
     metas: list[dict] = run_jobs(_job, jobs, workers, desc="procedural corpus", chunksize=8, progress=progress)
 
-    splits = _split_ids(n, int(seed))
+    splits = split_ids(n, int(seed))
     for name, ids in splits.items():
         (out / f"{name}.txt").write_text("\n".join(ids) + "\n", encoding="utf-8")
     all_ids = sorted(i for ids in splits.values() for i in ids)

@@ -24,7 +24,7 @@ import numpy as np
 
 from ...motion import compute_mean_std, features_to_joints, joints_to_features, process_joints
 from ...skeleton import get_skeleton
-from .corpus import SPLITS, _npy_bytes
+from .corpus import npy_bytes, split_indices
 from .general import GeneralConfig, generate_general
 from .parallel import run_jobs
 
@@ -46,7 +46,7 @@ def make_general_motion(seed: int, index: int, config: GeneralConfig | None = No
     rec = features_to_joints(feats).astype(np.float32)
     ref = process_joints(clip.joints)[:-1]
     err = float(np.linalg.norm(rec.astype(np.float64) - ref, axis=-1).max())
-    return {"name": f"G{index:06d}", "new_joint_vecs": _npy_bytes(feats), "new_joints": _npy_bytes(rec),
+    return {"name": f"G{index:06d}", "new_joint_vecs": npy_bytes(feats), "new_joints": npy_bytes(rec),
             "meta": {"mode": clip.mode, "frames": int(feats.shape[0]), "roundtrip": err}}
 
 
@@ -60,13 +60,8 @@ def _job(args: tuple[int, int, str, GeneralConfig | None]) -> dict:
 
 
 def _split_ids(n: int, seed: int) -> dict[str, list[str]]:
-    order = np.random.default_rng([int(seed), 104729]).permutation(n)
-    bounds, start, out = np.cumsum([f for _, f in SPLITS]), 0, {}
-    for (name, _), b in zip(SPLITS, bounds):
-        stop = n if name == SPLITS[-1][0] else int(round(b * n))
-        out[name] = [f"G{i:06d}" for i in sorted(int(i) for i in order[start:stop])]
-        start = stop
-    return out
+    # the corpus's split fractions, drawn independently of a corpus of the same seed
+    return {name: [f"G{i:06d}" for i in ids] for name, ids in split_indices(n, seed, salt=104729).items()}
 
 
 def build_general(out_dir: str | os.PathLike, n: int = 4000, seed: int = 0, workers: int | None = None,
