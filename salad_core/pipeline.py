@@ -25,7 +25,7 @@ import json
 import logging
 import math
 import warnings
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -37,7 +37,8 @@ from salad_core.io import (CheckpointError, atomic_write_text, config_from_dict,
 from salad_core.models.denoiser import Denoiser, TextContext
 from salad_core.models.vae import MotionVAE
 from salad_core.motion import MAX_FEATURE_MAGNITUDE, denormalize, features_to_joints, normalize
-from salad_core.sampling import DiffusionConfig, Guidance, denoise, make_scheduler
+from salad_core.sampling import DiffusionConfig, Guidance, denoise, make_scheduler, resolve_guidance
+from salad_core.sampling import MAX_GUIDANCE  # noqa: F401  (salad_core.cli imports it from here)
 from salad_core.skeleton import Skeleton
 from salad_core.text import TextBatch, TextEncoder, load_text_encoder
 
@@ -420,10 +421,10 @@ class SaladPipeline:
             Sample ``b`` uses noise seed ``seed + b`` (or ``seed[b]`` for a list); seeds must lie in
             :data:`SEED_RANGE` (what ``torch.Generator`` accepts).
         guidance_scale : float or Guidance, optional
-            Classifier-free guidance: None uses the weights' default (:attr:`guidance`); a number
-            (not a string) in ``-MAX_GUIDANCE..MAX_GUIDANCE`` replaces its weight ``w`` only (paper
-            default 7.5; 1 disables guidance; a negative weight steers away from the prompt and is
-            warned about); a
+            Classifier-free guidance (:func:`~salad_core.sampling.resolve_guidance`): None uses the
+            weights' default (:attr:`guidance`); a number (not a string) in
+            ``-MAX_GUIDANCE..MAX_GUIDANCE`` replaces its weight ``w`` only (paper default 7.5; 1
+            disables guidance; a negative weight steers away from the prompt and is warned about); a
             :class:`~salad_core.sampling.Guidance` (weight, rescale, interval) is used as given
             (``Guidance(7.5)`` is the paper's sampler).
         num_steps : int
@@ -565,12 +566,9 @@ class SaladPipeline:
 
     def resolve_guidance(self, guidance_scale: "float | Guidance | None" = None) -> Guidance:
         """The :class:`~salad_core.sampling.Guidance` a call uses: None -> :attr:`guidance`; a number ->
-        :attr:`guidance` with that weight; a Guidance -> itself."""
-        if guidance_scale is None:
-            return self.guidance
-        if isinstance(guidance_scale, Guidance):
-            return guidance_scale
-        return replace(self.guidance, scale=_check_scale(guidance_scale))
+        :attr:`guidance` with that weight; a Guidance -> itself
+        (:func:`~salad_core.sampling.resolve_guidance`, which checks the weight)."""
+        return resolve_guidance(self.guidance, guidance_scale, stacklevel=2)
 
     def chunk_size(self) -> int:
         """Motions per denoising chunk: :attr:`max_batch` if set, else 32 when the allocator is tuned
@@ -921,30 +919,6 @@ def check_compatible(vae: MotionVAE, denoiser: Denoiser, text_encoder: TextEncod
     if text_encoder is not None and getattr(text_encoder, "dim", dc.text_dim) != dc.text_dim:
         raise ValueError(f"the text encoder gives {text_encoder.dim}-d features; the denoiser expects "
                          f"{dc.text_dim}-d (it was trained with another encoder)")
-
-
-#: Largest guidance weight accepted (in absolute value): the papers sweep w in 1..10 and larger
-#: weights drive the sampler to non-finite motions (w = 1e30 gave NaN features).
-MAX_GUIDANCE = 100.0
-
-
-def _check_scale(scale: Any) -> float:
-    """A guidance weight: a real number (not a string or bool), finite, ``|w| <= MAX_GUIDANCE``;
-    a negative weight is allowed (it steers away from the prompt) with a warning."""
-    if isinstance(scale, torch.Tensor) and scale.numel() == 1 and not scale.is_complex():
-        scale = scale.item()
-    if isinstance(scale, (bool, str, bytes)) or not isinstance(scale, (int, float, np.integer, np.floating)):
-        raise TypeError(f"guidance_scale must be a number (or a Guidance), got {type(scale).__name__} {scale!r}")
-    value = float(scale)
-    if not math.isfinite(value):
-        raise ValueError(f"guidance_scale must be finite, got {scale!r}")
-    if abs(value) > MAX_GUIDANCE:
-        raise ValueError(f"guidance_scale={value:g} is out of range; allowed: -{MAX_GUIDANCE:g}..{MAX_GUIDANCE:g} "
-                         "(the papers use 1-10, default 7.5; larger weights make the sampler diverge)")
-    if value < 0:
-        warnings.warn(f"guidance_scale={value:g} is negative: the motion is steered away from the prompt "
-                      "(1 = no guidance, 7.5 = the paper's)", stacklevel=3)
-    return value
 
 
 def _check_solver(solver: Any) -> str | None:

@@ -23,10 +23,12 @@ from __future__ import annotations
 import inspect
 import logging
 import math
+import warnings
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable, ContextManager, Iterable, Iterator, Protocol, Sequence, Union, runtime_checkable
 
+import numpy as np
 import torch
 
 from salad_core.models.denoiser import Denoiser, TextContext
@@ -40,6 +42,8 @@ __all__ = [
     "StepInfo",
     "Guidance",
     "as_guidance",
+    "MAX_GUIDANCE",
+    "resolve_guidance",
     "Prediction",
     "GuidedPrediction",
     "denoise",
@@ -225,6 +229,60 @@ def as_guidance(guidance: "float | Guidance") -> Guidance:
     if isinstance(guidance, Guidance):
         return guidance
     return Guidance(scale=guidance)
+
+
+#: Largest guidance weight a pipeline call accepts (in absolute value): the papers sweep w in 1..10
+#: and larger weights drive the sampler to non-finite motions (w = 1e30 gave NaN features).
+MAX_GUIDANCE = 100.0
+
+
+def resolve_guidance(default: Guidance, guidance_scale: "float | Guidance | None" = None, *,
+                     stacklevel: int = 2) -> Guidance:
+    """The :class:`Guidance` a pipeline call uses (SALAD's and KeyMotion's ``resolve_guidance``).
+
+    Parameters
+    ----------
+    default : Guidance
+        The pipeline's default (its ``guidance``, stored with the weights).
+    guidance_scale : float, Guidance or None
+        None -> ``default``; a Guidance -> itself; a real number (not a string or bool; a one-element
+        tensor counts), finite, ``|w| <= MAX_GUIDANCE`` -> ``default`` with that weight ``w`` (its
+        rescale and interval kept). A negative weight steers away from the prompt: allowed, with a
+        warning.
+    stacklevel : int
+        Where that warning points, counted as :func:`warnings.warn` counts (1: the line that calls
+        this function; 2: the line that calls the function that does).
+
+    Raises
+    ------
+    TypeError
+        ``guidance_scale`` is neither None, a Guidance nor a real number.
+    ValueError
+        The weight is not finite or exceeds :data:`MAX_GUIDANCE` in absolute value.
+    """
+    if guidance_scale is None:
+        return default
+    if isinstance(guidance_scale, Guidance):
+        return guidance_scale
+    return replace(default, scale=_check_scale(guidance_scale, stacklevel + 1))
+
+
+def _check_scale(scale: Any, stacklevel: int) -> float:
+    """A guidance weight as a float (see :func:`resolve_guidance`); ``stacklevel`` as warnings.warn."""
+    if isinstance(scale, torch.Tensor) and scale.numel() == 1 and not scale.is_complex():
+        scale = scale.item()
+    if isinstance(scale, (bool, str, bytes)) or not isinstance(scale, (int, float, np.integer, np.floating)):
+        raise TypeError(f"guidance_scale must be a number (or a Guidance), got {type(scale).__name__} {scale!r}")
+    value = float(scale)
+    if not math.isfinite(value):
+        raise ValueError(f"guidance_scale must be finite, got {scale!r}")
+    if abs(value) > MAX_GUIDANCE:
+        raise ValueError(f"guidance_scale={value:g} is out of range; allowed: -{MAX_GUIDANCE:g}..{MAX_GUIDANCE:g} "
+                         "(the papers use 1-10, default 7.5; larger weights make the sampler diverge)")
+    if value < 0:
+        warnings.warn(f"guidance_scale={value:g} is negative: the motion is steered away from the prompt "
+                      "(1 = no guidance, 7.5 = the paper's)", stacklevel=stacklevel + 1)
+    return value
 
 
 @dataclass(frozen=True)

@@ -41,7 +41,7 @@ from __future__ import annotations
 import json
 import logging
 import os
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -50,7 +50,7 @@ import torch
 
 from salad_core.io import atomic_write_text, config_from_dict, config_to_dict, load_model, save_checkpoint
 from salad_core.motion import features_to_joints
-from salad_core.sampling import DiffusionConfig, Guidance, make_scheduler
+from salad_core.sampling import DiffusionConfig, Guidance, make_scheduler, resolve_guidance
 from salad_core.text import TextEncoder
 
 from .kf_vae import KeyframeVAE, positions_to_indices
@@ -301,14 +301,9 @@ class KeyMotionPipeline:
 
     def resolve_guidance(self, guidance_scale: "float | Guidance | None" = None) -> Guidance:
         """The :class:`~salad_core.sampling.Guidance` a call uses: None -> :attr:`guidance`; a number ->
-        :attr:`guidance` with that weight; a Guidance -> itself."""
-        if guidance_scale is None:
-            return self.guidance
-        if isinstance(guidance_scale, Guidance):
-            return guidance_scale
-        if isinstance(guidance_scale, bool) or not isinstance(guidance_scale, (int, float, np.floating)):
-            raise TypeError(f"guidance_scale must be a number, a Guidance or None, got {guidance_scale!r}")
-        return replace(self.guidance, scale=float(guidance_scale))
+        :attr:`guidance` with that weight; a Guidance -> itself
+        (:func:`~salad_core.sampling.resolve_guidance`, as SALAD's pipeline, which checks the weight)."""
+        return resolve_guidance(self.guidance, guidance_scale, stacklevel=2)
 
     def __call__(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None = None, seed: int = 0,
                  guidance_scale: "float | Guidance | None" = None, num_steps: int = 50, *,
@@ -325,7 +320,8 @@ class KeyMotionPipeline:
             Seeds the initial noise; the same call with the same seed returns the same motions.
         guidance_scale : float or Guidance, optional
             Classifier-free guidance (eq. 8): None uses the weights' default (:attr:`guidance`), a
-            number replaces its weight (1 disables guidance), a Guidance replaces it all.
+            number in ``-MAX_GUIDANCE..MAX_GUIDANCE`` replaces its weight (1 disables guidance; a
+            negative weight is warned about), a Guidance replaces it all.
         num_steps : int
             Denoising steps.
         keep_keyframes : bool
