@@ -1,43 +1,102 @@
 #!/usr/bin/env python
-"""Train the small ablation models (paper Tables 2-3, supplement Tables 2-4) and ship them.
+"""Train, evaluate and ship the ablation models (paper Tables 2-3, supplement Tables 2-4).
 
-Usage::
+The staged study (issue 24, ``configs/ablations_v2.json``, the default recipe) in one command::
 
-    python scripts/train_ablations.py --data CORPUS --work runs/ablations            # train + ship
-    python scripts/train_ablations.py --data CORPUS --work runs/ablations --jobs 2   # two runs at a time
-    python scripts/train_ablations.py --data CORPUS --work runs/ablations --only st pose full no_st
-    python scripts/train_ablations.py --work runs/ablations --ship-only                # re-assemble
+    python scripts/train_ablations.py --recipe configs/ablations_v2.json --data CORPUS --work RUNS --jobs 2
+    python scripts/train_ablations.py --recipe configs/ablations_v2.json --work RUNS --dry-run   # the plan
 
-The recipe (variants, shared budgets) is ``configs/ablations.json``. Every run resumes, so an
-interrupted study continues by running the same command again. The result goes to
-``salad_core/weights/ablations/`` (fp16; loaded by :mod:`salad_core.ablations`).
+Every group of tables trains to its next stage (every variant of a table to exactly the same steps),
+is evaluated there with one protocol (``RUNS/evaluations/<group>@<steps>.json``) and stops when the
+orderings of its paper pairs are the same at two consecutive stages or its budget is spent; the VAE
+groups come first and the denoisers learn on their final VAEs. Then the final stage's models (fp16),
+the evaluations, ``index.json`` and ``MODEL_CARD.md`` go to ``--ship`` (default
+``salad_core/weights/ablations``). Run the same command again after a kill: trained steps, snapshots
+and evaluated rows are kept, the study continues where it stopped. Run it at low priority on a shared
+machine (``nice -n 19``); each run uses one torch thread.
+
+A recipe without ``groups`` (``configs/ablations.json``, the 0.3 models) trains one fixed budget per
+variant and ships without evaluating, as before::
+
+    python scripts/train_ablations.py --recipe configs/ablations.json --data CORPUS --work RUNS --only st pose_long
+    python scripts/train_ablations.py --recipe configs/ablations.json --work RUNS --ship-only
 """
 from __future__ import annotations
 
 import argparse
+import json
 import logging
+import shlex
+import sys
 import time
 from pathlib import Path
 
-from salad_core.ablations import load_recipe, plan_jobs, run_jobs, ship
+from salad_core.ablations import (load_recipe, load_staged_recipe, plan_jobs, run_jobs, run_study, ship, ship_study,
+                                  study_plan)
+from salad_core.ablations.shipping import folder_size_mb
+from salad_core.ablations.stage_eval import load_evaluation
 
 REPO = Path(__file__).resolve().parents[1]
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", type=Path, help="corpus folder (HumanML3D layout); needed unless --ship-only")
-    ap.add_argument("--work", required=True, type=Path, help="folder of the training runs")
-    ap.add_argument("--recipe", type=Path, default=REPO / "configs" / "ablations.json")
-    ap.add_argument("--jobs", type=int, default=1, help="runs trained at the same time (one torch thread each)")
-    ap.add_argument("--only", nargs="+", default=None, help="variant names to train (default: all)")
-    ap.add_argument("--ship", type=Path, default=REPO / "salad_core" / "weights" / "ablations",
-                    help="where to assemble the shipped models")
-    ap.add_argument("--ship-only", action="store_true", help="only assemble already trained runs")
-    ap.add_argument("--no-ship", action="store_true", help="train only")
-    args = ap.parse_args()
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+def _hours(seconds: float | None) -> str:
+    return "unmeasured" if seconds is None else f"{seconds / 3600:.1f} h"
 
+
+def print_plan(recipe, work: Path | None, jobs: int) -> None:
+    """The stages, the steps each variant trains in them, the CPU time the recipe's measured speeds give,
+    and (with ``work``) which stages are already evaluated."""
+    print(f"recipe {recipe.path}: stop rule {recipe.stop.consecutive} consecutive evaluations with equal orderings "
+          f"({recipe.stop.compare}), else the last stage")
+    print(f"measured speeds: {recipe.timing_note or 'none'}")
+    total = 0.0
+    unmeasured = False
+    for entry in study_plan(recipe):
+        group = recipe.group(entry["group"])
+        done = work is not None and load_evaluation(work, group, entry["steps"]) is not None
+        sec = entry["cpu_seconds"]
+        unmeasured |= sec is None
+        total += sec or 0.0
+        print(f"  {entry['stage']:>16s}: {len(entry['variants'])} {entry['kind']}s x {entry['new_steps_per_variant']:,} "
+              f"new steps ({', '.join(entry['tables'])}), CPU {_hours(sec)}{'  [evaluated]' if done else ''}")
+    print(f"all stages, training only: {_hours(total)} of one core"
+          + (" (some variants unmeasured: not counted)" if unmeasured else "")
+          + f"; about {_hours(total / max(1, jobs))} of wall time with --jobs {jobs} on free cores. "
+            "Evaluation time comes on top; a group that stops early skips its later stages.")
+
+
+def staged_main(args, ap) -> int:
+    recipe = load_staged_recipe(args.recipe)
+    if args.dry_run:
+        print_plan(recipe, args.work, args.jobs)
+        return 0
+    if args.data is None:
+        ap.error("--data is required (the corpus the study trains on and evaluates on)")
+    command = " ".join(["python scripts/train_ablations.py", "--recipe", _rel(args.recipe), "--data", "CORPUS",
+                        "--work", "RUNS", *(["--jobs", str(args.jobs)] if args.jobs != 1 else [])])
+    t0 = time.time()
+    outcomes = run_study(recipe, args.data, args.work, max_parallel=args.jobs, groups=args.groups)
+    print(f"study done in {(time.time() - t0) / 60:.1f} min")
+    for name, o in outcomes.items():
+        agree = [k for k, v in o.evaluations[-1]["orderings"].items() if v["agrees"]]
+        print(f"  {name}: stopped at {o.decision.steps:,} steps ({o.decision.reason}); "
+              f"{len(agree)} of {len(o.evaluations[-1]['orderings'])} orderings agree with the paper")
+    if args.no_ship or args.groups:
+        print("not shipping" + (" (--groups trains part of the study)" if args.groups else ""))
+        return 0
+    out = ship_study(recipe, outcomes, args.ship, args.work, command=command, data=str(args.data))
+    print(f"shipped to {out} ({folder_size_mb(out):.1f} MB) with {out / 'MODEL_CARD.md'}")
+    return 0
+
+
+def _rel(path: Path) -> str:
+    try:
+        return str(Path(path).resolve().relative_to(REPO))
+    except ValueError:
+        return str(path)
+
+
+def legacy_main(args, ap) -> int:
     jobs = plan_jobs(load_recipe(args.recipe), args.work)
     if args.only:
         known = {j.variant.name for j in jobs}
@@ -45,6 +104,10 @@ def main() -> int:
         if unknown:
             ap.error(f"--only: unknown variants {unknown}; the recipe has {sorted(known)}")
         jobs = [j for j in jobs if j.variant.name in args.only]
+    if args.dry_run:
+        for j in jobs:
+            print(f"  {j.run_dir.name}: {j.config['train'].get('max_steps')} steps")
+        return 0
     if not args.ship_only:
         if args.data is None:
             ap.error("--data is required unless --ship-only")
@@ -56,10 +119,36 @@ def main() -> int:
             return 1
     if not args.no_ship:
         out = ship(jobs, args.ship)
-        size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
-        print(f"shipped {len(jobs)} models to {out} ({size / 1e6:.1f} MB)")
+        print(f"shipped {len(jobs)} models to {out} ({folder_size_mb(out):.1f} MB)")
     return 0
 
 
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", type=Path, help="corpus folder (HumanML3D layout); needed to train")
+    ap.add_argument("--work", required=True, type=Path, help="folder of the training runs, snapshots and evaluations")
+    ap.add_argument("--recipe", type=Path, default=REPO / "configs" / "ablations_v2.json")
+    ap.add_argument("--jobs", type=int, default=1, help="runs trained at the same time (one torch thread each)")
+    ap.add_argument("--ship", type=Path, default=REPO / "salad_core" / "weights" / "ablations",
+                    help="where to assemble the shipped models")
+    ap.add_argument("--no-ship", action="store_true", help="train (and evaluate) only")
+    ap.add_argument("--dry-run", action="store_true", help="print the plan and exit")
+    ap.add_argument("--groups", nargs="+", default=None,
+                    help="staged recipes: only these groups (their VAE groups must have stopped); does not ship")
+    ap.add_argument("--only", nargs="+", default=None, help="recipes without groups: variant names to train")
+    ap.add_argument("--ship-only", action="store_true", help="recipes without groups: only assemble trained runs")
+    args = ap.parse_args(argv)
+    if args.jobs < 1:
+        ap.error(f"--jobs {args.jobs}: use an integer >= 1")
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    staged = "groups" in json.loads(args.recipe.read_text())
+    if staged and (args.only or args.ship_only):
+        ap.error("--only and --ship-only are for recipes without groups; a staged study trains whole groups "
+                 "(--groups) and ships when every group has stopped")
+    if not staged and args.groups:
+        ap.error(f"--groups needs a staged recipe; {args.recipe} has no 'groups'")
+    return staged_main(args, ap) if staged else legacy_main(args, ap)
+
+
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(main())

@@ -1,4 +1,4 @@
-"""The ablation-study models of paper Tables 2-3 and supplement Tables 2-4, trained small.
+"""The ablation study's recipe, training runs, shipping and loading (paper Tables 2-3, supplement Tables 2-4).
 
 A JSON recipe (``configs/ablations.json``) names VAE variants (skeleton-aware vs pose-vector VAE,
 the VAE loss terms) and denoiser variants (w/o ST-Latent, w/o cross-attention, both, the three
@@ -292,7 +292,7 @@ def _share_vae(pipeline_dir: Path, vae_dir: Path) -> None:
 # ------------------------------------------------------------------------------ loading
 def ablations_dir() -> Path:
     """Folder of the shipped ablation models (package data)."""
-    return Path(__file__).resolve().parent / "weights" / "ablations"
+    return Path(__file__).resolve().parents[1] / "weights" / "ablations"
 
 
 def list_ablations(root: str | os.PathLike | None = None) -> dict[str, dict[str, Any]]:

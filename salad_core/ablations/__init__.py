@@ -1,0 +1,39 @@
+"""The ablation-study models of paper Tables 2-3 and supplement Tables 2-4, trained small.
+
+A JSON recipe names VAE variants (skeleton-aware vs pose-vector VAE, the VAE loss terms) and
+denoiser variants (w/o ST-Latent, w/o cross-attention, both, the three diffusion parametrisations,
+w/o FiLM), each as overrides of base configs, so that variants differ only in what the ablation changes.
+
+* :mod:`~salad_core.ablations.study`: the recipe (:func:`load_recipe`), its training runs
+  (:func:`plan_jobs`, :func:`run_jobs`: resumable subprocesses), shipping a set of runs
+  (:func:`ship`) and loading what was shipped (:func:`list_ablations`, :func:`load_ablation_pipeline`,
+  :func:`load_ablation_vae`; used by notebooks 06 and 07);
+* the staged study (issue 24; ``configs/ablations_v2.json``, ``scripts/train_ablations.py``):
+  :mod:`~salad_core.ablations.staged` (groups of tables, stages, one evaluation protocol per group:
+  :func:`load_staged_recipe`), :mod:`~salad_core.ablations.orderings` (which paper pairs are
+  reproduced, read against :mod:`salad_core.eval.paper_tables`), :mod:`~salad_core.ablations.stop_rule`
+  (stable orderings or budget spent), :mod:`~salad_core.ablations.stage_eval` (snapshots and scores of
+  one stage), :mod:`~salad_core.ablations.runner` (:func:`run_study`, resumable),
+  :mod:`~salad_core.ablations.shipping` (:func:`ship_study`) and :mod:`~salad_core.ablations.card`
+  (the model card from the evaluations).
+
+The denoisers learn on the latents of the ablation VAEs (trained with the same budget), not on the
+shipped VAE, so "w/o ST-Latent" compares two VAEs trained alike.
+"""
+from __future__ import annotations
+
+from .card import model_card
+from .orderings import PAPER_PAIRS, TABLE_METRICS, compare, paper_ordering
+from .runner import GroupOutcome, run_study, study_plan
+from .shipping import ship_study
+from .stage_eval import evaluate_stage, group_orderings
+from .staged import StagedRecipe, StudyGroup, load_staged_recipe, stage_jobs
+from .stop_rule import StopDecision, StopRule, decide
+from .study import (AblationRecipe, AblationVariant, TrainJob, ablations_dir, job_command, list_ablations,
+                    load_ablation_pipeline, load_ablation_vae, load_recipe, plan_jobs, run_jobs, ship)
+
+__all__ = ["AblationVariant", "AblationRecipe", "TrainJob", "load_recipe", "plan_jobs", "run_jobs", "ship",
+           "job_command", "ablations_dir", "list_ablations", "load_ablation_pipeline", "load_ablation_vae",
+           "StagedRecipe", "StudyGroup", "load_staged_recipe", "stage_jobs", "StopRule", "StopDecision", "decide",
+           "PAPER_PAIRS", "TABLE_METRICS", "compare", "paper_ordering", "evaluate_stage", "group_orderings",
+           "GroupOutcome", "run_study", "study_plan", "ship_study", "model_card"]

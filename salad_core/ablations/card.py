@@ -1,0 +1,127 @@
+"""The ablation models' ``MODEL_CARD.md``, written from the study's evaluation files alone.
+
+Per group: where it stopped and why, the protocol, and per paper table one row per variant with our
+figure and its 95 % interval, the paper's figure beside it (labelled as the paper's), the steps; then
+every paper pair's ordering at each evaluated stage, the paper's ordering, whether ours agrees and
+whether our intervals separate. Nothing is measured here: every number comes from the evaluations.
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+from .orderings import TABLE_METRICS, paper_value
+
+__all__ = ["model_card", "TABLE_TITLES"]
+
+#: How the card names the paper's tables.
+TABLE_TITLES = {"table2": "Table 2", "supp_table4": "supplement Table 4", "table3": "Table 3",
+                "supp_table2": "supplement Table 2", "supp_table3": "supplement Table 3"}
+_SYMBOL_WORDS = {">": "better", "<": "worse", "=": "level"}
+
+
+def _fmt(metric: str, mean: float, half: float | None = None) -> str:
+    scale, unit = (100.0, " cm") if metric == "MPJPE" else (1.0, "")
+    digits = 3 if metric != "FID" or abs(mean) < 10 else 1
+    text = f"{mean * scale:.{digits}f}"
+    if half is not None:
+        text += f" ± {half * scale:.{digits}f}"
+    return text + unit
+
+
+def _stage_list(evaluations: Sequence[Mapping[str, Any]]) -> str:
+    return ", ".join(f"{doc['steps']:,}" for doc in evaluations)
+
+
+def _table_section(table: str, rows: Mapping[str, str], final: Mapping[str, Any],
+                   evaluations: Sequence[Mapping[str, Any]], kind: str) -> list[str]:
+    metrics = TABLE_METRICS[kind]
+    head = ["row (ours)", "variant", "steps", *[f"{m} (ours)" for m in metrics], "paper row",
+            *[f"{m} (paper)" for m in metrics]]
+    lines = [f"### {TABLE_TITLES[table]}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for variant, paper_row in rows.items():
+        row = final["rows"][variant]
+        ours = [_fmt(m, *row["summary"][m]) for m in metrics]
+        paper = [_fmt(m, *paper_value(table, paper_row, m)) for m in metrics]
+        lines.append("| " + " | ".join([row["label"], f"`{variant}`", f"{row['steps']:,}", *ours,
+                                        f"paper: {paper_row}", *paper]) + " |")
+    if kind == "denoiser" and final.get("real"):
+        real = final["real"]["summary"]
+        lines.append("| Real motion (test split) | - | - | " + " | ".join(_fmt(m, *real[m]) for m in metrics)
+                     + " | - | " + " | ".join("-" for _ in metrics) + " |")
+    stages = [doc["steps"] for doc in evaluations]
+    keys = [k for k, o in final["orderings"].items() if o["table"] == table]
+    if keys:
+        lines += ["", "Orderings (`>`: the first row is better, `<`: worse, `=`: level"
+                  + (", i.e. 95 % intervals overlap" if final.get("compare", "intervals") == "intervals" else "")
+                  + "):", "",
+                  "| pair | metric | " + " | ".join(f"ours at {s:,}" for s in stages)
+                  + " | paper | agrees | our intervals separate |",
+                  "|" + "---|" * (5 + len(stages))]
+        for k in keys:
+            o = final["orderings"][k]
+            history = [doc["orderings"][k]["ours"] for doc in evaluations]
+            lines.append(f"| `{o['a']}` vs `{o['b']}` | {o['metric']} | " + " | ".join(f"`{h}`" for h in history)
+                         + f" | `{o['paper']}` | {'yes' if o['agrees'] else 'no'} | {'yes' if o['separated'] else 'no'} |")
+    return lines + [""]
+
+
+def model_card(outcomes: Mapping[str, Any], *, command: str, recipe_path: str = "", data: str = "",
+               size_mb: float | None = None, date: str | None = None, version: str = "0.4") -> str:
+    """The card's Markdown.
+
+    Parameters
+    ----------
+    outcomes : dict
+        Group name -> :class:`~salad_core.ablations.runner.GroupOutcome` (or any object with ``group``,
+        ``decision`` and ``evaluations``).
+    command : str
+        The command that trains, evaluates and ships everything (quoted in the card).
+    recipe_path, data : str
+        The recipe and corpus, named in the card.
+    size_mb : float, optional
+        The shipped folder's size.
+    date : str, optional
+    """
+    out = [f"# salad ablation models (version {version}, staged study)", "",
+           "Small models of the paper's ablations (Table 2, Table 3, supplement Tables 2-4), trained on salad's "
+           "procedural corpus, every variant of a table at exactly the same steps, each group of tables until the "
+           "orderings of its paper pairs were the same at two consecutive evaluations or its budget was spent. "
+           "They are **not** the shipped SALAD model, and no number here is comparable with the paper's HumanML3D "
+           "numbers: the paper's figures are printed beside ours, labelled as the paper's, for their *ordering*.", "",
+           f"Regenerate everything (training, evaluations, weights and this card) with one command:", "",
+           "```bash", command, "```", ""]
+    facts = []
+    if recipe_path:
+        facts.append(f"recipe `{recipe_path}`")
+    if data:
+        facts.append(f"corpus `{data}`")
+    if date:
+        facts.append(f"written {date}")
+    if size_mb is not None:
+        facts.append(f"weights folder {size_mb:.1f} MB (fp16)")
+    if facts:
+        out += ["; ".join(facts).capitalize() + ". Load the models with `salad_core.ablations.load_ablation_vae` and "
+                "`load_ablation_pipeline`; every evaluation is in `evaluations/<group>@<steps>.json` beside this card.", ""]
+    for name, outcome in outcomes.items():
+        group, decision, evaluations = outcome.group, outcome.decision, outcome.evaluations
+        final = evaluations[-1]
+        why = ("the orderings were the same at the last evaluations" if decision.reason == "stable"
+               else "the budget was spent" if decision.reason == "budget" else "it has not stopped yet")
+        out += [f"## Group `{name}` ({group.kind}s): {final['steps']:,} steps, stopped because {why}", "",
+                f"Evaluated at {_stage_list(evaluations)} steps (stages of the recipe: "
+                f"{', '.join(f'{s:,}' for s in group.stages)}). Protocol, the same for every row: "
+                f"{group.evaluation.describe()}, on the `{group.evaluation.split}` split of the corpus"
+                + (", FID and MPJPE of the reconstructions (posterior mean)" if group.kind == "vae" else
+                   ", the shipped procedural-corpus evaluator unless stated otherwise") + ".", ""]
+        ev_name = next(iter(final["rows"].values()))["settings"].get("evaluator")
+        if ev_name:
+            out += [f"Evaluator: `{ev_name}`.", ""]
+        for table, rows in group.tables.items():
+            out += _table_section(table, rows, final, evaluations, group.kind)
+        disagree = [o for o in final["orderings"].values() if not o["agrees"]]
+        if disagree:
+            out += ["Where our ordering differs from the paper's at the final stage: "
+                    + "; ".join(f"{TABLE_TITLES[o['table']]} `{o['a']}` vs `{o['b']}` on {o['metric']}: ours "
+                                f"{_SYMBOL_WORDS[o['ours']]}, paper {_SYMBOL_WORDS[o['paper']]}" for o in disagree)
+                    + ". The notebooks say what was measured and why.", ""]
+    return "\n".join(out).rstrip() + "\n"

@@ -1,0 +1,181 @@
+"""Run a staged ablation study to its end: train each group stage by stage until its orderings are stable.
+
+For every group of a :class:`~salad_core.ablations.staged.StagedRecipe` (VAE groups first), stage by
+stage:
+
+1. if ``evaluations/<group>@<steps>.json`` exists, read it (nothing is trained or scored again);
+2. else train every variant of the group to ``steps`` (:func:`~salad_core.ablations.study.run_jobs`,
+   resumable: a half-trained run continues), snapshot each run's checkpoint of that step, package the
+   snapshots (fp16) and score every row (:mod:`~salad_core.ablations.stage_eval`);
+3. apply the stop rule (:func:`~salad_core.ablations.stop_rule.decide`) to the group's evaluations so far.
+
+When a VAE group stops, its variants' snapshots at the final stage are *frozen*: the denoiser groups
+learn on them (and ship with them). Rerunning :func:`run_study` after a kill continues where it stopped.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+from .stage_eval import evaluate_stage, load_evaluation, package_stage, snapshot_run, stage_dir
+from .staged import StagedRecipe, StudyGroup, stage_jobs
+from .stop_rule import StopDecision, decide
+from .study import run_jobs
+
+__all__ = ["GroupOutcome", "run_study", "study_plan"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class GroupOutcome:
+    """Where a group stopped and its evaluations (one document per evaluated stage, in order)."""
+
+    group: StudyGroup
+    decision: StopDecision
+    evaluations: tuple[dict, ...]
+
+
+def _history(evaluations) -> list[dict[str, str]]:
+    return [{k: o["ours"] for k, o in doc["orderings"].items()} for doc in evaluations]
+
+
+def _check_vae_of_runs(jobs, frozen: Mapping[str, Path]) -> None:
+    """A denoiser run that exists must have learned on the frozen VAE it would resume with."""
+    for job in jobs:
+        cfg = job.run_dir / "config.json"
+        if job.variant.kind != "denoiser" or not cfg.is_file():
+            continue
+        used = json.loads(cfg.read_text()).get("task", {}).get("vae")
+        want = str(Path(frozen[job.variant.vae]) / "latest")
+        if used is not None and used != want:
+            raise RuntimeError(f"{job.run_dir} learned on the VAE {used}, but the study's {job.variant.vae!r} is "
+                               f"now {want} (its VAE group stopped elsewhere): move the denoiser run away to retrain it")
+
+
+def _train_stage(recipe: StagedRecipe, group: StudyGroup, steps: int, work: Path, data, frozen, max_parallel: int,
+                 inline: bool, python: str) -> None:
+    runs = stage_dir(work, group, steps) / "runs"
+    jobs = [j for j in stage_jobs(recipe, group, steps, work, frozen)
+            if not (runs / j.run_dir.name / "latest.safetensors").is_file()]
+    if jobs:
+        _check_vae_of_runs(jobs, frozen)
+        log.info("%s: training %s to %d steps", group.name, [j.run_dir.name for j in jobs], steps)
+        codes = run_jobs(jobs, data, max_parallel=max_parallel, python=python, inline=inline)
+        failed = {n: c for n, c in codes.items() if c}
+        if failed:
+            raise RuntimeError(f"training failed for {failed} (exit codes); see their logs "
+                               f"{[str(work / f'{n}.log') for n in failed]}")
+    for job in stage_jobs(recipe, group, steps, work, frozen):
+        snapshot_run(job.run_dir, runs / job.run_dir.name, steps)
+
+
+def run_study(recipe: StagedRecipe, data: str | os.PathLike, work: str | os.PathLike, *, evaluator: Any = None,
+              text_encoder: Any = None, max_parallel: int = 1, inline: bool = False,
+              python: str = sys.executable, groups: list[str] | None = None) -> dict[str, GroupOutcome]:
+    """Train and evaluate every group until it stops (see the module docstring); resumable.
+
+    Parameters
+    ----------
+    recipe : StagedRecipe
+    data : path
+        The training corpus (HumanML3D layout); rows are scored on its ``evaluation.split``.
+    work : path
+        The study folder: runs, snapshots, evaluations.
+    evaluator : T2MEvaluator, optional
+        Default: the shipped procedural-corpus evaluator (loaded only when a row is scored).
+    text_encoder : optional
+        Shared by the denoiser pipelines (default: MiniLM, loaded when needed).
+    max_parallel : int
+        Runs trained at the same time (one torch thread each).
+    inline : bool
+        Train in this process, one run after the other (tests).
+    groups : list of str, optional
+        Only these groups (their VAE groups must have stopped already: their evaluations are in ``work``).
+
+    Returns
+    -------
+    dict
+        Group name -> :class:`GroupOutcome`.
+    """
+    work = Path(work)
+    wanted = set(groups) if groups else None
+    if wanted:
+        unknown = sorted(wanted - {g.name for g in recipe.groups})
+        if unknown:
+            raise ValueError(f"groups={unknown} are not groups of the recipe: {[g.name for g in recipe.groups]}")
+    frozen: dict[str, Path] = {}
+    outcomes: dict[str, GroupOutcome] = {}
+    chosen = [g for g in recipe.groups if wanted is None or g.name in wanted]
+    needed_vaes = {recipe.base.variant(v).vae for g in chosen for v in g.variants
+                   if recipe.base.variant(v).kind == "denoiser"}
+    for group in recipe.groups:
+        if group not in chosen:
+            if group.kind == "vae" and needed_vaes & set(group.variants):
+                frozen.update(_frozen_of(group, _replay(recipe, group, work), work))   # must have stopped
+            continue
+        needs = {recipe.base.variant(v).vae for v in group.variants if recipe.base.variant(v).kind == "denoiser"}
+        missing = sorted(needs - set(frozen))
+        if missing:
+            raise RuntimeError(f"group {group.name!r} needs the VAEs {missing}, whose group has not stopped")
+        evaluations: list[dict] = []
+        decision = None
+        for steps in group.stages:
+            doc = load_evaluation(work, group, steps)
+            if doc is None:
+                _train_stage(recipe, group, steps, work, data, frozen, max_parallel, inline, python)
+                package_stage(recipe, group, steps, work, frozen, text_encoder)
+                doc = evaluate_stage(recipe, group, steps, work, data, evaluator, text_encoder)
+            evaluations.append(doc)
+            decision = decide(_history(evaluations), group.stages, recipe.stop)
+            log.info("%s at %d steps: %s", group.name, steps, decision.reason)
+            if decision.stop:
+                break
+        outcomes[group.name] = GroupOutcome(group, decision, tuple(evaluations))
+        if group.kind == "vae":
+            frozen.update(_frozen_of(group, outcomes[group.name], work))
+    return outcomes
+
+
+def _frozen_of(group: StudyGroup, outcome: GroupOutcome, work: Path) -> dict[str, Path]:
+    runs = stage_dir(work, group, outcome.decision.steps) / "runs"
+    return {v: runs / f"vae_{v}" for v in group.variants}
+
+
+def _replay(recipe: StagedRecipe, group: StudyGroup, work: Path) -> GroupOutcome:
+    """The outcome of a group from its evaluation files alone (it must have stopped)."""
+    evaluations: list[dict] = []
+    for steps in group.stages:
+        doc = load_evaluation(work, group, steps)
+        if doc is None:
+            break
+        evaluations.append(doc)
+        decision = decide(_history(evaluations), group.stages, recipe.stop)
+        if decision.stop:
+            return GroupOutcome(group, decision, tuple(evaluations))
+    raise RuntimeError(f"group {group.name!r} has not stopped yet ({len(evaluations)} of its stages evaluated in "
+                       f"{work / 'evaluations'}): run it first")
+
+
+def study_plan(recipe: StagedRecipe) -> list[dict[str, Any]]:
+    """The study's stages, for a dry run: one entry per group and stage, with the steps each variant
+    trains in that stage and the CPU time the recipe's measured speeds give (None when unmeasured)."""
+    plan = []
+    for group in recipe.groups:
+        before = 0
+        for steps in group.stages:
+            new = steps - before
+            seconds = 0.0
+            for v in group.variants:
+                rate = recipe.steps_per_s.get(v, recipe.steps_per_s.get(group.kind))
+                seconds = None if (seconds is None or not rate) else seconds + new / rate
+            plan.append({"group": group.name, "kind": group.kind, "stage": group.stage_name(steps), "steps": steps,
+                         "new_steps_per_variant": new, "variants": list(group.variants),
+                         "tables": list(group.tables), "cpu_seconds": seconds})
+            before = steps
+    return plan
