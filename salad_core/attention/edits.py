@@ -119,6 +119,14 @@ def _window(value, name: str) -> tuple[float, float]:
     return start, stop
 
 
+def _distinct(value, allowed: tuple[str, ...], name: str) -> tuple[str, ...]:
+    """A name or a sequence of names -> a non-empty tuple of distinct entries of ``allowed``."""
+    items = (value,) if isinstance(value, str) else tuple(value)
+    if not items or any(v not in allowed for v in items) or len(set(items)) != len(items):
+        raise ValueError(f"{name}={value!r} must be distinct entries of {allowed}")
+    return items
+
+
 def _is_span(value) -> bool:
     return (isinstance(value, (tuple, list)) and len(value) == 2
             and all(isinstance(v, int) and not isinstance(v, bool) for v in value))
@@ -180,8 +188,10 @@ class EditSpec:
         return start <= fraction < stop
 
     @property
-    def window(self) -> tuple[float, float]:  # pragma: no cover - every subclass defines it
-        raise NotImplementedError
+    def window(self) -> tuple[float, float]:
+        """``(start, stop)`` step fractions where the edit applies: its ``steps`` (WordSwap derives
+        them from ``tau``)."""
+        return self.steps
 
     @property
     def edited_seed(self) -> int | None:
@@ -260,10 +270,6 @@ class Refine(EditSpec):
     def __post_init__(self) -> None:
         object.__setattr__(self, "steps", _window(self.steps, "Refine.steps"))
 
-    @property
-    def window(self) -> tuple[float, float]:
-        return self.steps
-
     def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
         """:func:`refine_columns` by the alignments ``(B, W)`` of the prompt pairs."""
         mapping = torch.full((len(source), width), -1, dtype=torch.long)
@@ -307,10 +313,6 @@ class Reweight(EditSpec):
         object.__setattr__(self, "scale", float(self.scale))
         object.__setattr__(self, "steps", _window(self.steps, "Reweight.steps"))
 
-    @property
-    def window(self) -> tuple[float, float]:
-        return self.steps
-
     def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
         """:func:`reweight_columns` of the words' token columns in each prompt of ``maps_of``."""
         columns = _phrase_columns(maps_of, self.words, "Reweight")
@@ -337,10 +339,6 @@ class Mirror(EditSpec):
         object.__setattr__(self, "parts", parts)
         object.__setattr__(self, "steps", _window(self.steps, "Mirror.steps"))
 
-    @property
-    def window(self) -> tuple[float, float]:
-        return self.steps
-
     def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
         """:func:`mirror_parts` along the body-part axis of the cross maps."""
         return lambda maps, own: mirror_parts(maps, self.parts, part_axis=_PART_AXIS)
@@ -361,14 +359,7 @@ class InjectSelfAttention(EditSpec):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "steps", _window(self.steps, "InjectSelfAttention.steps"))
-        kinds = (self.kinds,) if isinstance(self.kinds, str) else tuple(self.kinds)
-        if not kinds or any(k not in _SELF_KINDS for k in kinds) or len(set(kinds)) != len(kinds):
-            raise ValueError(f"InjectSelfAttention.kinds={self.kinds!r} must be distinct entries of {_SELF_KINDS}")
-        object.__setattr__(self, "kinds", kinds)
-
-    @property
-    def window(self) -> tuple[float, float]:
-        return self.steps
+        object.__setattr__(self, "kinds", _distinct(self.kinds, _SELF_KINDS, "InjectSelfAttention.kinds"))
 
     @property
     def site_kinds(self) -> tuple[str, ...]:
@@ -404,10 +395,6 @@ class Erase(EditSpec):
         if self.mode not in ERASE_MODES:
             raise ValueError(f"Erase.mode={self.mode!r}; allowed: {ERASE_MODES}")
         object.__setattr__(self, "steps", _window(self.steps, "Erase.steps"))
-
-    @property
-    def window(self) -> tuple[float, float]:
-        return self.steps
 
     def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
         """:func:`erase_columns` of the phrase's columns in each prompt of ``maps_of``."""
@@ -468,10 +455,6 @@ class Shift(EditSpec):
         """The shift in latent frames, ``frames / unit_length``."""
         return self.frames // self.unit_length
 
-    @property
-    def window(self) -> tuple[float, float]:
-        return self.steps
-
     def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *, maps_of: "TokenInfo") -> EditKernel:
         """:func:`shift_columns` of the phrase's columns in each prompt of ``maps_of``."""
         columns = _phrase_columns(maps_of, self.words, "Shift")
@@ -498,16 +481,9 @@ class ShiftTemporal(EditSpec):
     steps: tuple[float, float] = (0.0, 1.0)    # window of step fractions
 
     def __post_init__(self) -> None:
-        parts = (self.parts,) if isinstance(self.parts, str) else tuple(self.parts)
-        if not parts or any(p not in PART_NAMES for p in parts) or len(set(parts)) != len(parts):
-            raise ValueError(f"ShiftTemporal.parts={self.parts!r} must be distinct names of {PART_NAMES}")
-        object.__setattr__(self, "parts", parts)
+        object.__setattr__(self, "parts", _distinct(self.parts, PART_NAMES, "ShiftTemporal.parts"))
         Shift("x", self.frames, self.unit_length)          # the same checks of frames and unit_length
         object.__setattr__(self, "steps", _window(self.steps, "ShiftTemporal.steps"))
-
-    @property
-    def window(self) -> tuple[float, float]:
-        return self.steps
 
     @property
     def site_kinds(self) -> tuple[str, ...]:
@@ -549,14 +525,7 @@ class ExampleBased(EditSpec):
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2 ** 63:
             raise ValueError(f"ExampleBased.seed={self.seed!r} must be an int in 0..2**63-1")
         object.__setattr__(self, "steps", _window(self.steps, "ExampleBased.steps"))
-        kinds = (self.kinds,) if isinstance(self.kinds, str) else tuple(self.kinds)
-        if not kinds or any(k not in _SELF_KINDS for k in kinds) or len(set(kinds)) != len(kinds):
-            raise ValueError(f"ExampleBased.kinds={self.kinds!r} must be distinct entries of {_SELF_KINDS}")
-        object.__setattr__(self, "kinds", kinds)
-
-    @property
-    def window(self) -> tuple[float, float]:
-        return self.steps
+        object.__setattr__(self, "kinds", _distinct(self.kinds, _SELF_KINDS, "ExampleBased.kinds"))
 
     @property
     def site_kinds(self) -> tuple[str, ...]:
