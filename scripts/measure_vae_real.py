@@ -11,9 +11,13 @@ Usage::
 length (floored to a multiple of 4, at most 196 frames) and compared in joint space:
 
 * root-aligned MPJPE (each pose's pelvis subtracted; the VAE-paper metric),
-* global MPJPE (no alignment: errors of the integrated root path count too) and
+* global MPJPE (no alignment: errors of the integrated root path count too),
 * the yaw drift: the largest error of the heading integrated from the root's angular velocity
   (degrees; issue 21 found it drives the root-aligned error on turning clips),
+* the local pose error: mean distance of the ``ric`` features (root-relative joints in the heading
+  frame, cm), which no root drift touches, and
+* per set, how well the decoder reproduces the root channels (rms, correlation and R^2 of the
+  angular velocity, also summed per latent frame; :func:`root_channel_stats`),
 
 all against ``features_to_joints`` (and the features) of the clip itself, MPJPE in cm; per clip and median / max
 per set. Sets: the real HumanML3D sample (``tests/data/humanml3d_sample``, clip 012314), pybullet's
@@ -70,18 +74,70 @@ def _crop(feats: np.ndarray, unit: int = 4, max_len: int = 196) -> np.ndarray:
     return feats[:n]
 
 
-def measure_clip(vae, mean, std, feats: np.ndarray) -> dict:
-    """Root-aligned and global MPJPE (cm) of one clip's posterior-mean reconstruction."""
+def measure_clip(vae, mean, std, feats: np.ndarray, pairs: list | None = None) -> dict:
+    """Root-aligned and global MPJPE (cm) of one clip's posterior-mean reconstruction.
+
+    ``pairs``, when given, receives ``(reconstruction, clip)`` (both ``(N, D)`` raw features, the clip
+    cropped as measured) for :func:`root_channel_stats`.
+    """
     from salad_core.eval.metrics import mpjpe
     from salad_core.eval.reconstruction import reconstruct_features
     from salad_core.motion import features_to_joints
 
     f = _crop(np.asarray(feats, dtype=np.float32), int(vae.config.downsample))
     rec = reconstruct_features(vae, mean, std, f[None], [len(f)])[0]
+    if pairs is not None:
+        pairs.append((rec, f))
     gt, pr = features_to_joints(f.astype(np.float64)), features_to_joints(rec.astype(np.float64))
     return {"frames": len(f), "mpjpe_cm": 100 * mpjpe(pr, gt, root_aligned=True),
             "global_cm": 100 * mpjpe(pr, gt, root_aligned=False),
-            "yaw_drift_deg": yaw_drift_deg(rec, f)}
+            "yaw_drift_deg": yaw_drift_deg(rec, f), "ric_cm": ric_error_cm(rec, f)}
+
+
+def ric_error_cm(rec: np.ndarray, feats: np.ndarray) -> float:
+    """Mean distance (cm) between the ``ric`` features of the reconstruction and the clip: the local
+    pose (root-relative joints in the heading frame), untouched by any root drift."""
+    from salad_core.skeleton import get_skeleton
+
+    sl = get_skeleton("humanml3d").feature_slices["ric"]
+    d = (np.asarray(rec, np.float64)[:, sl] - np.asarray(feats, np.float64)[:, sl]).reshape(len(rec), -1, 3)
+    return float(100 * np.linalg.norm(d, axis=-1).mean())
+
+
+#: The root channels of HumanML3D-layout features (columns 0-3).
+ROOT_CHANNELS = ("rot_vel", "vel_x", "vel_z", "root_y")
+
+
+def root_channel_stats(pairs: list[tuple[np.ndarray, np.ndarray]], unit: int = 4) -> dict:
+    """How well a set's reconstructions reproduce the root channels (issue 21: the decoder all but
+    dropped the angular velocity).
+
+    Parameters
+    ----------
+    pairs : list of ``(reconstruction, clip)``
+        Raw features ``(N, D)`` of each clip, ``N`` a multiple of ``unit``.
+    unit : int
+        Frames per latent frame: ``rot_vel_latent`` sums the angular velocity over each latent
+        frame's ``unit`` rows (the yaw change per latent frame, what the heading integrates).
+
+    Returns
+    -------
+    dict
+        ``{channel: {"rms_true", "rms_rec", "corr", "r2"}}`` over all frames of the set (radians
+        or metres per frame; ``root_y`` metres), for the four root channels and ``rot_vel_latent``.
+    """
+    rec = np.concatenate([r for r, _ in pairs]).astype(np.float64)
+    ref = np.concatenate([f for _, f in pairs]).astype(np.float64)
+    cols = {name: (rec[:, i], ref[:, i]) for i, name in enumerate(ROOT_CHANNELS)}
+    per_latent = lambda a: a.reshape(-1, unit).sum(1)                       # clips are whole latent frames
+    cols["rot_vel_latent"] = (per_latent(rec[:, 0]), per_latent(ref[:, 0]))
+    out = {}
+    for name, (r, t) in cols.items():
+        var = ((t - t.mean()) ** 2).sum()
+        out[name] = {"rms_true": float(np.sqrt((t ** 2).mean())), "rms_rec": float(np.sqrt((r ** 2).mean())),
+                     "corr": float(np.corrcoef(r, t)[0, 1]) if r.std() > 0 and t.std() > 0 else float("nan"),
+                     "r2": float(1 - ((t - r) ** 2).sum() / var) if var > 0 else float("nan")}
+    return out
 
 
 def yaw_drift_deg(rec: np.ndarray, feats: np.ndarray) -> float:
@@ -149,9 +205,11 @@ def summarise(rows: dict[str, dict]) -> dict:
     a = np.array([r["mpjpe_cm"] for r in rows.values()])
     g = np.array([r["global_cm"] for r in rows.values()])
     y = np.array([r["yaw_drift_deg"] for r in rows.values()])
+    c = np.array([r["ric_cm"] for r in rows.values()])
     return {"clips": len(rows), "mpjpe_median_cm": float(np.median(a)), "mpjpe_max_cm": float(a.max()),
             "global_median_cm": float(np.median(g)), "global_max_cm": float(g.max()),
-            "yaw_drift_median_deg": float(np.median(y)), "yaw_drift_max_deg": float(y.max())}
+            "yaw_drift_median_deg": float(np.median(y)), "yaw_drift_max_deg": float(y.max()),
+            "ric_median_cm": float(np.median(c)), "ric_mean_cm": float(c.mean())}
 
 
 def feature_stats(corpus: Path, general: Path, limit: int | None = None) -> dict:
@@ -210,13 +268,18 @@ def main(argv=None) -> int:
         sets["general_test"] = split_clips(args.general, "test", args.limit)
     results = {"vae": desc, "notes": notes, "sets": {}}
     for set_name, clips in sets.items():
-        rows = {name: measure_clip(vae, mean, std, f) for name, f in clips.items()}
+        pairs: list = []
+        rows = {name: measure_clip(vae, mean, std, f, pairs) for name, f in clips.items()}
         summary = summarise(rows)
-        results["sets"][set_name] = {"summary": summary, "clips": rows}
+        channels = root_channel_stats(pairs, int(vae.config.downsample))
+        results["sets"][set_name] = {"summary": summary, "root_channels": channels, "clips": rows}
         print(f"\n== {set_name}: {summary['clips']} clips, root-aligned MPJPE median {summary['mpjpe_median_cm']:.1f} cm, "
               f"max {summary['mpjpe_max_cm']:.1f} cm; global median {summary['global_median_cm']:.1f} cm, "
               f"max {summary['global_max_cm']:.1f} cm; yaw drift median {summary['yaw_drift_median_deg']:.1f} deg, "
-              f"max {summary['yaw_drift_max_deg']:.1f} deg")
+              f"max {summary['yaw_drift_max_deg']:.1f} deg; ric error median {summary['ric_median_cm']:.2f} cm")
+        rv, rl = channels["rot_vel"], channels["rot_vel_latent"]
+        print(f"  root angular velocity: rms {rv['rms_rec']:.4f} (true {rv['rms_true']:.4f}) rad/frame, "
+              f"corr {rv['corr']:.2f}; per latent frame corr {rl['corr']:.2f}, R^2 {rl['r2']:.2f}")
         if set_name in ("humanml3d_012314", "deepmimic"):
             print(f"  {'clip':24s} {'frames':>6s} {'MPJPE cm':>9s} {'global cm':>10s} {'yaw drift deg':>14s}")
             for name, r in rows.items():

@@ -243,3 +243,109 @@ def test_init_from_errors_name_the_problem(fake_corpus, base_run, tmp_path):
                        _train_cfg(init_from=str(base_run)), DistEnv())
     with pytest.raises(FileNotFoundError, match="neither a pipeline folder"):
         load_init_vae(tmp_path)
+
+
+# ------------------------------------------------------------------ root-channel weight
+def test_config_validates_lambda_root_features():
+    assert VAEConfig().lambda_root_features == 0.0
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="lambda_root_features"):
+            VAEConfig(lambda_root_features=bad)
+
+
+def test_root_features_term_by_hand():
+    # L1 criterion so the expected values are exact: an error of 0.5 on the angular velocity alone
+    vae = _vae(recon_loss="l1", lambda_root_features=3.0)
+    x = torch.randn(2, 16, D, generator=torch.Generator().manual_seed(0))
+    mu = logvar = torch.zeros(2, 4, vae.num_parts, vae.latent_dim)
+    recon = x.clone()
+    recon[..., 0] += 0.5
+    out = vae.loss(x, recon, mu, logvar)
+    assert out["root_feat"].item() == pytest.approx(0.5 / 4, rel=1e-6)         # mean over the 4 root columns
+    assert out["rec"].item() == pytest.approx(0.5 / D, rel=1e-5)                # its share of rec: 1/263
+    base = _vae(recon_loss="l1").loss(x, recon, mu, logvar)
+    assert "root_feat" not in base                                             # off by default: official loss
+    torch.testing.assert_close(out["loss"], base["loss"] + 3.0 * out["root_feat"])
+    # an error outside the root slice leaves the term at 0
+    other = x.clone()
+    other[..., 4] += 0.5
+    assert vae.loss(x, other, mu, logvar)["root_feat"].item() == 0.0
+    # masked frames do not count: the error on frames 8.. only
+    late = x.clone()
+    late[:, 8:, 1] += 1.0
+    mask = torch.zeros(2, 16, dtype=torch.bool)
+    mask[:, :8] = True
+    assert vae.loss(x, late, mu, logvar, mask=mask)["root_feat"].item() == 0.0
+    assert vae.loss(x, late, mu, logvar)["root_feat"].item() == pytest.approx(0.5 * 1.0 / 4, rel=1e-6)
+
+
+def test_root_features_term_moves_the_decoder_towards_the_root_channels():
+    # one gradient step of the decoder: with the weight, the root channels' error falls more
+    torch.manual_seed(0)
+    x = torch.randn(4, 16, D, generator=torch.Generator().manual_seed(2))
+    drops = {}
+    for w in (0.0, 10.0):
+        vae = _vae(lambda_root_features=w)
+        vae.eval()
+        opt = torch.optim.SGD(list(vae.conv_dec.parameters()) + list(vae.motion_dec.parameters()), lr=0.05)
+        enc = vae.encode(x, sample=False)
+        before = (vae.decode(enc.mu)[..., :4] - x[..., :4]).abs().mean().item()
+        vae.loss(x, vae.decode(enc.mu), enc.mu, enc.logvar)["loss"].backward()
+        opt.step()
+        with torch.no_grad():
+            after = (vae.decode(enc.mu)[..., :4] - x[..., :4]).abs().mean().item()
+        drops[w] = before - after
+    assert drops[10.0] > 3 * max(drops[0.0], 1e-6)
+
+
+# ------------------------------------------------------------------------ CLI flags
+def test_cli_parses_init_from_and_train_parts(tmp_path):
+    from salad_core.train.cli import build_parser, main
+
+    args = build_parser().parse_args(["vae", "--data", "d", "--out", "o", "--init-from", "runs/vae",
+                                      "--train-parts", "decoder"])
+    assert args.init_from == "runs/vae" and args.train_parts == "decoder"
+    assert build_parser().parse_args(["vae", "--data", "d", "--out", "o"]).train_parts is None
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["vae", "--data", "d", "--out", "o", "--train-parts", "encoder"])
+    for what in ("denoiser", "keymotion"):
+        with pytest.raises(SystemExit) as exc:
+            main([what, "--data", "d", "--out", str(tmp_path / what), "--init-from", "runs/vae"])
+        assert exc.value.code == 2
+
+
+def test_cli_init_from_flag_error_message(capsys):
+    from salad_core.train.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["denoiser", "--data", "d", "--out", "o", "--train-parts", "decoder"])
+    assert "--init-from/--train-parts are for 'salad train vae' only" in capsys.readouterr().err
+    # decoder without any init_from: the config's own error, naming the field
+    with pytest.raises(ValueError, match="needs init_from"):
+        main(["vae", "--data", "d", "--out", "o", "--train-parts", "decoder"])
+
+
+def test_cli_decoder_fine_tuning_two_steps(fake_corpus, base_run, tmp_path, capsys):
+    from salad_core.io import load_model
+    from salad_core.train import main
+
+    conf = tmp_path / "conf.json"
+    conf.write_text(json.dumps({
+        "model": {"latent_dim": 8, "n_extra_layers": 0, "lambda_root": 0.5, "lambda_root_features": 2.0},
+        "train": {"batch_size": 8, "max_steps": 5, "warmup_steps": 0, "num_threads": 1, "window": 64,
+                  "val_every": 0, "ckpt_every": 0, "log_every": 1, "seed": 3}}))
+    out = tmp_path / "dec"
+    assert main(["vae", "--data", str(fake_corpus), "--out", str(out), "--config", str(conf), "--steps", "2",
+                 "--init-from", str(base_run), "--train-parts", "decoder", "--no-progress"]) == 0
+    assert "vae: step 2" in capsys.readouterr().out
+    doc = json.loads((out / "config.json").read_text())
+    assert doc["train"]["init_from"] == str(base_run) and doc["train"]["train_parts"] == "decoder"
+    assert doc["model"]["lambda_root_features"] == 2.0
+    a, _, _ = load_model(base_run / "best")
+    b, _, _ = load_model(out / "latest")
+    sa, sb = a.state_dict(), b.state_dict()
+    assert all(torch.equal(sa[k], sb[k]) for k in sa if k.split(".")[0] in ("motion_enc", "conv_enc", "dist"))
+    assert any(not torch.equal(sa[k], sb[k]) for k in sa if k.split(".")[0] in ("conv_dec", "motion_dec"))
+    entries = [json.loads(l) for l in (out / "log.jsonl").read_text().splitlines()]
+    logged = [e for e in entries if "loss" in e]
+    assert len(logged) == 2 and all(np.isfinite(e["root_feat"]) and np.isfinite(e["root"]) for e in logged)

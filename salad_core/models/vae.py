@@ -76,6 +76,10 @@ class VAEConfig:
     lambda_bone: float = 0.0          # weight of the bone-length term (an addition; 0 = official loss)
     lambda_root: float = 0.0          # weight of the integrated-root term (an addition; 0 = official loss):
                                       # yaw error (rad) + global joint error (m) over the window, see root_error
+    lambda_root_features: float = 0.0  # extra weight of the root channels (features 0-3: angular velocity, x/z
+                                      # velocity, height) in normalised units, on top of their share of rec
+                                      # (an addition; 0 = official loss): rec averages 263 columns, so a
+                                      # decoder can all but ignore these 4, which the whole path integrates
     latent_noise: float = 0.0         # training only: std of extra Gaussian noise on the sampled latent, so
                                       # the decoder learns latents near (not only on) the data (an addition)
     pose_latent_dim: int | None = None  # "pose" only: Dz of the one-vector latent; None -> parts x latent_dim
@@ -107,7 +111,8 @@ class VAEConfig:
             raise ValueError(f"dropout must be in [0, 1), got {self.dropout}")
         if self.recon_loss not in RECON_LOSSES:
             raise ValueError(f"recon_loss={self.recon_loss!r} is not supported; choose one of {RECON_LOSSES}")
-        for name in ("lambda_pos", "lambda_vel", "lambda_kl", "lambda_bone", "lambda_root", "latent_noise"):
+        for name in ("lambda_pos", "lambda_vel", "lambda_kl", "lambda_bone", "lambda_root", "lambda_root_features",
+                     "latent_noise"):
             val = getattr(self, name)
             if not np.isfinite(val) or val < 0:
                 raise ValueError(f"{name} must be a finite number >= 0, got {val}")
@@ -418,8 +423,11 @@ class MotionVAE(nn.Module):
              mask: torch.Tensor | None = None,
              stats: tuple[torch.Tensor, torch.Tensor] | None = None) -> dict[str, torch.Tensor]:
         """Training objective ``L = L_rec + λ_pos L_pos + λ_vel L_vel + λ_kl L_kl`` (paper eq. 3),
-        plus ``λ_bone L_bone`` when ``config.lambda_bone > 0`` (an addition, see :meth:`bone_lengths`)
-        and ``λ_root L_root`` when ``config.lambda_root > 0`` (an addition, see :meth:`root_error`).
+        plus ``λ_bone L_bone`` when ``config.lambda_bone > 0`` (an addition, see :meth:`bone_lengths`),
+        ``λ_root L_root`` when ``config.lambda_root > 0`` (an addition, see :meth:`root_error`) and
+        ``λ_rf L_root_feat`` when ``config.lambda_root_features > 0`` (an addition: the criterion on the
+        root slice, features 0-3, averaged over those 4 columns, so they weigh ``1 + 263 λ_rf / 4`` times
+        what ``rec`` alone gives them).
 
         All reconstruction terms compare **normalised** features, as the official trainer does:
         ``rec`` on the whole vector, ``pos`` on the ``ric`` slice (root-relative joint positions,
@@ -441,7 +449,8 @@ class MotionVAE(nn.Module):
         Returns
         -------
         dict with scalar tensors ``loss``, ``rec``, ``pos``, ``vel``, ``kl`` (and ``bone`` in metres
-        when ``lambda_bone > 0``; ``root`` = ``root_yaw`` (rad) + ``root_pos`` (m) when ``lambda_root > 0``).
+        when ``lambda_bone > 0``; ``root`` = ``root_yaw`` (rad) + ``root_pos`` (m) when ``lambda_root > 0``;
+        ``root_feat`` (normalised units) when ``lambda_root_features > 0``).
         """
         if x.shape != recon.shape:
             raise ValueError(f"recon must have the shape of x {tuple(x.shape)}, got {tuple(recon.shape)}")
@@ -478,6 +487,12 @@ class MotionVAE(nn.Module):
         kl = masked_mean(kl_el, lat_w)
         total = rec + cfg.lambda_pos * pos + cfg.lambda_vel * vel + cfg.lambda_kl * kl
         out = {"loss": total, "rec": rec, "pos": pos, "vel": vel, "kl": kl}
+        if cfg.lambda_root_features > 0:
+            # the root channels again, averaged over their own 4 columns (normalised units, as rec)
+            root_feat = masked_mean(err[..., sl["root"]], frame_w)
+            out["root_feat"] = root_feat
+            total = total + cfg.lambda_root_features * root_feat
+            out["loss"] = total
         if cfg.lambda_bone > 0:
             if stats is None:
                 raise ValueError("lambda_bone > 0 needs stats=(mean, std) of the features to measure bone lengths")

@@ -43,6 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="salad train", formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Train the SALAD VAE or denoiser, or the three KeyMotion models.",
         epilog="example:\n  salad train vae --data data/procedural --out runs/vae --config configs/default_vae.json\n"
+               "  salad train vae --data data/procedural --out runs/vae_dec --config configs/v2_vae_decoder.json "
+               "--init-from runs/vae --train-parts decoder\n"
                "  salad train denoiser --data data/procedural --out runs/denoiser --vae runs/vae\n"
                "  salad train keymotion --data data/procedural --out runs/keymotion --config configs/default_keymotion.json")
     parser.add_argument("what", choices=TRAIN_TARGETS, help="which model to train")
@@ -60,6 +62,12 @@ def build_parser() -> argparse.ArgumentParser:
                              "(scripts/build_general_motion.py; overrides the config's general_data)")
     parser.add_argument("--general-ratio", type=float, metavar="R",
                         help="vae only: share of windows drawn from --general (default 0.5)")
+    parser.add_argument("--init-from", metavar="DIR",
+                        help="vae only: start from this VAE run or pipeline folder (its weights and normalisation; "
+                             "overrides the config's init_from)")
+    parser.add_argument("--train-parts", choices=("all", "decoder"),
+                        help="vae only: 'decoder' freezes the encoder so its posteriors stay bit-identical "
+                             "(needs --init-from or the config's init_from); default 'all'")
     parser.add_argument("--text-encoder", help="denoiser, keymotion: 'minilm' (default) or a local CLIP folder")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -119,6 +127,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--vae is for the denoiser only (keymotion trains its own keyframe VAE)")
     if (args.general is not None or args.general_ratio is not None) and args.what != "vae":
         parser.error("--general/--general-ratio are for 'salad train vae' only")
+    if (args.init_from is not None or args.train_parts is not None) and args.what != "vae":
+        parser.error(f"--init-from/--train-parts are for 'salad train vae' only (fine-tuning a VAE), not {args.what!r}")
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     from salad_core.allocator import tune_from_environment
@@ -131,7 +141,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     train_doc = doc.get("train", {k: v for k, v in doc.items() if k not in ("model", "diffusion", "text_encoder", "model_type", "task", "_path")})
     overrides = {"max_steps": args.steps, "batch_size": args.batch_size}
     if args.what == "vae":
-        overrides.update(general_data=args.general, general_ratio=args.general_ratio)
+        overrides.update(general_data=args.general, general_ratio=args.general_ratio,
+                         init_from=args.init_from, train_parts=args.train_parts)
     if args.no_progress:
         overrides["progress"] = False
     train_config = config_from_dict(cls, {**train_doc, **{k: v for k, v in overrides.items() if v is not None}})
