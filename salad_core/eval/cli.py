@@ -104,8 +104,18 @@ def build_parser() -> argparse.ArgumentParser:
     phys.add_argument("--sample", default=None, metavar="DIR",
                       help="folder of real HumanML3D clips for a reference row (default: tests/data/"
                            "humanml3d_sample of a source checkout if present; 'none' to leave it out)")
+    sweep = p.add_argument_group("choosing the default guidance (--guidance-sweep)")
+    sweep.add_argument("--guidance-sweep", action="store_true",
+                       help="evaluate every guidance of --scales x --rescales x --intervals with the T2M protocol "
+                            "AND the physics benchmark (--seeds, --prompts, --recovery) and choose the default by "
+                            "the rule of salad_core.eval.guidance_sweep (default --scales 1,2,3,4.5,6,7.5)")
+    sweep.add_argument("--rescales", default="0", help="comma-separated guidance rescale values phi in [0, 1] "
+                                                        "(default 0)")
+    sweep.add_argument("--intervals", default="full",
+                       help="comma-separated guidance intervals of t/T: 'full' or 'lo-hi', e.g. full,0-0.5")
     p.add_argument("--out", default=None, help="folder for results.{csv,md,tex,json,png} (with --physics: "
-                                               "physics.{md,json} and physics_motions.npz)")
+                                               "physics.{md,json} and physics_motions.npz; with --guidance-sweep: "
+                                               "guidance_sweep.{md,json})")
     p.add_argument("--progress", action="store_true", help="show a progress bar")
     p.add_argument("--debug", action="store_true", help="show full tracebacks")
     return p
@@ -266,6 +276,80 @@ def run_physics(args) -> int:
     return 0
 
 
+def _floats(flag: str, text: str) -> list[float]:
+    try:
+        out = [float(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        raise ValueError(f"{flag} {text!r} must be comma-separated numbers") from None
+    if not out:
+        raise ValueError(f"{flag} is empty")
+    return out
+
+
+def _intervals(text: str) -> list[tuple[float, float] | None]:
+    out: list[tuple[float, float] | None] = []
+    for part in (s.strip() for s in text.split(",") if s.strip()):
+        if part == "full":
+            out.append(None)
+            continue
+        try:
+            lo, hi = (float(v) for v in part.split("-"))
+        except ValueError:
+            raise ValueError(f"--intervals: {part!r} is neither 'full' nor 'lo-hi' (e.g. 0-0.5)") from None
+        out.append((lo, hi))
+    if not out:
+        raise ValueError("--intervals is empty; use e.g. full or full,0-0.5")
+    return out
+
+
+def run_guidance_sweep(args) -> int:
+    """``salad eval --guidance-sweep``: T2M protocol + physics benchmark per candidate guidance, and the
+    default chosen by :func:`salad_core.eval.guidance_sweep.choose`."""
+    from dataclasses import asdict
+
+    from salad_core.pipeline import SaladPipeline
+
+    from .guidance_sweep import choose, guidance_grid, run_sweep, sweep_markdown
+    from .physics import joints_reader
+    from .physics_prompts import BenchSettings
+    from .train_evaluator import load_packaged_evaluator
+
+    if args.cfg_sweep or args.official or args.keymotion is not None or args.motions is not None:
+        raise ValueError("--guidance-sweep takes neither --cfg-sweep, --official, --keymotion nor --motions")
+    if args.seeds < 1:
+        raise ValueError(f"--seeds {args.seeds} must be >= 1")
+    data = Path(args.data)
+    if not (data / f"{args.split}.txt").is_file():
+        raise FileNotFoundError(f"--data {data} has no {args.split}.txt; give a corpus folder "
+                                "(salad corpus build --out DIR)")
+    grid = guidance_grid(_scales(args.scales or "1,2,3,4.5,6,7.5"), _floats("--rescales", args.rescales),
+                         _intervals(args.intervals))
+    settings = _settings(args)
+    bench = BenchSettings(steps=args.steps, seeds=tuple(range(args.seed, args.seed + args.seeds)),
+                          num_prompts=args.prompts)
+    evaluator, _ = load_packaged_evaluator(args.evaluator)
+    pipe = SaladPipeline.from_pretrained(args.weights)
+    sample = _default_sample() if args.sample is None else (None if args.sample.lower() == "none" else Path(args.sample))
+    print(f"{len(grid)} candidates; {settings.describe()}", flush=True)
+    t0 = time.perf_counter()
+    result = run_sweep(pipe, grid, data, evaluator, settings, bench, joints_of=joints_reader(args.recovery, pipe.skeleton),
+                       sample_dir=sample, log=lambda line: print(line, flush=True))
+    pick, why = choose(result["rows"])
+    result["chosen"] = {"index": pick, "why": why, "guidance": asdict(grid[pick])}
+    result["settings"].update(weights=pipe.source, data=str(data), recovery=args.recovery,
+                              seconds=round(time.perf_counter() - t0, 1))
+    md = sweep_markdown(result, pick) + f"\n\nChosen: {why}.\n"
+    print(md)
+    print('pipeline.json entry: "guidance": ' + json.dumps(asdict(grid[pick])))
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "guidance_sweep.md").write_text(md, encoding="utf-8")
+        (out / "guidance_sweep.json").write_text(json.dumps(result, indent=1, default=str) + "\n", encoding="utf-8")
+        print(f"wrote {out / 'guidance_sweep.md'} and {out / 'guidance_sweep.json'}")
+    return 0
+
+
 def run(args) -> int:
     import torch
 
@@ -277,8 +361,13 @@ def run(args) -> int:
         if args.threads < 1:
             raise ValueError(f"--threads {args.threads} must be >= 1")
         torch.set_num_threads(args.threads)
+    if args.physics and args.guidance_sweep:
+        raise ValueError("--physics and --guidance-sweep are separate runs; --guidance-sweep already runs the "
+                         "physics benchmark for every candidate")
     if args.physics:
         return run_physics(args)
+    if args.guidance_sweep:
+        return run_guidance_sweep(args)
     data = Path(args.data)
     if not data.is_dir():
         raise FileNotFoundError(f"--data {data} is not a folder")

@@ -1,0 +1,142 @@
+"""Choosing the default guidance: the grid, the fixed-guidance wrapper, the rule, the sweep and its CLI."""
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from salad_core.data.dataset import load_mean_std
+from salad_core.eval import guidance_sweep as gs
+from salad_core.eval.physics_prompts import BenchSettings
+from salad_core.eval.settings import EvalSettings
+from salad_core.motion import features_to_joints
+from salad_core.sampling import Guidance
+from salad_core.skeleton import get_skeleton
+
+SK = get_skeleton("humanml3d")
+pytestmark = pytest.mark.usefixtures("single_thread")
+
+
+def test_grid_is_the_product_in_order_and_labels_are_distinct():
+    grid = gs.guidance_grid([1.0, 4.0], [0.0, 0.7], [None, (0.0, 0.5)])
+    assert len(grid) == 8
+    assert grid[0] == Guidance(1.0) and grid[1] == Guidance(1.0, 0.0, (0.0, 0.5)) and grid[-1] == Guidance(4.0, 0.7,
+                                                                                                        (0.0, 0.5))
+    assert [gs.guidance_label(g) for g in grid[:4]] == ["w=1", "w=1 t/T in [0,0.5]", "w=1 phi=0.7",
+                                                        "w=1 phi=0.7 t/T in [0,0.5]"]
+    with pytest.raises(ValueError, match="repeats a candidate"):
+        gs.guidance_grid([2.0, 2.0])
+    with pytest.raises(ValueError, match="empty"):
+        gs.guidance_grid([])
+    with pytest.raises(ValueError, match="rescale must be in"):
+        gs.guidance_grid([2.0], [1.5])
+
+
+def test_fixed_guidance_replaces_the_weight_the_protocol_asks_for():
+    calls = []
+
+    def pipe(prompts, **kw):
+        calls.append(kw)
+        return "out"
+
+    g = Guidance(3.0, 0.5, (0.0, 0.6))
+    gen = gs.FixedGuidance(pipe, g)
+    assert gen(["a person walks"], lengths=[40], seed=2, guidance_scale=7.5, num_steps=5, solver="ddim") == "out"
+    assert calls == [dict(lengths=[40], seed=2, guidance_scale=g, num_steps=5, solver="ddim")]
+    with pytest.raises(TypeError, match="Guidance"):
+        gs.FixedGuidance(pipe, 7.5)
+
+
+def _row(label, r3, fid, targets_passed, bone=2.0):
+    return {"label": label, "t2m": {"r_precision_top3": {"mean": r3, "ci": 0.01}, "fid": {"mean": fid, "ci": 0.1}},
+            "physics": {"targets_passed": targets_passed, "bone_p95_cm": bone}}
+
+
+def test_rule_text_faithfulness_first_then_physics_then_fid_then_bones():
+    rows = [_row("w=1", 0.80, 0.5, 5),          # most plausible but ignores the text: not eligible
+            _row("w=3", 0.955, 0.9, 3),         # eligible (0.955 >= 0.96 - 0.01), 3 targets
+            _row("w=5", 0.960, 0.4, 2),         # best text, fewer targets
+            _row("w=7", 0.951, 0.3, 3)]         # eligible, 3 targets, lower FID than w=3
+    pick, why = gs.choose(rows)
+    assert pick == 3 and why.startswith("w=7:") and "3 of 4 candidates" in why
+    rows[3]["t2m"]["r_precision_top3"]["mean"] = 0.949           # falls out of the tolerance
+    assert gs.choose(rows)[0] == 1
+    rows[1]["t2m"]["fid"]["mean"] = 0.3                          # FID tie with nobody; bones break ties
+    rows.append(_row("w=4", 0.958, 0.3, 3, bone=1.0))
+    assert gs.choose(rows)[0] == 4
+    rows[4]["t2m"]["fid"]["mean"] = float("nan")                 # a missing FID loses the tie
+    assert gs.choose(rows)[0] == 1
+    with pytest.raises(ValueError, match="no sweep rows"):
+        gs.choose([])
+
+
+class NoisyPipe:
+    """Features around the corpus mean whose noise grows with the guidance weight (a stand-in whose
+    FID and bone error must rise with w), recording the Guidance of every call."""
+
+    source = "noisy"
+
+    def __init__(self, mean, std):
+        self.mean, self.std, self.seen = mean, std, []
+
+    def __call__(self, prompts, lengths=None, seed=0, guidance_scale=None, num_steps=50):
+        assert isinstance(guidance_scale, Guidance)
+        self.seen.append(guidance_scale)
+        seeds = seed if isinstance(seed, list) else [seed + i for i in range(len(prompts))]
+        n = max(lengths)
+        feats = np.zeros((len(prompts), n, SK.feature_dim), np.float32)
+        for i, (s, m) in enumerate(zip(seeds, lengths)):
+            z = np.random.default_rng(s).standard_normal((m, SK.feature_dim))
+            feats[i, :m] = self.mean + 0.5 * guidance_scale.scale ** 2 * self.std * z
+        return SimpleNamespace(features=feats, lengths=list(lengths))
+
+
+def test_sweep_measures_every_candidate_with_both_protocols(tiny_procedural_corpus, tiny_random_evaluator):
+    mean, std = load_mean_std(tiny_procedural_corpus)
+    pipe = NoisyPipe(mean, std)
+    grid = gs.guidance_grid([1.0, 6.0], [0.0, 0.5])
+    settings = EvalSettings(replications=1, mm=False, seed=1)
+    bench = BenchSettings(steps=1, seeds=(0, 1), num_prompts=2)
+
+    def joints_of(out):
+        return [features_to_joints(out.features[b, :n], SK) for b, n in enumerate(out.lengths)]
+
+    lines = []
+    res = gs.run_sweep(pipe, grid, tiny_procedural_corpus, tiny_random_evaluator, settings, bench,
+                       joints_of=joints_of, log=lines.append)
+    assert [r["label"] for r in res["rows"]] == ["w=1", "w=1 phi=0.5", "w=6", "w=6 phi=0.5"]
+    assert {g.scale for g in pipe.seen} == {1.0, 6.0} and {g.rescale for g in pipe.seen} == {0.0, 0.5}
+    assert "corpus test split (real)" in res["references"]
+    by = {r["label"]: r for r in res["rows"]}
+    # the noise grows with w: the distribution moves away (FID) and the bones stretch
+    assert by["w=6"]["t2m"]["fid"]["mean"] > by["w=1"]["t2m"]["fid"]["mean"]
+    assert by["w=6"]["physics"]["bone_p95_cm"] > by["w=1"]["physics"]["bone_p95_cm"]
+    for r in res["rows"]:
+        assert r["physics"]["checks_total"] > 0 and 0 <= r["physics"]["targets_passed"] <= len(gs.PHYSICS_TARGETS)
+        assert set(r["t2m"]) >= {"r_precision_top3", "fid"}
+    md = gs.sweep_markdown(res, chosen=2)
+    assert "| w=6 **(chosen)** |" in md and "Rule: eligible" in md and md.count("\n| w=") == 4
+    assert any("T2M protocol done" in line for line in lines)
+    json.dumps(res)                                                  # JSON-ready
+
+
+def test_cli_sweep_on_the_shipped_weights(tiny_procedural_corpus, tmp_path, capsys):
+    from salad_core.eval.cli import main
+
+    out = tmp_path / "sweep"
+    status = main(["--guidance-sweep", "--data", str(tiny_procedural_corpus), "--scales", "5", "--intervals",
+                   "full,0-0.5", "--replications", "1", "--no-mm", "--prompts", "1", "--seeds", "2", "--steps", "3",
+                   "--sample", "none", "--out", str(out)])
+    assert status == 0
+    doc = json.loads((out / "guidance_sweep.json").read_text())
+    assert [r["label"] for r in doc["rows"]] == ["w=5", "w=5 t/T in [0,0.5]"]
+    chosen = doc["chosen"]
+    assert 0 <= chosen["index"] < 2 and chosen["guidance"] == doc["rows"][chosen["index"]]["guidance"]
+    assert doc["settings"]["weights"].endswith("salad") and doc["settings"]["recovery"] == "positions"
+    printed = capsys.readouterr().out
+    assert '"guidance": {"scale":' in printed and "Chosen: " in (out / "guidance_sweep.md").read_text()
+    assert main(["--guidance-sweep", "--physics", "--data", str(tiny_procedural_corpus)]) == 2
+    assert main(["--guidance-sweep", "--data", str(tiny_procedural_corpus), "--intervals", "0.5"]) == 2
+    assert "neither 'full' nor 'lo-hi'" in capsys.readouterr().err
