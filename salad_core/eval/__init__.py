@@ -17,6 +17,8 @@ protocol that runs them, its tables and the paper's published numbers. One job p
 - :mod:`salad_core.eval.reconstruction`: VAE reconstruction FID / MPJPE (Table 2).
 - :mod:`salad_core.eval.physics`, :mod:`salad_core.eval.physics_prompts`: the physical
   plausibility benchmark.
+- :mod:`salad_core.eval.guidance_sweep`: the default guidance chosen from one sweep over the T2M
+  metrics and the physics benchmark (``salad eval --guidance-sweep``).
 - :mod:`salad_core.eval.heldout`: held-out procedural clips; a notebook's data and evaluator.
 - :mod:`salad_core.eval.official`: the official SALAD release as a pipeline.
 - :mod:`salad_core.eval.length_buckets`: batches denoised in groups of similar length.
