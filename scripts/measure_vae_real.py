@@ -74,18 +74,19 @@ def _crop(feats: np.ndarray, unit: int = 4, max_len: int = 196) -> np.ndarray:
     return feats[:n]
 
 
-def measure_clip(vae, mean, std, feats: np.ndarray, pairs: list | None = None) -> dict:
+def measure_clip(vae, mean, std, feats: np.ndarray, pairs: list | None = None, sample: bool = False) -> dict:
     """Root-aligned and global MPJPE (cm) of one clip's posterior-mean reconstruction.
 
     ``pairs``, when given, receives ``(reconstruction, clip)`` (both ``(N, D)`` raw features, the clip
-    cropped as measured) for :func:`root_channel_stats`.
+    cropped as measured) for :func:`root_channel_stats`. ``sample`` decodes a posterior sample
+    (``mu + eps * sigma``, seed 0) instead of the mean.
     """
     from salad_core.eval.metrics import mpjpe
     from salad_core.eval.reconstruction import reconstruct_features
     from salad_core.motion import features_to_joints
 
     f = _crop(np.asarray(feats, dtype=np.float32), int(vae.config.downsample))
-    rec = reconstruct_features(vae, mean, std, f[None], [len(f)])[0]
+    rec = reconstruct_features(vae, mean, std, f[None], [len(f)], sample=sample)[0]
     if pairs is not None:
         pairs.append((rec, f))
     gt, pr = features_to_joints(f.astype(np.float64)), features_to_joints(rec.astype(np.float64))
@@ -240,6 +241,9 @@ def main(argv=None) -> int:
     ap.add_argument("--general", type=Path, default=None, help="general-motion set: its test split is measured too")
     ap.add_argument("--limit", type=int, default=200, help="clips per procedural test split (default 200)")
     ap.add_argument("--json", type=Path, default=None, help="write every figure to this JSON file")
+    ap.add_argument("--sample", action="store_true",
+                    help="decode posterior samples mu + eps * sigma (seed 0) instead of the mean: how the decoder "
+                         "treats latents as noisy as a denoiser's training targets")
     ap.add_argument("--stats", action="store_true", help="print feature-range figures instead (needs --corpus, --general)")
     args = ap.parse_args(argv)
 
@@ -260,16 +264,17 @@ def main(argv=None) -> int:
 
     torch.set_grad_enabled(False)
     vae, mean, std, desc = load_vae(args.vae)
-    print(f"VAE: {desc}")
+    print(f"VAE: {desc}; decoding the {'posterior samples (seed 0)' if args.sample else 'posterior mean'}")
     sets, notes = real_clips()
     if args.corpus is not None:
         sets["corpus_test"] = split_clips(args.corpus, "test", args.limit)
     if args.general is not None:
         sets["general_test"] = split_clips(args.general, "test", args.limit)
-    results = {"vae": desc, "notes": notes, "sets": {}}
+    results = {"vae": desc, "decoded": "posterior samples (seed 0)" if args.sample else "posterior mean",
+               "notes": notes, "sets": {}}
     for set_name, clips in sets.items():
         pairs: list = []
-        rows = {name: measure_clip(vae, mean, std, f, pairs) for name, f in clips.items()}
+        rows = {name: measure_clip(vae, mean, std, f, pairs, sample=args.sample) for name, f in clips.items()}
         summary = summarise(rows)
         channels = root_channel_stats(pairs, int(vae.config.downsample))
         results["sets"][set_name] = {"summary": summary, "root_channels": channels, "clips": rows}

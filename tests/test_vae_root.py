@@ -349,3 +349,60 @@ def test_cli_decoder_fine_tuning_two_steps(fake_corpus, base_run, tmp_path, caps
     entries = [json.loads(l) for l in (out / "log.jsonl").read_text().splitlines()]
     logged = [e for e in entries if "loss" in e]
     assert len(logged) == 2 and all(np.isfinite(e["root_feat"]) and np.isfinite(e["root"]) for e in logged)
+
+
+# ------------------------------------------------------------- posterior-mean decoding
+def test_posterior_noise_validates_and_zero_decodes_the_mean():
+    from salad_core.train.vae_trainer import VAEObjective
+
+    assert VAEConfig().posterior_noise == 1.0                                  # official: decode samples
+    with pytest.raises(ValueError, match="posterior_noise"):
+        VAEConfig(posterior_noise=-0.5)
+    x = torch.randn(2, 16, D, generator=torch.Generator().manual_seed(4))
+    g = torch.Generator().manual_seed(5)
+    eps1, eps2 = (torch.randn(2, 4, 7, 8, generator=g) for _ in range(2))
+    losses = {}
+    for pn in (0.0, 1.0):
+        vae = _vae(posterior_noise=pn, dropout=0.0)
+        obj = VAEObjective(vae).eval()
+        with torch.no_grad():
+            losses[pn] = (obj(x, eps1)["loss"].item(), obj(x, eps2)["loss"].item())
+            if pn == 0.0:
+                enc = vae.encode(x, sample=False)
+                want = vae.loss(x, vae.decode(enc.mu), enc.mu, enc.logvar)["loss"].item()
+    assert losses[0.0][0] == losses[0.0][1] == pytest.approx(want, rel=1e-6)   # the noise plays no part
+    assert losses[1.0][0] != losses[1.0][1]
+
+
+# -------------------------------------------------------------- measurement helpers
+def _measure_module():
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "measure_vae_real.py"
+    spec = importlib.util.spec_from_file_location("measure_vae_real", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_root_channel_stats_and_ric_error_by_hand():
+    m = _measure_module()
+    rng = np.random.default_rng(0)
+    ref = rng.standard_normal((2, 8, D)) * 0.02
+    ref[..., 0] -= ref[..., 0].mean()                                       # zero-mean angular velocity
+    rec = ref.copy()
+    rec[..., 0] *= 0.5                                                      # a decoder at half the gain
+    rec[..., 3] = ref[..., 3].mean()                                        # a flat root height
+    s = m.root_channel_stats([(rec[0], ref[0]), (rec[1], ref[1])], unit=4)
+    rv = s["rot_vel"]
+    assert rv["corr"] == pytest.approx(1.0) and rv["rms_rec"] == pytest.approx(0.5 * rv["rms_true"])
+    assert rv["r2"] == pytest.approx(0.75)                                  # 1 - 0.5^2
+    assert s["vel_x"]["r2"] == 1.0 and np.isnan(s["root_y"]["corr"])         # flat: no correlation
+    blocks = ref[..., 0].reshape(-1, 4).sum(1)
+    assert s["rot_vel_latent"]["rms_true"] == pytest.approx(np.sqrt((blocks ** 2).mean()))
+    # ric: every joint 1 cm off along x -> 1 cm; nothing else in the vector counts
+    off = ref[0].copy()
+    off[:, SK.feature_slices["ric"]] += np.tile([0.01, 0.0, 0.0], SK.num_joints - 1)
+    off[:, :4] += 5.0
+    assert m.ric_error_cm(off, ref[0]) == pytest.approx(1.0)
+    assert m.ric_error_cm(ref[0], ref[0]) == 0.0

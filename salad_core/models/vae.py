@@ -82,6 +82,10 @@ class VAEConfig:
                                       # decoder can all but ignore these 4, which the whole path integrates
     latent_noise: float = 0.0         # training only: std of extra Gaussian noise on the sampled latent, so
                                       # the decoder learns latents near (not only on) the data (an addition)
+    posterior_noise: float = 1.0      # training only: scale of the reparameterisation noise eps * sigma
+                                      # (1 = official: decode posterior samples; 0 = decode the posterior
+                                      # mean). Why: the heading rate lives in directions of mu whose spread is
+                                      # below sigma, so a decoder trained on samples cannot read it (issue 21)
     pose_latent_dim: int | None = None  # "pose" only: Dz of the one-vector latent; None -> parts x latent_dim
     pose_width: int | None = None     # "pose" only: width of MLP/conv stack; None -> the pose latent dim
 
@@ -112,7 +116,7 @@ class VAEConfig:
         if self.recon_loss not in RECON_LOSSES:
             raise ValueError(f"recon_loss={self.recon_loss!r} is not supported; choose one of {RECON_LOSSES}")
         for name in ("lambda_pos", "lambda_vel", "lambda_kl", "lambda_bone", "lambda_root", "lambda_root_features",
-                     "latent_noise"):
+                     "latent_noise", "posterior_noise"):
             val = getattr(self, name)
             if not np.isfinite(val) or val < 0:
                 raise ValueError(f"{name} must be a finite number >= 0, got {val}")

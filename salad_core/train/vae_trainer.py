@@ -74,7 +74,8 @@ class VAEObjective(nn.Module):
                 enc = self.vae.encode(motion, sample=False)
         else:
             enc = self.vae.encode(motion, sample=False)
-        z = enc.mu + eps * torch.exp(0.5 * enc.logvar)      # reparameterisation (official forward)
+        # reparameterisation (official forward: posterior_noise 1); posterior_noise 0 decodes the mean
+        z = enc.mu + self.vae.config.posterior_noise * eps * torch.exp(0.5 * enc.logvar)
         if eps_latent is not None:
             # decoder robustness (an addition): decode latents near, not only on, the posterior
             z = z + self.vae.config.latent_noise * eps_latent
