@@ -26,10 +26,9 @@ with ``annotations/``). Prints, with the numbers also returned / written as JSON
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
-import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -43,34 +42,27 @@ from salad_core.eval.metrics import mpjpe
 from salad_core.motion import features_to_joints
 from salad_core.pipeline import SaladPipeline
 
+from _measure_common import annotated_clips, finish_run, mean, print_summary, run_settings, start_run  # scripts/
+
 #: Word swaps that keep the number of words (source word -> target word).
 SWAPS = {"waves": "raises", "waving": "raising", "raises": "waves", "raising": "waving", "walks": "runs",
          "walking": "running", "punches": "waves", "kicks": "punches", "claps": "waves", "nods": "bows",
          "jogs": "walks", "jogging": "walking", "runs": "walks", "running": "walking"}
 HIGH_PROMPTS = ("a man is walking while raising his left hand up high", "a man raises his right hand up high")
+#: Prints a section's summary table (keys in 18 columns, nested figures to 4 digits).
+_print_table = partial(print_summary, width=18, nested_digits=4)
 
 
 # ------------------------------------------------------------------------------ corpus
 def read_corpus(root: Path, split: str, n: int, max_len: int) -> list[dict]:
     """The first ``n`` clips of a split that have annotations: features, captions, phrases."""
-    ids = [i for i in (root / f"{split}.txt").read_text().split() if i]
     out = []
-    for cid in ids:
-        ann = root / "annotations" / f"{cid}.json"
-        if not ann.is_file():
-            continue
-        doc = json.loads(ann.read_text())
-        feats = np.load(root / "new_joint_vecs" / f"{cid}.npy").astype(np.float32)
-        n_frames = min(len(feats) - len(feats) % 4, max_len)
-        if n_frames < 16:
-            continue
+    for cid, doc, feats in annotated_clips(root, split, max_frames=max_len, min_frames=16):
         captions = [parse_text_line(line).caption for line in (root / "texts" / f"{cid}.txt").read_text().splitlines()
                     if line.strip()]
-        out.append({"id": cid, "features": feats[:n_frames], "captions": captions, "annotation": doc})
+        out.append({"id": cid, "features": feats, "captions": captions, "annotation": doc})
         if len(out) >= n:
             break
-    if not out:
-        raise SystemExit(f"no annotated clips in {root}/{split}.txt; is {root} a procedural corpus?")
     return out
 
 
@@ -93,11 +85,6 @@ def _all_captions(root: Path, split: str) -> list[str]:
     return out
 
 
-def _mean(xs) -> float:
-    xs = [x for x in xs if x is not None and math.isfinite(x)]
-    return float(np.mean(xs)) if xs else float("nan")
-
-
 # ------------------------------------------------------------------------------ sections
 def measure_localisation(pipe, clips, args) -> dict:
     rows = []
@@ -115,9 +102,9 @@ def measure_localisation(pipe, clips, args) -> dict:
             frames = (ph["frames"][0], min(ph["frames"][1], n))
             loc = localisation(maps.word_map(0, tuple(ph["words"])), ph["parts"], frames, pipe.skeleton.unit_length)
             rows.append({"id": clip["id"], "phrase": ph["text"], "parts": ph["parts"], "mpjpe": err, **loc})
-    summary = {k: _mean(r[k] for r in rows) for k in ("share", "chance", "lift", "part_share", "part_chance",
+    summary = {k: mean(r[k] for r in rows) for k in ("share", "chance", "lift", "part_share", "part_chance",
                                                       "frame_share", "frame_chance", "mpjpe")}
-    summary["above_chance"] = _mean(float(r["share"] > r["chance"]) for r in rows)
+    summary["above_chance"] = mean(float(r["share"] > r["chance"]) for r in rows)
     return {"summary": summary, "phrases": rows}
 
 
@@ -133,10 +120,10 @@ def measure_mirroring(pipe, prompts, args) -> dict:
         flipped = np.sign(math.log(before[limb])) != np.sign(math.log(after[limb]))
         rows.append({"prompt": prompt, "side": side, "limb": limb, "ratio_before": before[limb],
                      "ratio_after": after[limb], "flipped": bool(flipped), **close})
-    return {"summary": {"flip_rate": _mean(float(r["flipped"]) for r in rows),
-                        "log_ratio_before": _mean(math.log(r["ratio_before"]) for r in rows),
-                        "log_ratio_after": _mean(math.log(r["ratio_after"]) for r in rows),
-                        "closeness_ratio": _mean(r["ratio"] for r in rows)},
+    return {"summary": {"flip_rate": mean(float(r["flipped"]) for r in rows),
+                        "log_ratio_before": mean(math.log(r["ratio_before"]) for r in rows),
+                        "log_ratio_after": mean(math.log(r["ratio_after"]) for r in rows),
+                        "closeness_ratio": mean(r["ratio"] for r in rows)},
             "prompts": rows}
 
 
@@ -175,15 +162,15 @@ def measure_word_swap(pipe, pairs, args) -> dict:
                      "other_change": part_activity_change(src, ed, [p for p in ("root", "spine", "head")
                                                                     if p not in parts] or ["root"])})
     keys = ("path_rmse_swap", "path_rmse_plain", "speed_corr_swap", "speed_corr_plain", "action_change", "other_change")
-    summary = {k: _mean(r[k] for r in rows) for k in keys}
+    summary = {k: mean(r[k] for r in rows) for k in keys}
     # a swap of the locomotion itself (walks -> runs) changes the path by design; the path can only be
     # expected to stay where the swapped action leaves the root alone
     for group, keep in (("root_kept", lambda r: "root" not in r["parts"]), ("locomotion", lambda r: "root" in r["parts"])):
         sel = [r for r in rows if keep(r)]
         summary[f"{group}_pairs"] = float(len(sel))
         for k in ("path_rmse_swap", "path_rmse_plain", "speed_corr_swap", "speed_corr_plain"):
-            summary[f"{group}_{k}"] = _mean(r[k] for r in sel)
-        summary[f"{group}_path_closer"] = _mean(float(r["path_rmse_swap"] < r["path_rmse_plain"]) for r in sel)
+            summary[f"{group}_{k}"] = mean(r[k] for r in sel)
+        summary[f"{group}_path_closer"] = mean(float(r["path_rmse_swap"] < r["path_rmse_plain"]) for r in sel)
     return {"summary": summary, "pairs": rows}
 
 
@@ -199,8 +186,8 @@ def measure_reweight(pipe, prompts, scales, args) -> dict:
         rows.append({"prompt": prompt, "scales": list(scales), "wrist_height": heights,
                      "spearman": spearman(scales, heights),
                      "monotonic": bool(np.all(np.diff(heights) > 0))})
-    return {"summary": {"spearman": _mean(r["spearman"] for r in rows),
-                        "monotonic_rate": _mean(float(r["monotonic"]) for r in rows)}, "prompts": rows}
+    return {"summary": {"spearman": mean(r["spearman"] for r in rows),
+                        "monotonic_rate": mean(float(r["monotonic"]) for r in rows)}, "prompts": rows}
 
 
 def _inversion_rows(pipe, items, methods, args) -> list[dict]:
@@ -227,7 +214,7 @@ def _summarise_methods(rows) -> dict:
     out = {}
     for m in dict.fromkeys(r["method"] for r in rows):
         sub = [r for r in rows if r["method"] == m]
-        out[m] = {k: _mean(r[k] for r in sub) for k in ("mpjpe", "mpjpe_global", "inversion_mpjpe",
+        out[m] = {k: mean(r[k] for r in sub) for k in ("mpjpe", "mpjpe_global", "inversion_mpjpe",
                                                           "inversion_mpjpe_global", "vae_mpjpe", "vae_mpjpe_global",
                                                           "seconds", "forward_rows", "max_step_residual",
                                                           "mirror_lr_change", "mirror_closeness")}
@@ -265,15 +252,6 @@ def measure_deepmimic(pipe, args) -> dict:
 
 
 # ------------------------------------------------------------------------------ main
-def _print_table(title: str, summary: dict) -> None:
-    print(f"\n== {title}")
-    for k, v in summary.items():
-        if isinstance(v, dict):
-            print(f"  {k:18s} " + "  ".join(f"{kk}={vv:.4g}" for kk, vv in v.items()))
-        else:
-            print(f"  {k:18s} {v:.4g}" if isinstance(v, float) else f"  {k:18s} {v}")
-
-
 def parse_args(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", required=True, type=Path, help="procedural corpus folder (build_corpus)")
@@ -313,10 +291,7 @@ def parse_args(argv=None):
 
 def main(argv=None) -> dict:
     args = parse_args(argv)
-    if args.threads:
-        import torch
-        torch.set_num_threads(args.threads)
-    start = time.perf_counter()
+    start = start_run(args.threads)
     pipe = SaladPipeline.from_pretrained(args.weights)
     max_len = pipe.skeleton.max_length
     clips = read_corpus(args.data, args.split, args.n, max_len)
@@ -328,8 +303,7 @@ def main(argv=None) -> dict:
     print(f"weights: {pipe.source or args.weights}; corpus {args.data} ({args.split}): {len(clips)} clips, "
           f"{len(sided)} sided prompts, {len(pairs)} swap pairs, {len(high)} 'high' prompts; {args.steps} steps, "
           f"w = {args.guidance}")
-    results: dict = {"settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()
-                                  if k not in ("iterations_for",)}}
+    results: dict = {"settings": run_settings(args, skip=("iterations_for",))}
     if "a" in args.sections:
         results["localisation"] = measure_localisation(pipe, clips, args)
         _print_table("(a) localisation: attention share on the annotated parts x frames (vs chance)",
@@ -360,13 +334,7 @@ def main(argv=None) -> dict:
                 print(f"     {row['id']:22s} {row['method']:18s} mpjpe={row['mpjpe']:.3f} "
                       f"inversion={row['inversion_mpjpe']:.3f} "
                       f"vae={row['vae_mpjpe']:.3f} mirror_closeness={row['mirror_closeness']:.2f}")
-    results["seconds"] = time.perf_counter() - start
-    print(f"\ntotal {results['seconds']:.1f} s")
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(results, indent=2, default=float) + "\n")
-        print(f"wrote {args.json}")
-    return results
+    return finish_run(results, start, args.json)
 
 
 if __name__ == "__main__":

@@ -33,11 +33,9 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import json
-import math
 import sys
 import tempfile
-import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -50,34 +48,28 @@ from salad_core.part_activity import part_speeds
 from salad_core.pipeline import SaladPipeline
 from salad_core.skeleton import PART_NAMES, get_skeleton
 
+from _measure_common import annotated_clips, finish_run, mean, print_summary, run_settings, start_run  # scripts/
+
 #: Words that say how many times an action happens.
 COUNT_WORDS = {"twice": 2, "two": 2, "three": 3, "four": 4, "five": 5}
+#: Prints a section's summary table (keys in 24 columns, nested figures to 3 digits).
+_print = partial(print_summary, width=24, nested_digits=3)
 
 
 # ------------------------------------------------------------------------------ corpus
 def read_clips(root: Path, split: str, n: int | None = None) -> list[dict]:
     """Annotated clips of a split: id, features, joints, first caption and its phrases."""
-    ids = [i for i in (root / f"{split}.txt").read_text().split() if i and not i.startswith("M")]
     out = []
-    for cid in ids:
-        ann = root / "annotations" / f"{cid}.json"
-        if not ann.is_file():
-            continue
-        doc = json.loads(ann.read_text())
-        feats = np.load(root / "new_joint_vecs" / f"{cid}.npy").astype(np.float32)
-        length = min(len(feats) - len(feats) % 4, 196)
-        if length < 40:
-            continue
+    for cid, doc, feats in annotated_clips(root, split, max_frames=196, min_frames=40, mirrors=False):
+        length = len(feats)
         joints = np.load(root / "new_joints" / f"{cid}.npy").astype(np.float32)[:length]
         for cap in doc["captions"]:
-            out.append({"id": cid, "features": feats[:length], "joints": joints, "length": length,
+            out.append({"id": cid, "features": feats, "joints": joints, "length": length,
                         "caption": cap["caption"],
                         "phrases": [dict(ph, frames=[min(ph["frames"][0], length), min(ph["frames"][1], length)])
                                     for ph in cap["phrases"]]})
         if n is not None and len({c["id"] for c in out}) >= n:
             break
-    if not out:
-        raise SystemExit(f"no annotated clips in {root}/{split}.txt; is {root} a procedural corpus?")
     return out
 
 
@@ -90,11 +82,6 @@ def stated_count(text: str) -> int | None:
         if w in COUNT_WORDS and (i + 1 < len(words)) and (words[i + 1] == "times" or i > 0):
             return COUNT_WORDS[w]
     return None
-
-
-def _mean(xs) -> float:
-    xs = [float(x) for x in xs if x is not None and math.isfinite(float(x))]
-    return float(np.mean(xs)) if xs else float("nan")
 
 
 def _part_joints(parts, skeleton) -> list[int]:
@@ -158,10 +145,10 @@ def measure_erase(pipe, items, args) -> dict:
     summary = {}
     for mode in args.erase_modes:
         sub = [r for r in rows if r["mode"] == mode]
-        summary[mode] = {k: _mean(r[k] for r in sub) for k in ("drop_erased", "drop_deleted", "others_mpjpe_erased",
+        summary[mode] = {k: mean(r[k] for r in sub) for k in ("drop_erased", "drop_deleted", "others_mpjpe_erased",
                                                               "others_mpjpe_deleted")}
-        summary[mode]["dropped_rate"] = _mean(float(r["activity_erased"] < r["activity_source"]) for r in sub)
-        summary[mode]["kept_better_rate"] = _mean(float(r["others_mpjpe_erased"] < r["others_mpjpe_deleted"])
+        summary[mode]["dropped_rate"] = mean(float(r["activity_erased"] < r["activity_source"]) for r in sub)
+        summary[mode]["kept_better_rate"] = mean(float(r["others_mpjpe_erased"] < r["others_mpjpe_deleted"])
                                                   for r in sub)
     return {"summary": summary, "items": rows}
 
@@ -235,16 +222,16 @@ def measure_shift(pipe, items, args) -> dict:
     summary = {}
     for variant in args.shift_variants:
         sub = [r for r in rows if r["variant"] == variant]
-        summary[variant] = {"lag_along_shift": _mean(r["lag"] * np.sign(r["shift"]) for r in sub),
-                            "mean_abs_error": _mean(r["error"] for r in sub),
-                            "met_rate": _mean(float(r["met"]) for r in sub),
-                            "right_direction_rate": _mean(float(r["sign_right"]) for r in sub),
-                            "zero_lag_rate": _mean(float(r["lag"] == 0) for r in sub)}
+        summary[variant] = {"lag_along_shift": mean(r["lag"] * np.sign(r["shift"]) for r in sub),
+                            "mean_abs_error": mean(r["error"] for r in sub),
+                            "met_rate": mean(float(r["met"]) for r in sub),
+                            "right_direction_rate": mean(float(r["sign_right"]) for r in sub),
+                            "zero_lag_rate": mean(float(r["lag"] == 0) for r in sub)}
     return {"summary": summary, "items": rows}
 
 
 def _pairwise(motions) -> float:
-    return _mean(mpjpe(a, b) for a, b in itertools.combinations(motions, 2))
+    return mean(mpjpe(a, b) for a, b in itertools.combinations(motions, 2))
 
 
 def example_settings(args) -> list[tuple[float, tuple[str, ...]]]:
@@ -271,8 +258,8 @@ def measure_example(pipe, clips, args) -> dict:
             v, p = var.edited.raw_joints, plain.raw_joints
             rows.append({"id": c["id"], "caption": c["caption"], "setting": f"{'+'.join(kinds)} (0, {window:g})",
                          "diversity_variations": _pairwise(v), "diversity_plain": _pairwise(p),
-                         "to_example_variations": _mean(mpjpe(x, example) for x in v),
-                         "to_example_plain": _mean(mpjpe(x, example) for x in p),
+                         "to_example_variations": mean(mpjpe(x, example) for x in v),
+                         "to_example_plain": mean(mpjpe(x, example) for x in p),
                          "example_vs_corpus": mpjpe(example, c["joints"][:len(example)])})
         if len(seen) >= args.n_example:
             break
@@ -281,8 +268,8 @@ def measure_example(pipe, clips, args) -> dict:
     summary = {}
     for setting in dict.fromkeys(r["setting"] for r in rows):
         sub = [r for r in rows if r["setting"] == setting]
-        summary[setting] = {key: _mean(r[key] for r in sub) for key in keys}
-        summary[setting]["closer_than_plain_rate"] = _mean(float(r["to_example_variations"] < r["to_example_plain"])
+        summary[setting] = {key: mean(r[key] for r in sub) for key in keys}
+        summary[setting]["closer_than_plain_rate"] = mean(float(r["to_example_variations"] < r["to_example_plain"])
                                                            for r in sub)
     return {"summary": summary, "items": rows}
 
@@ -318,14 +305,14 @@ def measure_counting(pipe, items, args) -> dict:
             corpus = motion_repetitions(it["joints"], ph["parts"], frames)
             rows.append({"id": it["id"], "phrase": ph["text"], "parts": ph["parts"], "truth": it["reps"],
                          "attention": att, "attention_whole_clip": att_all, "motion": mot, "corpus_motion": corpus})
-    summary = {"attention_vs_truth": _mean(float(r["attention"] == r["truth"]) for r in rows),
-               "attention_vs_motion": _mean(float(r["attention"] == r["motion"]) for r in rows),
-               "motion_vs_truth": _mean(float(r["motion"] == r["truth"]) for r in rows),
-               "corpus_motion_vs_truth": _mean(float(r["corpus_motion"] == r["truth"]) for r in rows),
-               "attention_whole_clip_vs_truth": _mean(float(r["attention_whole_clip"] == r["truth"]) for r in rows),
-               "mean_truth": _mean(r["truth"] for r in rows), "mean_attention": _mean(r["attention"] for r in rows),
-               "mean_motion": _mean(r["motion"] for r in rows),
-               "always_two_baseline": _mean(float(r["truth"] == 2) for r in rows)}
+    summary = {"attention_vs_truth": mean(float(r["attention"] == r["truth"]) for r in rows),
+               "attention_vs_motion": mean(float(r["attention"] == r["motion"]) for r in rows),
+               "motion_vs_truth": mean(float(r["motion"] == r["truth"]) for r in rows),
+               "corpus_motion_vs_truth": mean(float(r["corpus_motion"] == r["truth"]) for r in rows),
+               "attention_whole_clip_vs_truth": mean(float(r["attention_whole_clip"] == r["truth"]) for r in rows),
+               "mean_truth": mean(r["truth"] for r in rows), "mean_attention": mean(r["attention"] for r in rows),
+               "mean_motion": mean(r["motion"] for r in rows),
+               "always_two_baseline": mean(float(r["truth"] == 2) for r in rows)}
     return {"summary": summary, "items": rows}
 
 
@@ -343,15 +330,6 @@ def calibrate_motion_counter(root: Path, split: str) -> dict:
 
 
 # ------------------------------------------------------------------------------ main
-def _print(title: str, summary: dict) -> None:
-    print(f"\n== {title}")
-    for key, value in summary.items():
-        if isinstance(value, dict):
-            print(f"  {key:24s} " + "  ".join(f"{k}={v:.3g}" for k, v in value.items()))
-        else:
-            print(f"  {key:24s} {value:.4g}")
-
-
 def parse_args(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", type=Path, default=None, help="procedural corpus folder (default: held-out clips)")
@@ -392,10 +370,7 @@ def parse_args(argv=None):
 
 def main(argv=None) -> dict:
     args = parse_args(argv)
-    if args.threads:
-        import torch
-        torch.set_num_threads(args.threads)
-    start = time.perf_counter()
+    start = start_run(args.threads)
     tmp = None
     root = args.data
     if root is None:
@@ -413,7 +388,7 @@ def main(argv=None) -> dict:
         return res
     pipe = SaladPipeline.from_pretrained(args.weights)
     clips = read_clips(root, args.split)
-    results: dict = {"settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()}}
+    results: dict = {"settings": run_settings(args)}
     print(f"weights: {pipe.source}; corpus {root} ({args.split}): {len({c['id'] for c in clips})} clips; "
           f"{args.steps} steps, w = {args.guidance}")
     if "a" in args.sections:
@@ -433,12 +408,7 @@ def main(argv=None) -> dict:
     if "d" in args.sections:
         results["counting"] = measure_counting(pipe, count_items(clips, args.n), args)
         _print(f"(d) counting ({len(results['counting']['items'])} phrases): accuracy", results["counting"]["summary"])
-    results["seconds"] = time.perf_counter() - start
-    print(f"\ntotal {results['seconds']:.1f} s")
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(results, indent=2, default=float) + "\n")
-        print(f"wrote {args.json}")
+    finish_run(results, start, args.json)
     if tmp is not None:
         tmp.cleanup()
     return results

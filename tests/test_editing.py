@@ -1,8 +1,6 @@
 """Zero-shot editing (Algorithm 1): specs, kernels, alignment, equivalences and the batched loop."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import torch
@@ -17,14 +15,9 @@ from salad_core.skeleton import PART_NAMES
 
 STEPS = 8
 SRC = "a man walks forward"
-
+PIPE_SEED = 1  # seed of the tiny pipeline, conftest's `pipe` fixture
 
 pytestmark = pytest.mark.usefixtures("single_thread")
-
-
-@pytest.fixture(scope="module")
-def pipe(make_tiny_pipeline) -> SaladPipeline:
-    return make_tiny_pipeline(seed=1)
 
 
 # ------------------------------------------------------------------------------ specs
@@ -415,15 +408,13 @@ def test_trained_word_swap_keeps_the_root_path_and_changes_the_arm(trained):
 
 # ------------------------------------------------------------------ the measuring script
 def test_measure_script_runs_on_a_tiny_pipeline_and_corpus(pipe, tmp_path):
-    import importlib.util
     import json
+
+    from _doubles import load_script
 
     from salad_core.data.procedural import build_corpus
 
-    root = Path(__file__).resolve().parents[1]
-    spec = importlib.util.spec_from_file_location("measure_editing", root / "scripts" / "measure_editing.py")
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
+    script = load_script("measure_editing")
     # 40 motions: the test split must hold captions that name a side (the mirroring section needs them)
     build_corpus(tmp_path / "corpus", size=40, progress=False)
     pipe.save_pretrained(tmp_path / "weights")

@@ -2,8 +2,6 @@
 invariants through the pipeline, composition order, and the measuring script."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import torch
@@ -13,19 +11,14 @@ from salad_core.attention.counting import (attention_signal, count_peaks, count_
                                            motion_signal)
 from salad_core.attention.edits import (Erase, ExampleBased, Shift, ShiftTemporal, erase_columns, reweight_columns,
                                         seeded_noise, shift_columns, shift_temporal)
-from salad_core.pipeline import SaladPipeline
 from salad_core.sampling import StepInfo
 from salad_core.skeleton import PART_NAMES, get_skeleton
 
 STEPS = 8
 SRC = "a man waves his right hand and then jumps"
+PIPE_SEED = 3  # seed of the tiny pipeline, conftest's `pipe` fixture
 
 pytestmark = pytest.mark.usefixtures("single_thread")
-
-
-@pytest.fixture(scope="module")
-def pipe(make_tiny_pipeline) -> SaladPipeline:
-    return make_tiny_pipeline(seed=3)
 
 
 def _probs(*shape, seed=0) -> torch.Tensor:
@@ -304,15 +297,13 @@ def test_motion_repetitions_counts_kicks_and_squats(k):
 
 # ------------------------------------------------------------------ the measuring script
 def test_measure_script_runs_on_a_tiny_pipeline(pipe, tmp_path):
-    import importlib.util
     import json
+
+    from _doubles import load_script
 
     from salad_core.data.procedural import build_corpus
 
-    root = Path(__file__).resolve().parents[1]
-    spec = importlib.util.spec_from_file_location("measure_new_edits", root / "scripts" / "measure_new_edits.py")
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
+    script = load_script("measure_new_edits")
     assert script.stated_count("kicks with his left leg twice") == 2
     assert script.stated_count("does three squats") == 3 and script.stated_count("nods two times") == 2
     assert script.stated_count("waves his right hand") is None
