@@ -67,6 +67,13 @@ def make_tiny_pipeline(sample_dir):
     return make
 
 
+@pytest.fixture(scope="module")
+def pipe(make_tiny_pipeline, request):
+    """The test module's own tiny pipeline (:func:`make_tiny_pipeline`), seeded by the module's
+    ``PIPE_SEED`` (0 without one): one per module, so what a module's tests set on it stays there."""
+    return make_tiny_pipeline(seed=getattr(request.module, "PIPE_SEED", 0))
+
+
 @pytest.fixture(scope="session")
 def tiny_procedural_corpus(tmp_path_factory):
     """The "tiny" procedural corpus (seed 0), built once per test session (a few seconds)."""

@@ -8,7 +8,6 @@ import torch
 from salad_core.attention import AttentionMaps, CaptureConfig, capture_cross_attention
 from salad_core.models.attention import EagerProcessor, SDPAProcessor, cross_probs_by_part, use_processors
 from salad_core.models.denoiser import Denoiser, DenoiserConfig
-from salad_core.pipeline import SaladPipeline
 from salad_core.sampling import denoise, make_scheduler
 from salad_core.skeleton import NUM_PARTS
 
@@ -18,11 +17,6 @@ STEPS = 10
 
 
 pytestmark = pytest.mark.usefixtures("single_thread")
-
-
-@pytest.fixture(scope="module")
-def pipe(make_tiny_pipeline) -> SaladPipeline:
-    return make_tiny_pipeline(seed=0)
 
 
 @pytest.fixture(scope="module")

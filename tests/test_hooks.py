@@ -23,18 +23,13 @@ SEED = 3
 pytestmark = pytest.mark.usefixtures("single_thread")
 
 
-@pytest.fixture(scope="module")
-def pipe(make_tiny_pipeline) -> SaladPipeline:
-    return make_tiny_pipeline(seed=0)
+def _run(pipe, **kwargs):
+    return pipe(PROMPTS, lengths=LENGTHS, num_steps=STEPS, seed=SEED, **kwargs)
 
 
 @pytest.fixture(scope="module")
 def plain(pipe):
-    return pipe(PROMPTS, lengths=LENGTHS, num_steps=STEPS, seed=SEED)
-
-
-def _run(pipe, **kwargs):
-    return pipe(PROMPTS, lengths=LENGTHS, num_steps=STEPS, seed=SEED, **kwargs)
+    return _run(pipe)
 
 
 def _nothing_installed(den: Denoiser) -> bool:

@@ -13,14 +13,9 @@ from salad_core.sampling import DiffusionConfig, make_scheduler
 
 STEPS = 10
 PROMPT = "a person walks forward and turns around"
-
+PIPE_SEED = 2  # seed of the tiny pipeline, conftest's `pipe` fixture
 
 pytestmark = pytest.mark.usefixtures("single_thread")
-
-
-@pytest.fixture(scope="module")
-def pipe(make_tiny_pipeline) -> SaladPipeline:
-    return make_tiny_pipeline(seed=2)
 
 
 @pytest.fixture(scope="module")
