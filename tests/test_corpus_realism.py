@@ -242,7 +242,7 @@ def test_long_sequences_are_drawn_and_said():
     from salad_core.data.procedural import GENERATOR_VERSION, in_language, render_captions
     from salad_core.data.procedural.composition import PLAN_TYPES, sample_plan
 
-    assert GENERATOR_VERSION == "2.3"
+    assert GENERATOR_VERSION == "2.4"
     assert PLAN_TYPES["sequence3"] + PLAN_TYPES["sequence4"] >= 0.2
     for i in range(5):
         rng = np.random.default_rng([12, i])
@@ -346,3 +346,132 @@ def test_feet_are_handed_over_without_a_jump():
     still.ankle[:, 0] -= lift
     still.toe[:, 0] -= lift
     assert _feet_handover(acc, still, 8) == 8            # a foot the next segment leaves alone
+
+
+# ============================================================================ fidgets (2.4)
+def _chest_wrist(pose, joints: np.ndarray, k: int) -> np.ndarray:
+    """``(N, 3)`` wrist of arm ``k`` from its shoulder in the chest frame of ``pose``, x outwards."""
+    from salad_core.data.procedural.reach import chest_frames
+
+    side = ("left", "right")[k]
+    d = joints[:, SK.joint_names.index(f"{side}_wrist")] - joints[:, SK.joint_names.index(f"{side}_shoulder")]
+    local = np.einsum("nji,nj->ni", chest_frames(pose), d)
+    return local * np.array([1.0 if k == 0 else -1.0, 1.0, 1.0])
+
+
+def test_arm_fidget_puts_the_wrist_on_its_target_and_drives_one_arm():
+    from salad_core.data.procedural.composition import _blend
+    from salad_core.data.procedural.fidgets import ARM_FIDGETS, arm_fidget
+    from salad_core.data.procedural.footwork import Persona, Stance
+    from salad_core.data.procedural.kinematics import assemble, body_model
+    from salad_core.data.procedural.segment import standing_pose
+
+    body = body_model("humanml3d")
+    persona = Persona.sample(np.random.default_rng(3))
+    for kind in ("chin", "head", "pocket", "phone"):
+        for k in (0, 1):
+            g = arm_fidget(persona, body, np.random.default_rng([4, k]), k, span=3.0, kind=kind)
+            assert g.info == {"fidget": kind, "arm": k}
+            assert g.num_frames <= 61                                    # at most the 3 s span
+            assert (g.arm_weight[:, 1 - k] == 0).all() and g.arm_weight[[0, -1], k].max() < 1e-9
+            pose = standing_pose(Stance.at((0.0, 0.0), 0.0, persona), persona, g.num_frames, body, rng=None, idle=False)
+            _blend(pose, g, 0)
+            wrist = _chest_wrist(pose, assemble(pose, body), k)
+            mid = int(np.argmax(g.arm_weight[:, k] > 0.999)) + 2          # well into the hold
+            low, high, _, _ = ARM_FIDGETS[kind]
+            assert np.all(wrist[mid] > np.array(low) - 0.02) and np.all(wrist[mid] < np.array(high) + 0.03), (kind, k, wrist[mid])
+    with pytest.raises(ValueError, match="kind='wiggle'"):
+        arm_fidget(persona, body, np.random.default_rng(0), 0, 2.0, kind="wiggle")
+    with pytest.raises(ValueError, match="arm=2"):
+        arm_fidget(persona, body, np.random.default_rng(0), 2, 2.0)
+    with pytest.raises(ValueError, match="span=0.3"):
+        arm_fidget(persona, body, np.random.default_rng(0), 0, 0.3)
+
+
+def test_glance_and_trunk_shift_move_only_head_and_trunk():
+    from salad_core.data.procedural.fidgets import glance, trunk_shift
+    from salad_core.data.procedural.footwork import Persona
+    from salad_core.data.procedural.kinematics import body_model
+
+    body = body_model("humanml3d")
+    persona = Persona.sample(np.random.default_rng(5))
+    yaws, pitches = [], []
+    for i in range(30):
+        g = glance(persona, body, np.random.default_rng([6, i]), span=2.5)
+        assert g.num_frames <= 51 and (g.arm_weight == 0).all()
+        assert np.abs(g.neck[[0, -1]]).max() < 1e-9                      # from ahead back to ahead
+        yaws.append(np.abs(g.neck[:, 0]).max())
+        t = trunk_shift(persona, body, np.random.default_rng([7, i]), span=2.5)
+        assert t.num_frames <= 51 and (t.arm_weight == 0).all() and np.abs(t.spine[[0, -1]]).max() < 1e-9
+        np.testing.assert_allclose(t.neck[:, 1], -0.5 * t.spine[:, 1])   # the gaze stays level
+        pitches.append(t.spine[:, 1].max())
+    # glances are smaller than the annotated look (0.95-1.25 rad) but clearly there
+    assert 0.3 <= min(yaws) and max(yaws) <= 0.8 + 1e-9
+    assert max(pitches) > 0.15
+
+
+def test_fidgets_respect_the_core_and_the_parts_the_plan_names():
+    """step_fidgets stays inside the core (clear of its ends); the composer gives no fidget to an
+    arm a layered gesture drives, no glance under a layered head gesture, none to a kick."""
+    from salad_core.data.procedural.composition import _fidgets_of
+    from salad_core.data.procedural.fidgets import MARGIN, step_fidgets
+    from salad_core.data.procedural.footwork import Persona
+    from salad_core.data.procedural.kinematics import body_model
+    from salad_core.data.procedural.segment import Segment
+
+    body = body_model("humanml3d")
+    persona = Persona.sample(np.random.default_rng(8))
+    seen = set()
+    for i in range(40):
+        out = step_fidgets(persona, body, np.random.default_rng([9, i]), (10, 70), (0, 1), True, True)
+        for at, g in out:
+            assert at >= 10 + MARGIN and at + g.num_frames <= 70 - MARGIN
+            seen.add(g.info["fidget"])
+    assert {"glance", "trunk"} <= seen and len(seen) >= 6
+    assert step_fidgets(persona, body, np.random.default_rng(0), (0, 30), (0, 1), True, True) == []   # too short
+
+    seg = Segment(None, None, (0, 80))
+    wave = Step(Action("walk"), Action("wave", "right"))
+    nod = Step(Action("walk"), Action("nod", reps=2))
+    for i in range(40):
+        for at, g in _fidgets_of(wave, None, seg, (0, 80), persona, body, np.random.default_rng([10, i])):
+            assert (g.arm_weight[:, 1] == 0).all()
+        for at, g in _fidgets_of(nod, None, seg, (0, 80), persona, body, np.random.default_rng([11, i])):
+            assert g.info["fidget"] != "glance"
+        over = _fidgets_of(Step(Action("walk")), Action("clap", "both"), seg, (0, 80), persona, body,
+                           np.random.default_rng([12, i]))
+        assert all((g.arm_weight == 0).all() for _, g in over)
+
+
+def test_walks_fidget_but_their_annotation_still_holds():
+    """Over a few seeded walks the arms and head leave the gait's swing (fidgets), while the
+    walk's legs still move more than any part no phrase names (the annotation checks)."""
+    from salad_core.data.procedural import part_speeds, phrase_activity
+
+    plan = Plan((Step(Action("walk")),))
+    wrist_range, ratios = [], []
+    for i in range(6):
+        clip = realise(plan, np.random.default_rng([13, i]))
+        ev = clip.events[0]
+        r = phrase_activity(part_speeds(clip.joints), [{"frames": ev.frames, "parts": ev.parts}], [ev.secondary])[0]
+        ratios.append(r["ratio_idle"])
+        c = canonical_pose(clip.joints)
+        wrist_range.append(max(np.ptp(c[:, SK.joint_names.index(f"{s}_wrist"), 1]) for s in ("left", "right")))
+        assert bone_length_error(clip.joints)["max_error"] < 1e-6
+    assert min(ratios) > 1.5
+    assert max(wrist_range) > 0.3          # some hand went up to the face or the head (a swing alone: < 0.15)
+
+
+def test_targets_table_shows_the_pelvis_relative_pca_as_info():
+    from salad_core.data.procedural.stats import BASELINE, targets_table
+
+    fig = {k: v for k, v in BASELINE.items()}
+    fig.update(boundaries=10, run_phrases=0, jog_phrases=0, pca_90=10, pca_90_pelvis_relative=12,
+               boundary_speed_median=0.3)
+    for g in ("run", "jog"):
+        for k in ("bob", "arm_back", "arm_front", "elbow_min", "elbow_max"):
+            fig[f"{g}_{k}"] = float("nan")
+    rows = {r.name.strip(): r for r in targets_table(fig)}
+    assert rows["principal components for 90 % of pose variance"].passed is False
+    info = rows["the same with the root height taken off (pelvis-relative)"]
+    assert info.value == "12" and info.passed is None

@@ -90,6 +90,21 @@ def step_up(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gen
     return Segment(pose, start, core, info=dict(step_height=float(height), reps=reps))
 
 
+def _flight(start: Stance, fwd: np.ndarray, lead: int, stairs: int, run: float, rise: float, t: float,
+            beat: float) -> tuple[list, float]:
+    """Foot moves ``[(foot, ankle target (3,), time)]`` one foot per stair up (``rise`` > 0) or down
+    (``rise`` < 0) a flight of ``stairs`` from ``start``, the trailing foot joining the leader on the
+    last one; and the time after the last move. ``lead`` (0 left, 1 right) takes the first stair."""
+    moves = []
+    for i in range(1, stairs + 1):
+        foot = (lead + i - 1) % 2
+        moves.append((foot, start.ankles[foot] + fwd * (0.12 + i * run) + np.array([0.0, i * rise, 0.0]), t))
+        t += beat
+    last = (lead + stairs) % 2
+    moves.append((last, start.ankles[last] + fwd * (0.12 + stairs * run) + np.array([0.0, stairs * rise, 0.0]), t))
+    return moves, t + beat
+
+
 def climb_stairs(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *,
                  mods: tuple[str, ...] = ()) -> Segment:
     """Walk up a flight of 3-5 stairs (one foot per stair) and stand on the top step."""
@@ -100,16 +115,8 @@ def climb_stairs(start: Stance, persona: Persona, body: BodyModel, rng: np.rando
     stairs = int(rng.integers(3, 6))
     beat = u(0.6, 0.75) * tempo
     lead = int(rng.integers(2))
-    t = u(0.25, 0.35)
-    t0 = t
-    moves = []
-    for i in range(1, stairs + 1):
-        foot = (lead + i - 1) % 2
-        moves.append((foot, start.ankles[foot] + fwd * (0.12 + i * run) + np.array([0.0, i * rise, 0.0]), t))
-        t += beat
-    last = (lead + stairs) % 2                                  # the trailing foot joins on the top stair
-    moves.append((last, start.ankles[last] + fwd * (0.12 + stairs * run) + np.array([0.0, stairs * rise, 0.0]), t))
-    t += beat
+    t0 = u(0.25, 0.35)
+    moves, t = _flight(start, fwd, lead, stairs, run, rise, t0, beat)
     total = t + u(0.3, 0.4)
     pose, _, ends = _stepping(start, persona, body, rng, moves, 0.7 * beat, total, 0.08 + 0.5 * rise)
     tt = frame_times(pose.num_frames, FPS)
@@ -156,16 +163,8 @@ def descend_stairs(start: Stance, persona: Persona, body: BodyModel, rng: np.ran
     high = Stance(start.ankles + np.array([0.0, top, 0.0]), start.foot_yaw, start.yaw)
     beat = u(0.6, 0.75) * tempo
     lead = int(rng.integers(2))
-    t = u(0.25, 0.35)
-    t0 = t
-    moves = []
-    for i in range(1, stairs + 1):
-        foot = (lead + i - 1) % 2
-        moves.append((foot, high.ankles[foot] + fwd * (0.12 + i * run) - np.array([0.0, i * rise, 0.0]), t))
-        t += beat
-    last = (lead + stairs) % 2                                  # the trailing foot joins on the floor
-    moves.append((last, start.ankles[last] + fwd * (0.12 + stairs * run), t))
-    t += beat
+    t0 = u(0.25, 0.35)
+    moves, t = _flight(high, fwd, lead, stairs, run, -rise, t0, beat)
     total = t + u(0.3, 0.4)
     pose, _, ends = _stepping(high, persona, body, rng, moves, 0.7 * beat, total, 0.05 + 0.3 * rise)
     _within_reach(pose, body)
