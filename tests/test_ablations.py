@@ -142,3 +142,249 @@ def test_tiny_study_trains_ships_and_loads(tmp_path):
         load_ablation_vae("no_pos", out)
     with pytest.raises(FileNotFoundError, match="train_ablations"):
         list_ablations(tmp_path / "nothing")
+
+
+# ------------------------------------------------------------------ the staged study (issue 24)
+from salad_core.ablations import (GroupOutcome, StopDecision, StopRule, compare, decide, group_orderings,  # noqa: E402
+                                  load_staged_recipe, model_card, paper_ordering, run_study, stage_jobs, study_plan)
+from salad_core.ablations.stage_eval import evaluation_path, stage_dir  # noqa: E402
+
+
+def test_stop_rule_stable_flipping_and_budget():
+    stages = [10, 20, 30, 40]
+    a, b = {"p FID": ">", "p R": "="}, {"p FID": "<", "p R": "="}
+    assert decide([a], stages) == StopDecision(False, "continue", 10, 20)
+    assert decide([a, a], stages) == StopDecision(True, "stable", 20, None)
+    assert decide([a, b, a], stages) == StopDecision(False, "continue", 30, 40)            # flipping goes on
+    assert decide([a, b, a, b], stages) == StopDecision(True, "budget", 40, None)          # budget spent
+    assert decide([b, a, a], stages).reason == "stable"
+    three = StopRule(consecutive=3)
+    assert decide([a, a], stages, three).reason == "continue" and decide([a, a, a], stages, three).reason == "stable"
+    assert decide([a], [10]).reason == "budget"                                           # one stage: its budget
+    with pytest.raises(ValueError, match="same pairs"):
+        decide([a, {"p FID": ">"}], stages)
+    with pytest.raises(ValueError, match="consecutive=1"):
+        StopRule(consecutive=1)
+    with pytest.raises(ValueError, match="compare='median'"):
+        StopRule(compare="median")
+
+
+def test_orderings_read_intervals_and_the_papers_directions():
+    assert compare((1.0, 0.1), (2.0, 0.1), "FID") == ">"              # lower FID is better
+    assert compare((0.9, 0.01), (0.8, 0.01), "R-precision top-3") == ">"  # higher R-precision is better
+    assert compare((1.0, 0.6), (2.0, 0.6), "FID") == "="              # overlapping intervals: level
+    assert compare((1.0, 0.6), (2.0, 0.6), "FID", mode="means") == ">"
+    assert compare((0.02, 0.0), (0.01, 0.0), "MPJPE") == "<"
+    with pytest.raises(ValueError, match="metric='Diversity'"):
+        compare((1, 0), (2, 0), "Diversity")
+    # the paper's claims, read from eval/paper_tables with the same rule
+    assert paper_ordering("table3", "Full model", "w/o ST-Latent", "FID") == ">"
+    assert paper_ordering("table3", "Full model", "w/o CrossAttn", "R-precision top-3") == ">"
+    assert paper_ordering("supp_table2", "v-prediction", "x-prediction", "R-precision top-3") == "="  # .857 vs .860 +- .002
+    assert paper_ordering("supp_table2", "v-prediction", "x-prediction", "FID") == ">"
+    assert paper_ordering("supp_table4", "Full model", "without L_vel", "MPJPE") == "="              # 0.016 both
+    assert paper_ordering("table2", "SALAD (skeleton-aware VAE)", "MoMask (VQ-VAE)", "MPJPE") == ">"
+
+
+def test_v2_recipe_equal_budgets_constant_schedule_and_the_default_recipe(tmp_path):
+    recipe = load_staged_recipe(REPO / "configs" / "ablations_v2.json")
+    groups = {g.name: g for g in recipe.groups}
+    assert [g.kind for g in recipe.groups] == ["vae", "denoiser"]            # VAEs first: denoisers need them
+    den, vae = groups["denoisers"], groups["vaes"]
+    assert den.stages[0] >= 2500 and list(den.stages) == sorted(den.stages)
+    assert set(den.tables) == {"table3", "supp_table2", "supp_table3"} and set(vae.tables) == {"table2", "supp_table4"}
+    assert set(den.variants) == {"full", "no_st", "no_cross", "no_both", "eps", "x0", "no_film"}
+    assert vae.tables["table2"]["st_long"] == "SALAD (skeleton-aware VAE)" and "st_long" in vae.tables["supp_table4"]
+    frozen = {v: tmp_path / "frozen" / f"vae_{v}" for v in vae.variants}
+    for group in recipe.groups:
+        for steps in group.stages:
+            jobs = stage_jobs(recipe, group, steps, tmp_path, frozen)
+            assert {j.variant.name for j in jobs} == set(group.variants)
+            trains = [j.config["train"] for j in jobs]
+            # every row of every table of the group: the same steps and the same schedule and batch
+            assert {t["max_steps"] for t in trains} == {steps}
+            assert len({json.dumps(t, sort_keys=True) for t in trains}) == 1
+            assert trains[0]["milestones"] == [] and trains[0]["warmup_steps"] < group.stages[0]
+    den_cfg = {j.variant.name: j.config for j in stage_jobs(recipe, den, den.stages[0], tmp_path, frozen)}
+    assert all(c["train"]["latent_norm"] is True and c["train"]["micro_batches"] == 4 for c in den_cfg.values())
+    assert all(c["model"]["width"] == 96 and c["model"]["layers"] == 3 for c in den_cfg.values())
+    assert den_cfg["no_st"]["model"]["num_parts"] == 1 and den_cfg["full"]["model"]["num_parts"] == 7
+    vae_cfg = {j.variant.name: j.config for j in stage_jobs(recipe, vae, vae.stages[0], tmp_path)}
+    assert all(c["train"]["autocast"] == "bf16" for c in vae_cfg.values())
+    assert vae_cfg["pose_long"]["model"]["kind"] == "pose" and vae_cfg["no_pos"]["model"]["lambda_pos"] == 0.0
+    # denoisers learn on the frozen VAE snapshot, not on the VAE's live run
+    by_name = {j.variant.name: j for j in stage_jobs(recipe, den, den.stages[0], tmp_path, frozen)}
+    assert by_name["no_st"].depends_on == frozen["pose_long"] and by_name["full"].depends_on == frozen["st_long"]
+    with pytest.raises(ValueError, match="needs its VAE"):
+        stage_jobs(recipe, den, den.stages[0], tmp_path)
+    with pytest.raises(ValueError, match="not a stage"):
+        stage_jobs(recipe, den, 123, tmp_path, frozen)
+    plan = study_plan(recipe)
+    assert [p["new_steps_per_variant"] for p in plan if p["group"] == "denoisers"] == \
+        [den.stages[0], *np.diff(den.stages).tolist()]
+
+
+def _staged_doc(vaes=None, denoisers=None, groups=None, **top):
+    doc = {"vae_base": "vae.json", "denoiser_base": "den.json",
+           "vae_train": {"batch_size": 8, "window": 64, "warmup_steps": 0, "milestones": [], "val_every": 0,
+                         "ckpt_every": 0, "num_threads": 1, "log_every": 1},
+           "denoiser_train": {"batch_size": 4, "warmup_steps": 0, "milestones": [], "max_length": 64, "val_every": 0,
+                              "ckpt_every": 0, "num_threads": 1, "log_every": 1},
+           "vaes": vaes if vaes is not None else {"st": {"label": "ST VAE"}, "pose": {"model": {"kind": "pose"}}},
+           "denoisers": denoisers if denoisers is not None else {},
+           "groups": groups if groups is not None else {
+               "vaes": {"kind": "vae", "stages": [1, 2],
+                        "evaluation": {"replications": 2, "batch_size": 8, "max_samples": 8, "mm": False},
+                        "tables": {"table2": {"st": "SALAD (skeleton-aware VAE)", "pose": "MoMask (VQ-VAE)"}}}},
+           **top}
+    return doc
+
+
+def _write_staged(tmp_path: Path, doc: dict) -> Path:
+    (tmp_path / "vae.json").write_text(json.dumps({"model": {"latent_dim": 8, "n_extra_layers": 0}, "train": {}}))
+    (tmp_path / "den.json").write_text(json.dumps({"model": {"width": 32, "heads": 2, "ff_dim": 64, "layers": 1,
+                                                             "text_dim": 384}, "train": {"latent_norm": True}}))
+    path = tmp_path / "staged.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d["vae_train"].update(milestones=[1]), r"train.milestones=\[1\].*constant learning rate"),
+    (lambda d: d["vae_train"].pop("milestones"), r"train.milestones='\(missing\)'"),
+    (lambda d: d["vaes"]["st"].update(train={"max_steps": 5}), r"variant 'st'.*\['max_steps'\]"),
+    (lambda d: d["vae_train"].update(warmup_steps=1), r"train.warmup_steps=1.*first stage 1"),
+    (lambda d: d["groups"]["vaes"].update(stages=[2, 1]), r"groups.vaes.stages=\[2, 1\]"),
+    (lambda d: d["groups"]["vaes"].update(kind="gan"), r"groups.vaes.kind='gan'"),
+    (lambda d: d["groups"]["vaes"]["tables"].update(table9={}), r"groups.vaes.tables.table9.*not a paper table"),
+    (lambda d: d["groups"]["vaes"]["tables"].update(table3={"st": "Full model"}), r"is a denoiser table in a vae group"),
+    (lambda d: d["groups"]["vaes"]["tables"]["table2"].update(pose="ParCo"), r"paper rows \['ParCo'\]"),
+    (lambda d: d["vaes"].update(extra={}), r"variants \['extra'\] are in no group"),
+    (lambda d: d["groups"]["vaes"]["evaluation"].update(replicas=3), r"evaluation.*unknown fields \['replicas'\]"),
+    (lambda d: d["groups"]["vaes"]["evaluation"].update(replications=0), r"EvalSettings.replications=0"),
+    (lambda d: d.update(stop={"consecutive": 1}), r"StopRule.consecutive=1"),
+    (lambda d: d.update(groups={}), r"groups: missing or empty"),
+    (lambda d: d.update(timing={"steps_per_s": {"st": -1}}), r"timing.steps_per_s"),
+])
+def test_staged_recipe_errors_name_the_field(tmp_path, change, message):
+    doc = _staged_doc()
+    change(doc)
+    with pytest.raises(ValueError, match=message):
+        load_staged_recipe(_write_staged(tmp_path, doc))
+
+
+def _fake_rows(summaries: dict, steps: int) -> dict:
+    return {v: {"variant": v, "label": f"label {v}", "steps": steps, "summary": {m: list(s) for m, s in ms.items()},
+                "settings": {"evaluator": "fake evaluator"}} for v, ms in summaries.items()}
+
+
+def test_model_card_is_written_from_the_evaluation_files_alone(tmp_path):
+    recipe = load_staged_recipe(_write_staged(tmp_path, _staged_doc()))
+    group = recipe.groups[0]
+    docs = []
+    for steps, st_fid in ((1, 0.30), (2, 0.10)):
+        summaries = {"st": {"FID": (st_fid, 0.01), "MPJPE": (0.020, 0.001)},
+                     "pose": {"FID": (0.20, 0.01), "MPJPE": (0.020, 0.002)}}
+        docs.append({"steps": steps, "rows": _fake_rows(summaries, steps), "real": None, "compare": "intervals",
+                     "orderings": group_orderings(summaries, group)})
+    assert docs[0]["orderings"]["table2: st vs pose, FID"]["ours"] == "<"
+    assert docs[1]["orderings"]["table2: st vs pose, FID"] == {
+        "table": "table2", "a": "st", "b": "pose", "metric": "FID", "ours": ">", "paper": ">", "agrees": True,
+        "separated": True}
+    assert docs[1]["orderings"]["table2: st vs pose, MPJPE"]["agrees"] is False      # level here, better in the paper
+    outcome = GroupOutcome(group, decide([{k: o["ours"] for k, o in d["orderings"].items()} for d in docs],
+                                         group.stages), tuple(docs))
+    assert outcome.decision == StopDecision(True, "budget", 2, None)
+    card = model_card({"vaes": outcome}, command="python scripts/train_ablations.py --data C --work W", size_mb=1.25)
+    assert "python scripts/train_ablations.py --data C --work W" in card
+    assert "stopped because the budget was spent" in card and "1.2 MB" in card
+    assert "| label st | `st` | 2 | 0.100 ± 0.010 | 2.000 ± 0.100 cm | paper: SALAD (skeleton-aware VAE) | 0.003 ± 0.000 " \
+           "| 1.600 ± 0.000 cm |" in card
+    assert "| `st` vs `pose` | FID | `<` | `>` | `>` | yes | yes |" in card
+    assert "| `st` vs `pose` | MPJPE | `=` | `=` | `>` | no | no |" in card
+    assert "Evaluator: `fake evaluator`" in card and "ours level, paper better" in card
+
+
+def test_staged_study_trains_evaluates_resumes_and_ships(tmp_path, monkeypatch):
+    """The whole staged machinery on a fake corpus: 2 VAEs and 2 denoisers, stages of 1 and 2 steps."""
+    import functools
+
+    import salad_core.text
+    from _doubles import make_tiny_evaluator
+
+    # MiniLM is loaded once for the test's trainers, packaging and evaluation (the same encoder each time)
+    monkeypatch.setattr(salad_core.text, "load_text_encoder", functools.lru_cache(salad_core.text.load_text_encoder))
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=40)
+    evaluator = make_tiny_evaluator(data, dim_word=8, dim_text_hidden=16, dim_coemb=32, dim_movement_enc_hidden=16,
+                                    dim_movement_latent=16, dim_motion_hidden=32)
+    doc = _staged_doc(denoisers={"full": {"vae": "st", "label": "full"}, "no_st": {"vae": "pose", "label": "w/o ST"}})
+    doc["groups"]["vaes"]["evaluation"] = {"replications": 2, "batch_size": 16, "max_samples": 32, "mm": False}
+    doc["groups"]["dens"] = {"kind": "denoiser", "stages": [1, 2],
+                             "evaluation": {"replications": 2, "batch_size": 16, "max_samples": 32, "mm": False,
+                                            "num_steps": 2},
+                             "tables": {"table3": {"full": "Full model", "no_st": "w/o ST-Latent"}}}
+    recipe = load_staged_recipe(_write_staged(tmp_path, doc))
+    work = tmp_path / "work"
+    # a half-trained stage: one of the first stage's runs is trained already (its snapshot is not taken yet)
+    pre = stage_jobs(recipe, recipe.group("vaes"), 1, work)
+    assert run_jobs(pre[:1], data, inline=True) == {"vae_st": 0}
+    outcomes = run_study(recipe, data, work, evaluator=evaluator, inline=True)
+    for name, outcome in outcomes.items():
+        group = recipe.group(name)
+        assert outcome.decision.stop and outcome.decision.reason in ("stable", "budget")
+        for ev in outcome.evaluations:
+            steps = ev["steps"]
+            assert evaluation_path(work, group, steps).is_file()
+            assert {r["steps"] for r in ev["rows"].values()} == {steps}             # equal budgets in the table
+            for v in group.variants:
+                run = f"vae_{v}" if group.kind == "vae" else f"den_{v}"
+                meta = json.loads((stage_dir(work, group, steps) / "runs" / run / "latest.json").read_text())
+                assert meta.get("step", meta.get("meta", {}).get("step")) == steps
+            assert set(ev["orderings"]) == {f"table{'2' if group.kind == 'vae' else '3'}: "
+                                            f"{'st vs pose' if group.kind == 'vae' else 'full vs no_st'}, {m}"
+                                            for m in (("FID", "MPJPE") if group.kind == "vae"
+                                                      else ("FID", "R-precision top-3"))}
+    dens = outcomes["dens"]
+    assert dens.evaluations[-1]["real"]["summary"]["FID"][0] >= 0
+    vae_stop = outcomes["vaes"].decision.steps
+    frozen = stage_dir(work, recipe.group("vaes"), vae_stop) / "runs" / "vae_pose" / "latest"
+    assert json.loads((work / "den_no_st" / "config.json").read_text())["task"]["vae"] == str(frozen)
+
+    # rerun after the end: nothing is trained or scored again
+    def boom(*a, **k):
+        raise AssertionError("recomputed")
+    monkeypatch.setattr("salad_core.ablations.runner.run_jobs", boom)
+    monkeypatch.setattr("salad_core.ablations.stage_eval._score_vae", boom)
+    monkeypatch.setattr("salad_core.ablations.stage_eval._score_denoiser", boom)
+    again = run_study(recipe, data, work, evaluator=evaluator, inline=True)
+    assert {n: o.decision for n, o in again.items()} == {n: o.decision for n, o in outcomes.items()}
+    # an interrupted evaluation: one row left to score; only that row is scored
+    last = dens.evaluations[-1]["steps"]
+    stage_file = evaluation_path(work, recipe.group("dens"), last)
+    before = json.loads(stage_file.read_text())
+    stage_file.unlink()
+    stage_file.with_suffix(".rows").joinpath("no_st.json").unlink()
+    scored = []
+    monkeypatch.setattr("salad_core.ablations.stage_eval._score_denoiser",
+                        lambda folder, *a, **k: scored.append(folder.name) or _fake_result(before["rows"]["no_st"]))
+    run_study(recipe, data, work, evaluator=evaluator, inline=True)
+    assert scored == ["no_st"] and json.loads(stage_file.read_text())["orderings"] == before["orderings"]
+
+    # ship: the final stage's fp16 models, the evaluations, the index and the card
+    from salad_core.ablations import ship_study
+
+    out = ship_study(recipe, outcomes, tmp_path / "shipped", work, command="python scripts/train_ablations.py ...")
+    index = list_ablations(out)
+    assert set(index) == {"vae_st", "vae_pose", "full", "no_st"}
+    assert index["full"]["steps"] == dens.decision.steps and index["vae_st"]["steps"] == vae_stop
+    assert json.loads((out / "no_st" / "pipeline.json").read_text())["vae"] == "../vae_pose/vae"
+    assert (out / "evaluations" / f"dens@{last}.json").is_file() and "## Group `dens`" in (out / "MODEL_CARD.md").read_text()
+    pipe = load_ablation_pipeline("no_st", out)
+    res = pipe("a person walks", lengths=16, seed=0, num_steps=2)
+    assert res.features.shape == (1, 16, 263) and np.isfinite(res.features).all()
+
+
+def _fake_result(row: dict):
+    from salad_core.eval.settings import EvalResult
+
+    return EvalResult(row["label"], {m: tuple(v) for m, v in row["values"].items()}, row["settings"]), None

@@ -28,6 +28,17 @@ def _fmt(metric: str, mean: float, half: float | None = None) -> str:
     return text + unit
 
 
+def _protocol(kind: str, settings) -> str:
+    s = settings
+    samples = f"at most {s.max_samples} clips" if s.max_samples else "the whole split"
+    if kind == "vae":
+        return (f"reconstruction FID and MPJPE (posterior mean) of the `{s.split}` split's crops, {s.replications} "
+                f"replications of {samples} (batches of {s.batch_size}), seed {s.seed}; mean ± 1.96 std / sqrt(R)")
+    return (f"the T2M protocol on the `{s.split}` split, {s.replications} replications of {samples} (batches of "
+            f"{s.batch_size}), {s.num_steps} sampler steps, w {s.guidance_scale:g}, MultiModality "
+            f"{'on' if s.mm else 'off'}, seed {s.seed}; mean ± 1.96 std / sqrt(R)")
+
+
 def _stage_list(evaluations: Sequence[Mapping[str, Any]]) -> str:
     return ", ".join(f"{doc['steps']:,}" for doc in evaluations)
 
@@ -100,19 +111,19 @@ def model_card(outcomes: Mapping[str, Any], *, command: str, recipe_path: str = 
     if size_mb is not None:
         facts.append(f"weights folder {size_mb:.1f} MB (fp16)")
     if facts:
-        out += ["; ".join(facts).capitalize() + ". Load the models with `salad_core.ablations.load_ablation_vae` and "
+        text = "; ".join(facts)
+        out += [text[:1].upper() + text[1:] + ". Load the models with `salad_core.ablations.load_ablation_vae` and "
                 "`load_ablation_pipeline`; every evaluation is in `evaluations/<group>@<steps>.json` beside this card.", ""]
     for name, outcome in outcomes.items():
         group, decision, evaluations = outcome.group, outcome.decision, outcome.evaluations
         final = evaluations[-1]
         why = ("the orderings were the same at the last evaluations" if decision.reason == "stable"
                else "the budget was spent" if decision.reason == "budget" else "it has not stopped yet")
-        out += [f"## Group `{name}` ({group.kind}s): {final['steps']:,} steps, stopped because {why}", "",
+        out += [f"## Group `{name}` ({'VAEs' if group.kind == 'vae' else 'denoisers'}): {final['steps']:,} steps, "
+                f"stopped because {why}", "",
                 f"Evaluated at {_stage_list(evaluations)} steps (stages of the recipe: "
                 f"{', '.join(f'{s:,}' for s in group.stages)}). Protocol, the same for every row: "
-                f"{group.evaluation.describe()}, on the `{group.evaluation.split}` split of the corpus"
-                + (", FID and MPJPE of the reconstructions (posterior mean)" if group.kind == "vae" else
-                   ", the shipped procedural-corpus evaluator unless stated otherwise") + ".", ""]
+                + _protocol(group.kind, group.evaluation) + ".", ""]
         ev_name = next(iter(final["rows"].values()))["settings"].get("evaluator")
         if ev_name:
             out += [f"Evaluator: `{ev_name}`.", ""]
