@@ -388,3 +388,30 @@ def _fake_result(row: dict):
     from salad_core.eval.settings import EvalResult
 
     return EvalResult(row["label"], {m: tuple(v) for m, v in row["values"].items()}, row["settings"]), None
+
+
+def _script():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("train_ablations_script", REPO / "scripts" / "train_ablations.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_script_dry_run_prints_the_plan_and_marks_evaluated_stages(tmp_path, capsys):
+    script = _script()
+    recipe = load_staged_recipe(REPO / "configs" / "ablations_v2.json")
+    vaes = recipe.group("vaes")
+    evaluation_path(tmp_path, vaes, vaes.stages[0]).parent.mkdir(parents=True)
+    evaluation_path(tmp_path, vaes, vaes.stages[0]).write_text("{}")
+    assert script.main(["--recipe", str(REPO / "configs" / "ablations_v2.json"), "--work", str(tmp_path),
+                        "--dry-run", "--jobs", "2"]) == 0
+    out = capsys.readouterr().out
+    lines = [line for line in out.splitlines() if "@" in line]
+    assert len(lines) == len(vaes.stages) + len(recipe.group("denoisers").stages)
+    assert f"vaes@{vaes.stages[0]}" in lines[0] and "[evaluated]" in lines[0] and "[evaluated]" not in lines[1]
+    assert "7 denoisers x 2,500 new steps" in out and "--jobs 2" in out
+    with pytest.raises(SystemExit):
+        script.main(["--recipe", str(REPO / "configs" / "ablations_v2.json"), "--work", str(tmp_path), "--only", "st"])
+    assert "--only and --ship-only are for recipes without groups" in capsys.readouterr().err
