@@ -475,3 +475,25 @@ def test_targets_table_shows_the_pelvis_relative_pca_as_info():
     assert rows["principal components for 90 % of pose variance"].passed is False
     info = rows["the same with the root height taken off (pelvis-relative)"]
     assert info.value == "12" and info.passed is None
+
+
+def test_one_arm_swings_more_than_the_other():
+    """Persona.swing_scale (2.4) scales each arm's walking swing on its own; it is validated."""
+    from dataclasses import replace
+
+    from salad_core.data.procedural.footwork import Persona, Stance
+    from salad_core.data.procedural.gait import Route, gait_style, locomotion
+    from salad_core.data.procedural.kinematics import body_model
+
+    body = body_model("humanml3d")
+    base = Persona.sample(np.random.default_rng(14))
+    ranges = []
+    for scale in ((1.0, 1.0), (1.3, 0.7)):
+        persona = replace(base, swing_scale=scale)
+        style = gait_style("walk", np.random.default_rng(15), (), 1.0)
+        seg = locomotion(Stance.at((0.0, 0.0), 0.0, persona), persona, style, Route(), 6, body)
+        ranges.append(np.ptp(seg.pose.arm[:, :, 0], axis=0))          # flexion range per arm
+    np.testing.assert_allclose(ranges[0][0], ranges[0][1], rtol=0.05)
+    assert ranges[1][0] > 1.5 * ranges[1][1]
+    with pytest.raises(ValueError, match="swing_scale"):
+        replace(base, swing_scale=(1.0, 2.5))

@@ -467,6 +467,8 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
     """
     body = body or body_model("humanml3d")
     persona = persona or Persona.sample(rng)
+    # the fidgets draw from a stream of their own: how many there are does not change the rest
+    fidget_rng = np.random.default_rng(int(rng.integers(2 ** 62)))
     stance = Stance.at((0.0, 0.0), 0.0, persona)
     overlay_arms = _arms_of(plan.overlay)
     acc: Pose | None = None
@@ -506,7 +508,7 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
             events[("main", i)] = (core, seg.info)
             stance = seg.end
             if main.kind in UPPER_FIDGET_KINDS:
-                fidgets += _fidgets_of(step, plan.overlay, seg, core, persona, body, rng)
+                fidgets += _fidgets_of(step, plan.overlay, seg, core, persona, body, fidget_rng)
             if step.layer is not None:
                 span = (core[1] - core[0]) / FPS
                 g = build_gesture(step.layer, persona, body, rng, duration=span * rng.uniform(0.75, 0.92))

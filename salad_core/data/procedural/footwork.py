@@ -71,6 +71,9 @@ class Persona:
     #: (None: :data:`.kinematics.SPINE_SHARE` on every axis); 2.3: one performer bends more from
     #: the lower back, another from the upper back
     spine_share: tuple | None = None
+    #: per-arm (left, right) scale of the walking arm swing (2.4: one arm swings more than the
+    #: other, as with most people; 1 = the gait's amplitude)
+    swing_scale: tuple = (1.0, 1.0)
 
     def __post_init__(self) -> None:
         if not 0.03 <= self.width <= 0.3:
@@ -91,6 +94,8 @@ class Persona:
             if sh.shape != (3, 3) or (sh < 0).any() or not np.allclose(sh.sum(0), 1.0):
                 raise ValueError(f"Persona.spine_share must be 3 spine joints x 3 axes of non-negative shares "
                                  f"summing to 1 per axis, got {self.spine_share!r}")
+        if np.shape(self.swing_scale) != (2,) or not all(0.0 <= x <= 2.0 for x in self.swing_scale):
+            raise ValueError(f"Persona.swing_scale must be 2 arms' scales in [0, 2], got {self.swing_scale!r}")
         if np.abs(self.trunk_posture).max() > 0.5:
             raise ValueError(f"Persona.trunk_posture holds {np.abs(self.trunk_posture).max():.2f} rad; "
                              f"each offset must lie in [-0.5, 0.5]")
@@ -118,6 +123,7 @@ class Persona:
                               for _ in range(2)),
             trunk_posture=trunk_curvature(rng),
             spine_share=spine_shares(rng),
+            swing_scale=tuple(float(x) for x in rng.uniform(0.7, 1.3, size=2)),
         )
 
 

@@ -252,7 +252,7 @@ def locomotion(start: Stance, persona: Persona, style: GaitStyle, route: Route, 
             arm[:, k] = _running_arm(lead[:, 1 - k], chest_pitch, act, rest, style, body, k)
     else:
         for k in range(2):
-            swing = style.arm_swing * lead[:, 1 - k]
+            swing = style.arm_swing * persona.swing_scale[k] * lead[:, 1 - k]
             arm[:, k, 0] = rest[0] + swing + 0.1 * act
             arm[:, k, 1] = rest[1] + style.arm_abd * act
             arm[:, k, 2] = rest[2] + (style.elbow - rest[2]) * act + 0.35 * np.maximum(swing, 0.0)
