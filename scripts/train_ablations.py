@@ -5,6 +5,8 @@ The staged study (issue 24, ``configs/ablations_v2.json``, the default recipe) i
 
     python scripts/train_ablations.py --recipe configs/ablations_v2.json --data CORPUS --work RUNS --jobs 2
     python scripts/train_ablations.py --recipe configs/ablations_v2.json --work RUNS --dry-run   # the plan
+    python scripts/train_ablations.py --recipe configs/ablations_v2.json --data CORPUS --work RUNS --time 30
+                                                        # CPU s/step of representative variants, for the plan
 
 Every group of tables trains to its next stage (every variant of a table to exactly the same steps),
 is evaluated there with one protocol (``RUNS/evaluations/<group>@<steps>.json``) and stops when the
@@ -34,7 +36,9 @@ from pathlib import Path
 from salad_core.ablations import (load_recipe, load_staged_recipe, plan_jobs, run_jobs, run_study, ship, ship_study,
                                   study_plan)
 from salad_core.ablations.shipping import folder_size_mb
+from salad_core.ablations.runner import _alike
 from salad_core.ablations.stage_eval import load_evaluation
+from salad_core.ablations.timing import TIMING_FILE, time_variants
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -44,14 +48,19 @@ def _hours(seconds: float | None) -> str:
 
 
 def print_plan(recipe, work: Path | None, jobs: int) -> None:
-    """The stages, the steps each variant trains in them, the CPU time the recipe's measured speeds give,
-    and (with ``work``) which stages are already evaluated."""
+    """The stages, the steps each variant trains in them, the CPU time the measured speeds give (``--time``'s
+    ``WORK/timing.json`` if present, else the recipe's ``timing``) and which stages are already evaluated."""
     print(f"recipe {recipe.path}: stop rule {recipe.stop.consecutive} consecutive evaluations with equal orderings "
           f"({recipe.stop.compare}), else the last stage")
-    print(f"measured speeds: {recipe.timing_note or 'none'}")
+    timing = work / TIMING_FILE if work is not None else None
+    speeds, note = recipe.steps_per_s, recipe.timing_note or "none"
+    if timing is not None and timing.is_file():
+        doc = json.loads(timing.read_text())
+        speeds, note = doc["steps_per_cpu_s"], f"{timing}: {doc['measured']}"
+    print(f"measured speeds (steps per CPU second): {note}: {dict(speeds)}")
     total = 0.0
     unmeasured = False
-    for entry in study_plan(recipe):
+    for entry in study_plan(recipe, speeds):
         group = recipe.group(entry["group"])
         done = work is not None and load_evaluation(work, group, entry["steps"]) is not None
         sec = entry["cpu_seconds"]
@@ -59,7 +68,7 @@ def print_plan(recipe, work: Path | None, jobs: int) -> None:
         total += sec or 0.0
         print(f"  {entry['stage']:>16s}: {len(entry['variants'])} {entry['kind']}s x {entry['new_steps_per_variant']:,} "
               f"new steps ({', '.join(entry['tables'])}), CPU {_hours(sec)}{'  [evaluated]' if done else ''}")
-    print(f"all stages, training only: {_hours(total)} of one core"
+    print(f"all stages, training only: {_hours(total)} of CPU time"
           + (" (some variants unmeasured: not counted)" if unmeasured else "")
           + f"; about {_hours(total / max(1, jobs))} of wall time with --jobs {jobs} on free cores. "
             "Evaluation time comes on top; a group that stops early skips its later stages.")
@@ -67,6 +76,15 @@ def print_plan(recipe, work: Path | None, jobs: int) -> None:
 
 def staged_main(args, ap) -> int:
     recipe = load_staged_recipe(args.recipe)
+    if args.time:
+        if args.data is None:
+            ap.error("--time needs --data (a corpus to train the timing runs on)")
+        # one variant per kind of cost (VAE latent kind; denoiser's VAE): the plan takes the others alike
+        names = args.time_variants or list({_alike(recipe, v): v for g in reversed(recipe.groups)
+                                            for v in reversed(g.variants)}.values())
+        result = time_variants(recipe, names, args.data, args.work, steps=args.time)
+        print(json.dumps(result, indent=2))
+        return 0
     if args.dry_run:
         print_plan(recipe, args.work, args.jobs)
         return 0
@@ -133,6 +151,12 @@ def main(argv=None) -> int:
                     help="where to assemble the shipped models")
     ap.add_argument("--no-ship", action="store_true", help="train (and evaluate) only")
     ap.add_argument("--dry-run", action="store_true", help="print the plan and exit")
+    ap.add_argument("--time", type=int, default=0, metavar="STEPS",
+                    help="staged recipes: train STEPS steps of representative variants in this process and write "
+                         "their CPU seconds per step to WORK/timing.json (read by --dry-run), then exit")
+    ap.add_argument("--time-variants", nargs="+", default=None,
+                    help="with --time: the variants to time (default: one per kind of cost: each VAE latent kind, "
+                         "denoisers on each VAE)")
     ap.add_argument("--groups", nargs="+", default=None,
                     help="staged recipes: only these groups (their VAE groups must have stopped); does not ship")
     ap.add_argument("--only", nargs="+", default=None, help="recipes without groups: variant names to train")

@@ -162,17 +162,35 @@ def _replay(recipe: StagedRecipe, group: StudyGroup, work: Path) -> GroupOutcome
                        f"{work / 'evaluations'}): run it first")
 
 
-def study_plan(recipe: StagedRecipe) -> list[dict[str, Any]]:
+def _alike(recipe: StagedRecipe, name: str) -> tuple[str, str]:
+    """What a variant's speed is taken to equal when it was not timed: VAEs of the same latent kind
+    ("st" or "pose"), denoisers on the same VAE (the latent's token count sets the cost)."""
+    v = recipe.base.variant(name)
+    if v.kind == "vae":
+        return "vae", str(v.model.get("kind", recipe.base.vae_doc.get("model", {}).get("kind", "st")))
+    return "denoiser", str(v.vae)
+
+
+def study_plan(recipe: StagedRecipe, speeds: Mapping[str, float] | None = None) -> list[dict[str, Any]]:
     """The study's stages, for a dry run: one entry per group and stage, with the steps each variant
-    trains in that stage and the CPU time the recipe's measured speeds give (None when unmeasured)."""
+    trains in that stage and the CPU seconds (one core) the measured speeds give.
+
+    ``speeds``: steps per CPU second by variant (default: the recipe's ``timing``). A variant not
+    timed takes the speed of a timed one alike (VAEs of the same latent kind, denoisers on the same
+    VAE); ``cpu_seconds`` is None when none is.
+    """
+    speeds = dict(recipe.steps_per_s if speeds is None else speeds)
+    for name in list(speeds):
+        if name in {v.name for v in recipe.base.variants}:
+            speeds.setdefault(_alike(recipe, name), speeds[name])
     plan = []
     for group in recipe.groups:
         before = 0
         for steps in group.stages:
             new = steps - before
-            seconds = 0.0
+            seconds: float | None = 0.0
             for v in group.variants:
-                rate = recipe.steps_per_s.get(v, recipe.steps_per_s.get(group.kind))
+                rate = speeds.get(v, speeds.get(_alike(recipe, v)))
                 seconds = None if (seconds is None or not rate) else seconds + new / rate
             plan.append({"group": group.name, "kind": group.kind, "stage": group.stage_name(steps), "steps": steps,
                          "new_steps_per_variant": new, "variants": list(group.variants),
