@@ -9,7 +9,8 @@
 # Every stage resumes where it stopped when run again with RESUME=1 (Ctrl-C writes a checkpoint);
 # the data stage skips what is already built (both builds are deterministic: the same commit and
 # seed give byte-identical files, so a lost run folder is rebuilt from this recipe alone).
-# Environment: VAE_STEPS, DEN_STEPS, VAE_DEC_STEPS override the configs' step budgets, KM_STEPS="KF_VAE PST MMAE" KeyMotion's
+# Environment: VAE_CONFIG the VAE stage's config (default configs/v3_vae.json: v2_vae.json plus the integrated-root
+# term, extra weight on the root channels and bf16 autocast; configs/v2_vae.json is the first v2 run's), VAE_STEPS, DEN_STEPS, VAE_DEC_STEPS override the configs' step budgets, KM_STEPS="KF_VAE PST MMAE" KeyMotion's
 # (three numbers); PYTHON the python to use;
 # DEN_DATA the denoiser's corpus (default: WORK_DIR/corpus, the VAE's). The first v2 run trained its VAE
 # on corpus 2.0 (commit f1f8697) and its denoiser on corpus 2.1 (commit 33c5adb, DEN_DATA=WORK_DIR/corpus21):
@@ -38,9 +39,9 @@ if has data; then
 fi
 if has vae; then
   # the skeleto-temporal VAE (paper architecture, 162,503 parameters) on corpus + general motion (ratio 0.5),
-  # with the bone-length term and latent noise (configs/v2_vae.json)
+  # with the bone-length term, latent noise, the integrated-root term and bf16 autocast (configs/v3_vae.json)
   "$PY" -m salad_core.train vae --data "$WORK/corpus" --general "$WORK/general" --out "$WORK/vae" \
-      --config configs/v2_vae.json ${VAE_STEPS:+--steps "$VAE_STEPS"} --no-progress $RESUME
+      --config "${VAE_CONFIG:-configs/v3_vae.json}" ${VAE_STEPS:+--steps "$VAE_STEPS"} --no-progress $RESUME
 fi
 if has vae_decoder; then
   # decoder fine-tuning with the integrated-root term (issue 21: the heading drifts): the v2 VAE's encoder is
