@@ -10,7 +10,9 @@
 # the data stage skips what is already built (both builds are deterministic: the same commit and
 # seed give byte-identical files, so a lost run folder is rebuilt from this recipe alone).
 # Environment: VAE_CONFIG the VAE stage's config (default configs/v3_vae.json: v2_vae.json plus the integrated-root
-# term, extra weight on the root channels and bf16 autocast; configs/v2_vae.json is the first v2 run's), VAE_STEPS, DEN_STEPS, VAE_DEC_STEPS override the configs' step budgets, KM_STEPS="KF_VAE PST MMAE" KeyMotion's
+# term, extra weight on the root channels and bf16 autocast; configs/v2_vae.json is the first v2 run's), DEN_CONFIG
+# the denoiser's (default configs/v3_denoiser.json: v2_denoiser.json's recipe in 10,000 steps, lr x0.2 at 8,000, so that
+# the VAE and the denoiser fit one 3-hour session on 2 cores), VAE_STEPS, DEN_STEPS, VAE_DEC_STEPS override the configs' step budgets, KM_STEPS="KF_VAE PST MMAE" KeyMotion's
 # (three numbers); PYTHON the python to use;
 # DEN_DATA the denoiser's corpus (default: WORK_DIR/corpus, the VAE's). The first v2 run trained its VAE
 # on corpus 2.0 (commit f1f8697) and its denoiser on corpus 2.1 (commit 33c5adb, DEN_DATA=WORK_DIR/corpus21):
@@ -60,7 +62,7 @@ PYEOF
 fi
 if has denoiser; then
   "$PY" -m salad_core.train denoiser --data "${DEN_DATA:-$WORK/corpus}" --out "$WORK/denoiser" --vae "$WORK/vae" \
-      --config configs/v2_denoiser.json ${DEN_STEPS:+--steps "$DEN_STEPS"} --no-progress $RESUME
+      --config "${DEN_CONFIG:-configs/v3_denoiser.json}" ${DEN_STEPS:+--steps "$DEN_STEPS"} --no-progress $RESUME
 fi
 if has keymotion; then
   # three stages in one process; a finished stage is skipped on RESUME=1, an interrupted one continues
