@@ -415,3 +415,44 @@ def test_script_dry_run_prints_the_plan_and_marks_evaluated_stages(tmp_path, cap
     with pytest.raises(SystemExit):
         script.main(["--recipe", str(REPO / "configs" / "ablations_v2.json"), "--work", str(tmp_path), "--only", "st"])
     assert "--only and --ship-only are for recipes without groups" in capsys.readouterr().err
+
+
+
+def test_timing_measures_cpu_per_step_and_the_plan_takes_alike_variants(tmp_path, monkeypatch):
+    """ablations.timing: a denoiser's VAE is timed first, the figures are CPU seconds per real step
+    (warm-up steps left out), written to WORK/timing.json; the dry run's plan takes an untimed variant's
+    speed from a timed one alike (denoisers on the same VAE), and leaves unlike ones unmeasured."""
+    import functools
+
+    import salad_core.text
+    from salad_core.ablations.timing import TIMING_FILE, time_variants
+
+    monkeypatch.setattr(salad_core.text, "load_text_encoder", functools.lru_cache(salad_core.text.load_text_encoder))
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=40)
+    doc = _staged_doc(denoisers={"full": {"vae": "st"}, "no_film": {"vae": "st", "model": {"film": False}},
+                                 "no_st": {"vae": "pose"}})
+    doc["groups"]["dens"] = {"kind": "denoiser", "stages": [3],
+                             "evaluation": {"replications": 2, "batch_size": 16, "max_samples": 32, "mm": False},
+                             "tables": {"table3": {"full": "Full model", "no_st": "w/o ST-Latent"},
+                                        "supp_table3": {"full": "with FiLM", "no_film": "without FiLM"}}}
+    recipe = load_staged_recipe(_write_staged(tmp_path, doc))
+    work = tmp_path / "work"
+    with pytest.raises(ValueError, match="must exceed skip"):
+        time_variants(recipe, ["full"], data, work, steps=3, skip=3)
+    with pytest.raises(ValueError, match=r"\['nope'\] are not in the recipe"):
+        time_variants(recipe, ["nope"], data, work, steps=4, skip=1)
+    result = time_variants(recipe, ["full"], data, work, steps=4, skip=1)
+    assert set(result["steps_per_cpu_s"]) == {"st", "full"}            # the denoiser's VAE was timed too
+    for name, rate in result["steps_per_cpu_s"].items():
+        assert rate > 0 and result["cpu_s_per_step"][name] == pytest.approx(1.0 / rate, abs=1e-4)
+        assert result["wall_s_per_step"][name] > 0
+    assert json.loads((work / TIMING_FILE).read_text()) == result
+    plan = {(p["group"], p["steps"]): p for p in study_plan(recipe, result["steps_per_cpu_s"])}
+    rate = result["steps_per_cpu_s"]
+    assert plan[("vaes", 1)]["cpu_seconds"] is None                    # the pose VAE is like no timed one
+    assert plan[("dens", 3)]["cpu_seconds"] is None                    # no_st's denoiser runs on that VAE
+    doc["denoisers"].pop("no_st")
+    doc["groups"]["dens"]["tables"]["table3"].pop("no_st")
+    recipe = load_staged_recipe(_write_staged(tmp_path, doc))
+    dens = {p["steps"]: p for p in study_plan(recipe, rate) if p["group"] == "dens"}
+    assert dens[3]["cpu_seconds"] == pytest.approx(2 * 3 / rate["full"])  # no_film takes full's speed
