@@ -242,8 +242,9 @@ def test_long_sequences_are_drawn_and_said():
     from salad_core.data.procedural import GENERATOR_VERSION, in_language, render_captions
     from salad_core.data.procedural.composition import PLAN_TYPES, sample_plan
 
-    assert GENERATOR_VERSION == "2.4"
-    assert PLAN_TYPES["sequence3"] + PLAN_TYPES["sequence4"] >= 0.2
+    assert GENERATOR_VERSION == "2.5"
+    assert PLAN_TYPES["sequence3"] + PLAN_TYPES["sequence4"] >= 0.5          # 2.5: 0.57 (2.4: 0.43)
+    assert PLAN_TYPES["single"] + PLAN_TYPES["gesture"] <= 0.1
     for i in range(5):
         rng = np.random.default_rng([12, i])
         plan = sample_plan(rng, "sequence4")
@@ -497,3 +498,94 @@ def test_one_arm_swings_more_than_the_other():
     assert ranges[1][0] > 1.5 * ranges[1][1]
     with pytest.raises(ValueError, match="swing_scale"):
         replace(base, swing_scale=(1.0, 2.5))
+
+
+def test_forward_walks_drift_along_gentle_arcs():
+    """2.5: a forward walk, run, jog or march drifts along an arc with DRIFT_P; its heading gain
+    over the route lies in DRIFT_ANGLE (well under a turn), in-place gaits stay straight, and the
+    planted feet still do not slide."""
+    from salad_core.data.procedural.checks import foot_sliding
+    from salad_core.data.procedural.footwork import Persona, Stance
+    from salad_core.data.procedural.gait import Route, gait_style, locomotion
+    from salad_core.data.procedural.kinematics import assemble, body_model
+    from salad_core.data.procedural.primitives import DRIFT_ANGLE, DRIFT_P, build_base
+
+    body = body_model("humanml3d")
+    persona = Persona.sample(np.random.default_rng(20))
+    start = Stance.at((0.0, 0.0), 0.0, persona)
+    turns = {}
+    for kind in ("walk", "run"):
+        turns[kind] = []
+        for i in range(24):
+            seg = build_base(Action(kind), start, persona, body, np.random.default_rng([21, i]))
+            turns[kind].append(seg.info["turn"])
+            if i < 3:                       # the arc slides the planted feet no more than a line does
+                style = gait_style(kind, np.random.default_rng([26, i]))
+                slide = [foot_sliding(assemble(locomotion(start, persona, style, r, 6, body).pose, body,
+                                               keep_toes=True))["mean"]
+                         for r in (Route(), Route("arc", radius=8.0, side=1.0))]
+                assert slide[1] <= 1.05 * slide[0] + 1e-3, slide
+        t = np.abs(turns[kind])
+        curved = t > 1e-6
+        assert 0.3 < curved.mean() < 0.9                               # about DRIFT_P = 0.6 of them
+        assert DRIFT_ANGLE[0] * 0.8 <= t[curved].min() and t[curved].max() <= DRIFT_ANGLE[1] * 1.25
+        assert (np.sign(np.asarray(turns[kind])[curved]) > 0).any() and (np.sign(np.asarray(turns[kind])[curved]) < 0).any()
+    assert 0.0 < DRIFT_P < 1.0 and DRIFT_ANGLE[1] < 0.45 * np.pi       # a drift is never a turn
+    in_place = build_base(Action("walk", variant="in_place"), start, persona, body, np.random.default_rng(22))
+    assert abs(in_place.info["turn"]) < 1e-9
+
+
+def test_posture_drift_is_slow_large_and_spares_gesture_arms():
+    """2.5: _drift moves the trunk, head and free arms by several degrees over seconds (slowly:
+    the drift's angular speed stays far below an action's), and leaves arms a gesture drives and
+    a trunk propped on its hands (nearly) alone."""
+    from salad_core.data.procedural.composition import DRIFT_AMP, _drift
+    from salad_core.data.procedural.footwork import Persona, Stance
+    from salad_core.data.procedural.kinematics import FPS, body_model
+    from salad_core.data.procedural.segment import standing_pose
+
+    body = body_model("humanml3d")
+    persona = Persona.sample(np.random.default_rng(23))
+    n = 160
+    base = standing_pose(Stance.at((0.0, 0.0), 0.0, persona), persona, n, body, rng=None, idle=False)
+    spine_std, arm_std, rates = [], [], []
+    for i in range(8):
+        pose = base.copy()
+        gest = np.zeros((n, 2))
+        gest[:, 1] = 1.0                                                 # a gesture drives the right arm
+        propped = np.zeros(n)
+        propped[100:] = 1.0
+        _drift(pose, persona, np.random.default_rng([24, i]), propped=propped, gesture_arms=gest)
+        d_spine = pose.spine - base.spine
+        d_arm = pose.arm - base.arm
+        np.testing.assert_allclose(d_arm[:, 1], 0.0, atol=1e-12)         # the gesture's arm is its own
+        assert np.abs(d_spine[130:]).max() < 0.25 * np.abs(d_spine[:80]).max() + 1e-9
+        spine_std.append(d_spine[:90, 1].std())
+        arm_std.append(d_arm[:, 0, 0].std())
+        rates.append(np.abs(np.diff(d_arm[:, 0, 0])).max() * FPS)
+        np.testing.assert_allclose(pose.ankle, base.ankle)               # the feet are not touched
+        np.testing.assert_allclose(pose.pelvis, base.pelvis)
+    assert np.mean(spine_std) > 0.2 * DRIFT_AMP["spine"][1] * persona.liveliness
+    assert np.mean(arm_std) > 0.03                                       # rad: a visible drift of the free arm
+    assert max(rates) < 0.6                                              # rad/s: slow (a wave swings > 3)
+    # an arm a pose holds across the body (abduction below 0.02 rad) is not snapped out of it
+    pose = base.copy()
+    pose.arm[:, 0, 1] = np.linspace(-0.3, 0.3, n)
+    _drift(pose, persona, np.random.default_rng(27))
+    assert np.abs(np.diff(pose.arm[:, 0, 1])).max() < 0.02
+    assert pose.arm[0, 0, 1] < 0.0
+
+
+def test_performers_range_wider_in_posture_and_carriage():
+    """2.5: performers' stance width, twist and per-arm carriage span wider ranges than 2.4's."""
+    from salad_core.data.procedural.footwork import Persona
+
+    ps = [Persona.sample(np.random.default_rng([25, i])) for i in range(300)]
+    width = np.array([p.width for p in ps])
+    twist = np.array([p.twist for p in ps])
+    offs = np.array([p.arm_offsets for p in ps])                          # (300, 2, 3)
+    assert width.min() < 0.06 and width.max() > 0.18
+    assert np.abs(twist).max() > 0.3
+    assert offs[..., 0].max() > 0.2 and offs[..., 1].max() > 0.25
+    # the two arms of a performer are drawn each their own
+    assert abs(np.corrcoef(offs[:, 0, 0], offs[:, 1, 0])[0, 1]) < 0.2

@@ -36,8 +36,10 @@ MIN_FRAMES, MAX_FRAMES = 41, 197
 #: of its single-action clips under 2.5 cm; the real clip 9.7).
 #: Corpus 2.4 draws longer plans again (one-action clips spread 4.2 cm, four-action ones 6.6; clips
 #: averaged 4.5 s where HumanML3D's run 2-10 s, 7.1 s on average): 5.6 s on average now.
-PLAN_TYPES = {"single": 0.1, "gesture": 0.05, "layered": 0.12, "sequence": 0.24, "sequence3": 0.25,
-              "sequence4": 0.18, "overlay": 0.06}
+#: Corpus 2.5 shifts the draw again towards three and four actions (0.57, was 0.43) and away from
+#: one-action clips (0.17, was 0.27), whose joints spread 4 cm against 6-7 for a sequence: 5.8 s.
+PLAN_TYPES = {"single": 0.06, "gesture": 0.03, "layered": 0.08, "sequence": 0.2, "sequence3": 0.3,
+              "sequence4": 0.27, "overlay": 0.06}
 
 
 @dataclass(frozen=True)
@@ -287,6 +289,43 @@ def _alive(pose: Pose, persona: Persona, rng: np.random.Generator, propped: np.n
     pose.arm[:, :, 0] += noise[:, 6:8] * 0.035 * arm_scale
     pose.arm[:, :, 1] += noise[:, 8:10] * 0.025 * arm_scale
     pose.arm[:, :, 2] = np.maximum(pose.arm[:, :, 2] + noise[:, 10:12] * 0.05 * arm_scale, 0.02)
+
+
+#: Std (rad, at liveliness 1) of the slow posture drift of :func:`_drift`: spine (yaw, pitch, roll),
+#: neck (yaw, pitch), arms (flexion, abduction); and its periods (s).
+DRIFT_AMP = {"spine": (0.09, 0.1, 0.07), "neck": (0.12, 0.06), "arm": (0.16, 0.08)}
+DRIFT_PERIOD = (4.0, 9.0)
+
+
+def _drift(pose: Pose, persona: Persona, rng: np.random.Generator, propped: np.ndarray | None = None,
+           gesture_arms: np.ndarray | None = None, head_calm: np.ndarray | None = None) -> None:
+    """Lay a slow drift of the posture on ``pose`` (in place): the trunk leans and turns, the head
+    turns and the free arms settle forward or back over seconds (2.5).
+
+    Real performers do not hold one carriage through a clip: between and during actions they
+    shift their weight, lean, let the arms drift. :func:`_alive`'s wander is quicker and smaller
+    (periods 1.5-4 s); this one is slow (:data:`DRIFT_PERIOD`), so its joint speeds stay a few
+    cm/s (well under any annotated action's) while the pose moves by several centimetres. Each
+    channel draws its own phase, so trunk, head and the two arms drift independently.
+    ``propped``, ``gesture_arms`` and ``head_calm`` limit it as in :func:`_alive`: a trunk held up
+    by the hands drifts a tenth as much, an arm a gesture drives not at all (claps meet, salutes
+    reach the brow), and during a head gesture the arms stay and the trunk drifts a third as much.
+    """
+    n = pose.num_frames
+    live = persona.liveliness
+    noise = _wander(n, rng, 9, period=DRIFT_PERIOD) * live
+    trunk = np.ones(n) if propped is None else 1.0 - 0.9 * smooth(np.asarray(propped, dtype=np.float64), 4.0)
+    calm = np.zeros(n) if head_calm is None else np.clip(head_calm, 0.0, 1.0)
+    trunk = trunk * (1.0 - 0.67 * calm)
+    pose.spine += noise[:, 0:3] * np.asarray(DRIFT_AMP["spine"])[None] * trunk[:, None]
+    pose.neck[:, :2] += noise[:, 3:5] * np.asarray(DRIFT_AMP["neck"])[None] * (1.0 - 0.67 * calm)[:, None]
+    free = np.ones((n, 2)) if gesture_arms is None else 1.0 - np.clip(gesture_arms, 0.0, 1.0)
+    free = free * (1.0 - calm)[:, None]
+    pose.arm[:, :, 0] += noise[:, 5:7] * DRIFT_AMP["arm"][0] * free
+    # abduction: the drift may not carry a hanging arm into the body (below 0.02 rad), but an arm
+    # a pose already holds across it (a salute, a hand on the chest) keeps its own, continuous
+    abd = pose.arm[:, :, 1]
+    pose.arm[:, :, 1] = np.maximum(abd + noise[:, 7:9] * DRIFT_AMP["arm"][1] * free, np.minimum(abd, 0.02))
 
 
 def _share_spine(pose: Pose, persona: Persona) -> None:
@@ -565,6 +604,9 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
     for f0, f1 in calm:
         head_calm[max(0, f0 - 6):max(0, f1 + 6)] = 1.0
     _alive(pose, persona, rng, propped=hands[0].max(1), gesture_arms=gesture_arms, head_calm=smooth(head_calm, 2.0))
+    # the drift draws from the fidgets' stream: the main stream's later draws stay as they were
+    _drift(pose, persona, fidget_rng, propped=hands[0].max(1), gesture_arms=gesture_arms,
+           head_calm=smooth(head_calm, 2.0))
     mask = _hold_mask(pose, body, calm)
     # a trunk propped on its hands sways a tenth as much (as in _alive): the hands stay within reach
     mask[:, 0] *= 1.0 - 0.9 * smooth(hands[0].max(1), 4.0)

@@ -34,8 +34,9 @@ ARM_FIDGET_KINDS = frozenset({"walk", "walk_backward", "sidestep", "circle", "tu
 #: Base actions during which the head may glance around and the trunk lean or twist (they move
 #: the spine and the head only incidentally).
 UPPER_FIDGET_KINDS = ARM_FIDGET_KINDS | {"jog", "march"}
-#: Chance per eligible step of a fidget of each free arm (drawn per arm), a glance and a trunk shift.
-FIDGET_P = {"arm": 0.5, "glance": 0.5, "trunk": 0.7}
+#: Chance per eligible step of a fidget of each free arm (drawn per arm), a glance and a trunk shift
+#: (2.5: 0.7 / 0.6 / 0.9, was 0.5 / 0.5 / 0.7).
+FIDGET_P = {"arm": 0.7, "glance": 0.6, "trunk": 0.9}
 #: Shortest core (s) of a step that takes a fidget, and frames kept clear at either end of the
 #: core (the neighbouring actions cross-fade there).
 MIN_SPAN, MARGIN = 1.4, 6
@@ -154,7 +155,8 @@ def glance(persona: Persona, body: BodyModel, rng: np.random.Generator, span: fl
 def trunk_shift(persona: Persona, body: BodyModel, rng: np.random.Generator, span: float) -> Gesture:
     """The trunk leans forward or back, sideways and twists to a new carriage and back.
 
-    One or two held keyposes (yaw +-0.25, pitch -0.06..0.2, roll +-0.1 rad) over at most
+    One or two held keyposes (yaw +-0.4, pitch -0.1..0.4, roll +-0.25 rad; 2.5, was +-0.25,
+    -0.08..0.3, +-0.15) over at most
     ``span`` s; the head keeps its gaze (it turns back by half the pitch). Drives no arm.
     """
     if span <= 0.5:
@@ -165,7 +167,7 @@ def trunk_shift(persona: Persona, body: BodyModel, rng: np.random.Generator, spa
     for _ in range(n_keys):
         t += u(0.5, 0.9)
         times.append(t)
-        keys.append(np.array([u(-0.25, 0.25), u(-0.08, 0.3), u(-0.15, 0.15)]))
+        keys.append(np.array([u(-0.4, 0.4), u(-0.1, 0.4), u(-0.25, 0.25)]))
         t += u(0.3, 1.0)
         times.append(t)
         keys.append(keys[-1] + u(-0.02, 0.02, size=3))

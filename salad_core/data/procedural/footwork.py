@@ -105,7 +105,7 @@ class Persona:
         # ranges wide enough that posture and arm carriage differ visibly between performers
         # (generator 1.0 drew a near-identical stance: the corpus's pose std was 0.66x the real one)
         return Persona(
-            width=float(rng.uniform(0.06, 0.18)),
+            width=float(rng.uniform(0.05, 0.2)),
             toe_out=float(rng.uniform(0.0, 0.45)),
             arm_rest=(float(rng.uniform(-0.1, 0.3)), float(rng.uniform(0.04, 0.4)), float(rng.uniform(0.1, 1.0))),
             arm_pole=(0.3, 0.0, -1.0),
@@ -113,13 +113,14 @@ class Persona:
             head_pitch=float(rng.uniform(-0.2, 0.45)),
             tempo=float(rng.uniform(0.85, 1.15)),
             slouch=float(rng.uniform(-0.15, 0.5)),
-            tilt=float(rng.uniform(-0.2, 0.2)),
+            tilt=float(rng.uniform(-0.25, 0.25)),
             liveliness=float(rng.uniform(0.6, 1.4)),
             arm_asym=float(rng.uniform(-0.3, 0.3)),
             # 2.2: a twisted posture and arms carried each their own way vary pose dimensions that
-            # nothing else does (the corpus needed 9 principal components for 90 % of its variance)
-            twist=float(rng.uniform(-0.3, 0.3)),
-            arm_offsets=tuple(tuple(float(x) for x in rng.uniform([-0.2, -0.12, -0.3], [0.2, 0.25, 0.5]))
+            # nothing else does (the corpus needed 9 principal components for 90 % of its variance);
+            # 2.5 widens stance width, tilt, twist and the per-arm flexion/abduction offsets
+            twist=float(rng.uniform(-0.4, 0.4)),
+            arm_offsets=tuple(tuple(float(x) for x in rng.uniform([-0.3, -0.12, -0.3], [0.3, 0.4, 0.5]))
                               for _ in range(2)),
             trunk_posture=trunk_curvature(rng),
             spine_share=spine_shares(rng),

@@ -375,7 +375,7 @@ def _gait_style(kind: str, rng: np.random.Generator, mods: tuple[str, ...], temp
                        swing=Swing(u(0.06, 0.1), u(0.4, 0.5), u(0.05, 0.2)), roll_in=u(0.2, 0.32),
                        roll_out=-u(0.45, 0.65), width=u(0.07, 0.1), bob=u(0.012, 0.022), drop=u(0.0, 0.02),
                        lean=u(0.02, 0.06) + 0.03 * pace, sway=u(0.015, 0.03), twist=u(0.04, 0.08),
-                       arm_swing=u(0.22, 0.35) * (1 + 0.3 * pace), arm_abd=u(0.0, 0.06), elbow=u(0.2, 0.45))
+                       arm_swing=u(0.22, 0.5) * (1 + 0.3 * pace), arm_abd=u(0.0, 0.1), elbow=u(0.15, 0.7))  # 2.5: wider
         if in_place:
             st = replace(st, speed=0.0, swing=replace(st.swing, height=u(0.1, 0.15)), roll_in=0.05, roll_out=-0.3)
         return st

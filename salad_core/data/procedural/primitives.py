@@ -93,6 +93,9 @@ class PrimitiveSpec:
 
 
 _SPEED = ("quickly", "slowly")
+#: 2.5 weights: the head gestures (0.55 / 0.5 / 0.55 -> 0.4), shuffles and sways (0.5 -> 0.4), whose
+#: clips barely changed posture (2-4 cm within-clip spread), are drawn less; spins, circles, picking
+#: up, lunges and knee touches (6-9 cm) more.
 PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     # locomotion
     PrimitiveSpec("walk", "locomotion", "base", mods=_SPEED, variants=("", "in_place"), accepts=("arms", "head"), weight=2.5),
@@ -101,7 +104,7 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("march", "locomotion", "base", mods=_SPEED, variants=("", "in_place"), accepts=("head",), weight=0.8),
     PrimitiveSpec("walk_backward", "locomotion", "base", mods=_SPEED, accepts=("arms", "head"), weight=1.0),
     PrimitiveSpec("sidestep", "locomotion", "base", sides=("left", "right"), mods=_SPEED, accepts=("arms", "head"), weight=1.0),
-    PrimitiveSpec("circle", "locomotion", "base", sides=("left", "right"), mods=_SPEED, accepts=("arms", "head"), weight=0.9),
+    PrimitiveSpec("circle", "locomotion", "base", sides=("left", "right"), mods=_SPEED, accepts=("arms", "head"), weight=1.1),
     PrimitiveSpec("turn", "locomotion", "base", sides=("left", "right"), mods=_SPEED, variants=("", "around"), accepts=("arms", "head"), weight=1.2),
     # jumps
     PrimitiveSpec("jump", "jump", "base", mods=("high", "low"), reps=(1, 2, 3), variants=("", "forward"), accepts=("arms", "head"), weight=2.0),
@@ -113,7 +116,7 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("sit", "whole body", "base", mods=("slowly",), weight=1.1, terminal=True),
     PrimitiveSpec("bow", "whole body", "base", mods=("low", "slowly"), reps=(1, 2), weight=1.1),
     PrimitiveSpec("jumping_jacks", "whole body", "base", mods=_SPEED, reps=(2, 3, 4), accepts=("head",), weight=0.9),
-    PrimitiveSpec("spin", "whole body", "base", sides=("left", "right"), accepts=("arms",), weight=0.8),
+    PrimitiveSpec("spin", "whole body", "base", sides=("left", "right"), accepts=("arms",), weight=1.0),
     # arms
     PrimitiveSpec("wave", "arms", "gesture", sides=SIDE_WORDS, mods=("high", "low", "slowly", "quickly"), variants=("", "arms"), weight=2.0),
     PrimitiveSpec("raise", "arms", "gesture", sides=SIDE_WORDS, mods=("high", "low", "slowly", "quickly"), weight=2.2),
@@ -122,16 +125,16 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("clap", "arms", "gesture", sides=("both",), mods=_SPEED, reps=(1, 3, 4, 5), weight=0.9),
     PrimitiveSpec("arms_out", "arms", "gesture", sides=("both",), mods=_SPEED, weight=0.9),
     # head
-    PrimitiveSpec("nod", "head", "gesture", mods=_SPEED, reps=(2, 3), weight=0.55),
-    PrimitiveSpec("shake_head", "head", "gesture", mods=_SPEED, reps=(2, 3), weight=0.5),
-    PrimitiveSpec("look", "head", "gesture", sides=("left", "right"), mods=_SPEED, weight=0.55),
+    PrimitiveSpec("nod", "head", "gesture", mods=_SPEED, reps=(2, 3), weight=0.4),
+    PrimitiveSpec("shake_head", "head", "gesture", mods=_SPEED, reps=(2, 3), weight=0.4),
+    PrimitiveSpec("look", "head", "gesture", sides=("left", "right"), mods=_SPEED, weight=0.4),
     # --- corpus 2.0: wider coverage
     # dance
     PrimitiveSpec("dance", "whole body", "base", mods=_SPEED, accepts=("head",), weight=1.2),
-    PrimitiveSpec("sway", "whole body", "base", mods=_SPEED, accepts=("arms", "head"), weight=0.5),
+    PrimitiveSpec("sway", "whole body", "base", mods=_SPEED, accepts=("arms", "head"), weight=0.4),
     # everyday whole-body actions
     PrimitiveSpec("throw", "arms", "base", sides=("left", "right"), mods=_SPEED, variants=("", "underhand"), weight=1.1),
-    PrimitiveSpec("pick_up", "whole body", "base", sides=SIDE_WORDS, mods=("slowly",), weight=1.0),
+    PrimitiveSpec("pick_up", "whole body", "base", sides=SIDE_WORDS, mods=("slowly",), weight=1.2),
     PrimitiveSpec("step_over", "locomotion", "base", mods=("slowly",), accepts=("head",), weight=0.8),
     PrimitiveSpec("stumble", "locomotion", "base", weight=0.7),
     # down to the floor
@@ -143,7 +146,7 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("climb_stairs", "locomotion", "base", mods=_SPEED, accepts=("head",), weight=0.6, terminal=True),
     PrimitiveSpec("pivot", "locomotion", "base", sides=("left", "right"), mods=_SPEED, variants=("", "around"),
                   accepts=("arms", "head"), weight=0.8),
-    PrimitiveSpec("touch_knee", "whole body", "base", sides=("left", "right"), mods=_SPEED, reps=(1, 2), weight=1.1),
+    PrimitiveSpec("touch_knee", "whole body", "base", sides=("left", "right"), mods=_SPEED, reps=(1, 2), weight=1.3),
     # boxing
     PrimitiveSpec("guard", "arms", "gesture", sides=("both",), weight=0.5),
     PrimitiveSpec("jab_cross", "arms", "gesture", sides=("left", "right"), mods=("quickly",), reps=(1, 2), weight=0.8),
@@ -164,9 +167,9 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     # steps (the soles glide over the floor), lunges (legs far beyond walking)
     PrimitiveSpec("descend_stairs", "locomotion", "base", mods=_SPEED, accepts=("head",), weight=0.5, initial=True),
     PrimitiveSpec("shuffle", "locomotion", "base", sides=(None, "left", "right"), mods=_SPEED,
-                  accepts=("arms", "head"), weight=0.5),
+                  accepts=("arms", "head"), weight=0.4),
     PrimitiveSpec("lunge", "legs", "base", sides=("left", "right"), mods=("low", "slowly", "quickly"), reps=(1, 2),
-                  accepts=("arms", "head"), weight=1.1),
+                  accepts=("arms", "head"), weight=1.3),
     # the trunk alone: a standing side stretch and a torso twist (the upper body sideways and
     # turned against the hips: pose dimensions little else varies)
     PrimitiveSpec("side_bend", "whole body", "base", sides=("left", "right"), mods=("low", "slowly", "quickly"),
@@ -254,6 +257,23 @@ def primitive_parts(action: Action) -> tuple[tuple[str, ...], tuple[str, ...]]:
 
 
 # ----------------------------------------------------------------------------- builders
+#: Chance that a forward walk, run, jog or march drifts along a gentle arc, and the range of the
+#: heading it gains over the whole route (rad): a capture-room walk is seldom a ruler line, but a
+#: drift this small still reads as "forward" (a turn is 0.45-0.55 pi, a circle a full one).
+DRIFT_P, DRIFT_ANGLE = 0.6, (0.15, 0.55)
+
+
+def _drift_route(rng: np.random.Generator, style, n_steps: int, in_place: bool) -> Route:
+    """A straight :class:`Route`, or with :data:`DRIFT_P` a gentle arc to either side whose
+    heading gain over the route's distance lies in :data:`DRIFT_ANGLE` (2.5)."""
+    if in_place or style.speed <= 0.0 or rng.random() >= DRIFT_P:
+        return Route()
+    dist = style.speed * (n_steps + 0.5) / style.cadence
+    angle = rng.uniform(*DRIFT_ANGLE)
+    side = 1.0 if rng.random() < 0.5 else -1.0
+    return Route("arc", radius=float(max(dist / angle, 2.5)), side=side)
+
+
 def _steps(rng: np.random.Generator, lo: int, hi: int) -> int:
     return int(rng.integers(lo, hi + 1))
 
@@ -278,7 +298,8 @@ def build_base(action: Action, start: Stance, persona: Persona, body: BodyModel,
     if k in ("walk", "run", "jog", "march"):
         style = gait_style(k, rng, mods, tempo, in_place=in_place)
         lo, hi = {"walk": (4, 7), "run": (4, 7), "jog": (4, 7), "march": (4, 6)}[k]
-        return locomotion(start, persona, style, Route(), steps_for(style, lo, hi), body)
+        n = steps_for(style, lo, hi)
+        return locomotion(start, persona, style, _drift_route(rng, style, n, in_place), n, body)
     if k == "walk_backward":
         style = gait_style("backward", rng, mods, tempo)
         return locomotion(start, persona, style, Route(heading=np.pi), steps_for(style, 3, 5), body)
