@@ -469,6 +469,30 @@ def test_denoiser_normalises_with_the_vae_statistics(corpus, tiny_vae_run, tmp_p
     assert torch.equal(got["mean"], shifted["mean"]) and torch.equal(got["std"], shifted["std"])
 
 
+def test_denoiser_trains_on_an_exported_vae_folder_with_its_statistics(corpus, tiny_vae_run, tmp_path):
+    """An exported VAE (``export_vae``: vae.*, stats.safetensors; e.g. the shipped general VAE) serves as
+    ``--vae``: its stats.safetensors, not the data folder's Mean/Std, normalise the motions, and the
+    weights are those of the run's checkpoint."""
+    from salad_core.io import save_tensors
+    from salad_core.train.assemble import export_vae
+    from salad_core.train.denoiser_trainer import load_frozen_vae
+
+    run = tmp_path / "run"
+    import shutil
+    shutil.copytree(tiny_vae_run, run)
+    stats = load_tensors(run / "mean_std.safetensors")
+    shifted = {"mean": stats["mean"] - 0.5, "std": stats["std"] * 3.0}
+    save_tensors(run / "mean_std.safetensors", shifted)
+    folder = export_vae(run, tmp_path / "exported", dtype=None)
+    assert not (folder / "mean_std.safetensors").exists() and (folder / "stats.safetensors").is_file()
+    train_denoiser(corpus, tmp_path / "den", folder / "vae", tiny_denoiser_config(), den_train_config(max_steps=0),
+                   HashTextEncoder())
+    got = load_tensors(tmp_path / "den" / "mean_std.safetensors")
+    assert torch.equal(got["mean"], shifted["mean"]) and torch.equal(got["std"], shifted["std"])
+    ours, theirs = load_frozen_vae(folder / "vae").state_dict(), load_frozen_vae(run).state_dict()
+    assert ours.keys() == theirs.keys() and all(torch.equal(ours[k], theirs[k]) for k in ours)
+
+
 def test_vae_then_denoiser_on_the_procedural_corpus(tmp_path):
     from salad_core.data.procedural import build_corpus
 

@@ -185,17 +185,24 @@ def load_frozen_vae(path: str | os.PathLike, device: str | torch.device = "cpu")
     return vae
 
 
+#: Files beside a VAE checkpoint that hold the statistics it was trained with: a training run's, then an
+#: exported VAE folder's or a pipeline folder's (:func:`salad_core.train.assemble.export_vae`).
+VAE_STATS_FILES = ("mean_std.safetensors", "stats.safetensors")
+
+
 def _vae_stats(vae_path: str | os.PathLike) -> tuple[Any, Any]:
-    """The normalisation the VAE was trained with (its run's ``mean_std.safetensors``), else ``(None, None)``:
-    the latents only mean what the VAE learned if the motions are normalised the same way."""
+    """The normalisation the VAE was trained with (``mean_std.safetensors`` of its run, or ``stats.safetensors``
+    of an exported VAE or pipeline folder), else ``(None, None)``: the latents only mean what the VAE learned
+    if the motions are normalised the same way."""
     from salad_core.io import load_tensors
 
-    path = resolve_checkpoint(vae_path).parent / "mean_std.safetensors"
-    if not path.is_file():
-        log.info("no %s: normalising with the data folder's Mean.npy/Std.npy", path)
-        return None, None
-    stats = load_tensors(path)
-    return stats["mean"].numpy(), stats["std"].numpy()
+    folder = resolve_checkpoint(vae_path).parent
+    for name in VAE_STATS_FILES:
+        if (folder / name).is_file():
+            stats = load_tensors(folder / name)
+            return stats["mean"].numpy(), stats["std"].numpy()
+    log.info("no %s in %s: normalising with the data folder's Mean.npy/Std.npy", " or ".join(VAE_STATS_FILES), folder)
+    return None, None
 
 
 def prepare_denoiser_batch(batch: dict[str, Any], ctx: StepContext, *, vae: nn.Module, text: CaptionFeatureCache,
