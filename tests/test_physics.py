@@ -268,12 +268,15 @@ def test_checks_pass_on_the_corpus_own_clips(tiny_procedural_corpus):
 
     root = tiny_procedural_corpus
     clips = []
-    for cid in (root / "train.txt").read_text().split():
-        ann = json.loads((root / "annotations" / f"{cid}.json").read_text())
-        cap = ann["captions"][0]
-        if len(cap["phrases"]) == 1:
-            (q,) = parse_prompt(cap["caption"])
-            clips.append((cid, q))
+    # every split: corpus 2.5 draws one-action plans for 17 % of its clips (was 27 %), so the train
+    # split alone held 16 checkable clip x check pairs (all splits: 22)
+    for split in ("train", "val", "test"):
+        for cid in (root / f"{split}.txt").read_text().split():
+            ann = json.loads((root / "annotations" / f"{cid}.json").read_text())
+            cap = ann["captions"][0]
+            if len(cap["phrases"]) == 1:
+                (q,) = parse_prompt(cap["caption"])
+                clips.append((cid, q))
     ranges = {**pp.REFERENCE_RANGES, **pp.corpus_reference_ranges(root)}   # as the runner merges them
     checked = 0
     for p in pp.PROMPTS:
@@ -289,7 +292,7 @@ def test_checks_pass_on_the_corpus_own_clips(tiny_procedural_corpus):
                 r = c.evaluate(x, references=ranges)
                 assert r.passed, (p.text, cid, r)
                 checked += 1
-    assert checked >= 30
+    assert checked >= 20
 
 
 def test_runner_with_fake_generators(tiny_procedural_corpus, sample_dir):
