@@ -52,7 +52,7 @@ from .distributed import DistEnv, all_reduce_sum, init_distributed
 
 __all__ = ["DenoiserObjective", "CaptionFeatureCache", "train_denoiser", "build_denoiser_task", "load_frozen_vae",
            "resolve_checkpoint", "denoiser_latent_cache", "denoiser_latent_stats", "prepare_denoiser_batch",
-           "split_denoiser_inputs"]
+           "split_denoiser_inputs", "vae_statistics", "VAE_STATS_FILES"]
 
 log = logging.getLogger(__name__)
 
@@ -190,7 +190,7 @@ def load_frozen_vae(path: str | os.PathLike, device: str | torch.device = "cpu")
 VAE_STATS_FILES = ("mean_std.safetensors", "stats.safetensors")
 
 
-def _vae_stats(vae_path: str | os.PathLike) -> tuple[Any, Any]:
+def vae_statistics(vae_path: str | os.PathLike) -> tuple[Any, Any]:
     """The normalisation the VAE was trained with (``mean_std.safetensors`` of its run, or ``stats.safetensors``
     of an exported VAE or pipeline folder), else ``(None, None)``: the latents only mean what the VAE learned
     if the motions are normalised the same way."""
@@ -336,7 +336,7 @@ def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike
                          f"VAE's temporal down-sampling {vae.downsample}")
 
     skeleton = vae.config.skeleton
-    mean, std = _vae_stats(vae_path)
+    mean, std = vae_statistics(vae_path)
     train_set = MotionTextDataset(data_dir, "train", skeleton=skeleton, max_length=train_config.max_length,
                                   unit_length=vae.downsample, mean=mean, std=std, random_crop=True,
                                   seed=train_config.seed)
