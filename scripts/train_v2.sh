@@ -17,6 +17,9 @@
 # DEN_DATA the denoiser's corpus (default: WORK_DIR/corpus, the VAE's). The first v2 run trained its VAE
 # on corpus 2.0 (commit f1f8697) and its denoiser on corpus 2.1 (commit 33c5adb, DEN_DATA=WORK_DIR/corpus21):
 # the denoiser normalises motions with the VAE's statistics, so any corpus of the same layout works.
+# The v3 run (session of 2026-11-27, ~/salad-runs/v3) built its data at commit 197e7fc (corpus generator 2.4,
+# 4,000 motions + mirrors; 4,000 general motions) and trained the VAE and the denoiser on it; later commits
+# build newer corpora, so rebuild v3's data from a worktree of 197e7fc.
 # KeyMotion (keyframe VAE, PST, MMAE: configs/v2_keymotion.json, into WORK_DIR/keymotion) trains on the
 # denoiser's corpus, DEN_DATA, so that both generators of the comparison saw the same motions and captions;
 # it needs neither the VAE nor the denoiser and may run before them.
@@ -61,7 +64,9 @@ PYEOF
       --config "$WORK/vae_decoder.config.json" ${VAE_DEC_STEPS:+--steps "$VAE_DEC_STEPS"} --no-progress $RESUME
 fi
 if has denoiser; then
-  "$PY" -m salad_core.train denoiser --data "${DEN_DATA:-$WORK/corpus}" --out "$WORK/denoiser" --vae "$WORK/vae" \
+  # DEN_VAE: the frozen VAE (default: this recipe's VAE run; on a machine that lost the run folder, the
+  # shipped copy of the v3 VAE, salad_core/weights/general_vae/vae, gives the same latents)
+  "$PY" -m salad_core.train denoiser --data "${DEN_DATA:-$WORK/corpus}" --out "$WORK/denoiser" --vae "${DEN_VAE:-$WORK/vae}" \
       --config "${DEN_CONFIG:-configs/v3_denoiser.json}" ${DEN_STEPS:+--steps "$DEN_STEPS"} --no-progress $RESUME
 fi
 if has keymotion; then
