@@ -11,8 +11,8 @@
 # seed give byte-identical files, so a lost run folder is rebuilt from this recipe alone).
 # Environment: VAE_CONFIG the VAE stage's config (default configs/v3_vae.json: v2_vae.json plus the integrated-root
 # term, extra weight on the root channels and bf16 autocast; configs/v2_vae.json is the first v2 run's), DEN_CONFIG
-# the denoiser's (default configs/v3_denoiser.json: v2_denoiser.json's recipe in 10,000 steps, lr x0.2 at 8,000, so that
-# the VAE and the denoiser fit one 3-hour session on 2 cores), VAE_STEPS, DEN_STEPS, VAE_DEC_STEPS override the configs' step budgets, KM_STEPS="KF_VAE PST MMAE" KeyMotion's
+# the denoiser's (default configs/v3_denoiser.json: v2_denoiser.json's recipe in 10,000 steps, lr x0.2 at 8,000, forward
+# under bf16 autocast: 1.88x per step, measured; about 2.2 hours on 2 cores), VAE_STEPS, DEN_STEPS, VAE_DEC_STEPS override the configs' step budgets, KM_STEPS="KF_VAE PST MMAE" KeyMotion's
 # (three numbers); PYTHON the python to use;
 # DEN_DATA the denoiser's corpus (default: WORK_DIR/corpus, the VAE's). The first v2 run trained its VAE
 # on corpus 2.0 (commit f1f8697) and its denoiser on corpus 2.1 (commit 33c5adb, DEN_DATA=WORK_DIR/corpus21):
