@@ -493,6 +493,30 @@ def test_denoiser_trains_on_an_exported_vae_folder_with_its_statistics(corpus, t
     assert ours.keys() == theirs.keys() and all(torch.equal(ours[k], theirs[k]) for k in ours)
 
 
+def test_assemble_from_an_exported_vae_equals_assembling_from_its_run(corpus, tiny_vae_run, tmp_path):
+    """assemble_pipeline takes an exported VAE folder (or its ``vae`` stem) as it takes the VAE's run: the
+    same weights, statistics, run record and numerics note, so a pipeline can be built from a shipped VAE
+    after its run folder is gone."""
+    from salad_core.train.assemble import assemble_pipeline, export_vae, vae_source
+
+    den = tmp_path / "den"
+    train_denoiser(corpus, den, tiny_vae_run, tiny_denoiser_config(), den_train_config(max_steps=2),
+                   HashTextEncoder())
+    exported = export_vae(tiny_vae_run, tmp_path / "exported", dtype=None)
+    a = assemble_pipeline(tiny_vae_run, den, tmp_path / "a", dtype=None, text_encoder=HashTextEncoder())
+    for i, source in enumerate((exported, exported / "vae")):
+        stem, stats, record = vae_source(source)
+        assert stem == exported / "vae" and stats == exported / "stats.safetensors"
+        b = assemble_pipeline(source, den, tmp_path / f"b{i}", dtype=None, text_encoder=HashTextEncoder())
+        for name in ("vae.safetensors", "stats.safetensors", "denoiser.safetensors"):
+            assert_same_tensors(load_tensors(a / name), load_tensors(b / name))
+        assert json.loads((b / "runs.json").read_text()) == json.loads((a / "runs.json").read_text())
+        card_a, card_b = (a / "MODEL_CARD.md").read_text(), (b / "MODEL_CARD.md").read_text()
+        assert card_a == card_b
+    with pytest.raises(FileNotFoundError, match="no best/latest checkpoint"):
+        vae_source(tmp_path / "nothing")
+
+
 def test_vae_then_denoiser_on_the_procedural_corpus(tmp_path):
     from salad_core.data.procedural import build_corpus
 

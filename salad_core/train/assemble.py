@@ -20,7 +20,7 @@ import torch
 
 from salad_core.io import atomic_write_text, config_from_dict, load_model, load_tensors, save_checkpoint, save_tensors
 
-__all__ = ["run_checkpoint", "last_log_line", "assemble_pipeline", "export_vae", "numerics_note",
+__all__ = ["run_checkpoint", "last_log_line", "assemble_pipeline", "export_vae", "numerics_note", "vae_source",
            "write_numerics_section"]
 
 _BEGIN, _END = "<!-- training-numerics: begin -->", "<!-- training-numerics: end -->"
@@ -47,18 +47,36 @@ def _run_record(run: Path) -> dict:
             "last_log": last_log_line(run)}
 
 
-def numerics_note(runs: dict[str, str | Path]) -> str | None:
+def vae_source(vae: str | Path) -> tuple[Path, Path, dict]:
+    """``(checkpoint stem, statistics file, run record)`` of a VAE training run folder or of an exported VAE
+    folder (:func:`export_vae`: ``vae.*``, ``stats.safetensors``, ``runs.json``; also given as its ``vae``
+    stem), so that a pipeline can be assembled from a shipped VAE such as ``salad_core/weights/general_vae``."""
+    vae = Path(vae)
+    if vae.name == "vae" and (vae.parent / "vae.safetensors").is_file():
+        vae = vae.parent
+    if (vae / "vae.safetensors").is_file() and not (vae / "config.json").is_file():
+        runs = vae / "runs.json"
+        record = json.loads(runs.read_text()).get("vae", {}) if runs.is_file() else {}
+        return vae / "vae", vae / "stats.safetensors", record
+    return run_checkpoint(vae), vae / "mean_std.safetensors", _run_record(vae)
+
+
+def numerics_note(runs: dict[str, str | Path | dict]) -> str | None:
     """A Markdown paragraph on how the runs' numerics differ from release 0.5, or None if they do not.
 
     Parameters
     ----------
     runs : dict
-        Name (e.g. ``"denoiser"``) -> run folder holding the ``config.json`` its trainer wrote.
+        Name (e.g. ``"denoiser"``) -> run folder holding the ``config.json`` its trainer wrote, or that
+        ``config.json`` already read (an exported VAE's ``runs.json`` record keeps it).
     """
     lines = []
     for name, run in runs.items():
-        path = Path(run) / "config.json"
-        doc = json.loads(path.read_text()) if path.is_file() else {}
+        if isinstance(run, dict):
+            doc = run
+        else:
+            path = Path(run) / "config.json"
+            doc = json.loads(path.read_text()) if path.is_file() else {}
         runtime, numerics = doc.get("runtime", {}), dict(doc.get("task", {}).get("numerics", {}))
         changes = []
         batching = runtime.get("batching", "random")
@@ -112,7 +130,8 @@ def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | 
     Parameters
     ----------
     vae_run, denoiser_run : path
-        Run folders written by ``salad train vae`` / ``salad train denoiser``.
+        Run folders written by ``salad train vae`` / ``salad train denoiser``; the VAE may also be an
+        exported VAE folder (:func:`vae_source`).
     out : path
         Pipeline folder (created; existing files of the same names are replaced atomically).
     dtype : torch.dtype or None
@@ -125,9 +144,10 @@ def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | 
     from salad_core.text import load_text_encoder
 
     vae_run, denoiser_run, out = Path(vae_run), Path(denoiser_run), Path(out)
-    vae, _, _ = load_model(run_checkpoint(vae_run))
+    vae_stem, vae_stats, vae_record = vae_source(vae_run)
+    vae, _, _ = load_model(vae_stem)
     den, _, _ = load_model(run_checkpoint(denoiser_run))
-    stats = load_tensors(vae_run / "mean_std.safetensors")
+    stats = load_tensors(vae_stats)
     task = json.loads((denoiser_run / "config.json").read_text()).get("task", {})
     diffusion = config_from_dict(DiffusionConfig, task["diffusion"]) if task.get("diffusion") else DiffusionConfig()
     encoder = text_encoder if text_encoder is not None else load_text_encoder(task.get("text_encoder", "minilm"))
@@ -139,9 +159,10 @@ def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | 
     pipe = SaladPipeline(vae, den, encoder, stats["mean"].numpy(), stats["std"].numpy(), diffusion=diffusion,
                          latent_stats=latent_stats)
     pipe.save_pretrained(out, dtype=dtype)
-    runs = {"vae": _run_record(vae_run), "denoiser": _run_record(denoiser_run)}
+    runs = {"vae": vae_record, "denoiser": _run_record(denoiser_run)}
     atomic_write_text(out / "runs.json", json.dumps(runs, indent=2) + "\n")
-    write_numerics_section(out / "MODEL_CARD.md", numerics_note({"vae": vae_run, "denoiser": denoiser_run}))
+    write_numerics_section(out / "MODEL_CARD.md",
+                           numerics_note({"vae": vae_record.get("config", {}), "denoiser": denoiser_run}))
     return out
 
 
