@@ -504,6 +504,13 @@ def test_assemble_from_an_exported_vae_equals_assembling_from_its_run(corpus, ti
                    HashTextEncoder())
     exported = export_vae(tiny_vae_run, tmp_path / "exported", dtype=None)
     a = assemble_pipeline(tiny_vae_run, den, tmp_path / "a", dtype=None, text_encoder=HashTextEncoder())
+    # a VAE trained under autocast: the note names it for the run and for its exported copy alike
+    bf16_run = tmp_path / "vae_bf16"
+    train_vae(corpus, bf16_run, tiny_vae_config(), vae_train_config(max_steps=0, autocast="bf16"))
+    notes = [(assemble_pipeline(src, den, tmp_path / f"n{i}", dtype=None, text_encoder=HashTextEncoder())
+              / "MODEL_CARD.md").read_text() for i, src in enumerate((bf16_run, export_vae(bf16_run, tmp_path / "e")))]
+    assert "- **vae** (vae_bf16): forward passes under bf16 autocast" in notes[0]
+    assert "- **vae** (as recorded with the exported weights): forward passes under bf16 autocast" in notes[1]
     for i, source in enumerate((exported, exported / "vae")):
         stem, stats, record = vae_source(source)
         assert stem == exported / "vae" and stats == exported / "stats.safetensors"

@@ -94,7 +94,8 @@ def numerics_note(runs: dict[str, str | Path | dict]) -> str | None:
                            "validation)")
         if changes:
             threads = runtime.get("torch_threads")
-            lines.append(f"- **{name}** ({Path(run).name}): " + "; ".join(changes)
+            where = "as recorded with the exported weights" if isinstance(run, dict) else Path(run).name
+            lines.append(f"- **{name}** ({where}): " + "; ".join(changes)
                          + (f"; {threads} torch thread(s)" if threads else ""))
     if not lines:
         return None
@@ -162,7 +163,8 @@ def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | 
     runs = {"vae": vae_record, "denoiser": _run_record(denoiser_run)}
     atomic_write_text(out / "runs.json", json.dumps(runs, indent=2) + "\n")
     write_numerics_section(out / "MODEL_CARD.md",
-                           numerics_note({"vae": vae_record.get("config", {}), "denoiser": denoiser_run}))
+                           numerics_note({"vae": vae_run if (vae_run / "config.json").is_file() else vae_record.get("config", {}),
+                                          "denoiser": denoiser_run}))
     return out
 
 
