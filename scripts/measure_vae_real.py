@@ -52,21 +52,19 @@ MIN_ROWS = 40
 
 
 def load_vae(path: str | Path | None):
-    """``(vae, mean, std, description)`` from a pipeline folder or a VAE training run."""
+    """``(vae, mean, std, description)`` from a pipeline folder, an exported VAE folder, a VAE training run or a
+    checkpoint stem in one (:func:`salad_core.train.assemble.vae_source`); the shipped pipeline by default."""
     from salad_core.io import load_model, load_tensors
     from salad_core.pipeline import default_weights_dir
+    from salad_core.train.assemble import vae_source
 
-    root = Path(path) if path is not None else default_weights_dir()
-    if (root / "vae.json").is_file():
-        vae, _, _ = load_model(root / "vae")
-        stats = load_tensors(root / "stats.safetensors")
-        return vae, stats["mean"].numpy(), stats["std"].numpy(), f"{root} (vae, stats.safetensors)"
-    for stem in ("best", "latest"):
-        if (root / f"{stem}.json").is_file():
-            vae, _, _ = load_model(root / stem)
-            stats = load_tensors(root / "mean_std.safetensors")
-            return vae, stats["mean"].numpy(), stats["std"].numpy(), f"{root} ({stem}, mean_std.safetensors)"
-    raise FileNotFoundError(f"--vae {root}: neither a pipeline folder (vae.json) nor a VAE run (best.json / latest.json)")
+    source = vae_source(Path(path) if path is not None else default_weights_dir())
+    if not source.has_stats:
+        raise FileNotFoundError(f"--vae {path}: no {source.stats.name} beside {source.stem} (the Mean/Std the VAE "
+                                "was trained with)")
+    vae, _, _ = load_model(source.stem)
+    stats = load_tensors(source.stats)
+    return vae, stats["mean"].numpy(), stats["std"].numpy(), f"{source.stem} ({source.stats.name})"
 
 
 def _crop(feats: np.ndarray, unit: int = 4, max_len: int = 196) -> np.ndarray:

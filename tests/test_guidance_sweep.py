@@ -122,6 +122,55 @@ def test_sweep_measures_every_candidate_with_both_protocols(tiny_procedural_corp
     json.dumps(res)                                                  # JSON-ready
 
 
+def test_a_stopped_sweep_continues_from_its_kept_candidates(tiny_procedural_corpus, tiny_random_evaluator, tmp_path):
+    """With a store, each finished candidate is kept; a sweep stopped midway and run again measures only the
+    rest, gives the same rows, and measures again when the settings, data or identity differ."""
+    mean, std = load_mean_std(tiny_procedural_corpus)
+    grid = gs.guidance_grid([1.0, 6.0])
+    settings = EvalSettings(replications=1, mm=False, seed=1)
+    bench = BenchSettings(steps=1, seeds=(0,), num_prompts=1)
+    store = tmp_path / "kept"
+
+    def joints_of(out):
+        return [features_to_joints(out.features[b, :n], SK) for b, n in enumerate(out.lengths)]
+
+    class StopAfterFirst(NoisyPipe):
+        def __call__(self, prompts, guidance_scale=None, **kw):
+            if guidance_scale.scale == 6.0:
+                raise KeyboardInterrupt("stopped")
+            return super().__call__(prompts, guidance_scale=guidance_scale, **kw)
+
+    with pytest.raises(KeyboardInterrupt):
+        gs.run_sweep(StopAfterFirst(mean, std), grid, tiny_procedural_corpus, tiny_random_evaluator, settings, bench,
+                     joints_of=joints_of, store=store, identity={"weights": "a"})
+    assert sorted(f.name for f in store.iterdir()) == ["real.json", "w=1.json"]
+    pipe = NoisyPipe(mean, std)
+    lines = []
+    res = gs.run_sweep(pipe, grid, tiny_procedural_corpus, tiny_random_evaluator, settings, bench,
+                       joints_of=joints_of, store=store, identity={"weights": "a"}, log=lines.append)
+    assert [r["reused"] for r in res["rows"]] == [True, False]
+    assert {g.scale for g in pipe.seen} == {6.0}                       # w=1 was not generated again
+    assert any("w=1: measured before" in line for line in lines)
+    fresh = gs.run_sweep(NoisyPipe(mean, std), grid, tiny_procedural_corpus, tiny_random_evaluator, settings, bench,
+                         joints_of=joints_of)
+    for kept, new in zip(res["rows"], fresh["rows"]):
+        assert {k: v for k, v in kept.items() if k not in ("seconds", "reused")} == \
+               {k: v for k, v in new.items() if k not in ("seconds", "reused")}
+    assert res["real"] == fresh["real"] and res["references"] == fresh["references"]
+    grid = gs.guidance_grid([1.0, 6.0], intervals=[(0.0, 0.5)])          # tuples are kept as JSON lists
+    gs.run_sweep(NoisyPipe(mean, std), grid, tiny_procedural_corpus, tiny_random_evaluator, settings, bench,
+                 joints_of=joints_of, store=store, identity={"weights": "a"})
+    again = gs.run_sweep(NoisyPipe(mean, std), grid, tiny_procedural_corpus, tiny_random_evaluator, settings, bench,
+                         joints_of=joints_of, store=store, identity={"weights": "a"})
+    assert [r["reused"] for r in again["rows"]] == [True, True]
+    for change in ({"identity": {"weights": "b"}}, {"bench_settings": BenchSettings(steps=2, seeds=(0,), num_prompts=1)}):
+        pipe = NoisyPipe(mean, std)
+        kw = dict(joints_of=joints_of, store=store, identity=change.get("identity", {"weights": "a"}))
+        again = gs.run_sweep(pipe, grid, tiny_procedural_corpus, tiny_random_evaluator, settings,
+                             change.get("bench_settings", bench), **kw)
+        assert [r["reused"] for r in again["rows"]] == [False, False] and {g.scale for g in pipe.seen} == {1.0, 6.0}
+
+
 def test_cli_sweep_on_the_shipped_weights(tiny_procedural_corpus, tmp_path, capsys):
     from salad_core.eval.cli import main
 
@@ -137,6 +186,12 @@ def test_cli_sweep_on_the_shipped_weights(tiny_procedural_corpus, tmp_path, caps
     assert doc["settings"]["weights"].endswith("salad") and doc["settings"]["recovery"] == "positions"
     printed = capsys.readouterr().out
     assert '"guidance": {"scale":' in printed and "Chosen: " in (out / "guidance_sweep.md").read_text()
+    assert sorted(f.name for f in (out / "candidates").iterdir()) == ["real.json", "w=5.json", "w=5_t_T_in_0_0.5.json"]
+    status = main(["--guidance-sweep", "--data", str(tiny_procedural_corpus), "--scales", "5", "--intervals",
+                   "full,0-0.5", "--replications", "1", "--no-mm", "--prompts", "1", "--seeds", "2", "--steps", "3",
+                   "--sample", "none", "--out", str(out)])
+    assert status == 0 and "2 of 2 candidates reused" in capsys.readouterr().out
+    assert json.loads((out / "guidance_sweep.json").read_text())["rows"][0]["t2m"] == doc["rows"][0]["t2m"]
     assert main(["--guidance-sweep", "--physics", "--data", str(tiny_procedural_corpus)]) == 2
     assert main(["--guidance-sweep", "--data", str(tiny_procedural_corpus), "--intervals", "0.5"]) == 2
     assert "neither 'full' nor 'lo-hi'" in capsys.readouterr().err

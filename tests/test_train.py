@@ -512,16 +512,67 @@ def test_assemble_from_an_exported_vae_equals_assembling_from_its_run(corpus, ti
     assert "- **vae** (vae_bf16): forward passes under bf16 autocast" in notes[0]
     assert "- **vae** (as recorded with the exported weights): forward passes under bf16 autocast" in notes[1]
     for i, source in enumerate((exported, exported / "vae")):
-        stem, stats, record = vae_source(source)
-        assert stem == exported / "vae" and stats == exported / "stats.safetensors"
+        stem, stats, record, run = vae_source(source)
+        assert stem == exported / "vae" and stats == exported / "stats.safetensors" and run is None
         b = assemble_pipeline(source, den, tmp_path / f"b{i}", dtype=None, text_encoder=HashTextEncoder())
         for name in ("vae.safetensors", "stats.safetensors", "denoiser.safetensors"):
             assert_same_tensors(load_tensors(a / name), load_tensors(b / name))
         assert json.loads((b / "runs.json").read_text()) == json.loads((a / "runs.json").read_text())
         card_a, card_b = (a / "MODEL_CARD.md").read_text(), (b / "MODEL_CARD.md").read_text()
         assert card_a == card_b
-    with pytest.raises(FileNotFoundError, match="no best/latest checkpoint"):
+    with pytest.raises(FileNotFoundError, match="no such folder"):
         vae_source(tmp_path / "nothing")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(FileNotFoundError, match="no best/latest checkpoint"):
+        vae_source(tmp_path / "empty")
+
+
+def test_every_vae_location_resolves_to_the_same_weights_and_statistics(corpus, tiny_vae_run, tmp_path):
+    """vae_source is the one resolver: the denoiser trainer (load_frozen_vae, vae_statistics), export_vae and
+    scripts/measure_vae_real.py's load_vae accept a run folder, a checkpoint stem or file in it, an exported VAE
+    folder or its stem, and a pipeline folder, and all give the same weights and Mean/Std."""
+    import importlib.util
+
+    from salad_core.train.assemble import assemble_pipeline, export_vae, vae_source
+    from salad_core.train.denoiser_trainer import load_frozen_vae, vae_statistics
+
+    spec = importlib.util.spec_from_file_location("mvr", Path(__file__).resolve().parents[1] / "scripts" / "measure_vae_real.py")
+    mvr = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mvr)
+    den = tmp_path / "den"
+    train_denoiser(corpus, den, tiny_vae_run, tiny_denoiser_config(), den_train_config(max_steps=1), HashTextEncoder())
+    exported = export_vae(tiny_vae_run, tmp_path / "exported", dtype=None)
+    pipeline = assemble_pipeline(tiny_vae_run, den, tmp_path / "pipe", dtype=None, text_encoder=HashTextEncoder())
+    stem = vae_source(tiny_vae_run).stem
+    assert stem.parent == tiny_vae_run and stem.name in ("best", "latest")
+    want = load_frozen_vae(tiny_vae_run).state_dict()
+    want_mean, want_std = vae_statistics(tiny_vae_run)
+    locations = [tiny_vae_run, stem, stem.with_suffix(".safetensors"), stem.with_suffix(".json"), exported,
+                 exported / "vae", exported / "vae.safetensors", pipeline, pipeline / "vae"]
+    for where in locations:
+        source = vae_source(where)
+        assert source.has_stats, where
+        assert (source.run == tiny_vae_run) == (where in locations[:4]), where
+        assert source.record["config"] == json.loads((tiny_vae_run / "config.json").read_text()), where
+        assert_same_tensors(load_frozen_vae(where).state_dict(), want)
+        mean, std = vae_statistics(where)
+        np.testing.assert_array_equal(mean, want_mean)
+        np.testing.assert_array_equal(std, want_std)
+        vae, m2, s2, desc = mvr.load_vae(where)
+        assert_same_tensors(vae.state_dict(), want)
+        np.testing.assert_array_equal(m2, want_mean)
+        assert source.stats.name in desc
+    again = export_vae(exported, tmp_path / "re-exported", dtype=None)      # an exported VAE exports again
+    assert_same_tensors(load_tensors(again / "vae.safetensors"), load_tensors(exported / "vae.safetensors"))
+    assert json.loads((again / "runs.json").read_text()) == json.loads((exported / "runs.json").read_text())
+    with pytest.raises(FileNotFoundError, match="no such folder"):
+        vae_source(tmp_path / "exported" / "missing")
+    (tmp_path / "nostats").mkdir()
+    for name in ("vae.json", "vae.safetensors"):
+        (tmp_path / "nostats" / name).write_bytes((exported / name).read_bytes())
+    with pytest.raises(FileNotFoundError, match="stats.safetensors"):
+        mvr.load_vae(tmp_path / "nostats")
+    assert vae_statistics(tmp_path / "nostats") == (None, None)
 
 
 def test_vae_then_denoiser_on_the_procedural_corpus(tmp_path):

@@ -108,7 +108,9 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--guidance-sweep", action="store_true",
                        help="evaluate every guidance of --scales x --rescales x --intervals with the T2M protocol "
                             "AND the physics benchmark (--seeds, --prompts, --recovery) and choose the default by "
-                            "the rule of salad_core.eval.guidance_sweep (default --scales 1,2,3,4.5,6,7.5)")
+                            "the rule of salad_core.eval.guidance_sweep (default --scales 1,2,3,4.5,6,7.5); with --out, "
+                            "each finished candidate is kept in OUT/candidates/ and a sweep run again with the same "
+                            "settings, data and weights continues where it stopped")
     sweep.add_argument("--rescales", default="0", help="comma-separated guidance rescale values phi in [0, 1] "
                                                         "(default 0)")
     sweep.add_argument("--intervals", default="full",
@@ -302,6 +304,22 @@ def _intervals(text: str) -> list[tuple[float, float] | None]:
     return out
 
 
+def _weights_digest(folder) -> str | None:
+    """SHA-256 over the ``*.json`` and ``*.safetensors`` files of a weights folder (None when there is no such
+    folder): a kept sweep result is reused only for the same weights."""
+    import hashlib
+
+    root = Path(folder) if folder is not None else None
+    if root is None or not root.is_dir():
+        return None
+    h = hashlib.sha256()
+    for f in sorted(root.glob("*")):
+        if f.suffix in (".json", ".safetensors") and f.is_file():
+            h.update(f.name.encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()
+
+
 def run_guidance_sweep(args) -> int:
     """``salad eval --guidance-sweep``: T2M protocol + physics benchmark per candidate guidance, and the
     default chosen by :func:`salad_core.eval.guidance_sweep.choose`."""
@@ -312,7 +330,7 @@ def run_guidance_sweep(args) -> int:
     from .guidance_sweep import choose, guidance_grid, run_sweep, sweep_markdown
     from .physics import joints_reader
     from .physics_prompts import BenchSettings
-    from .train_evaluator import load_packaged_evaluator
+    from .train_evaluator import default_evaluator_dir, load_packaged_evaluator
 
     if args.cfg_sweep or args.official or args.keymotion is not None or args.motions is not None:
         raise ValueError("--guidance-sweep takes neither --cfg-sweep, --official, --keymotion nor --motions")
@@ -332,8 +350,15 @@ def run_guidance_sweep(args) -> int:
     sample = _default_sample() if args.sample is None else (None if args.sample.lower() == "none" else Path(args.sample))
     print(f"{len(grid)} candidates; {settings.describe()}", flush=True)
     t0 = time.perf_counter()
+    store = Path(args.out) / "candidates" if args.out else None
+    identity = {"weights": _weights_digest(pipe.source),
+                "evaluator": _weights_digest(args.evaluator or default_evaluator_dir()),
+                "recovery": args.recovery, "sample": None if sample is None else str(Path(sample).resolve())}
     result = run_sweep(pipe, grid, data, evaluator, settings, bench, joints_of=joints_reader(args.recovery, pipe.skeleton),
-                       sample_dir=sample, log=lambda line: print(line, flush=True))
+                       sample_dir=sample, log=lambda line: print(line, flush=True), store=store, identity=identity)
+    reused = sum(1 for r in result["rows"] if r.get("reused"))
+    if reused:
+        print(f"{reused} of {len(grid)} candidates reused from {store} (measured before with the same settings)")
     pick, why = choose(result["rows"])
     result["chosen"] = {"index": pick, "why": why, "guidance": asdict(grid[pick])}
     result["settings"].update(weights=pipe.source, data=str(data), recovery=args.recovery,

@@ -18,19 +18,23 @@ real evaluation clips.
 from __future__ import annotations
 
 import itertools
+import json
 import math
+import re
 import time
 from dataclasses import asdict
 from os import PathLike
+from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
+from salad_core.io import atomic_write_text
 from salad_core.sampling import Guidance
 
 from .physics_prompts import BenchSettings, run_benchmark, targets
 from .protocol import evaluate_generator, evaluate_real
 from .settings import EvalSettings
 
-__all__ = ["guidance_grid", "guidance_label", "FixedGuidance", "run_sweep", "choose", "sweep_markdown",
+__all__ = ["guidance_grid", "guidance_label", "FixedGuidance", "run_sweep", "sweep_fingerprint", "choose", "sweep_markdown",
            "R_PRECISION_TOLERANCE", "PHYSICS_TARGETS"]
 
 #: A candidate stays eligible while its R-precision top-3 is within this of the sweep's best (the
@@ -116,7 +120,8 @@ def _physics_row(result: Mapping, name: str) -> dict[str, Any]:
 
 def run_sweep(pipe: Callable[..., Any], guidances: Sequence[Guidance], dataset_root: str | PathLike, evaluator,
               eval_settings: EvalSettings, bench_settings: BenchSettings, *, joints_of: Callable[[Any], list],
-              sample_dir: str | PathLike | None = None, log: Callable[[str], None] | None = None) -> dict:
+              sample_dir: str | PathLike | None = None, log: Callable[[str], None] | None = None,
+              store: str | PathLike | None = None, identity: Mapping[str, Any] | None = None) -> dict:
     """Evaluate every candidate guidance with the T2M protocol and the physics benchmark.
 
     Parameters
@@ -131,38 +136,88 @@ def run_sweep(pipe: Callable[..., Any], guidances: Sequence[Guidance], dataset_r
     joints_of : ``output -> list of (N_b, J, 3)`` joints the benchmark measures
         (:func:`~salad_core.eval.physics.joints_reader`).
     sample_dir : real clips for the benchmark's reference row (reported, never used by the rule).
+    store : folder that keeps each finished candidate (and the real row) as JSON, so that a sweep that was
+        stopped (a sweep of a dozen candidates takes hours on a CPU) continues where it stopped when run
+        again: a kept result is reused only if it was measured with the same settings, data, candidate and
+        ``identity`` (:func:`sweep_fingerprint`); otherwise it is measured again and replaced.
+    identity : what else a kept result must match, e.g. ``{"weights": <digest of the weight files>}``.
 
     Returns
     -------
     dict (JSON-ready): ``real`` (the protocol's real row), ``rows`` (one per candidate: ``label``,
-    ``guidance``, ``t2m``, ``physics``, ``seconds``), ``settings``, ``references`` (the benchmark's real rows).
+    ``guidance``, ``t2m``, ``physics``, ``seconds``, ``reused``), ``settings``, ``references`` (the benchmark's
+    real rows).
     """
     say = log or (lambda s: None)
     if not guidances:
         raise ValueError("guidances is empty; build candidates with guidance_grid(...)")
-    real = evaluate_real(dataset_root, evaluator, eval_settings)
-    labels = [guidance_label(g) for g in guidances]
-    gens = {label: FixedGuidance(pipe, g) for label, g in zip(labels, guidances)}
-    t2m, seconds = {}, {}
-    for label, gen in gens.items():
-        t0 = time.perf_counter()
-        t2m[label] = evaluate_generator(gen, dataset_root, evaluator, eval_settings, name=label)
-        seconds[label] = time.perf_counter() - t0
-        say(f"{label}: T2M protocol done ({seconds[label]:.0f} s)")
+    keep = _SweepStore(store, eval_settings, bench_settings, dataset_root, identity)
+    real = keep.load("real", None)
+    if real is None:
+        real = keep.save("real", None, _t2m_row(evaluate_real(dataset_root, evaluator, eval_settings)))
+    rows, references = [], None
 
     def physics_gen(gen):
         return lambda texts, lengths, seed: joints_of(gen(texts, lengths=lengths, seed=[seed] * len(texts),
                                                           num_steps=bench_settings.steps))
 
-    # one benchmark run for all candidates: the reference rows are measured once
-    bench = run_benchmark({label: physics_gen(gen) for label, gen in gens.items()}, bench_settings,
-                          data_root=dataset_root, sample_dir=sample_dir, log=say)
-    rows = [{"label": label, "guidance": asdict(g), "t2m": _t2m_row(t2m[label]),
-             "physics": _physics_row(bench, label),
-             "seconds": round(seconds[label] + bench["generators"][label]["seconds"], 1)}
-            for label, g in zip(labels, guidances)]
-    return {"real": _t2m_row(real), "rows": rows, "references": bench["references"],
+    for g in guidances:
+        label = guidance_label(g)
+        kept = keep.load(label, g)
+        if kept is not None:
+            rows.append(dict(kept["row"], reused=True))
+            references = kept["references"]
+            say(f"{label}: measured before with the same settings ({keep.path(label)}): reused")
+            continue
+        gen = FixedGuidance(pipe, g)
+        t0 = time.perf_counter()
+        t2m = evaluate_generator(gen, dataset_root, evaluator, eval_settings, name=label)
+        seconds = time.perf_counter() - t0
+        say(f"{label}: T2M protocol done ({seconds:.0f} s)")
+        bench = run_benchmark({label: physics_gen(gen)}, bench_settings, data_root=dataset_root,
+                              sample_dir=sample_dir, log=say)
+        row = {"label": label, "guidance": asdict(g), "t2m": _t2m_row(t2m), "physics": _physics_row(bench, label),
+               "seconds": round(seconds + bench["generators"][label]["seconds"], 1)}
+        references = bench["references"]
+        keep.save(label, g, {"row": row, "references": references})
+        rows.append(dict(row, reused=False))
+    return {"real": real, "rows": rows, "references": references,
             "settings": {"t2m": eval_settings.describe(), "bench": asdict(bench_settings), "rule": rule_text()}}
+
+
+def sweep_fingerprint(eval_settings: EvalSettings, bench_settings: BenchSettings, dataset_root: str | PathLike,
+                      guidance: Guidance | None, identity: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """What a kept sweep result must have been measured with to be reused (JSON-ready)."""
+    doc = {"t2m": eval_settings.describe(), "bench": asdict(bench_settings), "data": str(Path(dataset_root).resolve()),
+           "guidance": None if guidance is None else asdict(guidance), "identity": dict(identity or {})}
+    return json.loads(json.dumps(doc, default=str))                 # as kept on disk (tuples become lists)
+
+
+class _SweepStore:
+    """Per-candidate JSON files of :func:`run_sweep` (no-op without a folder)."""
+
+    def __init__(self, folder, eval_settings, bench_settings, dataset_root, identity) -> None:
+        self.folder = None if folder is None else Path(folder)
+        self.args = (eval_settings, bench_settings, dataset_root)
+        self.identity = identity
+
+    def path(self, label: str) -> Path:
+        slug = re.sub(r"[^A-Za-z0-9.=-]+", "_", label).strip("_")
+        return self.folder / f"{slug}.json"
+
+    def load(self, label: str, guidance: Guidance | None) -> Any:
+        if self.folder is None or not self.path(label).is_file():
+            return None
+        doc = json.loads(self.path(label).read_text(encoding="utf-8"))
+        want = sweep_fingerprint(*self.args, guidance, self.identity)
+        return doc["result"] if doc.get("fingerprint") == want else None
+
+    def save(self, label: str, guidance: Guidance | None, result: Any) -> Any:
+        if self.folder is not None:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            doc = {"fingerprint": sweep_fingerprint(*self.args, guidance, self.identity), "result": result}
+            atomic_write_text(self.path(label), json.dumps(doc, indent=1) + "\n")
+        return result
 
 
 def rule_text() -> str:

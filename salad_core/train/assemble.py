@@ -15,12 +15,13 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import NamedTuple
 
 import torch
 
 from salad_core.io import atomic_write_text, config_from_dict, load_model, load_tensors, save_checkpoint, save_tensors
 
-__all__ = ["run_checkpoint", "last_log_line", "assemble_pipeline", "export_vae", "numerics_note", "vae_source",
+__all__ = ["run_checkpoint", "last_log_line", "assemble_pipeline", "export_vae", "numerics_note", "VaeSource", "vae_source",
            "write_numerics_section"]
 
 _BEGIN, _END = "<!-- training-numerics: begin -->", "<!-- training-numerics: end -->"
@@ -47,18 +48,56 @@ def _run_record(run: Path) -> dict:
             "last_log": last_log_line(run)}
 
 
-def vae_source(vae: str | Path) -> tuple[Path, Path, dict]:
-    """``(checkpoint stem, statistics file, run record)`` of a VAE training run folder or of an exported VAE
-    folder (:func:`export_vae`: ``vae.*``, ``stats.safetensors``, ``runs.json``; also given as its ``vae``
-    stem), so that a pipeline can be assembled from a shipped VAE such as ``salad_core/weights/general_vae``."""
+class VaeSource(NamedTuple):
+    """Where a VAE's weights, statistics and training record are (:func:`vae_source`)."""
+
+    stem: Path
+    """checkpoint stem (``<stem>.json`` + ``<stem>.safetensors``)"""
+    stats: Path
+    """the Mean/Std file it was trained with (``mean_std.safetensors`` of a run, ``stats.safetensors`` of an
+    exported VAE or pipeline folder); it may be missing for very old runs (:attr:`has_stats`)"""
+    record: dict
+    """the run record (``checkpoint``, ``config``, ``last_log``) as ``runs.json`` keeps it (``{}`` if unknown)"""
+    run: Path | None
+    """the training run folder, or None for an exported VAE or a pipeline folder"""
+
+    @property
+    def has_stats(self) -> bool:
+        return self.stats.is_file()
+
+    @property
+    def numerics(self) -> Path | dict:
+        """The argument :func:`numerics_note` takes for this VAE: its run folder, else its recorded config."""
+        return self.run if self.run is not None else self.record.get("config", {})
+
+
+def vae_source(vae: str | Path) -> VaeSource:
+    """The one resolver of a VAE location, used by the assembler, the denoiser trainer and the measuring
+    scripts. ``vae`` may be
+
+    - a training run folder (``best``/``latest`` checkpoint, ``mean_std.safetensors``, ``config.json``),
+    - an exported VAE folder (:func:`export_vae`: ``vae.*``, ``stats.safetensors``, ``runs.json``) such as
+      ``salad_core/weights/general_vae``, or a pipeline folder (same files beside the denoiser's),
+    - a checkpoint stem or file inside either (``run/best``, ``run/latest.safetensors``, ``folder/vae``).
+    """
     vae = Path(vae)
-    if vae.name == "vae" and (vae.parent / "vae.safetensors").is_file():
-        vae = vae.parent
-    if (vae / "vae.safetensors").is_file() and not (vae / "config.json").is_file():
-        runs = vae / "runs.json"
-        record = json.loads(runs.read_text()).get("vae", {}) if runs.is_file() else {}
-        return vae / "vae", vae / "stats.safetensors", record
-    return run_checkpoint(vae), vae / "mean_std.safetensors", _run_record(vae)
+    if vae.suffix in (".json", ".safetensors"):
+        vae = vae.with_suffix("")
+    if not vae.is_dir():                                   # a checkpoint stem
+        if not vae.with_suffix(".safetensors").is_file():
+            raise FileNotFoundError(f"VAE {vae}: no such folder and no {vae.name}.safetensors checkpoint")
+        stem, folder = vae, vae.parent
+    elif (vae / "vae.safetensors").is_file() and not (vae / "config.json").is_file():
+        stem, folder = vae / "vae", vae
+    else:
+        stem, folder = run_checkpoint(vae), vae
+    if (folder / "config.json").is_file():                 # a training run
+        record = _run_record(folder)
+        record["checkpoint"] = stem.name
+        return VaeSource(stem, folder / "mean_std.safetensors", record, folder)
+    runs = folder / "runs.json"
+    record = json.loads(runs.read_text()).get("vae", {}) if runs.is_file() else {}
+    return VaeSource(stem, folder / "stats.safetensors", record, None)
 
 
 def numerics_note(runs: dict[str, str | Path | dict]) -> str | None:
@@ -145,10 +184,12 @@ def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | 
     from salad_core.text import load_text_encoder
 
     vae_run, denoiser_run, out = Path(vae_run), Path(denoiser_run), Path(out)
-    vae_stem, vae_stats, vae_record = vae_source(vae_run)
-    vae, _, _ = load_model(vae_stem)
+    source = vae_source(vae_run)
+    if not source.has_stats:
+        raise FileNotFoundError(f"VAE {vae_run}: no {source.stats.name} beside it (the Mean/Std it was trained with)")
+    vae, _, _ = load_model(source.stem)
     den, _, _ = load_model(run_checkpoint(denoiser_run))
-    stats = load_tensors(vae_stats)
+    stats = load_tensors(source.stats)
     task = json.loads((denoiser_run / "config.json").read_text()).get("task", {})
     diffusion = config_from_dict(DiffusionConfig, task["diffusion"]) if task.get("diffusion") else DiffusionConfig()
     encoder = text_encoder if text_encoder is not None else load_text_encoder(task.get("text_encoder", "minilm"))
@@ -160,22 +201,24 @@ def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | 
     pipe = SaladPipeline(vae, den, encoder, stats["mean"].numpy(), stats["std"].numpy(), diffusion=diffusion,
                          latent_stats=latent_stats)
     pipe.save_pretrained(out, dtype=dtype)
-    runs = {"vae": vae_record, "denoiser": _run_record(denoiser_run)}
+    runs = {"vae": source.record, "denoiser": _run_record(denoiser_run)}
     atomic_write_text(out / "runs.json", json.dumps(runs, indent=2) + "\n")
     write_numerics_section(out / "MODEL_CARD.md",
-                           numerics_note({"vae": vae_run if (vae_run / "config.json").is_file() else vae_record.get("config", {}),
-                                          "denoiser": denoiser_run}))
+                           numerics_note({"vae": source.numerics, "denoiser": denoiser_run}))
     return out
 
 
 def export_vae(vae_run: str | Path, out: str | Path, *, dtype: torch.dtype | None = torch.float16) -> Path:
     """Write a VAE-only folder: ``vae.*`` (loadable with :func:`salad_core.io.load_model`), ``stats.safetensors``
     and ``runs.json``; for the VAE ablations, which have no denoiser."""
-    vae_run, out = Path(vae_run), Path(out)
+    out = Path(out)
+    source = vae_source(vae_run)
+    if not source.has_stats:
+        raise FileNotFoundError(f"VAE {vae_run}: no {source.stats.name} beside it (the Mean/Std it was trained with)")
     out.mkdir(parents=True, exist_ok=True)
-    vae, _, _ = load_model(run_checkpoint(vae_run))
+    vae, _, _ = load_model(source.stem)
     save_checkpoint(out / "vae", vae, model_type="salad_vae", config=vae.config, dtype=dtype)
-    stats = load_tensors(vae_run / "mean_std.safetensors")
+    stats = load_tensors(source.stats)
     save_tensors(out / "stats.safetensors", {"mean": stats["mean"], "std": stats["std"]})
-    atomic_write_text(out / "runs.json", json.dumps({"vae": _run_record(vae_run)}, indent=2) + "\n")
+    atomic_write_text(out / "runs.json", json.dumps({"vae": source.record}, indent=2) + "\n")
     return out

@@ -44,6 +44,7 @@ from torch import nn
 
 from salad_core.io import CheckpointError, config_to_dict
 from salad_core.sampling import training_target
+from salad_core.train.assemble import vae_source
 
 from .common import StepContext, TrainResult, TrainTask, fit
 from .batching import expected_latent_frames
@@ -52,7 +53,7 @@ from .distributed import DistEnv, all_reduce_sum, init_distributed
 
 __all__ = ["DenoiserObjective", "CaptionFeatureCache", "train_denoiser", "build_denoiser_task", "load_frozen_vae",
            "resolve_checkpoint", "denoiser_latent_cache", "denoiser_latent_stats", "prepare_denoiser_batch",
-           "split_denoiser_inputs", "vae_statistics", "VAE_STATS_FILES"]
+           "split_denoiser_inputs", "vae_statistics"]
 
 log = logging.getLogger(__name__)
 
@@ -173,11 +174,12 @@ def resolve_checkpoint(path: str | os.PathLike) -> Path:
 
 
 def load_frozen_vae(path: str | os.PathLike, device: str | torch.device = "cpu") -> nn.Module:
-    """Load a trained VAE checkpoint in eval mode with gradients off."""
+    """Load a trained VAE in eval mode with gradients off: a run folder, an exported VAE or pipeline folder,
+    or a checkpoint stem (:func:`salad_core.train.assemble.vae_source`)."""
     import salad_core.models.vae  # noqa: F401  (registers the "salad_vae" type)
     from salad_core.io import load_model
 
-    stem = resolve_checkpoint(path)
+    stem = vae_source(path).stem
     vae, _, _ = load_model(stem)
     vae = vae.to(device).eval()
     for p in vae.parameters():
@@ -185,23 +187,17 @@ def load_frozen_vae(path: str | os.PathLike, device: str | torch.device = "cpu")
     return vae
 
 
-#: Files beside a VAE checkpoint that hold the statistics it was trained with: a training run's, then an
-#: exported VAE folder's or a pipeline folder's (:func:`salad_core.train.assemble.export_vae`).
-VAE_STATS_FILES = ("mean_std.safetensors", "stats.safetensors")
-
-
 def vae_statistics(vae_path: str | os.PathLike) -> tuple[Any, Any]:
     """The normalisation the VAE was trained with (``mean_std.safetensors`` of its run, or ``stats.safetensors``
-    of an exported VAE or pipeline folder), else ``(None, None)``: the latents only mean what the VAE learned
-    if the motions are normalised the same way."""
+    of an exported VAE or pipeline folder: :func:`salad_core.train.assemble.vae_source`), else ``(None, None)``:
+    the latents only mean what the VAE learned if the motions are normalised the same way."""
     from salad_core.io import load_tensors
 
-    folder = resolve_checkpoint(vae_path).parent
-    for name in VAE_STATS_FILES:
-        if (folder / name).is_file():
-            stats = load_tensors(folder / name)
-            return stats["mean"].numpy(), stats["std"].numpy()
-    log.info("no %s in %s: normalising with the data folder's Mean.npy/Std.npy", " or ".join(VAE_STATS_FILES), folder)
+    source = vae_source(vae_path)
+    if source.has_stats:
+        stats = load_tensors(source.stats)
+        return stats["mean"].numpy(), stats["std"].numpy()
+    log.info("no %s beside %s: normalising with the data folder's Mean.npy/Std.npy", source.stats.name, source.stem)
     return None, None
 
 
@@ -375,7 +371,7 @@ def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike
                       prediction_type=diffusion_config.prediction_type, latent_shape=latent_shape,
                       latents=latents, frames_norm=frames_norm, latent_stats=latent_stats)
     meta = {"diffusion": config_to_dict(diffusion_config), "text_encoder": encoder_name,
-            "vae": str(resolve_checkpoint(vae_path)), "data": str(Path(data_dir))}
+            "vae": str(vae_source(vae_path).stem), "data": str(Path(data_dir))}
     numerics = {
         "latents": (f"cached posteriors ({'padded to max_length' if train_config.vae_pad_to_max else 'each window alone'}, "
                     f"{train_config.latent_cache_dtype}), eps drawn per step" if latents is not None
