@@ -206,7 +206,8 @@ def test_v2_recipe_equal_budgets_constant_schedule_and_the_default_recipe(tmp_pa
             assert len({json.dumps(t, sort_keys=True) for t in trains}) == 1
             assert trains[0]["milestones"] == [] and trains[0]["warmup_steps"] < group.stages[0]
     den_cfg = {j.variant.name: j.config for j in stage_jobs(recipe, den, den.stages[0], tmp_path, frozen)}
-    assert all(c["train"]["latent_norm"] is True and c["train"]["micro_batches"] == 4 for c in den_cfg.values())
+    assert all(c["train"]["latent_norm"] is True and c["train"]["micro_batches"] == 4 and c["train"]["autocast"] == "bf16"
+               for c in den_cfg.values())
     assert all(c["model"]["width"] == 96 and c["model"]["layers"] == 3 for c in den_cfg.values())
     assert den_cfg["no_st"]["model"]["num_parts"] == 1 and den_cfg["full"]["model"]["num_parts"] == 7
     vae_cfg = {j.variant.name: j.config for j in stage_jobs(recipe, vae, vae.stages[0], tmp_path)}
