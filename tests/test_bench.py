@@ -322,3 +322,45 @@ def test_python_dash_m_and_salad_bench_share_one_parser(monkeypatch):
     assert out.stdout.startswith("usage: salad bench") and "--sections" in out.stdout
     for section in bench.SECTIONS + bench.OPTIONAL_SECTIONS:
         assert section in out.stdout
+
+
+def test_step_runner_forward_runs_under_the_configs_autocast(single_thread):
+    """The profiler's step is the trainer's: the objective's forward under ``config.autocast`` (bf16 here), the
+    backward outside it, and every step's loss kept; a float32 config runs no autocast."""
+    from torch import nn
+
+    from salad_core.train.common import TrainTask
+    from salad_core.train.config import TrainConfig
+    from salad_core.train.profile import StepRunner
+
+    class Recording(nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.lin = nn.Linear(4, 1)
+            self.seen: list[tuple[bool, torch.dtype]] = []
+
+        def forward(self, x):
+            y = self.lin(x)
+            self.seen.append((torch.is_autocast_enabled("cpu"), y.dtype))
+            return {"loss": y.float().pow(2).mean()}
+
+    class Items(torch.utils.data.Dataset):
+        def __len__(self):
+            return 16
+
+        def __getitem__(self, i):
+            return torch.full((4,), float(i))
+
+    def build(config):
+        obj = Recording()
+        return TrainTask(model=obj, model_type="none", model_config=None, objective=obj, train_set=Items(),
+                         val_set=None, collate=lambda items: {"motion": torch.stack(items)},
+                         prepare=lambda batch, ctx: {"x": batch["motion"]})
+
+    for autocast, want in ((None, (False, torch.float32)), ("bf16", (True, torch.bfloat16))):
+        runner = StepRunner("r", build, TrainConfig(batch_size=4, num_workers=0, autocast=autocast, progress=False))
+        for _ in range(3):
+            runner.step(record=True)
+        assert runner.task.objective.seen == [want] * 3
+        assert len(runner.step_losses) == 3 and all(np.isfinite(runner.step_losses))
+        assert runner.result().parts["forward"] > 0

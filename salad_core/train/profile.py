@@ -128,6 +128,7 @@ class StepRunner:
         self.padded = 0.0
         self.steps = 0
         self.losses: list[torch.Tensor] = []
+        self.step_losses: list[float] = []          # every step's loss (float), timed or not
         self.task.objective.train()
 
     def _next(self) -> Any:
@@ -138,6 +139,8 @@ class StepRunner:
             return next(self.batches)
 
     def step(self, record: bool) -> None:
+        from salad_core.train.common import autocast_context
+
         t: dict[str, float] = {}
         t0 = time.perf_counter()
         batch = self._next()
@@ -157,7 +160,8 @@ class StepRunner:
         total = None
         for part in parts:                       # as train.common's forward/backward with micro-batches
             t0 = time.perf_counter()
-            losses = self.task.objective(**part)
+            with autocast_context(self.config, "cpu"):            # as the trainer: forward under config.autocast
+                losses = self.task.objective(**part)
             t["forward"] += time.perf_counter() - t0
             t0 = time.perf_counter()
             losses["loss"].backward()
@@ -175,6 +179,7 @@ class StepRunner:
             float(torch.stack(self.losses).mean())
             self.losses.clear()
         t["logging"] = time.perf_counter() - t0
+        self.step_losses.append(float(total))
         if record:
             for k, v in t.items():
                 self.totals[k] += v
