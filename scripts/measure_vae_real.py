@@ -163,8 +163,9 @@ def _quiet_stdout():
         os.close(saved)
 
 
-def real_clips() -> tuple[dict[str, dict[str, np.ndarray]], list[str]]:
-    """``({set: {clip: features}}, notes)`` of the real evaluation clips available here."""
+def real_clips(rig: str = "smpl") -> tuple[dict[str, dict[str, np.ndarray]], list[str]]:
+    """``({set: {clip: features}}, notes)`` of the real evaluation clips available here; the DeepMimic clips on
+    the torso geometry ``rig`` (:data:`salad_core.data.deepmimic.RIGS`: HumanML3D's by default)."""
     notes = []
     sets = {"humanml3d_012314": {"012314": np.load(SAMPLE / "new_joint_vecs" / "012314.npy")}}
     from salad_core.data import deepmimic
@@ -175,11 +176,11 @@ def real_clips() -> tuple[dict[str, dict[str, np.ndarray]], list[str]]:
     dm = {}
     for name in deepmimic.available_clips():
         with _quiet_stdout():
-            clip = deepmimic.load_clip(name)
+            clip = deepmimic.load_clip(name, rig=rig)
         if clip.loop and clip.num_frames - 1 < MIN_ROWS:      # cycles are repeated, as for editing
             cycles = int(np.ceil(MIN_ROWS / max(clip.num_frames - 1, 1))) + 1
             with _quiet_stdout():
-                clip = deepmimic.load_clip(name, cycles=cycles)
+                clip = deepmimic.load_clip(name, cycles=cycles, rig=rig)
             name = f"{name} (x{cycles})"
         feats = clip.features()
         if len(feats) >= MIN_ROWS:
@@ -242,6 +243,9 @@ def main(argv=None) -> int:
     ap.add_argument("--sample", action="store_true",
                     help="decode posterior samples mu + eps * sigma (seed 0) instead of the mean: how the decoder "
                          "treats latents as noisy as a denoiser's training targets")
+    ap.add_argument("--deepmimic-rig", choices=("smpl", "deepmimic"), default="smpl",
+                    help="torso geometry of the converted DeepMimic clips: HumanML3D's (default) or the humanoid's own "
+                         "level hips and straight spine (the conversion before session 10; salad_core.data.deepmimic)")
     ap.add_argument("--stats", action="store_true", help="print feature-range figures instead (needs --corpus, --general)")
     args = ap.parse_args(argv)
 
@@ -262,14 +266,15 @@ def main(argv=None) -> int:
 
     torch.set_grad_enabled(False)
     vae, mean, std, desc = load_vae(args.vae)
-    print(f"VAE: {desc}; decoding the {'posterior samples (seed 0)' if args.sample else 'posterior mean'}")
-    sets, notes = real_clips()
+    print(f"VAE: {desc}; decoding the {'posterior samples (seed 0)' if args.sample else 'posterior mean'}; "
+          f"DeepMimic clips on the {args.deepmimic_rig} torso")
+    sets, notes = real_clips(args.deepmimic_rig)
     if args.corpus is not None:
         sets["corpus_test"] = split_clips(args.corpus, "test", args.limit)
     if args.general is not None:
         sets["general_test"] = split_clips(args.general, "test", args.limit)
     results = {"vae": desc, "decoded": "posterior samples (seed 0)" if args.sample else "posterior mean",
-               "notes": notes, "sets": {}}
+               "notes": notes, "deepmimic_rig": args.deepmimic_rig, "sets": {}}
     for set_name, clips in sets.items():
         pairs: list = []
         rows = {name: measure_clip(vae, mean, std, f, pairs, sample=args.sample) for name, f in clips.items()}
