@@ -1,0 +1,63 @@
+"""scripts/evaluate_candidate.sh: the resumable post-training comparison (docs/campaign.md). Its stages are the
+``salad eval`` and measuring commands tested elsewhere; here: a finished stage is skipped, a failing one leaves
+no marker and stops the script, the commands get the settings, and the assemble stage needs a denoiser."""
+from __future__ import annotations
+
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SCRIPT = REPO / "scripts" / "evaluate_candidate.sh"
+
+
+def _run(out: Path, *stages: str, python: str, **env: str) -> subprocess.CompletedProcess:
+    full = {**os.environ, "PYTHON": python, "DATA": "/data/corpus", "WEIGHTS": "/w", **env}
+    return subprocess.run(["bash", str(SCRIPT), str(out), *stages], capture_output=True, text=True, env=full,
+                          timeout=60)
+
+
+@pytest.fixture
+def recorder(tmp_path) -> tuple[Path, Path]:
+    """A stand-in python that records its arguments (one line per call) and succeeds."""
+    log = tmp_path / "calls.txt"
+    fake = tmp_path / "fake_python"
+    fake.write_text(f'#!/usr/bin/env bash\necho "$*" >> {log}\n')
+    fake.chmod(0o755)
+    return fake, log
+
+
+def test_stages_run_once_and_are_skipped_when_done(tmp_path, recorder):
+    fake, log = recorder
+    out = tmp_path / "out"
+    res = _run(out, "physics", "t2m", python=str(fake), EVALUATOR="/ev", PHYSICS_ARGS="--prompts 2 --seeds 1")
+    assert res.returncode == 0, res.stderr
+    calls = log.read_text().splitlines()
+    assert len(calls) == 2
+    assert calls[0].startswith("-m salad_core.cli eval --physics --data /data/corpus --threads 2 --evaluator /ev "
+                               "--prompts 2 --seeds 1 --weights /w")
+    assert "--replications 5 --max-samples 256 --no-mm --weights /w --name candidate" in calls[1]
+    assert (out / "physics.done").is_file() and (out / "t2m.done").is_file()
+    res = _run(out, "physics", "t2m", python=str(fake))
+    assert res.returncode == 0 and res.stdout.count("done before") == 2
+    assert len(log.read_text().splitlines()) == 2                     # nothing ran again
+
+
+def test_a_failing_stage_leaves_no_marker_and_stops(tmp_path):
+    out = tmp_path / "out"
+    res = _run(out, "physics", "t2m", python="false")
+    assert res.returncode != 0
+    assert not (out / "physics.done").exists() and not (out / "t2m.log").exists()
+
+
+def test_settings_are_required(tmp_path, recorder):
+    fake, _ = recorder
+    env = {**os.environ, "PYTHON": str(fake)}
+    env.pop("DATA", None)
+    res = subprocess.run(["bash", str(SCRIPT), str(tmp_path / "o"), "physics"], capture_output=True, text=True,
+                         env=env, timeout=60)
+    assert res.returncode != 0 and "set DATA" in res.stderr
+    res = _run(tmp_path / "o2", "assemble", python=str(fake), WEIGHTS=str(tmp_path / "missing"))
+    assert res.returncode != 0 and "DENOISER" in res.stderr
