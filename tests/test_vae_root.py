@@ -406,3 +406,63 @@ def test_root_channel_stats_and_ric_error_by_hand():
     off[:, :4] += 5.0
     assert m.ric_error_cm(off, ref[0]) == pytest.approx(1.0)
     assert m.ric_error_cm(ref[0], ref[0]) == 0.0
+
+
+# ---------------------------------------------------------------------------- the foot-contact term
+def test_foot_slide_by_hand():
+    """``foot_slide``: the mean speed (m/frame) of contact joints over frames planted in the input, on the
+    integrated path: a standing pose with planted feet gives 0; the same pose drifting 3 cm per frame along
+    the heading gives 0.03 on every planted step; unplanted feet and masked frames do not count."""
+    vae = _vae(lambda_foot=2.0)
+    still = _standing_window(12, b=2)
+    c = SK.feature_slices["contacts"]
+    still[..., c] = 1.0
+    assert vae.foot_slide(still, still).item() == 0.0
+    drift = still.clone()
+    drift[..., 2] = 0.03                                              # z velocity: 3 cm per frame
+    assert vae.foot_slide(drift, still).item() == pytest.approx(0.03, rel=1e-6)
+    lifted = still.clone()
+    lifted[..., c] = 0.0                                              # nothing planted: nothing measured
+    assert vae.foot_slide(drift, lifted).item() == 0.0
+    half = still.clone()
+    half[:, 6:, c] = 0.0                                              # planted on frames 0-5: steps 0-4
+    late = still.clone()
+    late[:, 6:, 2] = 0.5                                              # the slide begins where no foot is planted
+    assert vae.foot_slide(late, half).item() == 0.0
+    mask = torch.ones(2, 12, dtype=torch.bool)
+    mask[:, 3:] = False                                               # only steps 0-1 are valid
+    fast = still.clone()
+    fast[:, 3:, 2] = 0.5
+    assert vae.foot_slide(fast, still, mask).item() == 0.0
+    recon = drift.clone().requires_grad_(True)
+    vae.foot_slide(recon, still).backward()
+    assert recon.grad[..., 2].abs().sum() > 0                         # the root velocity gets a gradient
+
+
+def test_foot_term_in_the_loss_and_off_by_default():
+    vae = _vae(lambda_foot=2.0)
+    x = _standing_window(16, b=2)
+    x[..., SK.feature_slices["contacts"]] = 1.0
+    recon = x.clone()
+    recon[..., 2] = 0.01
+    mean, std = torch.zeros(D, dtype=torch.float64), torch.ones(D, dtype=torch.float64)
+    mu = logvar = torch.zeros(2, 4, vae.num_parts, vae.latent_dim, dtype=torch.float64)
+    out = vae.loss(x, recon, mu, logvar, stats=(mean, std))
+    assert out["foot"].item() == pytest.approx(0.01, rel=1e-5)
+    base = _vae().loss(x, recon, mu, logvar)
+    assert "foot" not in base
+    torch.testing.assert_close(out["loss"], base["loss"] + 2.0 * out["foot"].to(base["loss"].dtype))
+    with pytest.raises(ValueError, match="lambda_foot > 0 needs stats"):
+        vae.loss(x, recon, mu, logvar)
+    with pytest.raises(ValueError, match="lambda_foot"):
+        VAEConfig(lambda_foot=-1.0)
+
+
+def test_trainer_logs_the_foot_term(fake_corpus, tmp_path):
+    """A run with ``lambda_foot`` gets the statistics it needs and logs the term (metres per frame)."""
+    out = tmp_path / "foot"
+    res = train_vae(fake_corpus, out, VAEConfig(latent_dim=8, n_extra_layers=0, lambda_foot=1.0), _train_cfg(max_steps=2))
+    assert res.step == 2
+    logged = [json.loads(line) for line in (out / "log.jsonl").read_text().splitlines()]
+    foot = [r["foot"] for r in logged if "foot" in r]
+    assert foot and all(np.isfinite(v) and v >= 0 for v in foot)

@@ -230,7 +230,8 @@ def build_vae_task(data_dir: str | os.PathLike, model_config: Any, train_config:
         extra_config["init_from"] = str(Path(train_config.init_from).resolve())
     return TrainTask(
         model=vae, model_type="salad_vae", model_config=model_config,
-        objective=VAEObjective(vae, stats if model_config.lambda_bone > 0 or model_config.lambda_root > 0 else None,
+        objective=VAEObjective(vae, stats if (model_config.lambda_bone > 0 or model_config.lambda_root > 0
+                                              or model_config.lambda_foot > 0) else None,
                                freeze_encoder=train_config.train_parts == "decoder"),
         train_set=train_set, val_set=val_set, collate=_collate_windows, prepare=prepare,
         meta=meta, extra_config=extra_config,
