@@ -241,8 +241,19 @@ def test_init_from_errors_name_the_problem(fake_corpus, base_run, tmp_path):
     with pytest.raises(ValueError, match=r"another architecture.*latent_dim: 8 \(init_from\) vs 16"):
         build_vae_task(fake_corpus, VAEConfig(latent_dim=16, n_extra_layers=0),
                        _train_cfg(init_from=str(base_run)), DistEnv())
-    with pytest.raises(FileNotFoundError, match="neither a pipeline folder"):
+    with pytest.raises(FileNotFoundError, match="neither a VAE run folder"):
         load_init_vae(tmp_path)
+    with pytest.raises(FileNotFoundError, match="neither a VAE run folder"):
+        load_init_vae(tmp_path / "missing")
+    # an exported VAE (or its stem) starts a fine-tuning run as its training run does
+    from salad_core.train.assemble import export_vae
+
+    exported = export_vae(base_run, tmp_path / "exported", dtype=None)
+    want = load_init_vae(base_run)
+    for where in (exported, exported / "vae"):
+        config, state, mean, std, _ = load_init_vae(where)
+        assert config == want[0] and all(torch.equal(state[k], want[1][k]) for k in want[1])
+        np.testing.assert_array_equal(mean, want[2])
 
 
 # ------------------------------------------------------------------ root-channel weight

@@ -113,8 +113,9 @@ def load_init_vae(path: str | os.PathLike) -> tuple[Any, dict[str, torch.Tensor]
     Parameters
     ----------
     path : path
-        A VAE training run (``best.*`` or else ``latest.*`` + ``mean_std.safetensors``) or a pipeline
-        folder (``vae.*`` + ``stats.safetensors``).
+        A VAE training run (``best.*`` or else ``latest.*`` + ``mean_std.safetensors``), an exported VAE or
+        pipeline folder (``vae.*`` + ``stats.safetensors``), or a checkpoint stem in one
+        (:func:`salad_core.train.assemble.vae_source`).
 
     Raises
     ------
@@ -123,16 +124,14 @@ def load_init_vae(path: str | os.PathLike) -> tuple[Any, dict[str, torch.Tensor]
         VAE learned if motions are normalised as in its training).
     """
     from salad_core.io import load_model, load_tensors
+    from salad_core.train.assemble import vae_source
 
-    root = Path(path)
-    if (root / "vae.json").is_file():
-        stem, stats_file = root / "vae", root / "stats.safetensors"
-    else:
-        stem = next((root / s for s in ("best", "latest") if (root / f"{s}.json").is_file()), None)
-        stats_file = root / "mean_std.safetensors"
-        if stem is None:
-            raise FileNotFoundError(f"VAETrainConfig.init_from={str(path)!r} is neither a pipeline folder (vae.json) "
-                                    "nor a VAE run folder (best.json or latest.json)")
+    try:
+        source = vae_source(path)
+    except (FileNotFoundError, NotADirectoryError) as exc:
+        raise FileNotFoundError(f"VAETrainConfig.init_from={str(path)!r} is neither a VAE run folder (best/latest), "
+                                f"an exported VAE or pipeline folder (vae.*), nor a checkpoint stem: {exc}") from None
+    stem, stats_file = source.stem, source.stats
     if not stats_file.is_file():
         raise FileNotFoundError(f"VAETrainConfig.init_from={str(path)!r} has no {stats_file.name}: the normalisation "
                                 "the VAE was trained with is needed to keep its latent space")
