@@ -242,7 +242,7 @@ def test_long_sequences_are_drawn_and_said():
     from salad_core.data.procedural import GENERATOR_VERSION, in_language, render_captions
     from salad_core.data.procedural.composition import PLAN_TYPES, sample_plan
 
-    assert GENERATOR_VERSION == "2.5"
+    assert GENERATOR_VERSION == "2.6"
     assert PLAN_TYPES["sequence3"] + PLAN_TYPES["sequence4"] >= 0.5          # 2.5: 0.57 (2.4: 0.43)
     assert PLAN_TYPES["single"] + PLAN_TYPES["gesture"] <= 0.1
     for i in range(5):
@@ -572,7 +572,9 @@ def test_posture_drift_is_slow_large_and_spares_gesture_arms():
     pose = base.copy()
     pose.arm[:, 0, 1] = np.linspace(-0.3, 0.3, n)
     _drift(pose, persona, np.random.default_rng(27))
-    assert np.abs(np.diff(pose.arm[:, 0, 1])).max() < 0.02
+    # (no snap: a held crossing snapped out would jump 0.28 rad; 2.6's drift with both arms
+    # drifting together moves up to ~0.02 rad a frame of its own)
+    assert np.abs(np.diff(pose.arm[:, 0, 1])).max() < 0.03
     assert pose.arm[0, 0, 1] < 0.0
 
 
@@ -589,3 +591,143 @@ def test_performers_range_wider_in_posture_and_carriage():
     assert offs[..., 0].max() > 0.2 and offs[..., 1].max() > 0.25
     # the two arms of a performer are drawn each their own
     assert abs(np.corrcoef(offs[:, 0, 0], offs[:, 1, 0])[0, 1]) < 0.2
+
+
+def test_settle_shifts_the_weight_while_the_feet_stay_planted():
+    """2.6: _settle moves a standing pelvis between held lower-body postures: the weight onto
+    one foot (the pelvis travels SETTLE_RANGE['shift'] of the way to it, at most SETTLE_MAX_SHIFT),
+    soft knees, a hinge at the hips. The feet do not move (exactly), the bones keep their lengths,
+    nothing goes under the floor and the pelvis moves slowly."""
+    from salad_core.data.procedural.composition import SETTLE_MAX_SHIFT, SETTLE_MOVE, SETTLE_RANGE, _settle
+    from salad_core.data.procedural.footwork import Persona, Stance
+    from salad_core.data.procedural.kinematics import FPS, assemble, body_model
+    from salad_core.data.procedural.segment import standing_pose
+
+    body = body_model("humanml3d")
+    feet = [SK.joint_names.index(n) for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
+    shifts, hinges = [], []
+    for i in range(6):
+        persona = Persona.sample(np.random.default_rng([30, i]))
+        stance = Stance.at((0.0, 0.0), 0.3 * i, persona)
+        base = standing_pose(stance, persona, 160, body, rng=None, idle=False)
+        pose = base.copy()
+        keys = _settle(pose, persona, body, np.random.default_rng([31, i]))
+        j0, j1 = assemble(base, body, keep_toes=True), assemble(pose, body, keep_toes=True)
+        np.testing.assert_allclose(j1[:, feet], j0[:, feet], atol=1e-9)          # planted exactly
+        assert bone_length_error(j1)["max_error"] < 1e-6
+        assert j1[..., 1].min() > -1e-6
+        # the pelvis's travel towards the loaded foot, against the stance's half width
+        half = np.linalg.norm(stance.ankles[0] - stance.ankles[1]) / 2
+        travel = np.linalg.norm((pose.pelvis - base.pelvis)[:, [0, 2]], axis=-1)
+        lat = np.abs(keys[:, 0])
+        held = lat > SETTLE_RANGE["shift"][0] * 0.99
+        if held.any() and not (keys[held, 2] > 0.01).any():
+            want = np.minimum(lat[held] * half, SETTLE_MAX_SHIFT)
+            np.testing.assert_allclose(travel[held], want, atol=2e-3)
+        shifts.append(travel.max())
+        hinges.append(keys[:, 2].max())
+        speed = np.linalg.norm(np.diff(pose.pelvis - base.pelvis, axis=0), axis=-1) * FPS
+        # m/s: a min-jerk move peaks at 1.875x its mean speed: SETTLE_MAX_SHIFT (plus the hinge's
+        # travel back) over at least SETTLE_MOVE[0] s stays under 0.35 m/s, its mean under 0.1
+        assert speed.max() < 1.875 * (SETTLE_MAX_SHIFT + 0.08) / SETTLE_MOVE[0]
+        assert speed.mean() < 0.1
+    assert max(shifts) > 0.06 and max(hinges) > 0.5 * SETTLE_RANGE["hinge"][0]   # (scaled by liveliness)
+
+
+def test_settle_leaves_stepping_frames_alone():
+    """2.6: frames where a foot moves (and a margin around them) keep the segment's own pelvis."""
+    from salad_core.data.procedural.composition import _settle
+    from salad_core.data.procedural.footwork import Persona, Stance
+    from salad_core.data.procedural.kinematics import body_model
+    from salad_core.data.procedural.primitives import build_base
+    from salad_core.data.procedural.segment import standing_pose
+    from salad_core.data.procedural.kinematics import Pose
+
+    body = body_model("humanml3d")
+    persona = Persona.sample(np.random.default_rng(32))
+    start = Stance.at((0.0, 0.0), 0.0, persona)
+    walk = build_base(Action("walk"), start, persona, body, np.random.default_rng(33))
+    stand = standing_pose(walk.end, persona, 80, body, rng=None, idle=False)
+    base = Pose.concat([walk.pose, stand])
+    pose = base.copy()
+    keys = _settle(pose, persona, body, np.random.default_rng(34))
+    moving = np.zeros(base.num_frames, dtype=bool)
+    for k in range(2):
+        d = np.linalg.norm(np.diff(base.ankle[:, k], axis=0), axis=-1) > 1e-6
+        moving[1:] |= d
+        moving[:-1] |= d
+    last = np.flatnonzero(moving).max()
+    np.testing.assert_allclose(pose.pelvis[:last + 1], base.pelvis[:last + 1], atol=1e-12)
+    assert np.abs(keys[:last + 1]).max() == 0.0
+    assert np.abs(pose.pelvis[last + 30:] - base.pelvis[last + 30:]).max() > 0.0 or np.abs(keys).max() == 0.0
+
+
+def test_trunk_leans_into_arm_gestures_and_its_annotation_says_so():
+    """2.6: an arm gesture's trunk lean follows the gesture's arm weight (none before and after),
+    the head turns back by about half of it, hand-to-head gestures keep the trunk, and the spine
+    is recorded as moved incidentally."""
+    from salad_core.data.procedural.composition import LEAN_KINDS, LEAN_RANGE, _lean_into
+    from salad_core.data.procedural.footwork import Persona
+    from salad_core.data.procedural.kinematics import body_model
+    from salad_core.data.procedural.primitives import build_gesture, primitive_parts
+
+    body = body_model("humanml3d")
+    persona = Persona.sample(np.random.default_rng(35))
+    leans = []
+    for i, kind in enumerate(("wave", "stretch", "arms_out", "raise")):
+        a = Action(kind, "both" if kind in ("stretch", "arms_out") else "left")
+        g = build_gesture(a, persona, body, np.random.default_rng([36, i]))
+        spine0, neck0 = g.spine.copy(), g.neck.copy()
+        _lean_into(g, a, persona, np.random.default_rng([37, i]))
+        d = g.spine - spine0
+        w = g.arm_weight.max(1)
+        peak = d[int(np.argmax(w))]
+        np.testing.assert_allclose(d, w[:, None] * peak[None] / max(w.max(), 1e-9), atol=1e-9)
+        np.testing.assert_allclose(d[0], 0.0, atol=1e-9)
+        np.testing.assert_allclose(g.neck - neck0, -d * np.array([0.5, 0.6, 0.5]), atol=1e-9)
+        for x, (lo, hi) in zip(peak, LEAN_RANGE):
+            assert lo * persona.liveliness - 1e-9 <= x <= hi * persona.liveliness + 1e-9
+        leans.append(np.abs(peak).max())
+        assert "spine" in primitive_parts(a)[1]
+    assert max(leans) > 0.1
+    sal = Action("salute", "right")
+    assert "salute" not in LEAN_KINDS and "scratch_head" not in LEAN_KINDS
+    g = build_gesture(sal, persona, body, np.random.default_rng(38))
+    spine0 = g.spine.copy()
+    _lean_into(g, sal, persona, np.random.default_rng(39))
+    np.testing.assert_array_equal(g.spine, spine0)
+
+
+def test_free_arms_change_carriage_only_while_stepping():
+    """2.6: in a plan with an action that needs the arms, a free arm takes or changes its
+    carriage only inside a stepping action's core, keeps it through a gesture step and lets it
+    go inside the next action's core."""
+    from salad_core.data.procedural.composition import _carriage_by_step
+    from salad_core.data.procedural.footwork import Persona
+    from salad_core.data.procedural.kinematics import body_model
+
+    body = body_model("humanml3d")
+    persona = Persona.sample(np.random.default_rng(40))
+    plan = Plan((Step(Action("walk")), Step(Action("nod", reps=2)), Step(Action("jump"))))
+    changed = 0
+    for i in range(12):
+        clip = realise(plan, np.random.default_rng([41, i]), body, persona)
+        ev = {e.step: e.frames for e in clip.events if e.role == "main"}
+        # re-run the carriage alone on a copy of a plain pose of the clip's length
+        from salad_core.data.procedural.segment import standing_pose
+        from salad_core.data.procedural.footwork import Stance
+        n = clip.num_frames
+        base = standing_pose(Stance.at((0.0, 0.0), 0.0, persona), persona, n, body, rng=None, idle=False)
+        pose = base.copy()
+        events = {("main", s): (f, {}) for s, f in ev.items()}
+        _carriage_by_step(pose, body, plan, events, np.random.default_rng([42, i]))
+        d = np.abs(np.diff(pose.arm - base.arm, axis=0)).max(axis=(1, 2))      # (n-1,) change per frame
+        walk0, walk1 = ev[0]
+        nod0, nod1 = ev[1]
+        jump0, jump1 = ev[2]
+        assert d[nod1:jump0].max(initial=0.0) < 1e-12 or nod1 >= jump0
+        assert d[max(walk1, 0):jump0].max(initial=0.0) < 1e-12                 # held through the nod
+        assert d[:walk0].max(initial=0.0) < 1e-12
+        assert d[min(jump1, n - 1):].max(initial=0.0) < 1e-12
+        changed += (pose.arm - base.arm)[walk1:jump0].std() > 0.01
+    assert changed >= 3

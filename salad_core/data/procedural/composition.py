@@ -16,9 +16,9 @@ import numpy as np
 from .carriage import FREE_ARM_KINDS, apply_carriage, sample_carriages
 from .curves import min_jerk, smooth, wrap_angle
 from .fidgets import ARM_FIDGET_KINDS, UPPER_FIDGET_KINDS, step_fidgets
-from .footwork import Persona, Stance, max_pelvis_height
+from .footwork import ANKLE_HEIGHT, TOE_HEIGHT, Persona, Stance, max_pelvis_height
 from .gestures import Gesture
-from .kinematics import FPS, BodyModel, Pose, assemble, body_model, rot_y, ypr_matrix
+from .kinematics import FPS, BodyModel, Pose, assemble, body_model, heading_vectors, rot_y, ypr_matrix
 from .primitives import PRIMITIVES, Action, build_base, build_gesture, primitive_parts
 from .reach import arm_controls_for
 from .segment import Segment, standing_pose
@@ -292,8 +292,9 @@ def _alive(pose: Pose, persona: Persona, rng: np.random.Generator, propped: np.n
 
 
 #: Std (rad, at liveliness 1) of the slow posture drift of :func:`_drift`: spine (yaw, pitch, roll),
-#: neck (yaw, pitch), arms (flexion, abduction); and its periods (s).
-DRIFT_AMP = {"spine": (0.09, 0.1, 0.07), "neck": (0.12, 0.06), "arm": (0.16, 0.08)}
+#: neck (yaw, pitch), arms (flexion, abduction), both arms together (out/in, to one side); and its
+#: periods (s). 2.6: spine, neck and arms larger (2.5: 0.09/0.1/0.07, 0.12/0.06, 0.16/0.08) and the pair.
+DRIFT_AMP = {"spine": (0.15, 0.16, 0.11), "neck": (0.16, 0.08), "arm": (0.2, 0.09), "arm_pair": (0.12, 0.1)}
 DRIFT_PERIOD = (4.0, 9.0)
 
 
@@ -314,7 +315,9 @@ def _drift(pose: Pose, persona: Persona, rng: np.random.Generator, propped: np.n
     n = pose.num_frames
     live = persona.liveliness
     noise = _wander(n, rng, 9, period=DRIFT_PERIOD) * live
-    trunk = np.ones(n) if propped is None else 1.0 - 0.9 * smooth(np.asarray(propped, dtype=np.float64), 4.0)
+    # 2.6: a trunk whose hands hold something drifts not at all (the larger 2.6 drift carried a
+    # hand on the floor 6 mm into it through the re-solved arm's blend)
+    trunk = np.ones(n) if propped is None else np.clip(1.0 - 1.5 * smooth(np.asarray(propped, dtype=np.float64), 4.0), 0.0, 1.0)
     calm = np.zeros(n) if head_calm is None else np.clip(head_calm, 0.0, 1.0)
     trunk = trunk * (1.0 - 0.67 * calm)
     pose.spine += noise[:, 0:3] * np.asarray(DRIFT_AMP["spine"])[None] * trunk[:, None]
@@ -322,10 +325,145 @@ def _drift(pose: Pose, persona: Persona, rng: np.random.Generator, propped: np.n
     free = np.ones((n, 2)) if gesture_arms is None else 1.0 - np.clip(gesture_arms, 0.0, 1.0)
     free = free * (1.0 - calm)[:, None]
     pose.arm[:, :, 0] += noise[:, 5:7] * DRIFT_AMP["arm"][0] * free
+    # 2.6: the two arms also drift together: both elbows out or in (hands to the hips, arms
+    # loosely akimbo) and both hands to one side (the shoulders' line turns, one arm across the
+    # body): directions in which the arms of the corpus hardly varied (0.5 % and 1.6 % of the
+    # pose variance, against 5-9 % for the gestures' arm-forward and arm-swing directions)
+    both = _wander(n, rng, 2, period=DRIFT_PERIOD) * live
+    sym = both[:, 0] * DRIFT_AMP["arm_pair"][0]
+    side = both[:, 1] * DRIFT_AMP["arm_pair"][1]
+    d_abd = noise[:, 7:9] * DRIFT_AMP["arm"][1] + np.stack([sym + side, sym - side], 1)
     # abduction: the drift may not carry a hanging arm into the body (below 0.02 rad), but an arm
     # a pose already holds across it (a salute, a hand on the chest) keeps its own, continuous
     abd = pose.arm[:, :, 1]
-    pose.arm[:, :, 1] = np.maximum(abd + noise[:, 7:9] * DRIFT_AMP["arm"][1] * free, np.minimum(abd, 0.02))
+    pose.arm[:, :, 1] = np.maximum(abd + d_abd * free, np.minimum(abd, 0.02))
+    # the arm the other one reaches across to comes forward a little (the hand passes in front)
+    pose.arm[:, :, 0] += 0.8 * np.maximum(-np.stack([side, -side], 1), 0.0) * free
+
+
+#: The lower-body postures of :func:`_settle` (2.6): per posture key, the chance of each kind and
+#: the ranges of its parameters. ``shift``: the fraction of the way from the feet's midpoint to
+#: the loaded foot that the pelvis travels (weight on one leg); ``drop``: how far the pelvis sinks
+#: (m, knees bending); ``hinge``: forward pitch of the pelvis (rad, hips back, trunk over the feet).
+SETTLE_KINDS = {"neutral": 0.2, "weight": 0.4, "soft": 0.15, "hinge": 0.25}
+SETTLE_RANGE = {"shift": (0.5, 0.95), "drop": (0.02, 0.06), "hinge": (0.18, 0.45), "hinge_drop": (0.03, 0.07)}
+#: Seconds a posture is held and the transitions between postures take.
+SETTLE_HOLD, SETTLE_MOVE = (1.2, 3.2), (0.9, 1.6)
+#: Largest pelvis travel (m) of a weight shift, and the pelvis's travel back (m per rad) under a hinge.
+SETTLE_MAX_SHIFT, SETTLE_BACK = 0.13, 0.16
+
+
+def _settle_mask(pose: Pose, body: BodyModel, hands: np.ndarray | None) -> np.ndarray:
+    """``(N,)`` in [0, 1]: where both feet stand still and flat and the body stands upright and
+    slowly, eroded so that it is 0 for a while before and after any foot moves, and smoothed."""
+    n = pose.num_frames
+    if n < 3:
+        return np.zeros(n)
+    still = np.ones(n, dtype=bool)
+    for k in range(2):
+        d = (np.linalg.norm(np.diff(pose.ankle[:, k], axis=0), axis=-1)
+             + np.linalg.norm(np.diff(pose.toe[:, k], axis=0), axis=-1))
+        moving = np.concatenate([[False], d > 1e-6]) | np.concatenate([d > 1e-6, [False]])
+        flat = np.abs((pose.ankle[:, k, 1] - pose.toe[:, k, 1]) - (ANKLE_HEIGHT - TOE_HEIGHT)) < 2e-3
+        still &= ~moving & flat
+    sp = np.linalg.norm(np.diff(pose.pelvis, axis=0), axis=-1) * FPS
+    sp = np.concatenate([sp[:1], sp])
+    still &= sp < 0.3
+    stand = max_pelvis_height(pose.pelvis, ypr_matrix(pose.pelvis_ypr), pose.ankle, body, reach=0.975)
+    still &= pose.pelvis[:, 1] > stand - 0.05
+    still &= np.abs(pose.pelvis_ypr[:, 1]) < 0.25
+    if hands is not None:
+        still &= np.asarray(hands) < 1e-3
+    # erode: the posture is back before a foot leaves (and only starts once both stand)
+    k = 10
+    pad = np.pad(still.astype(np.float64), k, mode="edge")
+    er = np.lib.stride_tricks.sliding_window_view(pad, 2 * k + 1).min(-1)
+    # smoothed over about 0.4 s; exactly 0 from a few frames inside the eroded margin
+    return np.clip((smooth(er, 3.0) - 0.02) / 0.98, 0.0, 1.0)
+
+
+def _settle_keys(n: int, rng: np.random.Generator, live: float) -> np.ndarray:
+    """``(n, 3)`` (shift, drop, hinge): held lower-body postures joined by min-jerk moves."""
+    t = np.arange(n) / FPS
+    kinds = list(SETTLE_KINDS)
+    p = np.asarray(list(SETTLE_KINDS.values()))
+    out = np.zeros((n, 3))
+    cur = np.zeros(3)
+    at = -rng.uniform(0.0, 1.5)            # the clip opens in whatever posture the performer was in
+    first = True
+    while at < t[-1]:
+        kind = kinds[int(rng.choice(len(kinds), p=p / p.sum()))]
+        u = rng.uniform
+        key = np.zeros(3)
+        if kind == "weight":
+            key[0] = u(*SETTLE_RANGE["shift"]) * (1.0 if rng.random() < 0.5 else -1.0)
+            key[1] = u(0.0, 0.02)
+        elif kind == "soft":
+            key[1] = u(*SETTLE_RANGE["drop"])
+            key[0] = u(-0.2, 0.2)
+        elif kind == "hinge":
+            key[2] = u(*SETTLE_RANGE["hinge"])
+            key[1] = u(*SETTLE_RANGE["hinge_drop"])
+            key[0] = u(-0.3, 0.3)
+        key *= live
+        key[0] = np.clip(key[0], -1.0, 1.0)
+        move = 0.0 if first else u(*SETTLE_MOVE)
+        first = False
+        a, b = at, at + move
+        w = min_jerk(np.clip((t - a) / max(b - a, 1e-9), 0.0, 1.0))[:, None] if move > 0 else (t >= a)[:, None] * 1.0
+        out = np.where((t >= a)[:, None], cur[None] + (key - cur)[None] * w, out)
+        cur = key
+        at = b + u(*SETTLE_HOLD)
+    return out
+
+
+def _settle(pose: Pose, persona: Persona, body: BodyModel, rng: np.random.Generator,
+            hands: np.ndarray | None = None, head_calm: np.ndarray | None = None) -> np.ndarray:
+    """Let the performer settle into lower-body postures while standing (in place; 2.6).
+
+    Where both feet stand still and flat (:func:`_settle_mask`) the pelvis moves between held
+    postures (:func:`_settle_keys`): the weight onto one leg (the pelvis travels towards that
+    foot, the hip on the unloaded side drops, the trunk leans back over the feet), soft knees (the
+    pelvis sinks a few cm), or a hinge at the hips (the pelvis pitches forward and goes back, the
+    trunk leans forward less and the gaze stays level). The feet are not touched: the legs reach
+    them by IK, the pelvis is kept within their reach, so they stay planted exactly. Changes take
+    about a second (the legs move at a few cm/s, far under any annotated action's part speed)
+    and fade out before a foot leaves the floor; under a head gesture a third as much.
+
+    Returns the ``(N, 3)`` (shift, drop, hinge) actually laid on (after the mask).
+    """
+    n = pose.num_frames
+    m = _settle_mask(pose, body, hands)
+    # scaled by the performer's liveliness (0: a frozen performer does not settle)
+    keys = _settle_keys(n, rng, float(np.clip(persona.liveliness, 0.0, 1.4)))
+    if head_calm is not None:
+        m = m * (1.0 - 0.67 * np.clip(head_calm, 0.0, 1.0))
+    keys = keys * m[:, None]
+    if not m.any():
+        return keys
+    yaw = pose.pelvis_ypr[:, 0]
+    fwd, left = heading_vectors(yaw)
+    mid = 0.5 * (pose.ankle[:, 0] + pose.ankle[:, 1])
+    shift = keys[:, 0]
+    # towards the left foot for shift > 0, the right for shift < 0
+    to = np.where((shift >= 0)[:, None], pose.ankle[:, 0] - mid, pose.ankle[:, 1] - mid)
+    to[:, 1] = 0.0
+    norm = np.linalg.norm(to, axis=-1, keepdims=True)
+    travel = np.minimum(np.abs(shift)[:, None] * norm, SETTLE_MAX_SHIFT)
+    move = to / np.maximum(norm, 1e-9) * travel
+    lateral = (move * left).sum(-1)                      # + towards the body's left
+    hinge = keys[:, 2]
+    pose.pelvis += move - fwd * (SETTLE_BACK * hinge)[:, None]
+    pose.pelvis[:, 1] -= keys[:, 1]
+    pose.pelvis_ypr[:, 1] += hinge
+    pose.pelvis_ypr[:, 2] -= 1.2 * lateral               # the hip drops on the unloaded side
+    pose.spine[:, 2] += 1.8 * lateral                    # the trunk leans back over the feet
+    pose.spine[:, 1] -= 0.45 * hinge                     # the chest leans forward by about half
+    pose.neck[:, 1] -= 0.35 * hinge                      # and the head keeps the gaze
+    planted = np.ones((n, 2), dtype=bool)
+    bound = max_pelvis_height(pose.pelvis, ypr_matrix(pose.pelvis_ypr), pose.ankle, body, planted=planted) - 0.004
+    pose.pelvis[:, 1] = np.where(m > 0, np.minimum(pose.pelvis[:, 1], bound), pose.pelvis[:, 1])
+    return keys
 
 
 def _share_spine(pose: Pose, persona: Persona) -> None:
@@ -480,6 +618,81 @@ def _anchor(joints: np.ndarray, body: BodyModel) -> np.ndarray:
     return out @ rot_y(-yaw).T
 
 
+#: 2.6: plans that also hold actions needing the arms carry the free arms step by step
+#: (:func:`_carriage_by_step`); chance that a stepping action changes an arm's carriage.
+CARRIAGE_BY_STEP, CARRIAGE_CHANGE_P = True, 0.6
+
+
+#: 2.6: arm gestures whose trunk leans into them (the spine moves incidentally:
+#: :func:`.primitives.primitive_parts`), and the range of the lean (yaw, pitch, roll; rad) held
+#: while the arms act. Gestures that put a hand to the head keep the trunk as it is.
+LEAN_KINDS = frozenset({"wave", "raise", "punch", "stretch", "clap", "arms_out", "hands_on_hips", "cross_arms",
+                        "arm_circles"})
+LEAN_RANGE = ((-0.3, 0.3), (-0.12, 0.35), (-0.25, 0.25))
+
+
+def _lean_into(g: Gesture, action: Action, persona: Persona, rng: np.random.Generator) -> None:
+    """Let the trunk lean into an arm gesture (in place; 2.6): a lean drawn from
+    :data:`LEAN_RANGE` follows the gesture's arm weight in and out (whole-body reaching: a wave
+    turned towards someone, a stretch bent forward, arms raised with the chest back), and the
+    head turns back by about half of it so that the gaze stays where it was. The lean scales with
+    ``persona.liveliness`` (a frozen performer does not lean)."""
+    if action.kind not in LEAN_KINDS:
+        return
+    w = g.arm_weight.max(1)
+    lean = np.array([rng.uniform(*r) for r in LEAN_RANGE]) * persona.liveliness
+    g.spine = g.spine + w[:, None] * lean[None]
+    g.neck = g.neck - w[:, None] * (lean * np.array([0.5, 0.6, 0.5]))[None]
+
+
+def _carriage_by_step(pose: Pose, body: BodyModel, plan: Plan, events: dict, rng: np.random.Generator) -> None:
+    """Carry each free arm step by step (in place; 2.6).
+
+    An arm takes, changes or drops a carriage (:data:`.carriage.CARRIAGES`) only inside the core
+    of a stepping action that moves the arms incidentally (:data:`.carriage.FREE_ARM_KINDS`), keeps
+    it through gesture steps (a gesture takes the arms it drives from it) and lets it go over the
+    first frames of any other action (its arms are driven or move incidentally there).
+    """
+    from .carriage import CARRIAGES, CARRY_P
+
+    n = pose.num_frames
+    t = np.arange(n, dtype=np.float64)
+    for k in range(2):
+        epochs: list[tuple[object, float, float]] = []     # (carriage and target or None, ramp start, ramp end)
+        cur = None
+        for i, step in enumerate(plan.steps):
+            (f0, f1), _ = events[("main", i)]
+            kind = step.main
+            if kind.spec.track == "gesture":
+                continue
+            if kind.kind in FREE_ARM_KINDS:
+                if rng.random() >= CARRIAGE_CHANGE_P or f1 - f0 < 16:
+                    continue
+                c = CARRIAGES[int(rng.integers(len(CARRIAGES)))] if rng.random() < CARRY_P else None
+                new = None if c is None else (c, rng.uniform(c.low, c.high))
+                if new is None and cur is None:
+                    continue
+                ramp = float(rng.uniform(10, 16))
+                a = f0 + rng.uniform(0.15, 0.5) * max(0.0, f1 - f0 - ramp)
+                epochs.append((new, a, a + ramp))
+                cur = new
+            elif cur is not None:
+                ramp = float(min(10, max(3, (f1 - f0) // 3)))
+                epochs.append((None, float(f0), f0 + ramp))
+                cur = None
+        for j, (ck, a, b) in enumerate(epochs):
+            if ck is None:
+                continue
+            w = min_jerk(np.clip((t - a) / (b - a), 0.0, 1.0))
+            if j + 1 < len(epochs):
+                nxt, a2, b2 = epochs[j + 1]
+                if nxt is None:
+                    w = w * (1.0 - min_jerk(np.clip((t - a2) / (b2 - a2), 0.0, 1.0)))
+                else:
+                    w = np.where(t >= b2, 0.0, w)
+            apply_carriage(pose, body, [ck if q == k else None for q in range(2)], w)
+
+
 def _fidgets_of(step: Step, overlay: Action | None, seg: Segment, core: tuple[int, int], persona: Persona,
                 body: BodyModel, rng: np.random.Generator) -> list[tuple[int, Gesture]]:
     """Unnamed fidgets (:mod:`.fidgets`) of a stepping step, on the parts it moves incidentally
@@ -551,12 +764,14 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
             if step.layer is not None:
                 span = (core[1] - core[0]) / FPS
                 g = build_gesture(step.layer, persona, body, rng, duration=span * rng.uniform(0.75, 0.92))
+                _lean_into(g, step.layer, persona, fidget_rng)
                 slack = max(0, core[1] - core[0] - g.num_frames)
                 g_at = core[0] + int(rng.integers(0, slack + 1))
                 placed.append((g_at, g))
                 events[("layer", i)] = ((g_at, g_at + g.num_frames), g.info)
         else:
             g = build_gesture(main, persona, body, rng)
+            _lean_into(g, main, persona, fidget_rng)
             # under a turn of the head (the slowest annotated motion) the weight shifts are calmer
             heady = main.spec.category == "head" or (step.layer is not None and step.layer.spec.category == "head")
             calm = replace(persona, sway=0.4 * persona.sway) if heady else persona
@@ -575,6 +790,7 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
         f0 = events[("main", 0)][0][0]
         f1 = events[("main", len(plan.steps) - 1)][0][1]
         g = build_gesture(plan.overlay, persona, body, rng, duration=(f1 - f0) / FPS)
+        _lean_into(g, plan.overlay, persona, fidget_rng)
         placed.append((f0, g))
         events[("overlay", -1)] = ((f0, f0 + g.num_frames), g.info)
     # the clip opens shortly before the first action's onset (sometimes just after it) and
@@ -592,6 +808,10 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
     if all(s.main.spec.track == "gesture" or s.main.kind in FREE_ARM_KINDS for s in plan.steps):
         # free arms keep the performer's carriage (each arm its own); gestures take them from it
         apply_carriage(pose, body, sample_carriages(rng))
+    elif CARRIAGE_BY_STEP:
+        # 2.6: other plans carry the free arms step by step (they take a carriage while stepping,
+        # keep it through gestures, let it go as an action needs the arms)
+        _carriage_by_step(pose, body, plan, events, fidget_rng)
     gesture_arms = np.zeros((pose.num_frames, 2))
     for at, g in fidgets + placed:
         _blend(pose, g, at)
@@ -611,6 +831,8 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
     # a trunk propped on its hands sways a tenth as much (as in _alive): the hands stay within reach
     mask[:, 0] *= 1.0 - 0.9 * smooth(hands[0].max(1), 4.0)
     _lively_holds(pose, mask, persona, rng)
+    # 2.6: lower-body postures while standing (weight on one leg, soft knees, a hinge at the hips)
+    _settle(pose, persona, body, fidget_rng, hands=hands[0].max(1), head_calm=smooth(head_calm, 2.0))
     _share_spine(pose, persona)
     _hold_hands(pose, body, hands)
     joints = _anchor(assemble(pose, body, keep_toes=True)[s0:stop], body)

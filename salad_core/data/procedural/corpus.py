@@ -42,7 +42,7 @@ __all__ = ["build_corpus", "corpus_figures", "corpus_digest", "make_motion", "SI
 logger = logging.getLogger(__name__)
 
 #: Bump when the generator's output changes.
-GENERATOR_VERSION = "2.5"
+GENERATOR_VERSION = "2.6"
 #: Motions (before mirroring) of each named size.
 SIZES = {"tiny": 200, "small": 1000, "default": 4000}
 #: Split fractions (HumanML3D's proportions).

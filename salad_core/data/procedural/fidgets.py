@@ -35,8 +35,8 @@ ARM_FIDGET_KINDS = frozenset({"walk", "walk_backward", "sidestep", "circle", "tu
 #: the spine and the head only incidentally).
 UPPER_FIDGET_KINDS = ARM_FIDGET_KINDS | {"jog", "march"}
 #: Chance per eligible step of a fidget of each free arm (drawn per arm), a glance and a trunk shift
-#: (2.5: 0.7 / 0.6 / 0.9, was 0.5 / 0.5 / 0.7).
-FIDGET_P = {"arm": 0.7, "glance": 0.6, "trunk": 0.9}
+#: (2.5: 0.7 / 0.6 / 0.9, was 0.5 / 0.5 / 0.7; 2.6: 0.85 / 0.7 / 1.0).
+FIDGET_P = {"arm": 0.85, "glance": 0.7, "trunk": 1.0}
 #: Shortest core (s) of a step that takes a fidget, and frames kept clear at either end of the
 #: core (the neighbouring actions cross-fade there).
 MIN_SPAN, MARGIN = 1.4, 6

@@ -202,11 +202,12 @@ def primitive_parts(action: Action) -> tuple[tuple[str, ...], tuple[str, ...]]:
     if k == "bow":
         return ("spine", "head"), _LOWER + ("left arm", "right arm")
     if k in ("wave", "raise", "punch", "stretch", "clap", "arms_out"):
-        return arms.get(side or "both", arms["both"]), ()
+        # 2.6: the trunk leans into the gesture (composition._lean_into)
+        return arms.get(side or "both", arms["both"]), ("spine",)
     if k in ("nod", "shake_head"):
         return ("head",), ()
     if k in ("hands_on_hips", "cross_arms", "arm_circles"):
-        return arms["both"], ()
+        return arms["both"], ("spine",)
     if k in ("guard", "jab_cross"):      # a jab-cross's side is its lead hand; both arms strike
         return arms["both"], ("spine",)
     if k in ("scratch_head", "salute"):
