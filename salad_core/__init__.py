@@ -17,6 +17,7 @@ motion         joints <-> 263-d features (``recover_from_ric``), mirroring, norm
 recovery       joints from decoded features with fixed bone lengths and planted feet (``out.joints``)
 part_activity  how much each body part moves (part speeds, each in the part's own frame)
 quaternion     quaternion and rotation-matrix helpers for numpy and torch
+retarget       re-pose a motion on another rig's rigid torso (HumanML3D's), every limb kept
 bvh            BVH motion-capture import: read a take, map its rig, convert to features
 data           the HumanML3D layout and loaders; ``data.procedural``: the embedded motion-language corpus
 train          trainers of the VAE and the denoiser (one ``fit`` loop), configs, batching, latent cache
