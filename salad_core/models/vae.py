@@ -511,24 +511,24 @@ class MotionVAE(nn.Module):
             out["bone"] = bone
             total = total + cfg.lambda_bone * bone
             out["loss"] = total
-        if cfg.lambda_root > 0:
+        integrated = {"lambda_root": "integrate the root", "lambda_foot": "integrate the feet"}
+        need = [name for name in integrated if getattr(cfg, name) > 0]
+        if need:
             if stats is None:
-                raise ValueError("lambda_root > 0 needs stats=(mean, std) of the features to integrate the root")
+                raise ValueError(f"{need[0]} > 0 needs stats=(mean, std) of the features to {integrated[need[0]]}")
             mean, std = (torch.as_tensor(t, dtype=torch.float32, device=x.device) for t in stats)
             # integration in float32 even under bf16 autocast: sums of N small velocities lose digits
             with torch.autocast(x.device.type, enabled=False):
-                yaw_err, pos_err = self.root_error(recon.float() * std + mean, x.float() * std + mean, mask)
-            out["root_yaw"], out["root_pos"] = yaw_err, pos_err
-            out["root"] = yaw_err + pos_err
-            total = total + cfg.lambda_root * out["root"]
+                raw_recon, raw_x = recon.float() * std + mean, x.float() * std + mean
+                if cfg.lambda_root > 0:
+                    yaw_err, pos_err = self.root_error(raw_recon, raw_x, mask)
+                    out["root_yaw"], out["root_pos"] = yaw_err, pos_err
+                    out["root"] = yaw_err + pos_err
+                    total = total + cfg.lambda_root * out["root"]
+                if cfg.lambda_foot > 0:
+                    out["foot"] = self.foot_slide(raw_recon, raw_x, mask)
+                    total = total + cfg.lambda_foot * out["foot"]
             out["loss"] = total
-        if cfg.lambda_foot > 0:
-            if stats is None:
-                raise ValueError("lambda_foot > 0 needs stats=(mean, std) of the features to integrate the feet")
-            mean, std = (torch.as_tensor(t, dtype=torch.float32, device=x.device) for t in stats)
-            with torch.autocast(x.device.type, enabled=False):
-                out["foot"] = self.foot_slide(recon.float() * std + mean, x.float() * std + mean, mask)
-            out["loss"] = total + cfg.lambda_foot * out["foot"]
         return out
 
     def foot_slide(self, recon: torch.Tensor, target: torch.Tensor,
