@@ -51,6 +51,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import measure_vae_real as mvr  # noqa: E402
 
+from salad_core.attention.measure import spearman as _spearman  # noqa: E402
 from salad_core.retarget import (SEGMENTS, _unit, bone_directions, kabsch, rerig,  # noqa: E402,F401
                                  smpl_rest_directions, swing)
 from salad_core.skeleton import get_skeleton  # noqa: E402
@@ -127,16 +128,8 @@ def nearest_neighbours(query: np.ndarray, bank: np.ndarray, k: int = 32, chunk: 
 
 
 def spearman(a, b) -> float:
-    """Spearman rank correlation of two 1-D samples (ranks by ``scipy.stats.rankdata``, ties averaged)."""
-    from scipy.stats import rankdata
-
-    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    if a.shape != b.shape or a.ndim != 1 or len(a) < 3:
-        raise ValueError(f"spearman needs two 1-D samples of equal length >= 3, got {a.shape} and {b.shape}")
-    ra, rb = rankdata(a), rankdata(b)
-    if ra.std() == 0 or rb.std() == 0:
-        return float("nan")
-    return float(np.corrcoef(ra, rb)[0, 1])
+    """Spearman rank correlation of two 1-D samples of at least 3 values (:func:`salad_core.attention.measure.spearman`)."""
+    return _spearman(a, b, min_length=3)
 
 
 def partial_spearman(x, y, z) -> float:

@@ -438,3 +438,21 @@ def test_measure_script_runs_on_a_tiny_pipeline_and_corpus(pipe, tmp_path):
     assert "mirroring" in only and not {"localisation", "word_swap", "reweight", "inversion"} & set(only)
     with pytest.raises(SystemExit):
         script.main(["--data", str(tmp_path / "corpus"), "--sections", "x"])
+
+
+def test_spearman_ranks_ties_and_bad_input():
+    """The shared rank correlation (used by the re-weighting measure and the VAE diagnosis): monotone maps
+    give +-1, ties are averaged (scipy's rankdata: [1, 1, 2] ranks 1.5, 1.5, 3), constants give NaN and
+    mismatched or too short samples are refused."""
+    from salad_core.attention.measure import spearman
+
+    x = np.linspace(-2, 3, 9)
+    assert spearman(x, np.exp(x)) == pytest.approx(1.0)
+    assert spearman(x, -x ** 3) == pytest.approx(-1.0)
+    # ties: ranks (1.5, 1.5, 3) against (1, 2, 3) -> corr of centred (-.5,-.5,1) and (-1,0,1) = 1.5/sqrt(1.5*2)
+    assert spearman([1, 1, 2], [1, 2, 3]) == pytest.approx(1.5 / np.sqrt(3.0))
+    assert np.isnan(spearman([1, 2, 3], [4, 4, 4]))
+    with pytest.raises(ValueError, match="equal length"):
+        spearman([1, 2, 3], [1, 2])
+    with pytest.raises(ValueError, match=">= 2"):
+        spearman([1], [1])

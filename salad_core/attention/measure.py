@@ -137,17 +137,17 @@ def wrist_height(joints: np.ndarray, side: str = "both", skeleton: str | Skeleto
     return float(np.percentile(j[:, ids, 1].max(-1) - floor, percentile))
 
 
-def spearman(x: Sequence[float], y: Sequence[float]) -> float:
-    """Spearman rank correlation (no ties handling beyond average ranks)."""
-    def ranks(v):
-        v = np.asarray(v, np.float64)
-        order = v.argsort()
-        r = np.empty(len(v))
-        r[order] = np.arange(len(v))
-        for val in np.unique(v):
-            r[v == val] = r[v == val].mean()
-        return r
-    rx, ry = ranks(x), ranks(y)
+def spearman(x: Sequence[float], y: Sequence[float], min_length: int = 2) -> float:
+    """Spearman rank correlation of two equal-length 1-D samples (ranks by ``scipy.stats.rankdata``,
+    ties averaged); NaN when either sample is constant. A sample shorter than ``min_length`` is a
+    ``ValueError`` (a correlation of two points is always +-1)."""
+    from scipy.stats import rankdata
+
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    if x.shape != y.shape or x.ndim != 1 or len(x) < min_length:
+        raise ValueError(f"spearman needs two 1-D samples of equal length >= {min_length}, "
+                         f"got {x.shape} and {y.shape}")
+    rx, ry = rankdata(x), rankdata(y)
     if rx.std() == 0 or ry.std() == 0:
         return float("nan")
     return float(np.corrcoef(rx, ry)[0, 1])
