@@ -6,8 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from salad_core.data.procedural import PRIMITIVES, Action, Plan, Step, part_speeds, phrase_activity, realise
-from salad_core.data.procedural.checks import bone_length_error, joint_angles
+from salad_core.data.procedural import (PRIMITIVES, Action, Plan, Step, part_speeds, phrase_activity, primitive_parts,
+                                        realise)
+from salad_core.data.procedural.checks import bone_length_error, joint_angles, part_activity
 from salad_core.data.procedural.everyday import FLOOR_WRIST_HEIGHT
 from salad_core.data.procedural.floorwork import KNEE_FLOOR
 from salad_core.data.procedural.footwork import ANKLE_HEIGHT, TOE_HEIGHT, Persona, Stance
@@ -17,7 +18,7 @@ from salad_core.data.procedural.primitives import build_base, build_gesture
 from salad_core.data.procedural.reach import arm_controls_for, shoulders
 from salad_core.data.procedural.segment import standing_pose
 from salad_core.motion import mirror_joints
-from salad_core.skeleton import get_skeleton
+from salad_core.skeleton import PART_NAMES, get_skeleton
 
 SK = get_skeleton("humanml3d")
 BODY = body_model()
@@ -258,13 +259,13 @@ def test_step_over_lifts_the_feet_high_and_dance_travels():
     assert np.abs(j[-1, J["left_ankle"]] - j[0, J["left_ankle"]]).max() < 1e-9
 
 
-def _built(kind: str, side: str, seed: int) -> np.ndarray:
+def _built(kind: str, side: str, seed: int, variant: str = "") -> np.ndarray:
     """Joints of ``kind`` on ``side`` built with a symmetric performer (no realiser extras)."""
     rng = np.random.default_rng(seed)
     persona = Persona(width=0.1, toe_out=0.2, arm_rest=(0.05, 0.14, 0.3), arm_pole=(0.3, 0.0, -1.0),
                       sway=0.0, head_pitch=0.0, tempo=1.0)
     stance = Stance.at((0.0, 0.0), 0.0, persona)
-    action = Action(kind, side)
+    action = Action(kind, side, (), PRIMITIVES[kind].reps[0], variant)
     if action.spec.track == "base":
         return assemble(build_base(action, stance, persona, BODY, rng).pose, BODY)
     g = build_gesture(action, persona, BODY, rng)
@@ -392,3 +393,176 @@ def test_carriage_holds_each_arm_its_own_way():
     both = [(a[0].name, b[0].name) for a, b in draws if a is not None and b is not None]
     assert len(both) > 50 and np.mean([x != y for x, y in both]) > 0.4  # the arms choose apart
     assert any(a is None for a, _ in draws)                              # some arms just hang
+
+
+# ============================================================================ corpus 2.7
+#: The whole-body actions corpus 2.7 added: (kind, side, variant). New primitives, the side lunge
+#: and the side and back kicks.
+WHOLE_BODY = (("touch_toes", "both", ""), ("touch_toes", "left", ""), ("swing", "right", ""), ("swing", "left", "bat"),
+              ("reach_up", "right", ""), ("balance", "left", ""), ("kick", "left", "side"), ("kick", "right", "back"),
+              ("lunge", "left", "side"))
+
+
+def _resting_steps(j: np.ndarray) -> float:
+    """Largest per-frame horizontal step (m) of a foot joint resting on the floor (0 if none rests)."""
+    worst = 0.0
+    for joint, h in zip(SK.contact_joints, (ANKLE_HEIGHT, TOE_HEIGHT) * 2):
+        y = j[:, joint, 1]
+        rest = (y[1:] < h + 5e-4) & (y[:-1] < h + 5e-4)
+        step = np.linalg.norm(np.diff(j[:, joint][:, [0, 2]], axis=0), axis=-1)[rest]
+        worst = max(worst, float(step.max()) if step.size else 0.0)
+    return worst
+
+
+@pytest.mark.parametrize("kind,side,variant", WHOLE_BODY)
+def test_whole_body_action_is_clean_and_annotated(kind, side, variant):
+    """Realised through the composer (posture, wander, drift, held hands): exact bones, nothing
+    below the floor, resting feet still, human joint angles and accelerations; the event carries
+    the registry's parts, its driven parts really move and the most active part is one of them."""
+    for seed in range(3):
+        action = Action(kind, side, (), PRIMITIVES[kind].reps[0], variant)
+        clip = realise(Plan((Step(action),)), np.random.default_rng([27, seed]))
+        j, ev = clip.joints, clip.events[0]
+        err = bone_length_error(j)
+        assert err["max_std"] < 1e-6 and err["max_error"] < 1e-6
+        assert j[..., 1].min() > -1e-6
+        assert _resting_steps(j) < 1e-3, (kind, seed)
+        ang = joint_angles(j)
+        assert ang["knee"].max() < 150 and ang["elbow"].max() < 160 and ang["knee_bend"].min() > -0.02
+        lo, hi = ANKLE_RANGE
+        assert lo - 1 <= ang["ankle"].min() and ang["ankle"].max() <= hi + 1
+        acc = np.linalg.norm(j[2:] - 2 * j[1:-1] + j[:-2], axis=-1).max() * 400.0
+        assert acc < 135.0, (kind, seed, acc)
+        assert (ev.parts, ev.secondary) == primitive_parts(action)
+        assert 0 <= ev.frames[0] < ev.frames[1] <= len(j)
+        r = phrase_activity(part_speeds(j), [{"frames": ev.frames, "parts": ev.parts}], [ev.secondary])[0]
+        assert r["driven"] > 0.03 and r["ratio_idle"] > 2.0, (kind, seed, r)
+        act = part_activity(j, ev.frames)                   # the part that moves most is one the phrase drives
+        driven = [PART_NAMES.index(p) for p in ev.parts]
+        assert act[driven].max() >= 0.9 * act.max(), (kind, seed, act.round(2))
+
+
+@pytest.mark.parametrize("hands,feet", [("both", ("left_foot", "right_foot")), ("left", ("right_foot",)),
+                                        ("right", ("left_foot",))])
+def test_touch_toes_puts_the_wrists_over_the_toes(hands, feet):
+    from salad_core.data.procedural.trunk import TOE_TOUCH_HEIGHT
+
+    wrists = {"both": ("left_wrist", "right_wrist"), "left": ("left_wrist",), "right": ("right_wrist",)}[hands]
+    for seed in range(3):
+        seg, start, _ = _raw("touch_toes", seed, side=hands)
+        j = assemble(seg.pose, BODY)
+        b = seg.info["bottom_frame"]
+        for w, f in zip(wrists, feet):                       # the hand on its own foot, or across on the other
+            assert j[b, J[w], 1] - j[b, J[f], 1] == pytest.approx(TOE_TOUCH_HEIGHT, abs=1e-6)
+            assert np.linalg.norm((j[b, J[w]] - j[b, J[f]])[[0, 2]]) == pytest.approx(0.02, abs=1e-6)
+        assert j[b, J["head"], 1] < 0.75                    # folded far forward
+        feet_j = j[:, [J["left_ankle"], J["right_ankle"]]]
+        assert np.abs(feet_j - feet_j[:1]).max() < 1e-12    # the feet do not move
+        if hands != "both":                                 # the free arm points up at the ceiling
+            free = "right_wrist" if hands == "left" else "left_wrist"
+            assert j[b, J[free], 1] > j[b, J["pelvis"], 1] + 0.2
+        # through the composer the hands stay on the toes at the bottom (held and re-solved)
+        clip = realise(Plan((Step(Action("touch_toes", hands)),)), np.random.default_rng([3, seed]))
+        jc = clip.joints
+        for w, f in zip(wrists, feet):
+            gap = jc[:, J[w], 1] - jc[:, J[f], 1] - TOE_TOUCH_HEIGHT
+            assert np.abs(gap).min() < 1e-6 and jc[:, J[w], 1].min() > 0.04
+
+
+def test_swing_holds_the_club_with_both_hands_and_pivots_on_the_back_toe():
+    from salad_core.data.procedural.sports import GRIP_GAP
+
+    for variant in ("", "bat"):
+        seg, start, _ = _raw("swing", 1, side="right", variant=variant)
+        j = assemble(seg.pose, BODY, keep_toes=True)
+        info = seg.info
+        t0, t1 = int(np.ceil(info["top_time"] * 20)) - 8, int(np.floor(info["finish_time"] * 20)) + 4
+        gap = np.linalg.norm(j[t0:t1, J["left_wrist"]] - j[t0:t1, J["right_wrist"]], axis=-1)
+        assert np.abs(gap - GRIP_GAP).max() < 1e-6                   # one grip, a hand's width apart
+        top, fin = int(round(info["top_time"] * 20)), int(round(info["finish_time"] * 20))
+        hands = 0.5 * (j[:, J["left_wrist"]] + j[:, J["right_wrist"]])
+        assert hands[top, 0] < -0.25 and hands[fin, 0] > 0.25          # wound up to the right, finished left
+        hips = j[:, J["left_hip"]] - j[:, J["right_hip"]]
+        yaw = np.degrees(np.unwrap(np.arctan2(-hips[:, 2], hips[:, 0])))
+        assert yaw[fin] - yaw[top] > 50.0                              # the hips unwind through the hit
+        toe = j[:, J["right_foot"]]                                    # the back foot rolls up onto its toe
+        assert np.abs(toe - toe[0]).max() < 1e-9 and j[fin, J["right_ankle"], 1] > ANKLE_HEIGHT + 0.05
+        if variant == "bat":                                           # the front foot strides and steps back
+            stride = j[:, J["left_ankle"], 0] - j[0, J["left_ankle"], 0]
+            assert stride.max() > 0.15 and abs(stride[-1]) < 1e-9
+        assert np.abs(j[-1] - j[0]).max() < 1e-6                       # back to the stand it started from
+
+
+def test_reach_up_goes_high_across_the_body_on_tiptoe():
+    for side, hand, other in (("right", "right_wrist", "left"), ("left", "left_wrist", "right")):
+        seg, start, _ = _raw("reach_up", 2, side=side)
+        j = assemble(seg.pose, BODY, keep_toes=True)
+        peak = seg.info["peak_frame"]
+        assert j[peak, J[hand], 1] > j[peak, J["head"], 1] + 0.25                 # high over the head
+        sgn = 1.0 if other == "left" else -1.0                                    # across the midline
+        assert sgn * (j[peak, J[hand], 0] - j[peak, J["pelvis"], 0]) > 0.05
+        assert j[peak, J[hand], 1] == pytest.approx(seg.info["reach_height"], abs=1e-9)
+        for s in ("left", "right"):                                               # up on both toes
+            assert j[peak, J[f"{s}_ankle"], 1] > ANKLE_HEIGHT + 0.03
+        held = slice(peak - 3, peak + 4)                                          # heels up, toes kept on the floor
+        for s in ("left", "right"):
+            toe = j[held, J[f"{s}_foot"]]
+            assert np.abs(toe - toe[0]).max() < 1e-9 and toe[0, 1] == pytest.approx(TOE_HEIGHT, abs=1e-6)
+        assert np.linalg.norm((j[peak, J[f"{other}_foot"]] - j[0, J[f"{other}_foot"]])[[0, 2]]) > 0.3   # stepped out
+        np.testing.assert_allclose(j[-1], j[0], atol=1e-6)                        # stepped back
+
+
+def test_balance_and_the_new_kicks_move_the_leg_where_they_say():
+    seg, start, _ = _raw("balance", 0, side="left")
+    j = assemble(seg.pose, BODY)
+    stand = j[:, J["left_foot"]]
+    assert np.abs(stand - stand[0]).max() < 1e-9                                  # the standing foot stays
+    hold = int(np.argmax(j[:, J["right_ankle"], 1]))
+    behind = j[hold, J["right_ankle"], 2] - j[hold, J["pelvis"], 2]
+    assert j[hold, J["right_ankle"], 1] > 0.5 and behind < -0.55                  # the free leg out behind
+    assert j[hold, J["head"], 1] < j[0, J["head"], 1] - 0.25                      # the trunk tipped forward
+    side, _, _ = _raw("kick", 1, side="left", variant="side")
+    back, _, _ = _raw("kick", 1, side="right", variant="back")
+    js, jb = assemble(side.pose, BODY), assemble(back.pose, BODY)
+    f = int(np.argmax(js[:, J["left_ankle"], 0]))
+    assert js[f, J["left_ankle"], 0] - js[f, J["pelvis"], 0] > 0.5               # out to the left side
+    f = int(np.argmin(jb[:, J["right_ankle"], 2]))
+    assert jb[f, J["right_ankle"], 2] - jb[f, J["pelvis"], 2] < -0.45             # out behind
+    lunge, start, _ = _raw("lunge", 2, side="right", variant="side")
+    jl = assemble(lunge.pose, BODY, keep_toes=True)
+    assert (jl[:, J["right_ankle"], 0] - jl[0, J["right_ankle"], 0]).min() < -0.35  # steps out to the right
+    assert jl[0, J["pelvis"], 1] - jl[:, J["pelvis"], 1].min() > 0.15
+    assert np.abs(jl[:, J["left_foot"]] - jl[0, J["left_foot"]]).max() < 1e-9     # the straight leg's foot stays
+    np.testing.assert_allclose(jl[-1, [J["left_ankle"], J["right_ankle"]]], jl[0, [J["left_ankle"], J["right_ankle"]]],
+                               atol=1e-9)
+
+
+@pytest.mark.parametrize("kind,variant", [("touch_toes", ""), ("swing", ""), ("swing", "bat"), ("reach_up", ""),
+                                          ("balance", ""), ("kick", "side"), ("kick", "back"), ("lunge", "side")])
+def test_mirror_of_a_whole_body_action_is_the_mirrored_action(kind, variant):
+    """The motion of the left-hand action, mirrored, is the right-hand action's (same draws, a
+    symmetric performer); the skeleton's left and right bones differ by up to ~1 cm."""
+    left, right = _built(kind, "left", 7, variant), _built(kind, "right", 7, variant)
+    assert np.abs(mirror_joints(left) - right).max() < 0.06, kind
+    assert np.abs(left - right).max() > 0.1, kind
+
+
+@pytest.mark.parametrize("kind,side,variant", WHOLE_BODY)
+def test_whole_body_captions_say_the_action_and_mirror(kind, side, variant):
+    from salad_core.data.procedural import parse_prompt, render_captions
+    from salad_core.data.procedural.language import mirror_caption, phrase_realisations
+
+    action = Action(kind, side, (), PRIMITIVES[kind].reps[0], variant)
+    said = phrase_realisations(action, "pres", "his")
+    assert len(said) >= 4
+    for items in said:                                   # every wording parses back to this action
+        (ph,) = parse_prompt("a man " + " ".join(w for w, _, _ in items))
+        assert (ph.kind, ph.variant) == (kind, variant) and ph.side in (None, side)
+    plan = Plan((Step(Action("walk")), Step(action)))
+    for cap in render_captions(plan, np.random.default_rng(5), 4):
+        parsed = parse_prompt(cap.text)
+        assert [p.kind for p in parsed] == ["walk", kind], cap.text
+        assert parsed[1].words == cap.spans[1]
+        m = parse_prompt(mirror_caption(cap).text)
+        mirrored = action.mirrored()
+        assert m[1].kind == kind and m[1].side in (None, mirrored.side), cap.text

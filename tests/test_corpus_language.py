@@ -77,6 +77,16 @@ def test_every_sampled_caption_parses_back_exactly(sampled):
     ("we see a person tossing a ball underhand and then pivoting on their right foot",
      [("throw", None, (), "underhand"), ("pivot", "right", (), "")]),
     ("the person touches their left knee with their right hand", [("touch_knee", "right", (), "")]),
+    # corpus 2.7
+    ("a man bends down and touches his toes", [("touch_toes", "both", (), "")]),
+    ("a woman touches her left foot with her right hand, then swings a golf club",
+     [("touch_toes", "right", (), ""), ("swing", None, (), "")]),
+    ("someone swings a baseball bat from his left shoulder", [("swing", "left", (), "bat")]),
+    ("a person slowly reaches up to a high shelf with their right hand", [("reach_up", "right", ("slowly",), "")]),
+    ("the man balances on his left leg as if doing yoga", [("balance", "left", (), "")]),
+    ("a man kicks backward with his right leg and then lunges to the left",
+     [("kick", "right", (), "back"), ("lunge", "left", (), "side")]),
+    ("a person does a side kick with their left leg", [("kick", "left", (), "side")]),
 ])
 def test_new_phrases_parse(prompt, want):
     got = [(p.kind, p.side, p.mods, p.variant) for p in parse_prompt(prompt)]
@@ -117,7 +127,8 @@ def test_figure_prompts_stay_in_the_language():
 
 
 @pytest.mark.parametrize("kind", ["throw", "hook", "uppercut", "jab_cross", "kneel", "pivot", "touch_knee",
-                                  "reach_across", "scratch_head", "salute", "pick_up"])
+                                  "reach_across", "scratch_head", "salute", "pick_up",
+                                  "touch_toes", "swing", "reach_up", "balance"])
 def test_mirrored_captions_say_the_mirrored_action(kind):
     spec = PRIMITIVES[kind]
     for side in [s for s in spec.sides if s in ("left", "right")]:

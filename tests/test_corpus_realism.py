@@ -242,7 +242,7 @@ def test_long_sequences_are_drawn_and_said():
     from salad_core.data.procedural import GENERATOR_VERSION, in_language, render_captions
     from salad_core.data.procedural.composition import PLAN_TYPES, sample_plan
 
-    assert GENERATOR_VERSION == "2.6"
+    assert GENERATOR_VERSION == "2.7"
     assert PLAN_TYPES["sequence3"] + PLAN_TYPES["sequence4"] >= 0.5          # 2.5: 0.57 (2.4: 0.43)
     assert PLAN_TYPES["single"] + PLAN_TYPES["gesture"] <= 0.1
     for i in range(5):

@@ -6,9 +6,10 @@ HumanML3D format and layout (every code path is the one real HumanML3D takes):
 * motions: forward kinematics and limb IK on the HumanML3D 22-joint skeleton with its target
   bone lengths, 20 fps, feet planted without sliding, converted with
   :func:`salad_core.motion.joints_to_features`;
-* 52 action primitives over all 7 body parts with left/right variants (locomotion, crawling, jumps, kicks,
-  dance steps, throwing, boxing, kneeling, lying down, stairs up and down, shuffles, lunges, pivots, picking things up, hands on
-  and across the body, ...), composed into sequences ("X, then Y"), layers ("X while Y"),
+* 58 action primitives over all 7 body parts with left/right variants (locomotion, crawling, jumps, kicks
+  to the front, side and back, dance steps, throwing, boxing, kneeling, lying down, stairs up and down, shuffles,
+  forward and side lunges, pivots, picking things up, touching the toes, golf and bat swings, reaching up high,
+  balancing on one leg, hands on and across the body, ...), composed into sequences ("X, then Y"), layers ("X while Y"),
   repetitions ("twice") and modifiers ("high", "low", "slowly", "quickly") that change the motion
   measurably;
 * 3-4 captions per motion in many sentence frames, with synonyms, style and intent words, and

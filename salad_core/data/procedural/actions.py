@@ -14,11 +14,11 @@ import numpy as np
 from .curves import ease, envelope, frame_times, keyframes, min_jerk
 from .footwork import (ANKLE_HEIGHT, Persona, Plant, Stance, flat_pitch, foot_track, max_pelvis_height,
                        plant_pose, standing_height)
-from .kinematics import FPS, BodyModel, Pose, foot_vector, heading_vectors, ypr_matrix
+from .kinematics import FPS, BodyModel, Pose, assemble, foot_vector, heading_vectors, ypr_matrix
 from .reach import arm_controls_for
 from .segment import Segment, knee_poles, num_frames, standing_pose
 
-__all__ = ["GRAVITY", "Hop", "hops", "jump", "jumping_jacks", "kick", "knee_lift", "squat", "sit", "bow"]
+__all__ = ["GRAVITY", "Hop", "hops", "jump", "jumping_jacks", "kick", "knee_lift", "balance", "squat", "sit", "bow"]
 
 #: Gravity (m/s^2) of the flight phases.
 GRAVITY = 9.81
@@ -275,7 +275,8 @@ def _leg_action(start: Stance, persona: Persona, body: BodyModel, rng: np.random
                 t_lift: float, t_plant: float, total: float, knee_up: float) -> Pose:
     """The ``side`` foot leaves the floor at ``t_lift``, follows ankle ``keys`` (time, local
     offset from its plant in the body frame (x left, y up, z forward), foot pitch) and lands
-    back on its plant at ``t_plant``; the other leg supports the body."""
+    back on its plant at ``t_plant``; the other leg supports the body. While the foot is up the
+    knee pole turns towards ``knee_up`` (up, or down if negative: 2.7's back kick and balance)."""
     n = num_frames(total)
     t = frame_times(n, FPS)
     support = 1 - side
@@ -324,8 +325,14 @@ def _leg_action(start: Stance, persona: Persona, body: BodyModel, rng: np.random
 
 
 def kick(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *, side: int,
-         mods: tuple[str, ...] = (), reps: int = 1) -> Segment:
-    """Kick forward with one leg (0 left, 1 right); "high" / "low" set the foot height."""
+         mods: tuple[str, ...] = (), reps: int = 1, direction: str = "front") -> Segment:
+    """Kick forward with one leg (0 left, 1 right); "high" / "low" set the foot height.
+
+    ``direction`` "side" or "back" (2.7): a side kick (the leg out to its own side, the trunk
+    leaning away over the supporting leg) or a back kick (the leg behind, the trunk leaning forward).
+    """
+    if direction != "front":
+        return _kick_out(start, persona, body, rng, side=side, mods=mods, reps=reps, back=direction == "back")
     u = rng.uniform
     tempo = 1.3 if "slowly" in mods else (0.75 if "quickly" in mods else 1.0)
     elev = u(0.3, 0.5) if "high" in mods else (-u(0.45, 0.55) if "low" in mods else -u(0.0, 0.15))
@@ -370,6 +377,119 @@ def kick(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Genera
     pose.spine[:, 0] -= sgn * u(0.1, 0.22) * c
     core = _frames(t_lift - 0.2, t_plant + 0.05, pose.num_frames)
     return Segment(pose, start, core, info=dict(foot_height=float(hip_h + reach * np.sin(elev))))
+
+
+def _kick_out(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *, side: int,
+              mods: tuple[str, ...], reps: int, back: bool) -> Segment:
+    """The side and back kicks of :func:`kick` (2.7)."""
+    u = rng.uniform
+    tempo = 1.3 if "slowly" in mods else (0.75 if "quickly" in mods else 1.0)
+    if back:
+        elev = u(0.0, 0.25) if "high" in mods else (-u(0.5, 0.6) if "low" in mods else -u(0.15, 0.35))
+    else:
+        elev = u(0.25, 0.45) if "high" in mods else (-u(0.5, 0.6) if "low" in mods else -u(0.05, 0.25))
+    reach = u(0.7, 0.76)
+    hip_h = 0.84
+    sgn = 1.0 if side == 0 else -1.0
+    t = u(0.35, 0.45) * tempo
+    t_lift = t
+    keys: list = []
+    lean_keys = [(0.0, 0.0), (t, 0.0)]
+    counter_keys = [(0.0, 0.0), (t, 0.0)]
+    lean_out = u(0.35, 0.55) + 0.4 * max(elev, 0.0)           # back: forward over the support leg
+    for r in range(reps):
+        t += u(0.2, 0.26) * tempo                              # chamber: the knee comes up
+        keys.append((t, np.array([sgn * 0.05, 0.32, 0.12 if back else 0.05]), 0.45))
+        lean_keys.append((t, 0.1 if back else 0.0))
+        t += (u(0.19, 0.24) if back else u(0.15, 0.2)) * tempo  # extension
+        if back:
+            ext = np.array([0.0, hip_h - ANKLE_HEIGHT + reach * np.sin(elev), -reach * np.cos(elev)])
+        else:
+            # a little forward of the side (with the knee pointing up, a leg straight out to the
+            # side bends its knee backwards about the hips' left axis)
+            ahead = u(0.35, 0.5)
+            ext = np.array([sgn * reach * np.cos(elev) * np.cos(ahead), hip_h - ANKLE_HEIGHT + reach * np.sin(elev),
+                            reach * np.cos(elev) * np.sin(ahead)])
+        keys.append((t, ext, 0.6 if back else 0.3))
+        lean_keys.append((t, lean_out if back else 0.05))
+        counter_keys.append((t, 1.0))
+        t += u(0.06, 0.12)
+        keys.append((t, ext + np.array([0, 0.01, 0.0]), 0.6 if back else 0.3))
+        lean_keys.append((t, lean_out if back else 0.05))
+        counter_keys.append((t, 1.0))
+        t += u(0.18, 0.24) * tempo                             # retract
+        keys.append((t, np.array([sgn * 0.05, 0.3, 0.08]), 0.4))
+        lean_keys.append((t, 0.05))
+        counter_keys.append((t, 0.3))
+    t_plant = t + u(0.2, 0.28) * tempo
+    lean_keys += [(t_plant, 0.0)]
+    counter_keys += [(t_plant, 0.0)]
+    total = t_plant + u(0.35, 0.45)
+    pose = _leg_action(start, persona, body, rng, side, keys, lean_keys, t_lift, t_plant, total,
+                       knee_up=-1.0 if back else 1.5)
+    ck = np.array(counter_keys)
+    c = keyframes(frame_times(pose.num_frames, FPS), ck[:, 0], ck[:, 1])
+    if back:
+        # the arms come forward for balance as the trunk tips over the supporting leg
+        pose.arm[:, :, 0] += (u(0.4, 0.8) * c)[:, None]
+        pose.neck[:, 1] -= 0.6 * lean_out * c                  # the eyes stay ahead
+    else:
+        # the trunk leans away from the kick over the supporting leg, the hips turn away a little,
+        # the fists come up in a guard
+        roll = u(0.3, 0.5) + 0.3 * max(elev, 0.0)
+        pose.spine[:, 2] -= sgn * roll * c
+        pose.pelvis_ypr[:, 2] -= sgn * 0.35 * roll * c
+        pose.pelvis_ypr[:, 0] -= sgn * u(0.05, 0.15) * c
+        pose.neck[:, 2] += sgn * 0.5 * roll * c
+        pose.arm[:, :, 0] += (u(0.3, 0.6) * c)[:, None]
+        pose.arm[:, :, 2] += c[:, None] * (u(1.3, 1.7) - pose.arm[:, :, 2])
+        g0 = ypr_matrix(pose.pelvis_ypr)
+        bound = max_pelvis_height(pose.pelvis, g0, pose.ankle[:, [1 - side, 1 - side]], body) - 0.003
+        pose.pelvis[:, 1] = np.minimum(pose.pelvis[:, 1], bound)
+    core = _frames(t_lift - 0.2, t_plant + 0.05, pose.num_frames)
+    return Segment(pose, start, core, info=dict(foot_height=float(hip_h + reach * np.sin(elev)),
+                                                direction="back" if back else "side"))
+
+
+def balance(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *, side: int,
+            mods: tuple[str, ...] = ()) -> Segment:
+    """Balance on the ``side`` leg (0 left, 1 right) in a T-balance (2.7): the trunk tips forward
+    towards level while the other leg rises out straight behind, the arms spread out to the
+    sides; hold a moment and come back up, the foot back on its plant."""
+    u = rng.uniform
+    tempo = (1.3 if "slowly" in mods else (0.75 if "quickly" in mods else 1.0)) * persona.tempo
+    lift = 1 - side
+    t_lift = u(0.3, 0.4) * tempo
+    t_up = t_lift + u(0.7, 0.95) * tempo
+    t_hold = t_up + u(0.5, 1.0) * tempo
+    t_plant = t_hold + u(0.7, 0.9) * tempo
+    total = t_plant + u(0.3, 0.4)
+    lean = u(1.25, 1.5)
+    lean_keys = [(0.0, 0.0), (t_lift, 0.0), (t_up, lean), (t_hold, lean), (t_plant, 0.0)]
+    fwd, left = heading_vectors(start.yaw)
+    up = np.array([0.0, 1.0, 0.0])
+
+    def build(back: np.ndarray) -> Pose:
+        keys = [(t_lift + 0.35 * (t_up - t_lift), np.array([0.0, 0.22, -0.2]), 0.5),
+                (t_up, back, 0.9), (t_hold, back + np.array([0.0, 0.01, -0.01]), 0.9),
+                (t_hold + 0.6 * (t_plant - t_hold), np.array([0.0, 0.2, -0.15]), 0.4)]
+        return _leg_action(start, persona, body, rng, lift, keys, lean_keys, t_lift, t_plant, total, knee_up=-1.0)
+
+    # the raised leg points straight back from its hip, near level: found on a first build of the body
+    probe = build(np.array([0.0, 0.6, -0.7]))
+    hold = int(round(0.5 * (t_up + t_hold) * FPS))
+    hip = assemble(probe.slice(hold, hold + 1), body)[0, body.j("left_hip" if lift == 0 else "right_hip")]
+    elev = u(1.2, 1.45)                                    # from straight down, behind
+    ankle = hip + 0.96 * float(body.leg[lift]) * (-np.cos(elev) * up - np.sin(elev) * fwd)
+    d = ankle - start.ankles[lift]
+    pose = build(np.array([float(d @ left), float(d[1]), float(d @ fwd)]))
+    tt = frame_times(pose.num_frames, FPS)
+    w = np.clip(keyframes(tt, [t_lift, t_up, t_hold, t_plant], [0.0, 1.0, 1.0, 0.0]), 0.0, 1.0)
+    spread = np.array([u(-0.2, 0.2), u(1.3, 1.6), u(0.05, 0.3)])          # arms out to the sides
+    pose.arm += w[:, None, None] * (spread[None, None] - pose.arm)
+    pose.neck[:, 1] -= 0.55 * lean * w                        # the eyes ahead, not on the floor
+    core = _frames(t_lift - 0.15, t_plant + 0.05, pose.num_frames)
+    return Segment(pose, start, core, arms_free=False, info=dict(lean=float(lean), lifted=lift))
 
 
 def knee_lift(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *, side: int,

@@ -20,7 +20,7 @@ from .footwork import ANKLE_HEIGHT, TOE_HEIGHT, Persona, Stance, max_pelvis_heig
 from .gestures import Gesture
 from .kinematics import FPS, BodyModel, Pose, assemble, body_model, heading_vectors, rot_y, ypr_matrix
 from .primitives import PRIMITIVES, Action, build_base, build_gesture, primitive_parts
-from .reach import arm_controls_for
+from .reach import arm_controls_for, nearest_controls
 from .segment import Segment, standing_pose
 
 __all__ = ["Step", "Plan", "Event", "Clip", "realise", "sample_action", "sample_plan", "generate_clip",
@@ -602,7 +602,9 @@ def _hold_hands(pose: Pose, body: BodyModel, hands: tuple[np.ndarray, np.ndarray
         wk = w[:, k]
         if not (wk > 0).any():
             continue
-        solved = arm_controls_for(pose, body, k, tgt[:, k])
+        # 2.7: written nearest to the arm's own controls, so that the blend cannot swing the arm
+        # the other way round (a hand down at the toes of a trunk folded past 90 deg)
+        solved = nearest_controls(arm_controls_for(pose, body, k, tgt[:, k]), pose.arm[:, k])
         pose.arm[:, k] += wk[:, None] * (solved - pose.arm[:, k])
 
 
@@ -701,7 +703,7 @@ def _fidgets_of(step: Step, overlay: Action | None, seg: Segment, core: tuple[in
     secondary = primitive_parts(step.main)[1]
     taken = _arms_of(step.layer) | _arms_of(overlay)
     arms = ()
-    if step.main.kind in ARM_FIDGET_KINDS and seg.hands is None:
+    if step.main.kind in ARM_FIDGET_KINDS and seg.hands is None and seg.arms_free:   # 2.7: not a side lunge's reach
         arms = tuple(k for k, a in enumerate(("left arm", "right arm")) if a in secondary and a not in taken)
     head = "head" in secondary and (step.layer is None or step.layer.spec.category != "head")
     return step_fidgets(persona, body, rng, core, arms, head, "spine" in secondary)
@@ -859,7 +861,8 @@ def realise(plan: Plan, rng: np.random.Generator, body: BodyModel | None = None,
 _HEIGHT = ("high", "low")
 _SPEED = ("quickly", "slowly")
 _VARIANT_P = {"walk": {"in_place": 0.12}, "jog": {"in_place": 0.2}, "march": {"in_place": 0.4},
-              "jump": {"forward": 0.4}, "turn": {"around": 0.4}, "wave": {"arms": 0.3}, "throw": {"underhand": 0.35}}
+              "jump": {"forward": 0.4}, "turn": {"around": 0.4}, "wave": {"arms": 0.3}, "throw": {"underhand": 0.35},
+              "lunge": {"side": 0.45}, "swing": {"bat": 0.45}, "kick": {"side": 0.3, "back": 0.25}}
 #: Chance of a speed modifier where one is allowed (1.0: 0.25, "slowly" was in 16 % of captions; 2.0: 0.2;
 #: 2.1 draws longer sequences, so 0.17 keeps "slowly" and "quickly" each under 10 % of captions;
 #: 2.2: 0.14, with three more primitives that take them, "slowly" was back in 12 %).

@@ -41,8 +41,12 @@ __all__ = ["build_corpus", "corpus_figures", "corpus_digest", "make_motion", "SI
 
 logger = logging.getLogger(__name__)
 
-#: Bump when the generator's output changes.
-GENERATOR_VERSION = "2.6"
+#: Bump when the generator's output changes. 2.7 (issue 27): whole-body actions with their own
+#: captions (touch_toes, swing, reach_up, balance; side and back kicks, the side lunge), the draw
+#: reweighted (kicks, spins and runs more; sitting, lying down and getting up and stairs more to keep
+#: the root height's spread: see :data:`.primitives.PRIMITIVES`), held hands re-solved nearest to
+#: the arm's own controls (:func:`.reach.nearest_controls`).
+GENERATOR_VERSION = "2.7"
 #: Motions (before mirroring) of each named size.
 SIZES = {"tiny": 200, "small": 1000, "default": 4000}
 #: Split fractions (HumanML3D's proportions).

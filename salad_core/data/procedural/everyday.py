@@ -1,5 +1,5 @@
 """Everyday whole-body actions: throwing, picking something up from the floor, stepping over
-something, stumbling.
+something, stumbling, and (2.7) reaching up high across the body.
 
 Throwing and picking up keep both feet planted (the pelvis shifts and lowers over them, its
 height bounded by the legs' reach); picking up puts the wrist(s) at a point on the floor below
@@ -14,14 +14,14 @@ from dataclasses import replace
 import numpy as np
 
 from .curves import ease, frame_times, keyframes
-from .footwork import Persona, Stance, Swing, max_pelvis_height
+from .footwork import Persona, Plant, Stance, Swing, flat_pitch, foot_track, max_pelvis_height
 from .gait import Route, gait_style, locomotion
-from .kinematics import FPS, BodyModel, arm_angles_for_target, heading_vectors, ypr_matrix
+from .kinematics import FPS, BodyModel, arm_angles_for_target, assemble, foot_vector, heading_vectors, ypr_matrix
 from .poses import rest_target
-from .reach import arm_controls_for, shoulders, wrist_reach
+from .reach import arm_controls_for, nearest_controls, shoulders, wrist_reach
 from .segment import Segment, num_frames, standing_pose
 
-__all__ = ["throw", "pick_up", "step_over", "stumble", "FLOOR_WRIST_HEIGHT"]
+__all__ = ["throw", "pick_up", "step_over", "stumble", "reach_up", "FLOOR_WRIST_HEIGHT"]
 
 #: Wrist height (m) when the hand rests on the floor to pick something up (as a palm on the
 #: floor, :data:`.actions.WRIST_ON_FLOOR`).
@@ -198,3 +198,82 @@ def stumble(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gen
     # no reach bound here: the lurch lowers the pelvis by more than pitching moves the hips
     seg.info.update(trip_time=float(t_trip), lurch=float(amount))
     return Segment(pose, seg.end, seg.core, arms_free=False, info=seg.info)
+
+
+def reach_up(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *, side: int,
+             mods: tuple[str, ...] = ()) -> Segment:
+    """Reach up high across the body with hand ``side`` (0 left, 1 right): step out forward and
+    to the other side, rise onto the toes, stretch the trunk up and over towards the reach with
+    the arm straight above the head (a high shelf), hold, come down and step back (2.7).
+
+    On the toes the toe joints stay where the feet landed and the heels rise about them; the
+    reaching wrist goes to a point 0.96 of the arm's length above and beyond the shoulder.
+    """
+    u = rng.uniform
+    tempo = _tempo(mods) * persona.tempo
+    sgn = 1.0 if side == 0 else -1.0                 # + the left hand, reaching over to the right
+    k, o = side, 1 - side                            # the foot on the reach side steps out
+    fwd, left = heading_vectors(start.yaw)
+    up = np.array([0.0, 1.0, 0.0])
+    way = fwd * u(0.5, 0.9) - sgn * left
+    way /= np.linalg.norm(way)
+    t_lift = u(0.2, 0.3)
+    swing_t = u(0.35, 0.45) * tempo
+    t_land = t_lift + swing_t
+    t_up = t_land + u(0.5, 0.7) * tempo
+    t_hold = t_up + u(0.3, 0.6) * tempo
+    t_down = t_hold + u(0.5, 0.7) * tempo
+    t_back = t_down + u(0.15, 0.25)
+    t_home = t_back + swing_t
+    total = t_home + u(0.3, 0.4)
+    n = num_frames(total)
+    tt = frame_times(n, FPS)
+    pose = standing_pose(start, persona, n, body, rng=None, idle=False)
+    # ---- feet: the step out and back, and both heels up about the toes while reaching
+    out = start.ankles[o] + way * u(0.4, 0.55)
+    yaw_o = float(start.foot_yaw[o])
+    plants = [Plant(-np.inf, t_lift, start.ankles[o], yaw_o, roll_out=-0.25, roll_out_time=0.1),
+              Plant(t_land, t_back, out, yaw_o, roll_in=0.1, roll_in_time=0.08, roll_out=-0.2, roll_out_time=0.1),
+              Plant(t_home, np.inf, start.ankles[o], yaw_o, roll_in=0.1, roll_in_time=0.08)]
+    pose.ankle[:, o], pose.toe[:, o], planted_o = foot_track(tt, plants, [Swing(u(0.05, 0.08), 0.5, 0.1)] * 2, body, o)
+    rise = np.clip(keyframes(tt, [t_land + 0.1, t_up, t_hold, t_down], [0.0, 1.0, 1.0, 0.0]), 0.0, 1.0)
+    heel = u(0.35, 0.5) * rise
+    phi0 = flat_pitch(body)
+    for f in (k, o):
+        on = heel > 1e-9
+        toe = pose.toe[on, f]
+        yaw = np.full(on.sum(), float(start.foot_yaw[f]))
+        pose.ankle[on, f] = toe - foot_vector(yaw, phi0[f] + heel[on], np.full(on.sum(), body.foot[f]))
+    lifted = float(body.foot.mean() * (np.sin(phi0.mean() + heel.max()) - np.sin(phi0.mean())))
+    # ---- the body: weight over the front foot, up on the toes, the trunk stretching over
+    weight = keyframes(tt, [0.0, t_lift, t_land, t_up, t_hold, t_down, t_home], [0.0, 0.0, 0.5, 1.0, 1.0, 0.6, 0.0])
+    d = (out - start.ankles[o]) * np.array([1.0, 0.0, 1.0])
+    pose.pelvis += weight[:, None] * (0.6 * d)[None]
+    pose.pelvis[:, 1] += 0.8 * lifted * rise
+    pose.pelvis_ypr[:, 0] += -sgn * u(0.1, 0.25) * weight
+    pose.pelvis_ypr[:, 2] += sgn * 0.05 * rise
+    pose.spine[:, 1] += -u(0.05, 0.15) * rise
+    pose.spine[:, 2] += -sgn * u(0.4, 0.6) * rise
+    pose.spine[:, 0] += -sgn * u(0.25, 0.4) * rise
+    pose.neck[:, 1] += -u(0.3, 0.5) * rise                # looking up at the hand
+    pose.neck[:, 0] += -sgn * u(0.1, 0.25) * rise
+    planted = np.stack([np.ones(n), planted_o], 1) if o == 1 else np.stack([planted_o, np.ones(n)], 1)
+    bound = max_pelvis_height(pose.pelvis, ypr_matrix(pose.pelvis_ypr), pose.ankle, body,
+                              planted=planted > 0.5) - 0.004
+    pose.pelvis[:, 1] = np.minimum(pose.pelvis[:, 1], bound)
+    # ---- the reaching arm: forward and up over the head, to a point above and beyond the step
+    peak = int(np.clip(np.round(0.5 * (t_up + t_hold) * FPS), 0, n - 1))
+    sh = shoulders(pose.slice(peak, peak + 1), body)[0, k]
+    aim = up + 0.45 * way
+    target = sh + aim / np.linalg.norm(aim) * 0.96 * wrist_reach(body, k)
+    reach = arm_controls_for(pose, body, k, np.tile(target, (n, 1)))
+    # forward and up over the head (not round the back), written one way in every frame
+    reach = nearest_controls(reach, nearest_controls(reach[peak], pose.arm[peak, k]))
+    aw = np.clip(keyframes(tt, [t_land - 0.1, t_up, t_hold, t_down + 0.1], [0.0, 1.0, 1.0, 0.0]), 0.0, 1.0)
+    pose.arm[:, k] += aw[:, None] * (reach - pose.arm[:, k])
+    pose.arm[:, o, 1] += 0.25 * rise                     # the other arm opens a little for balance
+    wrist = assemble(pose.slice(peak, peak + 1), body)[0, body.j("left_wrist" if k == 0 else "right_wrist")]
+    core = (max(0, int(np.floor((t_lift - 0.05) * FPS))), min(n, int(np.ceil((t_home + 0.05) * FPS)) + 1))
+    return Segment(pose, start, core, arms_free=False,
+                   info=dict(reach_height=float(wrist[1]), peak_frame=peak, step=float(np.linalg.norm(d)),
+                             heel_lift=float(heel.max())))

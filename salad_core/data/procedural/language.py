@@ -98,6 +98,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "mount": ("mounts", "mounting"), "crawl": ("crawls", "crawling"),
     "twist": ("twists", "twisting"), "descend": ("descends", "descending"), "come": ("comes", "coming"), "lunge": ("lunges", "lunging"),
     "ask": ("asks", "asking"), "chase": ("chases", "chasing"), "lean": ("leans", "leaning"), "loosen": ("loosens", "loosening"), "dash": ("dashes", "dashing"), "lower": ("lowers", "lowering"), "attract": ("attracts", "attracting"), "punctuate": ("punctuates", "punctuating"),
+    "aim": ("aims", "aiming"), "tip": ("tips", "tipping"),
 }
 
 #: Word -> (token, POS): the token is the lemma for NOUN and VERB (HumanML3D convention).
@@ -739,10 +740,10 @@ SPEED_STYLE = {
                 ("quickly", "rapidly", "energetically", "vigorously", "briskly", "swiftly", "hurriedly", "excitedly", "at a fast/ADJ pace", "at full/ADJ speed/NOUN", "in a rush/NOUN",
                  "in a hurry", "with a lot/NOUN of energy", "with great energy")),
 }
-_FORCE = frozenset({"kick", "punch", "jab_cross", "hook", "uppercut", "throw", "guard"})
+_FORCE = frozenset({"kick", "punch", "jab_cross", "hook", "uppercut", "throw", "guard", "swing"})
 _RHYTHM = frozenset({"dance", "sway", "clap", "march", "jumping_jacks", "nod", "arm_circles"})
 _WORKOUT = frozenset({"squat", "jumping_jacks", "knee_lift", "stretch", "arm_circles", "march", "jog", "arms_out",
-                      "kick", "bow"})
+                      "kick", "bow", "touch_toes"})
 #: Manner words that leave the motion as it is: (words, before the verb?, primitives or None for any).
 MOOD_STYLE: tuple[tuple[str, bool, frozenset | None], ...] = tuple(
     [(w, True, None) for w in ("happily", "cheerfully", "joyfully", "casually", "confidently", "playfully",
@@ -829,6 +830,69 @@ INTENT.update({
     "touch_knee": ("as if stretching/VERB", "as if warming/VERB up", "as part of a workout", "as if exercising/VERB"),
     "crawl": ("like a baby/NOUN", "as if looking/VERB for something on the floor",
               "as if searching/VERB for something"),
+})
+# corpus 2.7: whole-body actions with large trunk motion
+_lex("NOUN", "toe golf club bat shelf windmill target swing stretch")
+RULES.update({
+    "touch_toes": _rules(_R("V:touch {poss} toes", _B), _R("V:bend down and V:touch {poss} toes", _B),
+                         _R("V:bend over and V:touch {poss} toes", _B), _R("V:reach down and V:touch {poss} toes", _B),
+                         _R("V:bend forward to/PART touch/VERB {poss} toes", _B),
+                         _R("V:touch {poss} toes with both hands", _B), _R("V:do a toe/NOUN touch/NOUN", _B),
+                         _R("V:stretch down to {poss} toes", _B), _R("V:fold forward and V:touch {poss} toes", _B),
+                         _R("V:touch {poss} {oside} foot/NOUN with {poss} {side} hand", _LRN),
+                         _R("V:touch {poss} {oside} toes with {poss} {side} hand", _LRN),
+                         _R("V:bend down and V:touch {poss} {oside} foot/NOUN with {poss} {side} hand", _LRN),
+                         _R("V:reach down to {poss} {oside} foot/NOUN with {poss} {side} hand", _LRN),
+                         _R("V:bend and V:twist to/PART touch/VERB {poss} {oside} toes with {poss} {side} hand", _LRN),
+                         _R("V:do a windmill/NOUN stretch/NOUN with {poss} {side} hand to {poss} {oside} foot/NOUN", _LRN)),
+    "swing": _rules(_R("V:swing a golf/NOUN club/NOUN", _LRN), _R("V:swing an imaginary/ADJ golf/NOUN club/NOUN", _LRN),
+                    _R("V:take a golf/NOUN swing/NOUN", _LRN), _R("V:make a golf/NOUN swing/NOUN", _LRN),
+                    _R("V:hit a golf/NOUN ball/NOUN", _LRN), _R("V:swing a golf/NOUN club/NOUN from {poss} {side} side/NOUN", _LRN),
+                    _R("V:swing a golf/NOUN club/NOUN back over {poss} {side} shoulder and through", _LRN),
+                    _R("V:swing a baseball/NOUN bat/NOUN", _LRN, variant="bat"), _R("V:swing a bat/NOUN", _LRN, variant="bat"),
+                    _R("V:swing an imaginary/ADJ bat/NOUN", _LRN, variant="bat"),
+                    _RS("V:take a swing/NOUN with a [bat/NOUN|baseball/NOUN bat/NOUN]", _LRN, variant="bat"),
+                    _R("V:hit a ball/NOUN with a bat/NOUN", _LRN, variant="bat"),
+                    _R("V:swing a baseball/NOUN bat/NOUN from {poss} {side} shoulder", _LRN, variant="bat"),
+                    _R("V:step into a swing/NOUN with a baseball/NOUN bat/NOUN", _LRN, variant="bat")),
+    "reach_up": _rules(_R("V:reach up to a high/ADJ shelf/NOUN with {poss} {side} hand", _LRN),
+                       _R("V:reach up and over to the {oside:NOUN} with {poss} {side} hand", _LRN),
+                       _R("V:reach up high/ADV to the {oside:NOUN} with {poss} {side} hand", _LRN),
+                       _R("V:stretch up on {poss} toes to/PART reach/VERB something with {poss} {side} hand", _LRN),
+                       _R("V:grab something from a high/ADJ shelf/NOUN with {poss} {side} hand", _LRN),
+                       _R("V:step to the {oside:NOUN} and V:reach up with {poss} {side} hand", _LRN),
+                       _R("V:get something down from a high/ADJ shelf/NOUN with {poss} {side} hand", _LRN),
+                       _R("V:reach across and up with {poss} {side} hand", _LRN)),
+})
+RULES["kick"] += _rules(_R("V:kick to the {side:NOUN} with {poss} {side} leg", _LR, variant="side"),
+                        _R("V:do a side/ADJ kick/NOUN with {poss} {side} leg", _LR, variant="side"),
+                        _R("V:kick sideways with {poss} {side} leg", _LR, variant="side"),
+                        _R("V:kick {poss} {side} leg out to the side/NOUN", _LR, variant="side"),
+                        _R("V:kick backward with {poss} {side} leg", _LR, variant="back"),
+                        _R("V:kick back/ADV with {poss} {side} leg", _LR, variant="back"),
+                        _R("V:do a back/ADJ kick/NOUN with {poss} {side} leg", _LR, variant="back"),
+                        _R("V:kick {poss} {side} leg out behind {obj}", _LR, variant="back"))
+_lex("NOUN", "pose gymnast yoga")
+_lex("ADP", "behind")
+RULES["balance"] = _rules(_R("V:balance on {poss} {side} leg", _LR), _R("V:balance on {poss} {side} foot/NOUN", _LR),
+                          _R("V:stand on {poss} {side} leg", _LR),
+                          _R("V:balance on {poss} {side} leg with {poss} arms out", _LR),
+                          _R("V:do an airplane/NOUN pose/NOUN on {poss} {side} leg", _LR),
+                          _R("V:lean forward on {poss} {side} leg and V:lift {poss} {oside} leg behind {obj}", _LR),
+                          _R("V:stand on {poss} {side} leg and V:stretch {poss} {oside} leg back/ADV", _LR),
+                          _R("V:tip forward and V:balance on {poss} {side} leg", _LR))
+INTENT["balance"] = ("like a gymnast/NOUN", "as if doing/VERB yoga/NOUN", "like a ballerina/NOUN", "as if balancing/VERB")
+RULES["lunge"] += _rules(_R("V:lunge to the {side:NOUN}", _LR, variant="side"),
+                         _R("V:lunge sideways to the {side:NOUN}", _LR, variant="side"),
+                         _R("V:do a side/ADJ lunge/NOUN to the {side:NOUN}", _LR, variant="side"),
+                         _R("V:do a side/ADJ lunge/NOUN with {poss} {side} leg", _LR, variant="side"),
+                         _R("V:step out to the {side:NOUN} into a lunge/NOUN", _LR, variant="side"),
+                         _R("V:lunge out to the {side:NOUN} with {poss} {side} leg", _LR, variant="side"))
+INTENT.update({
+    "touch_toes": ("as if stretching/VERB", "as part of a workout", "as if warming/VERB up", "as if exercising/VERB"),
+    "swing": ("as if playing/VERB a match/NOUN", "as if training/VERB", "as if hitting/VERB a ball far/ADV",
+              "as if aiming/VERB at a target/NOUN"),
+    "reach_up": ("as if reaching/VERB for something", "as if grabbing/VERB something", "as if stretching/VERB"),
 })
 # corpus 2.1: on all fours
 RULES["crawl"] = _rules(_R("V:crawl forward"), _R("V:crawl"), _RS("V:crawl on [all/DET fours/NOUN|{poss} hands and knees]"),

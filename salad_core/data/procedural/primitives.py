@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import actions, boxing, crawl, dance, everyday, floorwork, gestures, poses, steps, trunk
+from . import actions, boxing, crawl, dance, everyday, floorwork, gestures, poses, sports, steps, trunk
 from .footwork import Persona, Stance
 from .gait import Route, gait_style, locomotion
 from .kinematics import BodyModel
@@ -96,10 +96,17 @@ _SPEED = ("quickly", "slowly")
 #: 2.5 weights: the head gestures (0.55 / 0.5 / 0.55 -> 0.4), shuffles and sways (0.5 -> 0.4), whose
 #: clips barely changed posture (2-4 cm within-clip spread), are drawn less; spins, circles, picking
 #: up, lunges and knee touches (6-9 cm) more.
+#: 2.7 weights: the new standing whole-body actions thinned out the floor actions, whose pelvis
+#: heights make the root height's spread (its std fell to 0.81 of the real one): sitting 1.1 -> 2.8,
+#: lying down and getting up 0.45 -> 1.6 (a long action: most plans holding it do not fit in a
+#: clip), stairs up 0.6 -> 0.9. Kicks (1.3 -> 3.8, now three ways), the balance, swings, runs
+#: (1.2 -> 1.5) and spins (1.0 -> 2.0) vary the legs and the trunk in directions little else does
+#: (each one of them drawn more lowered the share of the first 11 principal components), against
+#: the toe touches and the floor, which load the first one.
 PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     # locomotion
     PrimitiveSpec("walk", "locomotion", "base", mods=_SPEED, variants=("", "in_place"), accepts=("arms", "head"), weight=2.5),
-    PrimitiveSpec("run", "locomotion", "base", mods=("quickly",), accepts=("arms", "head"), weight=1.2),
+    PrimitiveSpec("run", "locomotion", "base", mods=("quickly",), accepts=("arms", "head"), weight=1.5),
     PrimitiveSpec("jog", "locomotion", "base", mods=_SPEED, variants=("", "in_place"), accepts=("arms", "head"), weight=1.0),
     PrimitiveSpec("march", "locomotion", "base", mods=_SPEED, variants=("", "in_place"), accepts=("head",), weight=0.8),
     PrimitiveSpec("walk_backward", "locomotion", "base", mods=_SPEED, accepts=("arms", "head"), weight=1.0),
@@ -109,14 +116,15 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     # jumps
     PrimitiveSpec("jump", "jump", "base", mods=("high", "low"), reps=(1, 2, 3), variants=("", "forward"), accepts=("arms", "head"), weight=2.0),
     # legs
-    PrimitiveSpec("kick", "legs", "base", sides=("left", "right"), mods=("high", "low", "quickly"), reps=(1, 2), accepts=("head",), weight=1.3),
+    PrimitiveSpec("kick", "legs", "base", sides=("left", "right"), mods=("high", "low", "quickly"), reps=(1, 2),
+                  variants=("", "side", "back"), accepts=("head",), weight=3.8),
     PrimitiveSpec("knee_lift", "legs", "base", sides=("left", "right"), mods=("high", "slowly", "quickly"), reps=(1, 2), accepts=("arms", "head"), weight=1.0),
     # whole body
     PrimitiveSpec("squat", "whole body", "base", mods=("low", "slowly", "quickly"), reps=(1, 2, 3), accepts=("arms", "head"), weight=1.6),
-    PrimitiveSpec("sit", "whole body", "base", mods=("slowly",), weight=1.1, terminal=True),
+    PrimitiveSpec("sit", "whole body", "base", mods=("slowly",), weight=2.8, terminal=True),
     PrimitiveSpec("bow", "whole body", "base", mods=("low", "slowly"), reps=(1, 2), weight=1.1),
     PrimitiveSpec("jumping_jacks", "whole body", "base", mods=_SPEED, reps=(2, 3, 4), accepts=("head",), weight=0.9),
-    PrimitiveSpec("spin", "whole body", "base", sides=("left", "right"), accepts=("arms",), weight=1.0),
+    PrimitiveSpec("spin", "whole body", "base", sides=("left", "right"), accepts=("arms",), weight=2.0),
     # arms
     PrimitiveSpec("wave", "arms", "gesture", sides=SIDE_WORDS, mods=("high", "low", "slowly", "quickly"), variants=("", "arms"), weight=2.0),
     PrimitiveSpec("raise", "arms", "gesture", sides=SIDE_WORDS, mods=("high", "low", "slowly", "quickly"), weight=2.2),
@@ -140,10 +148,10 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     # down to the floor
     PrimitiveSpec("kneel", "legs", "base", sides=("left", "right"), mods=_SPEED, weight=1.3),
     PrimitiveSpec("lie_down", "whole body", "base", mods=("slowly",), weight=0.45, terminal=True),
-    PrimitiveSpec("lie_down_get_up", "whole body", "base", mods=("slowly",), weight=0.45),
+    PrimitiveSpec("lie_down_get_up", "whole body", "base", mods=("slowly",), weight=1.6),
     # footwork: steps, stairs, pivots, a cross-body knee touch
     PrimitiveSpec("step_up", "legs", "base", mods=_SPEED, reps=(1, 2), accepts=("arms", "head"), weight=0.8),
-    PrimitiveSpec("climb_stairs", "locomotion", "base", mods=_SPEED, accepts=("head",), weight=0.6, terminal=True),
+    PrimitiveSpec("climb_stairs", "locomotion", "base", mods=_SPEED, accepts=("head",), weight=0.9, terminal=True),
     PrimitiveSpec("pivot", "locomotion", "base", sides=("left", "right"), mods=_SPEED, variants=("", "around"),
                   accepts=("arms", "head"), weight=0.8),
     PrimitiveSpec("touch_knee", "whole body", "base", sides=("left", "right"), mods=_SPEED, reps=(1, 2), weight=1.3),
@@ -169,12 +177,24 @@ PRIMITIVES: dict[str, PrimitiveSpec] = {s.name: s for s in [
     PrimitiveSpec("shuffle", "locomotion", "base", sides=(None, "left", "right"), mods=_SPEED,
                   accepts=("arms", "head"), weight=0.4),
     PrimitiveSpec("lunge", "legs", "base", sides=("left", "right"), mods=("low", "slowly", "quickly"), reps=(1, 2),
-                  accepts=("arms", "head"), weight=1.3),
+                  variants=("", "side"), accepts=("arms", "head"), weight=1.8),
     # the trunk alone: a standing side stretch and a torso twist (the upper body sideways and
     # turned against the hips: pose dimensions little else varies)
     PrimitiveSpec("side_bend", "whole body", "base", sides=("left", "right"), mods=("low", "slowly", "quickly"),
                   reps=(1, 2), weight=0.8),
     PrimitiveSpec("twist", "whole body", "base", sides=("left", "right"), mods=_SPEED, reps=(1, 2), weight=0.7),
+    # --- corpus 2.7: whole-body actions with large trunk motion (2.6's clips spread their joints
+    # 6.3 cm, the real clip 9.7; its trunk joints moved half as much as in real capture): touching
+    # the toes (both hands, or one hand across to the other foot: a windmill), a golf or baseball
+    # bat swing, and reaching up high across the body with a step and onto the toes. The lunge
+    # takes a sideways variant (2.7) as well.
+    PrimitiveSpec("touch_toes", "whole body", "base", sides=("both", "left", "right"), mods=_SPEED, reps=(1, 2),
+                  weight=2.3),
+    PrimitiveSpec("swing", "whole body", "base", sides=("left", "right"), mods=_SPEED, variants=("", "bat"),
+                  weight=2.6),
+    PrimitiveSpec("reach_up", "whole body", "base", sides=("left", "right"), mods=_SPEED, weight=1.0),
+    # a T-balance on one leg (the side is the standing leg); kicks also go out to the side and back (2.7)
+    PrimitiveSpec("balance", "whole body", "base", sides=("left", "right"), mods=_SPEED, weight=3.6),
 ]}
 
 
@@ -250,6 +270,19 @@ def primitive_parts(action: Action) -> tuple[tuple[str, ...], tuple[str, ...]]:
         support = "left leg" if side == "left" else "right leg"
         other = "right arm" if side == "left" else "left arm"
         return arms[side] + (knee_leg, "spine"), ("root", support, other, "head")
+    if k == "touch_toes":    # both hands to the toes, or (a side) one hand across to the other foot
+        if side == "both":
+            return ("spine", "left arm", "right arm"), ("root", "left leg", "right leg", "head")
+        other = "right arm" if side == "left" else "left arm"
+        return arms[side] + ("spine",), ("root", "left leg", "right leg", other, "head")
+    if k == "swing":         # both hands on the club whichever way it winds up; the legs turn under it
+        return ("left arm", "right arm", "spine"), ("root", "left leg", "right leg", "head")
+    if k == "reach_up":      # the side is the reaching hand; the other foot steps out, up on the toes
+        other = "right arm" if side == "left" else "left arm"
+        return arms[side] + ("spine",), ("root", "left leg", "right leg", other, "head")
+    if k == "balance":       # the side is the standing leg; the other one rises out behind
+        stand, free = ("left leg", "right leg") if side == "left" else ("right leg", "left leg")
+        return (free, "spine"), ("root", stand, "left arm", "right arm", "head")
     if k == "look":
         return ("head",), ("spine",)
     if k == "crawl":
@@ -331,7 +364,9 @@ def build_base(action: Action, start: Stance, persona: Persona, body: BodyModel,
         return actions.jumping_jacks(start, persona, body, rng, mods=mods, reps=action.reps)
     if k == "kick":
         return actions.kick(start, persona, body, rng, side=0 if action.side == "left" else 1, mods=mods,
-                            reps=action.reps)
+                            reps=action.reps, direction=action.variant or "front")
+    if k == "balance":
+        return actions.balance(start, persona, body, rng, side=0 if action.side == "left" else 1, mods=mods)
     if k == "knee_lift":
         return actions.knee_lift(start, persona, body, rng, side=0 if action.side == "left" else 1, mods=mods,
                                  reps=action.reps)
@@ -369,7 +404,15 @@ def build_base(action: Action, start: Stance, persona: Persona, body: BodyModel,
     if k == "shuffle":
         return steps.shuffle(start, persona, body, rng, side=None if action.side is None else side, mods=mods)
     if k == "lunge":
-        return steps.lunge(start, persona, body, rng, side=side, mods=mods, reps=action.reps)
+        return steps.lunge(start, persona, body, rng, side=side, mods=mods, reps=action.reps,
+                           sideways=action.variant == "side", arms_forward=not keep_arms)
+    if k == "touch_toes":
+        return trunk.touch_toes(start, persona, body, rng, hands=(0, 1) if action.side == "both" else (side,),
+                                mods=mods, reps=action.reps)
+    if k == "swing":
+        return sports.swing(start, persona, body, rng, side=side, bat=action.variant == "bat", mods=mods)
+    if k == "reach_up":
+        return everyday.reach_up(start, persona, body, rng, side=side, mods=mods)
     if k == "side_bend":
         return trunk.side_bend(start, persona, body, rng, side=side, mods=mods, reps=action.reps)
     if k == "twist":

@@ -10,7 +10,7 @@ import numpy as np
 
 from .kinematics import BodyModel, Pose, arm_angles_for_target, assemble, trunk_frames
 
-__all__ = ["chest_frames", "shoulders", "arm_controls_for", "wrist_reach"]
+__all__ = ["chest_frames", "shoulders", "arm_controls_for", "wrist_reach", "nearest_controls"]
 
 
 def chest_frames(pose: Pose) -> np.ndarray:
@@ -41,3 +41,27 @@ def arm_controls_for(pose: Pose, body: BodyModel, k: int, wrist: np.ndarray) -> 
     if k == 1:
         local[:, 0] *= -1.0                      # arm controls: x outwards for either arm
     return arm_angles_for_target(local, body.upper_arm[k], body.forearm[k])
+
+
+def nearest_controls(controls: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``(..., 3)`` arm controls that put the wrist where ``controls`` do, written nearest to ``reference``.
+
+    (flex, abd) and (pi - flex, abd + pi) point the arm the same way (abd counts modulo 2 pi), and
+    the elbow flexion and pole do not depend on the choice. :func:`arm_controls_for` writes a
+    direction with |flex| <= 90 deg, so an arm reaching past the head (or, with the trunk folded
+    far forward, down to the feet) comes out with its abduction near +-180 deg; blended with
+    controls written the other way it would swing through the body (2.7).
+    """
+    c = np.asarray(controls, dtype=np.float64)
+    ref = np.broadcast_to(np.asarray(reference, dtype=np.float64), c.shape)
+    best, cost = c.copy(), None
+    for flex, abd in ((c[..., 0], c[..., 1]), (np.pi - c[..., 0], c[..., 1] + np.pi)):
+        abd = abd + 2 * np.pi * np.round((ref[..., 1] - abd) / (2 * np.pi))
+        d = np.abs(flex - ref[..., 0]) + np.abs(abd - ref[..., 1])
+        if cost is None:
+            best[..., 1], cost = abd, d
+            continue
+        take = d < cost - 1e-12
+        best[..., 0] = np.where(take, flex, best[..., 0])
+        best[..., 1] = np.where(take, abd, best[..., 1])
+    return best

@@ -236,13 +236,21 @@ def shuffle(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gen
 
 
 def lunge(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *, side: int,
-          mods: tuple[str, ...] = (), reps: int = 1) -> Segment:
+          mods: tuple[str, ...] = (), reps: int = 1, sideways: bool = False, arms_forward: bool = True) -> Segment:
     """Lunge forward with the ``side`` leg (0 left, 1 right) and push back to standing, ``reps`` times.
 
     The front foot steps out 0.6-0.85 m, the pelvis sinks between the feet (the front thigh
     towards level, the rear knee towards the floor, the rear heel rising off it as the shin
     leans over the foot) and the front foot pushes back to its place.
+
+    ``sideways`` (2.7): a side lunge. The ``side`` foot steps out to that side (0.5-0.7 m beyond
+    the stance), the pelvis travels over it and sinks (its knee bends, the other leg stays
+    straight, its foot flat: the straight leg's reach sets how low the pelvis goes), the trunk
+    leans forward over the bent knee with the arms reaching forward for balance, and the foot
+    pushes back to its place (``arms_forward`` False: the arms stay free for a gesture on top).
     """
+    if sideways:
+        return _side_lunge(start, persona, body, rng, side=side, mods=mods, reps=reps, arms_forward=arms_forward)
     u = rng.uniform
     tempo = _tempo(mods) * persona.tempo
     fwd, _ = heading_vectors(start.yaw)
@@ -278,6 +286,58 @@ def lunge(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gener
     n = pose.num_frames
     core = (max(0, int(np.floor((t0 - 0.1) * FPS))), min(n, int(np.ceil((t + 0.05) * FPS)) + 1))
     return Segment(pose, start, core, info=dict(length=float(length), depth=float(depth), reps=reps))
+
+
+def _side_lunge(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *, side: int,
+                mods: tuple[str, ...], reps: int, arms_forward: bool = True) -> Segment:
+    """The side lunge of :func:`lunge` (``sideways=True``)."""
+    u = rng.uniform
+    tempo = _tempo(mods) * persona.tempo
+    fwd, left = heading_vectors(start.yaw)
+    k = side
+    way = left * (1.0 if side == 0 else -1.0)
+    length = u(0.5, 0.7) * float(body.leg[k]) / 0.85
+    depth = u(0.3, 0.4) if "low" in mods else u(0.2, 0.3)
+    over = u(0.25, 0.35)                                       # how far the pelvis goes past the feet's mean
+    swing = u(0.3, 0.4) * tempo
+    t = u(0.2, 0.3)
+    t0 = t
+    moves, sink_t, sink_w = [], [0.0, t], [0.0, 0.0]
+    for _ in range(reps):
+        moves.append((k, start.ankles[k] + way * length, t))
+        t += swing
+        sink_t.append(t); sink_w.append(0.15)
+        t += u(0.4, 0.55) * tempo
+        sink_t.append(t); sink_w.append(1.0)
+        t += u(0.2, 0.5) * tempo                                # hold at the bottom
+        sink_t.append(t); sink_w.append(1.0)
+        t += u(0.35, 0.5) * tempo
+        sink_t.append(t); sink_w.append(0.1)
+        moves.append((k, start.ankles[k].copy(), t))
+        t += swing
+        sink_t.append(t); sink_w.append(0.0)
+    total = t + u(0.3, 0.4)
+    pose, _, _ = _stepping(start, persona, body, rng, moves, swing, total, 0.05, roll_out=-0.15, roll_in=0.1)
+    tt = frame_times(pose.num_frames, FPS)
+    w = np.clip(keyframes(tt, sink_t, sink_w), 0.0, 1.0)
+    pose.pelvis += (over * length * w)[:, None] * way[None]
+    pose.pelvis[:, 1] -= depth * w
+    pose.pelvis -= fwd[None] * (0.08 * w)[:, None]           # the hips sit back
+    lean = u(0.25, 0.45)
+    pose.pelvis_ypr[:, 1] += lean * w                          # the trunk leans over the bent knee
+    pose.pelvis_ypr[:, 2] -= (0.08 if side == 0 else -0.08) * w
+    pose.spine[:, 1] += u(0.0, 0.15) * w
+    pose.spine[:, 2] += (0.12 if side == 0 else -0.12) * w     # the chest stays over the middle
+    pose.neck[:, 1] -= 0.5 * lean * w
+    flex, elbow = u(0.8, 1.3), u(0.0, 0.5)
+    if arms_forward:                                           # the arms reach forward for balance
+        pose.arm[:, :, 0] += (flex * w)[:, None]
+        pose.arm[:, :, 2] += (elbow * w)[:, None]
+    _within_reach(pose, body, sigma=1.0)
+    n = pose.num_frames
+    core = (max(0, int(np.floor((t0 - 0.1) * FPS))), min(n, int(np.ceil((t + 0.05) * FPS)) + 1))
+    return Segment(pose, start, core, arms_free=not arms_forward,
+                   info=dict(length=float(length), depth=float(depth), reps=reps, sideways=True))
 
 
 def pivot(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *, side: int,
