@@ -72,7 +72,8 @@ def _phrase_parts(prompt: str, word: int) -> tuple[str, ...]:
             spec = PRIMITIVES[p.kind]
             side = p.side if p.side in spec.sides else spec.sides[0]
             reps = p.reps if p.reps in spec.reps else spec.reps[0]
-            return primitive_parts(Action(p.kind, side, p.mods, reps, p.variant))[0]
+            mods = tuple(m for m in p.mods if m in spec.mods)   # a swapped-in verb may not take the source's
+            return primitive_parts(Action(p.kind, side, mods, reps, p.variant))[0]    # modifier ("runs slowly")
     return ()
 
 
