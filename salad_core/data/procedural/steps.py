@@ -235,6 +235,32 @@ def shuffle(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gen
     return Segment(pose, end, core, info=dict(steps=len(moves), distance=float(dist)))
 
 
+def _lunge_timeline(u, home: np.ndarray, out: np.ndarray, k: int, t: float, reps: int, swing: float, tempo: float,
+                    *, sink: tuple[float, float], rise: tuple[float, float]):
+    """The step-sink-hold-rise-return timeline of a lunge, ``reps`` times, from time ``t`` (s).
+
+    ``u`` draws uniforms (``rng.uniform``; the draws are sink, hold, rise per repetition, in that order);
+    ``home`` / ``out`` (3,) are the lunging foot's ankle targets at rest and lunged. Returns the foot
+    ``moves`` for :func:`_stepping` ((foot, ankle target, start time) tuples), the sink weight's keyframe
+    times and values (0 standing, 1 at the bottom) and the time the last return step starts.
+    """
+    moves, sink_t, sink_w = [], [0.0, t], [0.0, 0.0]
+    for _ in range(reps):
+        moves.append((k, out.copy(), t))
+        t += swing
+        sink_t.append(t); sink_w.append(0.15)
+        t += u(*sink) * tempo
+        sink_t.append(t); sink_w.append(1.0)
+        t += u(0.2, 0.5) * tempo                                # hold at the bottom
+        sink_t.append(t); sink_w.append(1.0)
+        t += u(*rise) * tempo
+        sink_t.append(t); sink_w.append(0.1)
+        moves.append((k, home.copy(), t))
+        t += swing
+        sink_t.append(t); sink_w.append(0.0)
+    return moves, sink_t, sink_w, t
+
+
 def lunge(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Generator, *, side: int,
           mods: tuple[str, ...] = (), reps: int = 1, sideways: bool = False, arms_forward: bool = True) -> Segment:
     """Lunge forward with the ``side`` leg (0 left, 1 right) and push back to standing, ``reps`` times.
@@ -260,20 +286,8 @@ def lunge(start: Stance, persona: Persona, body: BodyModel, rng: np.random.Gener
     swing = u(0.3, 0.4) * tempo
     t = u(0.2, 0.3)
     t0 = t
-    moves, sink_t, sink_w = [], [0.0, t], [0.0, 0.0]
-    for _ in range(reps):
-        moves.append((k, start.ankles[k] + fwd * length, t))
-        t += swing
-        sink_t.append(t); sink_w.append(0.15)
-        t += u(0.35, 0.5) * tempo
-        sink_t.append(t); sink_w.append(1.0)
-        t += u(0.2, 0.5) * tempo                                # hold at the bottom
-        sink_t.append(t); sink_w.append(1.0)
-        t += u(0.3, 0.45) * tempo
-        sink_t.append(t); sink_w.append(0.1)
-        moves.append((k, start.ankles[k].copy(), t))
-        t += swing
-        sink_t.append(t); sink_w.append(0.0)
+    moves, sink_t, sink_w, t = _lunge_timeline(u, start.ankles[k], start.ankles[k] + fwd * length, k, t, reps,
+                                               swing, tempo, sink=(0.35, 0.5), rise=(0.3, 0.45))
     total = t + u(0.3, 0.4)
     pose, _, ends = _stepping(start, persona, body, rng, moves, swing, total, 0.06, roll_out=0.0, roll_in=0.15)
     tt = frame_times(pose.num_frames, FPS)
@@ -302,20 +316,8 @@ def _side_lunge(start: Stance, persona: Persona, body: BodyModel, rng: np.random
     swing = u(0.3, 0.4) * tempo
     t = u(0.2, 0.3)
     t0 = t
-    moves, sink_t, sink_w = [], [0.0, t], [0.0, 0.0]
-    for _ in range(reps):
-        moves.append((k, start.ankles[k] + way * length, t))
-        t += swing
-        sink_t.append(t); sink_w.append(0.15)
-        t += u(0.4, 0.55) * tempo
-        sink_t.append(t); sink_w.append(1.0)
-        t += u(0.2, 0.5) * tempo                                # hold at the bottom
-        sink_t.append(t); sink_w.append(1.0)
-        t += u(0.35, 0.5) * tempo
-        sink_t.append(t); sink_w.append(0.1)
-        moves.append((k, start.ankles[k].copy(), t))
-        t += swing
-        sink_t.append(t); sink_w.append(0.0)
+    moves, sink_t, sink_w, t = _lunge_timeline(u, start.ankles[k], start.ankles[k] + way * length, k, t, reps,
+                                               swing, tempo, sink=(0.4, 0.55), rise=(0.35, 0.5))
     total = t + u(0.3, 0.4)
     pose, _, _ = _stepping(start, persona, body, rng, moves, swing, total, 0.05, roll_out=-0.15, roll_in=0.1)
     tt = frame_times(pose.num_frames, FPS)
