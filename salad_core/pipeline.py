@@ -240,7 +240,7 @@ class SaladPipeline:
         #: How ``out.joints`` are recovered from the decoded features (:data:`salad_core.recovery.METHODS`):
         #: "fit" (fixed bone lengths, feet locked from the contact channels, nothing below the floor;
         #: the default where the skeleton has target bone lengths) or "positions" (the raw position
-        #: features). Measured on the shipped model (``scripts/compare_recovery.py``, 20 motions): bone
+        #: features). Measured on the version 0.2 weights (``scripts/compare_recovery.py``, 20 motions): bone
         #: error p95 7.1 cm -> 0, foot skating 0.28 -> 0.07 m/s, floor penetration 10.9 cm -> 0.
         self.recovery = recovery if recovery is not None else (
             "fit" if self.skeleton.bone_lengths is not None else "positions")

@@ -50,9 +50,9 @@ def main() -> None:
     for n in names:
         f = np.load(args.data / "new_joint_vecs" / f"{n}.npy")
         f = f[: len(f) // 4 * 4]
-        feats, joints = pipe.decode(pipe.encode_motion(f), [len(f)])
+        feats, _ = pipe.decode(pipe.encode_motion(f), [len(f)])
         real = features_to_joints(f)
-        errs.append(mpjpe(joints[0], real))
+        errs.append(mpjpe(features_to_joints(feats[0]), real))      # the raw decoded positions, not the fit
         real_bones.append(bone_lengths(real)[:, 1:])
     print(f"VAE reconstruction MPJPE (root-aligned) on {len(errs)} test clips: mean {np.mean(errs) * 100:.2f} cm, "
           f"median {np.median(errs) * 100:.2f} cm")
@@ -71,14 +71,17 @@ def main() -> None:
     for n in names[:20]:
         f = np.load(args.data / "new_joint_vecs" / f"{n}.npy")
         f = f[: len(f) // 4 * 4]
-        recon.append(bone_stray(pipe.decode(pipe.encode_motion(f), [len(f)])[1][0]))
+        recon.append(bone_stray(features_to_joints(pipe.decode(pipe.encode_motion(f), [len(f)])[0][0])))  # raw
     recon = np.array(recon)
     print(f"bone-length deviation from the corpus median, mean / worst bone (95th pct of frames): corpus clips "
           f"{corpus[:, 0].mean():.1f} / {corpus[:, 1].mean():.1f} cm, VAE reconstructions {recon[:, 0].mean():.1f} / "
           f"{recon[:, 1].mean():.1f} cm")
-    print(f"\ngenerated motions ({args.length} frames, 50 DDIM steps, w=7.5, {args.seeds} seeds each):")
+    g = pipe.guidance
+    print(f"\ngenerated motions ({args.length} frames, 50 DDIM steps, w={g.scale:g} rescale {g.rescale:g} (the weights' "
+          f"default), {args.seeds} seeds each; activity and travel of out.joints (recovery {pipe.recovery!r}), bone "
+          f"deviation of the raw joints (position features), then of out.joints:")
     print(f"{'prompt':36s} " + " ".join(f"{p[:9]:>9s}" for p in PART_NAMES)
-          + "  L/R legs  L/R arms  root travel  bone dev. mean / worst (cm)")
+          + "  L/R legs  L/R arms  root travel  bone dev. mean / worst raw (cm)  shown")
     t0 = time.perf_counter()
     for prompt in PROMPTS:
         out = pipe([prompt] * args.seeds, lengths=args.length, seed=list(range(args.seeds)))
@@ -87,9 +90,10 @@ def main() -> None:
         legs = np.exp(np.mean([np.log(r["legs"]) for r in lr]))
         arms = np.exp(np.mean([np.log(r["arms"]) for r in lr]))
         travel = np.mean([np.linalg.norm(j[-1, 0, [0, 2]] - j[0, 0, [0, 2]]) for j in out.joints])
-        stray = np.array([bone_stray(j) for j in out.joints])
+        raw = np.array([bone_stray(features_to_joints(f[:n])) for f, n in zip(out.features, out.lengths)])
+        shown = np.array([bone_stray(j) for j in out.joints])
         print(f"{prompt:36s} " + " ".join(f"{a:9.2f}" for a in act) + f"  {legs:8.2f}  {arms:8.2f}  {travel:8.2f} m"
-              f"  {stray[:, 0].mean():8.1f} / {stray[:, 1].mean():5.1f}")
+              f"  {raw[:, 0].mean():8.1f} / {raw[:, 1].mean():5.1f}  {shown[:, 0].mean():5.1f} / {shown[:, 1].mean():5.1f}")
     dt = (time.perf_counter() - t0) / (len(PROMPTS) * args.seeds)
     print(f"\ngeneration time: {dt:.2f} s per motion (batch {args.seeds}, text encoder included)")
 

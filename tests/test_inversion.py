@@ -140,6 +140,13 @@ def test_trained_inversion_is_faithful(sample_features):
     # the methods themselves, without the exact replay (with it both errors are float round-off, ~3e-7 m)
     plain = trained.invert(motion, "a person walks forward", method="ddim", num_steps=20, exact=False)
     fixed = trained.invert(motion, "a person walks forward", method="fixed_point", num_steps=20, exact=False)
-    # measured: 0.16 m against 0.0009 m
-    assert fixed.errors["inversion_mpjpe"] < 0.1 * plain.errors["inversion_mpjpe"]
-    assert fixed.errors["inversion_mpjpe"] < 0.05
+    longer = trained.invert(motion, "a person walks forward", method="fixed_point", num_steps=20, exact=False,
+                            iterations=20)
+    # measured on the v3 weights (w 4.5): DDIM 0.30 m, fixed point with the default 5 iterations 0.048 m,
+    # with 20 iterations 0.010 m. The v0.2 weights converged in 5 (0.0009 m against 0.16 m); the sharper
+    # v3 model is less contractive under guidance at a few low-noise steps, so it needs more iterations
+    # (the default exact replay makes the reconstruction exact either way)
+    assert fixed.errors["inversion_mpjpe"] < 0.25 * plain.errors["inversion_mpjpe"]
+    assert longer.errors["inversion_mpjpe"] < 0.1 * plain.errors["inversion_mpjpe"]
+    assert longer.errors["inversion_mpjpe"] < 0.03
+    assert longer.errors["inversion_mpjpe"] < fixed.errors["inversion_mpjpe"]

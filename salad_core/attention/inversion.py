@@ -67,6 +67,12 @@ With the trained model, fixed-point inversion alone loses detail (a raised-arms 
 steps), while the corrections cost nothing extra and do not weaken the edit, so
 :meth:`SaladPipeline.invert` and ``salad invert`` use ``exact=True`` by default.
 :func:`invert_latents` itself keeps ``exact=False`` as its default (the plain method).
+
+The v3 weights (session 12; 12 held-out corpus 2.4 motions, 50 steps, w = 7.5, VAE floor 1.7 cm;
+``scripts/measure_editing.py``): ddim 9.6 cm, fixed_point 5.5 cm, null_text 2.4 cm, fixed_point + exact
+1.7 cm; mirror acts 0.77 / 0.97 / 0.95 / 1.13. The sharper model is less contractive under guidance at
+a few low-noise steps: on 80 frames of HumanML3D 012314 at 20 steps and w = 4.5, five fixed-point
+iterations leave 4.8 cm, twenty 1.0 cm (DDIM 30 cm); the exact replay closes the rest either way.
 """
 from __future__ import annotations
 
