@@ -41,6 +41,7 @@ from salad_core.data.texts import parse_text_line, split_words
 from salad_core.eval.metrics import mpjpe
 from salad_core.motion import features_to_joints
 from salad_core.pipeline import SaladPipeline
+from salad_core.skeleton import get_skeleton
 
 from _measure_common import annotated_clips, finish_run, mean, print_summary, run_settings, start_run  # scripts/
 
@@ -175,20 +176,52 @@ def measure_word_swap(pipe, pairs, args) -> dict:
     return {"summary": summary, "pairs": rows}
 
 
+#: Issue 20's target: Reweight("high", s) for s in [-2, 3] moves the wrist without the upper arm's length
+#: straying by more than this (cm, 95th percentile of frames, raw position joints).
+UPPER_ARM_LIMIT_CM = 3.0
+
+
+def upper_arm_error_cm(joints: np.ndarray, side: str) -> float:
+    """95th percentile over frames of |upper arm length - the skeleton's| (cm) of the ``side`` arm
+    ("both": the worse arm); ``joints`` (T, 22, 3) raw positions (features read as they are)."""
+    sk = get_skeleton("humanml3d")
+    names = {"left": ("left_elbow",), "right": ("right_elbow",), "both": ("left_elbow", "right_elbow")}[side]
+    ids = [sk.joint_names.index(n) for n in names]
+    parents = [sk.parents[i] for i in ids]
+    j = np.asarray(joints, np.float64)
+    length = np.linalg.norm(j[:, ids] - j[:, parents], axis=-1)               # (T, arms)
+    err = np.abs(length - np.asarray([sk.bone_lengths[i] for i in ids])) * 100
+    return float(np.percentile(err.max(axis=1), 95))
+
+
 def measure_reweight(pipe, prompts, scales, args) -> dict:
+    """Wrist height against s, on the pipeline's ``out.joints`` (with recovery "fit" the bones are fixed,
+    so the raw position joints are measured too: the wrist's height there and the upper arm's length
+    error, which the fit would hide)."""
     rows = []
     for i, prompt in enumerate(prompts):
         side = "left" if "left" in split_words(prompt) else ("right" if "right" in split_words(prompt) else "both")
-        heights = []
+        heights, raw_heights, upper = [], [], []
         for s in scales:
             out = pipe.edit(prompt, edits=[Reweight("high", s)], lengths=args.length, num_steps=args.steps,
                             guidance_scale=args.guidance, seed=args.seed + i)
             heights.append(wrist_height(out.edited.joints[0], side))
+            n = out.edited.lengths[0]
+            raw = features_to_joints(np.asarray(out.edited.features[0][:n], np.float64))
+            raw_heights.append(wrist_height(raw, side))
+            upper.append(upper_arm_error_cm(raw, side))
         rows.append({"prompt": prompt, "scales": list(scales), "wrist_height": heights,
                      "spearman": spearman(scales, heights),
-                     "monotonic": bool(np.all(np.diff(heights) > 0))})
+                     "monotonic": bool(np.all(np.diff(heights) > 0)),
+                     "wrist_height_raw": raw_heights, "spearman_raw": spearman(scales, raw_heights),
+                     "upper_arm_error_cm": upper, "upper_arm_within_limit": bool(max(upper) <= UPPER_ARM_LIMIT_CM)})
     return {"summary": {"spearman": mean(r["spearman"] for r in rows),
-                        "monotonic_rate": mean(float(r["monotonic"]) for r in rows)}, "prompts": rows}
+                        "monotonic_rate": mean(float(r["monotonic"]) for r in rows),
+                        "spearman_raw": mean(r["spearman_raw"] for r in rows),
+                        "upper_arm_error_cm_max": max(max(r["upper_arm_error_cm"]) for r in rows),
+                        "upper_arm_error_cm_mean": mean(float(np.mean(r["upper_arm_error_cm"])) for r in rows),
+                        "upper_arm_within_limit_rate": mean(float(r["upper_arm_within_limit"]) for r in rows)},
+            "prompts": rows}
 
 
 def _inversion_rows(pipe, items, methods, args) -> list[dict]:
@@ -260,7 +293,8 @@ def parse_args(argv=None):
     ap.add_argument("--split", default="test")
     ap.add_argument("--n", type=int, default=12, help="motions / prompts per section")
     ap.add_argument("--steps", type=int, default=50)
-    ap.add_argument("--guidance", type=float, default=7.5)
+    ap.add_argument("--guidance", type=float, default=None,
+                    help="CFG weight (default: the weights' own, pipeline.json; the paper's is 7.5)")
     ap.add_argument("--length", type=int, default=120, help="frames of generated motions")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--tau", type=float, default=0.8, help="word swap: source maps while t >= tau T")
@@ -294,6 +328,8 @@ def main(argv=None) -> dict:
     args = parse_args(argv)
     start = start_run(args.threads)
     pipe = SaladPipeline.from_pretrained(args.weights)
+    if args.guidance is None:                  # the weights' own default (pipeline.json), recorded as a number
+        args.guidance = float(pipe.guidance.scale)
     max_len = pipe.skeleton.max_length
     clips = read_corpus(args.data, args.split, args.n, max_len)
     captions = _all_captions(args.data, args.split)
@@ -320,7 +356,9 @@ def main(argv=None) -> dict:
         results["reweight"] = measure_reweight(pipe, high, args.scales, args)
         _print_table(f"(d) re-weighting 'high' with s in {args.scales}: wrist height", results["reweight"]["summary"])
         for row in results["reweight"]["prompts"]:
-            print(f"     {row['prompt']!r}: " + ", ".join(f"{h:.3f}" for h in row["wrist_height"]))
+            print(f"     {row['prompt']!r}: " + ", ".join(f"{h:.3f}" for h in row["wrist_height"])
+                  + "  raw " + ", ".join(f"{h:.3f}" for h in row["wrist_height_raw"])
+                  + "  upper arm (cm) " + ", ".join(f"{e:.1f}" for e in row["upper_arm_error_cm"]))
     if "e" in args.sections:
         results["inversion"] = measure_inversion(pipe, clips[: args.n_inversion], args)
         _print_table("(e) inversion of corpus motions (no edit; metres)", results["inversion"]["summary"])

@@ -348,7 +348,8 @@ def parse_args(argv=None):
     ap.add_argument("--shift-variants", nargs="+", default=["cross", "cross+temporal"],
                     choices=["cross", "temporal", "cross+temporal"])
     ap.add_argument("--steps", type=int, default=50)
-    ap.add_argument("--guidance", type=float, default=7.5)
+    ap.add_argument("--guidance", type=float, default=None,
+                    help="CFG weight (default: the weights' own, pipeline.json; the paper's is 7.5)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--batch", type=int, default=8, help="(d): prompts per generation")
     ap.add_argument("--sections", default="abcd")
@@ -387,6 +388,8 @@ def main(argv=None) -> dict:
             print(f"  {key:28s} {acc:.3f}" + ("   <- best" if key == best else ""))
         return res
     pipe = SaladPipeline.from_pretrained(args.weights)
+    if args.guidance is None:                  # the weights' own default (pipeline.json), recorded as a number
+        args.guidance = float(pipe.guidance.scale)
     clips = read_clips(root, args.split)
     results: dict = {"settings": run_settings(args)}
     print(f"weights: {pipe.source}; corpus {root} ({args.split}): {len({c['id'] for c in clips})} clips; "

@@ -432,6 +432,10 @@ def test_measure_script_runs_on_a_tiny_pipeline_and_corpus(pipe, tmp_path):
     assert saved["inversion"]["summary"]["ddim"]["forward_rows"] == inv["ddim"]["forward_rows"]
     swap = res["word_swap"]["summary"]
     assert swap["root_kept_pairs"] + swap["locomotion_pairs"] == len(res["word_swap"]["pairs"])
+    rw = res["reweight"]["prompts"][0]
+    assert len(rw["wrist_height_raw"]) == len(rw["upper_arm_error_cm"]) == 3
+    assert res["reweight"]["summary"]["upper_arm_error_cm_max"] == max(
+        max(r["upper_arm_error_cm"]) for r in res["reweight"]["prompts"])
     # one section alone
     only = script.main(["--data", str(tmp_path / "corpus"), "--weights", str(tmp_path / "weights"), "--quick",
                         "--sections", "b"])
@@ -456,3 +460,48 @@ def test_spearman_ranks_ties_and_bad_input():
         spearman([1, 2, 3], [1, 2])
     with pytest.raises(ValueError, match=">= 2"):
         spearman([1], [1])
+
+
+def test_upper_arm_error_measures_the_stretch(sample_joints):
+    """Issue 20's reweight target reads the raw upper arm: 0 on real motion (HumanML3D's skeleton), the
+    stretch itself when the elbow is pushed along the upper arm."""
+    from _doubles import load_script
+
+    script = load_script("measure_editing")
+    real = np.asarray(sample_joints, np.float64)
+    assert script.upper_arm_error_cm(real, "both") < 0.1
+    stretched = real.copy()
+    shoulder, elbow, wrist = 16, 18, 20                                 # the left arm
+    u = stretched[:, elbow] - stretched[:, shoulder]
+    push = 0.05 * u / np.linalg.norm(u, axis=-1, keepdims=True)          # 5 cm longer
+    stretched[:, elbow] += push
+    stretched[:, wrist] += push
+    assert script.upper_arm_error_cm(stretched, "left") == pytest.approx(5.0, abs=0.1)
+    assert script.upper_arm_error_cm(stretched, "right") < 0.1
+    assert script.upper_arm_error_cm(stretched, "both") == pytest.approx(5.0, abs=0.1)
+
+
+def test_real_edit_measures_read_sides_and_what_is_kept(sample_joints):
+    """scripts/measure_real_edits.py (issue 21): the one-sided limb pair flips sign under mirroring,
+    and ``kept_cm`` counts only the joints outside the mirrored limbs."""
+    from _doubles import load_script
+
+    from salad_core.motion import mirror_joints
+
+    script = load_script("measure_real_edits")
+    real = np.asarray(sample_joints, np.float64)
+    assert script.kept_cm(real, real, "arms") == 0.0
+    moved = real.copy()
+    moved[:, [16, 18, 20]] += 0.3                                     # the left arm only
+    assert script.kept_cm(real, moved, "arms") == 0.0
+    assert script.kept_cm(real, moved, "legs") > 0.0
+    moved[:, 15] += np.array([0.05, 0.0, 0.0])                        # the head, 5 cm
+    # 13 joints lie outside the arms (collars, shoulders, elbows and wrists) besides the root: 1 of them moved 5 cm
+    assert script.kept_cm(real, moved, "arms") == pytest.approx(5.0 / 13, rel=1e-6)
+    lifted = real.copy()
+    lifted[:, 20, 1] += 0.3 * np.sin(np.arange(len(real)) / 3.0)      # the left wrist waves
+    side = script.sided_limb(lifted, 1.2)
+    assert side is not None and side[0] == "arms" and side[1] > 0
+    mirrored = script.sided_limb(mirror_joints(lifted), 1.2)
+    assert mirrored[0] == "arms" and mirrored[1] == pytest.approx(-side[1], abs=1e-6)
+    assert script.sided_limb(real, 50.0) is None
