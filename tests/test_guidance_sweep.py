@@ -120,6 +120,16 @@ def test_sweep_measures_every_candidate_with_both_protocols(tiny_procedural_corp
     assert "| w=6 **(chosen)** |" in md and "Rule: eligible" in md and md.count("\n| w=") == 4
     assert any("T2M protocol done" in line for line in lines)
     json.dumps(res)                                                  # JSON-ready
+    # as a frame for the CFG plot: one line per rescale setting, the real row apart
+    df = gs.sweep_frame({**res, "chosen": {"index": 2}}, "toy")
+    assert list(df["name"]) == ["toy w=1", "toy rescale 0.5 w=1", "toy w=6", "toy rescale 0.5 w=6", "Real motion"]
+    assert list(df["chosen"]) == [False, False, True, False, False]
+    assert df.loc[2, "FID"] == by["w=6"]["t2m"]["fid"]["mean"] and df.loc[2, "FID ±"] == by["w=6"]["t2m"]["fid"]["ci"]
+    assert df.loc[4, "kind"] == "real" and df.loc[3, "bone p95 (cm)"] == by["w=6 phi=0.5"]["physics"]["bone_p95_cm"]
+    from salad_viz.plots import plot_cfg_sweep
+
+    fig = plot_cfg_sweep(df)
+    assert len(fig.axes[0].lines) >= 2                               # the two rescale settings are two curves
 
 
 def test_a_stopped_sweep_continues_from_its_kept_candidates(tiny_procedural_corpus, tiny_random_evaluator, tmp_path):
@@ -195,3 +205,16 @@ def test_cli_sweep_on_the_shipped_weights(tiny_procedural_corpus, tmp_path, caps
     assert main(["--guidance-sweep", "--physics", "--data", str(tiny_procedural_corpus)]) == 2
     assert main(["--guidance-sweep", "--data", str(tiny_procedural_corpus), "--intervals", "0.5"]) == 2
     assert "neither 'full' nor 'lo-hi'" in capsys.readouterr().err
+
+
+def test_the_shipped_sweep_record_chose_the_shipped_guidance():
+    """salad_core/weights/salad/guidance_sweep.json is the measurement that chose pipeline.json's guidance."""
+    from salad_core.pipeline import default_weights_dir
+
+    root = default_weights_dir()
+    if not (root / "guidance_sweep.json").is_file():
+        pytest.skip("no guidance sweep record beside the shipped weights")
+    record = json.loads((root / "guidance_sweep.json").read_text())
+    chosen = record["rows"][record["chosen"]["index"]]["guidance"]
+    assert chosen == json.loads((root / "pipeline.json").read_text())["guidance"]
+    assert gs.choose(record["rows"])[0] == record["chosen"]["index"]          # the rule gives the same choice

@@ -35,6 +35,7 @@ from .protocol import evaluate_generator, evaluate_real
 from .settings import EvalSettings
 
 __all__ = ["guidance_grid", "guidance_label", "FixedGuidance", "run_sweep", "sweep_fingerprint", "choose", "sweep_markdown",
+           "sweep_frame",
            "R_PRECISION_TOLERANCE", "PHYSICS_TARGETS"]
 
 #: A candidate stays eligible while its R-precision top-3 is within this of the sweep's best (the
@@ -279,6 +280,45 @@ def sweep_markdown(result: Mapping[str, Any], chosen: int | None = None) -> str:
     lines.append("")
     lines.append(f"Rule: {rule_text()}.")
     return "\n".join(lines)
+
+
+def sweep_frame(result: Mapping[str, Any], name: str = "SALAD"):
+    """A :func:`run_sweep` result (or its saved ``guidance_sweep.json``) as a pandas DataFrame that
+    :func:`salad_viz.plots.plot_cfg_sweep` draws.
+
+    One row per candidate: ``name`` (``"<name> w=<scale>"``, with ``" rescale <phi>"`` / ``" interval"``
+    in the stem when set, so that each rescale / interval setting is its own line), ``kind``
+    ("generated"), ``guidance_scale``, ``rescale``, the T2M means with their half-widths in
+    ``"<column> ±"`` (``R-precision top-1``, ``R-precision top-3``, ``FID``, ``MM-Dist``, ``Diversity``),
+    the physics columns ``bone p95 (cm)``, ``bone max (cm)``, ``skating (m/s)``, ``penetration (cm)``,
+    ``checks``, and ``chosen`` (bool). Then the real row (``kind`` "real", no guidance) when present.
+    """
+    import pandas as pd
+
+    t2m_cols = (("r_precision_top1", "R-precision top-1"), ("r_precision_top3", "R-precision top-3"),
+                ("fid", "FID"), ("mm_dist", "MM-Dist"), ("diversity", "Diversity"))
+    chosen = (result.get("chosen") or {}).get("index")
+
+    def t2m(cells: Mapping[str, Any]) -> dict[str, float]:
+        out = {}
+        for key, col in t2m_cols:
+            if cells.get(key):
+                out[col], out[col + " ±"] = float(cells[key]["mean"]), float(cells[key]["ci"])
+        return out
+
+    rows = []
+    for i, r in enumerate(result["rows"]):
+        g, p = r["guidance"], r["physics"]
+        stem = name + (f" rescale {g['rescale']:g}" if g.get("rescale") else "") + (
+            " interval" if g.get("interval") else "")
+        rows.append({"name": f"{stem} w={g['scale']:g}", "kind": "generated", "guidance_scale": float(g["scale"]),
+                     "rescale": float(g.get("rescale") or 0.0), **t2m(r["t2m"]),
+                     "bone p95 (cm)": p.get("bone_p95_cm"), "bone max (cm)": p.get("bone_max_cm"),
+                     "skating (m/s)": p.get("skate_ms"), "penetration (cm)": p.get("penetration_max_cm"),
+                     "checks": f"{p['checks_passed']}/{p['checks_total']}", "chosen": i == chosen})
+    if result.get("real"):
+        rows.append({"name": "Real motion", "kind": "real", **t2m(result["real"]), "chosen": False})
+    return pd.DataFrame(rows)
 
 
 def _ci(cell: Mapping[str, float] | None) -> str:
