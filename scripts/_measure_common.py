@@ -63,6 +63,31 @@ def annotated_clips(root: Path, split: str, *, max_frames: int, min_frames: int,
         raise SystemExit(f"no annotated clips in {root}/{split}.txt; is {root} a procedural corpus?")
 
 
+def deepmimic_items(skeleton, max_clips: int) -> list[dict]:
+    """pybullet's DeepMimic takes as inversion inputs: ``{"id", "features" (N, D) float32, "prompt"}``.
+
+    A loop shorter than ``skeleton.min_length`` is repeated past it; every take is cut to a multiple of
+    :data:`UNIT_LENGTH` frames and at most ``skeleton.max_length``; takes left with fewer than two latent
+    frames are dropped (the kick, 31 frames and no loop, stays: inversion takes it). Needs pybullet
+    (``salad_core.data.deepmimic.pybullet_available``).
+    """
+    from salad_core.data import deepmimic
+
+    items = []
+    for name in deepmimic.available_clips()[:max_clips]:
+        probe = deepmimic.load_clip(name)
+        cycles = 1
+        if probe.loop and probe.num_frames - 1 < skeleton.min_length:
+            cycles = int(math.ceil(skeleton.min_length / max(probe.num_frames - 1, 1))) + 1
+        clip = deepmimic.load_clip(name, cycles=cycles) if cycles > 1 else probe
+        feats = clip.features()
+        n = min(len(feats) - len(feats) % UNIT_LENGTH, skeleton.max_length)
+        if n < 2 * UNIT_LENGTH:
+            continue
+        items.append({"id": name, "features": np.asarray(feats[:n], np.float32), "prompt": clip.prompt})
+    return items
+
+
 def mean(xs: Iterable) -> float:
     """The mean of the finite values of ``xs`` (None and NaN skipped); NaN when none is left."""
     kept = [float(x) for x in xs if x is not None and math.isfinite(float(x))]

@@ -39,11 +39,12 @@ from salad_core.attention.measure import (left_right_ratio, localisation, mirror
 from salad_core.data.procedural import PRIMITIVES, Action, in_language, parse_prompt, primitive_parts
 from salad_core.data.texts import parse_text_line, split_words
 from salad_core.eval.metrics import mpjpe
-from salad_core.motion import features_to_joints
+from salad_core.motion import bone_lengths, features_to_joints
 from salad_core.pipeline import SaladPipeline
 from salad_core.skeleton import get_skeleton
 
-from _measure_common import annotated_clips, finish_run, mean, print_summary, run_settings, start_run  # scripts/
+from _measure_common import (annotated_clips, deepmimic_items, finish_run, mean, print_summary, run_settings,
+                             start_run)  # scripts/
 
 #: Word swaps that keep the number of words (source word -> target word).
 SWAPS = {"waves": "raises", "waving": "raising", "raises": "waves", "raising": "waving", "walks": "runs",
@@ -187,9 +188,7 @@ def upper_arm_error_cm(joints: np.ndarray, side: str) -> float:
     sk = get_skeleton("humanml3d")
     names = {"left": ("left_elbow",), "right": ("right_elbow",), "both": ("left_elbow", "right_elbow")}[side]
     ids = [sk.joint_names.index(n) for n in names]
-    parents = [sk.parents[i] for i in ids]
-    j = np.asarray(joints, np.float64)
-    length = np.linalg.norm(j[:, ids] - j[:, parents], axis=-1)               # (T, arms)
+    length = bone_lengths(np.asarray(joints, np.float64), sk)[:, ids]         # (T, arms): shoulder -> elbow
     err = np.abs(length - np.asarray([sk.bone_lengths[i] for i in ids])) * 100
     return float(np.percentile(err.max(axis=1), 95))
 
@@ -266,20 +265,7 @@ def measure_deepmimic(pipe, args) -> dict:
 
     if not deepmimic.pybullet_available():
         return {"skipped": "pybullet (extra 'deepmimic') is not installed"}
-    items = []
-    names = deepmimic.available_clips()[: args.n_deepmimic]
-    for name in names:
-        probe = deepmimic.load_clip(name)
-        unit, max_len = pipe.skeleton.unit_length, pipe.skeleton.max_length
-        cycles = 1
-        if probe.loop and probe.num_frames - 1 < pipe.skeleton.min_length:
-            cycles = int(math.ceil(pipe.skeleton.min_length / max(probe.num_frames - 1, 1))) + 1
-        clip = deepmimic.load_clip(name, cycles=cycles) if cycles > 1 else probe
-        feats = clip.features()
-        n = min(len(feats) - len(feats) % unit, max_len)
-        if n < unit * 2:
-            continue
-        items.append({"id": name, "features": feats[:n], "prompt": clip.prompt})
+    items = deepmimic_items(pipe.skeleton, args.n_deepmimic)
     # the plain method and the exact replay that invert() uses by default
     rows = _inversion_rows(pipe, items, [(args.default_method, False), (args.default_method, True)], args)
     return {"summary": _summarise_methods(rows), "clips": rows}

@@ -36,7 +36,7 @@ from salad_core.motion import features_to_joints, mirror_features
 from salad_core.pipeline import SaladPipeline
 from salad_core.skeleton import PART_NAMES, get_skeleton
 
-from _measure_common import finish_run, mean, print_summary, run_settings, start_run  # scripts/
+from _measure_common import deepmimic_items, finish_run, mean, print_summary, run_settings, start_run  # scripts/
 
 #: The limb pairs Mirror can act on alone, and the body parts that belong to each.
 LIMBS = {"arms": ("left arm", "right arm"), "legs": ("left leg", "right leg")}
@@ -62,26 +62,11 @@ def kept_cm(source: np.ndarray, edited: np.ndarray, limb: str) -> float:
 
 
 def real_items(pipe, max_clips: int) -> list[dict]:
-    """The DeepMimic clips (loops repeated up to the pipeline's minimum length) and their mirrored copies,
-    cut to a multiple of the latent unit and at most the maximum length."""
-    from salad_core.data import deepmimic
-
-    sk = pipe.skeleton
+    """The DeepMimic takes (:func:`_measure_common.deepmimic_items`) and their mirrored copies."""
     items = []
-    for name in deepmimic.available_clips()[:max_clips]:
-        probe = deepmimic.load_clip(name)
-        cycles = 1
-        if probe.loop and probe.num_frames - 1 < sk.min_length:
-            cycles = int(math.ceil(sk.min_length / max(probe.num_frames - 1, 1))) + 1
-        clip = deepmimic.load_clip(name, cycles=cycles) if cycles > 1 else probe
-        feats = clip.features()
-        n = min(len(feats) - len(feats) % sk.unit_length, sk.max_length)
-        if n < 2 * sk.unit_length:                 # the kick (31 frames, no loop) stays: invert takes it
-            continue
-        feats = np.asarray(feats[:n], np.float32)
-        items.append({"id": name, "features": feats, "prompt": clip.prompt})
-        items.append({"id": f"{name} (mirrored)", "features": mirror_features(feats).astype(np.float32),
-                      "prompt": clip.prompt})
+    for item in deepmimic_items(pipe.skeleton, max_clips):
+        items += [item, {**item, "id": f"{item['id']} (mirrored)",
+                         "features": mirror_features(item["features"]).astype(np.float32)}]
     return items
 
 
