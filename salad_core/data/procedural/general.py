@@ -402,9 +402,15 @@ def _gait_overlay(t: np.ndarray, dofs: np.ndarray, rng: np.random.Generator) -> 
         out_stance[:, k] = st
         x_st = ph / sf                                               # 0..1 through stance
         x_sw = (ph - sf) / (1.0 - sf)                                # 0..1 through swing
-        mj = x_sw ** 3 * (10 - 15 * x_sw + 6 * x_sw ** 2)
-        sweep = np.where(st, 1.0 - 2.0 * x_st, -1.0 + 2.0 * mj)       # +1 front .. -1 back
-        lift = np.where(st, 0.0, np.sin(np.pi * np.clip(x_sw, 0, 1)))
+        # swing: a cubic from back (-1) to front (+1) that leaves and reaches the floor at the stance's
+        # sweep rate, so the foot has no speed over the ground at toe-off and touch-down (it keeps
+        # moving back a little after toe-off and retracts before landing, as feet do)
+        m = -2.0 * (1.0 - sf) / sf                                   # stance rate in swing-phase units
+        xs = np.clip(x_sw, 0.0, 1.0)
+        hermite = (-1.0 * (2 * xs ** 3 - 3 * xs ** 2 + 1) + (-2 * xs ** 3 + 3 * xs ** 2)
+                   + m * (xs ** 3 - 2 * xs ** 2 + xs) + m * (xs ** 3 - xs ** 2))
+        sweep = np.where(st, 1.0 - 2.0 * x_st, hermite)               # +1 front .. -1 back
+        lift = np.where(st, 0.0, np.sin(np.pi * np.clip(x_sw, 0, 1)) ** 2)   # knee flexion, no jerk at toe-off
         sign = 1.0 if s == "l" else -1.0
         hf = a * sweep * np.cos(alpha)
         dofs[:, _I[f"{s}_hip_flex"]] += hf

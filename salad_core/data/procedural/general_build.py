@@ -31,7 +31,7 @@ from .parallel import run_jobs
 __all__ = ["build_general", "make_general_motion", "GENERAL_VERSION"]
 
 #: Bump when the generator's output changes.
-GENERAL_VERSION = "1.0"
+GENERAL_VERSION = "1.1"
 _FILES = ("train.txt", "val.txt", "test.txt", "all.txt", "Mean.npy", "Std.npy", "general.json")
 
 
