@@ -292,6 +292,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
              + [f"{st}.gif" for st in stems if not args.no_render]
              + [f"{st}_attention.png" for st, fig in zip(stems, figures) if fig], args.force, write=False)
     pipe = _load_pipeline(args.weights)
+    _say_guidance(args, pipe)
     result = pipe(prompts, lengths=args.length, seed=args.seed, guidance_scale=args.guidance,
                   num_steps=args.steps, solver=args.solver, capture_attention=attention and any(figures),
                   progress=not args.quiet)
@@ -305,6 +306,16 @@ def cmd_generate(args: argparse.Namespace) -> int:
             files += [fig] if fig else []
         print(f"{text!r} ({n} frames): " + ", ".join(str(f) for f in files))
     return 0
+
+
+def _say_guidance(args: argparse.Namespace, pipe) -> None:
+    """Print the guidance a command samples with: ``--guidance`` or, without it, the weights' own."""
+    if getattr(args, "quiet", False):
+        return
+    from salad_core.pipeline import _describe_guidance
+
+    print(f"guidance w = {_describe_guidance(pipe.resolve_guidance(args.guidance))}"
+          + (" (the weights' default, pipeline.json)" if args.guidance is None else " (--guidance)"))
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -419,6 +430,7 @@ def cmd_edit(args: argparse.Namespace) -> int:
     names = [f"{b}{ext}" for b in ("source", "edited") for ext in ("_features.npy", "_joints.npy", ".bvh")]
     _outputs(out, names + ["source_vs_edited.gif"], args.force, write=False)
     pipe = _load_pipeline(args.weights)
+    _say_guidance(args, pipe)
     if features is not None:
         inv = _invert(pipe, features, args.source, args, method="fixed_point")
         result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet)
@@ -831,8 +843,9 @@ def _generation_args(p: argparse.ArgumentParser, length: int) -> None:
                         "multiple of 4, with a note")
     p.add_argument("--seed", type=int, default=0,
                    help="noise seed (default 0); prompt b of a batch uses SEED + b")
-    p.add_argument("--guidance", type=float, default=7.5,
-                   help="classifier-free guidance weight w, -100..100 (default 7.5; 1 = no guidance; negative "
+    p.add_argument("--guidance", type=float, default=None,
+                   help="classifier-free guidance weight w, -100..100 (default: the weights' own, "
+                        "pipeline.json: 4.5 for the shipped SALAD; 7.5 = the paper's; 1 = no guidance; negative "
                         "steers away from the prompt)")
     p.add_argument("--steps", type=int, default=None, help="sampler steps, 1..1000 (default 50)")
     p.add_argument("--solver", default=None,
@@ -903,8 +916,8 @@ def build_parser() -> argparse.ArgumentParser:
     iv.add_argument("--exact", action=argparse.BooleanOptionalAction, default=True,
                     help="per-step corrections, so the reconstruction is exact (default; --no-exact: the plain "
                          "method)")
-    iv.add_argument("--guidance", type=float, default=7.5,
-                    help="guidance scale the inversion is made for (default 7.5)")
+    iv.add_argument("--guidance", type=float, default=None,
+                    help="guidance scale the inversion is made for (default: the weights' own, pipeline.json)")
     iv.add_argument("--steps", type=int, default=50, help="DDIM steps (default 50)")
     _bvh_args(iv)
     iv.add_argument("--no-render", action="store_true", help="skip the GIF")

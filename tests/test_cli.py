@@ -61,6 +61,38 @@ def test_sampler_preset_sets_solver_and_steps(tiny_weights, tmp_path, capsys, mo
         sampler_preset("turbo")
 
 
+def test_generate_and_edit_sample_at_the_weights_own_guidance(make_tiny_pipeline, tmp_path, capsys, monkeypatch):
+    # the shipped weights choose their guidance (pipeline.json); the CLI used to override it with 7.5
+    from salad_core.pipeline import SaladPipeline
+    from salad_core.sampling import Guidance
+
+    pipe = make_tiny_pipeline(seed=0)
+    pipe.guidance = Guidance(3.0)
+    weights = pipe.save_pretrained(tmp_path / "w3")
+    used = []                                    # the weights each sampling call resolves to
+    original = SaladPipeline.resolve_guidance
+
+    def spy(self, guidance_scale=None):
+        g = original(self, guidance_scale)
+        used.append(g.scale)
+        return g
+
+    monkeypatch.setattr(SaladPipeline, "resolve_guidance", spy)
+    base = ["generate", "a person walks", "--length", "16", "--steps", "2", "--weights", str(weights),
+            "--no-render", "--no-attention"]
+    assert cli.main([*base, "--out", str(tmp_path / "a")]) == 0
+    assert "guidance w = 3 (the weights' default, pipeline.json)" in capsys.readouterr().out
+    assert set(used) == {3.0}
+    used.clear()
+    assert cli.main([*base, "--out", str(tmp_path / "b"), "--guidance", "7.5"]) == 0
+    assert "guidance w = 7.5 (--guidance)" in capsys.readouterr().out
+    assert set(used) == {7.5}
+    used.clear()
+    assert cli.main(["-q", "edit", "a person walks", "--reweight", "walks=2", "--length", "16", "--steps", "2",
+                     "--weights", str(weights), "--out", str(tmp_path / "e")]) == 0
+    assert set(used) == {3.0}
+
+
 def test_generate_writes_outputs_and_refuses_to_overwrite(tiny_weights, tmp_path, capsys):
     out = tmp_path / "gen"
     args = ["generate", "a person walks forward", "--length", "40", "--steps", "3", "--weights",
