@@ -448,6 +448,18 @@ def test_foot_slide_by_hand():
     recon = drift.clone().requires_grad_(True)
     vae.foot_slide(recon, still).backward()
     assert recon.grad[..., 2].abs().sum() > 0                         # the root velocity gets a gradient
+    # feet the contact channels mark but that move in the input itself (2 cm per frame, 0.4 m/s) are not
+    # asked to stop: only steps where the input's foot moves < foot_planted_step (5 mm) count
+    walking = still.clone()
+    walking[..., 2] = 0.02
+    assert vae.foot_slide(drift, walking).item() == 0.0
+    loose = _vae(lambda_foot=2.0, foot_planted_step=None)             # the channels alone
+    assert loose.foot_slide(drift, walking).item() == pytest.approx(0.03, rel=1e-6)
+    slow = still.clone()
+    slow[..., 2] = 0.004                                              # input slides 4 mm/frame: still planted
+    assert vae.foot_slide(drift, slow).item() == pytest.approx(0.03, rel=1e-6)
+    with pytest.raises(ValueError, match="foot_planted_step"):
+        _vae(foot_planted_step=0.0)
 
 
 def test_foot_term_in_the_loss_and_off_by_default():

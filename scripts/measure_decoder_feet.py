@@ -1,0 +1,94 @@
+"""Feet, floor and bones of VAE reconstructions, side by side for several VAEs (issue 20's skating lever).
+
+    python scripts/measure_decoder_feet.py --data CORPUS [--general GENERAL] --vae salad_core/weights/salad \
+        --vae ~/salad-runs/v4/dec_foot20 [--clips 60]
+
+Each ``--vae`` is a VAE run folder (``best``), an exported VAE or a pipeline folder (anything
+``VAETrainConfig.init_from`` takes). The first ``--clips`` clips of each set's test split, cropped to a
+multiple of 4 frames, are reconstructed (posterior mean) and turned into joints the HumanML3D way;
+printed per set and VAE, with :mod:`salad_core.eval.physics`'s definitions: MPJPE (cm, root-aligned
+as the official ``test_vae``), foot skating (mean m/s over the frame pairs in contact), ground penetration
+(mean over clips of the max, cm) and the bone-length error p95 (cm), and the same measures of the
+clips themselves as the reference row.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def load_clips(root: Path, clips: int, unit: int = 4) -> list[np.ndarray]:
+    """Raw features ``(N, 263)`` of the first ``clips`` test clips of ``root``, cropped to ``unit``."""
+    ids = (root / "test.txt").read_text().split()[:clips]
+    out = []
+    for i in ids:
+        f = np.load(root / "new_joint_vecs" / f"{i}.npy")
+        out.append(f[: len(f) - len(f) % unit].astype(np.float32))
+    return out
+
+
+def measure(features: list[np.ndarray], reference: list[np.ndarray] | None = None) -> dict[str, float]:
+    """MPJPE against ``reference`` (cm; nan without one), skating, penetration and bone p95."""
+    from salad_core.eval.physics import foot_skating, ground_penetration, pooled_bone_p95
+    from salad_core.motion import features_to_joints
+
+    joints = [features_to_joints(f) for f in features]
+    skate = np.concatenate([foot_skating(j) for j in joints])
+    pen = [ground_penetration(j).max() for j in joints]
+    mpjpe = float("nan")
+    if reference is not None:
+        ref = [features_to_joints(f) for f in reference]
+        err = [np.linalg.norm((a - a[:, :1]) - (b - b[:, :1]), axis=-1).mean() for a, b in zip(joints, ref)]
+        mpjpe = 100 * float(np.mean(err))
+    return {"mpjpe_cm": mpjpe, "skating": float(skate.mean()), "skate_share": float((skate > 0.1).mean()),
+            "penetration_cm": 100 * float(np.mean(pen)), "bone_p95_cm": pooled_bone_p95(joints)}
+
+
+def reconstruct(vae_path: str, clips: list[np.ndarray]) -> list[np.ndarray]:
+    """Posterior-mean reconstructions of ``clips`` (raw features) by the VAE at ``vae_path``."""
+    import torch
+
+    from salad_core.eval.reconstruction import reconstruct_features
+    from salad_core.io import load_model
+    from salad_core.train.vae_trainer import load_init_vae
+
+    config, state, mean, std, stem = load_init_vae(vae_path)
+    vae, _, _ = load_model(stem)
+    vae = vae.float()
+    out = []
+    with torch.no_grad():
+        for f in clips:
+            out.append(reconstruct_features(vae, mean, std, f[None], [len(f)])[0])
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", required=True, type=Path, help="a corpus folder (its test split)")
+    ap.add_argument("--general", type=Path, default=None, help="a general-motion folder (its test split)")
+    ap.add_argument("--vae", action="append", required=True, help="a VAE run, exported VAE or pipeline folder")
+    ap.add_argument("--clips", type=int, default=60)
+    args = ap.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(1)
+    sets = {"corpus": args.data} | ({"general": args.general} if args.general else {})
+    print(f"{'set':<8} {'motions':<44} {'MPJPE cm':>8} {'skating m/s':>11} {'> 0.1':>6} {'pen. cm':>7} {'bone p95':>8}")
+    for name, root in sets.items():
+        clips = load_clips(root, args.clips)
+        rows = {"(the clips)": measure(clips)}
+        for v in args.vae:
+            rows[v] = measure(reconstruct(v, clips), clips)
+        for label, r in rows.items():
+            print(f"{name:<8} {label[-44:]:<44} {r['mpjpe_cm']:>8.2f} {r['skating']:>11.3f} {r['skate_share']:>6.2f} "
+                  f"{r['penetration_cm']:>7.2f} {r['bone_p95_cm']:>8.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
