@@ -37,16 +37,7 @@ EVAL_ARGS=(--data "$DATA" --threads "$THREADS")
 [ -n "${EVALUATOR:-}" ] && EVAL_ARGS+=(--evaluator "$EVALUATOR")
 export SALAD_OMP_WAIT=${SALAD_OMP_WAIT:-passive}
 mkdir -p "$OUT"
-has() { [[ " $STAGES " == *" $1 "* ]]; }
-stage() {  # stage NAME CMD...: run CMD unless NAME is done, log its output and time
-  local name=$1; shift
-  if [ -f "$OUT/$name.done" ]; then echo "[$name] done before ($(cat "$OUT/$name.done")): skipped"; return; fi
-  echo "[$name] $(date -u +%FT%TZ): $*"
-  local t0=$SECONDS
-  "$@" 2>&1 | tee "$OUT/$name.log"
-  echo "$(date -u +%FT%TZ), $((SECONDS - t0)) s" > "$OUT/$name.done"
-  echo "[$name] finished in $((SECONDS - t0)) s"
-}
+source scripts/_stages.sh   # has STAGE, stage NAME CMD...
 
 if has assemble; then
   if [ -f "$WEIGHTS/pipeline.json" ] && [ -z "${DENOISER:-}" ]; then

@@ -1,8 +1,11 @@
 """Test doubles shared by several test modules: a hashing text encoder, a fake corpus folder, a tiny
-random evaluator, and the scripts of ``scripts/`` loaded as modules."""
+random evaluator, the scripts of ``scripts/`` loaded as modules, and a recording stand-in python for the
+resumable shell scripts."""
 from __future__ import annotations
 
 import importlib.util
+import os
+import subprocess
 import sys
 import zlib
 from pathlib import Path
@@ -112,3 +115,21 @@ def load_script(name: str) -> ModuleType:
     finally:
         sys.path.remove(str(SCRIPTS_DIR))
     return module
+
+
+def recording_python(folder: Path) -> tuple[Path, Path]:
+    """``(fake, log)``: an executable stand-in for python in ``folder`` that appends its arguments to
+    ``log`` (one line per call) and succeeds, so a shell script's commands can be checked without running."""
+    log = folder / "calls.txt"
+    fake = folder / "fake_python"
+    fake.write_text(f'#!/usr/bin/env bash\necho "$*" >> {log}\n')
+    fake.chmod(0o755)
+    return fake, log
+
+
+def run_stage_script(script: Path, out: Path, *stages: str, python: str, timeout: float = 60,
+                     **env: str) -> subprocess.CompletedProcess:
+    """``bash script OUT STAGE...`` with ``PYTHON=python`` and ``env`` added to the environment."""
+    full = {**os.environ, "PYTHON": python, **env}
+    return subprocess.run(["bash", str(script), str(out), *stages], capture_output=True, text=True, env=full,
+                          timeout=timeout)

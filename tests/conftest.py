@@ -91,3 +91,12 @@ def tiny_random_evaluator(tiny_procedural_corpus):
 
     return make_tiny_evaluator(tiny_procedural_corpus, dim_word=8, dim_text_hidden=16, dim_coemb=32,
                                dim_movement_enc_hidden=16, dim_movement_latent=16, dim_motion_hidden=32)
+
+
+@pytest.fixture
+def recorder(tmp_path) -> tuple[Path, Path]:
+    """``(fake, log)``: a stand-in python that records its arguments (one line per call) and succeeds
+    (:func:`_doubles.recording_python`), for the resumable shell scripts' tests."""
+    from _doubles import recording_python
+
+    return recording_python(tmp_path)

@@ -7,26 +7,14 @@ import os
 import subprocess
 from pathlib import Path
 
-import pytest
+from _doubles import run_stage_script
 
 REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "scripts" / "evaluate_candidate.sh"
 
 
 def _run(out: Path, *stages: str, python: str, **env: str) -> subprocess.CompletedProcess:
-    full = {**os.environ, "PYTHON": python, "DATA": "/data/corpus", "WEIGHTS": "/w", **env}
-    return subprocess.run(["bash", str(SCRIPT), str(out), *stages], capture_output=True, text=True, env=full,
-                          timeout=60)
-
-
-@pytest.fixture
-def recorder(tmp_path) -> tuple[Path, Path]:
-    """A stand-in python that records its arguments (one line per call) and succeeds."""
-    log = tmp_path / "calls.txt"
-    fake = tmp_path / "fake_python"
-    fake.write_text(f'#!/usr/bin/env bash\necho "$*" >> {log}\n')
-    fake.chmod(0o755)
-    return fake, log
+    return run_stage_script(SCRIPT, out, *stages, python=python, **{"DATA": "/data/corpus", "WEIGHTS": "/w", **env})
 
 
 def test_stages_run_once_and_are_skipped_when_done(tmp_path, recorder):
