@@ -7,9 +7,8 @@ For each mode of :data:`salad_core.data.procedural.general.MODES`, ``--clips`` c
 features (``joints_to_features`` -> ``features_to_joints``, what a VAE trained on the set sees).
 Printed per mode, with :mod:`salad_core.eval.physics`'s definitions (the same measure as
 ``salad eval --physics``): foot skating mean and p95 (m/s) over the frame pairs in contact, the share of
-those faster than 10 cm/s, and the share of contact frames whose feature contact label (HumanML3D's
-velocity-based foot contact channel) is on. The captioned corpus's clips skate about 0.01 m/s on
-the same measure.
+those faster than 10 cm/s, and how many pairs there are; last, the mean weighted by the modes' default
+shares. The captioned corpus's clips skate about 0.01 m/s on the same measure.
 """
 from __future__ import annotations
 

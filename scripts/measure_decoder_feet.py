@@ -32,20 +32,16 @@ def load_clips(root: Path, clips: int, unit: int = 4) -> list[np.ndarray]:
     return out
 
 
-def measure(features: list[np.ndarray], reference: list[np.ndarray] | None = None) -> dict[str, float]:
-    """MPJPE against ``reference`` (cm; nan without one), skating, penetration and bone p95."""
+def measure(joints: list[np.ndarray], reference: list[np.ndarray] | None = None) -> dict[str, float]:
+    """MPJPE against ``reference`` joints (cm, root-aligned; nan without them), skating, penetration and
+    bone p95 of ``joints`` (each ``(N, 22, 3)``)."""
+    from salad_core.eval.metrics import mpjpe
     from salad_core.eval.physics import foot_skating, ground_penetration, pooled_bone_p95
-    from salad_core.motion import features_to_joints
 
-    joints = [features_to_joints(f) for f in features]
     skate = np.concatenate([foot_skating(j) for j in joints])
     pen = [ground_penetration(j).max() for j in joints]
-    mpjpe = float("nan")
-    if reference is not None:
-        ref = [features_to_joints(f) for f in reference]
-        err = [np.linalg.norm((a - a[:, :1]) - (b - b[:, :1]), axis=-1).mean() for a, b in zip(joints, ref)]
-        mpjpe = 100 * float(np.mean(err))
-    return {"mpjpe_cm": mpjpe, "skating": float(skate.mean()), "skate_share": float((skate > 0.1).mean()),
+    err = float("nan") if reference is None else 100 * float(np.mean([mpjpe(a, b) for a, b in zip(joints, reference)]))
+    return {"mpjpe_cm": err, "skating": float(skate.mean()), "skate_share": float((skate > 0.1).mean()),
             "penetration_cm": 100 * float(np.mean(pen)), "bone_p95_cm": pooled_bone_p95(joints)}
 
 
@@ -54,17 +50,15 @@ def reconstruct(vae_path: str, clips: list[np.ndarray]) -> list[np.ndarray]:
     import torch
 
     from salad_core.eval.reconstruction import reconstruct_features
-    from salad_core.io import load_model
-    from salad_core.train.vae_trainer import load_init_vae
+    from salad_core.io import load_model, load_tensors
+    from salad_core.train.assemble import vae_source
 
-    config, state, mean, std, stem = load_init_vae(vae_path)
-    vae, _, _ = load_model(stem)
-    vae = vae.float()
-    out = []
+    source = vae_source(vae_path)                     # a run (best/latest), an exported VAE or a pipeline
+    vae = load_model(source.stem)[0].float()
+    stats = load_tensors(source.stats)
+    mean, std = stats["mean"].numpy(), stats["std"].numpy()
     with torch.no_grad():
-        for f in clips:
-            out.append(reconstruct_features(vae, mean, std, f[None], [len(f)])[0])
-    return out
+        return [reconstruct_features(vae, mean, std, f[None], [len(f)])[0] for f in clips]
 
 
 def main(argv=None) -> int:
@@ -76,14 +70,17 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     import torch
 
+    from salad_core.motion import features_to_joints
+
     torch.set_num_threads(1)
     sets = {"corpus": args.data} | ({"general": args.general} if args.general else {})
     print(f"{'set':<8} {'motions':<44} {'MPJPE cm':>8} {'skating m/s':>11} {'> 0.1':>6} {'pen. cm':>7} {'bone p95':>8}")
     for name, root in sets.items():
         clips = load_clips(root, args.clips)
-        rows = {"(the clips)": measure(clips)}
+        truth = [features_to_joints(f) for f in clips]
+        rows = {"(the clips)": measure(truth)}
         for v in args.vae:
-            rows[v] = measure(reconstruct(v, clips), clips)
+            rows[v] = measure([features_to_joints(f) for f in reconstruct(v, clips)], truth)
         for label, r in rows.items():
             print(f"{name:<8} {label[-44:]:<44} {r['mpjpe_cm']:>8.2f} {r['skating']:>11.3f} {r['skate_share']:>6.2f} "
                   f"{r['penetration_cm']:>7.2f} {r['bone_p95_cm']:>8.2f}")

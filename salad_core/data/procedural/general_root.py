@@ -166,10 +166,10 @@ def plant_feet(joints: np.ndarray, flight: np.ndarray | None = None, blend: int 
     flight = np.zeros(n, dtype=bool) if flight is None else np.asarray(flight, dtype=bool)
     for k, side in enumerate(("left", "right")):
         hip, knee, ankle, toe = (ix[f"{side}_{p}"] for p in ("hip", "knee", "ankle", "foot"))
-        heel_low = _contact_mask(joints[:, ankle, 1] - radii[ankle], flight)
-        toe_low = _contact_mask(joints[:, toe, 1] - radii[toe], flight)
-        clear = ((joints[:, ankle, 1] - radii[ankle] >= RELEASE_GAP)
-                 & (joints[:, toe, 1] - radii[toe] >= RELEASE_GAP))    # (N,) both ends off the floor
+        heel_gap = joints[:, ankle, 1] - radii[ankle]                 # (N,) heights above resting on the floor
+        toe_gap = joints[:, toe, 1] - radii[toe]
+        heel_low, toe_low = _contact_mask(heel_gap, flight), _contact_mask(toe_gap, flight)
+        clear = (heel_gap >= RELEASE_GAP) & (toe_gap >= RELEASE_GAP)   # (N,) both ends off the floor
         foot = joints[:, toe] - joints[:, ankle]                       # (N, 3) original foot vectors
         new_ankle = joints[:, ankle].copy()
         new_foot = foot.copy()
