@@ -312,9 +312,7 @@ def _say_guidance(args: argparse.Namespace, pipe) -> None:
     """Print the guidance a command samples with: ``--guidance`` or, without it, the weights' own."""
     if getattr(args, "quiet", False):
         return
-    from salad_core.pipeline import _describe_guidance
-
-    print(f"guidance w = {_describe_guidance(pipe.resolve_guidance(args.guidance))}"
+    print(f"guidance w = {pipe.resolve_guidance(args.guidance).describe()}"
           + (" (the weights' default, pipeline.json)" if args.guidance is None else " (--guidance)"))
 
 

@@ -744,7 +744,7 @@ class SaladPipeline:
         made_for = _inversion_guidance(inversion)
         if guidance_scale is not None and self.resolve_guidance(guidance_scale) != made_for:
             raise ValueError(f"guidance_scale={guidance_scale} but the inversion is faithful to "
-                             f"{_describe_guidance(made_for)}; invert again with that guidance")
+                             f"{made_for.describe()}; invert again with that guidance")
         if num_steps is not None and int(num_steps) != inversion.num_steps:
             raise ValueError(f"num_steps={num_steps} but the inversion has {inversion.num_steps} steps")
         if solver is not None and solver.lower() != "ddim":
@@ -895,13 +895,6 @@ def _check_recovery(method: Any) -> str:
 def _guidance_settings(guidance: Guidance) -> dict[str, Any]:
     """The guidance entries of an output's ``settings``."""
     return dict(guidance_scale=guidance.scale, guidance_rescale=guidance.rescale, guidance_interval=guidance.interval)
-
-
-def _describe_guidance(guidance: Guidance) -> str:
-    """``7.5``, or ``7.5 (rescale 0.7, interval (0.1, 0.9))`` when refined."""
-    extra = [f"rescale {guidance.rescale:g}"] * (guidance.rescale > 0)
-    extra += [f"interval {guidance.interval}"] * (guidance.interval is not None)
-    return f"{guidance.scale:g}" + (f" ({', '.join(extra)})" if extra else "")
 
 
 def _inversion_guidance(inversion: Inversion) -> Guidance:

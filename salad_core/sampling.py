@@ -183,6 +183,12 @@ class Guidance:
         object.__setattr__(self, "scale", float(self.scale))
         object.__setattr__(self, "rescale", float(self.rescale))
 
+    def describe(self) -> str:
+        """``7.5``, or ``7.5 (rescale 0.7, interval (0.1, 0.9))`` when refined."""
+        extra = [f"rescale {self.rescale:g}"] * (self.rescale > 0)
+        extra += [f"interval {self.interval}"] * (self.interval is not None)
+        return f"{self.scale:g}" + (f" ({', '.join(extra)})" if extra else "")
+
     @property
     def cfg(self) -> bool:
         """Whether an unconditional branch is ever needed."""

@@ -225,6 +225,12 @@ def test_guidance_validation_names_the_field(kwargs, word):
         Guidance(**kwargs)
 
 
+def test_guidance_describe_names_only_the_refinements_in_use():
+    assert Guidance(4.5).describe() == "4.5"
+    assert Guidance(7.5, rescale=0.7).describe() == "7.5 (rescale 0.7)"
+    assert Guidance(3, rescale=0.5, interval=(0.1, 0.9)).describe() == "3 (rescale 0.5, interval (0.1, 0.9))"
+
+
 def test_pipeline_guidance_defaults_overrides_and_round_trip(make_tiny_pipeline, tmp_path):
     pipe = make_tiny_pipeline()
     assert pipe.guidance == Guidance(7.5)                             # no "guidance" entry: the paper's
