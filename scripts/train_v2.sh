@@ -5,7 +5,9 @@
 # Usage: bash scripts/train_v2.sh [WORK_DIR] [STAGE...]
 #   WORK_DIR   run folder, outside the repository (default: ~/salad-runs/v2)
 #   STAGE      any of: data vae denoiser keymotion (default: all, in that order), and vae_decoder (after vae,
-#              never by default: fine-tunes the VAE's decoder with the root term into WORK_DIR/vae_decoder)
+#              never by default: fine-tunes the VAE's decoder with the root term into WORK_DIR/vae_decoder) and
+#              evaluator (never by default: the T2M evaluator on the denoiser's corpus into WORK_DIR/evaluator,
+#              exported to WORK_DIR/evaluator_export; a candidate trained on a newer corpus is measured with it)
 # Every stage resumes where it stopped when run again with RESUME=1 (Ctrl-C writes a checkpoint);
 # the data stage skips what is already built (both builds are deterministic: the same commit and
 # seed give byte-identical files, so a lost run folder is rebuilt from this recipe alone).
@@ -68,6 +70,13 @@ if has denoiser; then
   # shipped copy of the v3 VAE, salad_core/weights/general_vae/vae, gives the same latents)
   "$PY" -m salad_core.train denoiser --data "${DEN_DATA:-$WORK/corpus}" --out "$WORK/denoiser" --vae "${DEN_VAE:-$WORK/vae}" \
       --config "${DEN_CONFIG:-configs/v3_denoiser.json}" ${DEN_STEPS:+--steps "$DEN_STEPS"} --no-progress $RESUME
+fi
+if has evaluator; then
+  # the v3 recipe (docs/campaign.md): about 27 minutes at low priority beside another run; one thread
+  "$PY" -m salad_core.eval.train_evaluator --data "${DEN_DATA:-$WORK/corpus}" --out "$WORK/evaluator" \
+      --steps "${EVAL_STEPS:-4000}" --movement-steps "${EVAL_AE_STEPS:-1000}" --lr 1e-3 --word-vectors contextual \
+      --seed 1234 --val-every 250 --threads "${EVAL_THREADS:-1}" --report-replications 5 --no-progress $RESUME \
+      --export "$WORK/evaluator_export"
 fi
 if has keymotion; then
   # three stages in one process; a finished stage is skipped on RESUME=1, an interrupted one continues
