@@ -72,11 +72,9 @@ if has denoiser; then
       --config "${DEN_CONFIG:-configs/v3_denoiser.json}" ${DEN_STEPS:+--steps "$DEN_STEPS"} --no-progress $RESUME
 fi
 if has evaluator; then
-  # the v3 recipe (docs/campaign.md): about 27 minutes at low priority beside another run; one thread
-  "$PY" -m salad_core.eval.train_evaluator --data "${DEN_DATA:-$WORK/corpus}" --out "$WORK/evaluator" \
-      --steps "${EVAL_STEPS:-4000}" --movement-steps "${EVAL_AE_STEPS:-1000}" --lr 1e-3 --word-vectors contextual \
-      --seed 1234 --val-every 250 --threads "${EVAL_THREADS:-1}" --report-replications 5 --no-progress $RESUME \
-      --export "$WORK/evaluator_export"
+  # scripts/train_evaluator.sh (the v3 evaluator's recipe), one thread: about 27 minutes beside another run
+  DATA=${DEN_DATA:-$WORK/corpus} EXPORT=$WORK/evaluator_export THREADS=${EVAL_THREADS:-1} PYTHON=$PY \
+      bash scripts/train_evaluator.sh "$WORK"
 fi
 if has keymotion; then
   # three stages in one process; a finished stage is skipped on RESUME=1, an interrupted one continues
