@@ -1,6 +1,9 @@
 """Assemble a SaladPipeline folder from a VAE run and a denoiser run (the shipped weights).
 
-Usage: python scripts/assemble_weights.py --vae RUN --denoiser RUN --out salad_core/weights/salad [--fp32]
+Usage: python scripts/assemble_weights.py [--vae RUN] --denoiser RUN --out salad_core/weights/salad [--fp32]
+
+Without --vae, the VAE the denoiser run recorded (its ``config.json``) is taken; a VAE other than the one the
+denoiser trained on is refused (compared weight by weight, so an exported copy of it passes).
 
 Takes each run's ``best`` checkpoint (else ``latest``), the VAE run's Mean/Std, the denoiser run's
 text encoder and diffusion config, and writes ``pipeline.json``, ``vae.*``, ``denoiser.*`` and
@@ -19,7 +22,7 @@ from salad_core.train.assemble import assemble_pipeline
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--vae", required=True, type=Path)
+    ap.add_argument("--vae", type=Path, help="the denoiser's VAE (run or exported folder; default: the one it recorded)")
     ap.add_argument("--denoiser", required=True, type=Path)
     ap.add_argument("--out", required=True, type=Path)
     ap.add_argument("--fp32", action="store_true", help="store float32 weights (default float16)")

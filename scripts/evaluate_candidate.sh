@@ -9,8 +9,8 @@
 # Environment:
 #   DATA       procedural corpus the models trained on (its test split and references; required)
 #   WEIGHTS    the candidate pipeline folder (default OUT_DIR/weights, written by the assemble stage)
-#   VAE, DENOISER  for the assemble stage: a VAE (run, exported folder; default the shipped general VAE) and a
-#              denoiser run folder
+#   VAE, DENOISER  for the assemble stage: a denoiser run folder and its VAE (run or exported folder; default the
+#              one the denoiser run recorded; another VAE is refused)
 #   EVALUATOR  T2M evaluator folder trained on DATA (default: the shipped one)
 #   SCALES     guidance weights of the sweep (default 1,2,3,4.5,6,7.5); RESCALES (default 0,0.7)
 #   PHYSICS_ARGS  extra arguments of the physics stage (default none: 41 prompts x 3 seeds, 50 steps)
@@ -44,7 +44,7 @@ if has assemble; then
     echo "[assemble] $WEIGHTS exists and no DENOISER given: skipped"
   else
     : "${DENOISER:?set DENOISER to the denoiser run folder (or WEIGHTS to an assembled pipeline)}"
-    stage assemble "$PY" scripts/assemble_weights.py --vae "${VAE:-salad_core/weights/general_vae}" \
+    stage assemble "$PY" scripts/assemble_weights.py ${VAE:+--vae "$VAE"} \
         --denoiser "$DENOISER" --out "$WEIGHTS"
   fi
 fi

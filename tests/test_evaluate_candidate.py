@@ -49,3 +49,17 @@ def test_settings_are_required(tmp_path, recorder):
     assert res.returncode != 0 and "set DATA" in res.stderr
     res = _run(tmp_path / "o2", "assemble", python=str(fake), WEIGHTS=str(tmp_path / "missing"))
     assert res.returncode != 0 and "DENOISER" in res.stderr
+
+
+def test_assemble_takes_the_denoisers_own_vae_unless_one_is_given(tmp_path, recorder):
+    """Without VAE the assembler is not handed any (it takes the VAE the denoiser run recorded); with VAE it gets
+    that one (and refuses it if the denoiser did not train on it: tests/test_train.py)."""
+    fake, log = recorder
+    res = _run(tmp_path / "a", "assemble", python=str(fake), WEIGHTS=str(tmp_path / "wa"), DENOISER="/runs/den")
+    assert res.returncode == 0, res.stderr
+    assert log.read_text().splitlines()[-1] == f"scripts/assemble_weights.py --denoiser /runs/den --out {tmp_path / 'wa'}"
+    res = _run(tmp_path / "b", "assemble", python=str(fake), WEIGHTS=str(tmp_path / "wb"), DENOISER="/runs/den",
+               VAE="/runs/vae")
+    assert res.returncode == 0, res.stderr
+    assert log.read_text().splitlines()[-1] == (f"scripts/assemble_weights.py --vae /runs/vae --denoiser /runs/den "
+                                                f"--out {tmp_path / 'wb'}")

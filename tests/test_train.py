@@ -527,6 +527,53 @@ def test_assemble_from_an_exported_vae_equals_assembling_from_its_run(corpus, ti
         vae_source(tmp_path / "empty")
 
 
+def test_assemble_refuses_a_vae_the_denoiser_did_not_train_on(corpus, tiny_vae_run, tmp_path):
+    """A denoiser diffuses in its own VAE's latent space: assembling it with another VAE (here one with other
+    initial weights) is refused with an error naming both, while the VAE it recorded, its float16 export and
+    ``vae=None`` (take the recorded one) all give the same pipeline. A run whose VAE is gone is assembled with a
+    warning recorded in ``runs.json``."""
+    import shutil
+
+    from salad_core.io import save_tensors
+    from salad_core.train.assemble import assemble_pipeline, check_denoiser_vae, denoiser_vae, export_vae, vae_source
+
+    den = tmp_path / "den"
+    train_denoiser(corpus, den, tiny_vae_run, tiny_denoiser_config(), den_train_config(max_steps=1), HashTextEncoder())
+    assert denoiser_vae(den) == vae_source(tiny_vae_run).stem
+    other = tmp_path / "other_vae"
+    train_vae(corpus, other, tiny_vae_config(), vae_train_config(max_steps=0, seed=4))
+    with pytest.raises(ValueError, match=r"is not the VAE denoiser run .* trained on .*weight '"):
+        assemble_pipeline(other, den, tmp_path / "bad", dtype=None, text_encoder=HashTextEncoder())
+    assert not (tmp_path / "bad" / "pipeline.json").exists()
+    # the same weights under other Mean/Std: refused too (the latents depend on the normalisation)
+    shifted = tmp_path / "shifted"
+    shutil.copytree(tiny_vae_run, shifted)
+    stats = load_tensors(shifted / "mean_std.safetensors")
+    save_tensors(shifted / "mean_std.safetensors", {"mean": stats["mean"] + 1.0, "std": stats["std"]})
+    with pytest.raises(ValueError, match="statistic 'mean' differs"):
+        assemble_pipeline(shifted, den, tmp_path / "bad2", dtype=None, text_encoder=HashTextEncoder())
+    half = export_vae(tiny_vae_run, tmp_path / "half", dtype=torch.float16)
+    assert check_denoiser_vae(vae_source(half), den) == "same"
+    a = assemble_pipeline(None, den, tmp_path / "a", dtype=None, text_encoder=HashTextEncoder())
+    b = assemble_pipeline(tiny_vae_run, den, tmp_path / "b", dtype=None, text_encoder=HashTextEncoder())
+    for name in ("vae.safetensors", "stats.safetensors", "denoiser.safetensors"):
+        assert_same_tensors(load_tensors(a / name), load_tensors(b / name))
+    assert json.loads((a / "runs.json").read_text())["vae_check"] == "same"
+    # the recorded VAE is gone (a run folder from another machine): assembled, and the record says it was unchecked
+    moved = tmp_path / "moved_vae"
+    shutil.copytree(tiny_vae_run, moved)
+    config = json.loads((den / "config.json").read_text())
+    config["task"]["vae"] = str(tmp_path / "gone" / "best")
+    (den / "config.json").write_text(json.dumps(config))
+    c = assemble_pipeline(moved, den, tmp_path / "c", dtype=None, text_encoder=HashTextEncoder())
+    assert json.loads((c / "runs.json").read_text())["vae_check"].startswith("unchecked: the denoiser's VAE")
+    assert_same_tensors(load_tensors(c / "vae.safetensors"), load_tensors(b / "vae.safetensors"))
+    del config["task"]["vae"]
+    (den / "config.json").write_text(json.dumps(config))
+    with pytest.raises(ValueError, match="does not record its VAE"):
+        assemble_pipeline(None, den, tmp_path / "d", dtype=None, text_encoder=HashTextEncoder())
+
+
 def test_every_vae_location_resolves_to_the_same_weights_and_statistics(corpus, tiny_vae_run, tmp_path):
     """vae_source is the one resolver: the denoiser trainer (load_frozen_vae, vae_statistics), export_vae and
     scripts/measure_vae_real.py's load_vae accept a run folder, a checkpoint stem or file in it, an exported VAE

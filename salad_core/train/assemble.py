@@ -14,6 +14,7 @@ added to an existing card or starting a new one; the section is replaced when as
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 from typing import NamedTuple
 
@@ -22,7 +23,9 @@ import torch
 from salad_core.io import atomic_write_text, config_from_dict, load_model, load_tensors, save_checkpoint, save_tensors
 
 __all__ = ["run_checkpoint", "last_log_line", "assemble_pipeline", "export_vae", "numerics_note", "VaeSource", "vae_source",
-           "write_numerics_section"]
+           "write_numerics_section", "denoiser_vae", "check_denoiser_vae"]
+
+log = logging.getLogger(__name__)
 
 _BEGIN, _END = "<!-- training-numerics: begin -->", "<!-- training-numerics: end -->"
 
@@ -163,7 +166,57 @@ def write_numerics_section(card: str | Path, note: str | None) -> Path | None:
     return card
 
 
-def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | Path, *,
+def denoiser_vae(denoiser_run: str | Path) -> Path | None:
+    """The VAE checkpoint stem a denoiser run trained on, as its ``config.json`` records it (``task.vae``), or
+    None when the run does not say."""
+    path = Path(denoiser_run) / "config.json"
+    recorded = json.loads(path.read_text()).get("task", {}).get("vae") if path.is_file() else None
+    return Path(recorded) if recorded else None
+
+
+def check_denoiser_vae(source: VaeSource, denoiser_run: str | Path, *, rtol: float = 2e-3, atol: float = 1e-4) -> str:
+    """Check that ``source`` is the VAE the denoiser run trained on: a denoiser diffuses in its VAE's latent space,
+    so pairing it with another VAE gives a pipeline that loads and samples but decodes nonsense.
+
+    The weights and Mean/Std are compared with the VAE the run recorded (``task.vae``) within float16 storage
+    rounding (``rtol``, ``atol``), so an exported or float16 copy of the same VAE passes.
+
+    Returns
+    -------
+    str
+        ``"same"`` when they match, ``"unchecked: ..."`` when the recorded VAE is not recorded or no longer exists
+        (a run folder from another machine).
+
+    Raises
+    ------
+    ValueError
+        When they differ, naming both VAEs and the first tensor that differs.
+    """
+    recorded = denoiser_vae(denoiser_run)
+    if recorded is None:
+        return "unchecked: the denoiser run does not record its VAE"
+    if not recorded.with_suffix(".safetensors").is_file():
+        return f"unchecked: the denoiser's VAE {recorded} is gone"
+    theirs_src = vae_source(recorded)
+    if theirs_src.stem.resolve() == source.stem.resolve():
+        return "same"
+    ours = load_tensors(source.stem.with_suffix(".safetensors"))
+    theirs = load_tensors(theirs_src.stem.with_suffix(".safetensors"))
+    pairs = [(f"weight {k!r}", ours.get(k), theirs[k]) for k in sorted(theirs)]
+    if source.has_stats and theirs_src.has_stats:
+        a, b = load_tensors(source.stats), load_tensors(theirs_src.stats)
+        pairs += [(f"statistic {k!r}", a.get(k), b[k]) for k in ("mean", "std")]
+    if set(ours) != set(theirs):
+        raise ValueError(f"VAE {source.stem} is not the VAE denoiser run {denoiser_run} trained on ({recorded}): "
+                         f"their weights have different names")
+    for what, a, b in pairs:
+        if a is None or a.shape != b.shape or not torch.allclose(a.float(), b.float(), rtol=rtol, atol=atol):
+            raise ValueError(f"VAE {source.stem} is not the VAE denoiser run {denoiser_run} trained on ({recorded}): "
+                             f"{what} differs; assemble with that VAE (or a copy of it)")
+    return "same"
+
+
+def assemble_pipeline(vae_run: str | Path | None, denoiser_run: str | Path, out: str | Path, *,
                       dtype: torch.dtype | None = torch.float16, text_encoder=None) -> Path:
     """Write a pipeline folder that ``SaladPipeline.from_pretrained(out)`` loads.
 
@@ -171,7 +224,8 @@ def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | 
     ----------
     vae_run, denoiser_run : path
         Run folders written by ``salad train vae`` / ``salad train denoiser``; the VAE may also be an
-        exported VAE folder (:func:`vae_source`).
+        exported VAE folder (:func:`vae_source`). ``vae_run=None`` takes the VAE the denoiser run records.
+        A VAE other than the one the denoiser trained on is refused (:func:`check_denoiser_vae`).
     out : path
         Pipeline folder (created; existing files of the same names are replaced atomically).
     dtype : torch.dtype or None
@@ -183,10 +237,17 @@ def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | 
     from salad_core.sampling import DiffusionConfig
     from salad_core.text import load_text_encoder
 
-    vae_run, denoiser_run, out = Path(vae_run), Path(denoiser_run), Path(out)
+    denoiser_run, out = Path(denoiser_run), Path(out)
+    if vae_run is None:
+        vae_run = denoiser_vae(denoiser_run)
+        if vae_run is None:
+            raise ValueError(f"denoiser run {denoiser_run} does not record its VAE: give the VAE it trained on")
     source = vae_source(vae_run)
     if not source.has_stats:
         raise FileNotFoundError(f"VAE {vae_run}: no {source.stats.name} beside it (the Mean/Std it was trained with)")
+    vae_check = check_denoiser_vae(source, denoiser_run)
+    if vae_check != "same":
+        log.warning("assembling %s with VAE %s: %s", denoiser_run, source.stem, vae_check)
     vae, _, _ = load_model(source.stem)
     den, _, _ = load_model(run_checkpoint(denoiser_run))
     stats = load_tensors(source.stats)
@@ -201,7 +262,7 @@ def assemble_pipeline(vae_run: str | Path, denoiser_run: str | Path, out: str | 
     pipe = SaladPipeline(vae, den, encoder, stats["mean"].numpy(), stats["std"].numpy(), diffusion=diffusion,
                          latent_stats=latent_stats)
     pipe.save_pretrained(out, dtype=dtype)
-    runs = {"vae": source.record, "denoiser": _run_record(denoiser_run)}
+    runs = {"vae": source.record, "denoiser": _run_record(denoiser_run), "vae_check": vae_check}
     atomic_write_text(out / "runs.json", json.dumps(runs, indent=2) + "\n")
     write_numerics_section(out / "MODEL_CARD.md",
                            numerics_note({"vae": source.numerics, "denoiser": denoiser_run}))
