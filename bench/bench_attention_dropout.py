@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 import time
 from pathlib import Path
 
@@ -36,6 +35,7 @@ def main(argv=None) -> int:
 
     import torch
 
+    from salad_core.bench.interleave import interleaved_medians
     from salad_core.io import config_from_dict
     from salad_core.models.denoiser import Denoiser, DenoiserConfig
     from salad_core.models.kernels import sdpa_attention_dropout
@@ -65,12 +65,7 @@ def main(argv=None) -> int:
         opt.step()
         return time.perf_counter() - t0
 
-    step(False), step(True)                                   # warm-up
-    times = {False: [], True: []}
-    for r in range(args.rounds):
-        for reference in ((True, False) if r % 2 == 0 else (False, True)):
-            times[reference].append(step(reference))
-    sdpa, explicit = statistics.median(times[True]), statistics.median(times[False])
+    sdpa, explicit = interleaved_medians(lambda: step(True), lambda: step(False), args.rounds)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"denoiser training step ({args.config.name}, batch 32, 30 latent frames, bf16 autocast, {args.threads} "
           f"thread(s), {args.rounds} rounds, load {load:.1f}): SDPA dropout {sdpa:.3f} s, explicit route "

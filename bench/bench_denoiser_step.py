@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 import time
 from pathlib import Path
 
@@ -32,6 +31,7 @@ def main(argv=None) -> int:
 
     import torch
 
+    from salad_core.bench.interleave import interleaved_medians
     from salad_core.io import config_from_dict
     from salad_core.models.denoiser import Denoiser, DenoiserConfig
 
@@ -57,12 +57,7 @@ def main(argv=None) -> int:
         opt.step()
         return time.perf_counter() - t0
 
-    step(False), step(True)                                   # warm-up
-    times = {False: [], True: []}
-    for r in range(args.rounds):
-        for bf16 in ((False, True) if r % 2 == 0 else (True, False)):
-            times[bf16].append(step(bf16))
-    fp32, bf16 = statistics.median(times[False]), statistics.median(times[True])
+    fp32, bf16 = interleaved_medians(lambda: step(False), lambda: step(True), args.rounds)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"denoiser step ({args.config.name}, batch {b}, {n} latent frames, {args.threads} thread(s), "
           f"{args.rounds} rounds, load {load:.1f}): float32 {fp32:.3f} s, bf16 autocast {bf16:.3f} s, "

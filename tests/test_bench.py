@@ -364,3 +364,24 @@ def test_step_runner_forward_runs_under_the_configs_autocast(single_thread):
         assert runner.task.objective.seen == [want] * 3
         assert len(runner.step_losses) == 3 and all(np.isfinite(runner.step_losses))
         assert runner.result().parts["forward"] > 0
+
+
+def test_interleaved_medians_alternates_order_and_takes_medians():
+    from salad_core.bench.interleave import interleaved_medians
+
+    calls: list[str] = []
+    a_times = iter([9.0, 1.0, 3.0, 2.0, 100.0])       # warm-up 9.0 is dropped; median of 1, 3, 2, 100 is 2.5
+    b_times = iter([7.0, 5.0, 4.0, 6.0, 0.5])         # warm-up 7.0 dropped; median of 5, 4, 6, 0.5 is 4.5
+
+    def first() -> float:
+        calls.append("a")
+        return next(a_times)
+
+    def second() -> float:
+        calls.append("b")
+        return next(b_times)
+
+    assert interleaved_medians(first, second, rounds=4) == (2.5, 4.5)
+    assert "".join(calls) == "ab" + "ab" + "ba" + "ab" + "ba"
+    with pytest.raises(ValueError, match="rounds"):
+        interleaved_medians(first, second, rounds=0)
