@@ -333,6 +333,9 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--refine", action="store_true", help="prompt refinement (aligned words keep the source maps)")
     p.add_argument("--reweight", action="append", metavar="WORD=SCALE", help="scale a word's attention, s in [-3, 3]")
     p.add_argument("--mirror", choices=["legs", "arms", "all"], help="swap left/right body-part rows")
+    p.add_argument("--mirror-self-attention", action="store_true",
+                   help="with --mirror: also swap the parts' temporal and skeletal self-attention (the source's, "
+                        "MirrorSelfAttention; beyond the paper): the side swaps more often, the rest moves more")
     p.add_argument("--window", default=None, metavar="START:STOP",
                    help="step window of --refine/--reweight/--mirror as fractions of the sampling steps, "
                         "0 <= START < STOP <= 1 (0 = the noisiest step; default 0:1)")
@@ -359,7 +362,7 @@ def _spec(flag: str, build: Callable):
 def _edit_specs(args: argparse.Namespace, required: bool = True) -> list:
     """Edit specifications from the flags of :func:`_edit_args`, in the order the pipeline needs
     (the replacement first, then the modifiers); ``[]`` if none was given and not ``required``."""
-    from salad_core.attention import Mirror, Refine, Reweight, WordSwap
+    from salad_core.attention import Mirror, MirrorSelfAttention, Refine, Reweight, WordSwap
 
     window = {} if args.window is None else {"steps": _parse_window(args.window)}
     in_window = "" if args.window is None else f" --window {args.window}"
@@ -379,6 +382,11 @@ def _edit_specs(args: argparse.Namespace, required: bool = True) -> list:
         specs.append(_spec(f"--reweight {item}{in_window}", lambda: Reweight(words=word, scale=value, **window)))
     if args.mirror:
         specs.append(_spec(f"--mirror {args.mirror}{in_window}", lambda: Mirror(parts=args.mirror, **window)))
+        if getattr(args, "mirror_self_attention", False):
+            specs.append(_spec(f"--mirror-self-attention{in_window}",
+                               lambda: MirrorSelfAttention(parts=args.mirror, **window)))
+    elif getattr(args, "mirror_self_attention", False):
+        raise UserError("--mirror-self-attention goes with --mirror PARTS (it mirrors the same parts' self-attention)")
     if args.window is not None and not (args.refine or args.reweight or args.mirror):
         raise UserError("--window applies to --refine, --reweight and --mirror; give one of them "
                         "(word swap is timed by TAU alone)")

@@ -15,7 +15,7 @@ with ``annotations/``). Prints, with the numbers also returned / written as JSON
     attention on its annotated body parts and frames, against chance (a uniform map);
 (b) mirroring: ``Mirror("all")`` on prompts that name a side; the left/right activity ratio of
     the arms and legs before and after (it should flip), and how close the edit is to the mirror
-    image of the source;
+    image of the source (``--mirror-self-attention temporal skeletal``: with ``MirrorSelfAttention``);
 (c) word swap: one action word swapped (``WordSwap(tau)`` + self-attention injection); the root
     path and timing kept (compared with plain generation of the target from the same noise) while
     the swapped action's parts change;
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from salad_core.attention import CaptureConfig, InjectSelfAttention, Mirror, Reweight, WordSwap
+from salad_core.attention import CaptureConfig, InjectSelfAttention, Mirror, MirrorSelfAttention, Reweight, WordSwap
 from salad_core.attention.measure import (left_right_ratio, localisation, mirror_closeness, part_activity_change,
                                           root_path_difference, spearman, wrist_height)
 from salad_core.data.procedural import PRIMITIVES, Action, in_language, parse_prompt, primitive_parts
@@ -114,7 +114,10 @@ def measure_localisation(pipe, clips, args) -> dict:
 def measure_mirroring(pipe, prompts, args) -> dict:
     rows = []
     for i, prompt in enumerate(prompts):
-        out = pipe.edit(prompt, edits=[Mirror("all")], lengths=args.length, num_steps=args.steps,
+        edits = [Mirror("all")]
+        if args.mirror_self_attention:
+            edits.append(MirrorSelfAttention("all", steps=tuple(args.mirror_window), kinds=tuple(args.mirror_self_attention)))
+        out = pipe.edit(prompt, edits=edits, lengths=args.length, num_steps=args.steps,
                         guidance_scale=args.guidance, seed=args.seed + i)
         before, after = left_right_ratio(out.source.joints[0]), left_right_ratio(out.edited.joints[0])
         close = mirror_closeness(out.source.joints[0], out.edited.joints[0], "all")
@@ -291,6 +294,10 @@ def parse_args(argv=None):
     ap.add_argument("--n-inversion", type=int, default=4, help="motions for the inversion comparison")
     ap.add_argument("--deepmimic", action="store_true", help="also invert and edit the DeepMimic clips")
     ap.add_argument("--n-deepmimic", type=int, default=20)
+    ap.add_argument("--mirror-self-attention", nargs="*", default=[], choices=["temporal", "skeletal"],
+                    help="(b): also mirror the source's self-attention of these kinds (MirrorSelfAttention)")
+    ap.add_argument("--mirror-window", type=float, nargs=2, default=(0.0, 1.0), metavar=("START", "STOP"),
+                    help="(b): step fractions of the self-attention mirroring (default 0 1)")
     ap.add_argument("--sections", default="abcde", help="which of the sections (a)-(e) to run, e.g. 'c' or 'ae'")
     ap.add_argument("--quick", action="store_true", help="tiny run (2 items, 10 steps) to check the script")
     ap.add_argument("--json", type=Path, default=None, help="write all numbers here")

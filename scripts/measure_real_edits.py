@@ -10,7 +10,7 @@ left). They are evaluation data: this script measures, nothing is trained or tun
 For every clip whose arms or legs are one-sided in the capture itself (left/right activity ratio of
 that limb pair beyond ``--sided`` either way), the clip is inverted with its prompt
 (:meth:`SaladPipeline.invert`, its defaults: fixed point with the exact replay) and edited with
-``Mirror`` of that limb pair:
+``Mirror`` of that limb pair (with ``--self-attention``, also ``MirrorSelfAttention`` of it):
 
 - ``swapped``: the limb pair's log left/right activity ratio changes sign between the source
   reconstruction and the edit (the other side now leads);
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from salad_core.attention import Mirror
+from salad_core.attention import Mirror, MirrorSelfAttention
 from salad_core.attention.measure import left_right_ratio, mirror_closeness
 from salad_core.motion import features_to_joints, mirror_features
 from salad_core.pipeline import SaladPipeline
@@ -70,7 +70,17 @@ def real_items(pipe, max_clips: int) -> list[dict]:
     return items
 
 
-def measure(pipe, items: list[dict], *, steps: int, sided: float) -> dict:
+def mirror_edits(limb: str, self_attention: tuple[str, ...], window: tuple[float, float]) -> list:
+    """``Mirror(limb)``, plus :class:`MirrorSelfAttention` of the same limb over ``window`` when
+    ``self_attention`` names kinds (temporal, skeletal)."""
+    edits = [Mirror(limb)]
+    if self_attention:
+        edits.append(MirrorSelfAttention(limb, steps=window, kinds=self_attention))
+    return edits
+
+
+def measure(pipe, items: list[dict], *, steps: int, sided: float, self_attention: tuple[str, ...] = (),
+            window: tuple[float, float] = (0.0, 1.0)) -> dict:
     rows, skipped = [], []
     for item in items:
         side = sided_limb(features_to_joints(item["features"]), sided)
@@ -79,7 +89,7 @@ def measure(pipe, items: list[dict], *, steps: int, sided: float) -> dict:
             continue
         limb, truth = side
         inv = pipe.invert(item["features"], item["prompt"], num_steps=steps)
-        edit = pipe.edit(inversion=inv, edits=[Mirror(limb)])
+        edit = pipe.edit(inversion=inv, edits=mirror_edits(limb, self_attention, window))
         src, out = edit.source.joints[0], edit.edited.joints[0]
         before, after = math.log(left_right_ratio(src)[limb]), math.log(left_right_ratio(out)[limb])
         rows.append({"id": item["id"], "prompt": item["prompt"], "limb": limb, "log_ratio_capture": truth,
@@ -104,6 +114,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--sided", type=float, default=1.5,
                     help="a limb pair is one-sided when one side is this many times busier than the other")
     ap.add_argument("--max-clips", type=int, default=40, help="DeepMimic clips (each also mirrored)")
+    ap.add_argument("--self-attention", nargs="*", default=[], choices=["temporal", "skeletal"],
+                    help="also mirror the source's self-attention of these kinds (MirrorSelfAttention)")
+    ap.add_argument("--window", type=float, nargs=2, default=(0.0, 1.0), metavar=("START", "STOP"),
+                    help="step fractions of the self-attention mirroring (default 0 1)")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
@@ -118,7 +132,8 @@ def main(argv=None) -> dict:
     items = real_items(pipe, args.max_clips)
     print(f"weights: {pipe.source or args.weights}; {len(items)} real clips (DeepMimic and mirrored copies); "
           f"{args.steps} steps, w = {pipe.guidance.scale:g}")
-    res = measure(pipe, items, steps=args.steps, sided=args.sided)
+    res = measure(pipe, items, steps=args.steps, sided=args.sided, self_attention=tuple(args.self_attention),
+                  window=tuple(args.window))
     results = {"settings": run_settings(args), **res}
     print_summary("Mirror of the one-sided limb pair on inverted real clips", res["summary"], width=24,
                   nested_digits=3)

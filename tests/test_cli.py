@@ -218,6 +218,7 @@ def _one_line_error(capsys) -> str:
     (["--mirror", "all", "--window", "0:inf"], "must satisfy 0 <= start < stop <= 1"),
     (["--mirror", "all", "--window", "half"], "--window takes START:STOP"),
     (["--swap", "0.8", "--window", "0:0.5"], "--window applies to --refine, --reweight and --mirror"),
+    (["--reweight", "high=2", "--mirror-self-attention"], "--mirror-self-attention goes with --mirror PARTS"),
     (["--reweight", "high=nan"], "--reweight high=nan: Reweight.scale must be a finite number, got nan"),
     (["--reweight", "high=inf"], "--reweight high=inf: Reweight.scale must be a finite number, got inf"),
     (["--reweight", "high=-inf"], "Reweight.scale must be a finite number"),
@@ -241,7 +242,7 @@ def test_generate_rejects_non_finite_guidance(tmp_path, capsys):
 
 
 def test_edit_flags_build_the_specs_with_their_window():
-    from salad_core.attention import Mirror, Refine, Reweight, WordSwap
+    from salad_core.attention import Mirror, MirrorSelfAttention, Refine, Reweight, WordSwap
 
     parser = cli.build_parser()
     args = parser.parse_args(["edit", "a man raises his hand", "--target", "a man slowly raises his hand high",
@@ -249,6 +250,9 @@ def test_edit_flags_build_the_specs_with_their_window():
                               "--out", "x"])
     assert cli._edit_specs(args) == [Refine(steps=(0.2, 0.6)), Reweight("high", -1.5, steps=(0.2, 0.6)),
                                      Mirror("arms", steps=(0.2, 0.6))]
+    args = parser.parse_args(["invert", "m.npy", "--prompt", "a man walks", "--mirror", "legs", "--mirror-self-attention",
+                              "--window", "0:0.5", "--out", "x"])
+    assert cli._edit_specs(args) == [Mirror("legs", steps=(0.0, 0.5)), MirrorSelfAttention("legs", steps=(0.0, 0.5))]
     args = parser.parse_args(["invert", "m.npy", "--prompt", "a man walks", "--swap", "0.7", "--out", "x"])
     assert cli._edit_specs(args, required=False) == [WordSwap(tau=0.7)]
     args = parser.parse_args(["invert", "m.npy", "--prompt", "a man walks", "--out", "x"])

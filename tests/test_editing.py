@@ -440,6 +440,12 @@ def test_measure_script_runs_on_a_tiny_pipeline_and_corpus(pipe, tmp_path):
     only = script.main(["--data", str(tmp_path / "corpus"), "--weights", str(tmp_path / "weights"), "--quick",
                         "--sections", "b"])
     assert "mirroring" in only and not {"localisation", "word_swap", "reweight", "inversion"} & set(only)
+    both = script.main(["--data", str(tmp_path / "corpus"), "--weights", str(tmp_path / "weights"), "--quick",
+                        "--sections", "b", "--mirror-self-attention", "temporal", "skeletal"])
+    assert both["settings"]["mirror_self_attention"] == ["temporal", "skeletal"]
+    assert [r["prompt"] for r in both["mirroring"]["prompts"]] == [r["prompt"] for r in only["mirroring"]["prompts"]]
+    # the self-attention mirroring changed the edits (same prompts, same seeds)
+    assert [r["ratio_after"] for r in both["mirroring"]["prompts"]] != [r["ratio_after"] for r in only["mirroring"]["prompts"]]
     with pytest.raises(SystemExit):
         script.main(["--data", str(tmp_path / "corpus"), "--sections", "x"])
 
@@ -505,3 +511,7 @@ def test_real_edit_measures_read_sides_and_what_is_kept(sample_joints):
     mirrored = script.sided_limb(mirror_joints(lifted), 1.2)
     assert mirrored[0] == "arms" and mirrored[1] == pytest.approx(-side[1], abs=1e-6)
     assert script.sided_limb(real, 50.0) is None
+    from salad_core.attention import Mirror, MirrorSelfAttention
+    assert script.mirror_edits("legs", (), (0.0, 1.0)) == [Mirror("legs")]
+    assert script.mirror_edits("arms", ("temporal",), (0.0, 0.5)) == [
+        Mirror("arms"), MirrorSelfAttention("arms", steps=(0.0, 0.5), kinds=("temporal",))]

@@ -349,3 +349,53 @@ def test_measure_scripts_shared_helpers(tmp_path, capsys):
     assert np.isnan(common.mean([None, float("inf")]))
     common.print_summary("T", {"a": 0.123456, "setting": {"x": 1.23456, "y": 2.0}, "n": 3}, width=4, nested_digits=2)
     assert capsys.readouterr().out == "\n== T\n  a    0.1235\n  setting x=1.2  y=2\n  n    3\n"
+
+
+# ------------------------------------------------------------------------ mirrored self-attention
+def test_mirror_self_attention_kernel_relabels_parts():
+    from salad_core.attention.edits import MirrorSelfAttention, mirror_permutation, mirror_self_attention
+
+    perm = mirror_permutation("all", 7)
+    temporal = _probs(2, 7, 2, 5, 5, seed=4)                          # (B, P, H, N', N')
+    out = mirror_self_attention(temporal, "temporal", "all")
+    for j in range(7):
+        assert torch.equal(out[:, j], temporal[:, perm[j]])
+    skeletal = _probs(2, 5, 2, 7, 7, seed=5)                          # (B, N', H, P, P)
+    out = mirror_self_attention(skeletal, "skeletal", "all")
+    for i in range(7):
+        for k in range(7):
+            assert torch.equal(out[..., i, k], skeletal[..., perm[i], perm[k]])
+    torch.testing.assert_close(out.sum(-1), skeletal.sum(-1)[..., perm])     # rows stay probabilities
+    for kind, maps in (("temporal", temporal), ("skeletal", skeletal)):
+        assert torch.equal(mirror_self_attention(mirror_self_attention(maps, kind, "legs"), kind, "legs"), maps)
+    legs = mirror_self_attention(temporal, "temporal", "legs")
+    arms = [PART_NAMES.index("left arm"), PART_NAMES.index("right arm")]
+    assert torch.equal(legs[:, arms], temporal[:, arms])                       # "legs" leaves the arms alone
+    with pytest.raises(ValueError, match="self-attention kinds"):
+        mirror_self_attention(temporal, "cross", "all")
+    with pytest.raises(ValueError, match="Mirror.parts"):
+        MirrorSelfAttention("tails")
+    with pytest.raises(ValueError, match="MirrorSelfAttention.kinds"):
+        MirrorSelfAttention("all", kinds=("cross",))
+    assert MirrorSelfAttention("lower").parts == "legs"
+
+
+def test_mirror_self_attention_hands_the_mirrored_source_maps_to_the_edit(pipe):
+    from salad_core.attention.edits import MirrorSelfAttention, mirror_self_attention
+
+    cap = CaptureConfig(mode="full", self_attention=True)
+    out = pipe.edit(SRC, edits=[Mirror("all"), MirrorSelfAttention("all", steps=(0.0, 0.5))], lengths=40,
+                    num_steps=STEPS, seed=1, capture_attention=cap)
+    half = STEPS // 2
+    # captured maps (S, L, H, ...) -> (S L H, ...) with a head axis of one at 2: temporal (., P, 1, N', N'),
+    # skeletal (., N', 1, P, P), the kernel's layouts
+    as_rows = lambda a: torch.from_numpy(a[:half].astype(np.float32)).flatten(0, 2).unsqueeze(2)
+    for kind in ("temporal", "skeletal"):
+        src, ed = out.source.attention.full(0, kind), out.edited.attention.full(0, kind)
+        want = mirror_self_attention(as_rows(src), kind, "all")
+        torch.testing.assert_close(as_rows(ed), want, atol=2e-3, rtol=0)             # float16 storage
+        later = np.abs(ed[half:].astype(np.float32) - src[half:].astype(np.float32)).max()
+        assert later > 1e-3, kind                                          # after the window: its own maps
+    plain = pipe.edit(SRC, edits=[Mirror("all")], lengths=40, num_steps=STEPS, seed=1)
+    assert (out.edited.latents - plain.edited.latents).abs().max() > 1e-3  # the self-attention acted
+    torch.testing.assert_close(out.source.latents, plain.source.latents, atol=1e-5, rtol=1e-5)

@@ -26,8 +26,8 @@ from .controller import EditController, RowLayout
 from .editing import EditPrediction, EditRun, edit_latents
 from .counting import attention_signal, count_peaks, count_repetitions, motion_repetitions, motion_signal
 from .edits import (ERASE_MODES, MIRROR_GROUPS, REWEIGHT_RANGE, EditSpec, Erase, ExampleBased, InjectSelfAttention, Mirror,
-                    Refine, Reweight, Shift, ShiftTemporal, WordSwap, erase_columns, map_columns, mirror_parts,
-                    mirror_permutation, refine_columns, reweight_columns, seeded_noise, shift_columns, shift_temporal,
+                    MirrorSelfAttention, Refine, Reweight, Shift, ShiftTemporal, WordSwap, erase_columns, map_columns, mirror_parts,
+                    mirror_permutation, mirror_self_attention, refine_columns, reweight_columns, seeded_noise, shift_columns, shift_temporal,
                     validate_edits)
 from .inversion import INVERSION_METHODS, Inversion, LatentInversion, ddim_step_coefficients, invert_latents
 from .hooks import (ActivationCache, HookContext, HookPoint, hook_point_names, hook_points, select_hook_points,
@@ -37,11 +37,11 @@ from .processor import HookedProcessor, flat_rows, named_rows, row_taker
 
 __all__ = [
     "capture_cross_attention", "CaptureConfig", "AttentionStore", "AttentionMaps", "TokenInfo", "as_capture_config",
-    "EditSpec", "WordSwap", "Refine", "Reweight", "Mirror", "InjectSelfAttention", "validate_edits",
+    "EditSpec", "WordSwap", "Refine", "Reweight", "Mirror", "MirrorSelfAttention", "InjectSelfAttention", "validate_edits",
     "Erase", "Shift", "ShiftTemporal", "ExampleBased", "ERASE_MODES", "erase_columns", "shift_columns",
     "shift_temporal", "seeded_noise",
     "count_repetitions", "motion_repetitions", "count_peaks", "attention_signal", "motion_signal",
-    "MIRROR_GROUPS", "REWEIGHT_RANGE", "mirror_parts", "mirror_permutation", "reweight_columns", "map_columns",
+    "MIRROR_GROUPS", "REWEIGHT_RANGE", "mirror_parts", "mirror_self_attention", "mirror_permutation", "reweight_columns", "map_columns",
     "refine_columns", "global_align", "alignment_matrix", "word_swap_matrix",
     "EditController", "RowLayout", "edit_latents", "EditRun", "EditPrediction",
     "invert_latents", "Inversion", "LatentInversion", "INVERSION_METHODS", "ddim_step_coefficients",

@@ -90,6 +90,12 @@ class RowLayout:
         return self.num_uncond + cond
 
 
+def _kernel_of_kind(kernel: EditKernel | dict[str, EditKernel], kind: str) -> EditKernel:
+    """An injection's kernel for one attention kind: specs whose kernels differ by kind
+    (:class:`~salad_core.attention.edits.MirrorSelfAttention`) bind a dict of them."""
+    return kernel[kind] if isinstance(kernel, dict) else kernel
+
+
 class EditController:
     """Builds ``M_hat`` at every cross site (and injects self-attention) for the edited rows.
 
@@ -204,7 +210,7 @@ class EditController:
         self._repl_active = self.replacement is not None and self.replacement.active(p)
         self._mods_active = [i for i, e in enumerate(self.edits) if e.role == "modify" and e.active(p)]
         self._cross_active = self.edited and (self._repl_active or bool(self._mods_active))
-        self._inject_active = {k: self._kernels[i] for i, e in enumerate(self.edits)
+        self._inject_active = {k: _kernel_of_kind(self._kernels[i], k) for i, e in enumerate(self.edits)
                                if e.role == "inject" and self.edited and e.active(p) for k in e.site_kinds}
         reads_own = self.edited and self.needs_probe(p)
         probe = reads_own and self.use_probe

@@ -66,6 +66,7 @@ __all__ = [
     "Reweight",
     "Mirror",
     "InjectSelfAttention",
+    "MirrorSelfAttention",
     "Erase",
     "Shift",
     "ExampleBased",
@@ -75,6 +76,7 @@ __all__ = [
     "REWEIGHT_RANGE",
     "mirror_permutation",
     "mirror_parts",
+    "mirror_self_attention",
     "reweight_columns",
     "map_columns",
     "refine_columns",
@@ -371,6 +373,43 @@ class InjectSelfAttention(EditSpec):
 
 
 @dataclass(frozen=True)
+class MirrorSelfAttention(EditSpec):
+    """The edited sample uses the source's self-attention with counterpart body parts swapped
+    (a companion of :class:`Mirror`, beyond the paper).
+
+    :class:`Mirror` swaps which body part reads which words; the parts' own structure, when each
+    moves and which parts follow which, lives in the self-attention. Here, during ``steps``, the
+    edited rows take the source's maps relabelled by the mirror permutation ``C`` of ``parts``
+    (:func:`mirror_self_attention`): temporal maps ``(B, P, H, N', N')`` of part ``j`` are those of
+    ``C(j)``; skeletal maps ``(B, N', H, P, P)`` become ``M[C(i), C(k)]``. So the left arm moves in
+    time as the source's right arm did and relates to the body as it did. Use it with
+    :class:`Mirror` of the same parts: ``[Mirror("all"), MirrorSelfAttention("all")]``.
+    """
+
+    role: ClassVar[str] = "inject"
+
+    parts: str = "all"                                        # "legs", "arms" or "all"
+    steps: tuple[float, float] = (0.0, 1.0)                  # window of step fractions
+    kinds: tuple[str, ...] = ("temporal", "skeletal")         # which self-attention to mirror
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "parts", Mirror(self.parts).parts)        # the same names and aliases
+        object.__setattr__(self, "steps", _window(self.steps, "MirrorSelfAttention.steps"))
+        object.__setattr__(self, "kinds", _distinct(self.kinds, _SELF_KINDS, "MirrorSelfAttention.kinds"))
+
+    @property
+    def site_kinds(self) -> tuple[str, ...]:
+        return self.kinds
+
+    def bind(self, source: "TokenInfo", target: "TokenInfo", width: int, *,
+             maps_of: "TokenInfo") -> dict[str, EditKernel]:
+        """One kernel per attention kind (the controller picks the site's): the source's maps
+        relabelled by :func:`mirror_self_attention`."""
+        return {kind: (lambda maps, own, kind=kind: mirror_self_attention(maps, kind, self.parts))
+                for kind in self.kinds}
+
+
+@dataclass(frozen=True)
 class Erase(EditSpec):
     """Erase a phrase (MotionCLR's erasing): its token columns lose all their attention.
 
@@ -584,6 +623,21 @@ def mirror_parts(maps: torch.Tensor, parts: str = "all", part_axis: int = -2) ->
     """
     perm = mirror_permutation(parts, maps.shape[part_axis])
     return maps.index_select(part_axis, torch.tensor(perm, device=maps.device))
+
+
+def mirror_self_attention(maps: torch.Tensor, kind: str, parts: str = "all") -> torch.Tensor:
+    """Self-attention maps relabelled by the mirror permutation ``C`` of ``parts`` (a new tensor).
+
+    ``kind="temporal"``: ``(B, P, H, N', N')``, part ``j``'s frame-to-frame map becomes part ``C(j)``'s.
+    ``kind="skeletal"``: ``(B, N', H, P, P)``, ``out[..., i, k] = maps[..., C(i), C(k)]`` (queries and
+    keys both relabelled, so each row still sums to what it did). ``C`` is an involution, so applying
+    it twice gives the input back exactly.
+    """
+    if kind == "temporal":
+        return mirror_parts(maps, parts, part_axis=1)
+    if kind == "skeletal":
+        return mirror_parts(mirror_parts(maps, parts, part_axis=-2), parts, part_axis=-1)
+    raise ValueError(f"kind={kind!r}: self-attention kinds are {_SELF_KINDS}")
 
 
 def reweight_columns(maps: torch.Tensor, columns: Sequence[int] | Sequence[Sequence[int]] | torch.Tensor,
