@@ -1,4 +1,5 @@
-"""KeyMotion's three training steps (keyframe VAE, PST, MMAE) in float32 and under bf16 autocast, side by side.
+"""KeyMotion's three training steps (keyframe VAE, PST, MMAE) in float32 and under bf16 autocast (or, with
+``--compare adamw``, with PyTorch's per-tensor AdamW loop and the fused AdamW), side by side.
 
 Builds each stage's real training task from a KeyMotion recipe (default ``configs/v2_keymotion.json``) on a
 corpus, twice: once as configured with ``autocast`` off and once with ``autocast="bf16"`` (float32 weights and
@@ -39,6 +40,9 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=12, help="timed steps of each setting per stage")
     p.add_argument("--warmup", type=int, default=2, help="untimed steps of each setting first")
     p.add_argument("--stages", nargs="+", default=list(STAGES), choices=STAGES)
+    p.add_argument("--compare", choices=["autocast", "adamw"], default="autocast",
+                   help="autocast: float32 against bf16 autocast (AdamW as configured); adamw: PyTorch's "
+                        "per-tensor AdamW loop against the fused AdamW (float32)")
     args = p.parse_args(argv)
 
     import torch
@@ -66,12 +70,17 @@ def main(argv=None) -> int:
                                             num_keyframes=num_keyframes),
     }
     load = []
-    print(f"KeyMotion training steps, float32 vs bf16 autocast ({args.config.name}, {args.data}, "
+    what = "float32 vs bf16 autocast" if args.compare == "autocast" else "AdamW loop vs fused"
+    print(f"KeyMotion training steps, {what} ({args.config.name}, {args.data}, "
           f"{args.threads} thread(s), {args.steps} timed steps each after {args.warmup} untimed)")
     for stage in args.stages:
         base = getattr(recipe, f"{stage}_train")
-        configs = {name: dataclasses.replace(base, autocast=mode, progress=False)
-                   for name, mode in (("float32", None), ("bf16", "bf16"))}
+        if args.compare == "autocast":
+            configs = {name: dataclasses.replace(base, autocast=mode, progress=False)
+                       for name, mode in (("float32", None), ("bf16", "bf16"))}
+        else:
+            configs = {name: dataclasses.replace(base, autocast=None, adamw=name, progress=False)
+                       for name in ("loop", "fused")}
         runners = {name: StepRunner(name, builders[stage], cfg) for name, cfg in configs.items()}
         order = list(runners)
         for i in range(args.warmup + args.steps):
@@ -79,16 +88,17 @@ def main(argv=None) -> int:
                 runners[name].step(record=i >= args.warmup)
             load.append(os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan"))
         prof = {name: r.result() for name, r in runners.items()}
-        f32, b16 = prof["float32"], prof["bf16"]
+        a, b = order
+        pa, pb = prof[a], prof[b]
         first = {name: r.step_losses[0] for name, r in runners.items()}
         timed = {name: statistics.fmean(r.step_losses[args.warmup:]) for name, r in runners.items()}
-        parts = ", ".join(f"{k} {f32.parts[k] * 1e3:.0f}/{b16.parts[k] * 1e3:.0f}"
-                          for k in ("data", "noise", "forward", "backward", "optimizer") if k in f32.parts)
-        print(f"{stage:7s} float32 {f32.step_s:.3f} s/step, bf16 {b16.step_s:.3f} s/step: ratio "
-              f"{f32.step_s / b16.step_s:.2f}x   (ms float32/bf16: {parts})")
-        print(f"        loss at step 1 (same weights and batch) {first['float32']:.6f} vs {first['bf16']:.6f} "
-              f"(relative difference {abs(first['bf16'] - first['float32']) / max(abs(first['float32']), 1e-12):.1e}); "
-              f"mean over the timed steps {timed['float32']:.5f} vs {timed['bf16']:.5f}")
+        parts = ", ".join(f"{k} {pa.parts[k] * 1e3:.0f}/{pb.parts[k] * 1e3:.0f}"
+                          for k in ("data", "noise", "forward", "backward", "optimizer") if k in pa.parts)
+        print(f"{stage:7s} {a} {pa.step_s:.3f} s/step, {b} {pb.step_s:.3f} s/step: ratio "
+              f"{pa.step_s / pb.step_s:.2f}x   (ms {a}/{b}: {parts})")
+        print(f"        loss at step 1 (same weights and batch) {first[a]:.6f} vs {first[b]:.6f} "
+              f"(relative difference {abs(first[b] - first[a]) / max(abs(first[a]), 1e-12):.1e}); "
+              f"mean over the timed steps {timed[a]:.5f} vs {timed[b]:.5f}")
     print(f"load average during the rounds: median {statistics.median(load):.1f} "
           f"(min {min(load):.1f}, max {max(load):.1f}); measured {time.strftime('%Y-%m-%d %H:%M')}")
     return 0

@@ -20,6 +20,12 @@ that limb pair beyond ``--sided`` either way), the clip is inverted with its pro
 - ``closeness``: :func:`salad_core.attention.measure.mirror_closeness` of the mirrored limbs (distance to
   the mirror image over distance to the source; below 1: closer to the mirror image).
 
+With ``--other-edits``, every original take is also inverted and edited by re-weighting its action word
+(s = -1 and +2) and, where :data:`SWAPS` has one, by swapping it (``WordSwap(0.8)`` with the source's
+self-attention for the first 20 % of steps): ``edited_cm`` is how much the body parts holding more than
+their share of the word's attention move, ``kept_cm`` how much the other parts move (root-aligned MPJPE
+between the source reconstruction and the edit).
+
 Joints are the pipeline's ``out.joints`` (with recovery "fit": fixed bones), the same for source and edit.
 """
 from __future__ import annotations
@@ -53,12 +59,72 @@ def sided_limb(joints: np.ndarray, threshold: float) -> tuple[str, float] | None
 def kept_cm(source: np.ndarray, edited: np.ndarray, limb: str) -> float:
     """Root-aligned MPJPE (cm) between two (T, 22, 3) motions over the joints outside ``limb``'s parts
     (the root joint itself excluded: it is the alignment point)."""
+    return parts_mpjpe_cm(source, edited, LIMBS[limb], inside=False)
+
+
+def parts_mpjpe_cm(source: np.ndarray, edited: np.ndarray, parts, *, inside: bool) -> float:
+    """Root-aligned MPJPE (cm) between two (T, 22, 3) motions over the joints of body ``parts`` (``inside``)
+    or of the other parts; the root joint is the alignment point and never counted. NaN when no joint is left."""
     sk = get_skeleton("humanml3d")
-    ids = [j for j, p in enumerate(sk.joint_to_part) if PART_NAMES[p] not in LIMBS[limb] and j != 0]
+    ids = [j for j, p in enumerate(sk.joint_to_part) if (PART_NAMES[p] in parts) == inside and j != 0]
+    if not ids:
+        return float("nan")
     a, b = np.asarray(source, np.float64), np.asarray(edited, np.float64)
     n = min(len(a), len(b))
     a, b = a[:n] - a[:n, :1], b[:n] - b[:n, :1]
     return float(np.linalg.norm(a[:, ids] - b[:, ids], axis=-1).mean() * 100)
+
+
+#: Word swaps for the takes' prompts (same number of words).
+SWAPS = {"walks": "runs", "runs": "walks", "kicks": "punches", "punches": "kicks", "jumps": "runs",
+         "dances": "jumps", "spins": "jumps"}
+
+
+def action_word(prompt: str) -> str:
+    """The action word of a DeepMimic prompt ("a person kicks" -> "kicks", "a person does a backflip" ->
+    "backflip")."""
+    words = prompt.split()
+    return words[4] if words[2] == "does" and len(words) > 4 else words[2]
+
+
+def attended_parts(word_map: np.ndarray) -> tuple[str, ...]:
+    """The body parts that hold more than their share (1 / P) of a word's attention, from its ``(P, N')``
+    map: the parts an edit of that word acts on."""
+    share = np.asarray(word_map, np.float64).sum(-1)
+    share = share / max(share.sum(), 1e-12)
+    return tuple(PART_NAMES[p] for p in np.flatnonzero(share > 1.0 / len(share)))
+
+
+def measure_other_edits(pipe, items: list[dict], *, steps: int, scales=(-1.0, 2.0)) -> dict:
+    """Re-weighting the action word (each scale) and swapping it (:data:`SWAPS`) on every inverted take:
+    how much the parts the word attends to change (``edited_cm``) and how much the others keep (``kept_cm``),
+    root-aligned MPJPE between the source reconstruction and the edit."""
+    from salad_core.attention import CaptureConfig, InjectSelfAttention, Reweight, WordSwap
+
+    rows = []
+    for item in items:
+        word = action_word(item["prompt"])
+        inv = pipe.invert(item["features"], item["prompt"], num_steps=steps)
+        edits = {f"reweight {word} {s:+g}": ([Reweight(word, s)], None) for s in scales}
+        if word in SWAPS:
+            target = item["prompt"].replace(word, SWAPS[word], 1)
+            edits[f"swap {word} -> {SWAPS[word]}"] = ([WordSwap(0.8), InjectSelfAttention()], target)
+        parts = None
+        for name, (specs, target) in edits.items():
+            out = pipe.edit(target=target, inversion=inv, edits=specs,
+                            capture_attention=CaptureConfig() if parts is None else False)
+            if parts is None:
+                parts = attended_parts(out.source.attention.word_map(0, word))
+            src, ed = out.source.joints[0], out.edited.joints[0]
+            rows.append({"id": item["id"], "prompt": item["prompt"], "edit": name, "parts": list(parts),
+                         "edited_cm": parts_mpjpe_cm(src, ed, parts, inside=True),
+                         "kept_cm": parts_mpjpe_cm(src, ed, parts, inside=False)})
+    summary = {}
+    for kind in ("reweight", "swap"):
+        sel = [r for r in rows if r["edit"].startswith(kind)]
+        summary[kind] = {"edits": float(len(sel)), "edited_cm": mean(r["edited_cm"] for r in sel),
+                         "kept_cm": mean(r["kept_cm"] for r in sel if not math.isnan(r["kept_cm"]))}
+    return {"summary": summary, "edits": rows}
 
 
 def real_items(pipe, max_clips: int) -> list[dict]:
@@ -118,6 +184,8 @@ def main(argv=None) -> dict:
                     help="also mirror the source's self-attention of these kinds (MirrorSelfAttention)")
     ap.add_argument("--window", type=float, nargs=2, default=(0.0, 1.0), metavar=("START", "STOP"),
                     help="step fractions of the self-attention mirroring (default 0 1)")
+    ap.add_argument("--other-edits", action="store_true",
+                    help="also re-weight (-1, +2) and swap each take's action word and measure what the edit keeps")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
@@ -142,6 +210,15 @@ def main(argv=None) -> dict:
               f"  {'swapped' if r['swapped'] else 'kept   '}  rest moved {r['kept_cm']:.1f} cm"
               f"  closeness {r['closeness']:.2f}")
     print(f"  two-sided (not measured): {', '.join(res['skipped']) or 'none'}")
+    if args.other_edits:
+        originals = [it for it in items if not it["id"].endswith("(mirrored)")]
+        other = measure_other_edits(pipe, originals, steps=args.steps)
+        results["other_edits"] = other
+        print_summary("Re-weighting and swapping the action word of inverted real clips (cm moved)", other["summary"],
+                      width=24, nested_digits=3)
+        for r in other["edits"]:
+            print(f"  {r['id']:24s} {r['edit']:28s} word's parts {'+'.join(r['parts']):34s} moved "
+                  f"{r['edited_cm']:5.1f} cm, the rest {r['kept_cm']:5.1f} cm")
     return finish_run(results, start, args.json)
 
 

@@ -511,6 +511,15 @@ def test_real_edit_measures_read_sides_and_what_is_kept(sample_joints):
     mirrored = script.sided_limb(mirror_joints(lifted), 1.2)
     assert mirrored[0] == "arms" and mirrored[1] == pytest.approx(-side[1], abs=1e-6)
     assert script.sided_limb(real, 50.0) is None
+    # the other edits: the action word, the parts it attends to, what moved inside and outside them
+    assert script.action_word("a person kicks") == "kicks"
+    assert script.action_word("a person does a backflip") == "backflip"
+    word_map = np.full((7, 5), 0.01)
+    word_map[PART_NAMES.index("right leg")] = 1.0                     # the word's attention sits on the right leg
+    assert script.attended_parts(word_map) == ("right leg",)
+    assert script.parts_mpjpe_cm(real, moved, ("head",), inside=True) == pytest.approx(5.0 / 2, rel=1e-6)  # head, neck
+    assert script.parts_mpjpe_cm(real, moved, ("right leg",), inside=True) == pytest.approx(0.0)
+    assert np.isnan(script.parts_mpjpe_cm(real, moved, PART_NAMES, inside=False))
     from salad_core.attention import Mirror, MirrorSelfAttention
     assert script.mirror_edits("legs", (), (0.0, 1.0)) == [Mirror("legs")]
     assert script.mirror_edits("arms", ("temporal",), (0.0, 0.5)) == [

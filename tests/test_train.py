@@ -5,6 +5,7 @@ clip) written to a temporary folder, with tiny models and one CPU thread.
 """
 from __future__ import annotations
 
+import copy
 import errno
 import json
 import os
@@ -145,6 +146,44 @@ def test_optimizer_and_rng_state_round_trip_exactly():
     restore_rng(snap)
     again = (torch.rand(3), np.random.rand(3), random.random())
     assert torch.equal(draws[0], again[0]) and np.array_equal(draws[1], again[1]) and draws[2] == again[2]
+
+
+def test_adamw_implementations_give_the_same_update_and_share_their_state():
+    from salad_core.train.config import ADAMW_IMPLEMENTATIONS, make_adamw
+
+    torch.manual_seed(0)
+    start = nn.Sequential(nn.Linear(6, 5), nn.GELU(), nn.Linear(5, 3))
+    x = torch.randn(8, 6)
+    models, opts = {}, {}
+    for impl in ADAMW_IMPLEMENTATIONS:
+        models[impl] = copy.deepcopy(start)
+        opts[impl] = make_adamw(list(models[impl].parameters()), DenoiserTrainConfig(adamw=impl), lr=1e-2)
+    assert opts["fused"].defaults["fused"] and opts["foreach"].defaults["foreach"]
+    assert opts["loop"].defaults["foreach"] is False and not opts["loop"].defaults["fused"]
+    for _ in range(5):
+        for impl, m in models.items():
+            opts[impl].zero_grad()
+            m(x).pow(2).mean().backward()
+            opts[impl].step()
+    for impl in ("fused", "foreach"):
+        for a, b in zip(models["loop"].parameters(), models[impl].parameters()):
+            torch.testing.assert_close(a, b, atol=1e-6, rtol=1e-5)
+    moved = max(float((a - b).abs().max()) for a, b in zip(start.parameters(), models["loop"].parameters()))
+    assert moved > 1e-2                                           # the five steps did move the weights
+    # a loop optimiser's state continues in a fused one (a run may resume with another implementation)
+    resumed = copy.deepcopy(models["loop"])
+    fused = make_adamw(list(resumed.parameters()), DenoiserTrainConfig(adamw="fused"), lr=1e-2)
+    tensors, doc = optimizer_to_flat(opts["loop"])                    # as the trainer saves and loads it
+    optimizer_from_flat(fused, {k: v.clone() for k, v in tensors.items()}, doc)
+    assert fused.param_groups[0]["fused"] is True                      # still the fused implementation
+    for opt, m in ((opts["loop"], models["loop"]), (fused, resumed)):
+        opt.zero_grad()
+        m(x).pow(2).mean().backward()
+        opt.step()
+    for a, b in zip(models["loop"].parameters(), resumed.parameters()):
+        torch.testing.assert_close(a, b, atol=1e-6, rtol=1e-5)
+    with pytest.raises(ValueError, match="adamw='lamb'"):
+        DenoiserTrainConfig(adamw="lamb")
 
 
 def test_resumable_batch_sampler_skips_used_batches():
@@ -718,6 +757,32 @@ def test_resuming_a_run_from_before_buckets_keeps_its_numerics(corpus, tiny_vae_
     with pytest.raises(SystemExit):
         cli.main(["denoiser", "--data", str(corpus), "--out", str(new_run), "--resume"])
     assert seen["config"].batching == "buckets" and seen["config"].latent_cache is True
+
+
+def test_a_run_from_before_the_adamw_field_resumes_with_the_loop(corpus, tiny_vae_run, tmp_path, monkeypatch):
+    """A run folder whose config.json has no ``adamw`` trained with PyTorch's per-tensor loop and resumes with
+    it; a run that recorded its implementation keeps it; a new run gets the fused default."""
+    from salad_core.train import cli
+
+    seen = {}
+
+    def fake_train(data, out, vae, model_config, train_config, *a, **kw):
+        seen["config"] = train_config
+        raise SystemExit(0)
+
+    monkeypatch.setattr("salad_core.train.denoiser_trainer.train_denoiser", fake_train)
+    train = {k: v for k, v in json.loads(json.dumps(den_train_config().__dict__, default=list)).items() if k != "adamw"}
+    for name, recorded, want in (("old", None, "loop"), ("foreach", "foreach", "foreach"), ("fused", "fused", "fused")):
+        run = tmp_path / name
+        run.mkdir()
+        section = train if recorded is None else {**train, "adamw": recorded}
+        (run / "config.json").write_text(json.dumps({"model_type": "denoiser", "runtime": {}, "train": section,
+                                                     "task": {"vae": str(tiny_vae_run)}}))
+        with pytest.raises(SystemExit):
+            cli.main(["denoiser", "--data", str(corpus), "--out", str(run), "--resume"])
+        assert seen["config"].adamw == want, name
+    assert cli._keep_own_optimizer({"pst": {"train": {"lr": 1e-4}}}, "keymotion")["train"] == {"adamw": "loop"}
+    assert DenoiserTrainConfig().adamw == VAETrainConfig().adamw == "fused"
 
 
 def test_vae_with_general_motion_bone_term_and_latent_noise(corpus, tmp_path):

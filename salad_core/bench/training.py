@@ -63,8 +63,10 @@ def train_recipe(weights: str | Path | None = None) -> TrainRecipe:
 
 
 def adamw(model: torch.nn.Module, config: Any) -> torch.optim.Optimizer:
-    return torch.optim.AdamW([p for p in model.parameters() if p.requires_grad], lr=config.lr,
-                             betas=tuple(config.betas), eps=config.adam_eps, weight_decay=config.weight_decay)
+    """The trainer's optimiser (:func:`salad_core.train.config.make_adamw`) over the trainable parameters."""
+    from salad_core.train.config import make_adamw
+
+    return make_adamw([p for p in model.parameters() if p.requires_grad], config, config.lr)
 
 
 def steps_per_second(step: Callable[[], None], steps: int, warmup: int) -> float:

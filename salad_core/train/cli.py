@@ -96,6 +96,17 @@ def _keep_legacy_numerics(doc: dict[str, Any], what: str) -> dict[str, Any]:
     return {**fields, **doc}
 
 
+def _keep_own_optimizer(doc: dict[str, Any], what: str) -> dict[str, Any]:
+    """A run whose config.json predates ``TrainConfig.adamw`` trained with PyTorch's per-tensor AdamW loop
+    and resumes with it (the fused default computes the same update, but not bit for bit)."""
+    trains = [doc.get("train")] + [(doc.get(stage) or {}).get("train") for stage in ("kf_vae", "pst", "mmae")]
+    if any(isinstance(t, dict) and "adamw" in t for t in trains):
+        return doc
+    if "train" in doc or what == "keymotion":
+        return {**doc, "train": {**(doc.get("train") or {}), "adamw": "loop"}}
+    return {**doc, "adamw": "loop"}
+
+
 def _read_doc(args: argparse.Namespace) -> dict[str, Any]:
     path = Path(args.config) if args.config else None
     own = False
@@ -110,6 +121,8 @@ def _read_doc(args: argparse.Namespace) -> dict[str, Any]:
     if own and not any(isinstance(t, dict) and "batching" in t for t in trains):
         log.info("%s predates length buckets and the latent cache: resuming with the numerics it started with", path)
         doc = _keep_legacy_numerics(doc, args.what)
+    if own:
+        doc = _keep_own_optimizer(doc, args.what)
     return {**doc, "_path": str(path)}
 
 

@@ -54,7 +54,7 @@ from torch.utils.data import DataLoader, Dataset, DistributedSampler, Sampler
 from salad_core.io import atomic_write_text, config_to_dict, load_state_into, save_checkpoint, save_tensors
 from salad_core.openmp import wait_policy
 
-from .config import RESUME_MUTABLE_FIELDS, TrainConfig
+from .config import RESUME_MUTABLE_FIELDS, TrainConfig, make_adamw
 from .distributed import (
     DistEnv,
     GlobalBatchRandom,
@@ -437,8 +437,7 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
     params = [p for p in model.parameters() if p.requires_grad]
     if not params:
         raise ValueError(f"{type(model).__name__} has no trainable parameters")
-    optimizer = torch.optim.AdamW(params, lr=lr_at_step(0, config.lr, config.warmup_steps, config.milestones, config.gamma),
-                                  betas=tuple(config.betas), eps=config.adam_eps, weight_decay=config.weight_decay)
+    optimizer = make_adamw(params, config, lr_at_step(0, config.lr, config.warmup_steps, config.milestones, config.gamma))
     objective = task.objective
     if env.distributed:
         from torch.nn.parallel import DistributedDataParallel as DDP

@@ -31,6 +31,8 @@ from typing import Any
 
 import torch
 
+from .config import make_adamw
+
 __all__ = ["PARTS", "StepProfile", "StepRunner", "profile_denoiser_training"]
 
 PARTS = ("data", "latents", "text", "noise", "forward", "backward", "clip", "optimizer", "logging", "validation")
@@ -109,8 +111,7 @@ class StepRunner:
             prepare = partial(prepare.func, *prepare.args, **kw)
         self.prepare = prepare
         self.params = [p for p in self.task.model.parameters() if p.requires_grad]
-        self.optimizer = torch.optim.AdamW(self.params, lr=config.lr, betas=tuple(config.betas), eps=config.adam_eps,
-                                           weight_decay=config.weight_decay)
+        self.optimizer = make_adamw(self.params, config, config.lr)
         if config.batching in ("buckets", "frames") and self.task.lengths is not None:
             from salad_core.train.batching import LengthBucketBatchSampler
 

@@ -98,6 +98,10 @@ def optimizer_to_flat(optimizer: torch.optim.Optimizer) -> tuple[dict[str, torch
     return tensors, json.loads(json.dumps(doc))
 
 
+#: Optimiser options that choose how the update is computed, not what it is.
+_IMPLEMENTATION_KEYS = ("fused", "foreach")
+
+
 def optimizer_from_flat(optimizer: torch.optim.Optimizer, tensors: dict[str, torch.Tensor], doc: dict[str, Any]) -> None:
     """Load what :func:`optimizer_to_flat` wrote into ``optimizer`` (same parameter layout)."""
     if doc.get("class") != type(optimizer).__name__:
@@ -119,6 +123,10 @@ def optimizer_from_flat(optimizer: torch.optim.Optimizer, tensors: dict[str, tor
     own = optimizer.state_dict()["param_groups"]
     if [len(g["params"]) for g in own] != [len(g["params"]) for g in groups]:
         raise CheckpointError("train state optimiser has a different parameter layout than the model")
+    for group, mine in zip(groups, own):          # the implementation is the trainer's (TrainConfig.adamw),
+        for key in _IMPLEMENTATION_KEYS:          # not the saved run's: the update is the same
+            if key in mine:
+                group[key] = mine[key]
     optimizer.load_state_dict({"state": state, "param_groups": groups})
 
 
