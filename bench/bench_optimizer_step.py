@@ -1,13 +1,13 @@
-"""AdamW's step as the trainer runs it (PyTorch's per-tensor loop on CPU) against its ``foreach`` and ``fused``
-implementations, side by side, for the shipped models' parameters.
+"""AdamW's three implementations (PyTorch's per-tensor CPU loop, ``foreach``, ``fused``; ``TrainConfig.adamw``)
+side by side, for the shipped models' parameters.
 
-The trainer (``salad_core.train.common.fit``) builds ``torch.optim.AdamW`` with PyTorch's defaults, which on
-CPU run the per-tensor loop (``_single_tensor_adam``). A ``py-spy`` sample of the running KeyMotion PST
+The trainer (``salad_core.train.common.fit``) used to build ``torch.optim.AdamW`` with PyTorch's defaults, which
+on CPU run the per-tensor loop (``_single_tensor_adam``); it now takes the fused one. A ``py-spy`` sample of the running KeyMotion PST
 training put 11 % of its time there: its models are small (width 128), so each step's arithmetic is tiny and
 the loop's per-tensor overhead is what costs. This times ``optimizer.step()`` alone (random gradients, the
-recipe's hyper-parameters) for each model, the implementations interleaved in one process, and prints the
-median milliseconds per step and the ratios; it also checks that the three give the same parameters after
-the timed steps (maximum absolute difference).
+trainer's ``make_adamw`` with betas 0.9/0.99) for each model, the implementations interleaved in one process,
+and prints the median milliseconds per step and the ratios; it also checks that the three give the same
+parameters after the timed steps (maximum absolute difference).
 
 Example::
 
@@ -26,7 +26,6 @@ WEIGHTS = HERE / "salad_core" / "weights"
 MODELS = {"KeyMotion PST": WEIGHTS / "keymotion" / "pst", "KeyMotion MMAE": WEIGHTS / "keymotion" / "mmae",
           "KeyMotion keyframe VAE": WEIGHTS / "keymotion" / "kf_vae", "SALAD denoiser": WEIGHTS / "salad" / "denoiser",
           "SALAD VAE": WEIGHTS / "salad" / "vae"}
-KINDS = ("loop", "foreach", "fused")
 
 
 def main(argv=None) -> int:
@@ -39,7 +38,9 @@ def main(argv=None) -> int:
     import torch
 
     from salad_core.io import load_model
+    from salad_core.train.config import ADAMW_IMPLEMENTATIONS, TrainConfig, make_adamw
 
+    KINDS = tuple(reversed(ADAMW_IMPLEMENTATIONS))              # loop, foreach, fused
     torch.set_num_threads(args.threads)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"AdamW step alone, {args.threads} thread(s), {args.rounds} interleaved rounds, load {load:.1f}, "
@@ -51,9 +52,7 @@ def main(argv=None) -> int:
         model = load_model(stem)[0].float()
         base = [q.detach().clone() for q in model.parameters() if q.requires_grad]   # what the trainer optimises
         params = {k: [torch.nn.Parameter(b.clone()) for b in base] for k in KINDS}
-        opts = {k: torch.optim.AdamW(params[k], lr=1e-4, betas=(0.9, 0.99), eps=1e-8, weight_decay=0.0,
-                                     foreach=(k == "foreach"), fused=(k == "fused") or None)
-                for k in KINDS}
+        opts = {k: make_adamw(params[k], TrainConfig(adamw=k, weight_decay=0.0), lr=1e-4) for k in KINDS}
         gen = torch.Generator().manual_seed(0)
         grads = [[torch.empty_like(b).normal_(generator=gen) for b in base] for _ in range(4)]   # the params' strides
         times: dict[str, list[float]] = {k: [] for k in KINDS}

@@ -1,6 +1,7 @@
-"""What the attention measurement scripts share (``measure_editing.py``, ``measure_new_edits.py``):
-the procedural corpus's annotated clips, a mean that skips missing values, the summary tables they
-print and the start and end of a run (torch threads, settings, total time, JSON).
+"""What the attention measurement scripts share (``measure_editing.py``, ``measure_new_edits.py``,
+``measure_real_edits.py``): the procedural corpus's annotated clips, the mirror edits they measure, a mean
+that skips missing values, the summary tables they print and the start and end of a run (torch threads,
+settings, total time, JSON).
 
 The scripts import it as a sibling module (``python scripts/NAME.py`` puts ``scripts/`` first on
 ``sys.path``); it is not part of the ``salad_core`` package.
@@ -129,3 +130,14 @@ def finish_run(results: dict, start: float, json_path: Path | None) -> dict:
         json_path.write_text(json.dumps(results, indent=2, default=float) + "\n")
         print(f"wrote {json_path}")
     return results
+
+
+def mirror_edits(parts: str, self_attention: tuple[str, ...] = (), window: tuple[float, float] = (0.0, 1.0)) -> list:
+    """``Mirror(parts)``, plus ``MirrorSelfAttention`` of the same parts over ``window`` when
+    ``self_attention`` names kinds (temporal, skeletal)."""
+    from salad_core.attention import Mirror, MirrorSelfAttention
+
+    edits = [Mirror(parts)]
+    if self_attention:
+        edits.append(MirrorSelfAttention(parts, steps=tuple(window), kinds=tuple(self_attention)))
+    return edits

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from salad_core.attention import CaptureConfig, InjectSelfAttention, Mirror, MirrorSelfAttention, Reweight, WordSwap
+from salad_core.attention import CaptureConfig, InjectSelfAttention, Mirror, Reweight, WordSwap
 from salad_core.attention.measure import (left_right_ratio, localisation, mirror_closeness, part_activity_change,
                                           root_path_difference, spearman, wrist_height)
 from salad_core.data.procedural import PRIMITIVES, Action, in_language, parse_prompt, primitive_parts
@@ -43,7 +43,7 @@ from salad_core.motion import bone_lengths, features_to_joints
 from salad_core.pipeline import SaladPipeline
 from salad_core.skeleton import get_skeleton
 
-from _measure_common import (annotated_clips, deepmimic_items, finish_run, mean, print_summary, run_settings,
+from _measure_common import (annotated_clips, deepmimic_items, finish_run, mean, mirror_edits, print_summary, run_settings,
                              start_run)  # scripts/
 
 #: Word swaps that keep the number of words (source word -> target word).
@@ -114,9 +114,7 @@ def measure_localisation(pipe, clips, args) -> dict:
 def measure_mirroring(pipe, prompts, args) -> dict:
     rows = []
     for i, prompt in enumerate(prompts):
-        edits = [Mirror("all")]
-        if args.mirror_self_attention:
-            edits.append(MirrorSelfAttention("all", steps=tuple(args.mirror_window), kinds=tuple(args.mirror_self_attention)))
+        edits = mirror_edits("all", args.mirror_self_attention, args.mirror_window)
         out = pipe.edit(prompt, edits=edits, lengths=args.length, num_steps=args.steps,
                         guidance_scale=args.guidance, seed=args.seed + i)
         before, after = left_right_ratio(out.source.joints[0]), left_right_ratio(out.edited.joints[0])

@@ -36,13 +36,13 @@ from pathlib import Path
 
 import numpy as np
 
-from salad_core.attention import Mirror, MirrorSelfAttention
 from salad_core.attention.measure import left_right_ratio, mirror_closeness
 from salad_core.motion import features_to_joints, mirror_features
 from salad_core.pipeline import SaladPipeline
 from salad_core.skeleton import PART_NAMES, get_skeleton
 
-from _measure_common import deepmimic_items, finish_run, mean, print_summary, run_settings, start_run  # scripts/
+from _measure_common import (deepmimic_items, finish_run, mean, mirror_edits, print_summary, run_settings,  # scripts/
+                             start_run)
 
 #: The limb pairs Mirror can act on alone, and the body parts that belong to each.
 LIMBS = {"arms": ("left arm", "right arm"), "legs": ("left leg", "right leg")}
@@ -134,15 +134,6 @@ def real_items(pipe, max_clips: int) -> list[dict]:
         items += [item, {**item, "id": f"{item['id']} (mirrored)",
                          "features": mirror_features(item["features"]).astype(np.float32)}]
     return items
-
-
-def mirror_edits(limb: str, self_attention: tuple[str, ...], window: tuple[float, float]) -> list:
-    """``Mirror(limb)``, plus :class:`MirrorSelfAttention` of the same limb over ``window`` when
-    ``self_attention`` names kinds (temporal, skeletal)."""
-    edits = [Mirror(limb)]
-    if self_attention:
-        edits.append(MirrorSelfAttention(limb, steps=window, kinds=self_attention))
-    return edits
 
 
 def measure(pipe, items: list[dict], *, steps: int, sided: float, self_attention: tuple[str, ...] = (),

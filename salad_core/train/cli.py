@@ -96,11 +96,16 @@ def _keep_legacy_numerics(doc: dict[str, Any], what: str) -> dict[str, Any]:
     return {**fields, **doc}
 
 
+def _has_train_field(doc: dict[str, Any], name: str) -> bool:
+    """Whether any train section of a run's config (the shared one or a KeyMotion stage's) sets ``name``."""
+    trains = [doc.get("train")] + [(doc.get(stage) or {}).get("train") for stage in ("kf_vae", "pst", "mmae")]
+    return any(isinstance(t, dict) and name in t for t in trains)
+
+
 def _keep_own_optimizer(doc: dict[str, Any], what: str) -> dict[str, Any]:
     """A run whose config.json predates ``TrainConfig.adamw`` trained with PyTorch's per-tensor AdamW loop
     and resumes with it (the fused default computes the same update, but not bit for bit)."""
-    trains = [doc.get("train")] + [(doc.get(stage) or {}).get("train") for stage in ("kf_vae", "pst", "mmae")]
-    if any(isinstance(t, dict) and "adamw" in t for t in trains):
+    if _has_train_field(doc, "adamw"):
         return doc
     if "train" in doc or what == "keymotion":
         return {**doc, "train": {**(doc.get("train") or {}), "adamw": "loop"}}
@@ -117,8 +122,7 @@ def _read_doc(args: argparse.Namespace) -> dict[str, Any]:
     doc = json.loads(path.read_text())
     if not isinstance(doc, dict):
         raise SystemExit(f"--config {path}: expected a JSON object")
-    trains = [doc.get("train")] + [(doc.get(stage) or {}).get("train") for stage in ("kf_vae", "pst", "mmae")]
-    if own and not any(isinstance(t, dict) and "batching" in t for t in trains):
+    if own and not _has_train_field(doc, "batching"):
         log.info("%s predates length buckets and the latent cache: resuming with the numerics it started with", path)
         doc = _keep_legacy_numerics(doc, args.what)
     if own:
