@@ -9,7 +9,12 @@ multiple of 4 frames, are reconstructed (posterior mean) and turned into joints 
 printed per set and VAE, with :mod:`salad_core.eval.physics`'s definitions: MPJPE (cm, root-aligned
 as the official ``test_vae``), foot skating (mean m/s over the frame pairs in contact), ground penetration
 (mean over clips of the max, cm) and the bone-length error p95 (cm), and the same measures of the
-clips themselves as the reference row.
+clips themselves as the reference row, and the worst bone (cm, max over frames and bones).
+
+``--perturb`` adds, per VAE, rows for the decoded *perturbed* posterior means (issue 20's robustness lever: the
+sampler lands near, not on, the encoded latents): ``noise:S`` adds Gaussian noise of std ``S`` (in units of the
+latents' own std over the clips, seeded), ``scale:F`` multiplies the latents' deviation from their mean over the
+clips by ``F``. MPJPE is then against the clips, i.e. the drift the perturbation causes plus the VAE's own error.
 """
 from __future__ import annotations
 
@@ -36,17 +41,43 @@ def measure(joints: list[np.ndarray], reference: list[np.ndarray] | None = None)
     """MPJPE against ``reference`` joints (cm, root-aligned; nan without them), skating, penetration and
     bone p95 of ``joints`` (each ``(N, 22, 3)``)."""
     from salad_core.eval.metrics import mpjpe
-    from salad_core.eval.physics import foot_skating, ground_penetration, pooled_bone_p95
+    from salad_core.eval.physics import bone_length_errors, foot_skating, ground_penetration, pooled_bone_p95
 
     skate = np.concatenate([foot_skating(j) for j in joints])
     pen = [ground_penetration(j).max() for j in joints]
     err = float("nan") if reference is None else 100 * float(np.mean([mpjpe(a, b) for a, b in zip(joints, reference)]))
     return {"mpjpe_cm": err, "skating": float(skate.mean()), "skate_share": float((skate > 0.1).mean()),
-            "penetration_cm": 100 * float(np.mean(pen)), "bone_p95_cm": pooled_bone_p95(joints)}
+            "penetration_cm": 100 * float(np.mean(pen)), "bone_p95_cm": pooled_bone_p95(joints),
+            "bone_max_cm": 100 * max(float(bone_length_errors(j)["ref_error"].max()) for j in joints)}
 
 
-def reconstruct(vae_path: str, clips: list[np.ndarray]) -> list[np.ndarray]:
-    """Posterior-mean reconstructions of ``clips`` (raw features) by the VAE at ``vae_path``."""
+def parse_perturbation(spec: str) -> tuple[str, float]:
+    """``"noise:0.5"`` -> ("noise", 0.5); ``"scale:1.5"`` -> ("scale", 1.5); anything else is an error."""
+    kind, _, value = spec.partition(":")
+    try:
+        amount = float(value)
+    except ValueError:
+        amount = float("nan")
+    if kind not in ("noise", "scale") or not np.isfinite(amount) or amount < 0:
+        raise argparse.ArgumentTypeError(f"bad --perturb {spec!r}: use noise:STD or scale:FACTOR with a number >= 0")
+    return kind, amount
+
+
+def perturb_latents(latents: list[np.ndarray], kind: str, amount: float, seed: int = 0) -> list[np.ndarray]:
+    """Perturb posterior means ``latents`` (each ``(T, P, C)`` or any shape with channels last) together:
+    their mean and std per channel over all clips define the units (see the module docstring)."""
+    flat = np.concatenate([z.reshape(-1, z.shape[-1]) for z in latents])
+    mu, sd = flat.mean(0), flat.std(0)
+    rng = np.random.default_rng(seed)
+    if kind == "noise":
+        return [z + amount * sd * rng.standard_normal(z.shape).astype(np.float32) for z in latents]
+    return [mu + amount * (z - mu) for z in latents]
+
+
+def reconstruct(vae_path: str, clips: list[np.ndarray], perturbation: tuple[str, float] | None = None
+                ) -> list[np.ndarray]:
+    """Posterior-mean reconstructions of ``clips`` (raw features) by the VAE at ``vae_path``, the latents
+    perturbed first when ``perturbation`` (``parse_perturbation``'s pair) is given."""
     import torch
 
     from salad_core.eval.reconstruction import reconstruct_features
@@ -58,7 +89,12 @@ def reconstruct(vae_path: str, clips: list[np.ndarray]) -> list[np.ndarray]:
     stats = load_tensors(source.stats)
     mean, std = stats["mean"].numpy(), stats["std"].numpy()
     with torch.no_grad():
-        return [reconstruct_features(vae, mean, std, f[None], [len(f)])[0] for f in clips]
+        if perturbation is None:
+            return [reconstruct_features(vae, mean, std, f[None], [len(f)])[0] for f in clips]
+        vae.eval()
+        latents = [vae.encode(torch.from_numpy((f - mean) / std)[None], sample=False).z[0].numpy() for f in clips]
+        latents = perturb_latents(latents, *perturbation)
+        return [vae.decode(torch.from_numpy(z)[None]).float()[0].numpy() * std + mean for z in latents]
 
 
 def main(argv=None) -> int:
@@ -67,6 +103,8 @@ def main(argv=None) -> int:
     ap.add_argument("--general", type=Path, default=None, help="a general-motion folder (its test split)")
     ap.add_argument("--vae", action="append", required=True, help="a VAE run, exported VAE or pipeline folder")
     ap.add_argument("--clips", type=int, default=60)
+    ap.add_argument("--perturb", type=parse_perturbation, nargs="*", default=[],
+                    help="extra rows per VAE: noise:STD and/or scale:FACTOR of the latents (module docstring)")
     args = ap.parse_args(argv)
     import torch
 
@@ -74,16 +112,19 @@ def main(argv=None) -> int:
 
     torch.set_num_threads(1)
     sets = {"corpus": args.data} | ({"general": args.general} if args.general else {})
-    print(f"{'set':<8} {'motions':<44} {'MPJPE cm':>8} {'skating m/s':>11} {'> 0.1':>6} {'pen. cm':>7} {'bone p95':>8}")
+    print(f"{'set':<8} {'motions':<44} {'MPJPE cm':>8} {'skating m/s':>11} {'> 0.1':>6} {'pen. cm':>7} {'bone p95':>8} {'bone max':>8}")
     for name, root in sets.items():
         clips = load_clips(root, args.clips)
         truth = [features_to_joints(f) for f in clips]
         rows = {"(the clips)": measure(truth)}
         for v in args.vae:
             rows[v] = measure([features_to_joints(f) for f in reconstruct(v, clips)], truth)
+            for kind, amount in args.perturb:
+                rec = reconstruct(v, clips, (kind, amount))
+                rows[f"{v} {kind} {amount:g}"] = measure([features_to_joints(f) for f in rec], truth)
         for label, r in rows.items():
             print(f"{name:<8} {label[-44:]:<44} {r['mpjpe_cm']:>8.2f} {r['skating']:>11.3f} {r['skate_share']:>6.2f} "
-                  f"{r['penetration_cm']:>7.2f} {r['bone_p95_cm']:>8.2f}")
+                  f"{r['penetration_cm']:>7.2f} {r['bone_p95_cm']:>8.2f} {r['bone_max_cm']:>8.2f}")
     return 0
 
 

@@ -295,6 +295,24 @@ def test_checks_pass_on_the_corpus_own_clips(tiny_procedural_corpus):
     assert checked >= 20
 
 
+def test_reference_ranges_are_the_widened_extremes_of_the_reference_clips_and_say_how_many(tiny_procedural_corpus,
+                                                                                            sample_dir):
+    rises = pp.corpus_reference_rises(tiny_procedural_corpus)
+    assert rises and all(len(v) >= 1 for v in rises.values())
+    ranges = pp.corpus_reference_ranges(tiny_procedural_corpus)
+    assert set(ranges) == set(rises)
+    for key, values in rises.items():
+        lo, hi = ranges[key]
+        assert lo <= min(values) < lo + 0.001 and hi - 0.001 < max(values) <= hi
+    assert pp.rise_ranges({"jump_rise_m": [0.2504, 0.3001]}) == {"jump_rise_m": (0.25, 0.301)}
+    # the benchmark's record says how many clips each measured range rests on (two clips make a thin range)
+    res = pp.run_benchmark({"statue": lambda texts, lengths, seed: [still(n) for n in lengths]},
+                           pp.BenchSettings(steps=1, seeds=(0,)), data_root=tiny_procedural_corpus,
+                           sample_dir=sample_dir, prompts=pp.PROMPTS[:1])
+    for key, values in rises.items():
+        assert f"{key} from {len(values)} clip" in res["reference_source"]
+
+
 def test_runner_with_fake_generators(tiny_procedural_corpus, sample_dir):
     """Deterministic generators: every seed gives the same motion (diversity 0) and the checks see the
     motions they were given."""

@@ -39,7 +39,7 @@ from ..skeleton import Skeleton, get_skeleton
 from . import physics as ph
 
 __all__ = ["Check", "CheckResult", "BenchmarkPrompt", "PROMPTS", "MEASURES", "REFERENCE_RANGES",
-           "BenchSettings", "Generator", "corpus_reference_ranges", "load_joints", "measure_clips",
+           "BenchSettings", "Generator", "corpus_reference_ranges", "corpus_reference_rises", "rise_ranges", "load_joints", "measure_clips",
            "caption_diversity", "reference_rows", "run_benchmark", "benchmark_markdown", "targets",
            "saved_generators"]
 
@@ -388,14 +388,14 @@ def caption_diversity(root: str | Path, splits: Sequence[str] = ("train", "val",
 _JUMP_WORDS = re.compile(r"\b(jump|jumps|jumping|hop|hops|hopping|leap|leaps|leaping|skip|skips|skipping|spring|springs|springing)\b")
 
 
-def corpus_reference_ranges(root: str | Path, splits: Sequence[str] = ("train", "val", "test"),
-                            skeleton: str | Skeleton = "humanml3d") -> dict[str, tuple[float, float]]:
-    """Measure :data:`REFERENCE_RANGES` on a procedural corpus (needs its ``annotations/``).
+def corpus_reference_rises(root: str | Path, splits: Sequence[str] = ("train", "val", "test"),
+                           skeleton: str | Skeleton = "humanml3d") -> dict[str, list[float]]:
+    """The pelvis rises (m) of a procedural corpus's reference clips (needs its ``annotations/``), per
+    :data:`REFERENCE_RANGES` key: one value per reference clip, so their number says how much a range rests on.
 
     A clip is a jump reference when every caption of its annotation is one phrase with a jump word
     (jump, hop, leap, skip: the corpus's paraphrases of a jump) and no "jacks"; a jumping-jacks
-    reference when every caption is one phrase with "jacks". The range is (min, max) of the pelvis
-    rise over those clips, widened to whole millimetres. Keys without clips are left out.
+    reference when every caption is one phrase with "jacks". Keys without clips are left out.
     """
     root = Path(root)
     rises: dict[str, list[float]] = {"jump_rise_m": [], "jumping_jacks_rise_m": []}
@@ -418,8 +418,19 @@ def corpus_reference_ranges(root: str | Path, splits: Sequence[str] = ("train", 
             else:
                 continue
             rises[key].append(ph.measure_motion(load_joints(root, cid, skeleton), skeleton).jump_rise_m)
-    # widen to whole millimetres so that every reference clip lies inside its range
+    return {k: v for k, v in rises.items() if v}
+
+
+def rise_ranges(rises: Mapping[str, Sequence[float]]) -> dict[str, tuple[float, float]]:
+    """(min, max) of each key's rises, widened to whole millimetres so that every reference clip lies inside."""
     return {k: (math.floor(min(v) * 1000) / 1000, math.ceil(max(v) * 1000) / 1000) for k, v in rises.items() if v}
+
+
+def corpus_reference_ranges(root: str | Path, splits: Sequence[str] = ("train", "val", "test"),
+                            skeleton: str | Skeleton = "humanml3d") -> dict[str, tuple[float, float]]:
+    """Measure :data:`REFERENCE_RANGES` on a procedural corpus: :func:`rise_ranges` of
+    :func:`corpus_reference_rises` (the reference clips are defined there)."""
+    return rise_ranges(corpus_reference_rises(root, splits, skeleton))
 
 
 def reference_rows(data_root: str | Path | None = None, sample_dir: str | Path | None = None,
@@ -515,10 +526,11 @@ def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings =
     chosen = list(prompts)[: settings.num_prompts] if settings.num_prompts else list(prompts)
     ranges, source = dict(REFERENCE_RANGES), "recorded (salad_core.eval.physics_prompts.REFERENCE_RANGES)"
     if data_root is not None and (Path(data_root) / "annotations").is_dir():
-        measured = corpus_reference_ranges(data_root, skeleton=sk)
-        if measured:
-            ranges.update(measured)
-            source = f"measured on {data_root} ({', '.join(sorted(measured))}; others recorded)"
+        rises = corpus_reference_rises(data_root, skeleton=sk)
+        if rises:
+            ranges.update(rise_ranges(rises))
+            counts = ", ".join(f"{k} from {len(v)} clip{'s' if len(v) != 1 else ''}" for k, v in sorted(rises.items()))
+            source = f"measured on {data_root} ({counts}; others recorded)"
     t0 = time.perf_counter()
     references = reference_rows(data_root, sample_dir, skeleton=sk)
     say(f"reference rows measured ({time.perf_counter() - t0:.0f} s)")
