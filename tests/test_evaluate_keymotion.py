@@ -35,11 +35,19 @@ def test_measuring_stages_get_the_weights_data_and_settings(tmp_path, recorder):
         f"scripts/keymotion_card_figures.py --data /data/corpus --weights /w --eval --renders {out}/renders "
         f"--out {out}/card.json",
     ]
+    res = _run(out, "t2m", "t2m_shipped", python=str(fake), WEIGHTS="/w", THREADS="1", EVALUATOR="/ev")
+    assert res.returncode == 0, res.stderr
+    assert log.read_text().splitlines()[5:] == [
+        f"-m salad_core.cli eval --data /data/corpus --threads 1 --evaluator /ev --replications 5 --max-samples 256 "
+        f"--no-mm --keymotion /w --name KeyMotion (candidate) --out {out}/t2m",
+        f"-m salad_core.cli eval --data /data/corpus --threads 1 --evaluator /ev --replications 5 --max-samples 256 "
+        f"--no-mm --keymotion --name KeyMotion (shipped) --out {out}/t2m_shipped",
+    ]
     res = _run(out, python=str(fake), WEIGHTS="/w")                    # all stages: only export is left
     assert res.returncode != 0 and "set RUN" in res.stderr            # ... and it needs the run
     res = _run(out, "guidance", "physics", python=str(fake), WEIGHTS="/w")
     assert res.returncode == 0 and res.stdout.count("done before") == 2
-    assert len(log.read_text().splitlines()) == 5                     # nothing ran again
+    assert len(log.read_text().splitlines()) == 7                     # nothing ran again
 
 
 def test_data_and_run_are_required(tmp_path, recorder):

@@ -197,3 +197,26 @@ def test_cli_quick_mode_end_to_end(run, corpus, tmp_path, capsys):
     assert len(doc[1]["values"]["FID"]) == 2
     assert main(["--data", str(corpus), "--evaluator", str(tmp_path / "none")]) == 2
     assert "train_evaluator" in capsys.readouterr().err
+
+
+def test_cli_evaluates_keymotion_with_the_same_protocol(run, corpus, tmp_path, capsys):
+    """``salad eval --keymotion`` (Table 1's other row): the shipped KeyMotion through the same T2M protocol and
+    evaluator as SALAD, labelled and recorded as KeyMotion; naming both models in one run is refused."""
+    from salad_core.eval.cli import main
+
+    out, _ = run
+    export_evaluator(out, tmp_path / "evaluator")
+    res = tmp_path / "results"
+    code = main(["--data", str(corpus), "--keymotion", "--evaluator", str(tmp_path / "evaluator"), "--quick",
+                 "--steps", "2", "--out", str(res)])
+    printed = capsys.readouterr().out
+    assert code == 0 and "| KeyMotion" in printed and "| SALAD" not in printed
+    doc = json.loads((res / "results.json").read_text())
+    assert [d["name"] for d in doc] == ["Real motion", "KeyMotion"]
+    s = doc[1]["settings"]
+    assert (s["replications"], s["num_steps"], s["guidance_scale"], s["weights"]) == \
+        (2, 2, 7.5, "salad_core/weights/keymotion")
+    assert all(np.isfinite(v) for v in doc[1]["values"]["FID"])
+    assert main(["--data", str(corpus), "--keymotion", "--weights", str(tmp_path), "--evaluator",
+                 str(tmp_path / "evaluator")]) == 2
+    assert "one model per run" in capsys.readouterr().err

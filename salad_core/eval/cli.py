@@ -4,6 +4,7 @@
 
     salad eval --data DIR [--weights DIR] [--evaluator DIR] [--quick] [--cfg-sweep]
                [--replications N] [--out DIR] ...
+    salad eval --data DIR --keymotion [DIR] [...]      # the same protocol for KeyMotion (Table 1's other row)
     salad eval --physics --data CORPUS [--weights DIR] [--keymotion [DIR]] [--steps N] [--guidance W]
                [--seeds N] [--prompts N] [--sample DIR] [--out DIR]
 
@@ -90,7 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="run the physical-plausibility benchmark (bone lengths, foot skating, penetration, "
                            "jumps, per-action checks) instead of the T2M protocol")
     phys.add_argument("--keymotion", nargs="?", const="shipped", default=None, metavar="DIR",
-                      help="also benchmark KeyMotion (no value: the shipped weights)")
+                      help="KeyMotion weights (no value: the shipped ones): with --physics, benchmarked beside "
+                           "SALAD; without, the T2M protocol evaluates KeyMotion instead of SALAD (row 'KeyMotion')")
     phys.add_argument("--seeds", type=int, default=3, help="seeds per prompt, from --seed (default 3)")
     phys.add_argument("--prompts", type=int, default=None, metavar="N",
                       help="only the first N benchmark prompts (default: all)")
@@ -404,17 +406,30 @@ def run(args) -> int:
         evaluator.source = f"official T2M evaluator ({args.dataset}) from {args.official}"
     else:
         evaluator, _ = load_packaged_evaluator(args.evaluator)
-    from salad_core.pipeline import SaladPipeline
+    name, weights = args.name, args.weights
+    if args.keymotion is not None:
+        if args.weights is not None:
+            raise ValueError("--weights names a SALAD pipeline and --keymotion a KeyMotion one: the T2M protocol "
+                             "evaluates one model per run (run it twice for both rows)")
+        from salad_core.keymotion.pipeline import KeyMotionPipeline
 
-    pipe = SaladPipeline.from_pretrained(args.weights)
+        weights = "salad_core/weights/keymotion" if args.keymotion == "shipped" else args.keymotion
+        pipe = KeyMotionPipeline.from_pretrained(None if args.keymotion == "shipped" else args.keymotion)
+        pipe.source = weights
+        name = "KeyMotion" if args.name == "SALAD" else args.name
+    else:
+        from salad_core.pipeline import SaladPipeline
+
+        pipe = SaladPipeline.from_pretrained(args.weights)
     print(settings.describe(), flush=True)
     t0 = time.perf_counter()
     if args.cfg_sweep:
-        results = cfg_sweep(pipe, data, evaluator, settings, scales=_scales(args.scales), name=args.name,
+        results = cfg_sweep(pipe, data, evaluator, settings, scales=_scales(args.scales), name=name,
                             include_real=not args.no_real, progress=args.progress)
     else:
         results = [] if args.no_real else [evaluate_real(data, evaluator, settings)]
-        results.append(evaluate_generator(pipe, data, evaluator, settings, name=args.name, progress=args.progress))
+        results.append(evaluate_generator(pipe, data, evaluator, settings, name=name, weights=weights,
+                                          progress=args.progress))
     df = results_frame(results)
     md, tex = to_markdown(df), to_latex(df)
     print(md)
