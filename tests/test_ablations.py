@@ -380,6 +380,24 @@ def test_staged_study_trains_evaluates_resumes_and_ships(tmp_path, monkeypatch):
     assert index["full"]["steps"] == dens.decision.steps and index["vae_st"]["steps"] == vae_stop
     assert json.loads((out / "no_st" / "pipeline.json").read_text())["vae"] == "../vae_pose/vae"
     assert (out / "evaluations" / f"dens@{last}.json").is_file() and "## Group `dens`" in (out / "MODEL_CARD.md").read_text()
+    # the notebooks' tables: read back from the shipped folder alone, exactly the card's sections
+    from salad_core.ablations import shipped_tables
+
+    tables = shipped_tables(out)
+    assert list(tables) == ["table2", "table3"]
+    card = (out / "MODEL_CARD.md").read_text()
+    for md in tables.values():
+        assert md.strip() in card
+    assert "| `full` vs `no_st` | FID |" in tables["table3"] and "paper: w/o ST-Latent" in tables["table3"]
+    old_style = tmp_path / "fixed_budget"                        # the 0.3 study's index: no evaluations
+    old_style.mkdir()
+    (old_style / "index.json").write_text(json.dumps({k: {kk: vv for kk, vv in e.items()
+                                                          if kk not in ("evaluation", "paper_rows")}
+                                                      for k, e in index.items()}))
+    assert shipped_tables(old_style) == {}
+    (out / "evaluations" / f"dens@{last}.json").unlink()
+    with pytest.raises(FileNotFoundError, match=f"dens@{last}.json"):
+        shipped_tables(out)
     pipe = load_ablation_pipeline("no_st", out)
     res = pipe("a person walks", lengths=16, seed=0, num_steps=2)
     assert res.features.shape == (1, 16, 263) and np.isfinite(res.features).all()

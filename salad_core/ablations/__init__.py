@@ -22,7 +22,7 @@ shipped VAE, so "w/o ST-Latent" compares two VAEs trained alike.
 """
 from __future__ import annotations
 
-from .card import model_card
+from .card import model_card, shipped_tables
 from .orderings import PAPER_PAIRS, TABLE_METRICS, compare, paper_ordering
 from .runner import GroupOutcome, run_study, study_plan
 from .shipping import ship_study
@@ -36,4 +36,4 @@ __all__ = ["AblationVariant", "AblationRecipe", "TrainJob", "load_recipe", "plan
            "job_command", "ablations_dir", "list_ablations", "load_ablation_pipeline", "load_ablation_vae",
            "StagedRecipe", "StudyGroup", "load_staged_recipe", "stage_jobs", "StopRule", "StopDecision", "decide",
            "PAPER_PAIRS", "TABLE_METRICS", "compare", "paper_ordering", "evaluate_stage", "group_orderings",
-           "GroupOutcome", "run_study", "study_plan", "ship_study", "model_card"]
+           "GroupOutcome", "run_study", "study_plan", "ship_study", "model_card", "shipped_tables"]

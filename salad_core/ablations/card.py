@@ -7,11 +7,14 @@ whether our intervals separate. Nothing is measured here: every number comes fro
 """
 from __future__ import annotations
 
+import json
+import os
+from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from .orderings import TABLE_METRICS, paper_value
 
-__all__ = ["model_card", "TABLE_TITLES"]
+__all__ = ["model_card", "shipped_tables", "TABLE_TITLES"]
 
 #: How the card names the paper's tables.
 TABLE_TITLES = {"table2": "Table 2", "supp_table4": "supplement Table 4", "table3": "Table 3",
@@ -136,3 +139,38 @@ def model_card(outcomes: Mapping[str, Any], *, command: str, recipe_path: str = 
                                 f"{_SYMBOL_WORDS[o['ours']]}, paper {_SYMBOL_WORDS[o['paper']]}" for o in disagree)
                     + ". The notebooks say what was measured and why.", ""]
     return "\n".join(out).rstrip() + "\n"
+
+
+def shipped_tables(root: str | os.PathLike | None = None) -> dict[str, str]:
+    """The shipped staged study's paper tables, as the model card prints them: ``{table: markdown}``.
+
+    Each table (keys of :data:`TABLE_TITLES`) gets its rows at the final stage (our figure with its 95 % interval,
+    the paper's figure apart) and every paper pair's ordering at each evaluated stage, whether ours agrees and
+    whether our intervals separate; read from ``index.json`` and ``evaluations/`` of ``root`` (default: the
+    shipped ablation folder) alone, nothing is measured. A folder from the fixed-budget study (no evaluations)
+    gives ``{}``; a staged folder whose evaluation files are missing is an error naming the file.
+    """
+    from .study import ablations_dir, list_ablations
+
+    root = Path(root) if root is not None else ablations_dir()
+    index = list_ablations(root)
+    staged = {k: e for k, e in index.items() if e.get("evaluation") and e.get("paper_rows")}
+    if not staged:
+        return {}
+    groups: dict[str, dict[str, Any]] = {}
+    for entry in staged.values():
+        g = groups.setdefault(entry["group"], {"kind": entry["kind"], "final": entry["evaluation"], "tables": {}})
+        for table, paper_row in entry["paper_rows"].items():
+            g["tables"].setdefault(table, {})[entry["variant"]] = paper_row
+    out: dict[str, str] = {}
+    for name, g in groups.items():
+        final_path = root / g["final"]
+        if not final_path.is_file():
+            raise FileNotFoundError(f"{final_path} (named by {root / 'index.json'}) is missing: ship the study again")
+        evaluations = sorted((json.loads(p.read_text()) for p in (root / "evaluations").glob(f"{name}@*.json")),
+                             key=lambda doc: doc["steps"])
+        final = json.loads(final_path.read_text())
+        evaluations = [doc for doc in evaluations if doc["steps"] <= final["steps"]]
+        for table, rows in g["tables"].items():
+            out[table] = "\n".join(_table_section(table, rows, final, evaluations, g["kind"])).rstrip() + "\n"
+    return {t: out[t] for t in TABLE_TITLES if t in out}

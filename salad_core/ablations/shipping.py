@@ -78,7 +78,8 @@ def ship_study(recipe: StagedRecipe, outcomes: Mapping[str, Any], out: str | os.
                              "vae": f"vae_{v.vae}" if v.vae else None, "steps": steps, "group": group.name,
                              "stop": outcome.decision.reason, "stage": group.stage_name(steps),
                              "evaluation": f"evaluations/{group.stage_name(steps)}.json",
-                             "model": v.model, "diffusion": v.diffusion}
+                             "model": v.model, "diffusion": v.diffusion,
+                             "paper_rows": {t: rows[name] for t, rows in group.tables.items() if name in rows}}
         (out / "evaluations").mkdir(exist_ok=True)
         for doc in outcome.evaluations:
             shutil.copy2(evaluation_path(work, group, doc["steps"]), out / "evaluations")
