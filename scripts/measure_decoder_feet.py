@@ -1,15 +1,15 @@
 """Feet, floor and bones of VAE reconstructions, side by side for several VAEs (issue 20's skating lever).
 
     python scripts/measure_decoder_feet.py --data CORPUS [--general GENERAL] --vae salad_core/weights/salad \
-        --vae ~/salad-runs/v4/dec_foot20 [--clips 60]
+        --vae ~/salad-runs/v4/dec_foot20 [--clips 60] [--perturb noise:0.5 scale:1.5]
 
 Each ``--vae`` is a VAE run folder (``best``), an exported VAE or a pipeline folder (anything
 ``VAETrainConfig.init_from`` takes). The first ``--clips`` clips of each set's test split, cropped to a
 multiple of 4 frames, are reconstructed (posterior mean) and turned into joints the HumanML3D way;
 printed per set and VAE, with :mod:`salad_core.eval.physics`'s definitions: MPJPE (cm, root-aligned
 as the official ``test_vae``), foot skating (mean m/s over the frame pairs in contact), ground penetration
-(mean over clips of the max, cm) and the bone-length error p95 (cm), and the same measures of the
-clips themselves as the reference row, and the worst bone (cm, max over frames and bones).
+(mean over clips of the max, cm), the bone-length error p95 and the worst bone (cm, max over frames and
+bones), and the same measures of the clips themselves as the reference row.
 
 ``--perturb`` adds, per VAE, rows for the decoded *perturbed* posterior means (issue 20's robustness lever: the
 sampler lands near, not on, the encoded latents): ``noise:S`` adds Gaussian noise of std ``S`` (in units of the
