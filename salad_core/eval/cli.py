@@ -364,7 +364,7 @@ def run_guidance_sweep(args) -> int:
     pick, why = choose(result["rows"])
     result["chosen"] = {"index": pick, "why": why, "guidance": asdict(grid[pick])}
     result["settings"].update(weights=pipe.source, data=str(data), recovery=args.recovery,
-                              seconds=round(time.perf_counter() - t0, 1))
+                              seconds=round(time.perf_counter() - t0, 1), identity=identity)
     md = sweep_markdown(result, pick) + f"\n\nChosen: {why}.\n"
     print(md)
     print('pipeline.json entry: "guidance": ' + json.dumps(asdict(grid[pick])))
