@@ -31,13 +31,13 @@ def relative_spread(latents, reference) -> float:
 
 
 def parse_scales(text: str) -> list[float]:
+    """The ``--scales`` list; a bad one ends the script with the reason."""
+    from salad_core.eval.cli import comma_floats
+
     try:
-        scales = [float(s) for s in text.split(",") if s.strip()]
-    except ValueError:
-        raise SystemExit(f"--scales: {text!r} is not a comma-separated list of numbers") from None
-    if not scales:
-        raise SystemExit("--scales is empty")
-    return scales
+        return comma_floats("--scales", text)
+    except ValueError as err:
+        raise SystemExit(str(err)) from None
 
 
 def encoded_clips(pipe, root: Path, clips: int) -> np.ndarray:

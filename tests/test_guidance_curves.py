@@ -24,7 +24,7 @@ def test_relative_spread_is_one_on_the_data_and_scales_with_the_deviation(G):
     assert G.relative_spread(np.tile(mu, (7, 1)), ref) == pytest.approx(0.0)
 
 
-@pytest.mark.parametrize("text, message", [("", "empty"), ("1,x", "not a comma-separated")])
+@pytest.mark.parametrize("text, message", [("", "empty"), ("1,x", "must be comma-separated")])
 def test_bad_weight_lists_are_refused_by_name(G, text, message):
     with pytest.raises(SystemExit, match=message):
         G.parse_scales(text)

@@ -45,7 +45,7 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "comma_floats", "main"]
 
 log = logging.getLogger("salad.eval")
 
@@ -140,18 +140,23 @@ def _settings(args):
     return EvalSettings.quick_mode(**changes) if args.quick else EvalSettings(**changes)
 
 
+def comma_floats(flag: str, text: str) -> list[float]:
+    """``"1,4.5, 7.5"`` -> ``[1.0, 4.5, 7.5]``; a ValueError naming ``flag`` for a non-number or an empty list."""
+    try:
+        out = [float(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        raise ValueError(f"{flag} {text!r} must be comma-separated numbers, e.g. 1.5,7.5") from None
+    if not out:
+        raise ValueError(f"{flag} is empty")
+    return out
+
+
 def _scales(text: str | None) -> list[float]:
     from .settings import DEFAULT_CFG_SCALES
 
     if text is None:
         return list(DEFAULT_CFG_SCALES)
-    try:
-        out = [float(s) for s in text.split(",") if s.strip()]
-    except ValueError:
-        raise ValueError(f"--scales {text!r} must be comma-separated numbers, e.g. 1.5,7.5,12.5") from None
-    if not out:
-        raise ValueError("--scales is empty")
-    return out
+    return comma_floats("--scales", text)
 
 
 def _write(out_dir: Path, results, df, md: str, tex: str) -> list[Path]:
@@ -280,14 +285,6 @@ def run_physics(args) -> int:
     return 0
 
 
-def _floats(flag: str, text: str) -> list[float]:
-    try:
-        out = [float(s) for s in text.split(",") if s.strip()]
-    except ValueError:
-        raise ValueError(f"{flag} {text!r} must be comma-separated numbers") from None
-    if not out:
-        raise ValueError(f"{flag} is empty")
-    return out
 
 
 def _intervals(text: str) -> list[tuple[float, float] | None]:
@@ -342,7 +339,7 @@ def run_guidance_sweep(args) -> int:
     if not (data / f"{args.split}.txt").is_file():
         raise FileNotFoundError(f"--data {data} has no {args.split}.txt; give a corpus folder "
                                 "(salad corpus build --out DIR)")
-    grid = guidance_grid(_scales(args.scales or "1,2,3,4.5,6,7.5"), _floats("--rescales", args.rescales),
+    grid = guidance_grid(_scales(args.scales or "1,2,3,4.5,6,7.5"), comma_floats("--rescales", args.rescales),
                          _intervals(args.intervals))
     settings = _settings(args)
     bench = BenchSettings(steps=args.steps, seeds=tuple(range(args.seed, args.seed + args.seeds)),
