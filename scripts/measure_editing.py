@@ -225,6 +225,12 @@ def measure_reweight(pipe, prompts, scales, args) -> dict:
 
 
 def _inversion_rows(pipe, items, methods, args) -> list[dict]:
+    """Invert and mirror each item with each (method, exact) pair. Null-text inversion optimises against a plain
+    guidance weight, so with a rescaled or interval guidance it is left out (said once) rather than failing."""
+    guidance = pipe.resolve_guidance(args.guidance)
+    if any(m == "null_text" for m, _ in methods) and (guidance.rescale or guidance.interval is not None):
+        print(f"  null-text inversion left out: it takes a plain guidance weight, the weights' is {guidance}")
+        methods = [(m, e) for m, e in methods if m != "null_text"]
     rows = []
     for item in items:
         for method, exact in methods:

@@ -450,6 +450,27 @@ def test_measure_script_runs_on_a_tiny_pipeline_and_corpus(pipe, tmp_path):
         script.main(["--data", str(tmp_path / "corpus"), "--sections", "x"])
 
 
+def test_measure_script_leaves_out_null_text_inversion_under_a_rescaled_default(pipe, tmp_path, capsys):
+    """Weights whose default guidance is rescaled (issue 20's sweep candidate): null-text inversion, which optimises
+    against a plain weight, is left out of section (e) with a note instead of failing the whole run."""
+    import json
+
+    from _doubles import load_script
+
+    from salad_core.data.procedural import build_corpus
+
+    script = load_script("measure_editing")
+    build_corpus(tmp_path / "corpus", size=40, progress=False)
+    weights = pipe.save_pretrained(tmp_path / "weights")
+    doc = json.loads((weights / "pipeline.json").read_text())
+    doc["guidance"] = {"scale": 2.0, "rescale": 0.7, "interval": None}
+    (weights / "pipeline.json").write_text(json.dumps(doc))
+    res = script.main(["--data", str(tmp_path / "corpus"), "--weights", str(weights), "--quick", "--sections", "e",
+                       "--n-inversion", "1"])
+    assert set(res["inversion"]["summary"]) == {"ddim", "fixed_point", "fixed_point+exact"}
+    assert "null-text inversion left out" in capsys.readouterr().out
+
+
 def test_spearman_ranks_ties_and_bad_input():
     """The shared rank correlation (used by the re-weighting measure and the VAE diagnosis): monotone maps
     give +-1, ties are averaged (scipy's rankdata: [1, 1, 2] ranks 1.5, 1.5, 3), constants give NaN and
