@@ -285,8 +285,6 @@ def run_physics(args) -> int:
     return 0
 
 
-
-
 def _intervals(text: str) -> list[tuple[float, float] | None]:
     out: list[tuple[float, float] | None] = []
     for part in (s.strip() for s in text.split(",") if s.strip()):
@@ -412,7 +410,6 @@ def run(args) -> int:
 
         weights = "salad_core/weights/keymotion" if args.keymotion == "shipped" else args.keymotion
         pipe = KeyMotionPipeline.from_pretrained(None if args.keymotion == "shipped" else args.keymotion)
-        pipe.source = weights
         name = "KeyMotion" if args.name == "SALAD" else args.name
     else:
         from salad_core.pipeline import SaladPipeline
@@ -422,7 +419,7 @@ def run(args) -> int:
     t0 = time.perf_counter()
     if args.cfg_sweep:
         results = cfg_sweep(pipe, data, evaluator, settings, scales=_scales(args.scales), name=name,
-                            include_real=not args.no_real, progress=args.progress)
+                            include_real=not args.no_real, weights=weights, progress=args.progress)
     else:
         results = [] if args.no_real else [evaluate_real(data, evaluator, settings)]
         results.append(evaluate_generator(pipe, data, evaluator, settings, name=name, weights=weights,

@@ -39,7 +39,8 @@ from ..skeleton import Skeleton, get_skeleton
 from . import physics as ph
 
 __all__ = ["Check", "CheckResult", "BenchmarkPrompt", "PROMPTS", "MEASURES", "REFERENCE_RANGES",
-           "BenchSettings", "Generator", "corpus_reference_ranges", "corpus_reference_rises", "rise_ranges", "load_joints", "measure_clips",
+           "BenchSettings", "Generator", "corpus_reference_ranges", "corpus_reference_rises", "rise_ranges",
+           "load_joints", "measure_clips",
            "caption_diversity", "reference_rows", "run_benchmark", "benchmark_markdown", "targets",
            "saved_generators"]
 
