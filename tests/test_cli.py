@@ -93,6 +93,66 @@ def test_generate_and_edit_sample_at_the_weights_own_guidance(make_tiny_pipeline
     assert set(used) == {3.0}
 
 
+def test_guidance_rescale_and_interval_reach_the_sampler_and_change_the_motion(make_tiny_pipeline, tmp_path,
+                                                                                capsys, monkeypatch):
+    # --guidance-rescale / --guidance-interval refine the weights' own guidance (their weight kept unless --guidance)
+    import numpy as np
+
+    from salad_core.pipeline import SaladPipeline
+    from salad_core.sampling import Guidance
+
+    pipe = make_tiny_pipeline(seed=0)
+    pipe.guidance = Guidance(3.0)
+    weights = pipe.save_pretrained(tmp_path / "w3")
+    used = []
+    original = SaladPipeline.resolve_guidance
+
+    def spy(self, guidance_scale=None):
+        g = original(self, guidance_scale)
+        used.append(g)
+        return g
+
+    monkeypatch.setattr(SaladPipeline, "resolve_guidance", spy)
+    base = ["generate", "a person walks", "--length", "16", "--steps", "3", "--weights", str(weights),
+            "--no-render", "--no-attention"]
+    assert cli.main([*base, "--out", str(tmp_path / "plain")]) == 0
+    capsys.readouterr()
+    used.clear()
+    assert cli.main([*base, "--out", str(tmp_path / "refined"), "--guidance-rescale", "0.7",
+                     "--guidance-interval", "0:0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "guidance w = 3 (rescale 0.7, interval (0.0, 0.5)) (--guidance-rescale, --guidance-interval)" in out
+    assert used[-1] == Guidance(3.0, rescale=0.7, interval=(0.0, 0.5))
+    plain = np.load(tmp_path / "plain" / "00_a_person_walks_features.npy")
+    refined = np.load(tmp_path / "refined" / "00_a_person_walks_features.npy")
+    api = SaladPipeline.from_pretrained(weights)("a person walks", lengths=16, seed=0, num_steps=3,
+                                                 guidance_scale=Guidance(3.0, rescale=0.7, interval=(0.0, 0.5)))
+    assert np.abs(refined - plain).max() > 1e-3                  # the refinement changes the motion ...
+    np.testing.assert_allclose(refined, api.features[0, :16], atol=1e-5)   # ... exactly as the Python API does
+    used.clear()
+    assert cli.main(["-q", "edit", "a person walks", "--reweight", "walks=2", "--length", "16", "--steps", "2",
+                     "--weights", str(weights), "--out", str(tmp_path / "e"), "--guidance", "5",
+                     "--guidance-rescale", "0.5"]) == 0
+    assert used[-1] == Guidance(5.0, rescale=0.5)             # the last resolution is the sampling call's
+    assert cli.main([*base, "--out", str(tmp_path / "w1"), "--guidance", "1", "--guidance-rescale", "0.7"]) == 0
+    assert "change nothing at w = 1" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--guidance-rescale", "1.5"], "--guidance-rescale 1.5 is out of range; allowed: 0..1"),
+    (["--guidance-rescale", "nan"], "--guidance-rescale must be a finite number, got nan"),
+    (["--guidance-interval", "0.5:0.2"], "--guidance-interval 0.5:0.2: allowed 0 <= LO < HI <= 1"),
+    (["--guidance-interval", "0:2"], "--guidance-interval 0:2: allowed 0 <= LO < HI <= 1"),
+    (["--guidance-interval", "half"], "--guidance-interval 'half': expected LO:HI"),
+    (["--guidance-interval", "0:0.2:0.5"], "expected LO:HI"),
+])
+def test_guidance_refinements_are_checked_before_weights_load(tmp_path, capsys, extra, message):
+    code = cli.main(["-q", "generate", "a person walks", *extra, "--weights", str(tmp_path / "nowhere"),
+                     "--out", str(tmp_path / "g")])
+    assert code == 2 and message in _one_line_error(capsys)
+    assert not (tmp_path / "g").exists()
+
+
 def test_generate_writes_outputs_and_refuses_to_overwrite(tiny_weights, tmp_path, capsys):
     out = tmp_path / "gen"
     args = ["generate", "a person walks forward", "--length", "40", "--steps", "3", "--weights",
