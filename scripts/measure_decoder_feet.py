@@ -74,27 +74,58 @@ def perturb_latents(latents: list[np.ndarray], kind: str, amount: float, seed: i
     return [mu + amount * (z - mu) for z in latents]
 
 
+class DecoderProbe:
+    """One VAE (a run, an exported VAE or a pipeline folder) loaded once, for clean and perturbed reconstructions
+    of the same clips: the posterior means are encoded once and every perturbation row decodes from them."""
+
+    def __init__(self, vae_path: str, clips: list[np.ndarray]):
+        import torch
+
+        from salad_core.io import load_model, load_tensors
+        from salad_core.train.assemble import vae_source
+
+        source = vae_source(vae_path)                     # a run (best/latest), an exported VAE or a pipeline
+        self.vae = load_model(source.stem)[0].float().eval()
+        stats = load_tensors(source.stats)
+        self.mean, self.std = stats["mean"].numpy(), stats["std"].numpy()
+        self.clips = clips
+        self._latents: list[np.ndarray] | None = None
+
+    def reconstruct(self) -> list[np.ndarray]:
+        """Posterior-mean reconstructions ``(T_i, 263)`` of the clips (raw features), the batched library path."""
+        import torch
+
+        from salad_core.eval.reconstruction import reconstruct_features
+
+        with torch.no_grad():
+            return [reconstruct_features(self.vae, self.mean, self.std, f[None], [len(f)])[0] for f in self.clips]
+
+    def latents(self) -> list[np.ndarray]:
+        """The clips' posterior means ``(T_i / 4, P, C)``, encoded on first use."""
+        import torch
+
+        if self._latents is None:
+            with torch.no_grad():
+                self._latents = [self.vae.encode(torch.from_numpy((f - self.mean) / self.std)[None],
+                                                 sample=False).z[0].numpy() for f in self.clips]
+        return self._latents
+
+    def perturbed(self, kind: str, amount: float) -> list[np.ndarray]:
+        """Reconstructions ``(T_i, 263)`` from the posterior means perturbed by ``(kind, amount)``
+        (``parse_perturbation``'s pair)."""
+        import torch
+
+        with torch.no_grad():
+            return [self.vae.decode(torch.from_numpy(z)[None]).float()[0].numpy() * self.std + self.mean
+                    for z in perturb_latents(self.latents(), kind, amount)]
+
+
 def reconstruct(vae_path: str, clips: list[np.ndarray], perturbation: tuple[str, float] | None = None
                 ) -> list[np.ndarray]:
     """Posterior-mean reconstructions of ``clips`` (raw features) by the VAE at ``vae_path``, the latents
     perturbed first when ``perturbation`` (``parse_perturbation``'s pair) is given."""
-    import torch
-
-    from salad_core.eval.reconstruction import reconstruct_features
-    from salad_core.io import load_model, load_tensors
-    from salad_core.train.assemble import vae_source
-
-    source = vae_source(vae_path)                     # a run (best/latest), an exported VAE or a pipeline
-    vae = load_model(source.stem)[0].float()
-    stats = load_tensors(source.stats)
-    mean, std = stats["mean"].numpy(), stats["std"].numpy()
-    with torch.no_grad():
-        if perturbation is None:
-            return [reconstruct_features(vae, mean, std, f[None], [len(f)])[0] for f in clips]
-        vae.eval()
-        latents = [vae.encode(torch.from_numpy((f - mean) / std)[None], sample=False).z[0].numpy() for f in clips]
-        latents = perturb_latents(latents, *perturbation)
-        return [vae.decode(torch.from_numpy(z)[None]).float()[0].numpy() * std + mean for z in latents]
+    probe = DecoderProbe(vae_path, clips)
+    return probe.reconstruct() if perturbation is None else probe.perturbed(*perturbation)
 
 
 def main(argv=None) -> int:
@@ -118,9 +149,10 @@ def main(argv=None) -> int:
         truth = [features_to_joints(f) for f in clips]
         rows = {"(the clips)": measure(truth)}
         for v in args.vae:
-            rows[v] = measure([features_to_joints(f) for f in reconstruct(v, clips)], truth)
+            probe = DecoderProbe(v, clips)
+            rows[v] = measure([features_to_joints(f) for f in probe.reconstruct()], truth)
             for kind, amount in args.perturb:
-                rec = reconstruct(v, clips, (kind, amount))
+                rec = probe.perturbed(kind, amount)
                 rows[f"{v} {kind} {amount:g}"] = measure([features_to_joints(f) for f in rec], truth)
         for label, r in rows.items():
             print(f"{name:<8} {label[-44:]:<44} {r['mpjpe_cm']:>8.2f} {r['skating']:>11.3f} {r['skate_share']:>6.2f} "

@@ -87,3 +87,18 @@ def test_script_prints_a_row_per_vae_and_perturbation(M, make_tiny_pipeline, tin
     assert same == plain                                          # scale 1 decodes the posterior means again
     assert noisy != plain
     assert float(rows["(the clips)"][-1]) < 0.01                  # the corpus keeps its bones
+
+
+def test_a_probe_encodes_the_clips_once_for_all_its_perturbation_rows(M, make_tiny_pipeline, tiny_procedural_corpus,
+                                                                       tmp_path):
+    weights = make_tiny_pipeline(seed=0).save_pretrained(tmp_path / "w")
+    clips = M.load_clips(tiny_procedural_corpus, 3)
+    probe = M.DecoderProbe(str(weights), clips)
+    calls = []
+    encode = probe.vae.encode
+    probe.vae.encode = lambda *a, **k: calls.append(1) or encode(*a, **k)
+    rows = [probe.perturbed("scale", 1.0), probe.perturbed("noise", 0.5), probe.perturbed("scale", 2.0)]
+    assert len(calls) == len(clips)                               # one encoding per clip, not per row
+    for a, b in zip(rows[0], M.reconstruct(str(weights), clips)):
+        np.testing.assert_allclose(a, b, atol=1e-4)               # scale 1 = the batched clean reconstruction
+    assert all(r.shape == c.shape for r, c in zip(rows[1], clips))
