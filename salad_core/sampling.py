@@ -42,6 +42,7 @@ __all__ = [
     "StepInfo",
     "Guidance",
     "as_guidance",
+    "parse_guidance_setting",
     "MAX_GUIDANCE",
     "resolve_guidance",
     "Prediction",
@@ -217,6 +218,28 @@ class Guidance:
             pred = self.rescale * pred * (_masked_std(cond, keep) / _masked_std(pred, keep).clamp_min(1e-8)) \
                 + (1.0 - self.rescale) * pred
         return pred
+
+
+def parse_guidance_setting(text: str) -> Guidance:
+    """A guidance setting in the benchmarks' short notation: ``"W"`` -> ``Guidance(W)``, ``"W@LO-HI"`` ->
+    ``Guidance(W, interval=(LO, HI))``, ``"W^PHI"`` -> ``Guidance(W, rescale=PHI)``.
+
+    Raises
+    ------
+    ValueError
+        ``text`` is not in that notation, or the numbers are not a valid :class:`Guidance`; the message names it.
+    """
+    try:
+        if "@" in text:
+            w, rng = text.split("@")
+            lo, hi = rng.split("-")
+            return Guidance(float(w), interval=(float(lo), float(hi)))
+        if "^" in text:
+            w, phi = text.split("^")
+            return Guidance(float(w), rescale=float(phi))
+        return Guidance(float(text))
+    except ValueError as err:
+        raise ValueError(f"bad guidance setting {text!r}: use W, W@LO-HI or W^PHI ({err})") from None
 
 
 def _masked_std(x: torch.Tensor, keep: torch.Tensor | None) -> torch.Tensor:

@@ -5,7 +5,8 @@
 # Usage: bash scripts/evaluate_keymotion.sh OUT_DIR [STAGE...]
 #   OUT_DIR   results folder, outside the repository (e.g. ~/salad-runs/v3/measure/keymotion)
 #   STAGE     any of: export guidance physics infill diversity t2m t2m_shipped card (default: all, in that order)
-#     export     the run's best checkpoints -> OUT_DIR/weights (fp16, KeyMotionPipeline.save_pretrained)
+#     export     the run's best checkpoints -> OUT_DIR/weights (fp16, salad_core.keymotion.export: runs.json too;
+#                GUIDANCE, e.g. 5 or 7.5@0-0.5, is the default guidance stored in keymotion.json)
 #     guidance   scripts/keymotion_guidance_bench.py over SETTINGS, with SALAD as the reference -> guidance.json
 #     physics    salad eval --physics with --keymotion WEIGHTS (41 prompts x 3 seeds, SALAD beside it) -> physics/
 #     infill     scripts/keymotion_infill_ratio.py: MMAE against linear interpolation at 10 % and 25 % -> infill.json
@@ -18,6 +19,7 @@
 #   DATA      procedural corpus the run trained on (its test split, references; required)
 #   RUN       the KeyMotion training root (kf_vae/, pst/, mmae/; required by the export stage)
 #   WEIGHTS   the pipeline folder to measure (default OUT_DIR/weights, written by export)
+#   GUIDANCE  the export stage's default guidance (W, W@LO-HI or W^PHI; default the pipeline's, 7.5)
 #   SETTINGS  guidance settings of the guidance stage (default "7.5 5 2.5 7.5@0-0.5 5@0-0.5": W, W@LO-HI, W^PHI)
 #   THREADS   torch threads of the physics and t2m stages (default 2); PYTHON the python to use
 #   EVALUATOR the T2M evaluator of the t2m stages (default: the packaged one; use the one trained on DATA)
@@ -45,10 +47,14 @@ source scripts/_stages.sh   # has STAGE, stage NAME CMD...
 
 if has export; then
   : "${RUN:?set RUN to the KeyMotion training root (or WEIGHTS to an exported pipeline and leave out export)}"
-  stage export "$PY" -c 'import sys, torch
-from salad_core.keymotion.pipeline import KeyMotionPipeline
-out = KeyMotionPipeline.from_pretrained(sys.argv[1]).save_pretrained(sys.argv[2], dtype=torch.float16)
-print(f"exported {sys.argv[1]} -> {out}")' "$RUN" "$WEIGHTS"
+  stage export "$PY" -c 'import sys
+from salad_core.keymotion.export import export_pipeline
+from salad_core.sampling import parse_guidance_setting
+guidance = parse_guidance_setting(sys.argv[3]) if sys.argv[3] else None
+out = export_pipeline(sys.argv[1], sys.argv[2], guidance=guidance)
+desc = guidance.describe() if guidance else "7.5 (the pipeline default)"
+print(f"exported {sys.argv[1]} -> {out}, default guidance {desc}")' \
+      "$RUN" "$WEIGHTS" "${GUIDANCE:-}"
 fi
 has guidance && stage guidance "$PY" scripts/keymotion_guidance_bench.py --weights "$WEIGHTS" --settings "${SET[@]}" \
     --salad --out "$OUT/guidance.json"

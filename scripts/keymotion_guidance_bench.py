@@ -25,22 +25,15 @@ import numpy as np
 from salad_core.eval.physics import joints_reader, seed_diversity
 from salad_core.eval.physics_prompts import PROMPTS, BenchSettings, run_benchmark
 from salad_core.keymotion.pipeline import KeyMotionPipeline
-from salad_core.sampling import Guidance
+from salad_core.sampling import Guidance, parse_guidance_setting
 
 
 def parse_setting(text: str) -> Guidance:
-    """``"W"`` -> Guidance(W); ``"W@LO-HI"`` -> Guidance(W, interval=(LO, HI)); ``"W^PHI"`` -> rescale PHI."""
+    """``--settings`` entry -> Guidance (:func:`salad_core.sampling.parse_guidance_setting`); a bad one exits."""
     try:
-        if "@" in text:
-            w, rng = text.split("@")
-            lo, hi = rng.split("-")
-            return Guidance(float(w), interval=(float(lo), float(hi)))
-        if "^" in text:
-            w, phi = text.split("^")
-            return Guidance(float(w), rescale=float(phi))
-        return Guidance(float(text))
+        return parse_guidance_setting(text)
     except ValueError as err:
-        raise SystemExit(f"bad --settings entry {text!r}: use W, W@LO-HI or W^PHI ({err})") from None
+        raise SystemExit(str(err)) from None
 
 
 def root_relative_diversity(motions: dict, name: str, n_prompts: int, seeds: tuple[int, ...]) -> float:

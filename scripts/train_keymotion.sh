@@ -25,31 +25,8 @@ export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 "$PY" -m salad_core.train keymotion --data "$DATA" --out "$WORK" --config configs/default_keymotion.json \
     --steps-per-stage "$KF_VAE_STEPS" "$PST_STEPS" "$MMAE_STEPS" --no-progress $RESUME
 # 3. the pipeline folder: each stage's `best` checkpoint (else `latest`), fp16 storage, plus runs.json
-"$PY" - "$WORK" "$DEST" <<'EOF'
-import json
-import sys
-from pathlib import Path
-
-import torch
-
-from salad_core.io import atomic_write_text
-from salad_core.keymotion.pipeline import KeyMotionPipeline
-from salad_core.keymotion.train import STAGES
-
-work, dest = Path(sys.argv[1]), Path(sys.argv[2])
-pipe = KeyMotionPipeline.from_pretrained(work)
-pipe.save_pretrained(dest, dtype=torch.float16)
-runs = {}
-for stage in STAGES:
-    run = work / stage
-    stem = "best" if (run / "best.json").is_file() else "latest"
-    lines = [json.loads(l) for l in (run / "log.jsonl").read_text().splitlines() if l.strip()]
-    train_lines = [l for l in lines if "loss" in l]
-    val_lines = [l for l in lines if "val_loss" in l]
-    runs[stage] = {"checkpoint": stem, "step": json.loads((run / f"{stem}.json").read_text()).get("meta", {}).get("step"),
-                   "config": json.loads((run / "config.json").read_text()),
-                   "last_log": train_lines[-1] if train_lines else {}, "last_val": val_lines[-1] if val_lines else {}}
-atomic_write_text(dest / "runs.json", json.dumps(runs, indent=2) + "\n")
+"$PY" -c 'import sys
+from salad_core.keymotion.export import export_pipeline
+dest = export_pipeline(sys.argv[1], sys.argv[2])
 size = sum(p.stat().st_size for p in dest.iterdir() if p.suffix == ".safetensors")
-print(f"wrote {dest} ({size / 1e6:.2f} MB of safetensors)")
-EOF
+print(f"wrote {dest} ({size / 1e6:.2f} MB of safetensors)")' "$WORK" "$DEST"

@@ -64,11 +64,14 @@ def test_export_writes_a_loadable_fp16_pipeline(tmp_path):
 
     from salad_core.io import load_tensors
     from salad_core.keymotion.pipeline import KeyMotionPipeline
+    from salad_core.sampling import Guidance
 
     shipped = REPO / "salad_core" / "weights" / "keymotion"
     out = tmp_path / "out"
-    res = _run(out, "export", python=sys.executable, RUN=str(shipped))
+    res = _run(out, "export", python=sys.executable, RUN=str(shipped), GUIDANCE="5@0-0.5")
     assert res.returncode == 0, res.stderr
+    assert "default guidance 5 (interval (0.0, 0.5))" in res.stdout
+    assert (out / "weights" / "runs.json").read_text() == (shipped / "runs.json").read_text()   # its records kept
     assert (out / "export.done").is_file() and (out / "weights" / "keymotion.json").is_file()
     for name in ("kf_vae", "pst", "mmae"):
         new = load_tensors(out / "weights" / f"{name}.safetensors")
@@ -76,4 +79,7 @@ def test_export_writes_a_loadable_fp16_pipeline(tmp_path):
         assert new.keys() == old.keys()
         assert all(new[k].dtype == torch.float16 for k in new if new[k].is_floating_point())
         assert all(torch.equal(new[k].float(), old[k].float().half().float()) for k in new)
-    assert KeyMotionPipeline.from_pretrained(out / "weights").default_length == 120
+    pipe = KeyMotionPipeline.from_pretrained(out / "weights")
+    assert pipe.default_length == 120 and pipe.guidance == Guidance(5.0, interval=(0.0, 0.5))
+    res = _run(tmp_path / "bad", "export", python=sys.executable, RUN=str(shipped), GUIDANCE="five")
+    assert res.returncode != 0 and "bad guidance setting 'five'" in res.stdout + res.stderr

@@ -1,0 +1,91 @@
+"""Export a KeyMotion training root (``kf_vae/``, ``pst/``, ``mmae/``) as a pipeline folder with its run records.
+
+The folder is what :meth:`KeyMotionPipeline.from_pretrained` loads and what ships in
+``salad_core/weights/keymotion``: the three models (each stage's ``best`` checkpoint, else ``latest``; fp16 by
+default), ``keymotion.json`` (with the chosen default guidance) and ``runs.json``, which keeps for each stage the
+checkpoint used, its step, the stage's training config and its last training and validation log lines, so that a
+model card can say exactly what was shipped.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from salad_core.io import atomic_write_text
+from salad_core.keymotion.pipeline import KeyMotionPipeline
+from salad_core.keymotion.train import STAGES
+from salad_core.sampling import Guidance
+
+__all__ = ["stage_records", "export_pipeline"]
+
+
+def stage_records(work: str | os.PathLike) -> dict[str, dict[str, Any]]:
+    """``runs.json``'s content for the training root ``work``: per stage ``checkpoint`` ("best" or "latest"),
+    ``step``, ``config`` (the stage's ``config.json``), ``last_log`` and ``last_val`` (its last training and
+    validation lines of ``log.jsonl``, ``{}`` if none).
+
+    Raises
+    ------
+    FileNotFoundError
+        A stage folder, its checkpoint record or its ``config.json`` is missing (the message names it).
+    """
+    root = Path(work)
+    records = {}
+    for stage in STAGES:
+        run = root / stage
+        if not run.is_dir():
+            raise FileNotFoundError(f"{run} does not exist: {root} is not a finished KeyMotion training root "
+                                    f"(it needs {', '.join(STAGES)})")
+        stem = "best" if (run / "best.json").is_file() else "latest"
+        if not (run / f"{stem}.json").is_file():
+            raise FileNotFoundError(f"{run} has no checkpoint (best.json or latest.json)")
+        if not (run / "config.json").is_file():
+            raise FileNotFoundError(f"{run / 'config.json'} is missing")
+        log_file = run / "log.jsonl"
+        lines = [json.loads(line) for line in log_file.read_text().splitlines() if line.strip()] \
+            if log_file.is_file() else []
+        train_lines = [line for line in lines if "loss" in line]
+        val_lines = [line for line in lines if "val_loss" in line]
+        meta = json.loads((run / f"{stem}.json").read_text()).get("meta", {})
+        records[stage] = {"checkpoint": stem, "step": meta.get("step"),
+                          "config": json.loads((run / "config.json").read_text()),
+                          "last_log": train_lines[-1] if train_lines else {},
+                          "last_val": val_lines[-1] if val_lines else {}}
+    return records
+
+
+def export_pipeline(work: str | os.PathLike, dest: str | os.PathLike, *, guidance: Guidance | None = None,
+                    dtype: torch.dtype | None = torch.float16) -> Path:
+    """Write the training root ``work`` as a pipeline folder ``dest`` (created) and return it.
+
+    Parameters
+    ----------
+    work : path
+        A KeyMotion training root (``salad train keymotion --out``), or a pipeline folder (its ``runs.json``, if
+        any, is copied).
+    dest : path
+        The pipeline folder; files of the same names are replaced.
+    guidance : Guidance, optional
+        The default guidance stored in ``keymotion.json`` (default: the pipeline's, ``Guidance(7.5)``).
+    dtype : torch.dtype or None
+        Storage type of the floating weights (fp16 by default; None keeps float32).
+    """
+    root = Path(work)
+    if (root / "keymotion.json").is_file() and not any((root / stage).is_dir() for stage in STAGES):
+        # a pipeline folder exported before (e.g. the shipped one): its own records travel with it
+        records = json.loads((root / "runs.json").read_text()) if (root / "runs.json").is_file() else None
+    else:
+        records = stage_records(root)              # first: a missing stage fails before anything is written
+    pipe = KeyMotionPipeline.from_pretrained(work)
+    if guidance is not None:
+        if not isinstance(guidance, Guidance):
+            raise TypeError(f"guidance must be a salad_core.sampling.Guidance, got {type(guidance).__name__}")
+        pipe.guidance = guidance
+    out = pipe.save_pretrained(dest, dtype=dtype)
+    if records is not None:
+        atomic_write_text(out / "runs.json", json.dumps(records, indent=2) + "\n")
+    return out
