@@ -114,7 +114,8 @@ def generations(pipe: KeyMotionPipeline, seeds: int, length: int, renders: Path 
     return {"rows": rows, "seconds_per_motion": dt, "length": length, "seeds": seeds}
 
 
-def evaluation(pipe: KeyMotionPipeline, data: Path, samples: int, reps: int) -> dict:
+def evaluation(pipe: KeyMotionPipeline, data: Path, samples: int, reps: int, weights: str | None = None) -> dict:
+    """The quick T2M rows (real, KeyMotion); ``weights`` is the folder recorded with them (None: the shipped one)."""
     from salad_core.eval.protocol import evaluate_generator, evaluate_real
     from salad_core.eval.settings import EvalSettings
     from salad_core.eval.tables import results_frame, to_markdown
@@ -125,7 +126,8 @@ def evaluation(pipe: KeyMotionPipeline, data: Path, samples: int, reps: int) -> 
     t0 = time.perf_counter()
     real = evaluate_real(data, evaluator, settings)
     t1 = time.perf_counter()
-    gen = evaluate_generator(pipe, data, evaluator, settings, name="KeyMotion", weights="salad_core/weights/keymotion")
+    gen = evaluate_generator(pipe, data, evaluator, settings, name="KeyMotion",
+                             weights=weights or "salad_core/weights/keymotion")
     t2 = time.perf_counter()
     df = results_frame([real, gen])
     return {"settings": settings.describe(), "markdown": to_markdown(df), "real": real.summary(),
@@ -162,7 +164,7 @@ def main() -> None:
                   + f"  {r['lr_legs']:8.2f}  {r['lr_arms']:8.2f}  {r['travel_m']:6.2f} m")
         print(f"generation: {g['seconds_per_motion']:.2f} s per motion", flush=True)
     if args.eval:
-        doc["evaluation"] = evaluation(pipe, args.data, args.eval_samples, args.eval_reps)
+        doc["evaluation"] = evaluation(pipe, args.data, args.eval_samples, args.eval_reps, args.weights)
         e = doc["evaluation"]
         print(e["settings"])
         print(e["markdown"])
