@@ -261,8 +261,6 @@ def _check_sampling_args(args: argparse.Namespace, n_prompts: int, *, length: bo
                         "(1 = no guidance, 7.5 = the paper's)", kind="warning")
             # said once, here; the pipeline's own warning would repeat it (restored after the command)
             warnings.filterwarnings("ignore", message=r"guidance_scale=\S+ is negative")
-
-
     _check_guidance_refinements(args)
 
 
@@ -485,7 +483,7 @@ def cmd_edit(args: argparse.Namespace) -> int:
     guidance = _guidance(args, pipe)
     _say_guidance(args, guidance)
     if features is not None:
-        inv = _invert(pipe, features, args.source, args, method="fixed_point")
+        inv = _invert(pipe, features, args.source, args, method="fixed_point", guidance=guidance)
         result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet)
     else:
         result = pipe.edit(args.source, args.target, edits=specs, lengths=args.length, seed=args.seed,
@@ -570,11 +568,14 @@ def _load_features(motion: str, skeleton: str):
 
 
 # ----------------------------------------------------------------------------- invert
-def _invert(pipe, features, prompt: str, args: argparse.Namespace, method: str, iterations=None, exact=True):
-    """Invert one motion under its prompt and print the reconstruction error in cm."""
+def _invert(pipe, features, prompt: str, args: argparse.Namespace, method: str, iterations=None, exact=True,
+            guidance=None):
+    """Invert one motion under its prompt and print the reconstruction error in cm; ``guidance`` is the command's
+    :func:`_guidance` when the caller has it already."""
     unit = pipe.skeleton.unit_length
     features = features[: len(features) - len(features) % unit]   # the callers said so already
-    inv = pipe.invert(features, prompt, method=method, guidance_scale=_guidance(args, pipe), num_steps=args.steps,
+    guidance = _guidance(args, pipe) if guidance is None else guidance
+    inv = pipe.invert(features, prompt, method=method, guidance_scale=guidance, num_steps=args.steps,
                       iterations=iterations, exact=exact, progress=not args.quiet)
     cm = _errors_cm(inv.errors, pipe.skeleton)
     print(f"inversion ({method}, {inv.num_steps} steps, w={inv.guidance_scale:g}): reconstruction MPJPE "
