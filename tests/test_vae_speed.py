@@ -90,6 +90,22 @@ def test_autocast_option_is_validated_and_opt_in():
         assert not torch.is_autocast_enabled("cpu")
 
 
+def test_native_bf16_cpu_reads_the_cpu_flags(tmp_path):
+    from salad_core.train.common import native_bf16_cpu
+
+    info = tmp_path / "cpuinfo"
+    info.write_text("processor\t: 0\nflags\t\t: fpu sse2 avx2 avx512f avx512bw\n\nprocessor\t: 1\n"
+                    "flags\t\t: fpu sse2 avx2 avx512f avx512bw\n")
+    assert native_bf16_cpu(info) is False                       # avx512f alone: bf16 is emulated
+    info.write_text("flags\t\t: fpu avx512f avx512_bf16 avx512_vnni\n")
+    assert native_bf16_cpu(info) is True
+    info.write_text("flags\t\t: fpu amx_tile amx_bf16\n")
+    assert native_bf16_cpu(info) is True
+    info.write_text("model name\t: some CPU\n")                 # no flags line: unknown
+    assert native_bf16_cpu(info) is None
+    assert native_bf16_cpu(tmp_path / "missing") is None
+
+
 def test_bf16_vae_training_follows_the_float32_run(tmp_path):
     from salad_core.models.vae import VAEConfig
 
