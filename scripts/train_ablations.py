@@ -11,7 +11,9 @@ The staged study (issue 24, ``configs/ablations_v2.json``, the default recipe) i
 Every group of tables trains to its next stage (every variant of a table to exactly the same steps),
 is evaluated there with one protocol (``RUNS/evaluations/<group>@<steps>.json``) and stops when the
 orderings of its paper pairs are the same at two consecutive stages or its budget is spent; the VAE
-groups come first and the denoisers learn on their final VAEs. Then the final stage's models (fp16),
+groups come first and the denoisers learn on their final VAEs (packaged, fp16). A stopped VAE group is
+also kept in the repository (``studies/<recipe name>/``, ``--keep``): commit it, and on a new machine the
+same command restores it and goes on with the denoisers. Then the final stage's models (fp16),
 the evaluations, ``index.json`` and ``MODEL_CARD.md`` go to ``--ship`` (default
 ``salad_core/weights/ablations``). Run the same command again after a kill: trained steps, snapshots
 and evaluated rows are kept, the study continues where it stopped. Run it at low priority on a shared
@@ -93,7 +95,8 @@ def staged_main(args, ap) -> int:
     command = " ".join(["python scripts/train_ablations.py", "--recipe", _rel(args.recipe), "--data", "CORPUS",
                         "--work", "RUNS", *(["--jobs", str(args.jobs)] if args.jobs != 1 else [])])
     t0 = time.time()
-    outcomes = run_study(recipe, args.data, args.work, max_parallel=args.jobs, groups=args.groups)
+    keep = None if args.no_keep else (args.keep or REPO / "studies" / Path(recipe.path).stem)
+    outcomes = run_study(recipe, args.data, args.work, max_parallel=args.jobs, groups=args.groups, keep=keep)
     print(f"study done in {(time.time() - t0) / 60:.1f} min")
     for name, o in outcomes.items():
         agree = [k for k, v in o.evaluations[-1]["orderings"].items() if v["agrees"]]
@@ -159,6 +162,11 @@ def main(argv=None) -> int:
                          "denoisers on each VAE)")
     ap.add_argument("--groups", nargs="+", default=None,
                     help="staged recipes: only these groups (their VAE groups must have stopped); does not ship")
+    ap.add_argument("--keep", type=Path, default=None,
+                    help="staged recipes: where a stopped VAE group is kept and restored from when --work lacks it "
+                         "(default: studies/<recipe name>/ in the repository; commit it, so that a new machine "
+                         "goes on with the denoisers)")
+    ap.add_argument("--no-keep", action="store_true", help="staged recipes: neither keep nor restore VAE groups")
     ap.add_argument("--only", nargs="+", default=None, help="recipes without groups: variant names to train")
     ap.add_argument("--ship-only", action="store_true", help="recipes without groups: only assemble trained runs")
     args = ap.parse_args(argv)

@@ -206,12 +206,12 @@ def test_v2_recipe_equal_budgets_constant_schedule_and_the_default_recipe(tmp_pa
             assert len({json.dumps(t, sort_keys=True) for t in trains}) == 1
             assert trains[0]["milestones"] == [] and trains[0]["warmup_steps"] < group.stages[0]
     den_cfg = {j.variant.name: j.config for j in stage_jobs(recipe, den, den.stages[0], tmp_path, frozen)}
-    assert all(c["train"]["latent_norm"] is True and c["train"]["micro_batches"] == 4 and c["train"]["autocast"] == "bf16"
-               for c in den_cfg.values())
+    assert all(c["train"]["latent_norm"] is True and c["train"]["micro_batches"] == 4
+               and c["train"]["autocast"] is None for c in den_cfg.values())      # float32: see the recipe's "about"
     assert all(c["model"]["width"] == 96 and c["model"]["layers"] == 3 for c in den_cfg.values())
     assert den_cfg["no_st"]["model"]["num_parts"] == 1 and den_cfg["full"]["model"]["num_parts"] == 7
     vae_cfg = {j.variant.name: j.config for j in stage_jobs(recipe, vae, vae.stages[0], tmp_path)}
-    assert all(c["train"]["autocast"] == "bf16" for c in vae_cfg.values())
+    assert all(c["train"]["autocast"] is None for c in vae_cfg.values())
     assert vae_cfg["pose_long"]["model"]["kind"] == "pose" and vae_cfg["no_pos"]["model"]["lambda_pos"] == 0.0
     # denoisers learn on the frozen VAE snapshot, not on the VAE's live run
     by_name = {j.variant.name: j for j in stage_jobs(recipe, den, den.stages[0], tmp_path, frozen)}
@@ -248,6 +248,29 @@ def _write_staged(tmp_path: Path, doc: dict) -> Path:
     path = tmp_path / "staged.json"
     path.write_text(json.dumps(doc))
     return path
+
+
+def test_kept_group_of_another_recipe_is_refused(tmp_path):
+    """A keep folder whose group was trained by other configs is an error naming the group, not a silent restore."""
+    from salad_core.ablations import group_fingerprint, restore_group
+
+    recipe = load_staged_recipe(_write_staged(tmp_path, _staged_doc()))
+    group = recipe.group("vaes")
+    keep = tmp_path / "keep"
+    assert restore_group(recipe, group, keep, tmp_path / "work") is False         # nothing kept: nothing to do
+    other_doc = _staged_doc()
+    other_doc["vae_train"]["batch_size"] = 16
+    other_dir = tmp_path / "other"
+    other_dir.mkdir()
+    other = load_staged_recipe(_write_staged(other_dir, other_doc))
+    assert group_fingerprint(other, other.group("vaes")) != group_fingerprint(recipe, group)
+    assert group_fingerprint(recipe, group) == group_fingerprint(load_staged_recipe(recipe.path), group)
+    keep.mkdir()
+    (keep / "groups.json").write_text(json.dumps({"vaes": {"steps": 2, "reason": "stable", "stages": [1, 2],
+                                                           "variants": ["st", "pose"],
+                                                           "fingerprint": group_fingerprint(other, other.group("vaes"))}}))
+    with pytest.raises(ValueError, match="group 'vaes' kept in .* another recipe"):
+        restore_group(recipe, group, keep, tmp_path / "work")
 
 
 @pytest.mark.parametrize("change, message", [
@@ -329,7 +352,8 @@ def test_staged_study_trains_evaluates_resumes_and_ships(tmp_path, monkeypatch):
     # a half-trained stage: one of the first stage's runs is trained already (its snapshot is not taken yet)
     pre = stage_jobs(recipe, recipe.group("vaes"), 1, work)
     assert run_jobs(pre[:1], data, inline=True) == {"vae_st": 0}
-    outcomes = run_study(recipe, data, work, evaluator=evaluator, inline=True)
+    keep = tmp_path / "keep"
+    outcomes = run_study(recipe, data, work, evaluator=evaluator, inline=True, keep=keep)
     for name, outcome in outcomes.items():
         group = recipe.group(name)
         assert outcome.decision.stop and outcome.decision.reason in ("stable", "budget")
@@ -348,8 +372,17 @@ def test_staged_study_trains_evaluates_resumes_and_ships(tmp_path, monkeypatch):
     dens = outcomes["dens"]
     assert dens.evaluations[-1]["real"]["summary"]["FID"][0] >= 0
     vae_stop = outcomes["vaes"].decision.steps
-    frozen = stage_dir(work, recipe.group("vaes"), vae_stop) / "runs" / "vae_pose" / "latest"
+    # the denoisers learn on the VAE group's packaged fp16 models (what ships), not on the float32 snapshot
+    frozen = stage_dir(work, recipe.group("vaes"), vae_stop) / "models" / "vae_pose" / "vae"
     assert json.loads((work / "den_no_st" / "config.json").read_text())["task"]["vae"] == str(frozen)
+    # the stopped VAE group is kept: its final models and every evaluation of the group
+    from salad_core.ablations import kept_groups
+
+    kept = kept_groups(keep)
+    assert list(kept) == ["vaes"] and kept["vaes"]["steps"] == vae_stop
+    assert kept["vaes"]["stages"] == [e["steps"] for e in outcomes["vaes"].evaluations]
+    assert sorted(p.name for p in keep.iterdir()) == ["evaluations", "groups.json", "vae_pose", "vae_st"]
+    assert (keep / "vae_pose" / "vae.safetensors").read_bytes() == (frozen.parent / "vae.safetensors").read_bytes()
 
     # rerun after the end: nothing is trained or scored again
     def boom(*a, **k):
@@ -359,6 +392,15 @@ def test_staged_study_trains_evaluates_resumes_and_ships(tmp_path, monkeypatch):
     monkeypatch.setattr("salad_core.ablations.stage_eval._score_denoiser", boom)
     again = run_study(recipe, data, work, evaluator=evaluator, inline=True)
     assert {n: o.decision for n, o in again.items()} == {n: o.decision for n, o in outcomes.items()}
+    # a new machine: an empty work folder gets the VAE group back from the keep folder, nothing is retrained,
+    # and the denoisers would learn on byte-identical VAEs
+    fresh = tmp_path / "fresh_work"
+    restored = run_study(recipe, data, fresh, evaluator=evaluator, inline=True, groups=["vaes"], keep=keep)
+    assert restored["vaes"].decision == outcomes["vaes"].decision
+    assert [e["orderings"] for e in restored["vaes"].evaluations] == [e["orderings"] for e in outcomes["vaes"].evaluations]
+    for v in ("st", "pose"):
+        rel = Path("stages") / f"vaes@{vae_stop}" / "models" / f"vae_{v}" / "vae.safetensors"
+        assert (fresh / rel).read_bytes() == (work / rel).read_bytes()
     # an interrupted evaluation: one row left to score; only that row is scored
     last = dens.evaluations[-1]["steps"]
     stage_file = evaluation_path(work, recipe.group("dens"), last)

@@ -14,6 +14,7 @@ w/o FiLM), each as overrides of base configs, so that variants differ only in wh
   reproduced, read against :mod:`salad_core.eval.paper_tables`), :mod:`~salad_core.ablations.stop_rule`
   (stable orderings or budget spent), :mod:`~salad_core.ablations.stage_eval` (snapshots and scores of
   one stage), :mod:`~salad_core.ablations.runner` (:func:`run_study`, resumable),
+  :mod:`~salad_core.ablations.keep` (a stopped VAE group kept in the repository, restored on a new machine),
   :mod:`~salad_core.ablations.shipping` (:func:`ship_study`) and :mod:`~salad_core.ablations.card`
   (the model card from the evaluations).
 
@@ -23,6 +24,7 @@ shipped VAE, so "w/o ST-Latent" compares two VAEs trained alike.
 from __future__ import annotations
 
 from .card import model_card, shipped_tables
+from .keep import group_fingerprint, keep_group, kept_groups, restore_group
 from .orderings import PAPER_PAIRS, TABLE_METRICS, compare, paper_ordering
 from .runner import GroupOutcome, run_study, study_plan
 from .shipping import ship_study
@@ -36,4 +38,5 @@ __all__ = ["AblationVariant", "AblationRecipe", "TrainJob", "load_recipe", "plan
            "job_command", "ablations_dir", "list_ablations", "load_ablation_pipeline", "load_ablation_vae",
            "StagedRecipe", "StudyGroup", "load_staged_recipe", "stage_jobs", "StopRule", "StopDecision", "decide",
            "PAPER_PAIRS", "TABLE_METRICS", "compare", "paper_ordering", "evaluate_stage", "group_orderings",
-           "GroupOutcome", "run_study", "study_plan", "ship_study", "model_card", "shipped_tables"]
+           "GroupOutcome", "run_study", "study_plan", "ship_study", "model_card", "shipped_tables",
+           "group_fingerprint", "keep_group", "kept_groups", "restore_group"]

@@ -9,8 +9,11 @@ stage:
    snapshots (fp16) and score every row (:mod:`~salad_core.ablations.stage_eval`);
 3. apply the stop rule (:func:`~salad_core.ablations.stop_rule.decide`) to the group's evaluations so far.
 
-When a VAE group stops, its variants' snapshots at the final stage are *frozen*: the denoiser groups
-learn on them (and ship with them). Rerunning :func:`run_study` after a kill continues where it stopped.
+When a VAE group stops, its variants' packaged models at the final stage (fp16, the form that ships) are
+*frozen*: the denoiser groups learn on them and ship with them. Rerunning :func:`run_study` after a kill
+continues where it stopped. With ``keep`` (a folder of the repository, :mod:`~salad_core.ablations.keep`),
+a stopped VAE group is also copied there, and a VAE group the ``work`` folder lacks is restored from there:
+a new machine goes on with the denoisers instead of training the VAEs again.
 """
 from __future__ import annotations
 
@@ -22,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
+from .keep import group_fingerprint, keep_group, kept_groups, restore_group
 from .stage_eval import evaluate_stage, load_evaluation, package_stage, snapshot_run, stage_dir
 from .staged import StagedRecipe, StudyGroup, stage_jobs
 from .stop_rule import StopDecision, decide
@@ -47,12 +51,14 @@ def _history(evaluations) -> list[dict[str, str]]:
 
 def _check_vae_of_runs(jobs, frozen: Mapping[str, Path]) -> None:
     """A denoiser run that exists must have learned on the frozen VAE it would resume with."""
+    from salad_core.train.assemble import vae_source
+
     for job in jobs:
         cfg = job.run_dir / "config.json"
         if job.variant.kind != "denoiser" or not cfg.is_file():
             continue
         used = json.loads(cfg.read_text()).get("task", {}).get("vae")
-        want = str(Path(frozen[job.variant.vae]) / "latest")
+        want = str(vae_source(frozen[job.variant.vae]).stem)
         if used is not None and used != want:
             raise RuntimeError(f"{job.run_dir} learned on the VAE {used}, but the study's {job.variant.vae!r} is "
                                f"now {want} (its VAE group stopped elsewhere): move the denoiser run away to retrain it")
@@ -77,7 +83,8 @@ def _train_stage(recipe: StagedRecipe, group: StudyGroup, steps: int, work: Path
 
 def run_study(recipe: StagedRecipe, data: str | os.PathLike, work: str | os.PathLike, *, evaluator: Any = None,
               text_encoder: Any = None, max_parallel: int = 1, inline: bool = False,
-              python: str = sys.executable, groups: list[str] | None = None) -> dict[str, GroupOutcome]:
+              python: str = sys.executable, groups: list[str] | None = None,
+              keep: str | os.PathLike | None = None) -> dict[str, GroupOutcome]:
     """Train and evaluate every group until it stops (see the module docstring); resumable.
 
     Parameters
@@ -96,7 +103,11 @@ def run_study(recipe: StagedRecipe, data: str | os.PathLike, work: str | os.Path
     inline : bool
         Train in this process, one run after the other (tests).
     groups : list of str, optional
-        Only these groups (their VAE groups must have stopped already: their evaluations are in ``work``).
+        Only these groups (their VAE groups must have stopped already: their evaluations are in ``work``,
+        or in ``keep``).
+    keep : path, optional
+        Where stopped VAE groups are kept (:func:`~salad_core.ablations.keep.keep_group`) and restored from
+        (:func:`~salad_core.ablations.keep.restore_group`) when ``work`` lacks them.
 
     Returns
     -------
@@ -115,6 +126,8 @@ def run_study(recipe: StagedRecipe, data: str | os.PathLike, work: str | os.Path
     needed_vaes = {recipe.base.variant(v).vae for g in chosen for v in g.variants
                    if recipe.base.variant(v).kind == "denoiser"}
     for group in recipe.groups:
+        if keep is not None and group.kind == "vae" and (group in chosen or needed_vaes & set(group.variants)):
+            restore_group(recipe, group, keep, work)
         if group not in chosen:
             if group.kind == "vae" and needed_vaes & set(group.variants):
                 frozen.update(_frozen_of(group, _replay(recipe, group, work), work))   # must have stopped
@@ -139,12 +152,19 @@ def run_study(recipe: StagedRecipe, data: str | os.PathLike, work: str | os.Path
         outcomes[group.name] = GroupOutcome(group, decision, tuple(evaluations))
         if group.kind == "vae":
             frozen.update(_frozen_of(group, outcomes[group.name], work))
+            if keep is not None:
+                kept = kept_groups(keep).get(group.name, {})
+                if kept.get("fingerprint") != group_fingerprint(recipe, group) or kept.get("steps") != decision.steps:
+                    keep_group(recipe, group, decision.steps, decision.reason,
+                               [int(d["steps"]) for d in evaluations], work, keep)
     return outcomes
 
 
 def _frozen_of(group: StudyGroup, outcome: GroupOutcome, work: Path) -> dict[str, Path]:
-    runs = stage_dir(work, group, outcome.decision.steps) / "runs"
-    return {v: runs / f"vae_{v}" for v in group.variants}
+    """The VAE group's packaged fp16 models at its final stage: what the denoisers learn on and ship with
+    (so a group restored from a keep folder gives the denoisers exactly the same VAEs)."""
+    models = stage_dir(work, group, outcome.decision.steps) / "models"
+    return {v: models / f"vae_{v}" for v in group.variants}
 
 
 def _replay(recipe: StagedRecipe, group: StudyGroup, work: Path) -> GroupOutcome:

@@ -109,7 +109,7 @@ def package_stage(recipe: StagedRecipe, group: StudyGroup, steps: int, work: str
     """Write ``stages/<stage>/models/``: every variant of the group in its shipping form (fp16).
 
     Needs the snapshots (``stages/<stage>/runs/``). Denoisers are assembled with their frozen VAE
-    (``frozen_vaes``: VAE variant -> run view). Returns the models folder.
+    (``frozen_vaes``: VAE variant -> the VAE group's packaged model folder). Returns the models folder.
     """
     from salad_core.train.assemble import assemble_pipeline, export_vae
 

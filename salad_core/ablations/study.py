@@ -159,12 +159,17 @@ def _finished(run_dir: Path, max_steps: int) -> bool:
 
 def _outside_dependencies(jobs: list[TrainJob]) -> dict[str, int]:
     """Exit codes to assume for VAE runs that denoiser jobs need but that are not in ``jobs``:
-    0 when the run has a checkpoint (trained earlier), else -1."""
+    0 when the VAE is there (a run with a checkpoint, or an exported VAE folder), else -1."""
+    from salad_core.train.assemble import vae_source
+
     names = {j.run_dir.name for j in jobs}
     codes = {}
     for j in jobs:
         if j.depends_on is not None and j.depends_on.name not in names:
-            has_ckpt = any((j.depends_on / f"{n}.safetensors").is_file() for n in ("best", "latest"))
+            try:
+                has_ckpt = vae_source(j.depends_on).stem.with_suffix(".safetensors").is_file()
+            except FileNotFoundError:
+                has_ckpt = False
             codes[j.depends_on.name] = 0 if has_ckpt else -1
     return codes
 
