@@ -209,6 +209,8 @@ def test_v2_recipe_equal_budgets_constant_schedule_and_the_default_recipe(tmp_pa
     assert all(c["train"]["latent_norm"] is True and c["train"]["micro_batches"] == 4
                and c["train"]["autocast"] is None for c in den_cfg.values())      # float32: see the recipe's "about"
     assert all(c["model"]["width"] == 96 and c["model"]["layers"] == 3 for c in den_cfg.values())
+    # one latent cache folder for all denoisers: those on the same VAE reuse one cache (its signature hashes the VAE)
+    assert {c["train"]["latent_cache_dir"] for c in den_cfg.values()} == {str(tmp_path / "latent_cache")}
     assert den_cfg["no_st"]["model"]["num_parts"] == 1 and den_cfg["full"]["model"]["num_parts"] == 7
     vae_cfg = {j.variant.name: j.config for j in stage_jobs(recipe, vae, vae.stages[0], tmp_path)}
     assert all(c["train"]["autocast"] is None for c in vae_cfg.values())

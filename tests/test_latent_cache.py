@@ -133,6 +133,47 @@ def test_prune_removes_caches_of_other_weights(vae, corpus, tmp_path):
     assert LatentCache(second.folder).signature == second.signature
 
 
+@pytest.mark.skipif(os.name != "posix", reason="the build lock is POSIX flock")
+def test_callers_sharing_a_cache_folder_build_it_once(vae, corpus, tmp_path, monkeypatch):
+    """Two callers (the ablation study's denoisers on one VAE, in two processes) opening the same missing
+    cache at once: the second waits for the first's build and reuses it instead of encoding every window
+    again. Threads stand in for the processes: each opens the lock file itself, and ``flock`` locks
+    belong to the open file, so they exclude each other as two processes would."""
+    import threading
+    import time
+
+    import salad_core.train.latent_cache as lc
+    from salad_core.train.denoiser_trainer import denoiser_latent_cache
+
+    builds = []
+    real_build = lc.build_latent_cache
+
+    def slow_counting_build(*args, **kwargs):
+        builds.append(threading.get_ident())
+        time.sleep(1.0)                           # long enough for the other caller to ask meanwhile
+        return real_build(*args, **kwargs)
+
+    monkeypatch.setattr(lc, "build_latent_cache", slow_counting_build)
+    ds = train_set(corpus)
+    shared = tmp_path / "shared"
+    folders, errors = [], []
+
+    def worker():
+        try:
+            folders.append(denoiser_latent_cache(vae, [ds], config(), shared, DistEnv()).folder)
+        except Exception as exc:                  # surfaced by the assertion below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=worker) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert not errors and len(folders) == 2
+    assert len(builds) == 1 and folders[0] == folders[1]
+    assert len(LatentCache(folders[0])) == len(ds.crops())
+
+
 def test_prepare_with_the_cache_equals_encoding_on_the_fly(vae, corpus, tmp_path):
     """vae_pad_to_max: the cached batch preparation gives the on-the-fly latents, noise and targets."""
     from salad_core.data.dataset import collate_motion_text

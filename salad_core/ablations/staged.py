@@ -233,5 +233,8 @@ def stage_jobs(recipe: StagedRecipe, group: StudyGroup, steps: int, work: str | 
                 raise ValueError(f"denoiser variant {job.variant.name!r} needs its VAE {job.variant.vae!r} frozen "
                                  f"(its group has not stopped yet); frozen: {sorted(frozen_vaes or {})}")
             depends = Path(frozen_vaes[job.variant.vae])
+            # one latent cache per VAE, shared by its denoisers (the cache's signature hashes the VAE's weights
+            # and the corpus; a lock lets one process build it while the others wait)
+            config["train"].setdefault("latent_cache_dir", str(Path(work) / "latent_cache"))
         jobs.append(TrainJob(job.variant, job.run_dir, config, depends))
     return jobs

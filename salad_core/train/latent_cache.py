@@ -24,6 +24,7 @@ half a cache.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
@@ -194,8 +195,34 @@ def open_or_build(cache_dir: str | os.PathLike, signature: str, build: Callable[
     """The cache ``<cache_dir>/<signature>``, built with ``build(folder)`` when it is missing or unreadable.
 
     ``prune`` removes the folder's other caches (built from other VAE weights or another corpus).
+
+    Processes that share ``cache_dir`` (the ablation study's denoisers on one VAE, trained side by side)
+    take an exclusive lock on ``<cache_dir>/.<signature>.lock`` first: one builds, the others wait and
+    then reuse its cache instead of encoding the same windows again.
     """
     cache_dir = Path(cache_dir)
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    with _exclusive(cache_dir / f".{signature[:32]}.lock"):
+        return _open_or_build(cache_dir, signature, build, prune)
+
+
+@contextlib.contextmanager
+def _exclusive(lock_path: Path) -> Iterator[None]:
+    """An exclusive advisory lock on ``lock_path`` (POSIX ``flock``; no lock where ``fcntl`` is missing)."""
+    try:
+        import fcntl
+    except ImportError:              # Windows: processes do not share run folders there
+        yield
+        return
+    with open(lock_path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _open_or_build(cache_dir: Path, signature: str, build: Callable[[Path], LatentCache], prune: bool) -> LatentCache:
     folder = cache_dir / signature[:32]
     try:
         cache = LatentCache(folder)
