@@ -46,6 +46,7 @@ from salad_core.keymotion.mmae import keyframe_lerp, scatter_keyframes
 from salad_core.keymotion.models import pose_joints
 from salad_core.keymotion.pipeline import KeyMotionPipeline, decode_keyframes
 from salad_core.keymotion.pst import sample_latents
+from salad_core.keymotion.sides import side_ids_of
 from salad_core.keymotion.selection import select_keyframes
 from salad_core.motion import features_to_joints
 from salad_core.sampling import Guidance, make_scheduler
@@ -172,8 +173,10 @@ def generate(pipe: KeyMotionPipeline, prompt: str, seeds: list[int], length: int
     lz, dz = pipe.pst.config.latent_size, pipe.pst.config.latent_dim
     noise = torch.stack([torch.randn((lz, dz), generator=torch.Generator().manual_seed(s)) for s in seeds])
     len_t = torch.full((b,), length, dtype=torch.long)
+    sides = side_ids_of(tb).expand(b, -1) if pipe.pst.config.side_cue else None     # a side-cue PST reads them
     z = sample_latents(pipe.pst, scheduler_factory(), text, mask, nb.features, nb.mask, noise, lengths=len_t,
-                       guidance_scale=w, num_steps=steps, generator=torch.Generator().manual_seed(seeds[0]))
+                       guidance_scale=w, num_steps=steps, generator=torch.Generator().manual_seed(seeds[0]),
+                       text_sides=sides)
     with torch.inference_mode():
         kfs, idx = decode_keyframes(pipe.kf_vae, z, len_t)
         motion = pipe.mmae.infill(kfs, idx, len_t, text, mask)

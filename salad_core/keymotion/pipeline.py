@@ -5,6 +5,7 @@ The pipeline only orchestrates (models know nothing of sampling, the loop is
 
     prompts --text encoder--> token features (B, W, C)
     noise (B, Lz, Dz) --PST + scheduler, CFG--> keyframe latents z0 (B, Lz, Dz)
+        (a PST with PSTConfig.side_cue also gets the tokens' left/right ids (B, W): keymotion.sides)
     z0 --keyframe VAE decoder--> keyframes (B, K, D), positions (B, K) --> frame indices (B, K)
     keyframes at their frames --MMAE (text-conditioned)--> motion (B, N, D) normalised
     --de-normalise (MMAE's statistics)--> features --features_to_joints--> joints (N_b, J, 3)
@@ -56,6 +57,7 @@ from salad_core.text import TextEncoder
 from .kf_vae import KeyframeVAE, positions_to_indices
 from .mmae import MotionMaskedAutoencoder
 from .pst import PST_DIFFUSION, ParallelSkipTransformer, sample_latents
+from .sides import side_ids_of
 
 __all__ = ["KeyMotionPipeline", "KeyMotionOutput", "decode_keyframes", "DEFAULT_WEIGHTS_DIR", "COMPONENTS"]
 
@@ -353,8 +355,11 @@ class KeyMotionPipeline:
         dtype = next(self.pst.parameters()).dtype
         noise = torch.randn((b, lz, dz), generator=gen).to(device=dev, dtype=dtype)
         scheduler = make_scheduler(self.diffusion, self.solver)
+        # a side-cue PST reads which tokens say left/right (salad_core.keymotion.sides)
+        sides = side_ids_of(tb).to(dev) if self.pst.config.side_cue else None
         z = sample_latents(self.pst, scheduler, text, text_mask, null_text, null_mask, noise, lengths=len_t,
-                           guidance_scale=guidance, num_steps=num_steps, progress=progress, generator=gen)
+                           guidance_scale=guidance, num_steps=num_steps, progress=progress, generator=gen,
+                           text_sides=sides)
         with torch.inference_mode():
             keyframes, indices = decode_keyframes(self.kf_vae, z, len_t)
             motion = self.mmae.infill(keyframes, indices, len_t, text, text_mask, keep_keyframes=keep_keyframes)

@@ -2,7 +2,8 @@
 
 Data flow (default sizes)::
 
-    condition: [time token, length token, text tokens (B, W, C) -Linear-> (B, W, w)] + SPE
+    condition: [time token, length token, text tokens (B, W, C) -Linear-> (B, W, w)
+                (+ side embedding of text_sides (B, W) with side_cue)] + SPE
       --transformer encoder x num_cond_layers (key mask: padded text tokens)--> c_0 (B, 2 + W, w)
     latents x_t (B, Lz, Dz) --Linear--> + SPE --> x_0 (B, Lz, w)
     parallel cross layers i = 0 .. L-1 (two streams updated from the previous layer's outputs):
@@ -28,6 +29,14 @@ Choices where the paper is silent or that we made:
 * **Length token** (an addition): the requested motion length is a condition token next to the
   timestep token (sinusoid of ``L`` then an MLP). Keyframes of a 40-frame and a 196-frame motion
   differ (denser sampling), and the pipeline knows ``L`` at generation time.
+* **Side cue** (an addition, opt-in: ``PSTConfig.side_cue``): the PST trained without it ignores
+  "left"/"right" (the side of a waved hand is decided by the initial noise;
+  :mod:`salad_core.keymotion.sides` has the measurement). With it, ``text_sides (B, W)`` (0 no side,
+  1 left, 2 right per token, :func:`~salad_core.keymotion.sides.side_ids`) select rows of
+  ``side_embed`` (``nn.Embedding(3, w)``, zero-initialised, row 0 fixed at zero) added to the projected
+  text tokens. A PST fine-tuned from a checkpoint without the cue therefore starts as exactly that
+  model, and prompts without a side word are never changed by it. A cue PST must be given
+  ``text_sides``; the null (empty-prompt) branch of guidance gets zeros.
 * **Diffusion**: ε-prediction on a scaled-linear schedule (beta 0.00085 -> 0.012, 1000 steps,
   as MLD/Stable Diffusion): :data:`PST_DIFFUSION`. Classifier-free guidance (eq. 8)
   ``eps = eps_u + w (eps_c - eps_u)`` with the empty prompt as the unconditional text; both
@@ -55,6 +64,7 @@ from salad_core.models.layers import ACTIVATIONS
 from salad_core.sampling import DiffusionConfig, Guidance, StepInfo, as_guidance, denoise
 
 from .models import TransformerBlock, check_positive_int, check_unit_interval, position_sinusoid
+from .sides import NO_SIDE, NUM_SIDES
 
 __all__ = ["PSTConfig", "ParallelSkipTransformer", "ParallelCrossLayer", "PST_DIFFUSION", "PSTPrediction",
            "sample_latents"]
@@ -83,6 +93,7 @@ class PSTConfig:
     max_length: int = 196         # longest motion (frames) the length token is scaled by
     length_condition: bool = True  # add the motion-length token to the condition (our addition)
     max_text_tokens: int = 512    # rows of the text positional table
+    side_cue: bool = False        # add a learned left/right embedding to the text tokens (needs text_sides)
 
     def __post_init__(self) -> None:
         name = type(self).__name__
@@ -98,6 +109,8 @@ class PSTConfig:
             raise ValueError(f"{name}.activation={self.activation!r} is invalid; choose one of {ACTIVATIONS}")
         if not isinstance(self.length_condition, bool):
             raise ValueError(f"{name}.length_condition={self.length_condition!r} is invalid; use True or False")
+        if not isinstance(self.side_cue, bool):
+            raise ValueError(f"{name}.side_cue={self.side_cue!r} is invalid; use True or False")
 
 
 class ParallelCrossLayer(nn.Module):
@@ -144,6 +157,9 @@ class ParallelSkipTransformer(nn.Module):
         self.time_mlp = nn.Sequential(Linear(w, w), nn.SiLU(), Linear(w, w))
         self.length_mlp = nn.Sequential(Linear(w, w), nn.SiLU(), Linear(w, w)) if cfg.length_condition else None
         self.text_in = Linear(cfg.text_dim, w)
+        self.side_embed = nn.Embedding(NUM_SIDES, w, padding_idx=NO_SIDE) if cfg.side_cue else None
+        if self.side_embed is not None:
+            nn.init.zeros_(self.side_embed.weight)     # starts as the PST without the cue
         self.cond_layers = nn.ModuleList(
             TransformerBlock(w, cfg.num_heads, cfg.ff_dim, cfg.dropout, activation=cfg.activation)
             for _ in range(cfg.num_cond_layers))
@@ -181,13 +197,37 @@ class ParallelSkipTransformer(nn.Module):
             raise ValueError(f"timesteps must be a scalar or have B={b} (or 1) entries, got shape {tuple(t.shape)}")
         return t
 
+    def _check_sides(self, text_sides: torch.Tensor | None, text: torch.Tensor) -> None:
+        """``text_sides`` must be given exactly when ``config.side_cue``: ``(B, W)`` integer ids in 0..2."""
+        if self.side_embed is None:
+            if text_sides is not None:
+                raise ValueError("text_sides was given but this PST has no side cue (PSTConfig.side_cue=False); "
+                                 "pass text_sides=None")
+            return
+        if text_sides is None:
+            raise ValueError("this PST has a side cue (PSTConfig.side_cue=True): pass text_sides (B, W), the side "
+                             "ids of the text tokens (salad_core.keymotion.sides.side_ids; zeros for the empty prompt)")
+        if tuple(text_sides.shape) != tuple(text.shape[:2]):
+            raise ValueError(f"text_sides must be (B, W) = {tuple(text.shape[:2])}, got {tuple(text_sides.shape)}")
+        if text_sides.dtype == torch.bool or text_sides.is_floating_point() or text_sides.is_complex():
+            raise ValueError(f"text_sides must hold integer side ids (0 none, 1 left, 2 right), got {text_sides.dtype}")
+        if text_sides.numel() and not 0 <= int(text_sides.min()) <= int(text_sides.max()) < NUM_SIDES:
+            raise ValueError(f"text_sides must be in 0..{NUM_SIDES - 1} (0 none, 1 left, 2 right), got values "
+                             f"{int(text_sides.min())}..{int(text_sides.max())}")
+
     def condition(self, timesteps: torch.Tensor, text: torch.Tensor, text_mask: torch.Tensor,
-                  lengths: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
-        """Condition stream ``c_0 (B, S, w)`` and its key mask ``(B, S)``, ``S = specials + W``."""
+                  lengths: torch.Tensor | None, text_sides: torch.Tensor | None = None
+                  ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Condition stream ``c_0 (B, S, w)`` and its key mask ``(B, S)``, ``S = specials + W``.
+
+        ``text_sides (B, W)`` long: side ids of the text tokens, required exactly when
+        ``config.side_cue`` (their embedding is added to the projected text tokens).
+        """
         cfg = self.config
         b, n_tok = text.shape[:2]
         if n_tok > cfg.max_text_tokens:
             raise ValueError(f"text has {n_tok} tokens; PSTConfig.max_text_tokens={cfg.max_text_tokens}")
+        self._check_sides(text_sides, text)
         w = cfg.width
         dtype = self.text_in.weight.dtype
         tok = [self.time_mlp(timestep_sinusoid(timesteps, w).to(dtype))[:, None]]          # (B, 1, w)
@@ -200,7 +240,11 @@ class ParallelSkipTransformer(nn.Module):
             if lengths.shape[0] != b:
                 raise ValueError(f"lengths must have B={b} entries, got {lengths.shape[0]}")
             tok.append(self.length_mlp(position_sinusoid(lengths.float(), w).to(dtype))[:, None])
-        c = torch.cat(tok + [self.text_in(text.to(dtype))], 1)
+        text_tokens = self.text_in(text.to(dtype))                                          # (B, W, w)
+        if self.side_embed is not None:
+            sides = self.side_embed(text_sides.to(device=text.device, dtype=torch.long))         # (B, W, w)
+            text_tokens = text_tokens + sides.to(text_tokens.dtype)
+        c = torch.cat(tok + [text_tokens], 1)
         c = self.drop(c + self.cond_pe[: c.shape[1]])
         special = torch.ones(b, len(tok), dtype=torch.bool, device=text.device)
         mask = torch.cat([special, text_mask.to(device=text.device, dtype=torch.bool)], 1)
@@ -209,7 +253,7 @@ class ParallelSkipTransformer(nn.Module):
         return c, mask
 
     def forward(self, x: torch.Tensor, timesteps, text: torch.Tensor, text_mask: torch.Tensor,
-                lengths: torch.Tensor | None = None) -> torch.Tensor:
+                lengths: torch.Tensor | None = None, text_sides: torch.Tensor | None = None) -> torch.Tensor:
         """Predict the noise of ``x_t``.
 
         Parameters
@@ -224,6 +268,10 @@ class ParallelSkipTransformer(nn.Module):
             True on real tokens.
         lengths : Tensor ``(B,)``, optional
             Motion lengths in frames (required when ``config.length_condition``).
+        text_sides : LongTensor ``(B, W)``, optional
+            Side ids of the text tokens (0 none, 1 left, 2 right;
+            :func:`~salad_core.keymotion.sides.side_ids`): required when ``config.side_cue``, an
+            error otherwise.
 
         Returns
         -------
@@ -238,7 +286,7 @@ class ParallelSkipTransformer(nn.Module):
         if tuple(text_mask.shape) != tuple(text.shape[:2]):
             raise ValueError(f"text_mask must be (B, W) = {tuple(text.shape[:2])}, got {tuple(text_mask.shape)}")
         t = self._timesteps(timesteps, b, x.device)
-        c, c_mask = self.condition(t, text, text_mask, lengths)
+        c, c_mask = self.condition(t, text, text_mask, lengths, text_sides)
         h = self.drop(self.latent_in(x) + self.latent_pe)
         sources = {i for i, _ in self.skip_pairs}
         partner = {j: i for i, j in self.skip_pairs}
@@ -254,11 +302,13 @@ class ParallelSkipTransformer(nn.Module):
 
     def guided(self, x: torch.Tensor, timesteps, text: torch.Tensor, text_mask: torch.Tensor,
                null_text: torch.Tensor, null_mask: torch.Tensor, guidance_scale: "float | Guidance",
-               lengths: torch.Tensor | None = None) -> torch.Tensor:
+               lengths: torch.Tensor | None = None, text_sides: torch.Tensor | None = None) -> torch.Tensor:
         """Classifier-free guided noise (eq. 8) with both branches in one batched forward.
 
         ``null_text (B or 1, W0, C)`` / ``null_mask`` are the empty prompt's features; the two
         texts are padded to a common width (padding is masked, so it changes nothing).
+        ``text_sides (B, W)`` (side-cue PSTs only) are the prompts' side ids, padded the same way;
+        the null branch gets zeros (the empty prompt names no side).
         ``guidance_scale`` is the weight ``w`` or a :class:`~salad_core.sampling.Guidance` (its
         ``rescale`` acts per sample over the ``Lz x Dz`` latent; its interval is applied by
         :class:`PSTPrediction`, not here).
@@ -266,18 +316,23 @@ class ParallelSkipTransformer(nn.Module):
         b = x.shape[0]
         guidance = as_guidance(guidance_scale)
         if not guidance.cfg:
-            return self(x, timesteps, text, text_mask, lengths)
+            return self(x, timesteps, text, text_mask, lengths, text_sides)
         null_text, null_mask = null_text.expand(b, -1, -1), null_mask.expand(b, -1)
         width = max(text.shape[1], null_text.shape[1])
         texts = torch.cat([_pad_tokens(null_text, width), _pad_tokens(text, width)])
         masks = torch.cat([_pad_mask(null_mask, width), _pad_mask(text_mask, width)])
+        sides = None
+        if text_sides is not None:
+            if tuple(text_sides.shape) != tuple(text.shape[:2]):
+                raise ValueError(f"text_sides must be (B, W) = {tuple(text.shape[:2])}, got {tuple(text_sides.shape)}")
+            sides = torch.cat([text_sides.new_zeros((b, width)), _pad_sides(text_sides, width)])
         t = self._timesteps(timesteps, b, x.device)
         lens = None
         if lengths is not None:
             lens = torch.as_tensor(lengths, device=x.device).reshape(-1)
             lens = lens.expand(b) if lens.numel() == 1 else lens
         out = self(torch.cat([x, x]), torch.cat([t, t]), texts, masks,
-                   None if lens is None else torch.cat([lens, lens]))
+                   None if lens is None else torch.cat([lens, lens]), sides)
         uncond, cond = out.chunk(2)
         # eq. 8: eps_u + w (eps_c - eps_u); Guidance works on (B, N', P, Dz), so the latent is one "frame"
         return guidance.combine(uncond[:, None], cond[:, None])[:, 0]
@@ -294,6 +349,10 @@ def _pad_mask(m: torch.Tensor, width: int) -> torch.Tensor:
     return torch.nn.functional.pad(m.to(torch.bool), (0, width - m.shape[1]), value=False)
 
 
+def _pad_sides(s: torch.Tensor, width: int) -> torch.Tensor:
+    return torch.nn.functional.pad(s, (0, width - s.shape[1]), value=NO_SIDE)
+
+
 class PSTPrediction:
     """KeyMotion's guided noise prediction (eq. 8) as a :class:`~salad_core.sampling.Prediction`.
 
@@ -306,21 +365,27 @@ class PSTPrediction:
     guidance_scale : float or Guidance
         The weight ``w`` (plain eq. 8) or a Guidance with a guidance ``rescale`` and/or a noise
         ``interval`` (``lo <= t / T <= hi``) outside which the step is unguided.
+    lengths : Tensor ``(B,)``, optional
+        Motion lengths (frames) for a length-conditioned PST.
+    text_sides : LongTensor ``(B, W)``, optional
+        Side ids of the prompts' tokens, for a PST with ``config.side_cue`` (required by it).
     """
 
     desc = "keyframe denoising"
 
     def __init__(self, pst: ParallelSkipTransformer, text: torch.Tensor, text_mask: torch.Tensor,
                  null_text: torch.Tensor | None, null_mask: torch.Tensor | None,
-                 guidance_scale: "float | Guidance", lengths: torch.Tensor | None = None) -> None:
+                 guidance_scale: "float | Guidance", lengths: torch.Tensor | None = None,
+                 text_sides: torch.Tensor | None = None) -> None:
         self.guidance = as_guidance(guidance_scale)
         if self.guidance.cfg and (null_text is None or null_mask is None):
             raise ValueError(f"guidance_scale={guidance_scale} needs the empty prompt's features "
                              "(null_text, null_mask)")
+        pst._check_sides(text_sides, text)       # fail before the loop, not at its first step
         self.model = pst
         self.batch_size = text.shape[0]
         self.text, self.text_mask, self.null_text, self.null_mask = text, text_mask, null_text, null_mask
-        self.guidance_scale, self.lengths = guidance_scale, lengths
+        self.guidance_scale, self.lengths, self.text_sides = guidance_scale, lengths, text_sides
         self.num_train_timesteps = PST_DIFFUSION.num_train_timesteps
 
     def session(self, timesteps: torch.Tensor, num_train_timesteps: int) -> ContextManager[None]:
@@ -333,16 +398,17 @@ class PSTPrediction:
     def __call__(self, z: torch.Tensor, t: torch.Tensor, info: StepInfo) -> torch.Tensor:
         """Predicted noise ``(B, Lz, Dz)`` of the keyframe latents ``z`` at ``t``."""
         if not info.cfg:
-            return self.model(z, t, self.text, self.text_mask, self.lengths)
+            return self.model(z, t, self.text, self.text_mask, self.lengths, self.text_sides)
         return self.model.guided(z, t, self.text, self.text_mask, self.null_text, self.null_mask,
-                                 self.guidance, self.lengths)
+                                 self.guidance, self.lengths, self.text_sides)
 
 
 def sample_latents(pst: ParallelSkipTransformer, scheduler, text: torch.Tensor, text_mask: torch.Tensor,
                    null_text: torch.Tensor | None, null_mask: torch.Tensor | None, noise: torch.Tensor, *,
                    lengths: torch.Tensor | None = None, guidance_scale: "float | Guidance" = 4.0, num_steps: int = 50,
                    progress: bool = False, generator: torch.Generator | None = None,
-                   callback: Callable[[StepInfo, torch.Tensor], None] | None = None) -> torch.Tensor:
+                   callback: Callable[[StepInfo, torch.Tensor], None] | None = None,
+                   text_sides: torch.Tensor | None = None) -> torch.Tensor:
     """Reverse diffusion of keyframe latents with classifier-free guidance (eq. 8).
 
     The loop is :func:`salad_core.sampling.denoise` with :class:`PSTPrediction`.
@@ -374,6 +440,9 @@ def sample_latents(pst: ParallelSkipTransformer, scheduler, text: torch.Tensor, 
     callback : callable, optional
         ``callback(step_info, latents)`` after each step (:class:`~salad_core.sampling.StepInfo`, as
         every sampler of salad).
+    text_sides : LongTensor ``(B, W)``, optional
+        Side ids of the prompts' tokens (:func:`~salad_core.keymotion.sides.side_ids_of` of their
+        TextBatch); required by a PST with ``config.side_cue``, an error for one without.
 
     Returns
     -------
@@ -381,7 +450,7 @@ def sample_latents(pst: ParallelSkipTransformer, scheduler, text: torch.Tensor, 
     """
     if num_steps < 1:
         raise ValueError(f"num_steps must be >= 1, got {num_steps}")
-    prediction = PSTPrediction(pst, text, text_mask, null_text, null_mask, guidance_scale, lengths)
+    prediction = PSTPrediction(pst, text, text_mask, null_text, null_mask, guidance_scale, lengths, text_sides)
     return denoise(pst, scheduler, latents=noise, num_steps=num_steps, prediction=prediction, callback=callback,
                    progress=progress, generator=generator)
 

@@ -9,7 +9,11 @@ handling and ``torchrun`` DDP as the SALAD trainers. The stages:
    default), their positions ``u = i / (L - 1)``; loss eq. 2.
 2. **PST** (:func:`train_pst`): the frozen VAE's posterior sample ``z`` of the keyframes, noised
    on the scaled-linear schedule; ε-prediction MSE (eq. 7); captions replaced by ``""`` with
-   probability ``cond_drop_prob`` for classifier-free guidance.
+   probability ``cond_drop_prob`` for classifier-free guidance. A PST with ``PSTConfig.side_cue``
+   also gets each caption's token side ids (``text_sides``, :mod:`salad_core.keymotion.sides`), from
+   the token strings the caption cache keeps. ``KeyMotionTrainConfig.init_from`` (PST stage only)
+   starts from a trained PST (fine-tuning, e.g. the shipped one with a new side cue:
+   :func:`load_pst_init`).
 3. **MMAE** (:func:`train_mmae`): the motion with everything but its keyframes masked, the
    caption; loss eq. 9. Optional Gaussian noise on the input keyframes (``keyframe_noise``, in
    normalised units) makes the in-filling robust to imperfect generated keyframes (paper Table VII).
@@ -58,6 +62,7 @@ from .kf_vae import KeyframeVAE, KeyframeVAEConfig, gather_keyframes, indices_to
 from .mmae import MMAEConfig, MotionMaskedAutoencoder, scatter_keyframes
 from .pst import PST_DIFFUSION, ParallelSkipTransformer, PSTConfig
 from .selection import KEYFRAME_METHODS, select_keyframes
+from .sides import side_ids
 
 __all__ = [
     "KeyMotionTrainConfig",
@@ -77,6 +82,9 @@ __all__ = [
     "load_frozen_kf_vae",
     "kf_vae_latent_cache",
     "PrefilledCaptions",
+    "PST_ARCHITECTURE_FIELDS",
+    "resolve_pst_source",
+    "load_pst_init",
     "STAGES",
     "KeyMotionRecipe",
     "load_keymotion_recipe",
@@ -107,6 +115,9 @@ class KeyMotionTrainConfig(TrainConfig):
                                                # keyframe VAE and PST need 0: their K is fixed by the VAE)
     latent_cache: bool = True                  # PST: keyframe-VAE posteriors of every window encoded once
     latent_cache_dir: str | None = None        # PST: where the cache lives (None: the run folder's latent_cache/)
+    init_from: str | None = None               # PST only: a PST checkpoint stem, PST run folder, KeyMotion pipeline
+                                               # folder or training root whose PST weights start the model
+                                               # (fine-tuning; only side_embed.* may be missing: load_pst_init)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -125,6 +136,9 @@ class KeyMotionTrainConfig(TrainConfig):
                 or not 0.0 <= self.keyframe_ratio <= 1.0:
             raise ValueError(f"{name}.keyframe_ratio={self.keyframe_ratio!r} is invalid; use a float in [0, 1] "
                              "(0: a fixed num_keyframes)")
+        if self.init_from is not None and (not isinstance(self.init_from, str) or not self.init_from):
+            raise ValueError(f"{name}.init_from={self.init_from!r} is invalid; use a PST checkpoint or folder path "
+                             "(str) or None")
 
 
 # ----------------------------------------------------------------------------------- data
@@ -281,14 +295,23 @@ class PrefilledCaptions:
         self.cache = cache
         self._todo: list[str] | None = list(captions)
 
-    def encode(self, captions: list[str]) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(features (B, W, C), mask (B, W) bool)`` of ``captions`` (see :meth:`CaptionFeatureCache.encode`)."""
+    def _prefill(self) -> None:
         if self._todo is not None:
             n = self.cache.prefill(self._todo)
             self._todo = None
             if n:
                 log.info("text features of %d captions computed up front", n)
+
+    def encode(self, captions: list[str]) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(features (B, W, C), mask (B, W) bool)`` of ``captions`` (see :meth:`CaptionFeatureCache.encode`)."""
+        self._prefill()
         return self.cache.encode(captions)
+
+    def encode_with_tokens(self, captions: list[str]) -> tuple[torch.Tensor, torch.Tensor, list[list[str]]]:
+        """``(features (B, W, C), mask (B, W) bool, token strings per caption)``
+        (see :meth:`CaptionFeatureCache.encode_with_tokens`)."""
+        self._prefill()
+        return self.cache.encode_with_tokens(captions)
 
 
 def _stage_captions(text_cache: CaptionFeatureCache | None, encoder: Any, config: KeyMotionTrainConfig,
@@ -330,16 +353,18 @@ class KeyframeVAEObjective(nn.Module):
 
 
 class PSTObjective(nn.Module):
-    """``forward(noisy, timesteps, text, text_mask, lengths, target, denom) -> dict(loss)`` (eq. 7)."""
+    """``forward(noisy, timesteps, text, text_mask, lengths, target[, text_sides]) -> dict(loss)`` (eq. 7)."""
 
     def __init__(self, pst: ParallelSkipTransformer) -> None:
         super().__init__()
         self.pst = pst
 
     def forward(self, noisy: torch.Tensor, timesteps: torch.Tensor, text: torch.Tensor, text_mask: torch.Tensor,
-                lengths: torch.Tensor, target: torch.Tensor) -> dict[str, torch.Tensor]:
-        """``noisy, target (B, Lz, Dz)``, ``timesteps (B,)``, ``text (B, W, C)``, ``text_mask (B, W)``."""
-        pred = self.pst(noisy, timesteps, text, text_mask, lengths)
+                lengths: torch.Tensor, target: torch.Tensor,
+                text_sides: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """``noisy, target (B, Lz, Dz)``, ``timesteps (B,)``, ``text (B, W, C)``, ``text_mask (B, W)``,
+        ``text_sides (B, W)`` long (side-cue PSTs only)."""
+        pred = self.pst(noisy, timesteps, text, text_mask, lengths, text_sides)
         return {"loss": F.mse_loss(pred, target)}
 
 
@@ -375,7 +400,7 @@ def _prepare_vae(batch: dict[str, Any], ctx: StepContext, *, latent_shape: tuple
 
 def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, text: PrefilledCaptions,
                       scheduler: Any, config: KeyMotionTrainConfig, latent_shape: tuple[int, int],
-                      latents: Any = None) -> dict[str, Any]:
+                      latents: Any = None, side_cue: bool = False) -> dict[str, Any]:
     """The :class:`PSTObjective` inputs of a training batch (eq. 7 with condition dropout).
 
     Draws, in this order from the step's shared generator: the VAE reparameterisation noise, the
@@ -393,18 +418,22 @@ def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeV
     vae : KeyframeVAE
         Frozen, for on-the-fly encoding.
     text : PrefilledCaptions
-        Caption features (``encode(captions) -> (B, W, C), (B, W)``).
+        Caption features (``encode(captions) -> (B, W, C), (B, W)``; with ``side_cue``
+        ``encode_with_tokens(captions)``, which also gives the token strings).
     scheduler
         The training scheduler of :data:`PST_DIFFUSION` (``add_noise``).
     config : KeyMotionTrainConfig
     latent_shape : tuple
         ``(Lz, Dz)``.
     latents : LatentCache, optional
+    side_cue : bool
+        The PST has ``PSTConfig.side_cue``: also return ``text_sides``.
 
     Returns
     -------
     dict: ``noisy (B, Lz, Dz)``, ``timesteps (B,)``, ``text (B, W, C)``, ``text_mask (B, W)``,
-    ``lengths (B,)``, ``target (B, Lz, Dz)`` (the noise).
+    ``lengths (B,)``, ``target (B, Lz, Dz)`` (the noise); with ``side_cue`` also ``text_sides (B, W)``
+    long, the side ids of the (possibly dropped, then all 0) captions' tokens, column for column.
     """
     dev = ctx.env.device
     _, length, idx, keyframes = _keyframe_inputs(batch, dev)
@@ -425,9 +454,15 @@ def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeV
         z = mu + eps * torch.exp(0.5 * logvar)
         noisy = scheduler.add_noise(z, noise, t)
         captions = ["" if d else c for d, c in zip(drop.tolist(), batch["caption"])]
-        feats, mask = text.encode(captions)
-    return {"noisy": noisy, "timesteps": t, "text": feats.to(dev), "text_mask": mask.to(dev), "lengths": length,
-            "target": noise}
+        if side_cue:
+            feats, mask, tokens = text.encode_with_tokens(captions)
+        else:
+            feats, mask = text.encode(captions)
+    out = {"noisy": noisy, "timesteps": t, "text": feats.to(dev), "text_mask": mask.to(dev), "lengths": length,
+           "target": noise}
+    if side_cue:
+        out["text_sides"] = side_ids(tokens, feats.shape[1]).to(dev)
+    return out
 
 
 def _prepare_mmae(batch: dict[str, Any], ctx: StepContext, *, text: PrefilledCaptions,
@@ -463,6 +498,7 @@ def build_kf_vae_task(data_dir: str | os.PathLike, model_config: KeyframeVAEConf
         raise TypeError(f"model_config must be a KeyframeVAEConfig, got {type(model_config).__name__}")
     _check_max_length(model_config.max_length, train_config)
     _check_fixed_keyframes(train_config, "keyframe VAE")
+    _check_no_init(train_config, "keyframe VAE")
     train_set, val_set = _datasets(data_dir, model_config.skeleton, model_config.num_keyframes, train_config)
     torch.manual_seed(train_config.seed)  # same initial weights on every rank and every run
     vae = KeyframeVAE(model_config).to(env.device)
@@ -574,7 +610,14 @@ def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, mod
     if not (np.allclose(train_set.mean, vae.norm.mean.cpu().numpy()) and np.allclose(train_set.std, vae.norm.std.cpu().numpy())):
         log.warning("the keyframe VAE was trained with other normalisation statistics than %s's", data_dir)
     torch.manual_seed(train_config.seed)
-    pst = ParallelSkipTransformer(model_config).to(env.device)
+    pst = ParallelSkipTransformer(model_config)
+    init_stem = None
+    if train_config.init_from is not None:
+        init_stem = load_pst_init(pst, train_config.init_from)
+        _warn_other_kf_vae(init_stem, vae)
+        log.info("PST initialised from %s%s", init_stem,
+                 " (side_embed starts at zero)" if model_config.side_cue else "")
+    pst = pst.to(env.device)
     scheduler = make_scheduler(diffusion_config, "ddim")
     text = _stage_captions(text_cache, encoder, train_config, train_set, val_set)
     latents = None
@@ -587,18 +630,119 @@ def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, mod
             log.warning("no latent cache folder given: using %s (pass cache_dir)", where)
         latents = kf_vae_latent_cache(vae, [d for d in (train_set, val_set) if d is not None], where, env,
                                       prune=train_config.latent_cache_dir is None and cache_dir is not None)
-    prepare = partial(prepare_pst_batch, vae=vae, text=text,
-                      scheduler=scheduler, config=train_config, latent_shape=vae.latent_shape, latents=latents)
+    prepare = partial(prepare_pst_batch, vae=vae, text=text, scheduler=scheduler, config=train_config,
+                      latent_shape=vae.latent_shape, latents=latents, side_cue=model_config.side_cue)
     meta = {"diffusion": config_to_dict(diffusion_config), "text_encoder": encoder_name,
             "kf_vae": str(resolve_checkpoint(vae_path)), "data": str(Path(data_dir))}
+    extra_config = {"kind": "keymotion_pst", **meta, "data": str(Path(data_dir).resolve())}
+    if init_stem is not None:
+        meta["init_from"] = str(init_stem)
+        extra_config["init_from"] = str(init_stem.resolve())
     numerics = {"latents": "cached keyframe-VAE posteriors, eps drawn per step" if latents is not None
                 else "encoded at every step"}
     return TrainTask(
         model=pst, model_type="keymotion_pst", model_config=model_config, objective=PSTObjective(pst),
         train_set=train_set, val_set=val_set, collate=collate_keyframes, prepare=prepare, meta=meta,
-        extra_config={"kind": "keymotion_pst", **meta, "data": str(Path(data_dir).resolve()), "numerics": numerics},
+        extra_config={**extra_config, "numerics": numerics},
         extra_files={"mean_std.safetensors": _mean_std_file(train_set)},
     )
+
+
+#: PSTConfig fields that define the network and must match for ``init_from``; ``dropout``,
+#: ``max_length``, ``max_text_tokens`` (a non-persistent table) and ``side_cue`` (its embedding
+#: starts at zero) may differ.
+PST_ARCHITECTURE_FIELDS = ("latent_size", "latent_dim", "text_dim", "width", "num_heads", "ff_dim",
+                           "num_cond_layers", "num_cross_layers", "activation", "length_condition")
+
+
+def resolve_pst_source(path: str | os.PathLike) -> Path:
+    """Checkpoint stem of the PST at ``path``: a KeyMotion pipeline folder (``pst.json``) or training
+    root (``pst/`` run folder), a PST run folder (``best`` or else ``latest``), a stem, or its
+    ``.json``/``.safetensors`` file."""
+    from .pipeline import _resolve_component
+
+    p = Path(path)
+    if p.is_dir():
+        if (p / "pst.json").is_file() or (p / "pst").is_dir():
+            return _resolve_component(p, "pst")
+        return resolve_checkpoint(p)
+    stem = p.with_suffix("") if p.suffix in (".json", ".safetensors") else p
+    if not stem.with_suffix(".json").is_file():
+        raise FileNotFoundError(f"{stem}.json does not exist")
+    return stem
+
+
+def load_pst_init(pst: ParallelSkipTransformer, path: str | os.PathLike) -> Path:
+    """Load the trained PST at ``path`` (:func:`resolve_pst_source`) into ``pst``; returns its stem.
+
+    The two must have the same :data:`PST_ARCHITECTURE_FIELDS`. The only parameters ``pst`` may have
+    that the checkpoint lacks are ``side_embed.*`` (a side cue added by the fine-tuning), which keep
+    their zero initialisation, so the model starts as exactly the loaded one. Any other missing or
+    unexpected key, or a shape mismatch, is an error naming the keys.
+    """
+    from salad_core.io import CheckpointError, config_from_dict, read_checkpoint
+
+    source = f"KeyMotionTrainConfig.init_from={str(path)!r}"
+    try:
+        stem = resolve_pst_source(path)
+    except (FileNotFoundError, CheckpointError) as exc:
+        raise FileNotFoundError(f"{source} is neither a KeyMotion pipeline folder or training root, a PST run "
+                                f"folder (best/latest) nor a PST checkpoint stem: {exc}") from None
+    doc, state = read_checkpoint(stem)
+    if doc["type"] != "keymotion_pst":
+        raise ValueError(f"{source}: {stem}.json holds a {doc['type']!r} model, not a 'keymotion_pst'")
+    init_config = config_from_dict(PSTConfig, doc["config"])
+    diff = [f"{k}: {getattr(init_config, k)!r} (init_from) vs {getattr(pst.config, k)!r} (model config)"
+            for k in PST_ARCHITECTURE_FIELDS if getattr(init_config, k) != getattr(pst.config, k)]
+    if diff:
+        raise ValueError(f"{source} holds a PST of another architecture; make the model config match it "
+                         f"({'; '.join(diff)})")
+    own = pst.state_dict()
+    missing = sorted(set(own) - set(state))
+    cue = [k for k in missing if k.startswith("side_embed.")]
+    problems = []
+    if len(cue) < len(missing):
+        problems.append(f"missing keys {_key_list([k for k in missing if k not in cue])}")
+    unexpected = sorted(set(state) - set(own))
+    if unexpected:
+        problems.append(f"unexpected keys {_key_list(unexpected)}")
+    bad_shape = [k for k in own if k in state and tuple(own[k].shape) != tuple(state[k].shape)]
+    if bad_shape:
+        problems.append("shape mismatch at " + ", ".join(f"{k} (model {tuple(own[k].shape)} vs init_from "
+                                                          f"{tuple(state[k].shape)})" for k in bad_shape[:5]))
+    if problems:
+        raise CheckpointError(f"{source} ({stem}) does not fit the PST (only side_embed.* may be missing): "
+                              + "; ".join(problems))
+    merged = {k: own[k] for k in cue}
+    merged.update({k: v.to(own[k].dtype) for k, v in state.items()})
+    pst.load_state_dict(merged, strict=True)
+    return stem
+
+
+def _key_list(keys: list[str], limit: int = 8) -> str:
+    return f"{keys[:limit]}" + (f" ... ({len(keys)} in all)" if len(keys) > limit else "")
+
+
+def _warn_other_kf_vae(pst_stem: Path, vae: KeyframeVAE) -> None:
+    """Warn when the PST to fine-tune comes with a keyframe VAE (pipeline folder or training root)
+    whose weights are not those of the frozen VAE this run diffuses the latents of."""
+    from salad_core.io import load_tensors
+
+    from .pipeline import _resolve_component
+
+    root = pst_stem.parent if pst_stem.name == "pst" else pst_stem.parent.parent
+    try:
+        stem = _resolve_component(root, "kf_vae")
+        theirs = load_tensors(stem.with_suffix(".safetensors"))
+    except (FileNotFoundError, ValueError):
+        return
+    own = vae.state_dict()
+    same = set(theirs) == set(own) and all(
+        theirs[k].shape == own[k].shape and torch.equal(theirs[k].to(own[k].device, own[k].dtype), own[k])
+        for k in own)
+    if not same:
+        log.warning("the PST of %s was trained on the latents of the keyframe VAE %s, not on those of the frozen "
+                    "keyframe VAE of this run: fine-tuning starts from a model of another latent space", pst_stem, stem)
 
 
 def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None, train_config: KeyMotionTrainConfig,
@@ -617,6 +761,7 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
         raise ValueError(f"MMAEConfig.text_dim={model_config.text_dim} does not fit: the text encoder gives "
                          f"{encoder.dim}; set text_dim={encoder.dim}")
     _check_max_length(model_config.max_length, train_config)
+    _check_no_init(train_config, "MMAE")
     train_set, val_set = _datasets(data_dir, model_config.skeleton, num_keyframes, train_config,
                                    ratio=train_config.keyframe_ratio)
     torch.manual_seed(train_config.seed)
@@ -647,6 +792,12 @@ def _check_fixed_keyframes(config: KeyMotionTrainConfig, stage: str) -> None:
                          f"{stage} works on the keyframe VAE's fixed num_keyframes; set keyframe_ratio=0 for it")
 
 
+def _check_no_init(config: KeyMotionTrainConfig, stage: str) -> None:
+    if config.init_from is not None:
+        raise ValueError(f"KeyMotionTrainConfig.init_from={config.init_from!r} is for the PST only (fine-tuning a "
+                         f"trained PST), not the {stage}; set it in the \"pst\" section's \"train\" of the config")
+
+
 def _check_max_length(model_max: int, config: KeyMotionTrainConfig) -> None:
     if config.max_length > model_max:
         raise ValueError(f"KeyMotionTrainConfig.max_length={config.max_length} exceeds the model's "
@@ -669,7 +820,14 @@ def train_pst(data_dir: str | os.PathLike, out_dir: str | os.PathLike, vae_path:
               text_encoder: Any = "minilm", resume: bool = False, *, diffusion_config: Any = None,
               env: DistEnv | None = None, on_step: Callable[[int], None] | None = None,
               text_cache: CaptionFeatureCache | None = None) -> TrainResult:
-    """Train a :class:`ParallelSkipTransformer` on the latents of the frozen VAE at ``vae_path``."""
+    """Train a :class:`ParallelSkipTransformer` on the latents of the frozen VAE at ``vae_path``.
+
+    Fine-tuning a trained PST (``train_config.init_from``) must use the keyframe VAE it was trained
+    on, e.g. the shipped weights with a side cue added::
+
+        train_pst(data, out, DEFAULT_WEIGHTS_DIR / "kf_vae", PSTConfig(..., side_cue=True),
+                  KeyMotionTrainConfig(init_from=str(DEFAULT_WEIGHTS_DIR), ...))
+    """
     train_config = train_config or KeyMotionTrainConfig()
     env = env or init_distributed(train_config.device)
     task = build_pst_task(data_dir, vae_path, model_config, train_config, env, text_encoder, diffusion_config,

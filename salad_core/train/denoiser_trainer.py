@@ -94,7 +94,8 @@ class CaptionFeatureCache:
     its batch (padding can change the floating-point result of a batched forward); a cached run
     is therefore exactly reproducible and resumable whatever the cache holds. Only the valid tokens
     are kept; a batch is re-padded to its longest caption with a False mask, which cross-attention
-    ignores.
+    ignores. Each caption's token strings (``TextBatch.tokens``) are kept beside its features, for
+    models that read the tokens themselves (:meth:`encode_with_tokens`; KeyMotion's side cue).
 
     Parameters
     ----------
@@ -111,22 +112,30 @@ class CaptionFeatureCache:
         self.encoder = encoder
         self.max_entries = max_entries
         self._store: "OrderedDict[str, torch.Tensor]" = OrderedDict()
+        self._tokens: dict[str, list[str]] = {}                        # same keys as _store
         self.hits = 0
         self.misses = 0
 
-    def _one(self, caption: str) -> torch.Tensor:
+    def _entry(self, caption: str) -> tuple[torch.Tensor, list[str]]:
+        """``(features (W_valid, C), token strings (W_valid,))`` of one caption, encoded alone."""
         feats = self._store.get(caption)
         if feats is not None:
             self._store.move_to_end(caption)
             self.hits += 1
-            return feats
+            return feats, self._tokens[caption]
         self.misses += 1
         tb = self.encoder.encode([caption], allow_empty=True)
         feats = tb.features[0, tb.mask[0]].clone()                     # (W_valid, C)
+        tokens = list(tb.tokens[0])
         self._store[caption] = feats
+        self._tokens[caption] = tokens
         if len(self._store) > self.max_entries:
-            self._store.popitem(last=False)
-        return feats
+            old, _ = self._store.popitem(last=False)
+            del self._tokens[old]
+        return feats, tokens
+
+    def _one(self, caption: str) -> torch.Tensor:
+        return self._entry(caption)[0]
 
     def prefill(self, captions: Sequence[str], batch_size: int = 64) -> int:
         """Encode every caption of a dataset up front, in fixed batches of similar length.
@@ -145,14 +154,26 @@ class CaptionFeatureCache:
             tb = self.encoder.encode(chunk, allow_empty=True)
             for j, caption in enumerate(chunk):
                 self._store[caption] = tb.features[j, tb.mask[j]].clone()
+                self._tokens[caption] = list(tb.tokens[j])
         return len(todo)
 
     def encode(self, captions: list[str]) -> tuple[torch.Tensor, torch.Tensor]:
         """``(features (B, W, C), mask (B, W) bool)`` on the CPU."""
+        feats, mask, _ = self.encode_with_tokens(captions)
+        return feats, mask
+
+    def encode_with_tokens(self, captions: list[str]) -> tuple[torch.Tensor, torch.Tensor, list[list[str]]]:
+        """:meth:`encode` and each caption's unpadded token strings (``TextBatch.tokens``): token ``j``
+        of caption ``b`` is feature column ``j``."""
         if self.max_entries <= 0:
             tb = self.encoder.encode(captions, allow_empty=True)
-            return tb.features, tb.mask
-        rows = [self._one(c) for c in captions]
+            return tb.features, tb.mask, [list(t) for t in tb.tokens]
+        entries = [self._entry(c) for c in captions]
+        return (*self._pad([f for f, _ in entries]), [t for _, t in entries])
+
+    @staticmethod
+    def _pad(rows: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+        """Rows ``(W_b, C)`` right-padded into ``(features (B, W, C), mask (B, W) bool)``."""
         w = max(r.shape[0] for r in rows)
         feats = rows[0].new_zeros((len(rows), w, rows[0].shape[1]))
         mask = torch.zeros((len(rows), w), dtype=torch.bool)
