@@ -434,3 +434,26 @@ def test_train_pst_fine_tunes_a_no_cue_pst_with_the_cue_and_records_it(side_corp
     assert torch.count_nonzero(model.side_embed.weight[0]) == 0
     with pytest.raises(ValueError, match="init_from=.* is for the PST only"):
         build_kf_vae_task(side_corpus, None, cfg, DistEnv())
+
+
+def test_fp16_keyframe_vae_statistics_are_not_another_corpus(side_corpus, tmp_path, caplog):
+    """The shipped pipelines store the keyframe VAE's Mean/Std in fp16 (~5e-4 relative rounding): fine-tuning
+    on their own corpus must not warn that the statistics differ; another corpus's statistics must."""
+    from salad_core.keymotion.train import build_pst_task
+    from salad_core.train.distributed import DistEnv
+
+    train, _ = _keyframe_sets(side_corpus)
+    cfg = KeyMotionTrainConfig(batch_size=4, max_steps=1, num_threads=1, device="cpu", max_length=96,
+                               progress=False, keyframe_method="uniform", latent_cache=False)
+    warned = {}
+    for name, shift in (("same_fp16", 0.0), ("other", 0.1)):
+        vae = _tiny_kf_vae(train)
+        vae.set_normalization(train.mean + shift, train.std)
+        save_checkpoint(tmp_path / name, vae, model_type="keymotion_kf_vae", config=vae.config,
+                        dtype=torch.float16)
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="salad_core.keymotion.train"):
+            build_pst_task(side_corpus, tmp_path / name, tiny_pst_config(max_length=96), cfg, DistEnv(),
+                           HashTextEncoder())
+        warned[name] = any("other normalisation statistics" in r.getMessage() for r in caplog.records)
+    assert warned == {"same_fp16": False, "other": True}
