@@ -26,7 +26,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def main(argv=None) -> int:
+def main(argv=None, *, text_encoder=None) -> int:
+    """``text_encoder``: an encoder object instead of the recipe's (tests)."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", required=True, type=Path, help="corpus the source pipeline was trained on")
     ap.add_argument("--out", required=True, type=Path, help="run folder of the fine-tuned PST")
@@ -60,7 +61,9 @@ def main(argv=None) -> int:
         overrides["num_threads"] = args.threads
     train_cfg = replace(recipe.pst_train, **overrides)
     model_cfg = replace(recipe.pst_model, side_cue=True)
-    result = train_pst(args.data, args.out, source / "kf_vae", model_cfg, train_cfg, resume=args.resume)
+    encoder = text_encoder if text_encoder is not None else doc.get("text_encoder", "minilm")
+    result = train_pst(args.data, args.out, source / "kf_vae", model_cfg, train_cfg, text_encoder=encoder,
+                       resume=args.resume)
     print(f"pst: step {result.step}, best val {result.best_val} (step {result.best_step}), "
           f"{result.steps_per_s:.2f} steps/s -> {result.out_dir}")
     if result.interrupted:
@@ -71,7 +74,7 @@ def main(argv=None) -> int:
         from salad_core.io import load_model
         from salad_core.train.assemble import run_checkpoint
 
-        pipe = KeyMotionPipeline.from_pretrained(source)
+        pipe = KeyMotionPipeline.from_pretrained(source, **({"text_encoder": text_encoder} if text_encoder else {}))
         pst, _, _ = load_model(run_checkpoint(args.out))
         pipe.pst = pst.eval()
         pipe.save_pretrained(args.export, dtype=torch.float16)
