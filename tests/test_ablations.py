@@ -519,3 +519,51 @@ def test_timing_measures_cpu_per_step_and_the_plan_takes_alike_variants(tmp_path
     recipe = load_staged_recipe(_write_staged(tmp_path, doc))
     dens = {p["steps"]: p for p in study_plan(recipe, rate) if p["group"] == "dens"}
     assert dens[3]["cpu_seconds"] == pytest.approx(2 * 3 / rate["full"])  # no_film takes full's speed
+
+
+def test_pipelined_study_overlaps_stages_in_subprocesses_and_stops_cleanly(tmp_path, monkeypatch):
+    """The default (subprocess) scheduler: two VAEs trained side by side, stages overlap, a stop at the second
+    stage interrupts what trains beyond it, and the stages it scored are exactly the snapshots' steps."""
+    import subprocess as sp
+
+    from _doubles import make_tiny_evaluator
+
+    import salad_core.ablations.runner as runner
+
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=40)
+    evaluator = make_tiny_evaluator(data, dim_word=8, dim_text_hidden=16, dim_coemb=32, dim_movement_enc_hidden=16,
+                                    dim_movement_latent=16, dim_motion_hidden=32)
+    doc = _staged_doc()
+    doc["groups"]["vaes"].update(stages=[1, 2, 3], evaluation={"replications": 2, "batch_size": 16,
+                                                               "max_samples": 32, "mm": False})
+    recipe = load_staged_recipe(_write_staged(tmp_path, doc))
+    real_decide = runner.decide
+
+    def stop_at_two(history, stages, rule):           # the orderings of tiny models are noise: stop at stage 2
+        d = real_decide(history, stages, rule)
+        return runner.StopDecision(True, "stable", d.steps, None) if d.steps == 2 else d
+    monkeypatch.setattr(runner, "decide", stop_at_two)
+    started = []
+    real_popen = sp.Popen
+
+    def recording_popen(cmd, *a, **k):
+        started.append(cmd)
+        return real_popen(cmd, *a, **k)
+    monkeypatch.setattr(runner.subprocess, "Popen", recording_popen)
+    work = tmp_path / "work"
+    outcome = run_study(recipe, data, work, evaluator=evaluator, max_parallel=2)["vaes"]
+    assert outcome.decision.steps == 2 and [e["steps"] for e in outcome.evaluations] == [1, 2]
+    assert evaluation_path(work, recipe.group("vaes"), 2).is_file()
+    assert not evaluation_path(work, recipe.group("vaes"), 3).exists()
+    for steps in (1, 2):
+        for v in ("st", "pose"):
+            meta = json.loads((stage_dir(work, recipe.group("vaes"), steps) / "runs" / f"vae_{v}" /
+                               "latest.json").read_text())
+            assert meta.get("step", meta.get("meta", {}).get("step")) == steps
+    assert all("--resume" in c for c in started) and len(started) >= 4       # at least stages 1 and 2 of both
+    # a second call trains and scores nothing: the evaluations and snapshots are read back
+    monkeypatch.setattr(runner.subprocess, "Popen", lambda *a, **k: (_ for _ in ()).throw(AssertionError("trained")))
+    monkeypatch.setattr("salad_core.ablations.stage_eval._score_vae",
+                        lambda *a, **k: (_ for _ in ()).throw(AssertionError("scored")))
+    again = run_study(recipe, data, work, evaluator=evaluator, max_parallel=2)["vaes"]
+    assert again.decision == outcome.decision

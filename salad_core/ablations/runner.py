@@ -20,7 +20,9 @@ from __future__ import annotations
 import json
 import logging
 import os
+import subprocess
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
@@ -29,7 +31,7 @@ from .keep import group_fingerprint, keep_group, kept_groups, restore_group
 from .stage_eval import evaluate_stage, load_evaluation, package_stage, snapshot_run, stage_dir
 from .staged import StagedRecipe, StudyGroup, stage_jobs
 from .stop_rule import StopDecision, decide
-from .study import run_jobs
+from .study import job_command, run_jobs
 
 __all__ = ["GroupOutcome", "run_study", "study_plan"]
 
@@ -81,10 +83,145 @@ def _train_stage(recipe: StagedRecipe, group: StudyGroup, steps: int, work: Path
         snapshot_run(job.run_dir, runs / job.run_dir.name, steps)
 
 
+def _stage_done(work: Path, group: StudyGroup, steps: int, run_name: str) -> bool:
+    return (stage_dir(work, group, steps) / "runs" / run_name / "latest.safetensors").is_file()
+
+
+def _run_group_pipelined(recipe: StagedRecipe, group: StudyGroup, work: Path, data, frozen, max_parallel: int,
+                         python: str, evaluator: Any, text_encoder: Any, evaluations: list[dict]) -> StopDecision | None:
+    """Train and evaluate a group's remaining stages without idle cores at the stage boundaries.
+
+    The work is a set of tasks ``(stage, variant)``: train the variant's run to the stage, then snapshot it.
+    Free slots take the pending task of the lowest stage whose previous stage is snapshotted, up to one
+    stage beyond the evaluation in progress; a stage is packaged and scored in a thread as soon as all its
+    snapshots exist, while the next stage trains. When the stop rule stops the group, the runs trained
+    beyond the stopping stage are interrupted (SIGINT: they write a checkpoint) and their extra steps are
+    not used: the models of a stage are its snapshots, and with a constant learning rate after warm-up a
+    run's weights at a step do not depend on how far it goes on (:mod:`~salad_core.ablations.staged`).
+    ``evaluations`` holds the stages evaluated before (in order) and is extended; returns the decision
+    after the last evaluation (None when there is none).
+    """
+    import signal
+    import threading
+
+    stages = list(group.stages)
+    names = list(group.variants)
+    run_of = {v: (f"vae_{v}" if recipe.base.variant(v).kind == "vae" else f"den_{v}") for v in names}
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    running: dict[tuple[int, str], tuple[subprocess.Popen, Any]] = {}
+    evaluating: dict[str, Any] = {}           # "thread", "index", "result", "error"
+    decision = None
+    for steps in stages[len(evaluations):]:   # stages evaluated before (also those restored from a keep folder)
+        doc = load_evaluation(work, group, steps)
+        if doc is None:
+            break
+        evaluations.append(doc)
+        decision = decide(_history(evaluations), stages, recipe.stop)
+        log.info("%s at %d steps: %s", group.name, steps, decision.reason)
+        if decision.stop:
+            return decision
+
+    def done(i: int, v: str) -> bool:
+        """Stage ``i`` of variant ``v`` is trained: snapshotted, or evaluated already."""
+        return i < len(evaluations) or _stage_done(work, group, stages[i], run_of[v])
+
+    def evaluate(i: int) -> None:
+        import torch
+
+        torch.set_num_threads(1)              # the trainings have the other cores
+        try:
+            package_stage(recipe, group, stages[i], work, frozen, text_encoder)
+            evaluating["result"] = evaluate_stage(recipe, group, stages[i], work, data, evaluator, text_encoder)
+        except BaseException as exc:           # re-raised by the scheduler
+            evaluating["error"] = exc
+
+    def stop_all() -> None:
+        for (i, v), (proc, _) in running.items():
+            if proc.poll() is None:
+                log.info("%s: interrupting %s (training towards %d steps, beyond the stop)", group.name, run_of[v],
+                         stages[i])
+                proc.send_signal(signal.SIGINT)
+        for proc, fh in running.values():
+            try:
+                proc.wait(timeout=600)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            fh.close()
+        running.clear()
+
+    try:
+        while True:
+            # finished trainings: snapshot their stage
+            for (i, v), (proc, fh) in list(running.items()):
+                code = proc.poll()
+                if code is None:
+                    continue
+                fh.close()
+                del running[(i, v)]
+                if code != 0:
+                    raise RuntimeError(f"training {run_of[v]} to {stages[i]} steps failed (exit code {code}); see "
+                                       f"{work / (run_of[v] + '.log')}")
+                snapshot_run(work / run_of[v], stage_dir(work, group, stages[i]) / "runs" / run_of[v], stages[i])
+                log.info("%s: %s reached %d steps", group.name, run_of[v], stages[i])
+            # a finished evaluation: the stop rule
+            if evaluating and not evaluating["thread"].is_alive():
+                if "error" in evaluating:
+                    raise evaluating["error"]
+                evaluations.append(evaluating["result"])
+                evaluating.clear()
+                decision = decide(_history(evaluations), stages, recipe.stop)
+                log.info("%s at %d steps: %s", group.name, decision.steps, decision.reason)
+                if decision.stop:
+                    return decision
+            # the next stage to evaluate, once every variant has its snapshot
+            nxt = len(evaluations)
+            if not evaluating and nxt < len(stages) and all(done(nxt, v) for v in names):
+                doc = load_evaluation(work, group, stages[nxt])
+                if doc is not None:               # evaluated before an interruption
+                    evaluations.append(doc)
+                    decision = decide(_history(evaluations), stages, recipe.stop)
+                    log.info("%s at %d steps: %s", group.name, decision.steps, decision.reason)
+                    if decision.stop:
+                        return decision
+                    continue
+                thread = threading.Thread(target=evaluate, args=(nxt,), name=f"evaluate {group.stage_name(stages[nxt])}",
+                                          daemon=True)
+                evaluating.update(thread=thread, index=nxt)
+                thread.start()
+            # free slots: the lowest pending stage first, at most one stage beyond the one being evaluated
+            limit = min(len(stages) - 1, len(evaluations) + 1)
+            busy = {v for _, v in running}
+            for i in range(len(evaluations), limit + 1):
+                for v in names:
+                    if len(running) >= max_parallel:
+                        break
+                    if v in busy or done(i, v) or (i > 0 and not done(i - 1, v)):
+                        continue
+                    job = next(j for j in stage_jobs(recipe, group, stages[i], work, frozen) if j.variant.name == v)
+                    _check_vae_of_runs([job], frozen)
+                    job.run_dir.parent.mkdir(parents=True, exist_ok=True)
+                    fh = open(job.run_dir.parent / f"{job.run_dir.name}.log", "a")
+                    log.info("%s: training %s to %d steps", group.name, job.run_dir.name, stages[i])
+                    running[(i, v)] = (subprocess.Popen(job_command(job, data, python), stdout=fh,
+                                                        stderr=subprocess.STDOUT, env=env), fh)
+                    busy.add(v)
+            if not running and not evaluating:
+                if len(evaluations) == len(stages):
+                    return decision
+                if all(done(len(evaluations), v) for v in names):
+                    continue                      # its evaluation starts at the next turn
+                raise RuntimeError(f"{group.name}: nothing runs and stage {stages[len(evaluations)]} cannot start "
+                                   "(a bug in the scheduler)")
+            time.sleep(2.0)
+    finally:
+        stop_all()
+
+
 def run_study(recipe: StagedRecipe, data: str | os.PathLike, work: str | os.PathLike, *, evaluator: Any = None,
               text_encoder: Any = None, max_parallel: int = 1, inline: bool = False,
               python: str = sys.executable, groups: list[str] | None = None,
-              keep: str | os.PathLike | None = None) -> dict[str, GroupOutcome]:
+              keep: str | os.PathLike | None = None, pipelined: bool = True) -> dict[str, GroupOutcome]:
     """Train and evaluate every group until it stops (see the module docstring); resumable.
 
     Parameters
@@ -105,6 +242,10 @@ def run_study(recipe: StagedRecipe, data: str | os.PathLike, work: str | os.Path
     groups : list of str, optional
         Only these groups (their VAE groups must have stopped already: their evaluations are in ``work``,
         or in ``keep``).
+    pipelined : bool
+        With subprocesses (``inline=False``): stages overlap, so no core idles at a stage boundary or during an
+        evaluation (:func:`_run_group_pipelined`); False trains, evaluates and decides one stage at a time.
+        The models and scores are the same either way.
     keep : path, optional
         Where stopped VAE groups are kept (:func:`~salad_core.ablations.keep.keep_group`) and restored from
         (:func:`~salad_core.ablations.keep.restore_group`) when ``work`` lacks them.
@@ -138,7 +279,10 @@ def run_study(recipe: StagedRecipe, data: str | os.PathLike, work: str | os.Path
             raise RuntimeError(f"group {group.name!r} needs the VAEs {missing}, whose group has not stopped")
         evaluations: list[dict] = []
         decision = None
-        for steps in group.stages:
+        if not inline and pipelined:
+            decision = _run_group_pipelined(recipe, group, work, data, frozen, max_parallel, python, evaluator,
+                                            text_encoder, evaluations)
+        for steps in (() if not inline and pipelined else group.stages):
             doc = load_evaluation(work, group, steps)
             if doc is None:
                 _train_stage(recipe, group, steps, work, data, frozen, max_parallel, inline, python)
