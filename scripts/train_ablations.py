@@ -11,9 +11,12 @@ The staged study (issue 24, ``configs/ablations_v2.json``, the default recipe) i
 Every group of tables trains to its next stage (every variant of a table to exactly the same steps),
 is evaluated there with one protocol (``RUNS/evaluations/<group>@<steps>.json``) and stops when the
 orderings of its paper pairs are the same at two consecutive stages or its budget is spent; the VAE
-groups come first and the denoisers learn on their final VAEs (packaged, fp16). A stopped VAE group is
-also kept in the repository (``studies/<recipe name>/``, ``--keep``): commit it, and on a new machine the
-same command restores it and goes on with the denoisers. Then the final stage's models (fp16),
+groups come first and the denoisers learn on their final VAEs (packaged, fp16). A stopped group is also
+kept in the repository (``studies/<recipe name>/``, ``--keep``), and so is a group in progress after each
+new evaluation (its runs' fp16 weights at that stage): commit it, and on a new machine the same command
+restores it and goes on from there (the group in progress warm-starts from its last evaluated stage).
+``--keep-now`` keeps what ``--work`` holds at once, without training (a study started by an older
+version, or before committing). Then the final stage's models (fp16),
 the evaluations, ``index.json`` and ``MODEL_CARD.md`` go to ``--ship`` (default
 ``salad_core/weights/ablations``). Run the same command again after a kill: trained steps, snapshots
 and evaluated rows are kept, the study continues where it stopped. Run it at low priority on a shared
@@ -35,8 +38,8 @@ import sys
 import time
 from pathlib import Path
 
-from salad_core.ablations import (load_recipe, load_staged_recipe, plan_jobs, run_jobs, run_study, ship, ship_study,
-                                  study_plan)
+from salad_core.ablations import (keep_study, load_recipe, load_staged_recipe, plan_jobs, run_jobs, run_study, ship,
+                                  ship_study, study_plan)
 from salad_core.ablations.shipping import folder_size_mb
 from salad_core.ablations.runner import _alike
 from salad_core.ablations.stage_eval import load_evaluation
@@ -89,6 +92,14 @@ def staged_main(args, ap) -> int:
         return 0
     if args.dry_run:
         print_plan(recipe, args.work, args.jobs)
+        return 0
+    if args.keep_now:
+        if args.no_keep:
+            ap.error("--keep-now and --no-keep contradict each other")
+        keep = args.keep or REPO / "studies" / Path(recipe.path).stem
+        for name, what in keep_study(recipe, args.work, keep).items():
+            print(f"  {name}: {what}")
+        print(f"kept in {keep}")
         return 0
     if args.data is None:
         ap.error("--data is required (the corpus the study trains on and evaluates on)")
@@ -163,10 +174,13 @@ def main(argv=None) -> int:
     ap.add_argument("--groups", nargs="+", default=None,
                     help="staged recipes: only these groups (their VAE groups must have stopped); does not ship")
     ap.add_argument("--keep", type=Path, default=None,
-                    help="staged recipes: where a stopped VAE group is kept and restored from when --work lacks it "
-                         "(default: studies/<recipe name>/ in the repository; commit it, so that a new machine "
-                         "goes on with the denoisers)")
-    ap.add_argument("--no-keep", action="store_true", help="staged recipes: neither keep nor restore VAE groups")
+                    help="staged recipes: where stopped groups and the progress of a running one are kept, and "
+                         "restored from when --work lacks them (default: studies/<recipe name>/ in the repository; "
+                         "commit it, so that a new machine goes on from there)")
+    ap.add_argument("--no-keep", action="store_true", help="staged recipes: neither keep nor restore groups")
+    ap.add_argument("--keep-now", action="store_true",
+                    help="staged recipes: keep what --work holds (stopped groups; a running group's last evaluated "
+                         "stage) and exit, without training")
     ap.add_argument("--only", nargs="+", default=None, help="recipes without groups: variant names to train")
     ap.add_argument("--ship-only", action="store_true", help="recipes without groups: only assemble trained runs")
     args = ap.parse_args(argv)

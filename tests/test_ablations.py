@@ -381,9 +381,12 @@ def test_staged_study_trains_evaluates_resumes_and_ships(tmp_path, monkeypatch):
     from salad_core.ablations import kept_groups
 
     kept = kept_groups(keep)
-    assert list(kept) == ["vaes"] and kept["vaes"]["steps"] == vae_stop
+    assert list(kept) == ["vaes", "dens"] and kept["vaes"]["steps"] == vae_stop
     assert kept["vaes"]["stages"] == [e["steps"] for e in outcomes["vaes"].evaluations]
-    assert sorted(p.name for p in keep.iterdir()) == ["evaluations", "groups.json", "vae_pose", "vae_st"]
+    assert kept["dens"]["stopped"] and kept["dens"]["steps"] == outcomes["dens"].decision.steps
+    # the stopped denoiser group too (its pipelines, as they ship); no progress is left once both stopped
+    assert sorted(p.name for p in keep.iterdir()) == ["evaluations", "full", "groups.json", "no_st", "vae_pose",
+                                                      "vae_st"]
     assert (keep / "vae_pose" / "vae.safetensors").read_bytes() == (frozen.parent / "vae.safetensors").read_bytes()
 
     # rerun after the end: nothing is trained or scored again
@@ -567,3 +570,70 @@ def test_pipelined_study_overlaps_stages_in_subprocesses_and_stops_cleanly(tmp_p
                         lambda *a, **k: (_ for _ in ()).throw(AssertionError("scored")))
     again = run_study(recipe, data, work, evaluator=evaluator, max_parallel=2)["vaes"]
     assert again.decision == outcome.decision
+
+
+def test_group_in_progress_is_kept_and_a_new_machine_warm_starts_it(tmp_path, monkeypatch):
+    """After each new evaluation of a group that goes on, its runs' fp16 weights and its evaluations are kept;
+    an empty work folder gets them back and the runs continue from that stage, not from step 0."""
+    from salad_core.ablations import keep_study, kept_groups
+    from salad_core.eval.reconstruction import ReconstructionResult
+    from salad_core.io import load_tensors
+
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=8)
+    doc = _staged_doc()
+    doc["groups"]["vaes"]["stages"] = [1, 2, 3]
+    recipe = load_staged_recipe(_write_staged(tmp_path, doc))
+    group = recipe.group("vaes")
+    scored = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_score(folder, label, data, evaluator, settings, weights, stop_at=None):
+        steps = int(folder.parent.parent.name.split("@")[1])          # stages/vaes@<steps>/models/<folder>
+        if steps == stop_at:
+            raise Stop(f"the machine stops during stage {steps}")
+        scored.append((steps, folder.name))
+        # the orderings flip at every stage: the group never becomes stable, it runs to its budget
+        fid = {"vae_st": 0.1 if steps % 2 else 0.3, "vae_pose": 0.2}[folder.name]
+        res = ReconstructionResult(label, {"FID": (fid, fid + 0.001), "MPJPE": (0.02, 0.0201)}, 10, {"evaluator": "fake"})
+        return res, res.parameters
+
+    import functools
+
+    monkeypatch.setattr("salad_core.ablations.stage_eval._score_vae", functools.partial(fake_score, stop_at=2))
+    work, keep = tmp_path / "work", tmp_path / "keep"
+    with pytest.raises(Stop):
+        run_study(recipe, data, work, evaluator=object(), inline=True, keep=keep)
+    kept = kept_groups(keep)["vaes"]
+    assert (kept["steps"], kept["stopped"], kept["reason"], kept["stages"]) == (1, False, "in progress", [1])
+    assert sorted(p.name for p in (keep / "progress" / "vaes").iterdir()) == [
+        "vae_pose.json", "vae_pose.safetensors", "vae_st.json", "vae_st.safetensors"]
+    snap = load_tensors(stage_dir(work, group, 1) / "runs" / "vae_st" / "latest.safetensors")
+    kept_w = load_tensors(keep / "progress" / "vaes" / "vae_st.safetensors")
+    assert set(kept_w) == set(snap) and all(kept_w[k].dtype == torch.float16 for k in kept_w if kept_w[k].is_floating_point())
+    for k, v in snap.items():
+        torch.testing.assert_close(kept_w[k].float(), v, rtol=1e-3, atol=1e-4)
+    assert keep_study(recipe, work, keep) == {"vaes": "in progress, evaluated up to 1 steps"}
+
+    # a new machine: nothing of work survives; the group goes on from stage 1 with the kept weights
+    monkeypatch.setattr("salad_core.ablations.stage_eval._score_vae", fake_score)
+    fresh = tmp_path / "fresh"
+    scored.clear()
+    outcome = run_study(recipe, data, fresh, evaluator=object(), inline=True, keep=keep)["vaes"]
+    assert outcome.decision.reason == "budget" and outcome.decision.steps == 3
+    assert sorted({s for s, _ in scored}) == [2, 3]                          # stage 1 was not trained or scored again
+    assert outcome.evaluations[0] == json.loads(evaluation_path(work, group, 1).read_text())
+    for run in ("vae_st", "vae_pose"):
+        rows = [json.loads(l) for l in (fresh / run / "log.jsonl").read_text().splitlines()]
+        assert rows[0]["step"] == 1 and "warm_start" in rows[0]              # continued from the kept step
+        assert [r["step"] for r in rows if "loss" in r] == [2, 3]
+    # the stopped group replaces its progress
+    kept = kept_groups(keep)["vaes"]
+    assert (kept["steps"], kept["stopped"], kept["stages"]) == (3, True, [1, 2, 3])
+    assert not (keep / "progress").exists()
+    assert sorted(p.name for p in keep.iterdir()) == ["evaluations", "groups.json", "vae_pose", "vae_st"]
+    with pytest.raises(ValueError, match="as stopped already"):
+        from salad_core.ablations import keep_progress
+
+        keep_progress(recipe, group, [1], work, keep)

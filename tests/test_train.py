@@ -332,6 +332,45 @@ def test_sigint_writes_a_consistent_checkpoint_then_resume_matches(corpus, strai
     assert_same_tensors(weights(tmp_path / "latest.safetensors"), weights(straight_vae / "latest.safetensors"))
 
 
+def test_warm_start_continues_from_fp16_weights_with_a_new_warm_up(corpus, straight_vae, tmp_path):
+    """A run folder holding only the fp16 weights of a step continues from that step: the epoch position an
+    exact resume would have, the learning rate warmed up again, and the train state says so for later resumes."""
+    from salad_core.train.warm_start import load_warm_start, rewarm_factor, write_warm_start
+
+    first = tmp_path / "first"
+    train_vae(corpus, first, tiny_vae_config(), vae_train_config(max_steps=4))
+    run = tmp_path / "warm"
+    write_warm_start(first / "latest", run / "warm_start")
+    kept = weights(run / "warm_start.safetensors")
+    assert {v.dtype for v in kept.values() if v.is_floating_point()} == {torch.float16}
+    for k, v in weights(first / "latest.safetensors").items():   # rounded once to float16, nothing else
+        torch.testing.assert_close(kept[k].float(), v, rtol=1e-3, atol=1e-4)
+
+    res = train_vae(corpus, run, tiny_vae_config(), vae_train_config(warmup_steps=2, milestones=()), resume=True)
+    assert res.step == 6 and res.epoch == 2                     # 3 batches per epoch: step 4 is epoch 1, batch 1
+    rows = [json.loads(l) for l in (run / "log.jsonl").read_text().splitlines()]
+    assert rows[0]["step"] == 4 and rows[0]["warm_start"].endswith("latest")
+    lrs = {r["step"]: r["lr"] for r in rows if "lr" in r}
+    assert sorted(lrs) == [5, 6]
+    assert lrs[5] == pytest.approx(3e-3 * 0.5) and lrs[6] == pytest.approx(3e-3)   # warmed up again over 2 steps
+    st = load_train_state(run)
+    assert st.step == 6 and st.extra["warm_from"] == 4
+    assert rewarm_factor(4, None, 2) == 1.0 and rewarm_factor(4, 4, 0) == 1.0 and rewarm_factor(9, 4, 2) == 1.0
+    # the warm start moved the model from the kept weights, and the weights differ from the exact run's
+    moved = weights(run / "latest.safetensors")
+    assert any(not torch.equal(moved[k], kept[k].float()) for k in kept if kept[k].is_floating_point())
+    # once the run has a train state, the warm start is ignored (an exact resume)
+    again = train_vae(corpus, run, tiny_vae_config(), vae_train_config(max_steps=7, warmup_steps=2, milestones=()),
+                      resume=True)
+    assert again.step == 7 and load_train_state(run).extra["warm_from"] == 4
+    # a warm start of another model configuration is refused with the fields that differ
+    other = tmp_path / "other"
+    write_warm_start(first / "latest", other / "warm_start")
+    with pytest.raises(CheckpointError, match="latent_dim"):
+        train_vae(corpus, other, tiny_vae_config().__class__(latent_dim=4, n_extra_layers=0), vae_train_config(), resume=True)
+    assert load_warm_start(tmp_path / "nothing", "vae", tiny_vae_config()) is None
+
+
 def test_disk_full_keeps_the_previous_checkpoint(corpus, tmp_path, monkeypatch):
     train_vae(corpus, tmp_path, tiny_vae_config(), vae_train_config(max_steps=2))
     kept = ("latest.json", "latest.safetensors", "train_state.json", "train_state.safetensors", "mean_std.safetensors")

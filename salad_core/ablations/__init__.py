@@ -24,9 +24,9 @@ shipped VAE, so "w/o ST-Latent" compares two VAEs trained alike.
 from __future__ import annotations
 
 from .card import model_card, shipped_tables
-from .keep import group_fingerprint, keep_group, kept_groups, restore_group
+from .keep import group_fingerprint, keep_group, keep_progress, kept_groups, restore_group
 from .orderings import PAPER_PAIRS, TABLE_METRICS, compare, paper_ordering
-from .runner import GroupOutcome, run_study, study_plan
+from .runner import GroupOutcome, keep_study, run_study, study_plan
 from .shipping import ship_study
 from .stage_eval import evaluate_stage, group_orderings
 from .staged import StagedRecipe, StudyGroup, load_staged_recipe, stage_jobs
@@ -38,5 +38,5 @@ __all__ = ["AblationVariant", "AblationRecipe", "TrainJob", "load_recipe", "plan
            "job_command", "ablations_dir", "list_ablations", "load_ablation_pipeline", "load_ablation_vae",
            "StagedRecipe", "StudyGroup", "load_staged_recipe", "stage_jobs", "StopRule", "StopDecision", "decide",
            "PAPER_PAIRS", "TABLE_METRICS", "compare", "paper_ordering", "evaluate_stage", "group_orderings",
-           "GroupOutcome", "run_study", "study_plan", "ship_study", "model_card", "shipped_tables",
-           "group_fingerprint", "keep_group", "kept_groups", "restore_group"]
+           "GroupOutcome", "run_study", "study_plan", "keep_study", "ship_study", "model_card", "shipped_tables",
+           "group_fingerprint", "keep_group", "keep_progress", "kept_groups", "restore_group"]

@@ -1,19 +1,29 @@
-"""Keep a stopped VAE group of a staged study in the repository, and restore it on another machine.
+"""Keep a staged study's groups in the repository, stopped or in progress, and restore them on another machine.
 
 A staged study takes longer than one working session, and its run folder (``work``) lives outside the
-repository, where a new machine loses it. The denoiser groups need only what a stopped VAE group
-*decided*: its evaluations and its VAEs at the final stage, in shipping form (fp16, the form the
-denoisers learn on: :func:`~salad_core.ablations.runner.run_study` freezes the packaged models). So
-when a VAE group stops, :func:`keep_group` copies exactly that into a folder of the repository
-(``studies/<recipe name>/``)::
+repository, where a new machine loses it. The later groups need only what a stopped group *decided*: its
+evaluations and its models at the final stage, in shipping form (fp16; the denoisers learn on the packaged
+VAEs: :func:`~salad_core.ablations.runner.run_study` freezes them). So when a group stops,
+:func:`keep_group` copies exactly that into a folder of the repository (``studies/<recipe name>/``)::
 
-    vae_<name>/                     the stage's packaged VAE (vae.*, stats.safetensors, runs.json)
+    vae_<name>/ or <name>/          the final stage's packaged model (a VAE group's or a denoiser group's)
     evaluations/<group>@<steps>.json  every evaluated stage of the group (the stop rule's history)
-    groups.json                     {group: {steps, reason, stages, fingerprint}}
+    groups.json                     {group: {steps, reason, stopped, stages, variants, fingerprint}}
 
-and :func:`restore_group` puts it back into a fresh ``work`` folder, so the study goes on with the
-denoisers instead of training the VAEs again. The files are byte-identical to what the final ship copies
+and :func:`restore_group` puts it back into a fresh ``work`` folder, so the study goes on with the next
+group instead of training this one again. The model files are byte-identical to what the final ship copies
 into ``salad_core/weights/ablations`` (git stores them once).
+
+A group that has *not* stopped yet can take several sessions, and a new machine would train it from step
+0 again. So after every evaluated stage :func:`keep_progress` keeps, for each of its runs, the weights of
+that stage in float16 (a warm start, :mod:`salad_core.train.warm_start`: a sixth of the float32 train state
+with its AdamW moments) beside the group's evaluations::
+
+    progress/<group>/<run>.safetensors, .json   the run's weights at the last evaluated stage (fp16)
+
+and :func:`restore_group` puts the evaluations back and each run's weights as its ``warm_start``: the
+group goes on from the kept stage (new AdamW moments, the learning rate warmed up again), not from 0.
+When the group stops, :func:`keep_group` replaces its progress.
 
 The ``fingerprint`` (:func:`group_fingerprint`) hashes the group's training configs, stages, evaluation
 protocol and stop rule: a kept group whose recipe has changed since is refused with an error that says
@@ -33,7 +43,7 @@ from .stage_eval import evaluation_path, load_evaluation, stage_dir
 from .staged import StagedRecipe, StudyGroup
 from .study import plan_jobs
 
-__all__ = ["group_fingerprint", "keep_group", "restore_group", "kept_groups", "KEPT_INDEX"]
+__all__ = ["group_fingerprint", "keep_group", "keep_progress", "restore_group", "kept_groups", "KEPT_INDEX"]
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +74,7 @@ def keep_group(recipe: StagedRecipe, group: StudyGroup, steps: int, reason: str,
     Parameters
     ----------
     recipe, group
-        The study and the group (``kind == "vae"``).
+        The study and the group (a VAE group: the denoisers learn on its models; a denoiser group: what ships).
     steps : int
         The stage where the group stopped (its models there are copied).
     reason : str
@@ -76,35 +86,87 @@ def keep_group(recipe: StagedRecipe, group: StudyGroup, steps: int, reason: str,
     """
     from salad_core.io import atomic_write_text
 
-    if group.kind != "vae":
-        raise ValueError(f"group {group.name!r} is a {group.kind} group; only VAE groups are kept (the denoiser "
-                         "groups end in the shipped study)")
     work, keep = Path(work), Path(keep)
     models = stage_dir(work, group, steps) / "models"
     (keep / "evaluations").mkdir(parents=True, exist_ok=True)
     for name in group.variants:
-        src = models / f"vae_{name}"
+        src = models / _model_folder(group, name)
         if not (src / ".packaged").is_file():
             raise FileNotFoundError(f"{src} is not packaged: the stage {group.stage_name(steps)} has not been "
                                     "packaged yet")
-        dest = keep / f"vae_{name}"
+        dest = keep / _model_folder(group, name)
         shutil.rmtree(dest, ignore_errors=True)
         shutil.copytree(src, dest, ignore=shutil.ignore_patterns(".packaged"))
     for s in evaluated:
         shutil.copy2(evaluation_path(work, group, s), keep / "evaluations")
     index = kept_groups(keep)
-    index[group.name] = {"steps": int(steps), "reason": reason, "stages": [int(s) for s in evaluated],
+    index[group.name] = {"steps": int(steps), "reason": reason, "stopped": True, "stages": [int(s) for s in evaluated],
                          "variants": list(group.variants), "fingerprint": group_fingerprint(recipe, group)}
     atomic_write_text(keep / KEPT_INDEX, json.dumps(index, indent=2) + "\n")
+    shutil.rmtree(keep / "progress" / group.name, ignore_errors=True)
+    if (keep / "progress").is_dir() and not any((keep / "progress").iterdir()):
+        (keep / "progress").rmdir()
     log.info("kept group %s (stopped at %d steps, %s) in %s", group.name, steps, reason, keep)
     return keep
+
+
+def _model_folder(group: StudyGroup, name: str) -> str:
+    """The packaged model's folder name of a variant (as in ``stages/<stage>/models/`` and the shipped study)."""
+    return f"vae_{name}" if group.kind == "vae" else name
+
+
+def _run_name(recipe: StagedRecipe, name: str) -> str:
+    return f"vae_{name}" if recipe.base.variant(name).kind == "vae" else f"den_{name}"
+
+
+def keep_progress(recipe: StagedRecipe, group: StudyGroup, evaluated: list[int], work: str | Path,
+                  keep: str | Path) -> Path:
+    """Keep a group that has not stopped: its evaluations so far and each run's weights (fp16) at the last of
+    them, ``evaluated[-1]`` (taken from the stage's snapshot ``stages/<group>@<steps>/runs/<run>/latest``).
+
+    Raises ``FileNotFoundError`` when a snapshot or an evaluation of those stages is missing, and
+    ``ValueError`` when ``keep`` holds the group as stopped already.
+    """
+    from salad_core.io import atomic_write_text
+    from salad_core.train.warm_start import write_warm_start
+
+    work, keep = Path(work), Path(keep)
+    if not evaluated:
+        raise ValueError(f"group {group.name!r} has no evaluated stage to keep")
+    index = kept_groups(keep)
+    if index.get(group.name, {}).get("stopped", group.name in index):
+        raise ValueError(f"{keep} holds the group {group.name!r} as stopped already; its progress is not kept")
+    steps = int(evaluated[-1])
+    runs = stage_dir(work, group, steps) / "runs"
+    tmp = keep / "progress" / f".{group.name}.tmp"
+    shutil.rmtree(tmp, ignore_errors=True)
+    for name in group.variants:
+        run = _run_name(recipe, name)
+        if not (runs / run / "latest.json").is_file():
+            raise FileNotFoundError(f"{runs / run} holds no snapshot of the stage {group.stage_name(steps)}")
+        write_warm_start(runs / run / "latest", tmp / run)
+    (keep / "evaluations").mkdir(parents=True, exist_ok=True)
+    for s in evaluated:
+        shutil.copy2(evaluation_path(work, group, s), keep / "evaluations")
+    dest = keep / "progress" / group.name
+    shutil.rmtree(dest, ignore_errors=True)
+    tmp.rename(dest)
+    index[group.name] = {"steps": steps, "reason": "in progress", "stopped": False,
+                         "stages": [int(s) for s in evaluated], "variants": list(group.variants),
+                         "fingerprint": group_fingerprint(recipe, group)}
+    atomic_write_text(keep / KEPT_INDEX, json.dumps(index, indent=2) + "\n")
+    log.info("kept the progress of group %s (evaluated up to %d steps) in %s", group.name, steps, dest)
+    return dest
 
 
 def restore_group(recipe: StagedRecipe, group: StudyGroup, keep: str | Path, work: str | Path) -> bool:
     """Put a kept group back into ``work``; returns False when ``keep`` does not hold it.
 
-    What ``work`` already has is left as it is (an evaluation file or a packaged model present is not
-    overwritten). Raises ``ValueError`` when the kept group was made by another recipe (fingerprint).
+    A stopped group gets its evaluations and final packaged models back; a group in progress gets its
+    evaluations back and, for each run that has no train state in ``work``, the kept weights as the run's
+    warm start. What ``work`` already has is left as it is (an evaluation file, a packaged model or a
+    run's train state present is not overwritten). Raises ``ValueError`` when the kept group was made by
+    another recipe (fingerprint).
     """
     keep, work = Path(keep), Path(work)
     entry = kept_groups(keep).get(group.name)
@@ -121,13 +183,26 @@ def restore_group(recipe: StagedRecipe, group: StudyGroup, keep: str | Path, wor
         if load_evaluation(work, group, s) is None:
             dest.parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(keep / "evaluations" / dest.name, dest)
+    if not entry.get("stopped", True):
+        from salad_core.train.warm_start import WARM_START
+
+        for name in group.variants:
+            run = work / _run_name(recipe, name)
+            if (run / "train_state.safetensors").is_file() or (run / f"{WARM_START}.json").is_file():
+                continue
+            run.mkdir(parents=True, exist_ok=True)
+            for suffix in (".safetensors", ".json"):
+                shutil.copy2(keep / "progress" / group.name / f"{run.name}{suffix}", run / f"{WARM_START}{suffix}")
+        log.info("restored group %s in progress (evaluated up to %d steps) from %s: its runs continue from the "
+                 "kept weights", group.name, steps, keep)
+        return True
     models = stage_dir(work, group, steps) / "models"
     for name in group.variants:
-        dest = models / f"vae_{name}"
+        dest = models / _model_folder(group, name)
         if (dest / ".packaged").is_file():
             continue
         shutil.rmtree(dest, ignore_errors=True)
-        shutil.copytree(keep / f"vae_{name}", dest)
+        shutil.copytree(keep / _model_folder(group, name), dest)
         (dest / ".packaged").write_text(f"{group.stage_name(steps)} (restored from {keep})\n")
     log.info("restored group %s (stopped at %d steps, %s) from %s", group.name, steps, entry["reason"], keep)
     return True

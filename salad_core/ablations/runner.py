@@ -12,8 +12,10 @@ stage:
 When a VAE group stops, its variants' packaged models at the final stage (fp16, the form that ships) are
 *frozen*: the denoiser groups learn on them and ship with them. Rerunning :func:`run_study` after a kill
 continues where it stopped. With ``keep`` (a folder of the repository, :mod:`~salad_core.ablations.keep`),
-a stopped VAE group is also copied there, and a VAE group the ``work`` folder lacks is restored from there:
-a new machine goes on with the denoisers instead of training the VAEs again.
+a stopped group is also copied there, a group in progress keeps its runs' fp16 weights after every new
+evaluation, and a group the ``work`` folder lacks is restored from there: a new machine goes on with the
+next group, or with the group in progress from its last evaluated stage (a warm start), instead of training
+from step 0 again.
 """
 from __future__ import annotations
 
@@ -27,13 +29,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
-from .keep import group_fingerprint, keep_group, kept_groups, restore_group
+from .keep import group_fingerprint, keep_group, keep_progress, kept_groups, restore_group
 from .stage_eval import evaluate_stage, load_evaluation, package_stage, snapshot_run, stage_dir
 from .staged import StagedRecipe, StudyGroup, stage_jobs
 from .stop_rule import StopDecision, decide
 from .study import job_command, run_jobs
 
-__all__ = ["GroupOutcome", "run_study", "study_plan"]
+__all__ = ["GroupOutcome", "run_study", "study_plan", "keep_study"]
 
 log = logging.getLogger(__name__)
 
@@ -88,7 +90,8 @@ def _stage_done(work: Path, group: StudyGroup, steps: int, run_name: str) -> boo
 
 
 def _run_group_pipelined(recipe: StagedRecipe, group: StudyGroup, work: Path, data, frozen, max_parallel: int,
-                         python: str, evaluator: Any, text_encoder: Any, evaluations: list[dict]) -> StopDecision | None:
+                         python: str, evaluator: Any, text_encoder: Any, evaluations: list[dict],
+                         on_progress=None) -> StopDecision | None:
     """Train and evaluate a group's remaining stages without idle cores at the stage boundaries.
 
     The work is a set of tasks ``(stage, variant)``: train the variant's run to the stage, then snapshot it.
@@ -98,8 +101,9 @@ def _run_group_pipelined(recipe: StagedRecipe, group: StudyGroup, work: Path, da
     beyond the stopping stage are interrupted (SIGINT: they write a checkpoint) and their extra steps are
     not used: the models of a stage are its snapshots, and with a constant learning rate after warm-up a
     run's weights at a step do not depend on how far it goes on (:mod:`~salad_core.ablations.staged`).
-    ``evaluations`` holds the stages evaluated before (in order) and is extended; returns the decision
-    after the last evaluation (None when there is none).
+    ``evaluations`` holds the stages evaluated before (in order) and is extended; ``on_progress`` is called
+    with it after each new evaluation that does not stop the group. Returns the decision after the last
+    evaluation (None when there is none).
     """
     import signal
     import threading
@@ -174,17 +178,11 @@ def _run_group_pipelined(recipe: StagedRecipe, group: StudyGroup, work: Path, da
                 log.info("%s at %d steps: %s", group.name, decision.steps, decision.reason)
                 if decision.stop:
                     return decision
+                if on_progress is not None:
+                    on_progress(evaluations)
             # the next stage to evaluate, once every variant has its snapshot
             nxt = len(evaluations)
             if not evaluating and nxt < len(stages) and all(done(nxt, v) for v in names):
-                doc = load_evaluation(work, group, stages[nxt])
-                if doc is not None:               # evaluated before an interruption
-                    evaluations.append(doc)
-                    decision = decide(_history(evaluations), stages, recipe.stop)
-                    log.info("%s at %d steps: %s", group.name, decision.steps, decision.reason)
-                    if decision.stop:
-                        return decision
-                    continue
                 thread = threading.Thread(target=evaluate, args=(nxt,), name=f"evaluate {group.stage_name(stages[nxt])}",
                                           daemon=True)
                 evaluating.update(thread=thread, index=nxt)
@@ -247,7 +245,8 @@ def run_study(recipe: StagedRecipe, data: str | os.PathLike, work: str | os.Path
         evaluation (:func:`_run_group_pipelined`); False trains, evaluates and decides one stage at a time.
         The models and scores are the same either way.
     keep : path, optional
-        Where stopped VAE groups are kept (:func:`~salad_core.ablations.keep.keep_group`) and restored from
+        Where stopped groups and the progress of running ones are kept (:func:`~salad_core.ablations.keep.keep_group`,
+        :func:`~salad_core.ablations.keep.keep_progress`) and restored from
         (:func:`~salad_core.ablations.keep.restore_group`) when ``work`` lacks them.
 
     Returns
@@ -267,7 +266,7 @@ def run_study(recipe: StagedRecipe, data: str | os.PathLike, work: str | os.Path
     needed_vaes = {recipe.base.variant(v).vae for g in chosen for v in g.variants
                    if recipe.base.variant(v).kind == "denoiser"}
     for group in recipe.groups:
-        if keep is not None and group.kind == "vae" and (group in chosen or needed_vaes & set(group.variants)):
+        if keep is not None and (group in chosen or (group.kind == "vae" and needed_vaes & set(group.variants))):
             restore_group(recipe, group, keep, work)
         if group not in chosen:
             if group.kind == "vae" and needed_vaes & set(group.variants):
@@ -279,12 +278,18 @@ def run_study(recipe: StagedRecipe, data: str | os.PathLike, work: str | os.Path
             raise RuntimeError(f"group {group.name!r} needs the VAEs {missing}, whose group has not stopped")
         evaluations: list[dict] = []
         decision = None
+
+        def progress(evaluations: list[dict], group: StudyGroup = group) -> None:
+            if keep is not None:
+                keep_progress(recipe, group, [int(d["steps"]) for d in evaluations], work, keep)
+
         if not inline and pipelined:
             decision = _run_group_pipelined(recipe, group, work, data, frozen, max_parallel, python, evaluator,
-                                            text_encoder, evaluations)
+                                            text_encoder, evaluations, on_progress=progress)
         for steps in (() if not inline and pipelined else group.stages):
             doc = load_evaluation(work, group, steps)
-            if doc is None:
+            new = doc is None
+            if new:
                 _train_stage(recipe, group, steps, work, data, frozen, max_parallel, inline, python)
                 package_stage(recipe, group, steps, work, frozen, text_encoder)
                 doc = evaluate_stage(recipe, group, steps, work, data, evaluator, text_encoder)
@@ -293,15 +298,54 @@ def run_study(recipe: StagedRecipe, data: str | os.PathLike, work: str | os.Path
             log.info("%s at %d steps: %s", group.name, steps, decision.reason)
             if decision.stop:
                 break
+            if new:
+                progress(evaluations)
         outcomes[group.name] = GroupOutcome(group, decision, tuple(evaluations))
         if group.kind == "vae":
             frozen.update(_frozen_of(group, outcomes[group.name], work))
-            if keep is not None:
-                kept = kept_groups(keep).get(group.name, {})
-                if kept.get("fingerprint") != group_fingerprint(recipe, group) or kept.get("steps") != decision.steps:
-                    keep_group(recipe, group, decision.steps, decision.reason,
-                               [int(d["steps"]) for d in evaluations], work, keep)
+        if keep is not None:
+            _keep_stopped(recipe, outcomes[group.name], work, keep)
     return outcomes
+
+
+def _keep_stopped(recipe: StagedRecipe, outcome: GroupOutcome, work: Path, keep: str | os.PathLike) -> None:
+    """Keep a stopped group in ``keep`` unless it holds it already (same recipe, same final stage)."""
+    group, decision = outcome.group, outcome.decision
+    kept = kept_groups(keep).get(group.name, {})
+    if (kept.get("fingerprint") != group_fingerprint(recipe, group) or kept.get("steps") != decision.steps
+            or not kept.get("stopped", True)):
+        keep_group(recipe, group, decision.steps, decision.reason, [int(d["steps"]) for d in outcome.evaluations],
+                   work, keep)
+
+
+def keep_study(recipe: StagedRecipe, work: str | os.PathLike, keep: str | os.PathLike) -> dict[str, str]:
+    """Keep what ``work`` holds of every group, without training or scoring: a stopped group as
+    :func:`~salad_core.ablations.keep.keep_group`, a group in progress as
+    :func:`~salad_core.ablations.keep.keep_progress` (its last evaluated stage). For a study started by an
+    older version, or to keep at once. Returns ``{group: what was kept}``.
+    """
+    work = Path(work)
+    done: dict[str, str] = {}
+    for group in recipe.groups:
+        evaluations: list[dict] = []
+        decision = None
+        for steps in group.stages:
+            doc = load_evaluation(work, group, steps)
+            if doc is None:
+                break
+            evaluations.append(doc)
+            decision = decide(_history(evaluations), group.stages, recipe.stop)
+            if decision.stop:
+                break
+        if decision is None:
+            done[group.name] = "nothing evaluated"
+        elif decision.stop:
+            _keep_stopped(recipe, GroupOutcome(group, decision, tuple(evaluations)), work, keep)
+            done[group.name] = f"stopped at {decision.steps} steps ({decision.reason})"
+        else:
+            keep_progress(recipe, group, [int(d["steps"]) for d in evaluations], work, keep)
+            done[group.name] = f"in progress, evaluated up to {decision.steps} steps"
+    return done
 
 
 def _frozen_of(group: StudyGroup, outcome: GroupOutcome, work: Path) -> dict[str, Path]:

@@ -65,6 +65,7 @@ from .distributed import (
     init_distributed,
 )
 from .schedules import lr_at_step, set_lr
+from .warm_start import WARM_START, load_warm_start, rewarm_factor
 from .state import (
     TrainState,
     capture_rng,
@@ -494,7 +495,9 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
     best_val: float | None = None
     best_step: int | None = None
     samples_seen, elapsed_before = 0, 0.0
+    warm_from: int | None = None          # the step a warm start continued from (learning rate warmed up again)
 
+    warm = None if (not resume or state_path.exists()) else load_warm_start(out_dir, task.model_type, task.model_config)
     if resume and state_path.exists():
         st = load_train_state(out_dir)
         load_state_into(model, st.model_state, source=str(state_path))
@@ -510,10 +513,21 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
         best_val, best_step = st.best_val, st.best_step
         samples_seen = int(st.extra.get("samples_seen", 0))
         elapsed_before = float(st.extra.get("elapsed_s", 0.0))
+        warm_from = st.extra.get("warm_from")
         if env.is_main:
             _check_resume_config(out_dir, config)
             _truncate_log(out_dir / "log.jsonl", step)
         log.info("resumed %s at step %d (epoch %d, batch %d)", out_dir, step, epoch, batch_in_epoch)
+    elif warm is not None:
+        # the kept weights of a step, without optimiser state or RNG streams (salad_core.train.warm_start)
+        load_state_into(model, warm.state, source=f"warm start {out_dir / WARM_START}")
+        step = warm_from = warm.step
+        epoch, batch_in_epoch = divmod(step, steps_per_epoch)
+        shared.manual_seed(config.seed + 7_919 * step)
+        seed_everything(config.seed + 1_000_003 * (env.rank + 1) + step)
+        log.info("warm start of %s at step %d (epoch %d, batch %d) from the weights of %s: new AdamW moments, "
+                 "learning rate warmed up again over %d steps", out_dir, step, epoch, batch_in_epoch, warm.source,
+                 config.warmup_steps)
     else:
         if resume:
             log.info("resume asked but %s holds no train state: starting fresh", out_dir)
@@ -523,6 +537,11 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
         _write_config(out_dir, task, config)
         for name, tensors in task.extra_files.items():
             save_tensors(out_dir / name, tensors)
+        if warm is not None:
+            _truncate_log(out_dir / "log.jsonl", step)
+            with open(out_dir / "log.jsonl", "a", encoding="utf-8") as fh:
+                fh.write(json.dumps({"step": step, "warm_start": warm.source, "rewarm_steps": config.warmup_steps})
+                         + "\n")
 
     def checkpoint(reason: str) -> None:
         # every rank contributes its RNG state (collective), only rank 0 writes
@@ -535,7 +554,8 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
                             rng=rngs, shared_rng=shared.get_state(), best_val=best_val, best_step=best_step,
                             extra={"lr": lr_now, "samples_seen": samples_seen,
                                    "elapsed_s": elapsed_before + (time.perf_counter() - t_start),
-                                   "model_type": task.model_type, "reason": reason})
+                                   "model_type": task.model_type, "reason": reason,
+                                   **({"warm_from": warm_from} if warm_from is not None else {})})
             try:
                 save_train_state(out_dir, ts)
                 save_checkpoint(out_dir / "latest", model, model_type=task.model_type, config=task.model_config,
@@ -597,6 +617,7 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
                 finished_epoch = True
                 for batch in loader:
                     lr = lr_at_step(step, config.lr, config.warmup_steps, config.milestones, config.gamma)
+                    lr *= rewarm_factor(step, warm_from, config.warmup_steps)
                     set_lr(optimizer, lr)
                     ctx.step = step
                     inputs = task.prepare(batch, ctx)
