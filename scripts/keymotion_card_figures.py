@@ -86,7 +86,9 @@ def generations(pipe: KeyMotionPipeline, seeds: int, length: int, renders: Path 
     for prompt in PROMPTS:
         joints = []
         for s in range(seeds):
-            out = pipe([prompt], lengths=[length], seed=s)
+            # the card's figures are of the model's own output: the position features read as they are
+            # (out.joints would be the skeleton fit, the pipeline's default since session 22)
+            out = pipe([prompt], lengths=[length], seed=s, recovery="positions")
             joints.append(out.joints[0])
         outs[prompt] = joints
     dt = (time.perf_counter() - t0) / (len(PROMPTS) * seeds)

@@ -491,7 +491,19 @@ def test_pipeline_end_to_end_fields_and_determinism():
     assert out.features.shape == (2, 64, D) and out.features.dtype == np.float32
     assert float(np.abs(out.features[0, 40:]).sum()) == 0.0
     assert [j.shape for j in out.joints] == [(40, SK.num_joints, 3), (64, SK.num_joints, 3)]
-    np.testing.assert_allclose(out.joints[1], features_to_joints(out.features[1], SK), atol=1e-5)
+    # joints are recovered as SALAD's pipeline recovers them: the skeleton fit by default, the raw reading kept
+    assert pipe.recovery == "fit" and out.settings == {"recovery": "fit", "skeleton": SK.name}
+    np.testing.assert_allclose(out.raw_joints[1], features_to_joints(out.features[1], SK), atol=1e-5)
+    bones = np.linalg.norm(out.joints[1][:, 1:] - out.joints[1][:, list(SK.parents[1:])], axis=-1)   # (N, J-1)
+    np.testing.assert_allclose(bones, np.broadcast_to(np.asarray(SK.bone_lengths)[1:], bones.shape), atol=1e-4)
+    raw_bones = np.linalg.norm(out.raw_joints[1][:, 1:] - out.raw_joints[1][:, list(SK.parents[1:])], axis=-1)
+    assert np.abs(raw_bones - bones).max() > 1e-3                              # the untrained output stretches
+    raw = pipe(["a person walks forward", "someone jumps"], lengths=[40, 64], seed=3, guidance_scale=2.5,
+               num_steps=5, recovery="positions")
+    np.testing.assert_array_equal(raw.features, out.features)
+    np.testing.assert_allclose(raw.joints[1], out.raw_joints[1], atol=1e-6)
+    with pytest.raises(ValueError, match="recovery must be one of"):
+        pipe("a", recovery="ik")
     assert out.keyframe_features.shape == (2, K, D) and out.latents.shape == (2, 2, 16)
     for kf, n in zip(out.keyframes, out.lengths):
         assert kf.dtype == np.int64 and kf.shape == (K,)
@@ -528,8 +540,10 @@ def test_pipeline_save_load_round_trip(tmp_path):
     doc = json.loads((root / "keymotion.json").read_text())
     assert doc["format"] == "keymotion_pipeline" and doc["text_encoder"] == "hash"
     assert doc["diffusion"]["prediction_type"] == "epsilon" and doc["diffusion"]["beta_schedule"] == "scaled_linear"
+    assert doc["recovery"] == "fit"
     loaded = KeyMotionPipeline.from_pretrained(root, text_encoder=HashTextEncoder())
-    assert loaded.default_length == 40 and loaded.diffusion == PST_DIFFUSION
+    assert loaded.default_length == 40 and loaded.diffusion == PST_DIFFUSION and loaded.recovery == "fit"
+    assert KeyMotionPipeline.from_pretrained(root, text_encoder=HashTextEncoder(), recovery="fk").recovery == "fk"
     for a, b in ((pipe.kf_vae, loaded.kf_vae), (pipe.pst, loaded.pst), (pipe.mmae, loaded.mmae)):
         assert a.config == b.config
         sa, sb = a.state_dict(), b.state_dict()

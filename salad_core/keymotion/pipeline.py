@@ -8,7 +8,7 @@ The pipeline only orchestrates (models know nothing of sampling, the loop is
         (a PST with PSTConfig.side_cue also gets the tokens' left/right ids (B, W): keymotion.sides)
     z0 --keyframe VAE decoder--> keyframes (B, K, D), positions (B, K) --> frame indices (B, K)
     keyframes at their frames --MMAE (text-conditioned)--> motion (B, N, D) normalised
-    --de-normalise (MMAE's statistics)--> features --features_to_joints--> joints (N_b, J, 3)
+    --de-normalise (MMAE's statistics)--> features --recovery--> joints (N_b, J, 3)
 
 :class:`KeyMotionPipeline` has the interface of ``SaladPipeline``: ``from_pretrained(path=None)``
 and ``pipe(prompts, lengths=None, seed=0, guidance_scale=None, num_steps=50)`` returning an output
@@ -24,7 +24,11 @@ KeyMotion paper's value was lost in our copy). ``docs/keymotion_recipe.md`` says
 matters so much here: strong guidance pushes the keyframe latents off the data and the seeds
 collapse. The MMAE output is the motion (it may correct the decoded
 keyframes); ``keep_keyframes=True`` pastes the decoded keyframes back. Padded rows of
-``features`` (``t >= length``) are zero.
+``features`` (``t >= length``) are zero. ``joints`` are recovered from the features as SALAD's pipeline
+recovers them (:attr:`KeyMotionPipeline.recovery`: by default the skeleton fit with fixed bone lengths,
+feet locked from the contact channels and nothing below the floor, :mod:`salad_core.recovery`), so the
+two generators' GIFs, BVHs and joints are made the same way; ``raw_joints`` are the position features
+read as they are (what the papers' metrics and the physics benchmark's default measure).
 
 A pretrained folder holds::
 
@@ -42,7 +46,7 @@ from __future__ import annotations
 import json
 import logging
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -75,12 +79,21 @@ class KeyMotionOutput:
     """Generated motions (numpy, de-normalised); sample ``b`` has ``lengths[b]`` frames."""
 
     features: np.ndarray              # (B, N, D) features, N = max(lengths); rows t >= lengths[b] are 0
-    joints: list[np.ndarray]          # per sample (N_b, J, 3) joint positions (features_to_joints)
+    joints: list[np.ndarray]          # per sample (N_b, J, 3) joint positions, recovered by ``settings["recovery"]``
     texts: list[str]                  # the prompts
     lengths: list[int]                # N_b, frames per sample
     keyframes: list[np.ndarray]       # per sample (K,) int64 frame indices of the keyframes, increasing
     keyframe_features: np.ndarray     # (B, K, D) decoded keyframes (de-normalised), in keyframe order
     latents: np.ndarray               # (B, Lz, Dz) denoised keyframe latents
+    settings: dict = field(default_factory=dict)   # "recovery", "skeleton"
+
+    @property
+    def raw_joints(self) -> list[np.ndarray]:
+        """Per sample ``(N_b, J, 3)`` joints read from the position features as they are (HumanML3D's
+        ``recover_from_ric``, no fit), as SALAD's ``raw_joints``."""
+        skeleton = self.settings.get("skeleton", "humanml3d")
+        return [features_to_joints(self.features[b, :n], skeleton).astype(np.float32)
+                for b, n in enumerate(self.lengths)]
 
 
 def decode_keyframes(vae: KeyframeVAE, z: torch.Tensor, lengths: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -137,12 +150,15 @@ class KeyMotionPipeline:
         Recorded by :meth:`save_pretrained` (default: the encoder's ``name``).
     guidance : Guidance, optional
         Default classifier-free guidance of these weights (default ``Guidance(7.5)``).
+    recovery : str, optional
+        How ``out.joints`` are recovered from the features (:data:`salad_core.recovery.METHODS`; default
+        ``"fit"`` where the skeleton has target bone lengths, else ``"positions"``), as SALAD's pipeline.
     """
 
     def __init__(self, kf_vae: KeyframeVAE, pst: ParallelSkipTransformer, mmae: MotionMaskedAutoencoder,
                  text_encoder: TextEncoder, *, diffusion: DiffusionConfig | None = None, solver: str = "ddim",
                  default_length: int = 120, text_encoder_name: str | None = None,
-                 guidance: Guidance | None = None) -> None:
+                 guidance: Guidance | None = None, recovery: str | None = None) -> None:
         self.kf_vae = kf_vae.eval()
         self.pst = pst.eval()
         self.mmae = mmae.eval()
@@ -159,6 +175,9 @@ class KeyMotionPipeline:
         self.guidance = Guidance(7.5) if guidance is None else guidance
         if not isinstance(self.guidance, Guidance):
             raise TypeError(f"guidance must be a salad_core.sampling.Guidance, got {type(guidance).__name__}")
+        #: How ``out.joints`` are recovered (:data:`salad_core.recovery.METHODS`), as SALAD's pipeline.
+        self.recovery = _check_recovery(recovery if recovery is not None else (
+            "fit" if self.skeleton.bone_lengths is not None else "positions"))
 
     # ------------------------------------------------------------------------ checks
     def _check_compatible(self) -> None:
@@ -213,7 +232,8 @@ class KeyMotionPipeline:
     @classmethod
     def from_pretrained(cls, path: str | os.PathLike | None = None, *,
                         text_encoder: str | TextEncoder | None = None, device: str | torch.device = "cpu",
-                        solver: str = "ddim", default_length: int | None = None) -> "KeyMotionPipeline":
+                        solver: str = "ddim", default_length: int | None = None,
+                        recovery: str | None = None) -> "KeyMotionPipeline":
         """Load a pretrained folder or a training root; ``path=None`` loads the shipped weights.
 
         Parameters
@@ -228,6 +248,8 @@ class KeyMotionPipeline:
             Sampler name (:data:`salad_core.sampling.SOLVERS`).
         default_length : int, optional
             Overrides the stored default length.
+        recovery : str, optional
+            Overrides the stored recovery of ``out.joints`` (``keymotion.json`` "recovery"; default "fit").
         """
         root = Path(path) if path is not None else DEFAULT_WEIGHTS_DIR
         if path is None and not (root / "keymotion.json").is_file():
@@ -273,7 +295,8 @@ class KeyMotionPipeline:
             except (TypeError, ValueError) as err:
                 raise ValueError(f"{root / 'keymotion.json'}: bad \"guidance\" entry {entry!r} ({err})") from err
         return cls(models["kf_vae"], models["pst"], models["mmae"], encoder, diffusion=diffusion, solver=solver,
-                   default_length=length, text_encoder_name=enc_name, guidance=guidance)
+                   default_length=length, text_encoder_name=enc_name, guidance=guidance,
+                   recovery=recovery if recovery is not None else doc.get("recovery"))
 
     def save_pretrained(self, path: str | os.PathLike, *, dtype: torch.dtype | None = None) -> Path:
         """Write the three checkpoints and ``keymotion.json`` into ``path`` (created); returns it.
@@ -286,7 +309,7 @@ class KeyMotionPipeline:
             save_checkpoint(root / name, model, model_type=COMPONENTS[name], config=model.config, dtype=dtype)
         doc = {"format": _FORMAT, "version": 1, "text_encoder": self.text_encoder_name,
                "diffusion": config_to_dict(self.diffusion), "default_length": self.default_length,
-               "guidance": asdict(self.guidance)}
+               "guidance": asdict(self.guidance), "recovery": self.recovery}
         atomic_write_text(root / "keymotion.json", json.dumps(doc, indent=2) + "\n")
         return root
 
@@ -309,7 +332,7 @@ class KeyMotionPipeline:
 
     def __call__(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None = None, seed: int = 0,
                  guidance_scale: "float | Guidance | None" = None, num_steps: int = 50, *,
-                 keep_keyframes: bool = False,
+                 keep_keyframes: bool = False, recovery: str | None = None,
                  progress: bool = False) -> KeyMotionOutput:
         """Generate one motion per prompt.
 
@@ -329,6 +352,8 @@ class KeyMotionPipeline:
         keep_keyframes : bool
             Paste the decoded keyframes over the MMAE's output at their frames (by default the MMAE
             may correct them, as in the paper).
+        recovery : str, optional
+            How ``joints`` are recovered from the features (default :attr:`recovery`).
         progress : bool
             Show a progress bar over the denoising steps.
 
@@ -367,7 +392,19 @@ class KeyMotionPipeline:
             valid = (torch.arange(feats.shape[1], device=dev)[None] < len_t[:, None])[..., None]
             feats = (feats * valid.to(feats.dtype)).float().cpu().numpy()
             kf_feats = self.mmae.norm.denormalize(keyframes).float().cpu().numpy()
-        joints = [features_to_joints(feats[i, :n], self.skeleton) for i, n in enumerate(lens)]
+        method = _check_recovery(self.recovery if recovery is None else recovery)
+        from salad_core.recovery import recover_joints
+
+        joints = [recover_joints(feats[i, :n], method, self.skeleton).astype(np.float32) for i, n in enumerate(lens)]
         return KeyMotionOutput(features=feats, joints=joints, texts=texts, lengths=lens,
                                keyframes=[row for row in indices.cpu().numpy().astype(np.int64)],
-                               keyframe_features=kf_feats, latents=z.float().cpu().numpy())
+                               keyframe_features=kf_feats, latents=z.float().cpu().numpy(),
+                               settings={"recovery": method, "skeleton": self.skeleton.name})
+
+
+def _check_recovery(method) -> str:
+    from salad_core.recovery import METHODS
+
+    if method not in METHODS:
+        raise ValueError(f"recovery must be one of {METHODS}, got {method!r}")
+    return str(method)
