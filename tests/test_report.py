@@ -260,6 +260,26 @@ def test_infill_from_keyframes_against_interpolation(keymotion_pipe, sample_feat
         infill_from_keyframes(keymotion_pipe, x, "  ")
 
 
+def test_generation_chain_gives_each_stage_of_the_path(keymotion_pipe, sample_features):
+    """The chain's stages are the motion, the in-filling of its own keyframes, the same after the keyframe VAE,
+    and the pipeline's generation from the caption, all raw position joints of the motion's length."""
+    from salad_core.eval.keymotion_roundtrip import CHAIN_STAGES, generation_chain
+    from salad_core.motion import features_to_joints
+
+    x = sample_features[:64]
+    chain = generation_chain(keymotion_pipe, x, "a person walks", seed=2)
+    assert tuple(chain) == CHAIN_STAGES
+    assert {k: v.shape for k, v in chain.items()} == {k: (64, SK.num_joints, 3) for k in CHAIN_STAGES}
+    np.testing.assert_allclose(chain["true"], features_to_joints(x, SK), atol=1e-5)
+    np.testing.assert_allclose(chain["true_keyframes"], infill_from_keyframes(keymotion_pipe, x, "a person walks").joints,
+                               atol=1e-5)
+    gen = keymotion_pipe(["a person walks"], lengths=[64], seed=2)
+    np.testing.assert_allclose(chain["generated"], gen.raw_joints[0], atol=1e-5)
+    assert np.abs(chain["vae_keyframes"] - chain["true_keyframes"]).max() > 1e-4    # the VAE changes the keyframes
+    with pytest.raises(ValueError, match="caption"):
+        generation_chain(keymotion_pipe, x, "")
+
+
 def test_procedural_eval_corpus_picks_heldout_clips_or_the_given_root(tmp_path):
     from salad_core.eval.heldout import procedural_eval_corpus
 

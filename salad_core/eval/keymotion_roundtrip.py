@@ -4,7 +4,10 @@ with errors in metres (notebook 05).
 - :func:`keyframe_roundtrip`: select a motion's keyframes, encode them with the keyframe VAE
   (posterior mean) and decode them;
 - :func:`infill_from_keyframes`: rebuild the motion from those keyframes with the MMAE, beside the
-  linear-interpolation baseline.
+  linear-interpolation baseline;
+- :func:`generation_chain`: the same motion at each stage of KeyMotion's generation path (its own
+  keyframes in-filled, the keyframe VAE's round trip of them in-filled, and a motion generated from its
+  caption), to find the stage where a property of real motion (ballistic flight, planted feet) is lost.
 """
 from __future__ import annotations
 
@@ -17,7 +20,11 @@ import torch
 if TYPE_CHECKING:
     from salad_core.keymotion.pipeline import KeyMotionPipeline
 
-__all__ = ["KeyframeRoundTrip", "Infilling", "keyframe_roundtrip", "infill_from_keyframes"]
+__all__ = ["KeyframeRoundTrip", "Infilling", "keyframe_roundtrip", "infill_from_keyframes", "generation_chain",
+           "CHAIN_STAGES"]
+
+#: The stages of :func:`generation_chain`, in the order of the generation path.
+CHAIN_STAGES = ("true", "true_keyframes", "vae_keyframes", "generated")
 
 
 @dataclass(frozen=True)
@@ -149,3 +156,56 @@ def infill_from_keyframes(pipe: "KeyMotionPipeline", features: np.ndarray, capti
                      mpjpe_global=float(mpjpe(joints, true_joints, root_aligned=False)),
                      lerp_mpjpe=float(mpjpe(lerp_joints, true_joints)),
                      lerp_mpjpe_global=float(mpjpe(lerp_joints, true_joints, root_aligned=False)))
+
+
+@torch.no_grad()
+def generation_chain(pipe: "KeyMotionPipeline", features: np.ndarray, caption: str, seed: int = 0,
+                     method: str = "mdo") -> dict[str, np.ndarray]:
+    """One motion at every stage of KeyMotion's generation path, as joints read from the position
+    features (no fit: what each model itself made).
+
+    Parameters
+    ----------
+    pipe : KeyMotionPipeline
+    features : array ``(N, D)``
+        One motion, raw features, ``K <= N <= pipe.max_length``.
+    caption : str
+        Its caption (conditions the MMAE and the generation).
+    seed : int
+        Seed of the generated stage.
+    method : {"mdo", "mieo", "uniform"}
+        Keyframe selection.
+
+    Returns
+    -------
+    dict
+        :data:`CHAIN_STAGES` -> joints ``(N, J, 3)`` in metres: ``"true"`` the motion;
+        ``"true_keyframes"`` the MMAE's in-filling of its own keyframes; ``"vae_keyframes"`` the MMAE's
+        in-filling of those keyframes after the keyframe VAE (posterior mean, decoded poses and frames);
+        ``"generated"`` the pipeline's motion of ``N`` frames for ``caption`` (PST, VAE decoder, MMAE).
+    """
+    from salad_core.keymotion.kf_vae import gather_keyframes, indices_to_positions
+    from salad_core.keymotion.pipeline import decode_keyframes
+    from salad_core.motion import features_to_joints
+
+    if not isinstance(caption, str) or not caption.strip():
+        raise ValueError(f"caption={caption!r} must be a non-empty string")
+    x, xn, idx = _keyframe_inputs(pipe, features, method, None)
+    dev = pipe.device
+    length = torch.tensor([len(x)], device=dev)
+    tb = pipe.text_encoder.encode([caption])
+    text, mask = tb.features.to(dev), tb.mask.to(dev)
+    kf = gather_keyframes(xn, idx).to(dev)
+    idx = idx.to(dev)
+    own = pipe.mmae.infill(kf, idx, length, text, mask)
+    enc = pipe.kf_vae.encode(kf, indices_to_positions(idx, length), sample=False)
+    dec, dec_idx = decode_keyframes(pipe.kf_vae, enc.mu, length)
+    through_vae = pipe.mmae.infill(dec, dec_idx, length, text, mask)
+    sk, norm = pipe.skeleton, pipe.mmae.norm
+
+    def joints(motion: torch.Tensor) -> np.ndarray:
+        return features_to_joints(norm.denormalize(motion.float().cpu())[0].numpy(), sk).astype(np.float32)
+
+    generated = pipe([caption], lengths=[len(x)], seed=seed, recovery="positions").joints[0]
+    return {"true": features_to_joints(x, sk).astype(np.float32), "true_keyframes": joints(own),
+            "vae_keyframes": joints(through_vae), "generated": np.asarray(generated, np.float32)}

@@ -53,6 +53,7 @@ from .models import (
     check_non_negative,
     check_positive_int,
     check_unit_interval,
+    foot_contact_loss,
     masked_mean,
     position_sinusoid,
     velocity_loss,
@@ -79,6 +80,7 @@ class MMAEConfig:
     lerp_residual: bool = True    # predict a correction to keyframe interpolation (our addition)
     lambda_bone: float = 1.0      # weight of the bone-length term (eq. 10), metres
     lambda_vel: float = 1.0       # weight of the joint-velocity term (eq. 11), metres per frame
+    lambda_foot: float = 0.0      # weight of the foot-contact term (planted feet stay put; MDM's, not the paper's)
     max_text_tokens: int = 512    # rows of the text positional table
 
     def __post_init__(self) -> None:
@@ -96,7 +98,7 @@ class MMAEConfig:
             raise ValueError(f"{name}.activation={self.activation!r} is invalid; choose one of {ACTIVATIONS}")
         if not isinstance(self.lerp_residual, bool):
             raise ValueError(f"{name}.lerp_residual={self.lerp_residual!r} is invalid; use True or False")
-        for f in ("lambda_bone", "lambda_vel"):
+        for f in ("lambda_bone", "lambda_vel", "lambda_foot"):
             check_non_negative(name, f, getattr(self, f))
 
 
@@ -271,7 +273,8 @@ class MotionMaskedAutoencoder(nn.Module):
         return out * frame_mask[..., None].to(out.dtype)
 
     def loss(self, pred: torch.Tensor, target: torch.Tensor, frame_mask: torch.Tensor) -> dict[str, torch.Tensor]:
-        """Eq. 9: ``L = L_mse + λ_bone L_bone + λ_vel L_vel`` over the valid frames.
+        """Eq. 9: ``L = L_mse + λ_bone L_bone + λ_vel L_vel`` over the valid frames, plus ``λ_foot L_foot``
+        (:func:`~salad_core.keymotion.models.foot_contact_loss`, 0 by default: not in the paper).
 
         Parameters
         ----------
@@ -280,24 +283,31 @@ class MotionMaskedAutoencoder(nn.Module):
 
         Returns
         -------
-        dict of scalar tensors ``loss``, ``rec``, ``bone``, ``vel``.
+        dict of scalar tensors ``loss``, ``rec``, ``bone``, ``vel`` (and ``foot`` when ``lambda_foot > 0``).
         """
         if pred.shape != target.shape:
             raise ValueError(f"pred must have the shape of target {tuple(target.shape)}, got {tuple(pred.shape)}")
         cfg = self.config
         rec = masked_mean(F.mse_loss(pred, target, reduction="none"), frame_mask)
         zero = rec.new_zeros(())
-        bone, vel = zero, zero
-        if cfg.lambda_bone > 0 or cfg.lambda_vel > 0:
+        bone, vel, foot = zero, zero, zero
+        if cfg.lambda_bone > 0 or cfg.lambda_vel > 0 or cfg.lambda_foot > 0:
             scale = self.skeleton.feature_scale
+            true_feats = self.norm.denormalize(target)
             pj = features_to_joints(self.norm.denormalize(pred), self.skeleton) * scale     # (B, N, J, 3)
-            tj = features_to_joints(self.norm.denormalize(target), self.skeleton) * scale
+            tj = features_to_joints(true_feats, self.skeleton) * scale
             if cfg.lambda_bone > 0:
                 bone = bone_length_loss(pj, tj, self.skeleton, frame_mask)
             if cfg.lambda_vel > 0:
                 vel = velocity_loss(pj, tj, frame_mask)
-        total = rec + cfg.lambda_bone * bone + cfg.lambda_vel * vel
-        return {"loss": total, "rec": rec, "bone": bone, "vel": vel}
+            if cfg.lambda_foot > 0:
+                contacts = true_feats[..., self.skeleton.feature_slices["contacts"]]
+                foot = foot_contact_loss(pj, contacts, self.skeleton, frame_mask)
+        total = rec + cfg.lambda_bone * bone + cfg.lambda_vel * vel + cfg.lambda_foot * foot
+        out = {"loss": total, "rec": rec, "bone": bone, "vel": vel}
+        if cfg.lambda_foot > 0:
+            out["foot"] = foot
+        return out
 
     def num_parameters(self) -> int:
         return sum(p.numel() for p in self.parameters())

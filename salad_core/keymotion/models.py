@@ -38,6 +38,7 @@ __all__ = [
     "bone_lengths",
     "bone_length_loss",
     "velocity_loss",
+    "foot_contact_loss",
     "masked_mean",
     "check_positive_int",
     "check_unit_interval",
@@ -251,6 +252,33 @@ def bone_length_loss(pred_joints: torch.Tensor, true_joints: torch.Tensor, skele
     """
     err = (bone_lengths(pred_joints, skeleton) - bone_lengths(true_joints, skeleton)).abs()  # (B, T, J-1)
     return masked_mean(err, mask)
+
+
+def foot_contact_loss(pred_joints: torch.Tensor, true_contacts: torch.Tensor, skeleton: str | Skeleton,
+                      mask: torch.Tensor | None = None) -> torch.Tensor:
+    """Mean ``|p_{t+1} - p_t|`` (metres/frame, L1 over x, y, z) of the 4 contact joints at the frames where the
+    ground truth has that foot joint in contact: zero when every planted foot stays put (the foot-contact
+    term of MDM, Tevet et al. 2023, in KeyMotion's L1 form; not in the KeyMotion paper).
+
+    Parameters
+    ----------
+    pred_joints : Tensor ``(B, T, J, 3)``
+        Generated joints (metres).
+    true_contacts : Tensor ``(B, T, 4)``
+        The ground truth's contact channels (de-normalised features; > 0.5 is contact), in the
+        skeleton's :attr:`~salad_core.skeleton.Skeleton.contact_joints` order.
+    skeleton : name or Skeleton
+    mask : Tensor ``(B, T)`` bool, optional
+        Valid frames; a velocity counts when both of its frames are valid.
+    """
+    sk = get_skeleton(skeleton)
+    feet = pred_joints[:, :, list(sk.contact_joints)]                       # (B, T, 4, 3)
+    speed = (feet[:, 1:] - feet[:, :-1]).abs()                              # (B, T-1, 4, 3)
+    w = (true_contacts[:, :-1] > 0.5)
+    if mask is not None:
+        w = w & (mask[:, 1:] & mask[:, :-1])[..., None]
+    w = w.to(speed.dtype)[..., None]                                        # (B, T-1, 4, 1)
+    return (speed * w).sum() / (w.sum() * 3).clamp_min(1.0)
 
 
 def velocity_loss(pred_joints: torch.Tensor, true_joints: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:

@@ -11,12 +11,13 @@ handling and ``torchrun`` DDP as the SALAD trainers. The stages:
    on the scaled-linear schedule; ε-prediction MSE (eq. 7); captions replaced by ``""`` with
    probability ``cond_drop_prob`` for classifier-free guidance. A PST with ``PSTConfig.side_cue``
    also gets each caption's token side ids (``text_sides``, :mod:`salad_core.keymotion.sides`), from
-   the token strings the caption cache keeps. ``KeyMotionTrainConfig.init_from`` (PST stage only)
-   starts from a trained PST (fine-tuning, e.g. the shipped one with a new side cue:
-   :func:`load_pst_init`).
+   the token strings the caption cache keeps. ``KeyMotionTrainConfig.init_from`` starts from a trained
+   PST (fine-tuning, e.g. the shipped one with a new side cue: :func:`load_pst_init`).
 3. **MMAE** (:func:`train_mmae`): the motion with everything but its keyframes masked, the
-   caption; loss eq. 9. Optional Gaussian noise on the input keyframes (``keyframe_noise``, in
-   normalised units) makes the in-filling robust to imperfect generated keyframes (paper Table VII).
+   caption; loss eq. 9 (plus an optional foot-contact term, ``MMAEConfig.lambda_foot``). Optional
+   Gaussian noise on the input keyframes (``keyframe_noise``, in normalised units) makes the in-filling
+   robust to imperfect generated keyframes (paper Table VII). ``init_from`` starts from a trained MMAE
+   (fine-tuning with other loss weights: :func:`load_mmae_init`).
 
 :func:`train_keymotion` runs the three stages into ``out/kf_vae``, ``out/pst``, ``out/mmae`` and
 writes ``out/keymotion.json``, so ``KeyMotionPipeline.from_pretrained(out)`` loads the result.
@@ -115,9 +116,9 @@ class KeyMotionTrainConfig(TrainConfig):
                                                # keyframe VAE and PST need 0: their K is fixed by the VAE)
     latent_cache: bool = True                  # PST: keyframe-VAE posteriors of every window encoded once
     latent_cache_dir: str | None = None        # PST: where the cache lives (None: the run folder's latent_cache/)
-    init_from: str | None = None               # PST only: a PST checkpoint stem, PST run folder, KeyMotion pipeline
-                                               # folder or training root whose PST weights start the model
-                                               # (fine-tuning; only side_embed.* may be missing: load_pst_init)
+    init_from: str | None = None               # PST and MMAE: a checkpoint stem, run folder, KeyMotion pipeline
+                                               # folder or training root whose weights of that stage start the
+                                               # model (fine-tuning: load_pst_init, load_mmae_init)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -764,12 +765,19 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
         raise ValueError(f"MMAEConfig.text_dim={model_config.text_dim} does not fit: the text encoder gives "
                          f"{encoder.dim}; set text_dim={encoder.dim}")
     _check_max_length(model_config.max_length, train_config)
-    _check_no_init(train_config, "MMAE")
     train_set, val_set = _datasets(data_dir, model_config.skeleton, num_keyframes, train_config,
                                    ratio=train_config.keyframe_ratio)
     torch.manual_seed(train_config.seed)
     mmae = MotionMaskedAutoencoder(model_config).to(env.device)
     mmae.set_normalization(train_set.mean, train_set.std)
+    init_stem = None
+    if train_config.init_from is not None:
+        init_stem = load_mmae_init(mmae, train_config.init_from)
+        if not (np.allclose(mmae.norm.mean.cpu().numpy(), train_set.mean, atol=1e-5)
+                and np.allclose(mmae.norm.std.cpu().numpy(), train_set.std, atol=1e-5)):
+            log.warning("the MMAE of %s was trained with other normalisation statistics than this corpus's; it "
+                        "keeps its own (its weights are tied to them)", init_stem)
+        log.info("MMAE initialised from %s", init_stem)
     text = _stage_captions(text_cache, encoder, train_config, train_set, val_set)
     bucketing = train_config.batching in ("buckets", "frames")
     u = train_set.base.unit_length
@@ -778,6 +786,8 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
     meta = {"text_encoder": encoder_name, "num_keyframes": num_keyframes,
             "keyframe_method": train_config.keyframe_method, "keyframe_ratio": train_config.keyframe_ratio,
             "data": str(Path(data_dir))}
+    if init_stem is not None:
+        meta["init_from"] = str(init_stem)
     numerics = {"loss_normaliser": (f"per-batch means x valid frames / (batch x {frames_norm:.4g} expected frames)"
                                     if frames_norm is not None else "per-batch means over valid frames")}
     return TrainTask(
@@ -797,8 +807,52 @@ def _check_fixed_keyframes(config: KeyMotionTrainConfig, stage: str) -> None:
 
 def _check_no_init(config: KeyMotionTrainConfig, stage: str) -> None:
     if config.init_from is not None:
-        raise ValueError(f"KeyMotionTrainConfig.init_from={config.init_from!r} is for the PST only (fine-tuning a "
-                         f"trained PST), not the {stage}; set it in the \"pst\" section's \"train\" of the config")
+        raise ValueError(f"KeyMotionTrainConfig.init_from={config.init_from!r} is for the PST and the MMAE only "
+                         f"(fine-tuning a trained model), not the {stage}; set it in the \"pst\" or \"mmae\" "
+                         "section's \"train\" of the config")
+
+
+#: MMAEConfig fields that may differ between a fine-tuned MMAE and the one it starts from (loss weights,
+#: dropout, table sizes); every other field defines the network and must match.
+MMAE_FREE_FIELDS = ("lambda_bone", "lambda_vel", "lambda_foot", "dropout", "max_text_tokens")
+
+
+def load_mmae_init(mmae: MotionMaskedAutoencoder, path: str | os.PathLike) -> Path:
+    """Load the trained MMAE at ``path`` (a KeyMotion pipeline folder or training root, an MMAE run folder,
+    a checkpoint stem or its file) into ``mmae``, normalisation included; returns its stem.
+
+    The configurations must agree except for :data:`MMAE_FREE_FIELDS`; the state must fit exactly.
+    """
+    from dataclasses import asdict
+
+    from salad_core.io import CheckpointError, config_from_dict, load_state_into, read_checkpoint
+
+    from .pipeline import _resolve_component
+
+    source = f"KeyMotionTrainConfig.init_from={str(path)!r}"
+    p = Path(path)
+    try:
+        if p.is_dir():
+            stem = (_resolve_component(p, "mmae") if (p / "mmae.json").is_file() or (p / "mmae").is_dir()
+                    else resolve_checkpoint(p))
+        else:
+            stem = p.with_suffix("") if p.suffix in (".json", ".safetensors") else p
+            if not stem.with_suffix(".json").is_file():
+                raise FileNotFoundError(f"{stem}.json does not exist")
+    except (FileNotFoundError, CheckpointError) as exc:
+        raise FileNotFoundError(f"{source} is neither a KeyMotion pipeline folder or training root, an MMAE run "
+                                f"folder (best/latest) nor an MMAE checkpoint stem: {exc}") from None
+    doc, state = read_checkpoint(stem)
+    if doc["type"] != "keymotion_mmae":
+        raise ValueError(f"{source}: {stem}.json holds a {doc['type']!r} model, not a 'keymotion_mmae'")
+    theirs, mine = asdict(config_from_dict(MMAEConfig, doc["config"])), asdict(mmae.config)
+    diff = [f"{k}: {theirs[k]!r} (init_from) vs {mine[k]!r} (model config)" for k in mine
+            if k not in MMAE_FREE_FIELDS and theirs.get(k) != mine[k]]
+    if diff:
+        raise ValueError(f"{source} holds an MMAE of another architecture; make the model config match it: "
+                         + "; ".join(diff))
+    load_state_into(mmae, state, source=f"{source} ({stem})")
+    return stem
 
 
 def _check_max_length(model_max: int, config: KeyMotionTrainConfig) -> None:

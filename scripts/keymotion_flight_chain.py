@@ -1,0 +1,110 @@
+#!/usr/bin/env python
+"""Where does KeyMotion lose the flight of a jump and the planted feet of real motion? (issue 22)
+
+For test clips whose caption names an action (default: jumps, not jumping jacks), the motion at every
+stage of the generation path (:func:`salad_core.eval.keymotion_roundtrip.generation_chain`): the clip
+itself, the MMAE's in-filling of its own MDO keyframes, the same keyframes after the keyframe VAE
+(posterior mean), and a motion generated from its caption. Each stage is measured by the physics
+benchmark's per-motion measures (raw position joints, :func:`salad_core.eval.physics.measure_motion`):
+flight frames, the pelvis's vertical acceleration in flight (ballistic: -9.81 m/s^2), the longest flight,
+the pelvis rise, foot skating and floating.
+
+    python scripts/keymotion_flight_chain.py --data CORPUS [--weights DIR] [--limit 30] [--out chain.json]
+
+CORPUS is the corpus the weights were trained on (its test split is used: evaluation data only).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+#: Measures reported per stage: (PhysicsReport field, label, statistic over clips).
+COLUMNS = (("flight_frames", "flight frames", "mean"), ("flight_accel_ms2", "flight accel (m/s^2)", "median"),
+           ("longest_flight_s", "longest flight (s)", "median"), ("jump_rise_m", "pelvis rise (m)", "median"),
+           ("skate_mean_ms", "skating (m/s)", "mean"), ("float_mean_cm", "float (cm)", "mean"))
+
+
+def clips_with(data: Path, words: list[str], exclude: list[str], limit: int) -> list[tuple[str, str]]:
+    """``(clip, caption)`` of test clips with a caption holding one of ``words`` and none of ``exclude``."""
+    out = []
+    for name in (data / "test.txt").read_text().split():
+        lines = (data / "texts" / f"{name}.txt").read_text().splitlines()
+        caps = [line.split("#")[0].strip() for line in lines if line.strip()]
+        good = [c for c in caps if any(w in c for w in words) and not any(x in c for x in exclude)]
+        if good:
+            out.append((name, good[0]))
+        if len(out) >= limit:
+            break
+    return out
+
+
+def summarise(reports: dict[str, list[dict]]) -> dict[str, dict[str, float]]:
+    table = {}
+    for stage, rows in reports.items():
+        table[stage] = {}
+        for key, _, stat in COLUMNS:
+            v = np.array([r[key] for r in rows], dtype=float)
+            v = v[np.isfinite(v)]
+            table[stage][key] = float(getattr(np, stat)(v)) if v.size else float("nan")
+    return table
+
+
+def markdown(table: dict[str, dict[str, float]], n: int) -> str:
+    head = "| stage (%d clips) | " % n + " | ".join(f"{label} ({stat})" for _, label, stat in COLUMNS) + " |"
+    lines = [head, "|---|" + "---:|" * len(COLUMNS)]
+    for stage, row in table.items():
+        lines.append(f"| {stage} | " + " | ".join(f"{row[k]:.2f}" for k, _, _ in COLUMNS) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None, *, pipe=None) -> int:
+    """``pipe``: a KeyMotionPipeline instead of loading ``--weights`` (tests)."""
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", required=True, type=Path, help="corpus folder (its test split)")
+    ap.add_argument("--weights", type=Path, default=None, help="KeyMotion folder (default: the shipped weights)")
+    ap.add_argument("--words", nargs="+", default=["jump"], help="caption words that select the clips")
+    ap.add_argument("--exclude", nargs="*", default=["jack"], help="caption words that leave a clip out")
+    ap.add_argument("--limit", type=int, default=30, help="clips measured")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the generated stage")
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--out", type=Path, default=None, help="write the per-clip reports and the table here (JSON)")
+    args = ap.parse_args(argv)
+    if args.limit < 1:
+        ap.error(f"--limit {args.limit}: use an integer >= 1")
+    if not (args.data / "test.txt").is_file():
+        ap.error(f"--data {args.data} has no test.txt")
+    import torch
+
+    from salad_core.eval.keymotion_roundtrip import CHAIN_STAGES, generation_chain
+    from salad_core.eval.physics import measure_motion
+    from salad_core.keymotion.pipeline import KeyMotionPipeline
+
+    torch.set_num_threads(args.threads)
+    pipe = pipe if pipe is not None else KeyMotionPipeline.from_pretrained(args.weights)
+    clips = clips_with(args.data, args.words, args.exclude, args.limit)
+    if not clips:
+        ap.error(f"no test clip of {args.data} has a caption with {args.words} (without {args.exclude})")
+    reports: dict[str, list[dict]] = {s: [] for s in CHAIN_STAGES}
+    for name, caption in clips:
+        x = np.load(args.data / "new_joint_vecs" / f"{name}.npy").astype(np.float32)[: pipe.max_length]
+        if len(x) < pipe.num_keyframes:
+            continue
+        for stage, joints in generation_chain(pipe, x, caption, seed=args.seed).items():
+            reports[stage].append({"clip": name, **measure_motion(joints, pipe.skeleton).as_dict()})
+    n = len(reports["true"])
+    table = summarise(reports)
+    print(markdown(table, n))
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps({"clips": [c for c, _ in clips], "words": args.words, "exclude": args.exclude,
+                                        "seed": args.seed, "weights": str(args.weights or "shipped"),
+                                        "table": table, "reports": reports}, indent=2, default=float) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
