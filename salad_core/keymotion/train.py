@@ -773,8 +773,9 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
     init_stem = None
     if train_config.init_from is not None:
         init_stem = load_mmae_init(mmae, train_config.init_from)
-        if not (np.allclose(mmae.norm.mean.cpu().numpy(), train_set.mean, atol=1e-5)
-                and np.allclose(mmae.norm.std.cpu().numpy(), train_set.std, atol=1e-5)):
+        tol = {"rtol": 1e-3, "atol": 1e-5}             # fp16 weights round the stored statistics (as for the PST)
+        if not (np.allclose(train_set.mean, mmae.norm.mean.float().cpu().numpy(), **tol)
+                and np.allclose(train_set.std, mmae.norm.std.float().cpu().numpy(), **tol)):
             log.warning("the MMAE of %s was trained with other normalisation statistics than this corpus's; it "
                         "keeps its own (its weights are tied to them)", init_stem)
         log.info("MMAE initialised from %s", init_stem)
