@@ -45,7 +45,7 @@ def main(argv=None, *, text_encoder=None) -> int:
         ap.error(f"--steps {args.steps}: use an integer >= 1")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 
-    from salad_core.keymotion.pipeline import DEFAULT_WEIGHTS_DIR, KeyMotionPipeline
+    from salad_core.keymotion.pipeline import DEFAULT_WEIGHTS_DIR
     from salad_core.keymotion.train import KeyMotionRecipe, train_pst
 
     source = args.source or DEFAULT_WEIGHTS_DIR
@@ -69,15 +69,9 @@ def main(argv=None, *, text_encoder=None) -> int:
     if result.interrupted:
         return 130
     if args.export is not None:
-        import torch
+        from salad_core.keymotion.export import export_with_component
 
-        from salad_core.io import load_model
-        from salad_core.train.assemble import run_checkpoint
-
-        pipe = KeyMotionPipeline.from_pretrained(source, **({"text_encoder": text_encoder} if text_encoder else {}))
-        pst, _, _ = load_model(run_checkpoint(args.out))
-        pipe.pst = pst.eval()
-        pipe.save_pretrained(args.export, dtype=torch.float16)
+        export_with_component(source, "pst", args.out, args.export, text_encoder=text_encoder)
         print(f"pipeline with the side-cue PST -> {args.export}")
     return 0
 

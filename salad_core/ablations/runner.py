@@ -327,16 +327,7 @@ def keep_study(recipe: StagedRecipe, work: str | os.PathLike, keep: str | os.Pat
     work = Path(work)
     done: dict[str, str] = {}
     for group in recipe.groups:
-        evaluations: list[dict] = []
-        decision = None
-        for steps in group.stages:
-            doc = load_evaluation(work, group, steps)
-            if doc is None:
-                break
-            evaluations.append(doc)
-            decision = decide(_history(evaluations), group.stages, recipe.stop)
-            if decision.stop:
-                break
+        evaluations, decision = _evaluated(recipe, group, work)
         if decision is None:
             done[group.name] = "nothing evaluated"
         elif decision.stop:
@@ -355,9 +346,11 @@ def _frozen_of(group: StudyGroup, outcome: GroupOutcome, work: Path) -> dict[str
     return {v: models / f"vae_{v}" for v in group.variants}
 
 
-def _replay(recipe: StagedRecipe, group: StudyGroup, work: Path) -> GroupOutcome:
-    """The outcome of a group from its evaluation files alone (it must have stopped)."""
+def _evaluated(recipe: StagedRecipe, group: StudyGroup, work: Path) -> tuple[list[dict], StopDecision | None]:
+    """A group's evaluation files in stage order, up to the first missing one or the stop, and the stop rule's
+    decision after the last of them (None when there is none)."""
     evaluations: list[dict] = []
+    decision = None
     for steps in group.stages:
         doc = load_evaluation(work, group, steps)
         if doc is None:
@@ -365,7 +358,15 @@ def _replay(recipe: StagedRecipe, group: StudyGroup, work: Path) -> GroupOutcome
         evaluations.append(doc)
         decision = decide(_history(evaluations), group.stages, recipe.stop)
         if decision.stop:
-            return GroupOutcome(group, decision, tuple(evaluations))
+            break
+    return evaluations, decision
+
+
+def _replay(recipe: StagedRecipe, group: StudyGroup, work: Path) -> GroupOutcome:
+    """The outcome of a group from its evaluation files alone (it must have stopped)."""
+    evaluations, decision = _evaluated(recipe, group, work)
+    if decision is not None and decision.stop:
+        return GroupOutcome(group, decision, tuple(evaluations))
     raise RuntimeError(f"group {group.name!r} has not stopped yet ({len(evaluations)} of its stages evaluated in "
                        f"{work / 'evaluations'}): run it first")
 

@@ -73,6 +73,15 @@ def _keyframe_inputs(pipe, features: np.ndarray, method: str, num_keyframes: int
     return x, torch.from_numpy(xn)[None], torch.from_numpy(idx)[None]
 
 
+def _captioned_inputs(pipe, features: np.ndarray, caption: str, method: str):
+    """:func:`_keyframe_inputs` and the caption's token features ``(1, W, C)`` and mask on the pipeline's device."""
+    if not isinstance(caption, str) or not caption.strip():
+        raise ValueError(f"caption={caption!r} must be a non-empty string")
+    x, xn, idx = _keyframe_inputs(pipe, features, method, None)
+    tb = pipe.text_encoder.encode([caption])
+    return x, xn, idx, tb.features.to(pipe.device), tb.mask.to(pipe.device)
+
+
 @torch.no_grad()
 def keyframe_roundtrip(pipe: "KeyMotionPipeline", features: np.ndarray, method: str = "mdo") -> KeyframeRoundTrip:
     """Select a motion's keyframes, encode them with KeyMotion's keyframe VAE and decode them.
@@ -134,14 +143,11 @@ def infill_from_keyframes(pipe: "KeyMotionPipeline", features: np.ndarray, capti
     from salad_core.keymotion.mmae import keyframe_lerp, scatter_keyframes
     from salad_core.motion import features_to_joints
 
-    if not isinstance(caption, str) or not caption.strip():
-        raise ValueError(f"caption={caption!r} must be a non-empty string")
-    x, xn, idx = _keyframe_inputs(pipe, features, method, None)
+    x, xn, idx, text, text_mask = _captioned_inputs(pipe, features, caption, method)
     n = len(x)
-    tb = pipe.text_encoder.encode([caption])
     dev = pipe.device
     out = pipe.mmae.infill(gather_keyframes(xn, idx).to(dev), idx.to(dev), torch.tensor([n], device=dev),
-                           tb.features.to(dev), tb.mask.to(dev), keep_keyframes=keep_keyframes)
+                           text, text_mask, keep_keyframes=keep_keyframes)
     canvas, mask = scatter_keyframes(gather_keyframes(xn, idx), idx, n)
     lerp = keyframe_lerp(canvas, mask)
     norm = pipe.mmae.norm
@@ -188,13 +194,9 @@ def generation_chain(pipe: "KeyMotionPipeline", features: np.ndarray, caption: s
     from salad_core.keymotion.pipeline import decode_keyframes
     from salad_core.motion import features_to_joints
 
-    if not isinstance(caption, str) or not caption.strip():
-        raise ValueError(f"caption={caption!r} must be a non-empty string")
-    x, xn, idx = _keyframe_inputs(pipe, features, method, None)
+    x, xn, idx, text, mask = _captioned_inputs(pipe, features, caption, method)
     dev = pipe.device
     length = torch.tensor([len(x)], device=dev)
-    tb = pipe.text_encoder.encode([caption])
-    text, mask = tb.features.to(dev), tb.mask.to(dev)
     kf = gather_keyframes(xn, idx).to(dev)
     idx = idx.to(dev)
     own = pipe.mmae.infill(kf, idx, length, text, mask)

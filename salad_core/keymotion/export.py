@@ -20,7 +20,7 @@ from salad_core.keymotion.pipeline import KeyMotionPipeline
 from salad_core.keymotion.train import STAGES
 from salad_core.sampling import Guidance
 
-__all__ = ["stage_records", "export_pipeline"]
+__all__ = ["stage_records", "export_pipeline", "export_with_component"]
 
 
 def stage_records(work: str | os.PathLike) -> dict[str, dict[str, Any]]:
@@ -89,3 +89,21 @@ def export_pipeline(work: str | os.PathLike, dest: str | os.PathLike, *, guidanc
     if records is not None:
         atomic_write_text(out / "runs.json", json.dumps(records, indent=2) + "\n")
     return out
+
+
+def export_with_component(source: str | os.PathLike, stage: str, run: str | os.PathLike, dest: str | os.PathLike, *,
+                          text_encoder: Any = None) -> Path:
+    """Write the KeyMotion pipeline folder ``source`` to ``dest`` (fp16) with its ``stage`` model ("kf_vae",
+    "pst" or "mmae") replaced by the one of the run folder ``run`` (its ``best``, else ``latest``), the
+    other two components, the guidance and the settings unchanged: how a fine-tuned stage is assembled for
+    measuring (``scripts/finetune_keymotion_*.py``). Returns ``dest``."""
+    from salad_core.io import load_model
+    from salad_core.keymotion.pipeline import COMPONENTS
+    from salad_core.train.assemble import run_checkpoint
+
+    if stage not in COMPONENTS:
+        raise ValueError(f"stage={stage!r} is not a KeyMotion component; use one of {sorted(COMPONENTS)}")
+    pipe = KeyMotionPipeline.from_pretrained(source, **({"text_encoder": text_encoder} if text_encoder else {}))
+    model, _, _ = load_model(run_checkpoint(run))
+    setattr(pipe, stage, model.eval())
+    return pipe.save_pretrained(dest, dtype=torch.float16)

@@ -663,17 +663,40 @@ def resolve_pst_source(path: str | os.PathLike) -> Path:
     """Checkpoint stem of the PST at ``path``: a KeyMotion pipeline folder (``pst.json``) or training
     root (``pst/`` run folder), a PST run folder (``best`` or else ``latest``), a stem, or its
     ``.json``/``.safetensors`` file."""
+    return _resolve_stage_source(path, "pst")
+
+
+def _resolve_stage_source(path: str | os.PathLike, stage: str) -> Path:
+    """Checkpoint stem of stage ``stage`` ("pst", "mmae") at ``path`` (see :func:`resolve_pst_source`)."""
     from .pipeline import _resolve_component
 
     p = Path(path)
     if p.is_dir():
-        if (p / "pst.json").is_file() or (p / "pst").is_dir():
-            return _resolve_component(p, "pst")
+        if (p / f"{stage}.json").is_file() or (p / stage).is_dir():
+            return _resolve_component(p, stage)
         return resolve_checkpoint(p)
     stem = p.with_suffix("") if p.suffix in (".json", ".safetensors") else p
     if not stem.with_suffix(".json").is_file():
         raise FileNotFoundError(f"{stem}.json does not exist")
     return stem
+
+
+def _read_init(path: str | os.PathLike, stage: str) -> tuple[Path, dict, dict]:
+    """``(stem, doc, state)`` of the trained ``stage`` model that ``init_from=path`` names, with errors that say
+    what was expected."""
+    from salad_core.io import CheckpointError, read_checkpoint
+
+    source = f"KeyMotionTrainConfig.init_from={str(path)!r}"
+    label = {"pst": "a PST", "mmae": "an MMAE"}[stage]
+    try:
+        stem = _resolve_stage_source(path, stage)
+    except (FileNotFoundError, CheckpointError) as exc:
+        raise FileNotFoundError(f"{source} is neither a KeyMotion pipeline folder or training root, {label} run "
+                                f"folder (best/latest) nor {label} checkpoint stem: {exc}") from None
+    doc, state = read_checkpoint(stem)
+    if doc["type"] != f"keymotion_{stage}":
+        raise ValueError(f"{source}: {stem}.json holds a {doc['type']!r} model, not a 'keymotion_{stage}'")
+    return stem, doc, state
 
 
 def load_pst_init(pst: ParallelSkipTransformer, path: str | os.PathLike) -> Path:
@@ -684,17 +707,10 @@ def load_pst_init(pst: ParallelSkipTransformer, path: str | os.PathLike) -> Path
     their zero initialisation, so the model starts as exactly the loaded one. Any other missing or
     unexpected key, or a shape mismatch, is an error naming the keys.
     """
-    from salad_core.io import CheckpointError, config_from_dict, read_checkpoint
+    from salad_core.io import CheckpointError, config_from_dict
 
     source = f"KeyMotionTrainConfig.init_from={str(path)!r}"
-    try:
-        stem = resolve_pst_source(path)
-    except (FileNotFoundError, CheckpointError) as exc:
-        raise FileNotFoundError(f"{source} is neither a KeyMotion pipeline folder or training root, a PST run "
-                                f"folder (best/latest) nor a PST checkpoint stem: {exc}") from None
-    doc, state = read_checkpoint(stem)
-    if doc["type"] != "keymotion_pst":
-        raise ValueError(f"{source}: {stem}.json holds a {doc['type']!r} model, not a 'keymotion_pst'")
+    stem, doc, state = _read_init(path, "pst")
     init_config = config_from_dict(PSTConfig, doc["config"])
     diff = [f"{k}: {getattr(init_config, k)!r} (init_from) vs {getattr(pst.config, k)!r} (model config)"
             for k in PST_ARCHITECTURE_FIELDS if getattr(init_config, k) != getattr(pst.config, k)]
@@ -826,26 +842,10 @@ def load_mmae_init(mmae: MotionMaskedAutoencoder, path: str | os.PathLike) -> Pa
     """
     from dataclasses import asdict
 
-    from salad_core.io import CheckpointError, config_from_dict, load_state_into, read_checkpoint
-
-    from .pipeline import _resolve_component
+    from salad_core.io import config_from_dict, load_state_into
 
     source = f"KeyMotionTrainConfig.init_from={str(path)!r}"
-    p = Path(path)
-    try:
-        if p.is_dir():
-            stem = (_resolve_component(p, "mmae") if (p / "mmae.json").is_file() or (p / "mmae").is_dir()
-                    else resolve_checkpoint(p))
-        else:
-            stem = p.with_suffix("") if p.suffix in (".json", ".safetensors") else p
-            if not stem.with_suffix(".json").is_file():
-                raise FileNotFoundError(f"{stem}.json does not exist")
-    except (FileNotFoundError, CheckpointError) as exc:
-        raise FileNotFoundError(f"{source} is neither a KeyMotion pipeline folder or training root, an MMAE run "
-                                f"folder (best/latest) nor an MMAE checkpoint stem: {exc}") from None
-    doc, state = read_checkpoint(stem)
-    if doc["type"] != "keymotion_mmae":
-        raise ValueError(f"{source}: {stem}.json holds a {doc['type']!r} model, not a 'keymotion_mmae'")
+    stem, doc, state = _read_init(path, "mmae")
     theirs, mine = asdict(config_from_dict(MMAEConfig, doc["config"])), asdict(mmae.config)
     diff = [f"{k}: {theirs[k]!r} (init_from) vs {mine[k]!r} (model config)" for k in mine
             if k not in MMAE_FREE_FIELDS and theirs.get(k) != mine[k]]
