@@ -885,11 +885,9 @@ class SaladPipeline:
 
 
 def _check_recovery(method: Any) -> str:
-    from salad_core.recovery import METHODS
+    from salad_core.recovery import check_method
 
-    if method not in METHODS:
-        raise ValueError(f"recovery must be one of {METHODS}, got {method!r}")
-    return method
+    return check_method(method)
 
 
 def _guidance_settings(guidance: Guidance) -> dict[str, Any]:

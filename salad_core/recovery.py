@@ -51,6 +51,7 @@ from .skeleton import Skeleton, get_skeleton
 
 __all__ = [
     "METHODS",
+    "check_method",
     "DEFAULT_METHOD",
     "RecoveryConfig",
     "recover_joints",
@@ -548,6 +549,13 @@ def _positions(f: np.ndarray, positions: np.ndarray, sk: Skeleton, cfg: Recovery
 #: Joints from ``(f, positions, sk, cfg)`` for each of :data:`METHODS`.
 _BY_METHOD: dict[str, Callable[[np.ndarray, np.ndarray, Skeleton, RecoveryConfig], np.ndarray]] = {
     "positions": _positions, "fk": _fk, "fit": _fit}
+
+
+def check_method(method) -> str:
+    """``method`` if it is one of :data:`METHODS` (what a pipeline's ``recovery`` may be), else ``ValueError``."""
+    if method not in METHODS:
+        raise ValueError(f"recovery must be one of {METHODS}, got {method!r}")
+    return str(method)
 
 
 def recover_joints(features: Array, method: str = DEFAULT_METHOD, skeleton: SkeletonLike = "humanml3d", *,

@@ -176,7 +176,9 @@ class KeyMotionPipeline:
         if not isinstance(self.guidance, Guidance):
             raise TypeError(f"guidance must be a salad_core.sampling.Guidance, got {type(guidance).__name__}")
         #: How ``out.joints`` are recovered (:data:`salad_core.recovery.METHODS`), as SALAD's pipeline.
-        self.recovery = _check_recovery(recovery if recovery is not None else (
+        from salad_core.recovery import check_method
+
+        self.recovery = check_method(recovery if recovery is not None else (
             "fit" if self.skeleton.bone_lengths is not None else "positions"))
 
     # ------------------------------------------------------------------------ checks
@@ -392,19 +394,12 @@ class KeyMotionPipeline:
             valid = (torch.arange(feats.shape[1], device=dev)[None] < len_t[:, None])[..., None]
             feats = (feats * valid.to(feats.dtype)).float().cpu().numpy()
             kf_feats = self.mmae.norm.denormalize(keyframes).float().cpu().numpy()
-        method = _check_recovery(self.recovery if recovery is None else recovery)
-        from salad_core.recovery import recover_joints
+        from salad_core.recovery import check_method, recover_joints
+
+        method = check_method(self.recovery if recovery is None else recovery)
 
         joints = [recover_joints(feats[i, :n], method, self.skeleton).astype(np.float32) for i, n in enumerate(lens)]
         return KeyMotionOutput(features=feats, joints=joints, texts=texts, lengths=lens,
                                keyframes=[row for row in indices.cpu().numpy().astype(np.int64)],
                                keyframe_features=kf_feats, latents=z.float().cpu().numpy(),
                                settings={"recovery": method, "skeleton": self.skeleton.name})
-
-
-def _check_recovery(method) -> str:
-    from salad_core.recovery import METHODS
-
-    if method not in METHODS:
-        raise ValueError(f"recovery must be one of {METHODS}, got {method!r}")
-    return str(method)
