@@ -432,8 +432,8 @@ def test_train_pst_fine_tunes_a_no_cue_pst_with_the_cue_and_records_it(side_corp
     assert config.side_cue and meta["init_from"] == str(stem)
     assert torch.count_nonzero(model.side_embed.weight[1:]) > 0              # the cue learned
     assert torch.count_nonzero(model.side_embed.weight[0]) == 0
-    with pytest.raises(ValueError, match="init_from=.* is for the PST and the MMAE only.*not the keyframe VAE"):
-        build_kf_vae_task(side_corpus, None, cfg, DistEnv())
+    with pytest.raises(ValueError, match="init_from=.*holds a 'keymotion_pst' model, not a 'keymotion_kf_vae'"):
+        build_kf_vae_task(side_corpus, None, cfg, DistEnv())          # each stage starts only from its own kind
 
 
 def test_fp16_keyframe_vae_statistics_are_not_another_corpus(side_corpus, tmp_path, caplog):

@@ -6,7 +6,10 @@ handling and ``torchrun`` DDP as the SALAD trainers. The stages:
 
 1. **keyframe VAE** (:func:`train_kf_vae`): keyframes of each training item (selected with
    :func:`~salad_core.keymotion.selection.select_keyframes` on its normalised features, MDO by
-   default), their positions ``u = i / (L - 1)``; loss eq. 2.
+   default), their positions ``u = i / (L - 1)``; loss eq. 2 (plus optional feature-group terms,
+   ``KeyframeVAEConfig.lambda_root`` etc.). ``init_from`` with ``train_parts="decoder"`` fine-tunes the
+   decoder of a trained keyframe VAE with the encoder frozen, so a PST trained on its latents still fits
+   (:func:`load_kf_vae_init`).
 2. **PST** (:func:`train_pst`): the frozen VAE's posterior sample ``z`` of the keyframes, noised
    on the scaled-linear schedule; ε-prediction MSE (eq. 7); captions replaced by ``""`` with
    probability ``cond_drop_prob`` for classifier-free guidance. A PST with ``PSTConfig.side_cue``
@@ -86,6 +89,10 @@ __all__ = [
     "PST_ARCHITECTURE_FIELDS",
     "resolve_pst_source",
     "load_pst_init",
+    "load_mmae_init",
+    "load_kf_vae_init",
+    "MMAE_FREE_FIELDS",
+    "KF_VAE_FREE_FIELDS",
     "STAGES",
     "KeyMotionRecipe",
     "load_keymotion_recipe",
@@ -116,9 +123,11 @@ class KeyMotionTrainConfig(TrainConfig):
                                                # keyframe VAE and PST need 0: their K is fixed by the VAE)
     latent_cache: bool = True                  # PST: keyframe-VAE posteriors of every window encoded once
     latent_cache_dir: str | None = None        # PST: where the cache lives (None: the run folder's latent_cache/)
-    init_from: str | None = None               # PST and MMAE: a checkpoint stem, run folder, KeyMotion pipeline
-                                               # folder or training root whose weights of that stage start the
-                                               # model (fine-tuning: load_pst_init, load_mmae_init)
+    init_from: str | None = None               # a checkpoint stem, run folder, KeyMotion pipeline folder or
+                                               # training root whose weights of that stage start the model
+                                               # (fine-tuning: load_kf_vae_init, load_pst_init, load_mmae_init)
+    train_parts: str = "all"                   # keyframe VAE: "all" | "decoder"; "decoder" freezes the encoder so
+                                               # the posteriors a trained PST relies on stay the same; needs init_from
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -138,8 +147,13 @@ class KeyMotionTrainConfig(TrainConfig):
             raise ValueError(f"{name}.keyframe_ratio={self.keyframe_ratio!r} is invalid; use a float in [0, 1] "
                              "(0: a fixed num_keyframes)")
         if self.init_from is not None and (not isinstance(self.init_from, str) or not self.init_from):
-            raise ValueError(f"{name}.init_from={self.init_from!r} is invalid; use a PST checkpoint or folder path "
+            raise ValueError(f"{name}.init_from={self.init_from!r} is invalid; use a checkpoint or folder path "
                              "(str) or None")
+        if self.train_parts not in ("all", "decoder"):
+            raise ValueError(f"{name}.train_parts={self.train_parts!r} is invalid; use 'all' or 'decoder'")
+        if self.train_parts == "decoder" and self.init_from is None:
+            raise ValueError(f"{name}.train_parts='decoder' needs init_from (a trained keyframe VAE): a frozen "
+                             "randomly initialised encoder has no latent space worth keeping")
 
 
 # ----------------------------------------------------------------------------------- data
@@ -341,14 +355,34 @@ def _text_encoder(text_encoder: Any, device: str) -> tuple[Any, str]:
 
 # ------------------------------------------------------------------------------ objectives
 class KeyframeVAEObjective(nn.Module):
-    """``forward(keyframes, positions, eps) -> dict(loss, rec, kl, bone, index)`` (eq. 2)."""
+    """``forward(keyframes, positions, eps) -> dict(loss, rec, kl, bone, index, ...)`` (eq. 2).
 
-    def __init__(self, vae: KeyframeVAE) -> None:
+    ``freeze_encoder``: decoder fine-tuning; the encoder's parameters get no gradient and it stays in
+    eval mode (no dropout), so the decoder learns from exactly the posteriors a PST trained on it sees.
+    """
+
+    def __init__(self, vae: KeyframeVAE, freeze_encoder: bool = False) -> None:
         super().__init__()
         self.vae = vae
+        self.freeze_encoder = freeze_encoder
+        if freeze_encoder:
+            vae.freeze_encoder()
+
+    def train(self, mode: bool = True) -> "KeyframeVAEObjective":
+        """As ``nn.Module.train``, but a frozen encoder stays in eval mode."""
+        super().train(mode)
+        if self.freeze_encoder:
+            for part in self.vae.encoder_modules():
+                part.eval()
+        return self
 
     def forward(self, keyframes: torch.Tensor, positions: torch.Tensor, eps: torch.Tensor) -> dict[str, torch.Tensor]:
         """``keyframes (B, K, D)``, ``positions (B, K)``, ``eps (B, Lz, Dz)`` standard normal."""
+        if self.freeze_encoder:
+            with torch.no_grad():
+                enc = self.vae.encode(keyframes, positions, sample=False)
+            decoding = self.vae.decode(enc.mu + eps * torch.exp(0.5 * enc.logvar))
+            return self.vae.loss(keyframes, positions, decoding, enc.mu, enc.logvar)
         decoding, mu, logvar = self.vae(keyframes, positions, eps)
         return self.vae.loss(keyframes, positions, decoding, mu, logvar)
 
@@ -499,14 +533,19 @@ def build_kf_vae_task(data_dir: str | os.PathLike, model_config: KeyframeVAEConf
         raise TypeError(f"model_config must be a KeyframeVAEConfig, got {type(model_config).__name__}")
     _check_max_length(model_config.max_length, train_config)
     _check_fixed_keyframes(train_config, "keyframe VAE")
-    _check_no_init(train_config, "keyframe VAE")
     train_set, val_set = _datasets(data_dir, model_config.skeleton, model_config.num_keyframes, train_config)
     torch.manual_seed(train_config.seed)  # same initial weights on every rank and every run
     vae = KeyframeVAE(model_config).to(env.device)
     vae.set_normalization(train_set.mean, train_set.std)
     meta = {"data": str(Path(data_dir)), "keyframe_method": train_config.keyframe_method}
+    if train_config.init_from is not None:
+        init_stem = load_kf_vae_init(vae, train_config.init_from)
+        _warn_other_statistics(train_set, vae, "keyframe VAE", init_stem)
+        log.info("keyframe VAE initialised from %s (training %s)", init_stem, train_config.train_parts)
+        meta.update(init_from=str(init_stem), train_parts=train_config.train_parts)
+    objective = KeyframeVAEObjective(vae, freeze_encoder=train_config.train_parts == "decoder")
     return TrainTask(
-        model=vae, model_type="keymotion_kf_vae", model_config=model_config, objective=KeyframeVAEObjective(vae),
+        model=vae, model_type="keymotion_kf_vae", model_config=model_config, objective=objective,
         train_set=train_set, val_set=val_set, collate=collate_keyframes,
         prepare=partial(_prepare_vae, latent_shape=vae.latent_shape), meta=meta,
         extra_config={"kind": "keymotion_kf_vae", **meta, "data": str(Path(data_dir).resolve())},
@@ -606,6 +645,7 @@ def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, mod
             raise ValueError(f"PSTConfig.{name}={getattr(model_config, name)} does not fit: the "
                              f"{'text encoder' if name == 'text_dim' else 'keyframe VAE'} gives {want}; set {name}={want}")
     _check_max_length(vc.max_length, train_config)
+    _check_all_parts(train_config, "PST")
     _check_fixed_keyframes(train_config, "PST")
     train_set, val_set = _datasets(data_dir, vc.skeleton, vc.num_keyframes, train_config)
     # fp16 weights (the shipped pipelines) round the stored statistics to ~5e-4 relative: not a different corpus
@@ -687,7 +727,7 @@ def _read_init(path: str | os.PathLike, stage: str) -> tuple[Path, dict, dict]:
     from salad_core.io import CheckpointError, read_checkpoint
 
     source = f"KeyMotionTrainConfig.init_from={str(path)!r}"
-    label = {"pst": "a PST", "mmae": "an MMAE"}[stage]
+    label = {"kf_vae": "a keyframe VAE", "pst": "a PST", "mmae": "an MMAE"}[stage]
     try:
         stem = _resolve_stage_source(path, stage)
     except (FileNotFoundError, CheckpointError) as exc:
@@ -781,6 +821,7 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
         raise ValueError(f"MMAEConfig.text_dim={model_config.text_dim} does not fit: the text encoder gives "
                          f"{encoder.dim}; set text_dim={encoder.dim}")
     _check_max_length(model_config.max_length, train_config)
+    _check_all_parts(train_config, "MMAE")
     train_set, val_set = _datasets(data_dir, model_config.skeleton, num_keyframes, train_config,
                                    ratio=train_config.keyframe_ratio)
     torch.manual_seed(train_config.seed)
@@ -789,11 +830,7 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
     init_stem = None
     if train_config.init_from is not None:
         init_stem = load_mmae_init(mmae, train_config.init_from)
-        tol = {"rtol": 1e-3, "atol": 1e-5}             # fp16 weights round the stored statistics (as for the PST)
-        if not (np.allclose(train_set.mean, mmae.norm.mean.float().cpu().numpy(), **tol)
-                and np.allclose(train_set.std, mmae.norm.std.float().cpu().numpy(), **tol)):
-            log.warning("the MMAE of %s was trained with other normalisation statistics than this corpus's; it "
-                        "keeps its own (its weights are tied to them)", init_stem)
+        _warn_other_statistics(train_set, mmae, "MMAE", init_stem)
         log.info("MMAE initialised from %s", init_stem)
     text = _stage_captions(text_cache, encoder, train_config, train_set, val_set)
     bucketing = train_config.batching in ("buckets", "frames")
@@ -816,22 +853,46 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
     )
 
 
+def _check_all_parts(config: KeyMotionTrainConfig, stage: str) -> None:
+    if config.train_parts != "all":
+        raise ValueError(f"KeyMotionTrainConfig.train_parts={config.train_parts!r} is for the keyframe VAE only "
+                         f"(decoder fine-tuning); the {stage} trains all its parts: set train_parts='all'")
+
+
 def _check_fixed_keyframes(config: KeyMotionTrainConfig, stage: str) -> None:
     if config.keyframe_ratio:
         raise ValueError(f"KeyMotionTrainConfig.keyframe_ratio={config.keyframe_ratio} is for the MMAE only: the "
                          f"{stage} works on the keyframe VAE's fixed num_keyframes; set keyframe_ratio=0 for it")
 
 
-def _check_no_init(config: KeyMotionTrainConfig, stage: str) -> None:
-    if config.init_from is not None:
-        raise ValueError(f"KeyMotionTrainConfig.init_from={config.init_from!r} is for the PST and the MMAE only "
-                         f"(fine-tuning a trained model), not the {stage}; set it in the \"pst\" or \"mmae\" "
-                         "section's \"train\" of the config")
-
-
 #: MMAEConfig fields that may differ between a fine-tuned MMAE and the one it starts from (loss weights,
 #: dropout, table sizes); every other field defines the network and must match.
 MMAE_FREE_FIELDS = ("lambda_bone", "lambda_vel", "lambda_foot", "dropout", "max_text_tokens")
+
+#: KeyframeVAEConfig fields that may differ between a fine-tuned keyframe VAE and the one it starts from (loss
+#: weights and dropout).
+KF_VAE_FREE_FIELDS = ("lambda_kl", "lambda_bone", "lambda_index", "lambda_root", "lambda_local_vel",
+                      "lambda_contact", "dropout")
+
+
+def _load_stage_init(model: nn.Module, path: str | os.PathLike, stage: str, config_class: type,
+                     free_fields: tuple[str, ...], label: str) -> Path:
+    """Load the trained ``stage`` model at ``path`` into ``model`` (normalisation included) when their configurations
+    agree except for ``free_fields``; returns its stem."""
+    from dataclasses import asdict
+
+    from salad_core.io import config_from_dict, load_state_into
+
+    source = f"KeyMotionTrainConfig.init_from={str(path)!r}"
+    stem, doc, state = _read_init(path, stage)
+    theirs, mine = asdict(config_from_dict(config_class, doc["config"])), asdict(model.config)
+    diff = [f"{k}: {theirs[k]!r} (init_from) vs {mine[k]!r} (model config)" for k in mine
+            if k not in free_fields and theirs.get(k) != mine[k]]
+    if diff:
+        raise ValueError(f"{source} holds {label} of another architecture; make the model config match it: "
+                         + "; ".join(diff))
+    load_state_into(model, state, source=f"{source} ({stem})")
+    return stem
 
 
 def load_mmae_init(mmae: MotionMaskedAutoencoder, path: str | os.PathLike) -> Path:
@@ -840,20 +901,25 @@ def load_mmae_init(mmae: MotionMaskedAutoencoder, path: str | os.PathLike) -> Pa
 
     The configurations must agree except for :data:`MMAE_FREE_FIELDS`; the state must fit exactly.
     """
-    from dataclasses import asdict
+    return _load_stage_init(mmae, path, "mmae", MMAEConfig, MMAE_FREE_FIELDS, "an MMAE")
 
-    from salad_core.io import config_from_dict, load_state_into
 
-    source = f"KeyMotionTrainConfig.init_from={str(path)!r}"
-    stem, doc, state = _read_init(path, "mmae")
-    theirs, mine = asdict(config_from_dict(MMAEConfig, doc["config"])), asdict(mmae.config)
-    diff = [f"{k}: {theirs[k]!r} (init_from) vs {mine[k]!r} (model config)" for k in mine
-            if k not in MMAE_FREE_FIELDS and theirs.get(k) != mine[k]]
-    if diff:
-        raise ValueError(f"{source} holds an MMAE of another architecture; make the model config match it: "
-                         + "; ".join(diff))
-    load_state_into(mmae, state, source=f"{source} ({stem})")
-    return stem
+def load_kf_vae_init(vae: KeyframeVAE, path: str | os.PathLike) -> Path:
+    """Load the trained keyframe VAE at ``path`` (a KeyMotion pipeline folder or training root, a keyframe-VAE
+    run folder, a checkpoint stem or its file) into ``vae``, normalisation included; returns its stem.
+
+    The configurations must agree except for :data:`KF_VAE_FREE_FIELDS`; the state must fit exactly.
+    """
+    return _load_stage_init(vae, path, "kf_vae", KeyframeVAEConfig, KF_VAE_FREE_FIELDS, "a keyframe VAE")
+
+
+def _warn_other_statistics(dataset: KeyframeDataset, model: nn.Module, label: str, stem: Path) -> None:
+    """Warn when the fine-tuning corpus's normalisation differs from the one the loaded model keeps."""
+    tol = {"rtol": 1e-3, "atol": 1e-5}             # fp16 weights round the stored statistics (as for the PST)
+    if not (np.allclose(dataset.mean, model.norm.mean.float().cpu().numpy(), **tol)
+            and np.allclose(dataset.std, model.norm.std.float().cpu().numpy(), **tol)):
+        log.warning("the %s of %s was trained with other normalisation statistics than this corpus's; it "
+                    "keeps its own (its weights are tied to them)", label, stem)
 
 
 def _check_max_length(model_max: int, config: KeyMotionTrainConfig) -> None:

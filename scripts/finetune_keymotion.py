@@ -1,0 +1,122 @@
+#!/usr/bin/env python
+"""Fine-tune one stage of a trained KeyMotion pipeline with extra loss terms (issue 22), then assemble a pipeline
+with it to measure.
+
+``scripts/keymotion_flight_chain.py`` measured where KeyMotion 0.2 loses the jumps' flight and starts to slide its
+feet: the MMAE's in-filling of the clips' own keyframes already slides (0.14 m/s against 0.01), and the keyframe
+VAE's decoded poses halve the flight (-3.30 m/s^2 against -7.66 with the true poses). Two stages can be fine-tuned:
+
+* ``--stage mmae``: :attr:`MMAEConfig.lambda_foot` (:func:`salad_core.keymotion.models.foot_contact_loss`:
+  planted feet stay put), with the recipe's MMAE settings (keyframe ratio, keyframe noise, batch, buckets).
+* ``--stage kf_vae``: :attr:`KeyframeVAEConfig.lambda_root`, ``lambda_local_vel`` and ``lambda_contact`` (the
+  root, joint-velocity and foot-contact channels weighed again), by default with the encoder frozen
+  (``--parts decoder``) so the source's PST, trained on its latents, still fits.
+
+Either starts from the source pipeline's model of that stage (default: the shipped ``salad_core/weights/
+keymotion``; same architecture, its normalisation kept) at a constant learning rate after a 200-step warm-up,
+and with ``--export`` writes a pipeline folder: the source's other two models with the new one.
+
+    python scripts/finetune_keymotion.py --stage mmae --data CORPUS --out RUN --steps 3000      # train (resumable)
+    python scripts/finetune_keymotion.py --stage kf_vae --lambda-local-vel 2 --lambda-root 2 --data CORPUS \\
+        --out RUN --steps 4000 --export DIR                                                    # train, then assemble
+
+CORPUS must be the corpus the source pipeline was trained on (KeyMotion 0.2: corpus generator 2.7,
+``python -m salad_core.cli corpus build --out CORPUS --size default --seed 0`` at 4736db4). Run it again with
+``--resume`` after an interruption (with the same arguments).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+#: per stage: the flags (and model config fields) of its extra loss weights
+LOSS_FLAGS = {"mmae": ("lambda_foot",), "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact")}
+#: the weight a flag gets when not given
+DEFAULT_WEIGHTS = {"lambda_foot": 5.0, "lambda_root": 0.0, "lambda_local_vel": 0.0, "lambda_contact": 0.0}
+
+
+def main(argv=None, *, text_encoder=None) -> int:
+    """``text_encoder``: an encoder object instead of the recipe's (tests)."""
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--stage", required=True, choices=sorted(LOSS_FLAGS), help="the model to fine-tune")
+    ap.add_argument("--data", required=True, type=Path, help="corpus the source pipeline was trained on")
+    ap.add_argument("--out", required=True, type=Path, help="run folder of the fine-tuned model")
+    ap.add_argument("--source", type=Path, default=None,
+                    help="KeyMotion pipeline folder to start from (default: the shipped weights)")
+    ap.add_argument("--recipe", type=Path, default=REPO / "configs" / "v2_keymotion.json",
+                    help="KeyMotion recipe whose section of the stage sets the model and training settings")
+    ap.add_argument("--steps", type=int, default=3000)
+    ap.add_argument("--lr", type=float, default=1e-4, help="constant after a 200-step warm-up (the recipe's "
+                                                             "stages ended at 1e-4)")
+    ap.add_argument("--lambda-foot", type=float, default=None, help="mmae: weight of the foot-contact term (5)")
+    ap.add_argument("--lambda-root", type=float, default=None, help="kf_vae: extra weight of the root channels (0)")
+    ap.add_argument("--lambda-local-vel", type=float, default=None,
+                    help="kf_vae: extra weight of the joint-velocity channels (0)")
+    ap.add_argument("--lambda-contact", type=float, default=None,
+                    help="kf_vae: extra weight of the foot-contact channels (0)")
+    ap.add_argument("--parts", choices=("decoder", "all"), default=None,
+                    help="kf_vae: 'decoder' (default) freezes the encoder so the source's PST still fits")
+    ap.add_argument("--threads", type=int, default=None, help="torch threads (default: the recipe's)")
+    ap.add_argument("--resume", action="store_true")
+    ap.add_argument("--export", type=Path, default=None, help="write the pipeline with the new model here (fp16)")
+    args = ap.parse_args(argv)
+    if args.steps < 1:
+        ap.error(f"--steps {args.steps}: use an integer >= 1")
+    for stage, flags in LOSS_FLAGS.items():
+        for flag in flags + (("parts",) if stage == "kf_vae" else ()):
+            if stage != args.stage and getattr(args, flag) is not None:
+                ap.error(f"--{flag.replace('_', '-')} is for --stage {stage}, not {args.stage}")
+    weights = {}
+    for flag in LOSS_FLAGS[args.stage]:
+        value = getattr(args, flag)
+        value = DEFAULT_WEIGHTS[flag] if value is None else value
+        if not value >= 0:
+            ap.error(f"--{flag.replace('_', '-')} {value}: use a number >= 0")
+        weights[flag] = value
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+
+    from salad_core.keymotion.kf_vae import KeyframeVAEConfig
+    from salad_core.keymotion.mmae import MMAEConfig
+    from salad_core.keymotion.pipeline import DEFAULT_WEIGHTS_DIR
+    from salad_core.keymotion.train import KeyMotionRecipe, train_kf_vae, train_mmae
+
+    source = args.source or DEFAULT_WEIGHTS_DIR
+    if not (source / f"{args.stage}.safetensors").is_file():
+        ap.error(f"--source {source}: no {args.stage}.safetensors (a KeyMotion pipeline folder is needed)")
+    doc = json.loads(args.recipe.read_text())
+    recipe = KeyMotionRecipe.from_doc(doc)
+    overrides = {"max_steps": args.steps, "lr": args.lr, "milestones": (), "warmup_steps": 200,
+                 "init_from": str(source), "progress": False}
+    if args.threads is not None:
+        overrides["num_threads"] = args.threads
+    if args.stage == "kf_vae":
+        train_cfg = replace(recipe.kf_vae_train, train_parts=args.parts or "decoder", **overrides)
+        model_cfg = replace(recipe.kf_vae_model or KeyframeVAEConfig(), **weights)
+        result = train_kf_vae(args.data, args.out, model_cfg, train_cfg, resume=args.resume)
+    else:
+        train_cfg = replace(recipe.mmae_train, **overrides)
+        model_cfg = replace(recipe.mmae_model or MMAEConfig(), **weights)
+        num_keyframes = json.loads((source / "kf_vae.json").read_text())["config"].get("num_keyframes", 20)
+        encoder = text_encoder if text_encoder is not None else doc.get("text_encoder", "minilm")
+        result = train_mmae(args.data, args.out, model_cfg, train_cfg, text_encoder=encoder, resume=args.resume,
+                            num_keyframes=num_keyframes)
+    print(f"{args.stage}: step {result.step}, best val {result.best_val} (step {result.best_step}), "
+          f"{result.steps_per_s:.2f} steps/s -> {result.out_dir}")
+    if result.interrupted:
+        return 130
+    if args.export is not None:
+        from salad_core.keymotion.export import export_with_component
+
+        export_with_component(source, args.stage, args.out, args.export, text_encoder=text_encoder)
+        print(f"pipeline with the fine-tuned {args.stage} -> {args.export}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

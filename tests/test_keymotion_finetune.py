@@ -1,0 +1,245 @@
+"""Fine-tuning a KeyMotion stage (issue 22): the MMAE's foot-contact term, the keyframe VAE's feature-group terms and
+frozen encoder, starting either from a trained one, and the fine-tuning script."""
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from salad_core.io import load_model
+from salad_core.keymotion.kf_vae import KeyframeVAE, KeyframeVAEConfig
+from salad_core.keymotion.mmae import MMAEConfig, MotionMaskedAutoencoder
+from salad_core.keymotion.models import foot_contact_loss
+from salad_core.keymotion.pipeline import KeyMotionPipeline
+from salad_core.keymotion.pst import ParallelSkipTransformer, PSTConfig
+from salad_core.keymotion.kf_vae import GROUP_TERMS
+from salad_core.keymotion.train import KeyframeVAEObjective, KeyMotionTrainConfig, load_kf_vae_init, load_mmae_init
+from salad_core.skeleton import get_skeleton
+from _doubles import HashTextEncoder, load_script, make_fake_corpus
+
+SK = get_skeleton("humanml3d")
+TEXT_DIM = 16
+
+pytestmark = pytest.mark.usefixtures("single_thread")
+
+
+def tiny_mmae_config(**kw) -> MMAEConfig:
+    base = dict(text_dim=TEXT_DIM, width=32, num_layers=1, num_heads=4, ff_dim=64, dropout=0.0, max_length=96)
+    base.update(kw)
+    return MMAEConfig(**base)
+
+
+def test_foot_contact_loss_is_the_planted_feet_speed():
+    """Zero while planted feet stay put, the mean per-axis speed of a sliding planted foot, and a foot in the air
+    (no contact) or an invalid frame does not count."""
+    torch.manual_seed(0)
+    joints = torch.zeros(1, 5, SK.num_joints, 3)
+    contacts = torch.zeros(1, 5, 4)
+    assert float(foot_contact_loss(joints, contacts, SK)) == 0.0                    # no contact: nothing to count
+    contacts[0, :, 0] = 1.0                                                         # the first contact joint planted
+    foot = SK.contact_joints[0]
+    assert float(foot_contact_loss(joints, contacts, SK)) == 0.0                    # and still
+    joints[0, :, foot, 0] = torch.arange(5.0) * 0.03                                # slides 3 cm/frame along x
+    assert float(foot_contact_loss(joints, contacts, SK)) == pytest.approx(0.01)    # |0.03, 0, 0| / 3 axes
+    other = SK.contact_joints[2]
+    joints[0, :, other, 1] = torch.arange(5.0) * 0.5                               # a foot in the air moves freely
+    assert float(foot_contact_loss(joints, contacts, SK)) == pytest.approx(0.01)
+    mask = torch.tensor([[True, True, False, False, False]])                        # one valid velocity
+    assert float(foot_contact_loss(joints, contacts, SK, mask)) == pytest.approx(0.01)
+    joints[0, 2:, foot, 0] = 0.06                                                   # stops after frame 2
+    assert float(foot_contact_loss(joints, contacts, SK)) == pytest.approx(0.06 / 3 / 4)
+
+
+def test_mmae_loss_adds_the_foot_term_only_when_weighted():
+    torch.manual_seed(0)
+    plain = MotionMaskedAutoencoder(tiny_mmae_config())
+    footed = MotionMaskedAutoencoder(tiny_mmae_config(lambda_foot=2.0))
+    footed.load_state_dict(plain.state_dict())
+    target = torch.randn(2, 12, SK.feature_dim)
+    pred = target + 0.1 * torch.randn_like(target)
+    mask = torch.ones(2, 12, dtype=torch.bool)
+    a, b = plain.loss(pred, target, mask), footed.loss(pred, target, mask)
+    assert "foot" not in a and float(b["foot"]) > 0
+    assert float(b["loss"]) == pytest.approx(float(a["loss"]) + 2.0 * float(b["foot"]), rel=1e-5)
+    no_contact = target.clone()
+    no_contact[..., SK.feature_slices["contacts"]] = 0.0                             # (identity normalisation)
+    assert float(footed.loss(pred, no_contact, mask)["foot"]) == 0.0                 # only planted feet count
+
+
+def test_load_mmae_init_takes_a_pipelines_mmae_and_refuses_another_architecture(tmp_path):
+    torch.manual_seed(1)
+    trained = MotionMaskedAutoencoder(tiny_mmae_config())
+    trained.set_normalization(np.full(SK.feature_dim, 0.5, np.float32), np.full(SK.feature_dim, 2.0, np.float32))
+    vae = KeyframeVAE(KeyframeVAEConfig(num_keyframes=8, max_length=96, frame_dim=32, latent_dim=16, num_layers=1,
+                                        ff_dim=64, dropout=0.0))
+    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4,
+                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
+    folder = KeyMotionPipeline(vae, pst, trained, HashTextEncoder(), default_length=40).save_pretrained(tmp_path / "km")
+    fresh = MotionMaskedAutoencoder(tiny_mmae_config(lambda_foot=5.0, dropout=0.1))   # loss weights may differ
+    assert load_mmae_init(fresh, folder) == folder / "mmae"
+    assert all(torch.equal(fresh.state_dict()[k], v) for k, v in trained.state_dict().items())
+    assert float(fresh.norm.mean[0]) == 0.5                                          # its normalisation comes along
+    with pytest.raises(ValueError, match="another architecture.*width"):
+        load_mmae_init(MotionMaskedAutoencoder(tiny_mmae_config(width=64)), folder)
+    with pytest.raises(ValueError, match="not a 'keymotion_mmae'"):
+        load_mmae_init(fresh, folder / "pst")
+    with pytest.raises(FileNotFoundError, match="neither"):
+        load_mmae_init(fresh, tmp_path / "nothing")
+
+
+def test_finetune_script_starts_from_a_pipeline_and_exports_one_with_the_new_mmae(tmp_path):
+    script = load_script("finetune_keymotion")
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=4)
+    mean, std = np.load(data / "Mean.npy"), np.load(data / "Std.npy")
+    torch.manual_seed(0)
+    vae = KeyframeVAE(KeyframeVAEConfig(num_keyframes=8, max_length=96, frame_dim=32, latent_dim=16, num_layers=1,
+                                        ff_dim=64, dropout=0.0))
+    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4,
+                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
+    mmae = MotionMaskedAutoencoder(tiny_mmae_config())
+    for m in (vae, mmae):
+        m.set_normalization(mean, std)
+    enc = HashTextEncoder()
+    source = KeyMotionPipeline(vae, pst, mmae, enc, default_length=40).save_pretrained(tmp_path / "source")
+    recipe = {"text_encoder": "hash", "train": {"batch_size": 4, "max_length": 96, "keyframe_method": "uniform",
+                                                "num_threads": 1, "val_every": 2, "val_batches": 1, "ckpt_every": 1,
+                                                "log_every": 1, "seed": 3},
+              "mmae": {"model": dataclasses.asdict(tiny_mmae_config()), "train": {"keyframe_ratio": 0.1}}}
+    (tmp_path / "recipe.json").write_text(json.dumps(recipe))
+    argv = ["--stage", "mmae", "--data", str(data), "--out", str(tmp_path / "run"), "--source", str(source), "--recipe",
+            str(tmp_path / "recipe.json"), "--steps", "2", "--lr", "1e-3", "--lambda-foot", "3",
+            "--export", str(tmp_path / "out")]
+    assert script.main(argv, text_encoder=enc) == 0
+    rows = [json.loads(line) for line in (tmp_path / "run" / "log.jsonl").read_text().splitlines()]
+    assert any("foot" in r for r in rows)                                            # the term is trained
+    doc = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert doc["train"]["init_from"] == str(source) and doc["model"]["lambda_foot"] == 3.0
+    out = KeyMotionPipeline.from_pretrained(tmp_path / "out", text_encoder=enc)
+    assert out.mmae.config.lambda_foot == 3.0
+    for name in ("kf_vae", "pst"):                       # the source's other two components, unchanged
+        a, _, _ = load_model(source / name)
+        b, _, _ = load_model(tmp_path / "out" / name)
+        assert all(torch.equal(x.half(), y.half()) for x, y in zip(a.state_dict().values(), b.state_dict().values()))
+    before, _, _ = load_model(source / "mmae")
+    assert any(not torch.equal(x.half(), y.half()) for x, y in
+               zip(before.state_dict().values(), out.mmae.state_dict().values()))    # the MMAE moved
+    with pytest.raises(SystemExit):
+        script.main(["--stage", "mmae", "--data", str(data), "--out", str(tmp_path / "x"), "--source", str(tmp_path)])
+
+
+# ------------------------------------------------------------------------------------------------ keyframe VAE
+def tiny_kf_vae_config(**kw) -> KeyframeVAEConfig:
+    base = dict(num_keyframes=8, max_length=96, frame_dim=32, latent_dim=16, num_layers=1, ff_dim=64, dropout=0.0)
+    base.update(kw)
+    return KeyframeVAEConfig(**base)
+
+
+def test_kf_vae_group_terms_are_the_mse_of_their_channels_added_with_their_weight():
+    torch.manual_seed(0)
+    plain = KeyframeVAE(tiny_kf_vae_config())
+    weighted = KeyframeVAE(tiny_kf_vae_config(lambda_root=2.0, lambda_local_vel=3.0, lambda_contact=0.5))
+    weighted.load_state_dict(plain.state_dict())
+    keyframes, positions = torch.randn(3, 8, SK.feature_dim), torch.linspace(0, 1, 8).expand(3, -1)
+    with torch.no_grad():
+        decoding, mu, logvar = plain(keyframes, positions, torch.zeros(3, 2, 16))
+    decoding = decoding._replace(keyframes=keyframes.clone())
+    decoding.keyframes[..., 3] += 0.5                                     # root height off by 0.5 everywhere
+    decoding.keyframes[..., SK.feature_slices["contacts"]] -= 1.0         # every contact channel off by 1
+    a = plain.loss(keyframes, positions, decoding, mu, logvar)
+    b = weighted.loss(keyframes, positions, decoding, mu, logvar)
+    assert set(GROUP_TERMS.values()) - set(a) == {"root", "local_vel", "contacts"}     # off: not reported
+    assert float(b["root"]) == pytest.approx(0.25 / 4)                   # one of the 4 root channels, 0.5^2
+    assert float(b["local_vel"]) == 0.0 and float(b["contacts"]) == pytest.approx(1.0)
+    assert float(b["rec"]) == pytest.approx(float(a["rec"]))
+    assert float(b["loss"]) == pytest.approx(float(a["loss"]) + 2.0 * 0.25 / 4 + 0.5 * 1.0, rel=1e-5)
+    with pytest.raises(ValueError, match="lambda_root"):
+        tiny_kf_vae_config(lambda_root=-1.0)
+
+
+def test_kf_vae_decoder_finetuning_keeps_the_encoder_and_its_posteriors():
+    """Frozen encoder: no gradient reaches it, it stays in eval mode (no dropout) while the objective trains, the
+    decoder still learns, and an optimiser step leaves the posterior of a batch exactly as it was."""
+    torch.manual_seed(2)
+    vae = KeyframeVAE(tiny_kf_vae_config(dropout=0.3, lambda_local_vel=1.0))
+    objective = KeyframeVAEObjective(vae, freeze_encoder=True).train()
+    assert not any(m.training for m in vae.encoder_modules()) and vae.decoder.training
+    keyframes, positions = torch.randn(4, 8, SK.feature_dim), torch.linspace(0, 1, 8).expand(4, -1)
+    with torch.no_grad():
+        before = vae.encode(keyframes, positions, sample=False)
+    decoder_before = [p.detach().clone() for p in vae.decoder.parameters()]
+    opt = torch.optim.SGD([p for p in vae.parameters() if p.requires_grad], lr=0.1)
+    objective(keyframes, positions, torch.randn(4, 2, 16))["loss"].backward()
+    assert vae.latent_tokens.grad is None and all(p.grad is None for p in vae.to_dist.parameters())
+    opt.step()
+    with torch.no_grad():
+        after = vae.encode(keyframes, positions, sample=False)
+    assert torch.equal(before.mu, after.mu) and torch.equal(before.logvar, after.logvar)
+    assert any(not torch.equal(a, b) for a, b in zip(decoder_before, vae.decoder.parameters()))
+    with pytest.raises(ValueError, match="needs init_from"):
+        KeyMotionTrainConfig(train_parts="decoder")
+    with pytest.raises(ValueError, match="train_parts"):
+        KeyMotionTrainConfig(train_parts="encoder", init_from="x")
+
+
+def test_load_kf_vae_init_takes_a_pipelines_vae_and_refuses_another_architecture(tmp_path):
+    torch.manual_seed(1)
+    trained = KeyframeVAE(tiny_kf_vae_config())
+    trained.set_normalization(np.full(SK.feature_dim, 0.5, np.float32), np.full(SK.feature_dim, 2.0, np.float32))
+    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4,
+                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
+    mmae = MotionMaskedAutoencoder(tiny_mmae_config())
+    folder = KeyMotionPipeline(trained, pst, mmae, HashTextEncoder(), default_length=40).save_pretrained(tmp_path / "km")
+    fresh = KeyframeVAE(tiny_kf_vae_config(lambda_root=4.0, dropout=0.1))     # loss weights and dropout may differ
+    assert load_kf_vae_init(fresh, folder) == folder / "kf_vae"
+    assert all(torch.equal(fresh.state_dict()[k], v) for k, v in trained.state_dict().items())
+    assert float(fresh.norm.std[0]) == 2.0
+    with pytest.raises(ValueError, match="another architecture.*latent_dim"):
+        load_kf_vae_init(KeyframeVAE(tiny_kf_vae_config(latent_dim=8)), folder)
+    with pytest.raises(ValueError, match="not a 'keymotion_kf_vae'"):
+        load_kf_vae_init(fresh, folder / "mmae")
+
+
+def test_finetune_script_fine_tunes_the_kf_vae_decoder_and_exports_a_pipeline_whose_pst_still_fits(tmp_path):
+    script = load_script("finetune_keymotion")
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=4)
+    mean, std = np.load(data / "Mean.npy"), np.load(data / "Std.npy")
+    torch.manual_seed(0)
+    vae = KeyframeVAE(tiny_kf_vae_config())
+    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4,
+                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
+    mmae = MotionMaskedAutoencoder(tiny_mmae_config())
+    for m in (vae, mmae):
+        m.set_normalization(mean, std)
+    enc = HashTextEncoder()
+    source = KeyMotionPipeline(vae, pst, mmae, enc, default_length=40).save_pretrained(tmp_path / "source")
+    recipe = {"text_encoder": "hash", "train": {"batch_size": 4, "max_length": 96, "keyframe_method": "uniform",
+                                                "num_threads": 1, "val_every": 2, "val_batches": 1, "ckpt_every": 1,
+                                                "log_every": 1, "seed": 3},
+              "kf_vae": {"model": dataclasses.asdict(tiny_kf_vae_config())}}
+    (tmp_path / "recipe.json").write_text(json.dumps(recipe))
+    common = ["--data", str(data), "--source", str(source), "--recipe", str(tmp_path / "recipe.json")]
+    argv = ["--stage", "kf_vae", *common, "--out", str(tmp_path / "run"), "--steps", "2", "--lr", "1e-2",
+            "--lambda-local-vel", "2", "--lambda-root", "1", "--export", str(tmp_path / "out")]
+    assert script.main(argv, text_encoder=enc) == 0
+    rows = [json.loads(line) for line in (tmp_path / "run" / "log.jsonl").read_text().splitlines()]
+    assert any("local_vel" in r and "root" in r for r in rows)                     # the terms are trained
+    doc = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert doc["train"]["train_parts"] == "decoder" and doc["model"]["lambda_local_vel"] == 2.0
+    out = KeyMotionPipeline.from_pretrained(tmp_path / "out", text_encoder=enc)
+    before, _, _ = load_model(source / "kf_vae")
+    old, new = before.state_dict(), out.kf_vae.state_dict()
+    encoder_keys = [k for k in old if k.split(".")[0] in ("frame_embed", "index_embed", "encoder", "encoder_norm",
+                                                           "to_dist", "latent_tokens")]
+    assert encoder_keys and all(torch.equal(old[k].half(), new[k].half()) for k in encoder_keys)   # encoder kept
+    assert any(not torch.equal(old[k].half(), new[k].half()) for k in old if k.startswith("decoder."))
+    for name in ("pst", "mmae"):                         # the source's other two components, unchanged
+        a, _, _ = load_model(source / name)
+        b, _, _ = load_model(tmp_path / "out" / name)
+        assert all(torch.equal(x.half(), y.half()) for x, y in zip(a.state_dict().values(), b.state_dict().values()))
+    with pytest.raises(SystemExit):                      # a flag of the other stage is refused
+        script.main(["--stage", "kf_vae", *common, "--out", str(tmp_path / "x"), "--lambda-foot", "3"])
+    with pytest.raises(SystemExit):
+        script.main(["--stage", "mmae", *common, "--out", str(tmp_path / "x"), "--parts", "all"])
