@@ -8,8 +8,8 @@ VAE's decoded poses halve the flight (-3.30 m/s^2 against -7.66 with the true po
 
 * ``--stage mmae``: :attr:`MMAEConfig.lambda_foot` (:func:`salad_core.keymotion.models.foot_contact_loss`:
   planted feet stay put), with the recipe's MMAE settings (keyframe ratio, keyframe noise, batch, buckets).
-* ``--stage kf_vae``: :attr:`KeyframeVAEConfig.lambda_root`, ``lambda_local_vel`` and ``lambda_contact`` (the
-  root, joint-velocity and foot-contact channels weighed again), by default with the encoder frozen
+* ``--stage kf_vae``: :attr:`KeyframeVAEConfig.lambda_root`, ``lambda_local_vel``, ``lambda_contact`` and
+  ``lambda_feet_height`` (the root, joint-velocity, foot-contact and foot-height channels weighed again), by default with the encoder frozen
   (``--parts decoder``) so the source's PST, trained on its latents, still fits.
 
 Either starts from the source pipeline's model of that stage (default: the shipped ``salad_core/weights/
@@ -17,7 +17,7 @@ keymotion``; same architecture, its normalisation kept) at a constant learning r
 and with ``--export`` writes a pipeline folder: the source's other two models with the new one.
 
     python scripts/finetune_keymotion.py --stage mmae --data CORPUS --out RUN --steps 3000      # train (resumable)
-    python scripts/finetune_keymotion.py --stage kf_vae --lambda-local-vel 2 --lambda-root 2 --data CORPUS \\
+    python scripts/finetune_keymotion.py --stage kf_vae --lambda-feet-height 5 --data CORPUS \\
         --out RUN --steps 4000 --export DIR                                                    # train, then assemble
 
 CORPUS must be the corpus the source pipeline was trained on (KeyMotion 0.2: corpus generator 2.7,
@@ -36,9 +36,11 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 #: per stage: the flags (and model config fields) of its extra loss weights
-LOSS_FLAGS = {"mmae": ("lambda_foot",), "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact")}
+LOSS_FLAGS = {"mmae": ("lambda_foot",),
+              "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact", "lambda_feet_height")}
 #: the weight a flag gets when not given
-DEFAULT_WEIGHTS = {"lambda_foot": 5.0, "lambda_root": 0.0, "lambda_local_vel": 0.0, "lambda_contact": 0.0}
+DEFAULT_WEIGHTS = {"lambda_foot": 5.0, "lambda_root": 0.0, "lambda_local_vel": 0.0, "lambda_contact": 0.0,
+                   "lambda_feet_height": 0.0}
 
 
 def main(argv=None, *, text_encoder=None) -> int:
@@ -60,6 +62,8 @@ def main(argv=None, *, text_encoder=None) -> int:
                     help="kf_vae: extra weight of the joint-velocity channels (0)")
     ap.add_argument("--lambda-contact", type=float, default=None,
                     help="kf_vae: extra weight of the foot-contact channels (0)")
+    ap.add_argument("--lambda-feet-height", type=float, default=None,
+                    help="kf_vae: extra weight of the contact joints' height channels (0)")
     ap.add_argument("--parts", choices=("decoder", "all"), default=None,
                     help="kf_vae: 'decoder' (default) freezes the encoder so the source's PST still fits")
     ap.add_argument("--threads", type=int, default=None, help="torch threads (default: the recipe's)")

@@ -1,7 +1,8 @@
 #!/usr/bin/env python
 """Where does KeyMotion lose the flight of a jump and the planted feet of real motion? (issue 22)
 
-For test clips whose caption names an action (default: jumps, not jumping jacks), the motion at every
+For the test clips (or ``--split val``: choosing settings on validation clips keeps the test figures
+unbiased) whose caption names an action (default: jumps, not jumping jacks), the motion at every
 stage of the generation path (:func:`salad_core.eval.keymotion_roundtrip.generation_chain`): the clip
 itself, the MMAE's in-filling of its own MDO keyframes, the same keyframes after the keyframe VAE
 (posterior mean), and a motion generated from its caption. Each stage is measured by the physics
@@ -9,9 +10,9 @@ benchmark's per-motion measures (raw position joints, :func:`salad_core.eval.phy
 flight frames, the pelvis's vertical acceleration in flight (ballistic: -9.81 m/s^2), the longest flight,
 the pelvis rise, foot skating and floating.
 
-    python scripts/keymotion_flight_chain.py --data CORPUS [--weights DIR] [--limit 30] [--out chain.json]
+    python scripts/keymotion_flight_chain.py --data CORPUS [--weights DIR] [--split test] [--limit 30] [--out chain.json]
 
-CORPUS is the corpus the weights were trained on (its test split is used: evaluation data only).
+CORPUS is the corpus the weights were trained on (its test or validation split: never training clips).
 """
 from __future__ import annotations
 
@@ -28,10 +29,11 @@ COLUMNS = (("flight_frames", "flight frames", "mean"), ("flight_accel_ms2", "fli
            ("skate_mean_ms", "skating (m/s)", "mean"), ("float_mean_cm", "float (cm)", "mean"))
 
 
-def clips_with(data: Path, words: list[str], exclude: list[str], limit: int) -> list[tuple[str, str]]:
-    """``(clip, caption)`` of test clips with a caption holding one of ``words`` and none of ``exclude``."""
+def clips_with(data: Path, words: list[str], exclude: list[str], limit: int, split: str = "test"
+               ) -> list[tuple[str, str]]:
+    """``(clip, caption)`` of ``split`` clips with a caption holding one of ``words`` and none of ``exclude``."""
     out = []
-    for name in (data / "test.txt").read_text().split():
+    for name in (data / f"{split}.txt").read_text().split():
         lines = (data / "texts" / f"{name}.txt").read_text().splitlines()
         caps = [line.split("#")[0].strip() for line in lines if line.strip()]
         good = [c for c in caps if any(w in c for w in words) and not any(x in c for x in exclude)]
@@ -64,7 +66,8 @@ def markdown(table: dict[str, dict[str, float]], n: int) -> str:
 def main(argv=None, *, pipe=None) -> int:
     """``pipe``: a KeyMotionPipeline instead of loading ``--weights`` (tests)."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", required=True, type=Path, help="corpus folder (its test split)")
+    ap.add_argument("--data", required=True, type=Path, help="corpus folder")
+    ap.add_argument("--split", choices=("test", "val"), default="test", help="the corpus split whose clips are used")
     ap.add_argument("--weights", type=Path, default=None, help="KeyMotion folder (default: the shipped weights)")
     ap.add_argument("--words", nargs="+", default=["jump"], help="caption words that select the clips")
     ap.add_argument("--exclude", nargs="*", default=["jack"], help="caption words that leave a clip out")
@@ -75,8 +78,8 @@ def main(argv=None, *, pipe=None) -> int:
     args = ap.parse_args(argv)
     if args.limit < 1:
         ap.error(f"--limit {args.limit}: use an integer >= 1")
-    if not (args.data / "test.txt").is_file():
-        ap.error(f"--data {args.data} has no test.txt")
+    if not (args.data / f"{args.split}.txt").is_file():
+        ap.error(f"--data {args.data} has no {args.split}.txt")
     import torch
 
     from salad_core.eval.keymotion_roundtrip import CHAIN_STAGES, generation_chain
@@ -85,9 +88,9 @@ def main(argv=None, *, pipe=None) -> int:
 
     torch.set_num_threads(args.threads)
     pipe = pipe if pipe is not None else KeyMotionPipeline.from_pretrained(args.weights)
-    clips = clips_with(args.data, args.words, args.exclude, args.limit)
+    clips = clips_with(args.data, args.words, args.exclude, args.limit, args.split)
     if not clips:
-        ap.error(f"no test clip of {args.data} has a caption with {args.words} (without {args.exclude})")
+        ap.error(f"no {args.split} clip of {args.data} has a caption with {args.words} (without {args.exclude})")
     reports: dict[str, list[dict]] = {s: [] for s in CHAIN_STAGES}
     for name, caption in clips:
         x = np.load(args.data / "new_joint_vecs" / f"{name}.npy").astype(np.float32)[: pipe.max_length]
@@ -101,7 +104,7 @@ def main(argv=None, *, pipe=None) -> int:
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"clips": [c for c, _ in clips], "words": args.words, "exclude": args.exclude,
-                                        "seed": args.seed, "weights": str(args.weights or "shipped"),
+                                        "split": args.split, "seed": args.seed, "weights": str(args.weights or "shipped"),
                                         "table": table, "reports": reports}, indent=2, default=float) + "\n")
     return 0
 

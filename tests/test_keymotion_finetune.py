@@ -15,7 +15,7 @@ from salad_core.keymotion.mmae import MMAEConfig, MotionMaskedAutoencoder
 from salad_core.keymotion.models import foot_contact_loss
 from salad_core.keymotion.pipeline import KeyMotionPipeline
 from salad_core.keymotion.pst import ParallelSkipTransformer, PSTConfig
-from salad_core.keymotion.kf_vae import GROUP_TERMS
+from salad_core.keymotion.kf_vae import GROUP_TERMS, group_channels
 from salad_core.keymotion.train import KeyframeVAEObjective, KeyMotionTrainConfig, load_kf_vae_init, load_mmae_init
 from salad_core.skeleton import get_skeleton
 from _doubles import HashTextEncoder, load_script, make_fake_corpus
@@ -150,11 +150,19 @@ def test_kf_vae_group_terms_are_the_mse_of_their_channels_added_with_their_weigh
     decoding.keyframes[..., SK.feature_slices["contacts"]] -= 1.0         # every contact channel off by 1
     a = plain.loss(keyframes, positions, decoding, mu, logvar)
     b = weighted.loss(keyframes, positions, decoding, mu, logvar)
-    assert set(GROUP_TERMS.values()) - set(a) == {"root", "local_vel", "contacts"}     # off: not reported
+    assert set(GROUP_TERMS.values()) - set(a) == {"root", "local_vel", "contacts", "feet_height"}  # off: not reported
     assert float(b["root"]) == pytest.approx(0.25 / 4)                   # one of the 4 root channels, 0.5^2
-    assert float(b["local_vel"]) == 0.0 and float(b["contacts"]) == pytest.approx(1.0)
+    assert float(b["local_vel"]) == 0.0 and float(b["contacts"]) == pytest.approx(1.0) and "feet_height" not in b
     assert float(b["rec"]) == pytest.approx(float(a["rec"]))
     assert float(b["loss"]) == pytest.approx(float(a["loss"]) + 2.0 * 0.25 / 4 + 0.5 * 1.0, rel=1e-5)
+    feet = KeyframeVAE(tiny_kf_vae_config(lambda_feet_height=1.0))
+    cols = group_channels(SK, "feet_height")                              # the y of the 4 contact joints' ric
+    ric = SK.feature_slices["ric"].start
+    assert cols == [ric + 3 * (j - 1) + 1 for j in SK.contact_joints] and len(cols) == 4
+    decoding.keyframes[..., cols[0]] += 2.0                               # one foot 2 units too high
+    assert float(feet.loss(keyframes, positions, decoding, mu, logvar)["feet_height"]) == pytest.approx(4.0 / 4)
+    with pytest.raises(ValueError, match="unknown feature group"):
+        group_channels(SK, "hands")
     with pytest.raises(ValueError, match="lambda_root"):
         tiny_kf_vae_config(lambda_root=-1.0)
 
