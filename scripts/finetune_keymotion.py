@@ -7,7 +7,10 @@ feet: the MMAE's in-filling of the clips' own keyframes already slides (0.14 m/s
 VAE's decoded poses halve the flight (-3.30 m/s^2 against -7.66 with the true poses). Two stages can be fine-tuned:
 
 * ``--stage mmae``: :attr:`MMAEConfig.lambda_foot` (:func:`salad_core.keymotion.models.foot_contact_loss`:
-  planted feet stay put), with the recipe's MMAE settings (keyframe ratio, keyframe noise, batch, buckets).
+  planted feet stay put), with the recipe's MMAE settings (keyframe ratio, keyframe noise, batch, buckets);
+  ``--roundtrip P`` gives a share ``P`` of the items the source keyframe VAE's reconstruction of their keyframes
+  (``KeyMotionTrainConfig.keyframe_roundtrip``: the errors generation makes) and selects the VAE's fixed number
+  of keyframes for every item (``keyframe_ratio`` 0).
 * ``--stage kf_vae``: :attr:`KeyframeVAEConfig.lambda_root`, ``lambda_local_vel``, ``lambda_contact`` and
   ``lambda_feet_height`` (the root, joint-velocity, foot-contact and foot-height channels weighed again), by default with the encoder frozen
   (``--parts decoder``) so the source's PST, trained on its latents, still fits.
@@ -38,6 +41,8 @@ REPO = Path(__file__).resolve().parents[1]
 #: per stage: the flags (and model config fields) of its extra loss weights
 LOSS_FLAGS = {"mmae": ("lambda_foot",),
               "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact", "lambda_feet_height")}
+#: per stage: its other flags
+STAGE_FLAGS = {"mmae": ("roundtrip",), "kf_vae": ("parts",)}
 #: the weight a flag gets when not given
 DEFAULT_WEIGHTS = {"lambda_foot": 5.0, "lambda_root": 0.0, "lambda_local_vel": 0.0, "lambda_contact": 0.0,
                    "lambda_feet_height": 0.0}
@@ -57,6 +62,8 @@ def main(argv=None, *, text_encoder=None) -> int:
     ap.add_argument("--lr", type=float, default=1e-4, help="constant after a 200-step warm-up (the recipe's "
                                                              "stages ended at 1e-4)")
     ap.add_argument("--lambda-foot", type=float, default=None, help="mmae: weight of the foot-contact term (5)")
+    ap.add_argument("--roundtrip", type=float, default=None,
+                    help="mmae: share of items whose input keyframes the source's keyframe VAE reconstructs (0)")
     ap.add_argument("--lambda-root", type=float, default=None, help="kf_vae: extra weight of the root channels (0)")
     ap.add_argument("--lambda-local-vel", type=float, default=None,
                     help="kf_vae: extra weight of the joint-velocity channels (0)")
@@ -73,7 +80,7 @@ def main(argv=None, *, text_encoder=None) -> int:
     if args.steps < 1:
         ap.error(f"--steps {args.steps}: use an integer >= 1")
     for stage, flags in LOSS_FLAGS.items():
-        for flag in flags + (("parts",) if stage == "kf_vae" else ()):
+        for flag in flags + STAGE_FLAGS[stage]:
             if stage != args.stage and getattr(args, flag) is not None:
                 ap.error(f"--{flag.replace('_', '-')} is for --stage {stage}, not {args.stage}")
     weights = {}
@@ -104,6 +111,10 @@ def main(argv=None, *, text_encoder=None) -> int:
         model_cfg = replace(recipe.kf_vae_model or KeyframeVAEConfig(), **weights)
         result = train_kf_vae(args.data, args.out, model_cfg, train_cfg, resume=args.resume)
     else:
+        if args.roundtrip is not None:
+            if not 0.0 <= args.roundtrip <= 1.0:
+                ap.error(f"--roundtrip {args.roundtrip}: use a share in [0, 1]")
+            overrides.update(keyframe_roundtrip=args.roundtrip, roundtrip_vae=str(source), keyframe_ratio=0.0)
         train_cfg = replace(recipe.mmae_train, **overrides)
         model_cfg = replace(recipe.mmae_model or MMAEConfig(), **weights)
         num_keyframes = json.loads((source / "kf_vae.json").read_text())["config"].get("num_keyframes", 20)

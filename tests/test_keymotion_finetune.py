@@ -128,6 +128,14 @@ def test_finetune_script_starts_from_a_pipeline_and_exports_one_with_the_new_mma
                zip(before.state_dict().values(), out.mmae.state_dict().values()))    # the MMAE moved
     with pytest.raises(SystemExit):
         script.main(["--stage", "mmae", "--data", str(data), "--out", str(tmp_path / "x"), "--source", str(tmp_path)])
+    argv = ["--stage", "mmae", "--data", str(data), "--out", str(tmp_path / "rt"), "--source", str(source), "--recipe",
+            str(tmp_path / "recipe.json"), "--steps", "1", "--roundtrip", "1"]
+    assert script.main(argv, text_encoder=enc) == 0                              # on the source VAE's keyframes
+    train = json.loads((tmp_path / "rt" / "config.json").read_text())["train"]
+    assert train["keyframe_roundtrip"] == 1.0 and train["roundtrip_vae"] == str(source)
+    assert train["keyframe_ratio"] == 0.0                                        # the VAE's fixed keyframes
+    with pytest.raises(SystemExit):
+        script.main(argv[:-1] + ["1.5"], text_encoder=enc)
 
 
 # ------------------------------------------------------------------------------------------------ keyframe VAE
@@ -251,3 +259,55 @@ def test_finetune_script_fine_tunes_the_kf_vae_decoder_and_exports_a_pipeline_wh
         script.main(["--stage", "kf_vae", *common, "--out", str(tmp_path / "x"), "--lambda-foot", "3"])
     with pytest.raises(SystemExit):
         script.main(["--stage", "mmae", *common, "--out", str(tmp_path / "x"), "--parts", "all"])
+
+
+# ------------------------------------------------------------------------------------- MMAE on decoded keyframes
+def test_mmae_roundtrip_items_get_the_keyframe_vaes_reconstruction_at_its_frames(tmp_path):
+    """keyframe_roundtrip 1: every item's input keyframes are the VAE's decoded keyframes scattered at the decoded
+    frames (first 0, last L - 1); 0: the true keyframes; the target stays the true motion either way."""
+    from salad_core.keymotion.mmae import scatter_keyframes
+    from salad_core.keymotion.train import build_mmae_task, roundtrip_keyframes
+    from salad_core.train.common import StepContext
+    from salad_core.train.distributed import DistEnv, GlobalBatchRandom
+
+    data = make_fake_corpus(tmp_path / "corpus", n_train=6, n_val=3)
+    mean, std = np.load(data / "Mean.npy"), np.load(data / "Std.npy")
+    torch.manual_seed(0)
+    vae = KeyframeVAE(tiny_kf_vae_config())
+    vae.set_normalization(mean, std)
+    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4,
+                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
+    mmae = MotionMaskedAutoencoder(tiny_mmae_config())
+    mmae.set_normalization(mean, std)
+    source = KeyMotionPipeline(vae, pst, mmae, HashTextEncoder(), default_length=40).save_pretrained(tmp_path / "km")
+    env = DistEnv()
+    base = KeyMotionTrainConfig(max_length=96, num_threads=1, progress=False, batch_size=3, keyframe_method="uniform")
+    inputs = {}
+    for share in (0.0, 1.0):
+        cfg = base.replace(keyframe_roundtrip=share, roundtrip_vae=str(source) if share else None)
+        task = build_mmae_task(data, tiny_mmae_config(), cfg, env, HashTextEncoder(), 8)
+        batch = task.collate([task.train_set[i] for i in range(3)])
+        ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(1), env), env, train=True, step=0)
+        inputs[share] = task.prepare(batch, ctx)
+        assert torch.equal(inputs[share]["motion"], batch["motion"])                  # the target: the true motion
+    motion, idx, length = batch["motion"], batch["keyframes"], batch["length"]
+    true_kf = torch.gather(motion, 1, idx[..., None].expand(-1, -1, motion.shape[-1]))
+    expected_true, _ = scatter_keyframes(true_kf, idx, motion.shape[1])
+    assert torch.equal(inputs[0.0]["inputs"], expected_true)
+    loaded = KeyMotionPipeline.from_pretrained(source, text_encoder=HashTextEncoder()).kf_vae
+    kf_rt, idx_rt = roundtrip_keyframes(loaded, true_kf, idx, length)
+    assert torch.equal(idx_rt[:, 0], torch.zeros(3, dtype=torch.long)) and torch.equal(idx_rt[:, -1], length - 1)
+    assert bool((idx_rt.diff(dim=1) > 0).all())
+    expected_rt, mask_rt = scatter_keyframes(kf_rt, idx_rt, motion.shape[1])
+    assert torch.allclose(inputs[1.0]["inputs"], expected_rt, atol=1e-6)
+    assert torch.equal(inputs[1.0]["keyframe_mask"], mask_rt)
+    assert not torch.allclose(inputs[1.0]["inputs"], inputs[0.0]["inputs"])
+    with pytest.raises(ValueError, match="needs roundtrip_vae"):
+        KeyMotionTrainConfig(keyframe_roundtrip=0.5)
+    with pytest.raises(ValueError, match="needs keyframe_ratio=0"):
+        KeyMotionTrainConfig(keyframe_roundtrip=0.5, roundtrip_vae="x", keyframe_ratio=0.1)
+    from salad_core.keymotion.train import build_kf_vae_task
+    with pytest.raises(ValueError, match="keyframe_roundtrip=.* is for the MMAE only"):
+        build_kf_vae_task(data, tiny_kf_vae_config(), cfg, env)
+    with pytest.raises(ValueError, match="has 8 keyframes; this MMAE run selects num_keyframes=6"):
+        build_mmae_task(data, tiny_mmae_config(), cfg, env, HashTextEncoder(), 6)

@@ -19,8 +19,10 @@ handling and ``torchrun`` DDP as the SALAD trainers. The stages:
 3. **MMAE** (:func:`train_mmae`): the motion with everything but its keyframes masked, the
    caption; loss eq. 9 (plus an optional foot-contact term, ``MMAEConfig.lambda_foot``). Optional
    Gaussian noise on the input keyframes (``keyframe_noise``, in normalised units) makes the in-filling
-   robust to imperfect generated keyframes (paper Table VII). ``init_from`` starts from a trained MMAE
-   (fine-tuning with other loss weights: :func:`load_mmae_init`).
+   robust to imperfect generated keyframes (paper Table VII); ``keyframe_roundtrip`` gives a share of the
+   items the keyframe VAE's reconstruction of their keyframes instead (:func:`roundtrip_keyframes`: the
+   errors generation makes, not Gaussian ones). ``init_from`` starts from a trained MMAE (fine-tuning with
+   other loss weights: :func:`load_mmae_init`).
 
 :func:`train_keymotion` runs the three stages into ``out/kf_vae``, ``out/pst``, ``out/mmae`` and
 writes ``out/keymotion.json``, so ``KeyMotionPipeline.from_pretrained(out)`` loads the result.
@@ -84,6 +86,7 @@ __all__ = [
     "train_mmae",
     "train_keymotion",
     "load_frozen_kf_vae",
+    "roundtrip_keyframes",
     "kf_vae_latent_cache",
     "PrefilledCaptions",
     "PST_ARCHITECTURE_FIELDS",
@@ -128,6 +131,11 @@ class KeyMotionTrainConfig(TrainConfig):
                                                # (fine-tuning: load_kf_vae_init, load_pst_init, load_mmae_init)
     train_parts: str = "all"                   # keyframe VAE: "all" | "decoder"; "decoder" freezes the encoder so
                                                # the posteriors a trained PST relies on stay the same; needs init_from
+    keyframe_roundtrip: float = 0.0            # MMAE: share of items whose input keyframes (and their frames) are
+                                               # the roundtrip_vae's reconstruction of the true ones, as generation
+                                               # gives them; needs keyframe_ratio 0 (the VAE's fixed K)
+    roundtrip_vae: str | None = None           # MMAE: the keyframe VAE of keyframe_roundtrip (a KeyMotion pipeline
+                                               # folder or training root, a keyframe-VAE run folder or stem)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -149,6 +157,15 @@ class KeyMotionTrainConfig(TrainConfig):
         if self.init_from is not None and (not isinstance(self.init_from, str) or not self.init_from):
             raise ValueError(f"{name}.init_from={self.init_from!r} is invalid; use a checkpoint or folder path "
                              "(str) or None")
+        if isinstance(self.keyframe_roundtrip, bool) or not isinstance(self.keyframe_roundtrip, (int, float)) \
+                or not 0.0 <= self.keyframe_roundtrip <= 1.0:
+            raise ValueError(f"{name}.keyframe_roundtrip={self.keyframe_roundtrip!r} is invalid; use a float in [0, 1]")
+        if self.keyframe_roundtrip > 0 and not (isinstance(self.roundtrip_vae, str) and self.roundtrip_vae):
+            raise ValueError(f"{name}.keyframe_roundtrip={self.keyframe_roundtrip} needs roundtrip_vae (the keyframe "
+                             "VAE whose reconstructions the MMAE learns to in-fill)")
+        if self.keyframe_roundtrip > 0 and self.keyframe_ratio:
+            raise ValueError(f"{name}.keyframe_roundtrip needs keyframe_ratio=0: the keyframe VAE reconstructs its "
+                             f"fixed number of keyframes, not {self.keyframe_ratio:.0%} of the frames")
         if self.train_parts not in ("all", "decoder"):
             raise ValueError(f"{name}.train_parts={self.train_parts!r} is invalid; use 'all' or 'decoder'")
         if self.train_parts == "decoder" and self.init_from is None:
@@ -500,11 +517,33 @@ def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeV
     return out
 
 
+def roundtrip_keyframes(vae: KeyframeVAE, keyframes: torch.Tensor, indices: torch.Tensor, lengths: torch.Tensor
+                        ) -> tuple[torch.Tensor, torch.Tensor]:
+    """The keyframe VAE's reconstruction of keyframes, as generation would give them to the MMAE.
+
+    ``keyframes (B, K, D)`` normalised, ``indices (B, K)``, ``lengths (B,)`` -> decoded keyframes ``(B, K, D)``
+    (posterior mean decoded, sorted by position) and their frames ``(B, K)`` (strictly increasing, first 0,
+    last ``L - 1``).
+    """
+    from .pipeline import decode_keyframes
+
+    with torch.no_grad():
+        enc = vae.encode(keyframes, indices_to_positions(indices, lengths), sample=False)
+        return decode_keyframes(vae, enc.mu, lengths)
+
+
 def _prepare_mmae(batch: dict[str, Any], ctx: StepContext, *, text: PrefilledCaptions,
-                  config: KeyMotionTrainConfig, frames_norm: float | None = None) -> dict[str, Any]:
+                  config: KeyMotionTrainConfig, frames_norm: float | None = None,
+                  roundtrip_vae: KeyframeVAE | None = None) -> dict[str, Any]:
     dev = ctx.env.device
     motion, length, idx, keyframes = _keyframe_inputs(batch, dev)
     b, n, d = motion.shape
+    if roundtrip_vae is not None:
+        pick = (ctx.rand.rand(b) < config.keyframe_roundtrip).to(dev)        # (B,) items given decoded keyframes
+        if bool(pick.any()):
+            kf_rt, idx_rt = roundtrip_keyframes(roundtrip_vae, keyframes[pick], idx[pick], length[pick])
+            keyframes, idx = keyframes.clone(), idx.clone()
+            keyframes[pick], idx[pick] = kf_rt.to(keyframes.dtype), idx_rt
     noise = ctx.rand.randn(b, (idx.shape[1], d)) * config.keyframe_noise
     if "keyframe_count" in batch:
         # a padded slot repeats its item's last keyframe: give it that keyframe's noise too, so the
@@ -832,16 +871,33 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
         init_stem = load_mmae_init(mmae, train_config.init_from)
         _warn_other_statistics(train_set, mmae, "MMAE", init_stem)
         log.info("MMAE initialised from %s", init_stem)
+    roundtrip_vae, roundtrip_stem = None, None
+    if train_config.keyframe_roundtrip > 0:
+        roundtrip_stem = _resolve_stage_source(train_config.roundtrip_vae, "kf_vae")
+        roundtrip_vae = load_frozen_kf_vae(roundtrip_stem, env.device)
+        if roundtrip_vae.num_keyframes != num_keyframes:
+            raise ValueError(f"KeyMotionTrainConfig.roundtrip_vae={train_config.roundtrip_vae!r} has "
+                             f"{roundtrip_vae.num_keyframes} keyframes; this MMAE run selects num_keyframes="
+                             f"{num_keyframes}")
+        if not (torch.allclose(roundtrip_vae.norm.mean.float(), mmae.norm.mean.float(), rtol=1e-3, atol=1e-5)
+                and torch.allclose(roundtrip_vae.norm.std.float(), mmae.norm.std.float(), rtol=1e-3, atol=1e-5)):
+            raise ValueError(f"KeyMotionTrainConfig.roundtrip_vae={train_config.roundtrip_vae!r} normalises features "
+                             "with other statistics than the MMAE: its keyframes would mean something else to it")
+        log.info("MMAE in-fills the keyframe VAE %s's reconstructions for %.0f%% of the items", roundtrip_stem,
+                 100 * train_config.keyframe_roundtrip)
     text = _stage_captions(text_cache, encoder, train_config, train_set, val_set)
     bucketing = train_config.batching in ("buckets", "frames")
     u = train_set.base.unit_length
     frames_norm = u * expected_latent_frames(train_set.lengths, u) if bucketing else None
-    prepare = partial(_prepare_mmae, text=text, config=train_config, frames_norm=frames_norm)
+    prepare = partial(_prepare_mmae, text=text, config=train_config, frames_norm=frames_norm,
+                      roundtrip_vae=roundtrip_vae)
     meta = {"text_encoder": encoder_name, "num_keyframes": num_keyframes,
             "keyframe_method": train_config.keyframe_method, "keyframe_ratio": train_config.keyframe_ratio,
             "data": str(Path(data_dir))}
     if init_stem is not None:
         meta["init_from"] = str(init_stem)
+    if roundtrip_stem is not None:
+        meta.update(roundtrip_vae=str(roundtrip_stem), keyframe_roundtrip=train_config.keyframe_roundtrip)
     numerics = {"loss_normaliser": (f"per-batch means x valid frames / (batch x {frames_norm:.4g} expected frames)"
                                     if frames_norm is not None else "per-batch means over valid frames")}
     return TrainTask(
@@ -863,6 +919,9 @@ def _check_fixed_keyframes(config: KeyMotionTrainConfig, stage: str) -> None:
     if config.keyframe_ratio:
         raise ValueError(f"KeyMotionTrainConfig.keyframe_ratio={config.keyframe_ratio} is for the MMAE only: the "
                          f"{stage} works on the keyframe VAE's fixed num_keyframes; set keyframe_ratio=0 for it")
+    if config.keyframe_roundtrip:
+        raise ValueError(f"KeyMotionTrainConfig.keyframe_roundtrip={config.keyframe_roundtrip} is for the MMAE only "
+                         f"(its input keyframes); set keyframe_roundtrip=0 for the {stage}")
 
 
 #: MMAEConfig fields that may differ between a fine-tuned MMAE and the one it starts from (loss weights,
