@@ -393,6 +393,24 @@ def test_salad_eval_physics_rejects_protocol_flags(tiny_procedural_corpus, capsy
     assert "--cfg-sweep does not apply to --physics" in capsys.readouterr().err
 
 
+def test_salad_eval_physics_no_salad_benchmarks_keymotion_alone(tiny_procedural_corpus, tmp_path, single_thread,
+                                                               capsys):
+    from salad_core.eval.cli import main
+
+    out = tmp_path / "km"
+    assert main(["--physics", "--data", str(tiny_procedural_corpus), "--keymotion", "--no-salad", "--prompts", "1",
+                 "--seeds", "2", "--steps", "5", "--out", str(out)]) == 0
+    doc = json.loads((out / "physics.json").read_text())
+    assert list(doc["generators"]) == ["KeyMotion"] and "salad_guidance" not in doc["settings"]
+    assert doc["generators"]["KeyMotion"]["aggregate"]["motions"] == 2
+    assert sorted({k.split("/")[0] for k in np.load(out / "physics_motions.npz").files}) == ["KeyMotion"]
+    capsys.readouterr()
+    assert main(["--physics", "--data", str(tiny_procedural_corpus), "--no-salad"]) == 2      # nothing to benchmark
+    assert "--no-salad benchmarks KeyMotion alone" in capsys.readouterr().err
+    assert main(["--data", str(tiny_procedural_corpus), "--keymotion", "--no-salad"]) == 2    # not the T2M protocol
+    assert "--no-salad is for --physics --keymotion" in capsys.readouterr().err
+
+
 def test_recovery_reader_reads_raw_positions_or_fixed_bones(sample_features):
     """``--recovery``: 'positions' is the raw position-feature read; 'fk' has the reference bones."""
     from types import SimpleNamespace

@@ -100,6 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="how joints are read from the generated features: 'positions' (the raw model output, "
                            "HumanML3D's recover_from_ric; default), a salad_core.recovery method ('fk', 'fit') or "
                            "'pipeline' (each pipeline's own out.joints)")
+    phys.add_argument("--no-salad", action="store_true",
+                      help="with --keymotion: benchmark KeyMotion alone (comparing KeyMotion weights; SALAD's rows "
+                           "take most of the run's time); checks relative to SALAD are then left out")
     phys.add_argument("--motions", default=None, metavar="NPZ",
                       help="measure the joints a run saved (its physics_motions.npz) instead of generating; "
                            "give the run's --seed/--seeds/--prompts")
@@ -206,10 +209,11 @@ def _physics_generators(args, settings) -> tuple[dict, dict]:
         return joints_of(pipe(texts, lengths=lengths, seed=[seed] * len(texts), num_steps=settings.steps,
                               solver=args.solver, **({} if g is None else {"guidance_scale": g})))
 
-    generators = {args.name: salad}
+    generators = {} if args.no_salad else {args.name: salad}
     resolved = pipe.resolve_guidance(g) if hasattr(pipe, "resolve_guidance") else (7.5 if g is None else g)
-    info = {"salad_guidance": resolved if isinstance(resolved, float) else _as_dict(resolved),
-            "solver": args.solver or pipe.solver, "weights": pipe.source, "recovery": args.recovery}
+    info = {"recovery": args.recovery} if args.no_salad else {
+        "salad_guidance": resolved if isinstance(resolved, float) else _as_dict(resolved),
+        "solver": args.solver or pipe.solver, "weights": pipe.source, "recovery": args.recovery}
     if args.keymotion is not None:
         from salad_core.keymotion.pipeline import KeyMotionPipeline
 
@@ -235,6 +239,8 @@ def run_physics(args) -> int:
                              "quicker run")
     if args.seeds < 1:
         raise ValueError(f"--seeds {args.seeds} must be >= 1")
+    if args.no_salad and (args.keymotion is None or args.motions is not None):
+        raise ValueError("--no-salad benchmarks KeyMotion alone: give --keymotion [DIR] (and not --motions)")
     data = Path(args.data)
     if not (data / f"{args.split}.txt").is_file():
         raise FileNotFoundError(f"--data {data} has no {args.split}.txt; give a corpus folder "
@@ -333,6 +339,8 @@ def run_guidance_sweep(args) -> int:
         raise ValueError("--guidance-sweep takes neither --cfg-sweep, --official, --keymotion nor --motions")
     if args.seeds < 1:
         raise ValueError(f"--seeds {args.seeds} must be >= 1")
+    if args.no_salad:
+        raise ValueError("--no-salad is for --physics --keymotion; the guidance sweep sweeps SALAD")
     data = Path(args.data)
     if not (data / f"{args.split}.txt").is_file():
         raise FileNotFoundError(f"--data {data} has no {args.split}.txt; give a corpus folder "
@@ -390,6 +398,9 @@ def run(args) -> int:
         return run_physics(args)
     if args.guidance_sweep:
         return run_guidance_sweep(args)
+    if args.no_salad:
+        raise ValueError("--no-salad is for --physics --keymotion (the T2M protocol with --keymotion already "
+                         "evaluates KeyMotion alone)")
     data = Path(args.data)
     if not data.is_dir():
         raise FileNotFoundError(f"--data {data} is not a folder")
