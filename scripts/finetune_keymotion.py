@@ -11,15 +11,21 @@ VAE's decoded poses halve the flight (-3.30 m/s^2 against -7.66 with the true po
   ``--roundtrip P`` gives a share ``P`` of the items the source keyframe VAE's reconstruction of their keyframes
   (``KeyMotionTrainConfig.keyframe_roundtrip``: the errors generation makes) and selects the VAE's fixed number
   of keyframes for every item (``keyframe_ratio`` 0).
+* ``--stage pst``: ``--side-cue`` adds the side cue (:attr:`PSTConfig.side_cue`: the shipped PST ignores "left"
+  and "right", ``salad_core/keymotion/sides.py`` has the measurement; its embedding starts at zero, so step 0 is
+  exactly the source PST), trained on the source keyframe VAE's latents with the recipe's PST settings (text
+  dropout, length buckets); without it the PST just trains on.
 * ``--stage kf_vae``: :attr:`KeyframeVAEConfig.lambda_root`, ``lambda_local_vel``, ``lambda_contact`` and
   ``lambda_feet_height`` (the root, joint-velocity, foot-contact and foot-height channels weighed again), by default with the encoder frozen
   (``--parts decoder``) so the source's PST, trained on its latents, still fits.
 
 Either starts from the source pipeline's model of that stage (default: the shipped ``salad_core/weights/
-keymotion``; same architecture, its normalisation kept) at a constant learning rate after a 200-step warm-up,
+keymotion``; same architecture, its normalisation kept) at a constant learning rate after a 200-step warm-up
+(default 1e-4, the PST 2e-4),
 and with ``--export`` writes a pipeline folder: the source's other two models with the new one.
 
     python scripts/finetune_keymotion.py --stage mmae --data CORPUS --out RUN --steps 3000      # train (resumable)
+    python scripts/finetune_keymotion.py --stage pst --side-cue --data CORPUS --out RUN --steps 3000
     python scripts/finetune_keymotion.py --stage kf_vae --lambda-feet-height 5 --data CORPUS \\
         --out RUN --steps 4000 --export DIR                                                    # train, then assemble
 
@@ -39,10 +45,12 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 #: per stage: the flags (and model config fields) of its extra loss weights
-LOSS_FLAGS = {"mmae": ("lambda_foot",),
+LOSS_FLAGS = {"mmae": ("lambda_foot",), "pst": (),
               "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact", "lambda_feet_height")}
 #: per stage: its other flags
-STAGE_FLAGS = {"mmae": ("roundtrip",), "kf_vae": ("parts",)}
+STAGE_FLAGS = {"mmae": ("roundtrip",), "kf_vae": ("parts",), "pst": ("side_cue",)}
+#: the learning rate a stage gets when --lr is not given (the PST's probe of session 20 ran at 2e-4)
+DEFAULT_LR = {"mmae": 1e-4, "kf_vae": 1e-4, "pst": 2e-4}
 #: the weight a flag gets when not given
 DEFAULT_WEIGHTS = {"lambda_foot": 5.0, "lambda_root": 0.0, "lambda_local_vel": 0.0, "lambda_contact": 0.0,
                    "lambda_feet_height": 0.0}
@@ -59,9 +67,11 @@ def main(argv=None, *, text_encoder=None) -> int:
     ap.add_argument("--recipe", type=Path, default=REPO / "configs" / "v2_keymotion.json",
                     help="KeyMotion recipe whose section of the stage sets the model and training settings")
     ap.add_argument("--steps", type=int, default=3000)
-    ap.add_argument("--lr", type=float, default=1e-4, help="constant after a 200-step warm-up (the recipe's "
-                                                             "stages ended at 1e-4)")
+    ap.add_argument("--lr", type=float, default=None, help="constant after a 200-step warm-up (default 1e-4, where "
+                                                             "the recipe's stages ended; the PST 2e-4)")
     ap.add_argument("--lambda-foot", type=float, default=None, help="mmae: weight of the foot-contact term (5)")
+    ap.add_argument("--side-cue", action="store_const", const=True, default=None,
+                    help="pst: add the side cue (PSTConfig.side_cue) to the source PST")
     ap.add_argument("--roundtrip", type=float, default=None,
                     help="mmae: share of items whose input keyframes the source's keyframe VAE reconstructs (0)")
     ap.add_argument("--lambda-root", type=float, default=None, help="kf_vae: extra weight of the root channels (0)")
@@ -95,14 +105,16 @@ def main(argv=None, *, text_encoder=None) -> int:
     from salad_core.keymotion.kf_vae import KeyframeVAEConfig
     from salad_core.keymotion.mmae import MMAEConfig
     from salad_core.keymotion.pipeline import DEFAULT_WEIGHTS_DIR
-    from salad_core.keymotion.train import KeyMotionRecipe, train_kf_vae, train_mmae
+    from salad_core.keymotion.train import KeyMotionRecipe, train_kf_vae, train_mmae, train_pst
 
     source = args.source or DEFAULT_WEIGHTS_DIR
     if not (source / f"{args.stage}.safetensors").is_file():
         ap.error(f"--source {source}: no {args.stage}.safetensors (a KeyMotion pipeline folder is needed)")
     doc = json.loads(args.recipe.read_text())
     recipe = KeyMotionRecipe.from_doc(doc)
-    overrides = {"max_steps": args.steps, "lr": args.lr, "milestones": (), "warmup_steps": 200,
+    encoder = text_encoder if text_encoder is not None else doc.get("text_encoder", "minilm")
+    lr = DEFAULT_LR[args.stage] if args.lr is None else args.lr
+    overrides = {"max_steps": args.steps, "lr": lr, "milestones": (), "warmup_steps": 200,
                  "init_from": str(source), "progress": False}
     if args.threads is not None:
         overrides["num_threads"] = args.threads
@@ -110,6 +122,14 @@ def main(argv=None, *, text_encoder=None) -> int:
         train_cfg = replace(recipe.kf_vae_train, train_parts=args.parts or "decoder", **overrides)
         model_cfg = replace(recipe.kf_vae_model or KeyframeVAEConfig(), **weights)
         result = train_kf_vae(args.data, args.out, model_cfg, train_cfg, resume=args.resume)
+    elif args.stage == "pst":
+        if recipe.pst_model is None:
+            ap.error(f"--recipe {args.recipe}: its 'pst' section has no 'model' (the source PST's architecture is "
+                     "needed)")
+        train_cfg = replace(recipe.pst_train, **overrides)
+        model_cfg = replace(recipe.pst_model, side_cue=bool(args.side_cue) or recipe.pst_model.side_cue)
+        result = train_pst(args.data, args.out, source / "kf_vae", model_cfg, train_cfg, text_encoder=encoder,
+                           resume=args.resume)
     else:
         if args.roundtrip is not None:
             if not 0.0 <= args.roundtrip <= 1.0:
@@ -118,7 +138,6 @@ def main(argv=None, *, text_encoder=None) -> int:
         train_cfg = replace(recipe.mmae_train, **overrides)
         model_cfg = replace(recipe.mmae_model or MMAEConfig(), **weights)
         num_keyframes = json.loads((source / "kf_vae.json").read_text())["config"].get("num_keyframes", 20)
-        encoder = text_encoder if text_encoder is not None else doc.get("text_encoder", "minilm")
         result = train_mmae(args.data, args.out, model_cfg, train_cfg, text_encoder=encoder, resume=args.resume,
                             num_keyframes=num_keyframes)
     print(f"{args.stage}: step {result.step}, best val {result.best_val} (step {result.best_step}), "

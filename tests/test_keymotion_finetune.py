@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,6 +31,39 @@ def tiny_mmae_config(**kw) -> MMAEConfig:
     base = dict(text_dim=TEXT_DIM, width=32, num_layers=1, num_heads=4, ff_dim=64, dropout=0.0, max_length=96)
     base.update(kw)
     return MMAEConfig(**base)
+
+
+def tiny_kf_vae_config(**kw) -> KeyframeVAEConfig:
+    base = dict(num_keyframes=8, max_length=96, frame_dim=32, latent_dim=16, num_layers=1, ff_dim=64, dropout=0.0)
+    base.update(kw)
+    return KeyframeVAEConfig(**base)
+
+
+def saved_pipeline(folder: Path, *, vae: KeyframeVAE | None = None, mmae: MotionMaskedAutoencoder | None = None,
+                   stats: tuple[np.ndarray, np.ndarray] | None = None) -> Path:
+    """A tiny KeyMotion pipeline saved at ``folder`` (the given models, new ones otherwise; ``stats`` (mean, std)
+    set on both), as the source of a fine-tuning."""
+    vae = vae if vae is not None else KeyframeVAE(tiny_kf_vae_config())
+    mmae = mmae if mmae is not None else MotionMaskedAutoencoder(tiny_mmae_config())
+    if stats is not None:
+        for m in (vae, mmae):
+            m.set_normalization(*stats)
+    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4,
+                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
+    return KeyMotionPipeline(vae, pst, mmae, HashTextEncoder(), default_length=40).save_pretrained(folder)
+
+
+def finetune_inputs(tmp_path: Path, stage_sections: dict) -> tuple[Path, Path]:
+    """``(corpus, source pipeline)`` for the fine-tuning script, and ``tmp_path / "recipe.json"``: tiny training
+    settings plus ``stage_sections`` (the recipe's ``"mmae"`` / ``"kf_vae"`` sections)."""
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=4)
+    torch.manual_seed(0)
+    source = saved_pipeline(tmp_path / "source", stats=(np.load(data / "Mean.npy"), np.load(data / "Std.npy")))
+    recipe = {"text_encoder": "hash", "train": {"batch_size": 4, "max_length": 96, "keyframe_method": "uniform",
+                                                "num_threads": 1, "val_every": 2, "val_batches": 1, "ckpt_every": 1,
+                                                "log_every": 1, "seed": 3}, **stage_sections}
+    (tmp_path / "recipe.json").write_text(json.dumps(recipe))
+    return data, source
 
 
 def test_foot_contact_loss_is_the_planted_feet_speed():
@@ -73,11 +107,7 @@ def test_load_mmae_init_takes_a_pipelines_mmae_and_refuses_another_architecture(
     torch.manual_seed(1)
     trained = MotionMaskedAutoencoder(tiny_mmae_config())
     trained.set_normalization(np.full(SK.feature_dim, 0.5, np.float32), np.full(SK.feature_dim, 2.0, np.float32))
-    vae = KeyframeVAE(KeyframeVAEConfig(num_keyframes=8, max_length=96, frame_dim=32, latent_dim=16, num_layers=1,
-                                        ff_dim=64, dropout=0.0))
-    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4,
-                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
-    folder = KeyMotionPipeline(vae, pst, trained, HashTextEncoder(), default_length=40).save_pretrained(tmp_path / "km")
+    folder = saved_pipeline(tmp_path / "km", mmae=trained)
     fresh = MotionMaskedAutoencoder(tiny_mmae_config(lambda_foot=5.0, dropout=0.1))   # loss weights may differ
     assert load_mmae_init(fresh, folder) == folder / "mmae"
     assert all(torch.equal(fresh.state_dict()[k], v) for k, v in trained.state_dict().items())
@@ -92,23 +122,9 @@ def test_load_mmae_init_takes_a_pipelines_mmae_and_refuses_another_architecture(
 
 def test_finetune_script_starts_from_a_pipeline_and_exports_one_with_the_new_mmae(tmp_path):
     script = load_script("finetune_keymotion")
-    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=4)
-    mean, std = np.load(data / "Mean.npy"), np.load(data / "Std.npy")
-    torch.manual_seed(0)
-    vae = KeyframeVAE(KeyframeVAEConfig(num_keyframes=8, max_length=96, frame_dim=32, latent_dim=16, num_layers=1,
-                                        ff_dim=64, dropout=0.0))
-    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4,
-                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
-    mmae = MotionMaskedAutoencoder(tiny_mmae_config())
-    for m in (vae, mmae):
-        m.set_normalization(mean, std)
+    data, source = finetune_inputs(tmp_path, {"mmae": {"model": dataclasses.asdict(tiny_mmae_config()),
+                                                       "train": {"keyframe_ratio": 0.1}}})
     enc = HashTextEncoder()
-    source = KeyMotionPipeline(vae, pst, mmae, enc, default_length=40).save_pretrained(tmp_path / "source")
-    recipe = {"text_encoder": "hash", "train": {"batch_size": 4, "max_length": 96, "keyframe_method": "uniform",
-                                                "num_threads": 1, "val_every": 2, "val_batches": 1, "ckpt_every": 1,
-                                                "log_every": 1, "seed": 3},
-              "mmae": {"model": dataclasses.asdict(tiny_mmae_config()), "train": {"keyframe_ratio": 0.1}}}
-    (tmp_path / "recipe.json").write_text(json.dumps(recipe))
     argv = ["--stage", "mmae", "--data", str(data), "--out", str(tmp_path / "run"), "--source", str(source), "--recipe",
             str(tmp_path / "recipe.json"), "--steps", "2", "--lr", "1e-3", "--lambda-foot", "3",
             "--export", str(tmp_path / "out")]
@@ -139,12 +155,6 @@ def test_finetune_script_starts_from_a_pipeline_and_exports_one_with_the_new_mma
 
 
 # ------------------------------------------------------------------------------------------------ keyframe VAE
-def tiny_kf_vae_config(**kw) -> KeyframeVAEConfig:
-    base = dict(num_keyframes=8, max_length=96, frame_dim=32, latent_dim=16, num_layers=1, ff_dim=64, dropout=0.0)
-    base.update(kw)
-    return KeyframeVAEConfig(**base)
-
-
 def test_kf_vae_group_terms_are_the_mse_of_their_channels_added_with_their_weight():
     torch.manual_seed(0)
     plain = KeyframeVAE(tiny_kf_vae_config())
@@ -204,10 +214,7 @@ def test_load_kf_vae_init_takes_a_pipelines_vae_and_refuses_another_architecture
     torch.manual_seed(1)
     trained = KeyframeVAE(tiny_kf_vae_config())
     trained.set_normalization(np.full(SK.feature_dim, 0.5, np.float32), np.full(SK.feature_dim, 2.0, np.float32))
-    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4,
-                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
-    mmae = MotionMaskedAutoencoder(tiny_mmae_config())
-    folder = KeyMotionPipeline(trained, pst, mmae, HashTextEncoder(), default_length=40).save_pretrained(tmp_path / "km")
+    folder = saved_pipeline(tmp_path / "km", vae=trained)
     fresh = KeyframeVAE(tiny_kf_vae_config(lambda_root=4.0, dropout=0.1))     # loss weights and dropout may differ
     assert load_kf_vae_init(fresh, folder) == folder / "kf_vae"
     assert all(torch.equal(fresh.state_dict()[k], v) for k, v in trained.state_dict().items())
@@ -220,22 +227,8 @@ def test_load_kf_vae_init_takes_a_pipelines_vae_and_refuses_another_architecture
 
 def test_finetune_script_fine_tunes_the_kf_vae_decoder_and_exports_a_pipeline_whose_pst_still_fits(tmp_path):
     script = load_script("finetune_keymotion")
-    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=4)
-    mean, std = np.load(data / "Mean.npy"), np.load(data / "Std.npy")
-    torch.manual_seed(0)
-    vae = KeyframeVAE(tiny_kf_vae_config())
-    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4,
-                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
-    mmae = MotionMaskedAutoencoder(tiny_mmae_config())
-    for m in (vae, mmae):
-        m.set_normalization(mean, std)
+    data, source = finetune_inputs(tmp_path, {"kf_vae": {"model": dataclasses.asdict(tiny_kf_vae_config())}})
     enc = HashTextEncoder()
-    source = KeyMotionPipeline(vae, pst, mmae, enc, default_length=40).save_pretrained(tmp_path / "source")
-    recipe = {"text_encoder": "hash", "train": {"batch_size": 4, "max_length": 96, "keyframe_method": "uniform",
-                                                "num_threads": 1, "val_every": 2, "val_batches": 1, "ckpt_every": 1,
-                                                "log_every": 1, "seed": 3},
-              "kf_vae": {"model": dataclasses.asdict(tiny_kf_vae_config())}}
-    (tmp_path / "recipe.json").write_text(json.dumps(recipe))
     common = ["--data", str(data), "--source", str(source), "--recipe", str(tmp_path / "recipe.json")]
     argv = ["--stage", "kf_vae", *common, "--out", str(tmp_path / "run"), "--steps", "2", "--lr", "1e-2",
             "--lambda-local-vel", "2", "--lambda-root", "1", "--export", str(tmp_path / "out")]
@@ -271,15 +264,8 @@ def test_mmae_roundtrip_items_get_the_keyframe_vaes_reconstruction_at_its_frames
     from salad_core.train.distributed import DistEnv, GlobalBatchRandom
 
     data = make_fake_corpus(tmp_path / "corpus", n_train=6, n_val=3)
-    mean, std = np.load(data / "Mean.npy"), np.load(data / "Std.npy")
     torch.manual_seed(0)
-    vae = KeyframeVAE(tiny_kf_vae_config())
-    vae.set_normalization(mean, std)
-    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4,
-                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
-    mmae = MotionMaskedAutoencoder(tiny_mmae_config())
-    mmae.set_normalization(mean, std)
-    source = KeyMotionPipeline(vae, pst, mmae, HashTextEncoder(), default_length=40).save_pretrained(tmp_path / "km")
+    source = saved_pipeline(tmp_path / "km", stats=(np.load(data / "Mean.npy"), np.load(data / "Std.npy")))
     env = DistEnv()
     base = KeyMotionTrainConfig(max_length=96, num_threads=1, progress=False, batch_size=3, keyframe_method="uniform")
     inputs = {}

@@ -22,7 +22,7 @@ from salad_core.keymotion.pst import PST_DIFFUSION, ParallelSkipTransformer, PST
 from salad_core.keymotion.sides import LEFT, NO_SIDE, RIGHT, side_ids, side_ids_of
 from salad_core.keymotion.train import KeyMotionTrainConfig, load_pst_init
 from salad_core.sampling import make_scheduler
-from _doubles import HashTextEncoder
+from _doubles import HashTextEncoder, load_script
 
 TEXT_DIM = 16
 K = 8
@@ -460,14 +460,9 @@ def test_fp16_keyframe_vae_statistics_are_not_another_corpus(side_corpus, tmp_pa
 
 
 def test_finetune_script_starts_from_a_pipeline_and_exports_one_with_the_cue(side_corpus, tmp_path):
-    """scripts/finetune_keymotion_sides.py: a cue PST fine-tuned from a pipeline's PST on its own keyframe VAE,
-    then a pipeline with the source's keyframe VAE and MMAE and the new PST."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location(
-        "finetune_keymotion_sides", Path(__file__).resolve().parents[1] / "scripts" / "finetune_keymotion_sides.py")
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
+    """scripts/finetune_keymotion.py --stage pst --side-cue: a cue PST fine-tuned from a pipeline's PST on its own
+    keyframe VAE, then a pipeline with the source's keyframe VAE and MMAE and the new PST."""
+    script = load_script("finetune_keymotion")
     train, _ = _keyframe_sets(side_corpus)
     vae = _tiny_kf_vae(train)
     torch.manual_seed(0)
@@ -483,8 +478,9 @@ def test_finetune_script_starts_from_a_pipeline_and_exports_one_with_the_cue(sid
                                                 "log_every": 1, "seed": 3},
               "pst": {"model": pst_model, "train": {}}}
     (tmp_path / "recipe.json").write_text(json.dumps(recipe))
-    argv = ["--data", str(side_corpus), "--out", str(tmp_path / "run"), "--source", str(source), "--recipe",
-            str(tmp_path / "recipe.json"), "--steps", "2", "--lr", "1e-3", "--export", str(tmp_path / "out")]
+    argv = ["--stage", "pst", "--side-cue", "--data", str(side_corpus), "--out", str(tmp_path / "run"), "--source",
+            str(source), "--recipe", str(tmp_path / "recipe.json"), "--steps", "2", "--lr", "1e-3", "--export",
+            str(tmp_path / "out")]
     assert script.main(argv, text_encoder=enc) == 0
     out = KeyMotionPipeline.from_pretrained(tmp_path / "out", text_encoder=enc)
     assert out.pst.config.side_cue is True and torch.count_nonzero(out.pst.side_embed.weight[1:]) > 0
@@ -495,4 +491,7 @@ def test_finetune_script_starts_from_a_pipeline_and_exports_one_with_the_cue(sid
     doc = json.loads((tmp_path / "run" / "config.json").read_text())
     assert doc["train"]["init_from"] == str(source) and doc["train"]["max_steps"] == 2
     with pytest.raises(SystemExit):
-        script.main(["--data", str(side_corpus), "--out", str(tmp_path / "x"), "--source", str(tmp_path)])
+        script.main(["--stage", "pst", "--data", str(side_corpus), "--out", str(tmp_path / "x"), "--source",
+                     str(tmp_path)])
+    with pytest.raises(SystemExit):                       # a flag of another stage
+        script.main(["--stage", "mmae", "--side-cue", "--data", str(side_corpus), "--out", str(tmp_path / "x")])
