@@ -14,7 +14,11 @@ VAE's decoded poses halve the flight (-3.30 m/s^2 against -7.66 with the true po
 * ``--stage pst``: ``--side-cue`` adds the side cue (:attr:`PSTConfig.side_cue`: the shipped PST ignores "left"
   and "right", ``salad_core/keymotion/sides.py`` has the measurement; its embedding starts at zero, so step 0 is
   exactly the source PST), trained on the source keyframe VAE's latents with the recipe's PST settings (text
-  dropout, length buckets); without it the PST just trains on.
+  dropout, length buckets); without it the PST just trains on. ``--latent-norm`` gives the PST latent
+  normalisation (:attr:`PSTConfig.latent_norm`); a source PST without it cannot start such a model, so add
+  ``--scratch``: a new PST trained from its initialisation with the recipe's schedule (learning rate, decay
+  milestones, warm-up; ``--steps`` then counts the whole run, e.g. the recipe's 60,000), on the source keyframe
+  VAE's latents.
 * ``--stage kf_vae``: :attr:`KeyframeVAEConfig.lambda_root`, ``lambda_local_vel``, ``lambda_contact`` and
   ``lambda_feet_height`` (the root, joint-velocity, foot-contact and foot-height channels weighed again), by default with the encoder frozen
   (``--parts decoder``) so the source's PST, trained on its latents, still fits.
@@ -26,6 +30,7 @@ and with ``--export`` writes a pipeline folder: the source's other two models wi
 
     python scripts/finetune_keymotion.py --stage mmae --data CORPUS --out RUN --steps 3000      # train (resumable)
     python scripts/finetune_keymotion.py --stage pst --side-cue --data CORPUS --out RUN --steps 3000
+    python scripts/finetune_keymotion.py --stage pst --latent-norm --scratch --data CORPUS --out RUN --steps 60000
     python scripts/finetune_keymotion.py --stage kf_vae --lambda-feet-height 5 --data CORPUS \\
         --out RUN --steps 4000 --export DIR                                                    # train, then assemble
 
@@ -48,7 +53,7 @@ REPO = Path(__file__).resolve().parents[1]
 LOSS_FLAGS = {"mmae": ("lambda_foot",), "pst": (),
               "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact", "lambda_feet_height")}
 #: per stage: its other flags
-STAGE_FLAGS = {"mmae": ("roundtrip",), "kf_vae": ("parts",), "pst": ("side_cue",)}
+STAGE_FLAGS = {"mmae": ("roundtrip",), "kf_vae": ("parts",), "pst": ("side_cue", "latent_norm", "scratch")}
 #: the learning rate a stage gets when --lr is not given (the PST's probe of session 20 ran at 2e-4)
 DEFAULT_LR = {"mmae": 1e-4, "kf_vae": 1e-4, "pst": 2e-4}
 #: the weight a flag gets when not given
@@ -72,6 +77,10 @@ def main(argv=None, *, text_encoder=None) -> int:
     ap.add_argument("--lambda-foot", type=float, default=None, help="mmae: weight of the foot-contact term (5)")
     ap.add_argument("--side-cue", action="store_const", const=True, default=None,
                     help="pst: add the side cue (PSTConfig.side_cue) to the source PST")
+    ap.add_argument("--latent-norm", action="store_const", const=True, default=None,
+                    help="pst: latent normalisation (PSTConfig.latent_norm; with a source PST without it, --scratch)")
+    ap.add_argument("--scratch", action="store_const", const=True, default=None,
+                    help="pst: train a new PST (the recipe's schedule) instead of starting from the source's")
     ap.add_argument("--roundtrip", type=float, default=None,
                     help="mmae: share of items whose input keyframes the source's keyframe VAE reconstructs (0)")
     ap.add_argument("--lambda-root", type=float, default=None, help="kf_vae: extra weight of the root channels (0)")
@@ -126,8 +135,13 @@ def main(argv=None, *, text_encoder=None) -> int:
         if recipe.pst_model is None:
             ap.error(f"--recipe {args.recipe}: its 'pst' section has no 'model' (the source PST's architecture is "
                      "needed)")
+        if args.scratch:                    # the recipe's schedule; --steps counts the whole run
+            overrides = {k: v for k, v in overrides.items() if k in ("max_steps", "progress", "num_threads")}
+            if args.lr is not None:
+                overrides["lr"] = args.lr
         train_cfg = replace(recipe.pst_train, **overrides)
-        model_cfg = replace(recipe.pst_model, side_cue=bool(args.side_cue) or recipe.pst_model.side_cue)
+        model_cfg = replace(recipe.pst_model, side_cue=bool(args.side_cue) or recipe.pst_model.side_cue,
+                            latent_norm=bool(args.latent_norm) or recipe.pst_model.latent_norm)
         result = train_pst(args.data, args.out, source / "kf_vae", model_cfg, train_cfg, text_encoder=encoder,
                            resume=args.resume)
     else:

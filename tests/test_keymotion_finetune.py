@@ -297,3 +297,24 @@ def test_mmae_roundtrip_items_get_the_keyframe_vaes_reconstruction_at_its_frames
         build_kf_vae_task(data, tiny_kf_vae_config(), cfg, env)
     with pytest.raises(ValueError, match="has 8 keyframes; this MMAE run selects num_keyframes=6"):
         build_mmae_task(data, tiny_mmae_config(), cfg, env, HashTextEncoder(), 6)
+
+
+def test_finetune_script_trains_a_latent_norm_pst_from_scratch_on_the_source_vae(tmp_path):
+    """--stage pst --latent-norm: refused from a source PST without it (another latent space), trained from scratch
+    with --scratch (the statistics of the source VAE's latents set, the source PST's weights not used)."""
+    script = load_script("finetune_keymotion")
+    pst_model = dict(latent_size=2, latent_dim=16, text_dim=TEXT_DIM, width=32, num_heads=4, ff_dim=64,
+                     num_cond_layers=1, num_cross_layers=2, dropout=0.0, max_length=96)
+    data, source = finetune_inputs(tmp_path, {"pst": {"model": pst_model, "train": {"latent_cache": False}}})
+    enc = HashTextEncoder()
+    common = ["--stage", "pst", "--latent-norm", "--data", str(data), "--source", str(source), "--recipe",
+              str(tmp_path / "recipe.json"), "--steps", "2"]
+    with pytest.raises(ValueError, match="latent_norm"):
+        script.main(common + ["--out", str(tmp_path / "bad")], text_encoder=enc)
+    assert script.main(common + ["--scratch", "--out", str(tmp_path / "run")], text_encoder=enc) == 0
+    doc = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert doc["model"]["latent_norm"] is True and doc["train"]["init_from"] is None
+    new, _, _ = load_model(tmp_path / "run" / "latest")
+    old, _, _ = load_model(source / "pst")
+    assert float(new.latent_std.min()) > 0 and not torch.equal(new.latent_std, torch.ones_like(new.latent_std))
+    assert not torch.equal(new.out.weight.half(), old.out.weight.half())

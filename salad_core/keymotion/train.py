@@ -49,7 +49,7 @@ import os
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator, Mapping
 
 import numpy as np
 import torch
@@ -88,6 +88,7 @@ __all__ = [
     "load_frozen_kf_vae",
     "roundtrip_keyframes",
     "kf_vae_latent_cache",
+    "kf_latent_stats",
     "PrefilledCaptions",
     "PST_ARCHITECTURE_FIELDS",
     "resolve_pst_source",
@@ -452,7 +453,8 @@ def _prepare_vae(batch: dict[str, Any], ctx: StepContext, *, latent_shape: tuple
 
 def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, text: PrefilledCaptions,
                       scheduler: Any, config: KeyMotionTrainConfig, latent_shape: tuple[int, int],
-                      latents: Any = None, side_cue: bool = False) -> dict[str, Any]:
+                      latents: Any = None, side_cue: bool = False,
+                      latent_stats: tuple[torch.Tensor, torch.Tensor] | None = None) -> dict[str, Any]:
     """The :class:`PSTObjective` inputs of a training batch (eq. 7 with condition dropout).
 
     Draws, in this order from the step's shared generator: the VAE reparameterisation noise, the
@@ -480,6 +482,8 @@ def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeV
     latents : LatentCache, optional
     side_cue : bool
         The PST has ``PSTConfig.side_cue``: also return ``text_sides``.
+    latent_stats : (Tensor, Tensor), optional
+        ``(mean, std)`` ``(Lz, Dz)`` of a ``PSTConfig.latent_norm`` PST: the diffused latent is ``(z - mean) / std``.
 
     Returns
     -------
@@ -504,6 +508,8 @@ def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeV
             enc = vae.encode(keyframes, indices_to_positions(idx, length), sample=False)
             mu, logvar = enc.mu, enc.logvar
         z = mu + eps * torch.exp(0.5 * logvar)
+        if latent_stats is not None:
+            z = (z - latent_stats[0].to(z)) / latent_stats[1].to(z)
         noisy = scheduler.add_noise(z, noise, t)
         captions = ["" if d else c for d, c in zip(drop.tolist(), batch["caption"])]
         if side_cue:
@@ -606,6 +612,51 @@ def load_frozen_kf_vae(path: str | os.PathLike, device: str | torch.device = "cp
     return vae
 
 
+def _encode_windows(vae: KeyframeVAE, source: Mapping[tuple, KeyframeDataset], keys: list[tuple],
+                    batch_size: int = 256) -> Iterator[tuple[int, torch.Tensor, torch.Tensor]]:
+    """``(first index, mu, logvar)`` of the keyframe VAE's posteriors ``(B, Lz, Dz)`` of the windows ``keys``
+    (``(motion_id, offset, length)``, each selected and cropped by its dataset in ``source``), in batches."""
+    device = next(vae.parameters()).device
+    for b0 in range(0, len(keys), batch_size):
+        chunk = keys[b0: b0 + batch_size]
+        idx = np.stack([source[k].keyframes_of(k) for k in chunk])                 # (B, K)
+        frames = np.stack([source[k].base.crop_features(*k)[i] for k, i in zip(chunk, idx)])   # (B, K, D)
+        lengths = torch.tensor([k[2] for k in chunk])
+        positions = indices_to_positions(torch.from_numpy(idx), lengths)
+        with torch.no_grad():
+            enc = vae.encode(torch.from_numpy(frames).to(device), positions.to(device), sample=False)
+        yield b0, enc.mu, enc.logvar
+
+
+def kf_latent_stats(vae: KeyframeVAE, dataset: KeyframeDataset, latents: Any = None,
+                    batch_size: int = 256) -> tuple[torch.Tensor, torch.Tensor]:
+    """Mean and std ``(Lz, Dz)`` of the latents ``z = mu + sigma eps`` a PST is trained on, over every window of
+    ``dataset`` (its posteriors looked up in ``latents``, a :func:`kf_vae_latent_cache`, or encoded).
+
+    ``std^2 = var(mu) + mean(sigma^2)`` per token and channel: the spread of the sampled training latents, as
+    SALAD's :func:`~salad_core.train.denoiser_trainer.denoiser_latent_stats`. Deterministic for a VAE and a
+    corpus, so a resumed run computes the same numbers.
+    """
+    keys = list(dataset.base.crops())
+    if not keys:
+        raise ValueError("the dataset has no windows to compute latent statistics from")
+    shape = vae.latent_shape
+    total, total_sq, total_var = (torch.zeros(shape, dtype=torch.float64) for _ in range(3))
+    if latents is not None:
+        chunks = ((b0, *latents.lookup(keys[b0: b0 + batch_size])) for b0 in range(0, len(keys), batch_size))
+    else:
+        chunks = _encode_windows(vae, {k: dataset for k in keys}, keys, batch_size)
+    for _, mu, logvar in chunks:
+        mu = mu.detach().double().cpu()
+        total += mu.sum(0)
+        total_sq += (mu ** 2).sum(0)
+        total_var += logvar.detach().double().cpu().exp().sum(0)
+    n = len(keys)
+    mean = total / n
+    var = (total_sq / n - mean ** 2).clamp_min(0) + total_var / n
+    return mean.float(), var.sqrt().clamp_min(1e-6).float()
+
+
 def kf_vae_latent_cache(vae: KeyframeVAE, datasets: list[KeyframeDataset], cache_dir: str | os.PathLike,
                         env: DistEnv, *, prune: bool = False, batch_size: int = 256) -> Any:
     """The keyframe VAE's posteriors ``(Lz, Dz)`` of every window of ``datasets`` (a
@@ -629,18 +680,10 @@ def kf_vae_latent_cache(vae: KeyframeVAE, datasets: list[KeyframeDataset], cache
     parts = [CACHE_FORMAT, "keymotion-kf-vae", module_digest(vae), *methods, *(corpus_digest(ds.base) for ds in datasets)]
     signature = hashlib.sha256("|".join(parts).encode()).hexdigest()
     lz, dz = vae.latent_shape
-    device = next(vae.parameters()).device
 
     def batches() -> Any:
-        for b0 in range(0, len(keys), batch_size):
-            chunk = keys[b0: b0 + batch_size]
-            idx = np.stack([source[k].keyframes_of(k) for k in chunk])                 # (B, K)
-            frames = np.stack([source[k].base.crop_features(*k)[i] for k, i in zip(chunk, idx)])   # (B, K, D)
-            lengths = torch.tensor([k[2] for k in chunk])
-            positions = indices_to_positions(torch.from_numpy(idx), lengths)
-            with torch.no_grad():
-                enc = vae.encode(torch.from_numpy(frames).to(device), positions.to(device), sample=False)
-            yield list(range(b0, b0 + len(chunk))), enc.mu, enc.logvar
+        for b0, mu, logvar in _encode_windows(vae, source, keys, batch_size):
+            yield list(range(b0, b0 + mu.shape[0])), mu, logvar
 
     def build(folder: Path) -> Any:
         log.info("selecting keyframes and encoding the posteriors of %d windows into %s", len(keys), folder)
@@ -713,8 +756,17 @@ def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, mod
             log.warning("no latent cache folder given: using %s (pass cache_dir)", where)
         latents = kf_vae_latent_cache(vae, [d for d in (train_set, val_set) if d is not None], where, env,
                                       prune=train_config.latent_cache_dir is None and cache_dir is not None)
+    latent_stats = None
+    if model_config.latent_norm:
+        if init_stem is None:
+            pst.set_latent_stats(*kf_latent_stats(vae, train_set, latents))
+        latent_stats = (pst.latent_mean.detach().clone(), pst.latent_std.detach().clone())
+        log.info("PST latent normalisation: training latents' mean %.3f, std %.3f (averaged over tokens and "
+                 "channels)%s", float(latent_stats[0].mean()), float(latent_stats[1].mean()),
+                 " (from init_from)" if init_stem is not None else "")
     prepare = partial(prepare_pst_batch, vae=vae, text=text, scheduler=scheduler, config=train_config,
-                      latent_shape=vae.latent_shape, latents=latents, side_cue=model_config.side_cue)
+                      latent_shape=vae.latent_shape, latents=latents, side_cue=model_config.side_cue,
+                      latent_stats=latent_stats)
     meta = {"diffusion": config_to_dict(diffusion_config), "text_encoder": encoder_name,
             "kf_vae": str(resolve_checkpoint(vae_path)), "data": str(Path(data_dir))}
     extra_config = {"kind": "keymotion_pst", **meta, "data": str(Path(data_dir).resolve())}
@@ -735,7 +787,7 @@ def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, mod
 #: ``max_length``, ``max_text_tokens`` (a non-persistent table) and ``side_cue`` (its embedding
 #: starts at zero) may differ.
 PST_ARCHITECTURE_FIELDS = ("latent_size", "latent_dim", "text_dim", "width", "num_heads", "ff_dim",
-                           "num_cond_layers", "num_cross_layers", "activation", "length_condition")
+                           "num_cond_layers", "num_cross_layers", "activation", "length_condition", "latent_norm")
 
 
 def resolve_pst_source(path: str | os.PathLike) -> Path:
