@@ -96,7 +96,7 @@ def export_with_component(source: str | os.PathLike, stage: str, run: str | os.P
     """Write the KeyMotion pipeline folder ``source`` to ``dest`` (fp16) with its ``stage`` model ("kf_vae",
     "pst" or "mmae") replaced by the one of the run folder ``run`` (its ``best``, else ``latest``), the
     other two components, the guidance and the settings unchanged: how a fine-tuned stage is assembled for
-    measuring (``scripts/finetune_keymotion_*.py``). Returns ``dest``."""
+    measuring (``scripts/finetune_keymotion.py``). Returns ``dest``."""
     from salad_core.io import load_model
     from salad_core.keymotion.pipeline import COMPONENTS
     from salad_core.train.assemble import run_checkpoint
