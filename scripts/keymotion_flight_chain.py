@@ -8,9 +8,10 @@ itself, the MMAE's in-filling of its own MDO keyframes, the same keyframes after
 (posterior mean), and a motion generated from its caption. Each stage is measured by the physics
 benchmark's per-motion measures (raw position joints, :func:`salad_core.eval.physics.measure_motion`):
 flight frames, the pelvis's vertical acceleration in flight (ballistic: -9.81 m/s^2), the longest flight,
-the pelvis rise, foot skating and floating.
+the pelvis rise, foot skating and floating. ``--recovery fit`` reads the three generated stages' joints after
+the skeleton fit (fixed bones, locked feet, a floor: what ``out.joints`` shows) instead of the position features.
 
-    python scripts/keymotion_flight_chain.py --data CORPUS [--weights DIR] [--split test] [--limit 30] [--out chain.json]
+    python scripts/keymotion_flight_chain.py --data CORPUS [--weights DIR] [--split test] [--limit 30] [--recovery fit] [--out chain.json]
 
 CORPUS is the corpus the weights were trained on (its test or validation split: never training clips).
 """
@@ -73,6 +74,9 @@ def main(argv=None, *, pipe=None) -> int:
     ap.add_argument("--exclude", nargs="*", default=["jack"], help="caption words that leave a clip out")
     ap.add_argument("--limit", type=int, default=30, help="clips measured")
     ap.add_argument("--seed", type=int, default=0, help="seed of the generated stage")
+    ap.add_argument("--recovery", choices=("positions", "fit"), default="positions",
+                    help="joints of the generated stages: the position features as they are (default), or after the "
+                         "skeleton fit (fixed bones, locked feet, a floor: what out.joints shows)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None, help="write the per-clip reports and the table here (JSON)")
     args = ap.parse_args(argv)
@@ -96,7 +100,8 @@ def main(argv=None, *, pipe=None) -> int:
         x = np.load(args.data / "new_joint_vecs" / f"{name}.npy").astype(np.float32)[: pipe.max_length]
         if len(x) < pipe.num_keyframes:
             continue
-        for stage, joints in generation_chain(pipe, x, caption, seed=args.seed).items():
+        for stage, joints in generation_chain(pipe, x, caption, seed=args.seed,
+                                                recovery=args.recovery).items():
             reports[stage].append({"clip": name, **measure_motion(joints, pipe.skeleton).as_dict()})
     n = len(reports["true"])
     table = summarise(reports)
@@ -104,7 +109,8 @@ def main(argv=None, *, pipe=None) -> int:
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"clips": [c for c, _ in clips], "words": args.words, "exclude": args.exclude,
-                                        "split": args.split, "seed": args.seed, "weights": str(args.weights or "shipped"),
+                                        "split": args.split, "seed": args.seed, "recovery": args.recovery,
+                                        "weights": str(args.weights or "shipped"),
                                         "table": table, "reports": reports}, indent=2, default=float) + "\n")
     return 0
 

@@ -7,7 +7,9 @@ Tiny seeded models, one CPU thread, a hashing text encoder (no MiniLM) and a 40-
 from __future__ import annotations
 
 import itertools
+import json
 import types
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -278,6 +280,49 @@ def test_generation_chain_gives_each_stage_of_the_path(keymotion_pipe, sample_fe
     assert np.abs(chain["vae_keyframes"] - chain["true_keyframes"]).max() > 1e-4    # the VAE changes the keyframes
     with pytest.raises(ValueError, match="caption"):
         generation_chain(keymotion_pipe, x, "")
+
+
+def test_generation_chain_after_the_skeleton_fit(keymotion_pipe, sample_features):
+    """``recovery="fit"``: the generated stages are the fitted joints of the same features (the fit keeps every
+    bone at one length and puts nothing below the floor), the true stage stays the clip's position joints."""
+    from salad_core.eval.keymotion_roundtrip import generation_chain
+    from salad_core.eval.physics import bone_length_errors
+
+    x = sample_features[:64]
+    raw = generation_chain(keymotion_pipe, x, "a person walks", seed=2)
+    fit = generation_chain(keymotion_pipe, x, "a person walks", seed=2, recovery="fit")
+    np.testing.assert_allclose(fit["true"], raw["true"])
+    gen = keymotion_pipe(["a person walks"], lengths=[64], seed=2, recovery="fit")
+    np.testing.assert_allclose(fit["generated"], gen.joints[0], atol=1e-5)
+    for stage in ("true_keyframes", "vae_keyframes", "generated"):
+        assert np.abs(fit[stage] - raw[stage]).max() > 1e-3                   # the fit moved joints
+        assert fit[stage][..., 1].min() > -1e-6                               # nothing below the floor
+        assert bone_length_errors(fit[stage], SK)["self_error"].max() < 1e-3    # fixed bones
+    with pytest.raises(ValueError, match="recovery='ik'"):
+        generation_chain(keymotion_pipe, x, "a person walks", recovery="ik")
+
+
+def test_flight_chain_script_writes_each_stage_with_its_recovery(keymotion_pipe, tiny_procedural_corpus, tmp_path,
+                                                                  capsys):
+    """``scripts/keymotion_flight_chain.py --recovery fit``: a table row per stage, the setting in the JSON."""
+    import importlib.util
+
+    from salad_core.eval.keymotion_roundtrip import CHAIN_STAGES
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "keymotion_flight_chain.py"
+    spec = importlib.util.spec_from_file_location("keymotion_flight_chain", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    out = tmp_path / "chain.json"
+    assert script.main(["--data", str(tiny_procedural_corpus), "--words", "a", "--exclude", "--limit", "2",
+                        "--recovery", "fit", "--out", str(out)], pipe=keymotion_pipe) == 0
+    doc = json.loads(out.read_text())
+    assert doc["recovery"] == "fit" and len(doc["clips"]) == 2
+    assert list(doc["table"]) == list(CHAIN_STAGES)
+    assert all(len(doc["reports"][s]) == 2 for s in CHAIN_STAGES)
+    assert "| generated |" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        script.main(["--data", str(tiny_procedural_corpus), "--recovery", "ik"], pipe=keymotion_pipe)
 
 
 def test_procedural_eval_corpus_picks_heldout_clips_or_the_given_root(tmp_path):

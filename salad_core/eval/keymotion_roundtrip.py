@@ -166,9 +166,10 @@ def infill_from_keyframes(pipe: "KeyMotionPipeline", features: np.ndarray, capti
 
 @torch.no_grad()
 def generation_chain(pipe: "KeyMotionPipeline", features: np.ndarray, caption: str, seed: int = 0,
-                     method: str = "mdo") -> dict[str, np.ndarray]:
+                     method: str = "mdo", recovery: str = "positions") -> dict[str, np.ndarray]:
     """One motion at every stage of KeyMotion's generation path, as joints read from the position
-    features (no fit: what each model itself made).
+    features (``recovery="positions"``, no fit: what each model itself made) or after the skeleton fit
+    (``"fit"``: fixed bones, locked feet, a floor; what ``out.joints`` shows by default).
 
     Parameters
     ----------
@@ -181,6 +182,9 @@ def generation_chain(pipe: "KeyMotionPipeline", features: np.ndarray, caption: s
         Seed of the generated stage.
     method : {"mdo", "mieo", "uniform"}
         Keyframe selection.
+    recovery : {"positions", "fit"}
+        How joints are read from the three generated stages' features (:func:`salad_core.recovery.recover_joints`);
+        the ``"true"`` stage is always the clip's own position joints.
 
     Returns
     -------
@@ -193,7 +197,10 @@ def generation_chain(pipe: "KeyMotionPipeline", features: np.ndarray, caption: s
     from salad_core.keymotion.kf_vae import gather_keyframes, indices_to_positions
     from salad_core.keymotion.pipeline import decode_keyframes
     from salad_core.motion import features_to_joints
+    from salad_core.recovery import recover_joints
 
+    if recovery not in ("positions", "fit"):
+        raise ValueError(f"recovery={recovery!r}: use 'positions' or 'fit'")
     x, xn, idx, text, mask = _captioned_inputs(pipe, features, caption, method)
     dev = pipe.device
     length = torch.tensor([len(x)], device=dev)
@@ -206,8 +213,9 @@ def generation_chain(pipe: "KeyMotionPipeline", features: np.ndarray, caption: s
     sk, norm = pipe.skeleton, pipe.mmae.norm
 
     def joints(motion: torch.Tensor) -> np.ndarray:
-        return features_to_joints(norm.denormalize(motion.float().cpu())[0].numpy(), sk).astype(np.float32)
+        f = norm.denormalize(motion.float().cpu())[0].numpy()
+        return np.asarray(recover_joints(f, recovery, sk), np.float32)
 
-    generated = pipe([caption], lengths=[len(x)], seed=seed, recovery="positions").joints[0]
+    generated = pipe([caption], lengths=[len(x)], seed=seed, recovery=recovery).joints[0]
     return {"true": features_to_joints(x, sk).astype(np.float32), "true_keyframes": joints(own),
             "vae_keyframes": joints(through_vae), "generated": np.asarray(generated, np.float32)}
