@@ -11,7 +11,7 @@ flight frames, the pelvis's vertical acceleration in flight (ballistic: -9.81 m/
 the pelvis rise, foot skating and floating. ``--recovery fit`` reads the three generated stages' joints after
 the skeleton fit (fixed bones, locked feet, a floor: what ``out.joints`` shows) instead of the position features.
 
-    python scripts/keymotion_flight_chain.py --data CORPUS [--weights DIR] [--split test] [--limit 30] [--recovery fit] [--out chain.json]
+    python scripts/keymotion_flight_chain.py --data CORPUS [--weights DIR] [--split test] [--limit 30] [--recovery fit] [--guidance W] [--out chain.json]
 
 CORPUS is the corpus the weights were trained on (its test or validation split: never training clips).
 """
@@ -77,6 +77,8 @@ def main(argv=None, *, pipe=None) -> int:
     ap.add_argument("--recovery", choices=("positions", "fit"), default="positions",
                     help="joints of the generated stages: the position features as they are (default), or after the "
                          "skeleton fit (fixed bones, locked feet, a floor: what out.joints shows)")
+    ap.add_argument("--guidance", type=float, default=None,
+                    help="guidance weight of the generated stage (default: the pipeline's)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None, help="write the per-clip reports and the table here (JSON)")
     args = ap.parse_args(argv)
@@ -101,7 +103,7 @@ def main(argv=None, *, pipe=None) -> int:
         if len(x) < pipe.num_keyframes:
             continue
         for stage, joints in generation_chain(pipe, x, caption, seed=args.seed,
-                                                recovery=args.recovery).items():
+                                                recovery=args.recovery, guidance_scale=args.guidance).items():
             reports[stage].append({"clip": name, **measure_motion(joints, pipe.skeleton).as_dict()})
     n = len(reports["true"])
     table = summarise(reports)
@@ -110,6 +112,7 @@ def main(argv=None, *, pipe=None) -> int:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({"clips": [c for c, _ in clips], "words": args.words, "exclude": args.exclude,
                                         "split": args.split, "seed": args.seed, "recovery": args.recovery,
+                                        "guidance": args.guidance,
                                         "weights": str(args.weights or "shipped"),
                                         "table": table, "reports": reports}, indent=2, default=float) + "\n")
     return 0

@@ -300,6 +300,11 @@ def test_generation_chain_after_the_skeleton_fit(keymotion_pipe, sample_features
         assert bone_length_errors(fit[stage], SK)["self_error"].max() < 1e-3    # fixed bones
     with pytest.raises(ValueError, match="recovery='ik'"):
         generation_chain(keymotion_pipe, x, "a person walks", recovery="ik")
+    # the generated stage's guidance weight: the pipeline's call with that weight
+    w1 = generation_chain(keymotion_pipe, x, "a person walks", seed=2, guidance_scale=1.0)
+    np.testing.assert_allclose(w1["generated"], keymotion_pipe(["a person walks"], lengths=[64], seed=2,
+                                                               guidance_scale=1.0).raw_joints[0], atol=1e-5)
+    assert np.abs(w1["generated"] - raw["generated"]).max() > 1e-4
 
 
 def test_flight_chain_script_writes_each_stage_with_its_recovery(keymotion_pipe, tiny_procedural_corpus, tmp_path,
@@ -315,9 +320,9 @@ def test_flight_chain_script_writes_each_stage_with_its_recovery(keymotion_pipe,
     spec.loader.exec_module(script)
     out = tmp_path / "chain.json"
     assert script.main(["--data", str(tiny_procedural_corpus), "--words", "a", "--exclude", "--limit", "2",
-                        "--recovery", "fit", "--out", str(out)], pipe=keymotion_pipe) == 0
+                        "--recovery", "fit", "--guidance", "2.5", "--out", str(out)], pipe=keymotion_pipe) == 0
     doc = json.loads(out.read_text())
-    assert doc["recovery"] == "fit" and len(doc["clips"]) == 2
+    assert doc["recovery"] == "fit" and doc["guidance"] == 2.5 and len(doc["clips"]) == 2
     assert list(doc["table"]) == list(CHAIN_STAGES)
     assert all(len(doc["reports"][s]) == 2 for s in CHAIN_STAGES)
     assert "| generated |" in capsys.readouterr().out
