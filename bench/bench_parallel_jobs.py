@@ -40,7 +40,8 @@ SMALL_DENOISER = {"width": 96, "heads": 4, "ff_dim": 384, "layers": 3}
 
 
 def _make_step(what: str):
-    """A closure running one training step of ``what`` on fixed random inputs."""
+    """``(step, optimizer)``: a closure running one training step of ``what`` on fixed random inputs, and the
+    AdamW it steps."""
     import torch
 
     from salad_core.io import config_from_dict
@@ -93,7 +94,7 @@ def _make_step(what: str):
         loss_fn().backward()
         opt.step()
 
-    return step
+    return step, opt
 
 
 def _worker(what: str, threads: int, seconds: float, ready, go, result) -> None:
@@ -101,7 +102,7 @@ def _worker(what: str, threads: int, seconds: float, ready, go, result) -> None:
     import torch
 
     torch.set_num_threads(threads)
-    step = _make_step(what)
+    step, _ = _make_step(what)
     step(), step()
     ready.release()
     go.wait()
