@@ -116,7 +116,10 @@ def staged_main(args, ap) -> int:
     if args.no_ship or args.groups:
         print("not shipping" + (" (--groups trains part of the study)" if args.groups else ""))
         return 0
-    out = ship_study(recipe, outcomes, args.ship, args.work, command=command, data=str(args.data))
+    from salad_core.ablations.probes import load_probes
+
+    probes = load_probes(keep / "probes.json") if keep is not None else {}
+    out = ship_study(recipe, outcomes, args.ship, args.work, command=command, data=str(args.data), probes=probes)
     print(f"shipped to {out} ({folder_size_mb(out):.1f} MB) with {out / 'MODEL_CARD.md'}")
     return 0
 

@@ -329,6 +329,15 @@ def test_model_card_is_written_from_the_evaluation_files_alone(tmp_path):
     assert "| `st` vs `pose` | FID | `<` | `>` | `>` | yes | yes |" in card
     assert "| `st` vs `pose` | MPJPE | `=` | `=` | `>` | no | no |" in card
     assert "Evaluator: `fake evaluator`" in card and "ours level, paper better" in card
+    assert "Probes" not in card
+    # probes made on the final stage are printed beside the tables, with their commands; others are not
+    probe = {"label": "narrow pose VAE", "base_variant": "pose", "change": {"model.pose_width": 4}, "parameters": 900,
+             "summary": {"FID": [0.5, 0.02], "MPJPE": [0.05, 0.003]}, "commands": ["train it", "score it"]}
+    card = model_card({"vaes": outcome}, command="c", probes={"narrow": {**probe, "stage": "vaes@2"},
+                                                               "old": {**probe, "stage": "vaes@1", "label": "old one"}})
+    assert "| **probe** narrow pose VAE (pose with model.pose_width = 4) | 900 | 0.500 ± 0.020 | 5.00 ± 0.30 |" in card
+    assert "| label pose (pose) | 0 | 0.200 ± 0.010 | 2.00 ± 0.20 |" in card
+    assert "Probe `narrow` was made by:\n\n```bash\ntrain it\nscore it\n```" in card and "old one" not in card
 
 
 def test_staged_study_trains_evaluates_resumes_and_ships(tmp_path, monkeypatch):
@@ -427,6 +436,16 @@ def test_staged_study_trains_evaluates_resumes_and_ships(tmp_path, monkeypatch):
     assert index["full"]["steps"] == dens.decision.steps and index["vae_st"]["steps"] == vae_stop
     assert json.loads((out / "no_st" / "pipeline.json").read_text())["vae"] == "../vae_pose/vae"
     assert (out / "evaluations" / f"dens@{last}.json").is_file() and "## Group `dens`" in (out / "MODEL_CARD.md").read_text()
+    assert not (out / "probes.json").exists()
+    # a probe of the VAE group's final stage ships beside the card and is printed in it; shipping again without
+    # probes removes it
+    probe = {"stage": f"vaes@{vae_stop}", "label": "a probe", "base_variant": "pose", "change": {"model.x": 1},
+             "parameters": 7, "summary": {"FID": [1.0, 0.1], "MPJPE": [0.1, 0.01]}, "commands": ["make it"]}
+    ship_study(recipe, outcomes, out, work, command="c", probes={"p": probe})
+    assert json.loads((out / "probes.json").read_text()) == {"p": probe}
+    assert "| **probe** a probe (pose with model.x = 1) | 7 |" in (out / "MODEL_CARD.md").read_text()
+    ship_study(recipe, outcomes, out, work, command="python scripts/train_ablations.py ...")
+    assert not (out / "probes.json").exists() and "**probe**" not in (out / "MODEL_CARD.md").read_text()
     # the notebooks' tables: read back from the shipped folder alone, exactly the card's sections
     from salad_core.ablations import shipped_tables
 

@@ -15,7 +15,8 @@ w/o FiLM), each as overrides of base configs, so that variants differ only in wh
   (stable orderings or budget spent), :mod:`~salad_core.ablations.stage_eval` (snapshots and scores of
   one stage), :mod:`~salad_core.ablations.runner` (:func:`run_study`, resumable),
   :mod:`~salad_core.ablations.keep` (a stopped VAE group kept in the repository, restored on a new machine),
-  :mod:`~salad_core.ablations.shipping` (:func:`ship_study`) and :mod:`~salad_core.ablations.card`
+  :mod:`~salad_core.ablations.probes` (a changed variant scored with a stage's protocol, to measure why an
+  ordering differs), :mod:`~salad_core.ablations.shipping` (:func:`ship_study`) and :mod:`~salad_core.ablations.card`
   (the model card from the evaluations).
 
 The denoisers learn on the latents of the ablation VAEs (trained with the same budget), not on the

@@ -80,7 +80,8 @@ def _table_section(table: str, rows: Mapping[str, str], final: Mapping[str, Any]
 
 
 def model_card(outcomes: Mapping[str, Any], *, command: str, recipe_path: str = "", data: str = "",
-               size_mb: float | None = None, date: str | None = None, version: str = "0.4") -> str:
+               size_mb: float | None = None, date: str | None = None, version: str = "0.4",
+               probes: Mapping[str, Mapping[str, Any]] | None = None) -> str:
     """The card's Markdown.
 
     Parameters
@@ -95,6 +96,9 @@ def model_card(outcomes: Mapping[str, Any], *, command: str, recipe_path: str = 
     size_mb : float, optional
         The shipped folder's size.
     date : str, optional
+    probes : dict, optional
+        Probe records (:mod:`~salad_core.ablations.probes`); those made on a group's final stage are printed
+        beside its tables with the commands that made them.
     """
     out = [f"# salad ablation models (version {version}, staged study)", "",
            "Small models of the paper's ablations (Table 2, Table 3, supplement Tables 2-4), trained on salad's "
@@ -138,6 +142,19 @@ def model_card(outcomes: Mapping[str, Any], *, command: str, recipe_path: str = 
                     + "; ".join(f"{TABLE_TITLES[o['table']]} `{o['a']}` vs `{o['b']}` on {o['metric']}: ours "
                                 f"{_SYMBOL_WORDS[o['ours']]}, paper {_SYMBOL_WORDS[o['paper']]}" for o in disagree)
                     + ". The notebooks say what was measured and why.", ""]
+        stage = final.get("stage", group.stage_name(final["steps"]))
+        mine = {k: p for k, p in (probes or {}).items() if p.get("stage") == stage}
+        if mine:
+            from .probes import probe_markdown
+
+            bases = list(dict.fromkeys(p["base_variant"] for p in mine.values()))
+            others = [v for rows in group.tables.values() for v in rows if v not in bases]
+            out += ["Probes (`probes.json`): a variant changed in one setting, trained to the same steps outside the "
+                    "study and scored with this stage's protocol (the same crops), to measure why an ordering "
+                    "differs:", "", probe_markdown({**final, "stage": stage}, mine, bases + list(dict.fromkeys(others))).rstrip(),
+                    ""]
+            for k, p in mine.items():
+                out += [f"Probe `{k}` was made by:", "", "```bash", *p.get("commands", []), "```", ""]
     return "\n".join(out).rstrip() + "\n"
 
 

@@ -4,7 +4,8 @@ The shipped folder (default ``salad_core/weights/ablations``) gets, for every gr
 it stopped, the packaged fp16 models of that stage (``vae_<name>/`` and ``<name>/``; the pipelines
 point at their VAE's folder instead of a copy), every evaluation document of the study
 (``evaluations/<group>@<steps>.json``, the per-replication values the card and the notebooks read),
-``index.json`` and ``MODEL_CARD.md`` (:func:`~salad_core.ablations.card.model_card`). The entries of
+``index.json``, ``MODEL_CARD.md`` (:func:`~salad_core.ablations.card.model_card`) and, when the kept study
+has probes (:mod:`~salad_core.ablations.probes`), ``probes.json``. The entries of
 the previous ``index.json`` are removed first, so no model of an older study stays behind.
 """
 from __future__ import annotations
@@ -30,7 +31,7 @@ def folder_size_mb(folder: str | os.PathLike) -> float:
 
 
 def ship_study(recipe: StagedRecipe, outcomes: Mapping[str, Any], out: str | os.PathLike, work: str | os.PathLike, *,
-               command: str, data: str = "") -> Path:
+               command: str, data: str = "", probes: Mapping[str, Any] | None = None) -> Path:
     """Write the shipped folder (see the module docstring); every group must have stopped.
 
     Parameters
@@ -46,6 +47,9 @@ def ship_study(recipe: StagedRecipe, outcomes: Mapping[str, Any], out: str | os.
         Quoted in the card as the command that regenerates it all.
     data : str
         The corpus, named in the card.
+    probes : dict, optional
+        Probe records (:mod:`~salad_core.ablations.probes`, the kept study's ``probes.json``): written beside
+        the card as ``probes.json`` and printed in it.
     """
     from salad_core.io import atomic_write_text
 
@@ -84,8 +88,12 @@ def ship_study(recipe: StagedRecipe, outcomes: Mapping[str, Any], out: str | os.
         for doc in outcome.evaluations:
             shutil.copy2(evaluation_path(work, group, doc["steps"]), out / "evaluations")
     atomic_write_text(index_path, json.dumps(index, indent=2) + "\n")
+    if probes:
+        atomic_write_text(out / "probes.json", json.dumps(dict(probes), indent=2) + "\n")
+    elif (out / "probes.json").is_file():
+        (out / "probes.json").unlink()
     size = folder_size_mb(out) - ((out / "MODEL_CARD.md").stat().st_size / 1e6 if (out / "MODEL_CARD.md").is_file() else 0)
     card = model_card(outcomes, command=command, recipe_path=recipe.path, data=data, size_mb=size,
-                      date=time.strftime("%Y-%m-%d"))
+                      date=time.strftime("%Y-%m-%d"), probes=probes)
     atomic_write_text(out / "MODEL_CARD.md", card)
     return out

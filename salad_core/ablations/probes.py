@@ -1,0 +1,138 @@
+"""Probes beside a staged ablation study: one extra model scored with exactly a stage's protocol (issue 24).
+
+Where an ordering of the paper is not reproduced, the notebook must say why, with a measurement. A probe
+is that measurement: a run trained outside the study from one of its variants' configs with one change
+(for example the pose-vector VAE of Table 2 narrowed to the skeleton-aware VAE's parameter count), scored
+here with the stage evaluation's own settings (split, replications, crops, seed), so its row compares with
+the stage's rows as the rows compare with each other. The study itself is not touched: its recipe, kept
+groups and shipped models stay as they are.
+
+A probe record (``probes.json`` beside the study's kept groups, e.g. ``studies/ablations_v2/probes.json``)
+maps a probe name to its row document (the layout of a stage's rows: ``values`` per replication,
+``summary`` mean and 95 % half-width, ``parameters``, ``settings``) plus what it changed, the stage it
+compares with and the commands that made it. :func:`probe_markdown` prints the probe beside the stage's
+rows it answers.
+
+VAE probes only, for now: the VAE group is the one with a measured question (Table 2).
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from .stage_eval import _jsonable, _row_doc, _score_vae, latest_step
+
+__all__ = ["score_vae_probe", "record_probe", "load_probes", "probe_markdown"]
+
+
+def _stage_settings(stage_doc: Mapping[str, Any]):
+    from salad_core.eval.settings import EvalSettings
+
+    if stage_doc.get("kind") != "vae":
+        raise ValueError(f"stage {stage_doc.get('stage')!r} is a {stage_doc.get('kind')!r} stage; VAE probes "
+                         "compare with a VAE group's stage")
+    return EvalSettings(**stage_doc["settings"])
+
+
+def score_vae_probe(stage_doc: Mapping[str, Any], run: str | os.PathLike, *, label: str, change: Mapping[str, Any],
+                    base_variant: str, data: str | os.PathLike, evaluator=None) -> dict:
+    """Score the VAE run ``run`` with the protocol of the VAE stage ``stage_doc``; return its row document.
+
+    Parameters
+    ----------
+    stage_doc : dict
+        A VAE group's stage evaluation (``evaluations/<group>@<steps>.json``): its ``settings`` are the
+        protocol, its ``steps`` the budget the probe must have trained for.
+    run : path
+        The probe's training run (``python -m salad_core.train vae --config ...``); its ``latest``
+        checkpoint must be at the stage's steps (equal budgets).
+    label, change, base_variant
+        What the probe is, what it changed (e.g. ``{"model.pose_width": 46}``) and of which variant of
+        the stage: recorded with the row.
+    data : path
+        The study's corpus (the stage's ``data`` may be a path of another machine).
+    evaluator : T2MEvaluator, optional
+        Default: the packaged procedural-corpus evaluator, the study's.
+
+    Returns
+    -------
+    dict
+        The row document of :mod:`~salad_core.ablations.stage_eval` (``values``, ``summary``, ``parameters``,
+        ``settings``) with ``label``, ``change``, ``base_variant``, ``stage`` and ``run``.
+
+    Raises
+    ------
+    ValueError
+        When the run is not at the stage's steps, the stage is not a VAE stage or ``base_variant`` is not
+        one of its rows.
+    """
+    from salad_core.train.assemble import export_vae
+
+    settings = _stage_settings(stage_doc)
+    steps = int(stage_doc["steps"])
+    if base_variant not in stage_doc["rows"]:
+        raise ValueError(f"base_variant {base_variant!r} is not a row of {stage_doc['stage']}; its rows: "
+                         f"{sorted(stage_doc['rows'])}")
+    at = latest_step(run)
+    if at != steps:
+        raise ValueError(f"probe run {run} is at step {at}, the stage {stage_doc['stage']} at {steps}: a probe "
+                         "compares at an equal budget; train it to that step (max_steps) first")
+    if evaluator is None:
+        from salad_core.eval.train_evaluator import load_packaged_evaluator
+
+        evaluator = load_packaged_evaluator()[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = export_vae(run, Path(tmp) / "vae_probe")          # fp16, as the study's rows were scored
+        result, params = _score_vae(folder, label, data, evaluator, settings,
+                                    f"probe {label} at {steps} steps ({run})")
+    row = _row_doc(result, "probe", label, steps, params)
+    return _jsonable({**row, "label": label, "change": dict(change), "base_variant": base_variant,
+                      "stage": stage_doc["stage"], "run": str(run)})
+
+
+def load_probes(path: str | os.PathLike) -> dict[str, dict]:
+    """The probe record at ``path`` (``{}`` when there is none yet)."""
+    path = Path(path)
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def record_probe(path: str | os.PathLike, name: str, row: Mapping[str, Any], *, commands: Sequence[str]) -> Path:
+    """Add (or replace) the probe ``name`` in the record at ``path`` with the ``commands`` that made it."""
+    from salad_core.io import atomic_write_text
+
+    path = Path(path)
+    doc = load_probes(path)
+    doc[name] = {**row, "commands": list(commands)}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, json.dumps(doc, indent=2) + "\n")
+    return path
+
+
+def _cell(summary: Mapping[str, Sequence[float]], metric: str, scale: float, digits: int) -> str:
+    if metric not in summary:
+        return "-"
+    mean, half = summary[metric]
+    return f"{mean * scale:.{digits}f} ± {half * scale:.{digits}f}"
+
+
+def probe_markdown(stage_doc: Mapping[str, Any], probes: Mapping[str, Mapping[str, Any]],
+                   variants: Sequence[str] | None = None) -> str:
+    """A markdown table: the stage's rows ``variants`` (default: each probe's base variant and the table's
+    other rows it compares with) and every probe of ``probes`` made on that stage, with parameters, FID and
+    MPJPE (cm) as mean ± 95 % half-width over the replications."""
+    mine = {k: p for k, p in probes.items() if p.get("stage") == stage_doc["stage"]}
+    if variants is None:
+        variants = list(stage_doc["rows"])
+    lines = ["| model | parameters | FID | MPJPE (cm) |", "|---|---:|---:|---:|"]
+    for v in variants:
+        r = stage_doc["rows"][v]
+        lines.append(f"| {r['label']} ({v}) | {r.get('parameters') or 0:,} | {_cell(r['summary'], 'FID', 1, 3)} | "
+                     f"{_cell(r['summary'], 'MPJPE', 100, 2)} |")
+    for k, p in mine.items():
+        change = ", ".join(f"{a} = {b}" for a, b in p.get("change", {}).items())
+        lines.append(f"| **probe** {p['label']} ({p['base_variant']} with {change}) | {p.get('parameters') or 0:,} | "
+                     f"{_cell(p['summary'], 'FID', 1, 3)} | {_cell(p['summary'], 'MPJPE', 100, 2)} |")
+    return "\n".join(lines) + "\n"

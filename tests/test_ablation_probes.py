@@ -1,0 +1,145 @@
+"""Probes beside the ablation study (issue 24): a changed VAE variant scored with a stage's own protocol."""
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from salad_core.ablations.probes import load_probes, probe_markdown, record_probe, score_vae_probe
+from salad_core.models.vae import MotionVAE, VAEConfig
+from _doubles import make_fake_corpus, make_tiny_evaluator
+
+REPO = Path(__file__).resolve().parents[1]
+SETTINGS = {"split": "test", "batch_size": 4, "replications": 2, "max_samples": 4, "mm": False, "seed": 0}
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("ablation_vae_probe", REPO / "scripts" / "ablation_vae_probe.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _study_configs(root: Path) -> Path:
+    """What a study's <work>/configs folder holds for a pose-vector VAE variant (tiny, 2 steps)."""
+    root.mkdir(parents=True)
+    (root / "vae_pose.json").write_text(json.dumps({
+        "model": {"latent_dim": 8, "n_extra_layers": 0, "kind": "pose"},
+        "train": {"batch_size": 8, "max_steps": 2, "window": 64, "warmup_steps": 1, "milestones": [], "val_every": 0,
+                  "ckpt_every": 0, "num_threads": 1}}))
+    return root
+
+
+def _stage_doc(steps: int) -> dict:
+    """A VAE stage evaluation as the study writes it (rows' figures made up: only the layout matters here)."""
+    rows = {v: {"variant": v, "label": lab, "steps": steps, "parameters": p,
+                "summary": {"FID": [f, 0.01], "MPJPE": [m, 0.001]}}
+            for v, lab, p, f, m in (("st", "skeleton-aware VAE", 1000, 0.5, 0.04), ("pose", "pose-vector VAE", 9000,
+                                                                                   0.4, 0.03))}
+    return {"stage": f"vaes@{steps}", "group": "vaes", "kind": "vae", "steps": steps, "settings": dict(SETTINGS),
+            "rows": rows}
+
+
+def _train(config: Path, run: Path, data: Path) -> None:
+    from salad_core.train.cli import main as train_main
+
+    assert train_main(["vae", "--data", str(data), "--out", str(run), "--config", str(config), "--resume",
+                       "--no-progress"]) == 0
+
+
+def test_probe_config_changes_only_the_named_keys(tmp_path):
+    mod = _script()
+    configs = _study_configs(tmp_path / "configs")
+    out = tmp_path / "probe" / "vae_pose_narrow.json"
+    assert mod.main(["config", "--study-configs", str(configs), "--variant", "pose", "--set", "model.pose_width=12",
+                     "--out", str(out)]) == 0
+    base, probe = json.loads((configs / "vae_pose.json").read_text()), json.loads(out.read_text())
+    assert probe["model"].pop("pose_width") == 12
+    assert probe == base
+    assert mod.parse_sets(["model.kind=\"st\"", "train.lr=0.5"]) == {"model.kind": "st", "train.lr": 0.5}
+    with pytest.raises(ValueError, match="SECTION.KEY=VALUE"):
+        mod.parse_sets(["pose_width=12"])
+    with pytest.raises(ValueError, match="no section 'modle'"):
+        mod.apply_sets(base, {"modle.pose_width": 12})
+    with pytest.raises(SystemExit):
+        mod.main(["config", "--study-configs", str(configs), "--variant", "st", "--set", "model.x=1", "--out",
+                  str(out)])
+
+
+def test_probe_is_scored_with_the_stages_protocol_and_recorded(tmp_path):
+    mod = _script()
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=6)
+    configs = _study_configs(tmp_path / "configs")
+    cfg = tmp_path / "probe" / "vae_pose_narrow.json"
+    mod.main(["config", "--study-configs", str(configs), "--variant", "pose", "--set", "model.pose_width=12",
+              "--out", str(cfg)])
+    run = tmp_path / "probe" / "vae_pose_narrow"
+    _train(cfg, run, data)
+    evaluator = make_tiny_evaluator(data, dim_word=8, dim_text_hidden=16, dim_coemb=32, dim_movement_enc_hidden=16,
+                                    dim_movement_latent=16, dim_motion_hidden=32)
+    stage = _stage_doc(2)
+    row = score_vae_probe(stage, run, label="pose-vector VAE, narrow", change={"model.pose_width": 12},
+                          base_variant="pose", data=data, evaluator=evaluator)
+    # the probe's own parameter count, the stage's protocol, one value per replication
+    expected = MotionVAE(VAEConfig(latent_dim=8, n_extra_layers=0, kind="pose", pose_width=12))
+    assert row["parameters"] == sum(p.numel() for p in expected.parameters() if p.requires_grad)
+    assert row["steps"] == 2 and row["stage"] == "vaes@2" and row["base_variant"] == "pose"
+    for key in ("split", "batch_size", "replications", "max_samples", "seed"):
+        assert row["settings"][key] == SETTINGS[key], key
+    assert all(len(v) == 2 and np.isfinite(v).all() for v in row["values"].values())
+    assert set(row["summary"]) == {"FID", "MPJPE"} and row["summary"]["MPJPE"][0] > 0
+    # the same crops every time: scoring again gives the same figures
+    again = score_vae_probe(stage, run, label="again", change={}, base_variant="pose", data=data, evaluator=evaluator)
+    assert again["values"] == row["values"]
+
+    record = tmp_path / "probes.json"
+    record_probe(record, "narrow", row, commands=["train", "score"])
+    record_probe(record, "other", {**row, "stage": "vaes@4"}, commands=["x"])
+    doc = load_probes(record)
+    assert set(doc) == {"narrow", "other"} and doc["narrow"]["commands"] == ["train", "score"]
+    table = probe_markdown(stage, doc, ["pose", "st"])
+    lines = table.strip().splitlines()
+    assert len(lines) == 2 + 2 + 1                     # header, rule, the two stage rows, the probe of this stage
+    assert lines[2].startswith("| pose-vector VAE (pose) | 9,000 | 0.400 ± 0.010 | 3.00 ± 0.10 |")
+    mpjpe = row["summary"]["MPJPE"]
+    assert "model.pose_width = 12" in lines[4] and f"{mpjpe[0] * 100:.2f} ± {mpjpe[1] * 100:.2f}" in lines[4]
+
+
+def test_probe_refuses_another_budget_and_unknown_rows(tmp_path):
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=3)
+    cfg = _study_configs(tmp_path / "configs") / "vae_pose.json"
+    run = tmp_path / "run"
+    _train(cfg, run, data)
+    with pytest.raises(ValueError, match="equal budget"):
+        score_vae_probe(_stage_doc(4), run, label="x", change={}, base_variant="pose", data=data, evaluator=object())
+    with pytest.raises(ValueError, match="not a row of vaes@2"):
+        score_vae_probe(_stage_doc(2), run, label="x", change={}, base_variant="no_pos", data=data,
+                        evaluator=object())
+    with pytest.raises(ValueError, match="VAE group's stage"):
+        score_vae_probe({**_stage_doc(2), "kind": "denoiser"}, run, label="x", change={}, base_variant="pose",
+                        data=data, evaluator=object())
+
+
+def test_the_kept_studys_probes_match_their_stage_and_config():
+    """The committed record: each probe compares with a kept stage at its steps and protocol, and its parameter
+    count is that of the config it trained with."""
+    from salad_core.io import config_from_dict
+
+    study = REPO / "studies" / "ablations_v2"
+    probes = load_probes(study / "probes.json")
+    assert probes, "studies/ablations_v2/probes.json is missing"
+    for name, probe in probes.items():
+        stage = json.loads((study / "evaluations" / f"{probe['stage']}.json").read_text())
+        assert probe["steps"] == stage["steps"] and probe["base_variant"] in stage["rows"], name
+        base = stage["rows"][probe["base_variant"]]["settings"]
+        for key in ("split", "batch_size", "replications", "max_samples", "seed"):
+            assert probe["settings"][key] == base[key], (name, key)
+        model = MotionVAE(config_from_dict(VAEConfig, probe["trained_config"]["model"]))
+        assert probe["parameters"] == sum(p.numel() for p in model.parameters() if p.requires_grad), name
+        for key, value in probe["change"].items():
+            section, _, field = key.partition(".")
+            assert probe["trained_config"][section][field] == value, (name, key)
+        assert len(probe["values"]["MPJPE"]) == stage["settings"]["replications"]
