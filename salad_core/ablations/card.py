@@ -149,10 +149,10 @@ def model_card(outcomes: Mapping[str, Any], *, command: str, recipe_path: str = 
 
             bases = list(dict.fromkeys(p["base_variant"] for p in mine.values()))
             others = [v for rows in group.tables.values() for v in rows if v not in bases]
+            table = probe_markdown({**final, "stage": stage}, mine, bases + list(dict.fromkeys(others)))
             out += ["Probes (`probes.json`): a variant changed in one setting, trained to the same steps outside the "
                     "study and scored with this stage's protocol (the same crops), to measure why an ordering "
-                    "differs:", "", probe_markdown({**final, "stage": stage}, mine, bases + list(dict.fromkeys(others))).rstrip(),
-                    ""]
+                    "differs:", "", table.rstrip(), ""]
             for k, p in mine.items():
                 out += [f"Probe `{k}` was made by:", "", "```bash", *p.get("commands", []), "```", ""]
     return "\n".join(out).rstrip() + "\n"
