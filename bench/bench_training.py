@@ -113,16 +113,12 @@ def _config_path(args: argparse.Namespace) -> Path:
 
 def _train_overrides(pairs: list[str]) -> dict:
     """``KEY=VALUE`` strings (VALUE read as JSON when it parses, else as a string) -> dict."""
-    out = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key:
-            raise SystemExit(f"--new-train expects KEY=VALUE, got {pair!r}")
-        try:
-            out[key] = json.loads(value)
-        except json.JSONDecodeError:
-            out[key] = value
-    return out
+    from salad_core.train.config import parse_overrides
+
+    try:
+        return parse_overrides(pairs)
+    except ValueError as e:
+        raise SystemExit(f"--new-train: {e}") from None
 
 
 def _spec(root: Path, args: argparse.Namespace, out: Path, steps: int, cache_dir: Path | None,

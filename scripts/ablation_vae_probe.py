@@ -33,16 +33,9 @@ sys.path.insert(0, str(REPO))
 
 def parse_sets(items: list[str]) -> dict:
     """``["model.pose_width=46"]`` -> ``{"model.pose_width": 46}`` (values read as JSON, else as text)."""
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key or "." not in key:
-            raise ValueError(f"--set {item!r}: use SECTION.KEY=VALUE, e.g. model.pose_width=46")
-        try:
-            out[key] = json.loads(value)
-        except json.JSONDecodeError:
-            out[key] = value
-    return out
+    from salad_core.train.config import parse_overrides
+
+    return parse_overrides(items, dotted=True)
 
 
 def apply_sets(config: dict, sets: dict) -> dict:

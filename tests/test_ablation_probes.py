@@ -62,6 +62,8 @@ def test_probe_config_changes_only_the_named_keys(tmp_path):
     assert mod.parse_sets(["model.kind=\"st\"", "train.lr=0.5"]) == {"model.kind": "st", "train.lr": 0.5}
     with pytest.raises(ValueError, match="SECTION.KEY=VALUE"):
         mod.parse_sets(["pose_width=12"])
+    with pytest.raises(ValueError, match="'model.x' is not an override"):
+        mod.parse_sets(["model.x"])
     with pytest.raises(ValueError, match="no section 'modle'"):
         mod.apply_sets(base, {"modle.pose_width": 12})
     with pytest.raises(SystemExit):

@@ -25,6 +25,7 @@ __all__ = [
     "DenoiserTrainConfig",
     "load_train_config",
     "save_train_config",
+    "parse_overrides",
     "RESUME_MUTABLE_FIELDS",
     "BATCHING_MODES",
     "AUTOCAST_MODES",
@@ -228,6 +229,23 @@ def load_train_config(path: str | os.PathLike, cls: type[C], **overrides: Any) -
         raise ValueError(f"{path}: a training config must be a JSON object, got {type(data).__name__}")
     data = {**data, **{k: v for k, v in overrides.items() if v is not None}}
     return config_from_dict(cls, data)
+
+
+def parse_overrides(items: list[str], *, dotted: bool = False) -> dict[str, Any]:
+    """Command-line overrides ``KEY=VALUE`` -> ``{KEY: VALUE}``, VALUE read as JSON when it parses, else as text
+    (``lr=1e-3`` -> 0.001, ``kind=pose`` -> "pose"). ``dotted``: keys must name a section, ``SECTION.KEY``
+    (``model.pose_width=46``). Raises ValueError naming the item that is not of that form."""
+    out: dict[str, Any] = {}
+    form = "SECTION.KEY=VALUE, e.g. model.pose_width=46" if dotted else "KEY=VALUE, e.g. lr=0.001"
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key or (dotted and "." not in key.strip(".")):
+            raise ValueError(f"{item!r} is not an override: use {form}")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
 
 
 def save_train_config(path: str | os.PathLike, config: TrainConfig) -> Path:
