@@ -26,7 +26,8 @@ VAE's decoded poses halve the flight (-3.30 m/s^2 against -7.66 with the true po
 Either starts from the source pipeline's model of that stage (default: the shipped ``salad_core/weights/
 keymotion``; same architecture, its normalisation kept) at a constant learning rate after a 200-step warm-up
 (default 1e-4, the PST 2e-4),
-and with ``--export`` writes a pipeline folder: the source's other two models with the new one.
+and with ``--export`` writes a pipeline folder: the source's other two models with the new one, and in its
+``runs.json`` the source's run records with the new model's (salad_core.keymotion.export.export_with_component).
 
     python scripts/finetune_keymotion.py --stage mmae --data CORPUS --out RUN --steps 3000      # train (resumable)
     python scripts/finetune_keymotion.py --stage pst --side-cue --data CORPUS --out RUN --steps 3000

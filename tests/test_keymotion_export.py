@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from salad_core.io import load_tensors
-from salad_core.keymotion.export import export_pipeline, stage_records
+from salad_core.keymotion.export import export_pipeline, export_with_component, run_record, stage_records
 from salad_core.keymotion.pipeline import KeyMotionPipeline
 from salad_core.keymotion.train import STAGES
 from salad_core.sampling import Guidance, parse_guidance_setting
@@ -87,6 +87,34 @@ def test_a_root_missing_a_stage_is_refused_before_anything_is_written(trained_ro
     assert not (tmp_path / "dest").exists()
     with pytest.raises(TypeError, match="guidance must be a salad_core.sampling.Guidance"):
         export_pipeline(trained_root, tmp_path / "dest2", guidance=5.0)
+
+
+def test_a_replaced_component_carries_its_run_record_and_keeps_the_others(trained_root, tmp_path, hashing):
+    source = export_pipeline(trained_root, tmp_path / "source")
+    records = json.loads((source / "runs.json").read_text())
+    records["pst"] = {"step": -1, "note": "the record of the model being replaced"}
+    (source / "runs.json").write_text(json.dumps(records))
+    dest = export_with_component(source, "pst", trained_root / "pst", tmp_path / "dest")
+    out = json.loads((dest / "runs.json").read_text())
+    assert out["pst"] == run_record(trained_root / "pst") and out["pst"]["step"] in (2, 3)
+    assert out["kf_vae"] == records["kf_vae"] and out["mmae"] == records["mmae"]
+    stem = out["pst"]["checkpoint"]
+    trained = load_tensors(trained_root / "pst" / f"{stem}.safetensors")
+    shipped = load_tensors(dest / "pst.safetensors")
+    key = next(k for k, v in shipped.items() if v.is_floating_point() and v.numel() > 16)
+    assert torch.allclose(shipped[key].float(), trained[key].float().half().float())
+    # a source without records: the new component's record alone
+    (source / "runs.json").unlink()
+    out = json.loads((export_with_component(source, "pst", trained_root / "pst", tmp_path / "d2")
+                      / "runs.json").read_text())
+    assert set(out) == {"pst"}
+    # a run without its config is refused before anything is written
+    bare = tmp_path / "bare_run"
+    shutil.copytree(trained_root / "pst", bare)
+    (bare / "config.json").unlink()
+    with pytest.raises(FileNotFoundError, match="config.json is missing"):
+        export_with_component(source, "pst", bare, tmp_path / "d3")
+    assert not (tmp_path / "d3").exists()
 
 
 @pytest.mark.parametrize("text, expected", [

@@ -20,13 +20,41 @@ from salad_core.keymotion.pipeline import KeyMotionPipeline
 from salad_core.keymotion.train import STAGES
 from salad_core.sampling import Guidance
 
-__all__ = ["stage_records", "export_pipeline", "export_with_component"]
+__all__ = ["run_record", "stage_records", "export_pipeline", "export_with_component"]
+
+
+def run_record(run: str | os.PathLike) -> dict[str, Any]:
+    """One stage's entry of ``runs.json`` for the training run folder ``run``: ``checkpoint`` ("best" if the run
+    has one, else "latest"), ``step``, ``config`` (the run's ``config.json``), ``last_log`` and ``last_val`` (its
+    last training and validation lines of ``log.jsonl``, ``{}`` if none).
+
+    Raises
+    ------
+    FileNotFoundError
+        The run folder, its checkpoint record or its ``config.json`` is missing (the message names it).
+    """
+    run = Path(run)
+    if not run.is_dir():
+        raise FileNotFoundError(f"{run} does not exist")
+    stem = "best" if (run / "best.json").is_file() else "latest"
+    if not (run / f"{stem}.json").is_file():
+        raise FileNotFoundError(f"{run} has no checkpoint (best.json or latest.json)")
+    if not (run / "config.json").is_file():
+        raise FileNotFoundError(f"{run / 'config.json'} is missing")
+    log_file = run / "log.jsonl"
+    lines = [json.loads(line) for line in log_file.read_text().splitlines() if line.strip()] \
+        if log_file.is_file() else []
+    train_lines = [line for line in lines if "loss" in line]
+    val_lines = [line for line in lines if "val_loss" in line]
+    meta = json.loads((run / f"{stem}.json").read_text()).get("meta", {})
+    return {"checkpoint": stem, "step": meta.get("step"),
+            "config": json.loads((run / "config.json").read_text()),
+            "last_log": train_lines[-1] if train_lines else {},
+            "last_val": val_lines[-1] if val_lines else {}}
 
 
 def stage_records(work: str | os.PathLike) -> dict[str, dict[str, Any]]:
-    """``runs.json``'s content for the training root ``work``: per stage ``checkpoint`` ("best" or "latest"),
-    ``step``, ``config`` (the stage's ``config.json``), ``last_log`` and ``last_val`` (its last training and
-    validation lines of ``log.jsonl``, ``{}`` if none).
+    """``runs.json``'s content for the training root ``work``: per stage :func:`run_record` of ``work/<stage>``.
 
     Raises
     ------
@@ -36,25 +64,10 @@ def stage_records(work: str | os.PathLike) -> dict[str, dict[str, Any]]:
     root = Path(work)
     records = {}
     for stage in STAGES:
-        run = root / stage
-        if not run.is_dir():
-            raise FileNotFoundError(f"{run} does not exist: {root} is not a finished KeyMotion training root "
-                                    f"(it needs {', '.join(STAGES)})")
-        stem = "best" if (run / "best.json").is_file() else "latest"
-        if not (run / f"{stem}.json").is_file():
-            raise FileNotFoundError(f"{run} has no checkpoint (best.json or latest.json)")
-        if not (run / "config.json").is_file():
-            raise FileNotFoundError(f"{run / 'config.json'} is missing")
-        log_file = run / "log.jsonl"
-        lines = [json.loads(line) for line in log_file.read_text().splitlines() if line.strip()] \
-            if log_file.is_file() else []
-        train_lines = [line for line in lines if "loss" in line]
-        val_lines = [line for line in lines if "val_loss" in line]
-        meta = json.loads((run / f"{stem}.json").read_text()).get("meta", {})
-        records[stage] = {"checkpoint": stem, "step": meta.get("step"),
-                          "config": json.loads((run / "config.json").read_text()),
-                          "last_log": train_lines[-1] if train_lines else {},
-                          "last_val": val_lines[-1] if val_lines else {}}
+        if not (root / stage).is_dir():
+            raise FileNotFoundError(f"{root / stage} does not exist: {root} is not a finished KeyMotion training "
+                                    f"root (it needs {', '.join(STAGES)})")
+        records[stage] = run_record(root / stage)
     return records
 
 
@@ -96,7 +109,9 @@ def export_with_component(source: str | os.PathLike, stage: str, run: str | os.P
     """Write the KeyMotion pipeline folder ``source`` to ``dest`` (fp16) with its ``stage`` model ("kf_vae",
     "pst" or "mmae") replaced by the one of the run folder ``run`` (its ``best``, else ``latest``), the
     other two components, the guidance and the settings unchanged: how a fine-tuned stage is assembled for
-    measuring (``scripts/finetune_keymotion.py``). Returns ``dest``."""
+    measuring (``scripts/finetune_keymotion.py``). ``dest/runs.json`` keeps ``source``'s run records (if it has
+    them) with the ``stage`` entry replaced by :func:`run_record` of ``run``, so a shipped pipeline says which run
+    each of its models came from. Returns ``dest``."""
     from salad_core.io import load_model
     from salad_core.keymotion.pipeline import COMPONENTS
     from salad_core.train.assemble import run_checkpoint
@@ -104,6 +119,12 @@ def export_with_component(source: str | os.PathLike, stage: str, run: str | os.P
     if stage not in COMPONENTS:
         raise ValueError(f"stage={stage!r} is not a KeyMotion component; use one of {sorted(COMPONENTS)}")
     pipe = KeyMotionPipeline.from_pretrained(source, **({"text_encoder": text_encoder} if text_encoder else {}))
+    record = run_record(run)                       # first: a run without its records fails before anything is written
     model, _, _ = load_model(run_checkpoint(run))
     setattr(pipe, stage, model.eval())
-    return pipe.save_pretrained(dest, dtype=torch.float16)
+    source_records = Path(source) / "runs.json"
+    records = json.loads(source_records.read_text()) if source_records.is_file() else {}
+    records[stage] = record
+    out = pipe.save_pretrained(dest, dtype=torch.float16)
+    atomic_write_text(out / "runs.json", json.dumps(records, indent=2) + "\n")
+    return out
