@@ -19,14 +19,16 @@ from salad_core.io import atomic_write_text
 from salad_core.keymotion.pipeline import KeyMotionPipeline
 from salad_core.keymotion.train import STAGES
 from salad_core.sampling import Guidance
+from salad_core.train.assemble import run_checkpoint
 
 __all__ = ["run_record", "stage_records", "export_pipeline", "export_with_component"]
 
 
 def run_record(run: str | os.PathLike) -> dict[str, Any]:
-    """One stage's entry of ``runs.json`` for the training run folder ``run``: ``checkpoint`` ("best" if the run
-    has one, else "latest"), ``step``, ``config`` (the run's ``config.json``), ``last_log`` and ``last_val`` (its
-    last training and validation lines of ``log.jsonl``, ``{}`` if none).
+    """One stage's entry of ``runs.json`` for the training run folder ``run``: ``checkpoint`` (the one an export
+    loads, :func:`~salad_core.train.assemble.run_checkpoint`: "best" if the run has one, else "latest"),
+    ``step``, ``config`` (the run's ``config.json``), ``last_log`` and ``last_val`` (its last training and
+    validation lines of ``log.jsonl``, ``{}`` if none).
 
     Raises
     ------
@@ -36,9 +38,9 @@ def run_record(run: str | os.PathLike) -> dict[str, Any]:
     run = Path(run)
     if not run.is_dir():
         raise FileNotFoundError(f"{run} does not exist")
-    stem = "best" if (run / "best.json").is_file() else "latest"
+    stem = run_checkpoint(run).name
     if not (run / f"{stem}.json").is_file():
-        raise FileNotFoundError(f"{run} has no checkpoint (best.json or latest.json)")
+        raise FileNotFoundError(f"{run} has no record of its {stem} checkpoint ({stem}.json)")
     if not (run / "config.json").is_file():
         raise FileNotFoundError(f"{run / 'config.json'} is missing")
     log_file = run / "log.jsonl"
@@ -114,7 +116,6 @@ def export_with_component(source: str | os.PathLike, stage: str, run: str | os.P
     each of its models came from. Returns ``dest``."""
     from salad_core.io import load_model
     from salad_core.keymotion.pipeline import COMPONENTS
-    from salad_core.train.assemble import run_checkpoint
 
     if stage not in COMPONENTS:
         raise ValueError(f"stage={stage!r} is not a KeyMotion component; use one of {sorted(COMPONENTS)}")
