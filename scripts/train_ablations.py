@@ -15,8 +15,9 @@ groups come first and the denoisers learn on their final VAEs (packaged, fp16). 
 kept in the repository (``studies/<recipe name>/``, ``--keep``), and so is a group in progress after each
 new evaluation (its runs' fp16 weights at that stage): commit it, and on a new machine the same command
 restores it and goes on from there (the group in progress warm-starts from its last evaluated stage).
-``--keep-now`` keeps what ``--work`` holds at once, without training (a study started by an older
-version, or before committing). Then the final stage's models (fp16),
+``--keep-now`` keeps what ``--work`` holds at once, without training: a group in progress with each run at
+its latest step, inside a stage too (pause the study first, and commit the keep folder before a working
+session ends: a new machine then loses no trained step). Then the final stage's models (fp16),
 the evaluations, ``index.json`` and ``MODEL_CARD.md`` go to ``--ship`` (default
 ``salad_core/weights/ablations``). Run the same command again after a kill: trained steps, snapshots
 and evaluated rows are kept, the study continues where it stopped. Run it at low priority on a shared
@@ -182,8 +183,9 @@ def main(argv=None) -> int:
                          "commit it, so that a new machine goes on from there)")
     ap.add_argument("--no-keep", action="store_true", help="staged recipes: neither keep nor restore groups")
     ap.add_argument("--keep-now", action="store_true",
-                    help="staged recipes: keep what --work holds (stopped groups; a running group's last evaluated "
-                         "stage) and exit, without training")
+                    help="staged recipes: keep what --work holds (stopped groups; a running group's runs at their "
+                         "latest steps and its stages trained but not evaluated) and exit, without training; run it "
+                         "(with the study paused) before a working session ends and commit the keep folder")
     ap.add_argument("--only", nargs="+", default=None, help="recipes without groups: variant names to train")
     ap.add_argument("--ship-only", action="store_true", help="recipes without groups: only assemble trained runs")
     args = ap.parse_args(argv)

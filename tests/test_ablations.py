@@ -633,7 +633,13 @@ def test_group_in_progress_is_kept_and_a_new_machine_warm_starts_it(tmp_path, mo
     assert set(kept_w) == set(snap) and all(kept_w[k].dtype == torch.float16 for k in kept_w if kept_w[k].is_floating_point())
     for k, v in snap.items():
         torch.testing.assert_close(kept_w[k].float(), v, rtol=1e-3, atol=1e-4)
-    assert keep_study(recipe, work, keep) == {"vaes": "in progress, evaluated up to 1 steps"}
+    # keeping at once (--keep-now, on a copy) takes the runs where they are: past stage 1, at the interrupted stage 2
+    import shutil
+
+    shutil.copytree(keep, tmp_path / "keep_now")
+    assert keep_study(recipe, work, tmp_path / "keep_now") == {
+        "vaes": "in progress, evaluated up to 1 steps; runs kept at {'vae_st': 2, 'vae_pose': 2}"}
+    assert kept_groups(tmp_path / "keep_now")["vaes"]["snapshots"] == {"2": ["vae_st", "vae_pose"]}
 
     # a new machine: nothing of work survives; the group goes on from stage 1 with the kept weights
     monkeypatch.setattr("salad_core.ablations.stage_eval._score_vae", fake_score)
@@ -656,3 +662,68 @@ def test_group_in_progress_is_kept_and_a_new_machine_warm_starts_it(tmp_path, mo
         from salad_core.ablations import keep_progress
 
         keep_progress(recipe, group, [1], work, keep)
+
+
+def test_a_session_keeps_its_runs_inside_a_stage_and_a_new_machine_loses_no_step(tmp_path, monkeypatch):
+    """``keep_study`` (``--keep-now``) before a session ends keeps each run at its latest step, inside a stage,
+    and the snapshots of stages not evaluated yet; an empty work folder continues from exactly there."""
+    from salad_core.ablations import keep_study, kept_groups
+    from salad_core.ablations.stage_eval import snapshot_run
+    from salad_core.eval.reconstruction import ReconstructionResult
+    from salad_core.io import load_tensors
+
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=8)
+    doc = _staged_doc()
+    doc["groups"]["vaes"]["stages"] = [2, 3, 4]
+    recipe = load_staged_recipe(_write_staged(tmp_path, doc))
+    group = recipe.group("vaes")
+    work, keep = tmp_path / "work", tmp_path / "keep"
+    assert keep_study(recipe, work, keep) == {"vaes": "nothing trained"}
+    assert not (keep / "groups.json").exists()
+    # the session ends with vae_st trained past the first stage (its snapshot taken, not evaluated) up to the
+    # second (no snapshot yet: its latest is kept as one), and vae_pose not started
+    assert run_jobs(stage_jobs(recipe, group, 2, work)[:1], data, inline=True) == {"vae_st": 0}
+    snapshot_run(work / "vae_st", stage_dir(work, group, 2) / "runs" / "vae_st", 2)
+    assert run_jobs(stage_jobs(recipe, group, 3, work)[:1], data, inline=True) == {"vae_st": 0}
+    assert keep_study(recipe, work, keep) == {"vaes": "in progress, nothing evaluated yet; runs kept at {'vae_st': 3}"}
+    kept = kept_groups(keep)["vaes"]
+    assert (kept["stopped"], kept["stages"], kept["runs"], kept["snapshots"]) == (False, [], {"vae_st": 3},
+                                                                                 {"2": ["vae_st"], "3": ["vae_st"]})
+    progress = keep / "progress" / "vaes"
+    assert sorted(p.name for p in progress.iterdir()) == ["snapshots", "vae_st.json", "vae_st.safetensors"]
+    for kept_file, original in ((progress / "vae_st.safetensors", work / "vae_st" / "latest.safetensors"),
+                                (progress / "snapshots" / "2" / "vae_st" / "latest.safetensors",
+                                 stage_dir(work, group, 2) / "runs" / "vae_st" / "latest.safetensors")):
+        w, ref = load_tensors(kept_file), load_tensors(original)
+        assert set(w) == set(ref) and all(t.dtype == torch.float16 for t in w.values() if t.is_floating_point())
+        for k, v in ref.items():
+            torch.testing.assert_close(w[k].float(), v, rtol=1e-3, atol=1e-4)
+    assert json.loads((progress / "vae_st.json").read_text())["meta"]["step"] == 3
+
+    scored = []
+
+    def fake_score(folder, label, data, evaluator, settings, weights):
+        steps = int(folder.parent.parent.name.split("@")[1])
+        scored.append((steps, folder.name))
+        fid = {"vae_st": 0.1 if steps % 2 else 0.3, "vae_pose": 0.2}[folder.name]      # never stable
+        res = ReconstructionResult(label, {"FID": (fid, fid + 0.001), "MPJPE": (0.02, 0.0201)}, 10, {"evaluator": "fake"})
+        return res, res.parameters
+
+    monkeypatch.setattr("salad_core.ablations.stage_eval._score_vae", fake_score)
+    fresh = tmp_path / "fresh"
+    outcome = run_study(recipe, data, fresh, evaluator=object(), inline=True, keep=keep)["vaes"]
+    assert outcome.decision.reason == "budget" and outcome.decision.steps == 4
+    assert sorted(set(scored)) == [(s, f) for s in (2, 3, 4) for f in ("vae_pose", "vae_st")]
+    # stages 2 and 3 of vae_st are the kept snapshots (fp16-rounded), not retrained ones
+    for s in (2, 3):
+        used = load_tensors(stage_dir(fresh, group, s) / "runs" / "vae_st" / "latest.safetensors")
+        ref = load_tensors((stage_dir(work, group, 2) / "runs" / "vae_st" if s == 2 else work / "vae_st")
+                           / "latest.safetensors")
+        assert set(used) == set(ref) and all(torch.equal(used[k], ref[k].half() if ref[k].is_floating_point()
+                                                         else ref[k]) for k in ref)
+    st_rows = [json.loads(l) for l in (fresh / "vae_st" / "log.jsonl").read_text().splitlines()]
+    assert st_rows[0]["step"] == 3 and "warm_start" in st_rows[0]           # continued from the kept step 3
+    assert [r["step"] for r in st_rows if "loss" in r] == [4]
+    pose_rows = [json.loads(l) for l in (fresh / "vae_pose" / "log.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in pose_rows if "loss" in r] == [1, 2, 3, 4]     # not started before: from 0
+    assert kept_groups(keep)["vaes"]["stopped"] and not (keep / "progress").exists()

@@ -25,6 +25,19 @@ and :func:`restore_group` puts the evaluations back and each run's weights as it
 group goes on from the kept stage (new AdamW moments, the learning rate warmed up again), not from 0.
 When the group stops, :func:`keep_group` replaces its progress.
 
+A stage of the denoiser group takes longer than a working session, so a session also keeps its runs *as they
+are* before it ends (``keep_progress(..., current=True)``, what ``scripts/train_ablations.py --keep-now``
+does): each run's weights at its latest checkpoint, wherever it is inside a stage, and the snapshots of
+stages trained but not evaluated yet (their weights in float16, which is also what packaging makes of them)::
+
+    progress/<group>/<run>.safetensors, .json           the run's weights at its latest step (fp16)
+    progress/<group>/snapshots/<steps>/<run>/           a stage's snapshot, not evaluated yet (fp16 weights)
+
+with ``runs`` ({run: kept step}) and ``snapshots`` ({steps: [runs]}) in the index. A run that had not started
+is not kept (it starts from 0 again, as it would have). A run continued this way warm-starts inside the
+stage, so it re-warms its learning rate at another step than a run that did not stop there; its
+``log.jsonl`` records where (the stage's snapshot carries it into the evaluation's folder).
+
 The ``fingerprint`` (:func:`group_fingerprint`) hashes the group's training configs, stages, evaluation
 protocol and stop rule: a kept group whose recipe has changed since is refused with an error that says
 so, never restored silently.
@@ -120,31 +133,59 @@ def _run_name(recipe: StagedRecipe, name: str) -> str:
 
 
 def keep_progress(recipe: StagedRecipe, group: StudyGroup, evaluated: list[int], work: str | Path,
-                  keep: str | Path) -> Path:
-    """Keep a group that has not stopped: its evaluations so far and each run's weights (fp16) at the last of
-    them, ``evaluated[-1]`` (taken from the stage's snapshot ``stages/<group>@<steps>/runs/<run>/latest``).
+                  keep: str | Path, *, current: bool = False) -> Path:
+    """Keep a group that has not stopped: its evaluations so far and each run's weights (fp16).
+
+    By default the weights are those of the last evaluated stage, ``evaluated[-1]`` (taken from the stage's
+    snapshot ``stages/<group>@<steps>/runs/<run>/latest``). With ``current=True`` (the end of a working
+    session) each run is kept at its latest checkpoint in ``work`` when that is beyond the last evaluated
+    stage (a run not started yet is left out), and the snapshots of stages not evaluated yet are kept too;
+    ``evaluated`` may then be empty.
 
     Raises ``FileNotFoundError`` when a snapshot or an evaluation of those stages is missing, and
-    ``ValueError`` when ``keep`` holds the group as stopped already.
+    ``ValueError`` when ``keep`` holds the group as stopped already or there is nothing to keep.
     """
     from salad_core.io import atomic_write_text
     from salad_core.train.warm_start import write_warm_start
 
+    from .stage_eval import latest_step
+
     work, keep = Path(work), Path(keep)
-    if not evaluated:
+    if not evaluated and not current:
         raise ValueError(f"group {group.name!r} has no evaluated stage to keep")
     index = kept_groups(keep)
     if index.get(group.name, {}).get("stopped", group.name in index):
         raise ValueError(f"{keep} holds the group {group.name!r} as stopped already; its progress is not kept")
-    steps = int(evaluated[-1])
-    runs = stage_dir(work, group, steps) / "runs"
+    steps = int(evaluated[-1]) if evaluated else 0
+    runs = stage_dir(work, group, steps) / "runs" if evaluated else None
     tmp = keep / "progress" / f".{group.name}.tmp"
     shutil.rmtree(tmp, ignore_errors=True)
+    kept_runs: dict[str, int] = {}
+    snapshots: dict[str, list[str]] = {}
     for name in group.variants:
         run = _run_name(recipe, name)
-        if not (runs / run / "latest.json").is_file():
-            raise FileNotFoundError(f"{runs / run} holds no snapshot of the stage {group.stage_name(steps)}")
-        write_warm_start(runs / run / "latest", tmp / run)
+        at = latest_step(work / run) if current else None
+        if at is not None and at > steps:
+            write_warm_start(work / run / "latest", tmp / run)
+            kept_runs[run] = at
+        elif runs is not None:
+            if not (runs / run / "latest.json").is_file():
+                raise FileNotFoundError(f"{runs / run} holds no snapshot of the stage {group.stage_name(steps)}")
+            write_warm_start(runs / run / "latest", tmp / run)
+            kept_runs[run] = steps
+        if current:
+            for later in (s for s in group.stages if s > steps):
+                snap = stage_dir(work, group, later) / "runs" / run
+                if not (snap / "latest.json").is_file():
+                    # a run stopped exactly at a stage before its snapshot was taken: its latest is the snapshot
+                    # (and a run warm-started at its stage's end would train no step to write one)
+                    snap = work / run if at == later else None
+                if snap is not None:
+                    _keep_snapshot(snap, tmp / "snapshots" / str(later) / run)
+                    snapshots.setdefault(str(later), []).append(run)
+    if not kept_runs:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise ValueError(f"group {group.name!r}: no run has trained a step yet in {work}; nothing to keep")
     (keep / "evaluations").mkdir(parents=True, exist_ok=True)
     for s in evaluated:
         shutil.copy2(evaluation_path(work, group, s), keep / "evaluations")
@@ -153,10 +194,25 @@ def keep_progress(recipe: StagedRecipe, group: StudyGroup, evaluated: list[int],
     tmp.rename(dest)
     index[group.name] = {"steps": steps, "reason": "in progress", "stopped": False,
                          "stages": [int(s) for s in evaluated], "variants": list(group.variants),
-                         "fingerprint": group_fingerprint(recipe, group)}
+                         "fingerprint": group_fingerprint(recipe, group), "runs": kept_runs, "snapshots": snapshots}
     atomic_write_text(keep / KEPT_INDEX, json.dumps(index, indent=2) + "\n")
-    log.info("kept the progress of group %s (evaluated up to %d steps) in %s", group.name, steps, dest)
+    log.info("kept the progress of group %s (evaluated up to %d steps; runs at %s; snapshots %s) in %s",
+             group.name, steps, kept_runs, snapshots, dest)
     return dest
+
+
+#: The files of a stage snapshot kept besides its weights (small: configs, statistics, the run's log).
+_SNAPSHOT_FILES = ("config.json", "mean_std.safetensors", "latent_stats.safetensors", "log.jsonl")
+
+
+def _keep_snapshot(snap: Path, dest: Path) -> None:
+    """Copy a stage snapshot (``snapshot_run``'s folder) with its weights in float16."""
+    from salad_core.train.warm_start import write_warm_start
+
+    write_warm_start(snap / "latest", dest / "latest")
+    for name in _SNAPSHOT_FILES:
+        if (snap / name).is_file():
+            shutil.copy2(snap / name, dest / name)
 
 
 def restore_group(recipe: StagedRecipe, group: StudyGroup, keep: str | Path, work: str | Path) -> bool:
@@ -186,15 +242,26 @@ def restore_group(recipe: StagedRecipe, group: StudyGroup, keep: str | Path, wor
     if not entry.get("stopped", True):
         from salad_core.train.warm_start import WARM_START
 
+        progress = keep / "progress" / group.name
         for name in group.variants:
             run = work / _run_name(recipe, name)
             if (run / "train_state.safetensors").is_file() or (run / f"{WARM_START}.json").is_file():
                 continue
+            if not (progress / f"{run.name}.json").is_file():
+                continue                          # kept mid-stage before it started: it starts from 0
             run.mkdir(parents=True, exist_ok=True)
             for suffix in (".safetensors", ".json"):
-                shutil.copy2(keep / "progress" / group.name / f"{run.name}{suffix}", run / f"{WARM_START}{suffix}")
-        log.info("restored group %s in progress (evaluated up to %d steps) from %s: its runs continue from the "
-                 "kept weights", group.name, steps, keep)
+                shutil.copy2(progress / f"{run.name}{suffix}", run / f"{WARM_START}{suffix}")
+        for later, names in entry.get("snapshots", {}).items():
+            for run_name in names:
+                dest = stage_dir(work, group, int(later)) / "runs" / run_name
+                if (dest / "latest.safetensors").is_file():
+                    continue
+                shutil.rmtree(dest, ignore_errors=True)
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copytree(progress / "snapshots" / later / run_name, dest)
+        log.info("restored group %s in progress (evaluated up to %d steps; runs at %s) from %s: its runs continue "
+                 "from the kept weights", group.name, steps, entry.get("runs", "that stage"), keep)
         return True
     models = stage_dir(work, group, steps) / "models"
     for name in group.variants:

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
-from .keep import group_fingerprint, keep_group, keep_progress, kept_groups, restore_group
+from .keep import _run_name, group_fingerprint, keep_group, keep_progress, kept_groups, restore_group
 from .stage_eval import evaluate_stage, load_evaluation, package_stage, snapshot_run, stage_dir
 from .staged import StagedRecipe, StudyGroup, stage_jobs
 from .stop_rule import StopDecision, decide
@@ -321,21 +321,28 @@ def _keep_stopped(recipe: StagedRecipe, outcome: GroupOutcome, work: Path, keep:
 def keep_study(recipe: StagedRecipe, work: str | os.PathLike, keep: str | os.PathLike) -> dict[str, str]:
     """Keep what ``work`` holds of every group, without training or scoring: a stopped group as
     :func:`~salad_core.ablations.keep.keep_group`, a group in progress as
-    :func:`~salad_core.ablations.keep.keep_progress` (its last evaluated stage). For a study started by an
-    older version, or to keep at once. Returns ``{group: what was kept}``.
+    :func:`~salad_core.ablations.keep.keep_progress` with ``current=True`` (each run at its latest step,
+    inside a stage too, and the snapshots of stages not evaluated yet): what a working session does before it
+    ends, so that a new machine loses no trained step. Returns ``{group: what was kept}``.
     """
+    from .stage_eval import latest_step
+
     work = Path(work)
     done: dict[str, str] = {}
     for group in recipe.groups:
         evaluations, decision = _evaluated(recipe, group, work)
-        if decision is None:
-            done[group.name] = "nothing evaluated"
-        elif decision.stop:
+        if decision is not None and decision.stop:
             _keep_stopped(recipe, GroupOutcome(group, decision, tuple(evaluations)), work, keep)
             done[group.name] = f"stopped at {decision.steps} steps ({decision.reason})"
-        else:
-            keep_progress(recipe, group, [int(d["steps"]) for d in evaluations], work, keep)
-            done[group.name] = f"in progress, evaluated up to {decision.steps} steps"
+            continue
+        evaluated = [int(d["steps"]) for d in evaluations]
+        if not evaluated and all(latest_step(work / _run_name(recipe, v)) is None for v in group.variants):
+            done[group.name] = "nothing trained"
+            continue
+        keep_progress(recipe, group, evaluated, work, keep, current=True)
+        kept = kept_groups(keep)[group.name]["runs"]
+        done[group.name] = (f"in progress, evaluated up to {evaluated[-1]} steps" if evaluated else
+                            "in progress, nothing evaluated yet") + f"; runs kept at {kept}"
     return done
 
 
