@@ -52,7 +52,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from .stage_eval import evaluation_path, load_evaluation, stage_dir
+from .stage_eval import _VIEW_FILES, evaluation_path, load_evaluation, stage_dir
 from .staged import StagedRecipe, StudyGroup
 from .study import plan_jobs
 
@@ -201,17 +201,13 @@ def keep_progress(recipe: StagedRecipe, group: StudyGroup, evaluated: list[int],
     return dest
 
 
-#: The files of a stage snapshot kept besides its weights (small: configs, statistics, the run's log).
-_SNAPSHOT_FILES = ("config.json", "mean_std.safetensors", "latent_stats.safetensors", "log.jsonl")
-
-
 def _keep_snapshot(snap: Path, dest: Path) -> None:
     """Copy a stage snapshot (``snapshot_run``'s folder) with its weights in float16."""
     from salad_core.train.warm_start import write_warm_start
 
     write_warm_start(snap / "latest", dest / "latest")
-    for name in _SNAPSHOT_FILES:
-        if (snap / name).is_file():
+    for name in _VIEW_FILES:                  # the snapshot's other files: configs, statistics, the run's log
+        if not name.startswith("latest.") and (snap / name).is_file():
             shutil.copy2(snap / name, dest / name)
 
 
