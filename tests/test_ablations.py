@@ -304,6 +304,28 @@ def _fake_rows(summaries: dict, steps: int) -> dict:
                 "settings": {"evaluator": "fake evaluator"}} for v, ms in summaries.items()}
 
 
+def test_paired_advantage_removes_what_a_replication_does_to_both_rows():
+    from salad_core.ablations.orderings import paired_advantage
+
+    # each replication moves both rows alike (an easy or hard draw): their own intervals overlap widely,
+    # the paired differences are all 1.0 lower FID for the first row
+    a, b = [5.0, 9.0, 6.0, 12.0, 7.0], [6.0, 10.0, 7.0, 13.0, 8.0]
+    half_a = 1.96 * np.std(a) / np.sqrt(5)
+    assert compare((np.mean(a), half_a), (np.mean(b), 1.96 * np.std(b) / np.sqrt(5)), "FID") == "="
+    assert paired_advantage(a, b, "FID") == pytest.approx((1.0, 0.0))
+    # higher-is-better metric: a's advantage is a - b; the half-width is the protocol's 1.96 std / sqrt(R)
+    mean, half = paired_advantage([0.8, 0.7, 0.9], [0.7, 0.7, 0.6], "R-precision top-3")
+    d = np.array([0.1, 0.0, 0.3])
+    assert mean == pytest.approx(d.mean()) and half == pytest.approx(1.96 * d.std() / np.sqrt(3))
+    assert paired_advantage([0.02], [0.03], "MPJPE") == pytest.approx((0.01, 0.0))
+    with pytest.raises(ValueError, match="same replications"):
+        paired_advantage([1.0, 2.0], [1.0], "FID")
+    with pytest.raises(ValueError, match="non-finite"):
+        paired_advantage([1.0, float("nan")], [1.0, 2.0], "FID")
+    with pytest.raises(ValueError, match="metric='Diversity'"):
+        paired_advantage([1.0], [2.0], "Diversity")
+
+
 def test_model_card_is_written_from_the_evaluation_files_alone(tmp_path):
     recipe = load_staged_recipe(_write_staged(tmp_path, _staged_doc()))
     group = recipe.groups[0]
@@ -330,6 +352,13 @@ def test_model_card_is_written_from_the_evaluation_files_alone(tmp_path):
     assert "| `st` vs `pose` | MPJPE | `=` | `=` | `>` | no | no |" in card
     assert "Evaluator: `fake evaluator`" in card and "ours level, paper better" in card
     assert "Probes" not in card
+    assert "| `st` vs `pose` | FID | `<` | `>` | `>` | yes | yes | - |" in card        # no per-replication values
+    # with the replications' values the card prints the paired advantage, starred when it excludes 0
+    docs[-1]["rows"]["st"]["values"] = {"FID": [0.09, 0.11, 0.10], "MPJPE": [0.019, 0.021, 0.020]}
+    docs[-1]["rows"]["pose"]["values"] = {"FID": [0.19, 0.21, 0.20], "MPJPE": [0.020, 0.020, 0.020]}
+    card = model_card({"vaes": outcome}, command="c")
+    assert "| `st` vs `pose` | FID | `<` | `>` | `>` | yes | yes | 0.100 ± 0.000 `*` |" in card
+    assert "| `st` vs `pose` | MPJPE | `=` | `=` | `>` | no | no | 0.000 ± 0.092 cm |" in card
     # probes made on the final stage are printed beside the tables, with their commands; others are not
     probe = {"label": "narrow pose VAE", "base_variant": "pose", "change": {"model.pose_width": 4}, "parameters": 900,
              "summary": {"FID": [0.5, 0.02], "MPJPE": [0.05, 0.003]}, "commands": ["train it", "score it"]}

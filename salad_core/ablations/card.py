@@ -12,7 +12,7 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from .orderings import TABLE_METRICS, paper_value
+from .orderings import TABLE_METRICS, paired_advantage, paper_value
 
 __all__ = ["model_card", "shipped_tables", "TABLE_TITLES"]
 
@@ -46,6 +46,17 @@ def _stage_list(evaluations: Sequence[Mapping[str, Any]]) -> str:
     return ", ".join(f"{doc['steps']:,}" for doc in evaluations)
 
 
+def _paired_cell(final: Mapping[str, Any], ordering: Mapping[str, Any]) -> str:
+    """The paired-advantage cell of one ordering (``-`` when the rows carry no per-replication values)."""
+    metric, rows = ordering["metric"], final["rows"]
+    try:
+        a, b = rows[ordering["a"]]["values"][metric], rows[ordering["b"]]["values"][metric]
+    except KeyError:
+        return "-"
+    mean, half = paired_advantage(a, b, metric)
+    return _fmt(metric, mean, half) + (" `*`" if abs(mean) > half else "")
+
+
 def _table_section(table: str, rows: Mapping[str, str], final: Mapping[str, Any],
                    evaluations: Sequence[Mapping[str, Any]], kind: str) -> list[str]:
     metrics = TABLE_METRICS[kind]
@@ -69,13 +80,18 @@ def _table_section(table: str, rows: Mapping[str, str], final: Mapping[str, Any]
                   + (", i.e. 95 % intervals overlap" if final.get("compare", "intervals") == "intervals" else "")
                   + "):", "",
                   "| pair | metric | " + " | ".join(f"ours at {s:,}" for s in stages)
-                  + " | paper | agrees | our intervals separate |",
-                  "|" + "---|" * (5 + len(stages))]
+                  + f" | paper | agrees | our intervals separate | paired advantage at {stages[-1]:,} |",
+                  "|" + "---|" * (6 + len(stages))]
         for k in keys:
             o = final["orderings"][k]
             history = [doc["orderings"][k]["ours"] for doc in evaluations]
             lines.append(f"| `{o['a']}` vs `{o['b']}` | {o['metric']} | " + " | ".join(f"`{h}`" for h in history)
-                         + f" | `{o['paper']}` | {'yes' if o['agrees'] else 'no'} | {'yes' if o['separated'] else 'no'} |")
+                         + f" | `{o['paper']}` | {'yes' if o['agrees'] else 'no'} | {'yes' if o['separated'] else 'no'} | "
+                         + _paired_cell(final, o) + " |")
+        lines += ["", "*Paired advantage*: the first row's advantage over the second (positive: better), replication "
+                  "by replication on the same crops, captions and noise, mean ± 95 % half-width; `*` where that "
+                  "interval excludes 0. It is a second reading of a level pair (the stop rule and the columns "
+                  "before it compare the two rows' own intervals)."]
     return lines + [""]
 
 

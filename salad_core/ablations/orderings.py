@@ -17,9 +17,9 @@ An ordering is one of three symbols, always from the first row's point of view:
 from __future__ import annotations
 
 import math
-from typing import Mapping
+from typing import Mapping, Sequence
 
-__all__ = ["PAPER_PAIRS", "TABLE_METRICS", "BETTER", "COMPARE_MODES", "KIND_OF_TABLE", "compare",
+__all__ = ["PAPER_PAIRS", "TABLE_METRICS", "BETTER", "COMPARE_MODES", "KIND_OF_TABLE", "compare", "paired_advantage",
            "paper_value", "paper_ordering", "paper_rows", "pair_key", "check_table_rows"]
 
 #: Paper table -> the pairs of rows it compares (paper row labels; the first is the paper's model).
@@ -74,6 +74,43 @@ def compare(a: tuple[float, float], b: tuple[float, float], metric: str, mode: s
         return "="
     a_better = diff < 0 if BETTER[metric] == "lower" else diff > 0
     return ">" if a_better else "<"
+
+
+def paired_advantage(a: "Sequence[float]", b: "Sequence[float]", metric: str) -> tuple[float, float]:
+    """Row ``a``'s advantage over row ``b`` on ``metric``, replication by replication.
+
+    Every row of a stage is scored on the same crops, captions and noise seeds in each replication, so
+    the per-replication differences are paired: their spread leaves out what the replication itself
+    does to both rows (an easy or hard draw of crops), and their interval is narrower than the
+    two rows' intervals together. The stop rule does not use it (:func:`compare` does); the card prints
+    it beside the orderings as a second reading of a level pair.
+
+    Parameters
+    ----------
+    a, b : sequence of float ``(R,)``
+        The two rows' values of ``metric`` per replication, in replication order.
+    metric : str
+        A key of :data:`BETTER`.
+
+    Returns
+    -------
+    (mean, half) : tuple of float
+        The mean advantage (positive: ``a`` better, i.e. ``b - a`` for a lower-is-better metric) and its
+        95 % half-width, as every interval of the protocol (:func:`salad_core.eval.metrics.mean_ci`:
+        ``1.96 std / sqrt(R)``, population std; 0 for one replication).
+    """
+    if metric not in BETTER:
+        raise ValueError(f"metric={metric!r} has no ordering; allowed: {sorted(BETTER)}")
+    a, b = [float(v) for v in a], [float(v) for v in b]
+    if len(a) != len(b) or not a:
+        raise ValueError(f"paired values need the same replications on both rows, got {len(a)} and {len(b)}")
+    if not all(math.isfinite(v) for v in a + b):
+        raise ValueError(f"cannot pair non-finite values a={a!r}, b={b!r} on {metric}")
+    from salad_core.eval.metrics import mean_ci
+
+    sign = -1.0 if BETTER[metric] == "lower" else 1.0
+    mean, half = mean_ci([sign * (x - y) for x, y in zip(a, b)])
+    return float(mean), float(half)
 
 
 def paper_rows(table: str) -> tuple[str, ...]:
