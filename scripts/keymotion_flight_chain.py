@@ -10,8 +10,10 @@ benchmark's per-motion measures (raw position joints, :func:`salad_core.eval.phy
 flight frames, the pelvis's vertical acceleration in flight (ballistic: -9.81 m/s^2), the longest flight,
 the pelvis rise, foot skating and floating. ``--recovery fit`` reads the three generated stages' joints after
 the skeleton fit (fixed bones, locked feet, a floor: what ``out.joints`` shows) instead of the position features.
+``--kf-vae RUN`` measures another keyframe VAE (a training run, e.g. of another latent size) in place of the
+weights' own, with their MMAE, before any PST has been trained on its latent: the generated stage is left out.
 
-    python scripts/keymotion_flight_chain.py --data CORPUS [--weights DIR] [--split test] [--limit 30] [--recovery fit] [--guidance W] [--out chain.json]
+    python scripts/keymotion_flight_chain.py --data CORPUS [--weights DIR] [--kf-vae RUN] [--split test] [--limit 30] [--recovery fit] [--guidance W] [--out chain.json]
 
 CORPUS is the corpus the weights were trained on (its test or validation split: never training clips).
 """
@@ -79,6 +81,9 @@ def main(argv=None, *, pipe=None) -> int:
                          "skeleton fit (fixed bones, locked feet, a floor: what out.joints shows)")
     ap.add_argument("--guidance", type=float, default=None,
                     help="guidance weight of the generated stage (default: the pipeline's)")
+    ap.add_argument("--kf-vae", type=Path, default=None,
+                    help="a keyframe VAE run (folder or checkpoint) measured in place of the weights' own, with their "
+                         "MMAE; the generated stage is left out (the weights' PST denoises its own VAE's latent)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None, help="write the per-clip reports and the table here (JSON)")
     args = ap.parse_args(argv)
@@ -94,16 +99,25 @@ def main(argv=None, *, pipe=None) -> int:
 
     torch.set_num_threads(args.threads)
     pipe = pipe if pipe is not None else KeyMotionPipeline.from_pretrained(args.weights)
+    if args.kf_vae is not None:
+        from salad_core.keymotion.train import load_frozen_kf_vae
+
+        vae, own = load_frozen_kf_vae(args.kf_vae, pipe.device), pipe.kf_vae.config
+        if (vae.config.num_keyframes, vae.config.skeleton) != (own.num_keyframes, own.skeleton):
+            ap.error(f"--kf-vae {args.kf_vae}: {vae.config.num_keyframes} keyframes of {vae.config.skeleton!r}, the "
+                     f"weights' VAE {own.num_keyframes} of {own.skeleton!r}")
+        pipe.kf_vae = vae                              # the PST is not called (generate=False below)
+    stages = [s for s in CHAIN_STAGES if args.kf_vae is None or s != "generated"]
     clips = clips_with(args.data, args.words, args.exclude, args.limit, args.split)
     if not clips:
         ap.error(f"no {args.split} clip of {args.data} has a caption with {args.words} (without {args.exclude})")
-    reports: dict[str, list[dict]] = {s: [] for s in CHAIN_STAGES}
+    reports: dict[str, list[dict]] = {s: [] for s in stages}
     for name, caption in clips:
         x = np.load(args.data / "new_joint_vecs" / f"{name}.npy").astype(np.float32)[: pipe.max_length]
         if len(x) < pipe.num_keyframes:
             continue
-        for stage, joints in generation_chain(pipe, x, caption, seed=args.seed,
-                                                recovery=args.recovery, guidance_scale=args.guidance).items():
+        for stage, joints in generation_chain(pipe, x, caption, seed=args.seed, recovery=args.recovery,
+                                                guidance_scale=args.guidance, generate=args.kf_vae is None).items():
             reports[stage].append({"clip": name, **measure_motion(joints, pipe.skeleton).as_dict()})
     n = len(reports["true"])
     table = summarise(reports)
@@ -114,6 +128,7 @@ def main(argv=None, *, pipe=None) -> int:
                                         "split": args.split, "seed": args.seed, "recovery": args.recovery,
                                         "guidance": args.guidance,
                                         "weights": str(args.weights or "shipped"),
+                                        "kf_vae": str(args.kf_vae) if args.kf_vae else None,
                                         "table": table, "reports": reports}, indent=2, default=float) + "\n")
     return 0
 

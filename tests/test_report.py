@@ -328,6 +328,29 @@ def test_flight_chain_script_writes_each_stage_with_its_recovery(keymotion_pipe,
     assert "| generated |" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         script.main(["--data", str(tiny_procedural_corpus), "--recovery", "ik"], pipe=keymotion_pipe)
+    # --kf-vae: another keyframe VAE (another latent width, which the weights' PST cannot denoise) in place of
+    # the weights' own; the chain stops before the generated stage and its VAE stage is that VAE's
+    from salad_core.io import save_checkpoint
+    from salad_core.keymotion.kf_vae import KeyframeVAE, KeyframeVAEConfig
+
+    own = keymotion_pipe.kf_vae
+    torch.manual_seed(5)
+    wide_cfg = KeyframeVAEConfig(**{**own.config.__dict__, "latent_dim": 32})
+    wide = KeyframeVAE(wide_cfg)
+    wide.norm.load_state_dict(own.norm.state_dict())             # the same data statistics
+    save_checkpoint(tmp_path / "wide" / "best", wide, model_type="keymotion_kf_vae", config=wide_cfg)
+    wout = tmp_path / "wide.json"
+    try:
+        assert script.main(["--data", str(tiny_procedural_corpus), "--words", "a", "--exclude", "--limit", "2",
+                            "--recovery", "fit", "--kf-vae", str(tmp_path / "wide"), "--out", str(wout)],
+                           pipe=keymotion_pipe) == 0
+    finally:
+        keymotion_pipe.kf_vae = own                               # the fixture is shared
+    wdoc = json.loads(wout.read_text())
+    assert list(wdoc["table"]) == ["true", "true_keyframes", "vae_keyframes"] and wdoc["kf_vae"].endswith("wide")
+    assert wdoc["reports"]["true_keyframes"] == doc["reports"]["true_keyframes"]      # the same MMAE, clips, keyframes
+    assert wdoc["reports"]["vae_keyframes"] != doc["reports"]["vae_keyframes"]        # another VAE
+    assert "| generated |" not in capsys.readouterr().out
 
 
 def test_procedural_eval_corpus_picks_heldout_clips_or_the_given_root(tmp_path):

@@ -166,8 +166,8 @@ def infill_from_keyframes(pipe: "KeyMotionPipeline", features: np.ndarray, capti
 
 @torch.no_grad()
 def generation_chain(pipe: "KeyMotionPipeline", features: np.ndarray, caption: str, seed: int = 0,
-                     method: str = "mdo", recovery: str = "positions", guidance_scale: float | None = None
-                     ) -> dict[str, np.ndarray]:
+                     method: str = "mdo", recovery: str = "positions", guidance_scale: float | None = None,
+                     generate: bool = True) -> dict[str, np.ndarray]:
     """One motion at every stage of KeyMotion's generation path, as joints read from the position
     features (``recovery="positions"``, no fit: what each model itself made) or after the skeleton fit
     (``"fit"``: fixed bones, locked feet, a floor; what ``out.joints`` shows by default).
@@ -188,6 +188,9 @@ def generation_chain(pipe: "KeyMotionPipeline", features: np.ndarray, caption: s
         the ``"true"`` stage is always the clip's own position joints.
     guidance_scale : float, optional
         Guidance weight of the generated stage (default: the pipeline's).
+    generate : bool
+        False leaves the ``"generated"`` stage out (no PST call): how a keyframe VAE is measured before a
+        PST has been trained on its latent.
 
     Returns
     -------
@@ -219,7 +222,10 @@ def generation_chain(pipe: "KeyMotionPipeline", features: np.ndarray, caption: s
         f = norm.denormalize(motion.float().cpu())[0].numpy()
         return np.asarray(recover_joints(f, recovery, sk), np.float32)
 
-    generated = pipe([caption], lengths=[len(x)], seed=seed, recovery=recovery,
-                     guidance_scale=guidance_scale).joints[0]
-    return {"true": features_to_joints(x, sk).astype(np.float32), "true_keyframes": joints(own),
-            "vae_keyframes": joints(through_vae), "generated": np.asarray(generated, np.float32)}
+    chain = {"true": features_to_joints(x, sk).astype(np.float32), "true_keyframes": joints(own),
+             "vae_keyframes": joints(through_vae)}
+    if generate:
+        generated = pipe([caption], lengths=[len(x)], seed=seed, recovery=recovery,
+                         guidance_scale=guidance_scale).joints[0]
+        chain["generated"] = np.asarray(generated, np.float32)
+    return chain
