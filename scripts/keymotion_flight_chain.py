@@ -20,6 +20,7 @@ CORPUS is the corpus the weights were trained on (its test or validation split: 
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import sys
 from pathlib import Path
@@ -106,6 +107,7 @@ def main(argv=None, *, pipe=None) -> int:
         if (vae.config.num_keyframes, vae.config.skeleton) != (own.num_keyframes, own.skeleton):
             ap.error(f"--kf-vae {args.kf_vae}: {vae.config.num_keyframes} keyframes of {vae.config.skeleton!r}, the "
                      f"weights' VAE {own.num_keyframes} of {own.skeleton!r}")
+        pipe = copy.copy(pipe)                         # the caller's pipeline keeps its own VAE
         pipe.kf_vae = vae                              # the PST is not called (generate=False below)
     stages = [s for s in CHAIN_STAGES if args.kf_vae is None or s != "generated"]
     clips = clips_with(args.data, args.words, args.exclude, args.limit, args.split)

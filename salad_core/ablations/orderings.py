@@ -76,7 +76,7 @@ def compare(a: tuple[float, float], b: tuple[float, float], metric: str, mode: s
     return ">" if a_better else "<"
 
 
-def paired_advantage(a: "Sequence[float]", b: "Sequence[float]", metric: str) -> tuple[float, float]:
+def paired_advantage(a: Sequence[float], b: Sequence[float], metric: str) -> tuple[float, float]:
     """Row ``a``'s advantage over row ``b`` on ``metric``, replication by replication.
 
     Every row of a stage is scored on the same crops, captions and noise seeds in each replication, so
