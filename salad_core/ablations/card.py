@@ -149,7 +149,9 @@ def model_card(outcomes: Mapping[str, Any], *, command: str, recipe_path: str = 
                 + _protocol(group.kind, group.evaluation) + ".", ""]
         ev_name = next(iter(final["rows"].values()))["settings"].get("evaluator")
         if ev_name:
-            out += [f"Evaluator: `{ev_name}`.", ""]
+            shipped = str(ev_name).replace(os.sep, "/").rstrip("/").endswith("salad_core/weights/evaluator")
+            out += [("Evaluator: the shipped procedural-corpus evaluator (`salad_core/weights/evaluator`)." if shipped
+                     else f"Evaluator: `{ev_name}`."), ""]
         for table, rows in group.tables.items():
             out += _table_section(table, rows, final, evaluations, group.kind)
         disagree = [o for o in final["orderings"].values() if not o["agrees"]]
