@@ -145,3 +145,46 @@ def test_the_kept_studys_probes_match_their_stage_and_config():
             section, _, field = key.partition(".")
             assert probe["trained_config"][section][field] == value, (name, key)
         assert len(probe["values"]["MPJPE"]) == stage["settings"]["replications"]
+
+
+def _sampler_script():
+    spec = importlib.util.spec_from_file_location("ablation_sampler_probe", REPO / "scripts" / "ablation_sampler_probe.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_sampler_probe_refuses_what_is_not_the_shipped_stage(tmp_path):
+    """The sampler probe rescores shipped denoisers with a stage's protocol: a VAE stage, a variant the stage did not
+    score, or shipped models of other steps than the stage are refused before anything is loaded."""
+    main = _sampler_script().main
+    stage = tmp_path / "stage.json"
+    common = ["--stage-eval", str(stage), "--num-steps", "50", "--data", str(tmp_path), "--out", str(tmp_path / "o.json")]
+    stage.write_text(json.dumps({**_stage_doc(100), "kind": "vae"}))
+    with pytest.raises(SystemExit, match="not a denoiser stage"):
+        main([*common, "--variants", "st"])
+    rows = {"full": {"summary": {}}, "x0": {"summary": {}}}
+    stage.write_text(json.dumps({"kind": "denoiser", "stage": "denoisers@100", "steps": 100, "rows": rows,
+                                 "settings": {"num_steps": 10}}))
+    with pytest.raises(SystemExit, match="'no_film' is not a row"):
+        main([*common, "--variants", "full", "no_film"])
+    shipped = json.loads((REPO / "salad_core" / "weights" / "ablations" / "index.json").read_text())["full"]["steps"]
+    with pytest.raises(SystemExit, match=f"shipped 'full' has {shipped} steps, the stage 100"):
+        main([*common, "--variants", "full", "x0"])
+    with pytest.raises(SystemExit, match="at least 1"):
+        main([*common[:2], "--num-steps", "0", *common[4:], "--variants", "full"])
+    assert not (tmp_path / "o.json").exists()
+
+
+def test_sampler_probe_markdown_prints_both_sampler_settings_side_by_side():
+    from salad_core.ablations.probes import sampler_probe_markdown
+
+    row = lambda f10, f50: {"at_stage": {"FID": [f10, 0.1], "R-precision top-3": [0.8, 0.01]},
+                            "summary": {"FID": [f50, 0.2], "R-precision top-3": [0.7, 0.02]}}
+    record = {"denoisers@8000, 50 steps": {
+        "num_steps": 50, "stage_num_steps": 10, "rows": {"full": row(3.0, 2.5), "x0": row(3.5, 3.25)},
+        "paired": {"full vs x0, FID": {"at_stage": [0.5, 0.25], "probe": [0.75, 0.5]}}, "command": "python probe"}}
+    text = sampler_probe_markdown(record)
+    assert "| `full` | 3.000 ± 0.100 | 2.500 ± 0.200 | 0.800 ± 0.010 | 0.700 ± 0.020 |" in text
+    assert "| full vs x0, FID | +0.500 ± 0.250 | +0.750 ± 0.500 |" in text
+    assert "FID, 10 steps | FID, 50 steps" in text and "Made by: `python probe`" in text

@@ -25,7 +25,7 @@ from typing import Any, Mapping, Sequence
 
 from .stage_eval import _jsonable, _row_doc, _score_vae, latest_step
 
-__all__ = ["score_vae_probe", "record_probe", "load_probes", "probe_markdown"]
+__all__ = ["score_vae_probe", "record_probe", "load_probes", "probe_markdown", "sampler_probe_markdown"]
 
 
 def _stage_settings(stage_doc: Mapping[str, Any]):
@@ -136,3 +136,28 @@ def probe_markdown(stage_doc: Mapping[str, Any], probes: Mapping[str, Mapping[st
         lines.append(f"| **probe** {p['label']} ({p['base_variant']} with {change}) | {p.get('parameters') or 0:,} | "
                      f"{_cell(p['summary'], 'FID', 1, 3)} | {_cell(p['summary'], 'MPJPE', 100, 2)} |")
     return "\n".join(lines) + "\n"
+
+
+def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
+    """The record of ``scripts/ablation_sampler_probe.py`` (denoisers scored again with another number of sampler
+    steps, the stage's protocol otherwise) as markdown: per probe, each row at the stage's steps and at the probe's,
+    then each pair's paired advantage at both, and the command that made it."""
+    out = []
+    for name, probe in record.items():
+        n = probe["num_steps"]
+        first = next(iter(probe["rows"]))
+        stage_steps = probe.get("stage_num_steps", 10)
+        out += [f"**{name}** (the stage's protocol with {n} sampler steps):", "",
+                f"| variant | FID, {stage_steps} steps | FID, {n} steps | R-precision top-3, {stage_steps} steps | "
+                f"R-precision top-3, {n} steps |", "|---|---|---|---|---|"]
+        for v, row in probe["rows"].items():
+            cells = [f"{row[k][m][0]:.3f} ± {row[k][m][1]:.3f}" for m in ("FID", "R-precision top-3")
+                     for k in ("at_stage", "summary")]
+            out.append(f"| `{v}` | " + " | ".join(cells) + " |")
+        out += ["", f"Paired advantage of `{first}` (positive: better; 95 % half-width):", "",
+                f"| pair | {stage_steps} steps | {n} steps |", "|---|---|---|"]
+        for pair, p in probe["paired"].items():
+            out.append(f"| {pair} | {p['at_stage'][0]:+.3f} ± {p['at_stage'][1]:.3f} | "
+                       f"{p['probe'][0]:+.3f} ± {p['probe'][1]:.3f} |")
+        out += ["", f"Made by: `{probe['command']}`", ""]
+    return "\n".join(out).rstrip() + "\n"

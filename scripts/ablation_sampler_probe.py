@@ -1,0 +1,106 @@
+#!/usr/bin/env python
+"""Score shipped ablation denoisers again with a stage's protocol but another sampler setting (issue 24).
+
+The staged study scores its denoisers with 10 DDIM steps (a CPU budget); the paper samples with 50. This probe
+takes the protocol of one stage's evaluation file (split, crops, replications, seed, guidance), changes only the
+sampler steps, scores the named variants of the shipped ablation folder and prints each row and the paired
+advantage of the first variant over each other one (the same crops, captions and noise)::
+
+    python scripts/ablation_sampler_probe.py --stage-eval studies/ablations_v2/evaluations/denoisers@8000.json \\
+        --variants full x0 --num-steps 50 --data CORPUS_2.4 --out studies/ablations_v2/sampler_probe.json
+
+The shipped models must be those of the stage (the card names the steps; checked against ``index.json``).
+The record keeps the command, so the probe can be made again on a new machine.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import shlex
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--stage-eval", type=Path, required=True, help="a denoiser stage's evaluation file")
+    ap.add_argument("--variants", nargs="+", required=True, help="shipped denoiser variants; the first is compared "
+                    "with each other one")
+    ap.add_argument("--num-steps", type=int, required=True, help="sampler steps (the stage used its own)")
+    ap.add_argument("--data", type=Path, required=True, help="the corpus the stage was scored on")
+    ap.add_argument("--ablations", type=Path, default=None, help="shipped ablation folder (default: salad's own)")
+    ap.add_argument("--out", type=Path, required=True, help="JSON record (one entry per --num-steps, merged)")
+    ap.add_argument("--threads", type=int, default=None)
+    args = ap.parse_args(argv)
+
+    import torch
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    from salad_core.ablations import list_ablations, load_ablation_pipeline
+    from salad_core.ablations.orderings import TABLE_METRICS, paired_advantage
+    from salad_core.eval import EvalSettings, evaluate_generator
+    from salad_core.eval.length_buckets import LengthBucketed
+    from salad_core.eval.metrics import mean_ci
+    from salad_core.eval.train_evaluator import load_packaged_evaluator
+    from salad_core.text import load_text_encoder
+
+    stage = json.loads(args.stage_eval.read_text())
+    if stage.get("kind") != "denoiser":
+        raise SystemExit(f"{args.stage_eval} is not a denoiser stage (kind {stage.get('kind')!r})")
+    if args.num_steps < 1:
+        raise SystemExit(f"--num-steps must be at least 1, got {args.num_steps}")
+    index = list_ablations(args.ablations)
+    for v in args.variants:
+        if v not in stage["rows"]:
+            raise SystemExit(f"variant {v!r} is not a row of {args.stage_eval} (rows: {sorted(stage['rows'])})")
+    for v in args.variants:
+        if v not in index or index[v]["steps"] != stage["steps"]:
+            got = index.get(v, {}).get("steps")
+            raise SystemExit(f"shipped {v!r} has {got} steps, the stage {stage['steps']}: ship that stage first")
+    fields = {f.name for f in dataclasses.fields(EvalSettings)}
+    settings = EvalSettings(**{**{k: v for k, v in stage["settings"].items() if k in fields},
+                               "num_steps": args.num_steps})
+    evaluator = load_packaged_evaluator()[0]
+    text_encoder = load_text_encoder("minilm")
+    rows = {}
+    for v in args.variants:
+        t0 = time.perf_counter()
+        gen = LengthBucketed(load_ablation_pipeline(v, args.ablations, text_encoder=text_encoder))
+        res = evaluate_generator(gen, args.data, evaluator, settings, name=index[v]["label"],
+                                 weights=f"ablation {v} at {stage['steps']} steps, {args.num_steps} sampler steps")
+        values = {m: [float(x) for x in res.values[m]] for m in TABLE_METRICS["denoiser"]}
+        rows[v] = {"values": values, "summary": {m: list(mean_ci(x)) for m, x in values.items()},
+                   "at_stage": {m: stage["rows"][v]["summary"][m] for m in values}}
+        print(f"{v}: {time.perf_counter() - t0:.0f} s;", ", ".join(
+            f"{m} {s[0]:.3f} ± {s[1]:.3f} (at {stage['settings']['num_steps']} steps {rows[v]['at_stage'][m][0]:.3f})"
+            for m, s in rows[v]["summary"].items()))
+    first = args.variants[0]
+    paired = {}
+    for b in args.variants[1:]:
+        for m in TABLE_METRICS["denoiser"]:
+            mean, half = paired_advantage(rows[first]["values"][m], rows[b]["values"][m], m)
+            at = paired_advantage(stage["rows"][first]["values"][m], stage["rows"][b]["values"][m], m)
+            paired[f"{first} vs {b}, {m}"] = {"probe": [mean, half], "at_stage": list(at)}
+            print(f"{first} vs {b}, {m}: paired advantage {mean:+.3f} ± {half:.3f} at {args.num_steps} steps "
+                  f"({at[0]:+.3f} ± {at[1]:.3f} at {stage['settings']['num_steps']})")
+    record = json.loads(args.out.read_text()) if args.out.is_file() else {}
+    record[f"{stage['stage']}, {args.num_steps} steps"] = {
+        "stage_eval": str(args.stage_eval), "num_steps": args.num_steps,
+        "stage_num_steps": stage["settings"]["num_steps"], "settings": dataclasses.asdict(settings),
+        "rows": rows, "paired": paired,
+        "command": "python scripts/ablation_sampler_probe.py " + " ".join(
+            shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(record, indent=1) + "\n")
+    print(f"recorded in {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
