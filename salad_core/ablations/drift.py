@@ -39,6 +39,8 @@ def load_group_evaluations(root: str | os.PathLike | None, group: str) -> list[d
 def row_drift(evaluations: Sequence[Mapping[str, Any]], metric: str) -> dict[str, dict[str, Any]]:
     """Per row: its mean of ``metric`` at every stage and its change between consecutive stages.
 
+    Values are in the evaluation files' units (MPJPE in metres).
+
     Returns
     -------
     dict
@@ -71,13 +73,14 @@ def pair_gaps(evaluations: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """
     final = evaluations[-1]
     metrics = TABLE_METRICS[final["kind"]]
+    drifts = {metric: row_drift(evaluations, metric) for metric in metrics}
     out = []
     for table, rows in final["tables"].items():
         variants = list(rows)
         first = variants[0]
         for b in variants[1:]:
             for metric in metrics:
-                drift = row_drift(evaluations, metric)
+                drift = drifts[metric]
                 gaps = [paired_advantage(doc["rows"][first]["values"][metric], doc["rows"][b]["values"][metric],
                                          metric) for doc in evaluations]
                 da, db = drift[first]["last_change"], drift[b]["last_change"]
