@@ -358,6 +358,12 @@ def test_model_card_is_written_from_the_evaluation_files_alone(tmp_path):
     docs[-1]["rows"]["pose"]["values"] = {"FID": [0.19, 0.21, 0.20], "MPJPE": [0.020, 0.020, 0.020]}
     card = model_card({"vaes": outcome}, command="c")
     assert "| `st` vs `pose` | FID | `<` | `>` | `>` | yes | yes | 0.100 ± 0.000 `*` |" in card
+    # the shipped evaluator is named as such, not by the path of the machine that scored the study
+    for row in docs[-1]["rows"].values():
+        row["settings"]["evaluator"] = "/root/runs/code/salad_core/weights/evaluator"
+    card = model_card({"vaes": outcome}, command="c")
+    assert "Evaluator: the shipped procedural-corpus evaluator (`salad_core/weights/evaluator`)." in card
+    assert "/root/runs" not in card
     assert "| `st` vs `pose` | MPJPE | `=` | `=` | `>` | no | no | 0.000 ± 0.092 cm |" in card
     # probes made on the final stage are printed beside the tables, with their commands; others are not
     probe = {"label": "narrow pose VAE", "base_variant": "pose", "change": {"model.pose_width": 4}, "parameters": 900,
