@@ -44,17 +44,19 @@ def main(argv=None) -> int:
         torch.set_num_threads(args.threads)
     from salad_core.ablations import list_ablations, load_ablation_pipeline
     from salad_core.ablations.orderings import TABLE_METRICS, paired_advantage
-    from salad_core.eval import EvalSettings, evaluate_generator
+    from salad_core.ablations.probes import stage_settings
+    from salad_core.eval import evaluate_generator
     from salad_core.eval.length_buckets import LengthBucketed
-    from salad_core.eval.metrics import mean_ci
     from salad_core.eval.train_evaluator import load_packaged_evaluator
     from salad_core.text import load_text_encoder
 
-    stage = json.loads(args.stage_eval.read_text())
-    if stage.get("kind") != "denoiser":
-        raise SystemExit(f"{args.stage_eval} is not a denoiser stage (kind {stage.get('kind')!r})")
     if args.num_steps < 1:
         raise SystemExit(f"--num-steps must be at least 1, got {args.num_steps}")
+    stage = json.loads(args.stage_eval.read_text())
+    try:
+        settings = dataclasses.replace(stage_settings(stage, "denoiser"), num_steps=args.num_steps)
+    except ValueError as err:
+        raise SystemExit(f"{args.stage_eval} is not a denoiser stage: {err}") from None
     index = list_ablations(args.ablations)
     for v in args.variants:
         if v not in stage["rows"]:
@@ -63,9 +65,6 @@ def main(argv=None) -> int:
         if v not in index or index[v]["steps"] != stage["steps"]:
             got = index.get(v, {}).get("steps")
             raise SystemExit(f"shipped {v!r} has {got} steps, the stage {stage['steps']}: ship that stage first")
-    fields = {f.name for f in dataclasses.fields(EvalSettings)}
-    settings = EvalSettings(**{**{k: v for k, v in stage["settings"].items() if k in fields},
-                               "num_steps": args.num_steps})
     evaluator = load_packaged_evaluator()[0]
     text_encoder = load_text_encoder("minilm")
     rows = {}
@@ -75,7 +74,8 @@ def main(argv=None) -> int:
         res = evaluate_generator(gen, args.data, evaluator, settings, name=index[v]["label"],
                                  weights=f"ablation {v} at {stage['steps']} steps, {args.num_steps} sampler steps")
         values = {m: [float(x) for x in res.values[m]] for m in TABLE_METRICS["denoiser"]}
-        rows[v] = {"values": values, "summary": {m: list(mean_ci(x)) for m, x in values.items()},
+        summary = res.summary()
+        rows[v] = {"values": values, "summary": {m: [float(x) for x in summary[m]] for m in values},
                    "at_stage": {m: stage["rows"][v]["summary"][m] for m in values}}
         print(f"{v}: {time.perf_counter() - t0:.0f} s;", ", ".join(
             f"{m} {s[0]:.3f} ± {s[1]:.3f} (at {stage['settings']['num_steps']} steps {rows[v]['at_stage'][m][0]:.3f})"

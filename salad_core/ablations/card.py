@@ -185,6 +185,7 @@ def shipped_tables(root: str | os.PathLike | None = None) -> dict[str, str]:
     shipped ablation folder) alone, nothing is measured. A folder from the fixed-budget study (no evaluations)
     gives ``{}``; a staged folder whose evaluation files are missing is an error naming the file.
     """
+    from .drift import load_group_evaluations
     from .study import ablations_dir, list_ablations
 
     root = Path(root) if root is not None else ablations_dir()
@@ -202,8 +203,7 @@ def shipped_tables(root: str | os.PathLike | None = None) -> dict[str, str]:
         final_path = root / g["final"]
         if not final_path.is_file():
             raise FileNotFoundError(f"{final_path} (named by {root / 'index.json'}) is missing: ship the study again")
-        evaluations = sorted((json.loads(p.read_text()) for p in (root / "evaluations").glob(f"{name}@*.json")),
-                             key=lambda doc: doc["steps"])
+        evaluations = load_group_evaluations(root, name)
         final = json.loads(final_path.read_text())
         evaluations = [doc for doc in evaluations if doc["steps"] <= final["steps"]]
         for table, rows in g["tables"].items():

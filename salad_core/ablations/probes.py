@@ -13,7 +13,8 @@ maps a probe name to its row document (the layout of a stage's rows: ``values`` 
 compares with and the commands that made it. :func:`probe_markdown` prints the probe beside the stage's
 rows it answers.
 
-VAE probes only, for now: the VAE group is the one with a measured question (Table 2).
+Trained probes are VAE probes (the VAE group had the measured questions); denoisers are probed by scoring the
+shipped models again with another sampler setting (``scripts/ablation_sampler_probe.py``, :func:`sampler_probe_markdown`).
 """
 from __future__ import annotations
 
@@ -25,15 +26,18 @@ from typing import Any, Mapping, Sequence
 
 from .stage_eval import _jsonable, _row_doc, _score_vae, latest_step
 
-__all__ = ["score_vae_probe", "record_probe", "load_probes", "probe_markdown", "sampler_probe_markdown"]
+__all__ = ["stage_settings", "score_vae_probe", "record_probe", "load_probes", "probe_markdown", "sampler_probe_markdown"]
 
 
-def _stage_settings(stage_doc: Mapping[str, Any]):
+def stage_settings(stage_doc: Mapping[str, Any], kind: str = "vae"):
+    """The :class:`~salad_core.eval.settings.EvalSettings` a stage was scored with; the stage must be of ``kind``
+    (``"vae"`` or ``"denoiser"``), the kind of model the probe scores."""
     from salad_core.eval.settings import EvalSettings
 
-    if stage_doc.get("kind") != "vae":
-        raise ValueError(f"stage {stage_doc.get('stage')!r} is a {stage_doc.get('kind')!r} stage; VAE probes "
-                         "compare with a VAE group's stage")
+    if stage_doc.get("kind") != kind:
+        name = "VAE" if kind == "vae" else kind
+        raise ValueError(f"stage {stage_doc.get('stage')!r} is a {stage_doc.get('kind')!r} stage; {name} probes "
+                         f"compare with a {name} group's stage")
     return EvalSettings(**stage_doc["settings"])
 
 
@@ -71,7 +75,7 @@ def score_vae_probe(stage_doc: Mapping[str, Any], run: str | os.PathLike, *, lab
     """
     from salad_core.train.assemble import export_vae
 
-    settings = _stage_settings(stage_doc)
+    settings = stage_settings(stage_doc)
     steps = int(stage_doc["steps"])
     if base_variant not in stage_doc["rows"]:
         raise ValueError(f"base_variant {base_variant!r} is not a row of {stage_doc['stage']}; its rows: "
