@@ -188,3 +188,117 @@ def test_sampler_probe_markdown_prints_both_sampler_settings_side_by_side():
     assert "| `full` | 3.000 ± 0.100 | 2.500 ± 0.200 | 0.800 ± 0.010 | 0.700 ± 0.020 |" in text
     assert "| full vs x0, FID | +0.500 ± 0.250 | +0.750 ± 0.500 |" in text
     assert "FID, 10 steps | FID, 50 steps" in text and "Made by: `python probe`" in text
+
+
+def _den_study(root: Path, data: Path) -> tuple[Path, Path]:
+    """A study's work folder as the staged study leaves it: two denoiser variants (v and x prediction, tiny) trained
+    2 steps at a constant learning rate on one frozen VAE, their configs in ``configs/``."""
+    from salad_core.train import train_vae
+    from salad_core.train.cli import main as train_main
+    from salad_core.train.config import VAETrainConfig
+
+    vae = root / "vae"
+    train_vae(data, vae, VAEConfig(latent_dim=8, n_extra_layers=0),
+              VAETrainConfig(batch_size=8, max_steps=0, window=64, val_every=0, ckpt_every=0, num_threads=1,
+                             progress=False))
+    (root / "configs").mkdir(parents=True)
+    for name, pred in (("full", "v_prediction"), ("x0", "sample")):
+        cfg = root / "configs" / f"den_{name}.json"
+        cfg.write_text(json.dumps({
+            "model": {"latent_dim": 8, "width": 16, "heads": 2, "ff_dim": 32, "layers": 1, "text_dim": 384},
+            "diffusion": {"prediction_type": pred}, "text_encoder": "minilm",
+            "train": {"batch_size": 4, "max_steps": 2, "lr": 2e-3, "warmup_steps": 1, "milestones": [], "gamma": 0.2,
+                      "max_length": 72, "val_every": 0, "ckpt_every": 0, "log_every": 1, "num_threads": 1}}))
+        assert train_main(["denoiser", "--data", str(data), "--out", str(root / f"den_{name}"), "--config", str(cfg),
+                           "--vae", str(vae), "--no-progress"]) == 0
+    return root, vae
+
+
+def _den_stage_doc(steps: int) -> dict:
+    settings = {"split": "test", "batch_size": 4, "replications": 2, "max_samples": 4, "mm": False, "seed": 0,
+                "num_steps": 2}
+    rows = {v: {"variant": v, "label": lab, "steps": steps, "values": {"FID": f, "R-precision top-3": r},
+                "summary": {"FID": [sum(f) / 2, 0.1], "R-precision top-3": [sum(r) / 2, 0.05]}}
+            for v, lab, f, r in (("full", "v prediction", [3.0, 3.2], [0.8, 0.82]),
+                                 ("x0", "x prediction", [3.1, 3.5], [0.75, 0.8]))}
+    return {"stage": f"dens@{steps}", "group": "dens", "kind": "denoiser", "steps": steps, "settings": settings,
+            "rows": rows}
+
+
+def test_continuation_probe_continues_the_study_runs_with_a_decaying_rate_and_scores_them_paired(tmp_path,
+                                                                                                monkeypatch):
+    """prepare copies the study's runs (train state included) and writes their configs with the change; the runs
+    resume where the study stopped and train on with the new schedule; score assembles each with the frozen VAE,
+    scores it with the stage's protocol and records both rows and the pair's paired gap at the stage and after."""
+    import functools
+
+    import salad_core.eval.train_evaluator
+    import salad_core.text
+    from salad_core.train.cli import main as train_main
+    from _doubles import load_script
+
+    monkeypatch.setattr(salad_core.text, "load_text_encoder", functools.lru_cache(salad_core.text.load_text_encoder))
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=6)
+    work, vae = _den_study(tmp_path / "work", data)
+    mod = load_script("ablation_continuation_probe")
+    out_dir = tmp_path / "decay"
+    assert mod.main(["prepare", "--study-work", str(work), "--variants", "full", "x0", "--set", "train.max_steps=4",
+                     "train.milestones=[1]", "--out-dir", str(out_dir)]) == 0
+    for name in ("full", "x0"):
+        cfg = json.loads((out_dir / f"den_{name}.json").read_text())
+        base = json.loads((work / "configs" / f"den_{name}.json").read_text())
+        assert cfg["train"].pop("max_steps") == 4 and cfg["train"].pop("milestones") == [1]
+        assert base["train"].pop("max_steps") == 2 and base["train"].pop("milestones") == []
+        assert cfg == base
+        assert (out_dir / f"den_{name}" / "train_state.json").is_file()
+        # continue from the copied train state: the study's steps 1-2 at the warm-up and the constant rate, the
+        # continued steps 3 and 4 at x0.2 (milestone 1 after 1 warm-up step; a log line's step counts from 1)
+        assert train_main(["denoiser", "--data", str(data), "--out", str(out_dir / f"den_{name}"), "--config",
+                           str(out_dir / f"den_{name}.json"), "--vae", str(vae), "--no-progress", "--resume"]) == 0
+        logs = [json.loads(line) for line in (out_dir / f"den_{name}" / "log.jsonl").read_text().splitlines()]
+        lrs = {d["step"]: d["lr"] for d in logs if "lr" in d}
+        assert [lrs[k] for k in (1, 2, 3, 4)] == pytest.approx([1e-3, 2e-3, 4e-4, 4e-4])
+        # the study's own run is untouched
+        assert json.loads((work / f"den_{name}" / "latest.json").read_text())["meta"]["step"] == 2
+    assert "--set train.max_steps=4" in (out_dir / "prepare_command.txt").read_text()
+
+    evaluator = make_tiny_evaluator(data, dim_word=8, dim_text_hidden=16, dim_coemb=32, dim_movement_enc_hidden=16,
+                                    dim_movement_latent=16, dim_motion_hidden=32)
+    monkeypatch.setattr(salad_core.eval.train_evaluator, "load_packaged_evaluator", lambda *a, **k: (evaluator,))
+    stage = _den_stage_doc(2)
+    stage_file = tmp_path / "dens@2.json"
+    stage_file.write_text(json.dumps(stage))
+    record = tmp_path / "continuation_probe.json"
+    assert mod.main(["score", "--stage-eval", str(stage_file), "--out-dir", str(out_dir), "--variants", "full", "x0",
+                     "--name", "decay", "--change-text", "lr x0.2 from step 2", "--vae", str(vae), "--data",
+                     str(data), "--out", str(record)]) == 0
+    probe = json.loads(record.read_text())["decay"]
+    assert probe["from_step"] == 2 and probe["steps"] == 4 and probe["stage"] == "dens@2"
+    for name in ("full", "x0"):
+        row = probe["rows"][name]
+        assert row["steps"] == 4 and row["from_step"] == 2
+        assert all(len(v) == 2 and np.isfinite(v).all() for v in row["values"].values())
+        assert row["at_stage"] == stage["rows"][name]["summary"]
+        for key in ("split", "batch_size", "replications", "max_samples", "seed", "num_steps"):
+            assert row["settings"][key] == stage["settings"][key], key
+    # the paired gap, at the stage from its rows, after the continuation from the probe's rows
+    from salad_core.ablations.orderings import paired_advantage
+
+    pair = probe["paired"]["full vs x0, R-precision top-3"]
+    assert pair["at_stage"] == pytest.approx(list(paired_advantage([0.8, 0.82], [0.75, 0.8], "R-precision top-3")))
+    assert pair["probe"] == pytest.approx(list(paired_advantage(probe["rows"]["full"]["values"]["R-precision top-3"],
+                                                                probe["rows"]["x0"]["values"]["R-precision top-3"],
+                                                                "R-precision top-3")))
+    assert "prepare --study-work" in probe["commands"][0] and probe["commands"][1].startswith(
+        "python scripts/ablation_continuation_probe.py score")
+    from salad_core.ablations.probes import continuation_probe_markdown, score_denoiser_continuation
+
+    table = continuation_probe_markdown({"decay": probe})
+    assert "| `full` | 3.100 ± 0.100 |" in table and "| full vs x0, FID | +0.200 ± " in table
+    # a run not past the stage, or a VAE stage, is refused
+    with pytest.raises(ValueError, match="trained past its 4 steps"):
+        score_denoiser_continuation(_den_stage_doc(4), out_dir / "den_full", vae=vae, label="x", data=data,
+                                    evaluator=evaluator)
+    with pytest.raises(ValueError, match="denoiser probes compare with a denoiser group's stage"):
+        score_denoiser_continuation({**stage, "kind": "vae"}, out_dir / "den_full", vae=vae, label="x", data=data,
+                                    evaluator=evaluator)

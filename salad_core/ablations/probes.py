@@ -13,8 +13,11 @@ maps a probe name to its row document (the layout of a stage's rows: ``values`` 
 compares with and the commands that made it. :func:`probe_markdown` prints the probe beside the stage's
 rows it answers.
 
-Trained probes are VAE probes (the VAE group had the measured questions); denoisers are probed by scoring the
-shipped models again with another sampler setting (``scripts/ablation_sampler_probe.py``, :func:`sampler_probe_markdown`).
+Trained probes at an equal budget are VAE probes (the VAE group had the measured questions); denoisers are probed
+by scoring the shipped models again with another sampler setting (``scripts/ablation_sampler_probe.py``,
+:func:`sampler_probe_markdown`) and by *continuing* the study's runs past their last stage with another schedule
+(``scripts/ablation_continuation_probe.py``, :func:`score_denoiser_continuation`,
+:func:`continuation_probe_markdown`; their own record, not ``probes.json``: they trained longer than the stage).
 """
 from __future__ import annotations
 
@@ -26,7 +29,8 @@ from typing import Any, Mapping, Sequence
 
 from .stage_eval import _jsonable, _row_doc, _score_vae, latest_step
 
-__all__ = ["stage_settings", "score_vae_probe", "record_probe", "load_probes", "probe_markdown", "sampler_probe_markdown"]
+__all__ = ["stage_settings", "score_vae_probe", "record_probe", "load_probes", "probe_markdown", "sampler_probe_markdown",
+           "score_denoiser_continuation", "continuation_probe_markdown"]
 
 
 def stage_settings(stage_doc: Mapping[str, Any], kind: str = "vae"):
@@ -164,4 +168,88 @@ def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
             out.append(f"| {pair} | {p['at_stage'][0]:+.3f} ± {p['at_stage'][1]:.3f} | "
                        f"{p['probe'][0]:+.3f} ± {p['probe'][1]:.3f} |")
         out += ["", f"Made by: `{probe['command']}`", ""]
+    return "\n".join(out).rstrip() + "\n"
+
+
+def score_denoiser_continuation(stage_doc: Mapping[str, Any], run: str | os.PathLike, *, vae: str | os.PathLike,
+                                label: str, data: str | os.PathLike, evaluator=None, text_encoder=None) -> dict:
+    """Score a denoiser run that *continued* a stage's run (e.g. with a decaying learning rate) with that stage's
+    protocol; return its row document.
+
+    Unlike a VAE probe (:func:`score_vae_probe`, an equal budget), a continuation has trained past the stage:
+    it starts from the study run's train state at the stage's steps and changes the schedule from there, so it
+    answers "does the pair's gap at the stage survive more training of this kind?" Compare continuations with
+    each other (the same crops, captions and noise: :func:`~salad_core.ablations.orderings.paired_advantage`),
+    and with the stage's rows only as a second reading.
+
+    Parameters
+    ----------
+    stage_doc : dict
+        A denoiser group's stage evaluation: its ``settings`` are the protocol.
+    run : path
+        The continued denoiser run; its ``latest`` checkpoint must be past the stage's steps.
+    vae : path
+        The frozen VAE the study's denoisers learned on (an exported VAE folder, e.g. the shipped
+        ``weights/ablations/vae_st_long``, or the stage's VAE run).
+    label : str
+        What the row is (recorded).
+    data : path
+        The study's corpus.
+    evaluator, text_encoder : optional
+        Default: the packaged procedural-corpus evaluator and the run's text encoder.
+
+    Returns
+    -------
+    dict
+        The row document of :mod:`~salad_core.ablations.stage_eval` (``values`` per replication, ``summary``,
+        ``settings``, ``steps`` = the run's step) with ``label``, ``from_step`` and ``run``.
+    """
+    from salad_core.train.assemble import assemble_pipeline
+
+    from .stage_eval import _score_denoiser
+
+    settings = stage_settings(stage_doc, "denoiser")
+    from_step = int(stage_doc["steps"])
+    at = latest_step(run)
+    if at is None or at <= from_step:
+        raise ValueError(f"denoiser run {run} is at step {at}: a continuation of {stage_doc['stage']} must have "
+                         f"trained past its {from_step} steps")
+    if evaluator is None:
+        from salad_core.eval.train_evaluator import load_packaged_evaluator
+
+        evaluator = load_packaged_evaluator()[0]
+    if text_encoder is None:
+        from salad_core.text import load_text_encoder
+
+        text_encoder = load_text_encoder(json.loads((Path(run) / "config.json").read_text())
+                                         .get("task", {}).get("text_encoder", "minilm"))
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = assemble_pipeline(vae, run, Path(tmp) / "pipeline", text_encoder=text_encoder)   # fp16, as shipped
+        result, _ = _score_denoiser(folder, label, data, evaluator, settings, f"continuation {label} at {at} steps "
+                                    f"({run})", text_encoder)
+    row = _row_doc(result, "continuation", label, at)
+    return _jsonable({**row, "label": label, "from_step": from_step, "stage": stage_doc["stage"], "run": str(run)})
+
+
+def continuation_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
+    """The record of ``scripts/ablation_continuation_probe.py`` as markdown: per probe, each variant at the stage
+    and after the continuation (FID, R-precision top-3, mean ± 95 % half-width), then the paired advantage of its
+    first variant over each other one at both, and the commands that made it."""
+    out = []
+    for name, probe in record.items():
+        first = next(iter(probe["rows"]))
+        s, n = probe["from_step"], probe["steps"]
+        out += [f"**{name}** ({probe['change_text']}; the stage's protocol):", "",
+                f"| variant | FID at {s:,} | FID at {n:,} | R-precision top-3 at {s:,} | R-precision top-3 at {n:,} |",
+                "|---|---|---|---|---|"]
+        for v, row in probe["rows"].items():
+            cells = [f"{row[k][m][0]:.3f} ± {row[k][m][1]:.3f}" for m in ("FID", "R-precision top-3")
+                     for k in ("at_stage", "summary")]
+            out.append(f"| `{v}` | " + " | ".join(cells) + " |")
+        out += ["", f"Paired advantage of `{first}` (positive: better; 95 % half-width):", "",
+                f"| pair | at {s:,} (constant rate) | at {n:,} (continued) |", "|---|---|---|"]
+        for pair, p in probe["paired"].items():
+            out.append(f"| {pair} | {p['at_stage'][0]:+.3f} ± {p['at_stage'][1]:.3f} | "
+                       f"{p['probe'][0]:+.3f} ± {p['probe'][1]:.3f} |")
+        out += ["", "Made by:", ""] + [f"    {c}" for c in probe["commands"]] + [""]
     return "\n".join(out).rstrip() + "\n"
