@@ -302,3 +302,26 @@ def test_continuation_probe_continues_the_study_runs_with_a_decaying_rate_and_sc
     with pytest.raises(ValueError, match="denoiser probes compare with a denoiser group's stage"):
         score_denoiser_continuation({**stage, "kind": "vae"}, out_dir / "den_full", vae=vae, label="x", data=data,
                                     evaluator=evaluator)
+
+
+def test_paired_probe_markdown_pairs_stage_rows_and_probes_and_refuses_unpaired_ones():
+    """Probes of a stage share its crops: a probe and a stage row are paired as two rows are; the gap is the
+    orderings module's paired advantage, in cm for MPJPE; a probe scored otherwise, or an unknown name, is refused."""
+    from salad_core.ablations.orderings import paired_advantage
+    from salad_core.ablations.probes import paired_probe_markdown
+
+    stage = {**_stage_doc(2), "settings": dict(SETTINGS)}
+    stage["rows"]["st"]["values"] = {"FID": [0.5, 0.52], "MPJPE": [0.040, 0.042]}
+    stage["rows"]["pose"]["values"] = {"FID": [0.4, 0.41], "MPJPE": [0.030, 0.031]}
+    probe = {"stage": "vaes@2", "settings": dict(SETTINGS), "values": {"FID": [0.6, 0.66], "MPJPE": [0.050, 0.050]}}
+    table = paired_probe_markdown(stage, {"narrow": probe}, [("st", "pose"), ("st", "narrow")]).splitlines()
+    assert table[0] == "| pair | FID | MPJPE (cm) |" and len(table) == 4
+    fid = paired_advantage([0.5, 0.52], [0.6, 0.66], "FID")
+    mpjpe = paired_advantage([0.040, 0.042], [0.050, 0.050], "MPJPE")
+    assert table[3] == (f"| `st` over `narrow` | {fid[0]:+.4f} ± {fid[1]:.4f} | "
+                        f"{mpjpe[0] * 100:+.2f} ± {mpjpe[1] * 100:.2f} |")
+    assert table[2].startswith("| `st` over `pose` | -0.1050 ± ")
+    with pytest.raises(ValueError, match="not paired"):
+        paired_probe_markdown(stage, {"narrow": {**probe, "settings": {**SETTINGS, "seed": 1}}}, [("st", "narrow")])
+    with pytest.raises(KeyError, match="neither a row of vaes@2"):
+        paired_probe_markdown(stage, {"narrow": {**probe, "stage": "vaes@4"}}, [("st", "narrow")])

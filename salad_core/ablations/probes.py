@@ -30,7 +30,7 @@ from typing import Any, Mapping, Sequence
 from .stage_eval import _jsonable, _row_doc, _score_vae, latest_step
 
 __all__ = ["stage_settings", "score_vae_probe", "record_probe", "load_probes", "probe_markdown", "sampler_probe_markdown",
-           "score_denoiser_continuation", "continuation_probe_markdown"]
+           "score_denoiser_continuation", "continuation_probe_markdown", "paired_probe_markdown"]
 
 
 def stage_settings(stage_doc: Mapping[str, Any], kind: str = "vae"):
@@ -253,3 +253,50 @@ def continuation_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
                        f"{p['probe'][0]:+.3f} ± {p['probe'][1]:.3f} |")
         out += ["", "Made by:", ""] + [f"    {c}" for c in probe["commands"]] + [""]
     return "\n".join(out).rstrip() + "\n"
+
+
+def paired_probe_markdown(stage_doc: Mapping[str, Any], probes: Mapping[str, Mapping[str, Any]],
+                          pairs: Sequence[tuple[str, str]]) -> str:
+    """Paired gaps between rows of a stage and probes made on it, as a markdown table.
+
+    Every probe of a stage is scored with the stage's protocol (the same crops, in the same replications), so any
+    two of these rows are paired, as the stage's own rows are. ``pairs`` names ``(a, b)``: each a stage row
+    (variant) or a probe (its key in ``probes``). Each cell is ``a``'s advantage over ``b`` (positive: ``a``
+    better) on each metric of the stage's kind, mean ± 95 % half-width (MPJPE in cm).
+
+    Raises
+    ------
+    KeyError
+        A name that is neither a row of the stage nor one of its probes.
+    ValueError
+        A probe scored with other settings than the stage (not paired).
+    """
+    from .orderings import TABLE_METRICS, paired_advantage
+
+    metrics = TABLE_METRICS[stage_doc["kind"]]
+    protocol = ("split", "batch_size", "replications", "max_samples", "seed")
+
+    def row(name: str) -> Mapping[str, Any]:
+        if name in stage_doc["rows"]:
+            return stage_doc["rows"][name]
+        if name in probes and probes[name].get("stage") == stage_doc["stage"]:
+            p = probes[name]
+            ours = {k: p["settings"].get(k) for k in protocol}
+            theirs = {k: stage_doc["settings"].get(k) for k in protocol}
+            if ours != theirs:
+                raise ValueError(f"probe {name!r} was scored with {ours}, the stage with {theirs}: not paired")
+            return p
+        raise KeyError(f"{name!r} is neither a row of {stage_doc['stage']} ({sorted(stage_doc['rows'])}) nor one of "
+                       f"its probes ({sorted(k for k, p in probes.items() if p.get('stage') == stage_doc['stage'])})")
+
+    lines = ["| pair | " + " | ".join(f"{m}{' (cm)' if m == 'MPJPE' else ''}" for m in metrics) + " |",
+             "|---|" + "---:|" * len(metrics)]
+    for a, b in pairs:
+        ra, rb = row(a), row(b)
+        cells = []
+        for m in metrics:
+            mean, half = paired_advantage(ra["values"][m], rb["values"][m], m)
+            scale, digits = (100, 2) if m == "MPJPE" else (1, 4 if stage_doc["kind"] == "vae" else 3)
+            cells.append(f"{mean * scale:+.{digits}f} ± {half * scale:.{digits}f}")
+        lines.append(f"| `{a}` over `{b}` | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
