@@ -16,7 +16,7 @@ same crops, captions and noise), so a pair's paired gap after the continuation r
     python scripts/ablation_continuation_probe.py score \\
         --stage-eval studies/ablations_v2/evaluations/denoisers@8000.json --out-dir ~/salad-runs/abl_probe/decay \\
         --variants full x0 --name lr_decay --change-text "learning rate x0.2 at 8,000 and 9,000 steps" \\
-        --vae salad_core/weights/ablations/vae_st_long --data CORPUS_2.4 \\
+        --data CORPUS_2.4 \\
         --out studies/ablations_v2/continuation_probe.json
 
 The study's runs must still hold their train state at the stage (``<work>/den_<variant>``, as the study leaves
@@ -87,7 +87,8 @@ def main(argv=None) -> int:
     s.add_argument("--variants", nargs="+", required=True, help="the first is compared with each other one")
     s.add_argument("--name", required=True, help="the probe's key in the record")
     s.add_argument("--change-text", required=True, help="what the continuation changed, in words (recorded)")
-    s.add_argument("--vae", type=Path, required=True, help="the frozen VAE the denoisers learned on")
+    s.add_argument("--vae", type=Path, default=None, help="the frozen VAE the denoisers learned on (default: the one "
+                   "each run records; give it when the run's VAE moved, e.g. salad_core/weights/ablations/vae_st_long)")
     s.add_argument("--data", type=Path, required=True, help="the study's corpus")
     s.add_argument("--out", type=Path, required=True, help="the record (JSON, one entry per --name, merged)")
     s.add_argument("--threads", type=int, default=None)
@@ -99,7 +100,9 @@ def main(argv=None) -> int:
         args.out_dir.mkdir(parents=True, exist_ok=True)
         for c in prepare(args.study_work, args.variants, _sets(args.sets), args.out_dir):
             print(c)
-        (args.out_dir / "prepare_command.txt").write_text(command + "\n")    # recorded by score
+        made = args.out_dir / "prepare_command.txt"                  # every prepare of the folder, recorded by score
+        lines = made.read_text().splitlines() if made.is_file() else []
+        made.write_text("\n".join(lines + ([command] if command not in lines else [])) + "\n")
         return 0
 
     import torch
@@ -148,11 +151,11 @@ def main(argv=None) -> int:
             at = paired_advantage(stage["rows"][first]["values"][m], stage["rows"][b]["values"][m], m)
             paired[f"{first} vs {b}, {m}"] = {"probe": list(probe), "at_stage": list(at)}
     made = args.out_dir / "prepare_command.txt"
-    prepare_cmd = made.read_text().strip() if made.is_file() else "(prepared by hand: see each row's trained_config)"
+    prepared = made.read_text().split("\n") if made.is_file() else ["(prepared by hand: see each row's trained_config)"]
     record = json.loads(args.out.read_text()) if args.out.is_file() else {}
     record[args.name] = {"stage_eval": str(args.stage_eval), "stage": stage["stage"], "from_step": int(stage["steps"]),
                          "steps": steps.pop(), "change_text": args.change_text, "rows": rows, "paired": paired,
-                         "commands": [prepare_cmd, command]}
+                         "commands": [c for c in prepared if c] + [command]}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(args.out, json.dumps(record, indent=1) + "\n")
     print(continuation_probe_markdown({args.name: record[args.name]}))

@@ -260,7 +260,14 @@ def test_continuation_probe_continues_the_study_runs_with_a_decaying_rate_and_sc
         assert [lrs[k] for k in (1, 2, 3, 4)] == pytest.approx([1e-3, 2e-3, 4e-4, 4e-4])
         # the study's own run is untouched
         assert json.loads((work / f"den_{name}" / "latest.json").read_text())["meta"]["step"] == 2
-    assert "--set train.max_steps=4" in (out_dir / "prepare_command.txt").read_text()
+    # a second prepare of the folder (another variant) is recorded beside the first; the same one is not repeated
+    assert mod.main(["prepare", "--study-work", str(work), "--variants", "x0", "--set", "train.max_steps=4",
+                     "train.milestones=[1]", "--out-dir", str(out_dir)]) == 0
+    assert mod.main(["prepare", "--study-work", str(work), "--variants", "x0", "--set", "train.max_steps=4",
+                     "train.milestones=[1]", "--out-dir", str(out_dir)]) == 0
+    prepared = (out_dir / "prepare_command.txt").read_text().splitlines()
+    assert len(prepared) == 2 and all("--set train.max_steps=4" in c for c in prepared)
+    assert "--variants full x0" in prepared[0] and "--variants x0 --set" in prepared[1]
 
     evaluator = make_tiny_evaluator(data, dim_word=8, dim_text_hidden=16, dim_coemb=32, dim_movement_enc_hidden=16,
                                     dim_movement_latent=16, dim_motion_hidden=32)
@@ -270,7 +277,7 @@ def test_continuation_probe_continues_the_study_runs_with_a_decaying_rate_and_sc
     stage_file.write_text(json.dumps(stage))
     record = tmp_path / "continuation_probe.json"
     assert mod.main(["score", "--stage-eval", str(stage_file), "--out-dir", str(out_dir), "--variants", "full", "x0",
-                     "--name", "decay", "--change-text", "lr x0.2 from step 2", "--vae", str(vae), "--data",
+                     "--name", "decay", "--change-text", "lr x0.2 from step 2", "--data",
                      str(data), "--out", str(record)]) == 0
     probe = json.loads(record.read_text())["decay"]
     assert probe["from_step"] == 2 and probe["steps"] == 4 and probe["stage"] == "dens@2"
@@ -289,7 +296,7 @@ def test_continuation_probe_continues_the_study_runs_with_a_decaying_rate_and_sc
     assert pair["probe"] == pytest.approx(list(paired_advantage(probe["rows"]["full"]["values"]["R-precision top-3"],
                                                                 probe["rows"]["x0"]["values"]["R-precision top-3"],
                                                                 "R-precision top-3")))
-    assert "prepare --study-work" in probe["commands"][0] and probe["commands"][1].startswith(
+    assert probe["commands"][:2] == prepared and probe["commands"][2].startswith(
         "python scripts/ablation_continuation_probe.py score")
     from salad_core.ablations.probes import continuation_probe_markdown, score_denoiser_continuation
 

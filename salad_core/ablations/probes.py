@@ -171,8 +171,8 @@ def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
     return "\n".join(out).rstrip() + "\n"
 
 
-def score_denoiser_continuation(stage_doc: Mapping[str, Any], run: str | os.PathLike, *, vae: str | os.PathLike,
-                                label: str, data: str | os.PathLike, evaluator=None, text_encoder=None) -> dict:
+def score_denoiser_continuation(stage_doc: Mapping[str, Any], run: str | os.PathLike, *,
+                                vae: str | os.PathLike | None = None, label: str, data: str | os.PathLike, evaluator=None, text_encoder=None) -> dict:
     """Score a denoiser run that *continued* a stage's run (e.g. with a decaying learning rate) with that stage's
     protocol; return its row document.
 
@@ -188,9 +188,9 @@ def score_denoiser_continuation(stage_doc: Mapping[str, Any], run: str | os.Path
         A denoiser group's stage evaluation: its ``settings`` are the protocol.
     run : path
         The continued denoiser run; its ``latest`` checkpoint must be past the stage's steps.
-    vae : path
-        The frozen VAE the study's denoisers learned on (an exported VAE folder, e.g. the shipped
-        ``weights/ablations/vae_st_long``, or the stage's VAE run).
+    vae : path, optional
+        The frozen VAE the run learned on (an exported VAE folder, e.g. the shipped
+        ``weights/ablations/vae_st_long``, or the stage's VAE run); default: the one the run records.
     label : str
         What the row is (recorded).
     data : path
