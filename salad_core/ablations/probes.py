@@ -29,8 +29,9 @@ from typing import Any, Mapping, Sequence
 
 from .stage_eval import _jsonable, _row_doc, _score_vae, latest_step
 
-__all__ = ["stage_settings", "score_vae_probe", "record_probe", "load_probes", "probe_markdown", "sampler_probe_markdown",
-           "score_denoiser_continuation", "continuation_probe_markdown", "paired_probe_markdown"]
+__all__ = ["stage_settings", "score_vae_probe", "record_probe", "load_probes", "probe_markdown",
+           "sampler_probe_markdown", "score_denoiser_continuation", "continuation_probe_markdown",
+           "paired_probe_markdown"]
 
 
 def stage_settings(stage_doc: Mapping[str, Any], kind: str = "vae"):
@@ -172,7 +173,8 @@ def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
 
 
 def score_denoiser_continuation(stage_doc: Mapping[str, Any], run: str | os.PathLike, *,
-                                vae: str | os.PathLike | None = None, label: str, data: str | os.PathLike, evaluator=None, text_encoder=None) -> dict:
+                                vae: str | os.PathLike | None = None, label: str, data: str | os.PathLike,
+                                evaluator=None, text_encoder=None) -> dict:
     """Score a denoiser run that *continued* a stage's run (e.g. with a decaying learning rate) with that stage's
     protocol; return its row document.
 
@@ -247,7 +249,7 @@ def continuation_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
                      for k in ("at_stage", "summary")]
             out.append(f"| `{v}` | " + " | ".join(cells) + " |")
         out += ["", f"Paired advantage of `{first}` (positive: better; 95 % half-width):", "",
-                f"| pair | at {s:,} (constant rate) | at {n:,} (continued) |", "|---|---|---|"]
+                f"| pair | at {s:,} (the stage) | at {n:,} (continued) |", "|---|---|---|"]
         for pair, p in probe["paired"].items():
             out.append(f"| {pair} | {p['at_stage'][0]:+.3f} ± {p['at_stage'][1]:.3f} | "
                        f"{p['probe'][0]:+.3f} ± {p['probe'][1]:.3f} |")
