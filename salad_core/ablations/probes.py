@@ -147,6 +147,26 @@ def probe_markdown(stage_doc: Mapping[str, Any], probes: Mapping[str, Mapping[st
     return "\n".join(lines) + "\n"
 
 
+def _stage_and_probe_tables(probe: Mapping[str, Any], first: str, stage_col: str, probe_col: str,
+                            stage_pair_col: str, probe_pair_col: str) -> list[str]:
+    """Markdown lines of a denoiser probe record's two tables: each variant's FID and R-precision top-3 at the stage
+    (``at_stage``) and in the probe (``summary``), then the paired advantage of ``first`` over each other variant at
+    both (``paired``: ``at_stage`` and ``probe``), mean ± 95 % half-width."""
+    metrics = ("FID", "R-precision top-3")
+    lines = ["| variant | " + " | ".join(f"{m} {c}" if c.startswith("at ") else f"{m}, {c}"
+                                          for m in metrics for c in (stage_col, probe_col)) + " |",
+             "|---|---|---|---|---|"]
+    for v, row in probe["rows"].items():
+        cells = [f"{row[k][m][0]:.3f} ± {row[k][m][1]:.3f}" for m in metrics for k in ("at_stage", "summary")]
+        lines.append(f"| `{v}` | " + " | ".join(cells) + " |")
+    lines += ["", f"Paired advantage of `{first}` (positive: better; 95 % half-width):", "",
+              f"| pair | {stage_pair_col} | {probe_pair_col} |", "|---|---|---|"]
+    for pair, p in probe["paired"].items():
+        lines.append(f"| {pair} | {p['at_stage'][0]:+.3f} ± {p['at_stage'][1]:.3f} | "
+                     f"{p['probe'][0]:+.3f} ± {p['probe'][1]:.3f} |")
+    return lines
+
+
 def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
     """The record of ``scripts/ablation_sampler_probe.py`` (denoisers scored again with another number of sampler
     steps, the stage's protocol otherwise) as markdown: per probe, each row at the stage's steps and at the probe's,
@@ -156,18 +176,9 @@ def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
         n = probe["num_steps"]
         first = next(iter(probe["rows"]))
         stage_steps = probe.get("stage_num_steps", 10)
-        out += [f"**{name}** (the stage's protocol with {n} sampler steps):", "",
-                f"| variant | FID, {stage_steps} steps | FID, {n} steps | R-precision top-3, {stage_steps} steps | "
-                f"R-precision top-3, {n} steps |", "|---|---|---|---|---|"]
-        for v, row in probe["rows"].items():
-            cells = [f"{row[k][m][0]:.3f} ± {row[k][m][1]:.3f}" for m in ("FID", "R-precision top-3")
-                     for k in ("at_stage", "summary")]
-            out.append(f"| `{v}` | " + " | ".join(cells) + " |")
-        out += ["", f"Paired advantage of `{first}` (positive: better; 95 % half-width):", "",
-                f"| pair | {stage_steps} steps | {n} steps |", "|---|---|---|"]
-        for pair, p in probe["paired"].items():
-            out.append(f"| {pair} | {p['at_stage'][0]:+.3f} ± {p['at_stage'][1]:.3f} | "
-                       f"{p['probe'][0]:+.3f} ± {p['probe'][1]:.3f} |")
+        out += [f"**{name}** (the stage's protocol with {n} sampler steps):", ""]
+        out += _stage_and_probe_tables(probe, first, f"{stage_steps} steps", f"{n} steps", f"{stage_steps} steps",
+                                       f"{n} steps")
         out += ["", f"Made by: `{probe['command']}`", ""]
     return "\n".join(out).rstrip() + "\n"
 
@@ -241,18 +252,9 @@ def continuation_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
     for name, probe in record.items():
         first = next(iter(probe["rows"]))
         s, n = probe["from_step"], probe["steps"]
-        out += [f"**{name}** ({probe['change_text']}; the stage's protocol):", "",
-                f"| variant | FID at {s:,} | FID at {n:,} | R-precision top-3 at {s:,} | R-precision top-3 at {n:,} |",
-                "|---|---|---|---|---|"]
-        for v, row in probe["rows"].items():
-            cells = [f"{row[k][m][0]:.3f} ± {row[k][m][1]:.3f}" for m in ("FID", "R-precision top-3")
-                     for k in ("at_stage", "summary")]
-            out.append(f"| `{v}` | " + " | ".join(cells) + " |")
-        out += ["", f"Paired advantage of `{first}` (positive: better; 95 % half-width):", "",
-                f"| pair | at {s:,} (the stage) | at {n:,} (continued) |", "|---|---|---|"]
-        for pair, p in probe["paired"].items():
-            out.append(f"| {pair} | {p['at_stage'][0]:+.3f} ± {p['at_stage'][1]:.3f} | "
-                       f"{p['probe'][0]:+.3f} ± {p['probe'][1]:.3f} |")
+        out += [f"**{name}** ({probe['change_text']}; the stage's protocol):", ""]
+        out += _stage_and_probe_tables(probe, first, f"at {s:,}", f"at {n:,}", f"at {s:,} (the stage)",
+                                       f"at {n:,} (continued)")
         out += ["", "Made by:", ""] + [f"    {c}" for c in probe["commands"]] + [""]
     return "\n".join(out).rstrip() + "\n"
 
