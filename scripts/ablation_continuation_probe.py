@@ -34,20 +34,13 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-
-
-def _sets(items: list[str]) -> dict:
-    from salad_core.train.config import parse_overrides
-
-    return parse_overrides(items, dotted=True)
+sys.path.insert(0, str(REPO / "scripts"))
+from ablation_vae_probe import apply_sets, parse_sets  # noqa: E402  (the VAE probe's --set handling, shared)
 
 
 def prepare(work: Path, variants: list[str], sets: dict, out_dir: Path) -> list[str]:
     """Copy ``work/den_<v>`` to ``out_dir/den_<v>`` (unless already there: a continuation in progress is kept) and
     write ``out_dir/den_<v>.json`` (the study's config with ``sets``); return the train commands."""
-    sys.path.insert(0, str(REPO / "scripts"))
-    from ablation_vae_probe import apply_sets
-
     from salad_core.ablations.stage_eval import latest_step
 
     commands = []
@@ -98,7 +91,7 @@ def main(argv=None) -> int:
         shlex.quote(str(a)) for a in (argv if argv is not None else sys.argv[1:]))).replace(home, "~")
     if args.what == "prepare":
         args.out_dir.mkdir(parents=True, exist_ok=True)
-        for c in prepare(args.study_work, args.variants, _sets(args.sets), args.out_dir):
+        for c in prepare(args.study_work, args.variants, parse_sets(args.sets), args.out_dir):
             print(c)
         made = args.out_dir / "prepare_command.txt"                  # every prepare of the folder, recorded by score
         lines = made.read_text().splitlines() if made.is_file() else []
