@@ -40,19 +40,30 @@ from ablation_vae_probe import apply_sets, parse_sets  # noqa: E402  (the VAE pr
 
 def prepare(work: Path, variants: list[str], sets: dict, out_dir: Path) -> list[str]:
     """Copy ``work/den_<v>`` to ``out_dir/den_<v>`` (unless already there: a continuation in progress is kept) and
-    write ``out_dir/den_<v>.json`` (the study's config with ``sets``); return the train commands."""
+    write ``out_dir/den_<v>.json`` (the study's config with ``sets``); return the train commands.
+
+    A variant written ``NAME=RUN`` is a denoiser probe (``scripts/ablation_denoiser_probe.py``) instead: its run
+    ``RUN`` and the config beside it (``RUN.json``) take the study run's and config's places."""
     from salad_core.ablations.stage_eval import latest_step
 
     commands = []
     for v in variants:
-        src, dest = work / f"den_{v}", out_dir / f"den_{v}"
-        study_cfg = work / "configs" / f"den_{v}.json"
-        if not study_cfg.is_file():
-            raise SystemExit(f"{study_cfg} does not exist: --study-work is the study's work folder and --variants its "
-                             f"denoiser variants ({sorted(p.stem[4:] for p in (work / 'configs').glob('den_*.json'))})")
+        if "=" in v:
+            v, _, probe_run = v.partition("=")
+            src, study_cfg = Path(probe_run).expanduser(), Path(probe_run).expanduser().with_suffix(".json")
+            if not study_cfg.is_file():
+                raise SystemExit(f"{study_cfg} does not exist: a probe variant NAME=RUN needs the config it trained "
+                                 f"with beside its run (as scripts/ablation_denoiser_probe.py config writes it)")
+        else:
+            src, study_cfg = work / f"den_{v}", work / "configs" / f"den_{v}.json"
+            if not study_cfg.is_file():
+                have = sorted(p.stem[4:] for p in (work / "configs").glob("den_*.json"))
+                raise SystemExit(f"{study_cfg} does not exist: --study-work is the study's work folder and --variants "
+                                 f"its denoiser variants ({have}) or NAME=RUN for a denoiser probe")
+        dest = out_dir / f"den_{v}"
         if not dest.exists():
             if not (src / "train_state.json").is_file():
-                raise SystemExit(f"{src} holds no train state: the study's run must be where its last stage left it")
+                raise SystemExit(f"{src} holds no train state: the run must be where its last stage left it")
             tmp = dest.with_name(dest.name + ".tmp")
             shutil.rmtree(tmp, ignore_errors=True)
             shutil.copytree(src, tmp)
@@ -71,13 +82,17 @@ def main(argv=None) -> int:
     sub = ap.add_subparsers(dest="what", required=True)
     p = sub.add_parser("prepare", help="copy the study's runs and write the continuation configs")
     p.add_argument("--study-work", type=Path, required=True, help="the study's work folder (den_<variant>, configs/)")
-    p.add_argument("--variants", nargs="+", required=True)
+    p.add_argument("--variants", nargs="+", required=True,
+                   help="the study's denoiser variants, or NAME=RUN for a denoiser probe's run (config at RUN.json)")
     p.add_argument("--set", dest="sets", nargs="+", required=True, metavar="SECTION.KEY=VALUE")
     p.add_argument("--out-dir", type=Path, required=True)
     s = sub.add_parser("score", help="score the continued runs with a stage's protocol and record them")
     s.add_argument("--stage-eval", type=Path, required=True, help="the stage the runs continued (evaluations/G@S.json)")
     s.add_argument("--out-dir", type=Path, required=True, help="the continued runs (den_<variant>)")
-    s.add_argument("--variants", nargs="+", required=True, help="the first is compared with each other one")
+    s.add_argument("--variants", nargs="+", required=True, help="the first is compared with each other one; rows of "
+                   "the stage or (with --probes) denoiser probes made on it")
+    s.add_argument("--probes", type=Path, default=None, help="the probe record (probes.json) holding variants that "
+                   "are not rows of the stage: their figures at the stage are the probe's")
     s.add_argument("--name", required=True, help="the probe's key in the record")
     s.add_argument("--change-text", required=True, help="what the continuation changed, in words (recorded)")
     s.add_argument("--vae", type=Path, default=None, help="the frozen VAE the denoisers learned on (default: the one "
@@ -111,9 +126,18 @@ def main(argv=None) -> int:
     stage = json.loads(args.stage_eval.read_text())
     if stage.get("kind") != "denoiser":
         raise SystemExit(f"{args.stage_eval} is a {stage.get('kind')!r} stage: continuations are of denoiser stages")
+    at_stage = dict(stage["rows"])                   # variant -> its row at the stage (a stage row or a probe's)
+    probes = json.loads(args.probes.read_text()) if args.probes else {}
     for v in args.variants:
-        if v not in stage["rows"]:
-            raise SystemExit(f"variant {v!r} is not a row of {args.stage_eval} (rows: {sorted(stage['rows'])})")
+        if v in at_stage:
+            continue
+        if v in probes and probes[v].get("stage") == stage["stage"]:
+            at_stage[v] = probes[v]
+            continue
+        mine = sorted(k for k, p in probes.items() if p.get("stage") == stage["stage"])
+        raise SystemExit(f"variant {v!r} is not a row of {args.stage_eval} (rows: {sorted(stage['rows'])})"
+                         + (f" nor one of its probes in {args.probes} ({mine})" if args.probes else
+                            "; a denoiser probe's variant needs --probes"))
         if not (args.out_dir / f"den_{v}" / "latest.json").is_file():
             raise SystemExit(f"{args.out_dir / f'den_{v}'} holds no trained run: prepare and train it first")
     evaluator = load_packaged_evaluator()[0]
@@ -122,10 +146,10 @@ def main(argv=None) -> int:
     rows, steps = {}, set()
     for v in args.variants:
         run = args.out_dir / f"den_{v}"
-        row = score_denoiser_continuation(stage, run, vae=args.vae, label=f"{stage['rows'][v]['label']}, "
+        row = score_denoiser_continuation(stage, run, vae=args.vae, label=f"{at_stage[v]['label']}, "
                                           f"{args.change_text}", data=args.data, evaluator=evaluator,
                                           text_encoder=text_encoder)
-        row["at_stage"] = {m: stage["rows"][v]["summary"][m] for m in metrics}
+        row["at_stage"] = {m: at_stage[v]["summary"][m] for m in metrics}
         row["run"] = row["run"].replace(home, "~")
         cfg = args.out_dir / f"den_{v}.json"
         row["trained_config"] = json.loads(cfg.read_text()) if cfg.is_file() else None
@@ -141,7 +165,7 @@ def main(argv=None) -> int:
     for b in args.variants[1:]:
         for m in metrics:
             probe = paired_advantage(rows[first]["values"][m], rows[b]["values"][m], m)
-            at = paired_advantage(stage["rows"][first]["values"][m], stage["rows"][b]["values"][m], m)
+            at = paired_advantage(at_stage[first]["values"][m], at_stage[b]["values"][m], m)
             paired[f"{first} vs {b}, {m}"] = {"probe": list(probe), "at_stage": list(at)}
     made = args.out_dir / "prepare_command.txt"
     prepared = made.read_text().split("\n") if made.is_file() else ["(prepared by hand: see each row's trained_config)"]

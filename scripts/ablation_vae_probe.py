@@ -49,6 +49,17 @@ def apply_sets(config: dict, sets: dict) -> dict:
     return cfg
 
 
+def probe_config(study_configs: Path, prefix: str, variant: str, sets: dict) -> dict:
+    """The study's config ``<study_configs>/<prefix>_<variant>.json`` with ``sets`` applied (``prefix``: ``vae`` or
+    ``den``); SystemExit naming the study's variants when there is no such config."""
+    src = study_configs / f"{prefix}_{variant}.json"
+    if not src.is_file():
+        have = sorted(q.stem[len(prefix) + 1:] for q in study_configs.glob(f"{prefix}_*.json"))
+        raise SystemExit(f"{src} does not exist: --study-configs is the study's <work>/configs folder and --variant "
+                         f"one of its {prefix} variants ({have})")
+    return apply_sets(json.loads(src.read_text()), sets)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="what", required=True)
@@ -73,11 +84,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     sets = parse_sets(args.sets)
     if args.what == "config":
-        src = args.study_configs / f"vae_{args.variant}.json"
-        if not src.is_file():
-            ap.error(f"{src} does not exist: --study-configs is the study's <work>/configs folder and --variant one "
-                     f"of its VAE variants ({sorted(p.stem[4:] for p in args.study_configs.glob('vae_*.json'))})")
-        cfg = apply_sets(json.loads(src.read_text()), sets)
+        cfg = probe_config(args.study_configs, "vae", args.variant, sets)
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(cfg, indent=2) + "\n")
         run = args.out.with_suffix("")

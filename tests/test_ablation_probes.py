@@ -139,12 +139,19 @@ def test_the_kept_studys_probes_match_their_stage_and_config():
         base = stage["rows"][probe["base_variant"]]["settings"]
         for key in ("split", "batch_size", "replications", "max_samples", "seed"):
             assert probe["settings"][key] == base[key], (name, key)
-        model = MotionVAE(config_from_dict(VAEConfig, probe["trained_config"]["model"]))
-        assert probe["parameters"] == sum(p.numel() for p in model.parameters() if p.requires_grad), name
+        if stage["kind"] == "vae":
+            model = MotionVAE(config_from_dict(VAEConfig, probe["trained_config"]["model"]))
+            assert probe["parameters"] == sum(p.numel() for p in model.parameters() if p.requires_grad), name
+        else:                   # a denoiser probe: trained on the VAE it names, as its command says
+            assert Path(probe["vae"]).name in Path(probe["trained_config"]["task"]["vae"]).parts, name
+            assert f"--vae {probe['vae']}" in probe["commands"][0], name
         for key, value in probe["change"].items():
+            if key == "vae":
+                continue
             section, _, field = key.partition(".")
             assert probe["trained_config"][section][field] == value, (name, key)
-        assert len(probe["values"]["MPJPE"]) == stage["settings"]["replications"]
+        for metric in ("FID", "MPJPE" if stage["kind"] == "vae" else "R-precision top-3"):
+            assert len(probe["values"][metric]) == stage["settings"]["replications"], (name, metric)
 
 
 def _sampler_script():
@@ -332,3 +339,101 @@ def test_paired_probe_markdown_pairs_stage_rows_and_probes_and_refuses_unpaired_
         paired_probe_markdown(stage, {"narrow": {**probe, "settings": {**SETTINGS, "seed": 1}}}, [("st", "narrow")])
     with pytest.raises(KeyError, match="neither a row of vaes@2"):
         paired_probe_markdown(stage, {"narrow": {**probe, "stage": "vaes@4"}}, [("st", "narrow")])
+
+
+def test_denoiser_probe_trains_a_variant_on_another_vae_and_is_scored_paired_and_continued(tmp_path, monkeypatch):
+    """The denoiser probe: a study variant's config (only --set keys changed) trained on another frozen VAE to the
+    stage's budget, scored with the stage's protocol (the same figures when scored again), recorded with its
+    commands and printed beside the stage's rows; then continued past the stage with the study's runs and scored
+    paired with them, its figures at the stage read from the probe record."""
+    import functools
+
+    import salad_core.eval.train_evaluator
+    import salad_core.text
+    from salad_core.ablations.probes import score_denoiser_probe
+    from salad_core.train import train_vae
+    from salad_core.train.cli import main as train_main
+    from salad_core.train.config import VAETrainConfig
+    from _doubles import load_script
+
+    monkeypatch.setattr(salad_core.text, "load_text_encoder", functools.lru_cache(salad_core.text.load_text_encoder))
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=6)
+    work, _ = _den_study(tmp_path / "work", data)
+    other_vae = tmp_path / "other_vae"                 # another VAE of the same latent shape (other seed, trained)
+    train_vae(data, other_vae, VAEConfig(latent_dim=8, n_extra_layers=0),
+              VAETrainConfig(batch_size=8, max_steps=2, window=64, val_every=0, ckpt_every=0, num_threads=1,
+                             progress=False, seed=7))
+    mod = load_script("ablation_denoiser_probe")
+    cfg = tmp_path / "probe" / "den_x0_other.json"
+    assert mod.main(["config", "--study-configs", str(work / "configs"), "--variant", "x0", "--vae", str(other_vae),
+                     "--set", "train.lr=0.001", "--out", str(cfg)]) == 0
+    probe_cfg, base = json.loads(cfg.read_text()), json.loads((work / "configs" / "den_x0.json").read_text())
+    assert probe_cfg["train"].pop("lr") == 0.001 and base["train"].pop("lr") == 2e-3 and probe_cfg == base
+    with pytest.raises(SystemExit, match="one of its den variants"):
+        mod.main(["config", "--study-configs", str(work / "configs"), "--variant", "no_st", "--vae", str(other_vae),
+                  "--out", str(cfg)])
+    run = cfg.with_suffix("")
+    assert train_main(["denoiser", "--data", str(data), "--out", str(run), "--config", str(cfg), "--vae",
+                       str(other_vae), "--no-progress"]) == 0
+
+    evaluator = make_tiny_evaluator(data, dim_word=8, dim_text_hidden=16, dim_coemb=32, dim_movement_enc_hidden=16,
+                                    dim_movement_latent=16, dim_motion_hidden=32)
+    monkeypatch.setattr(salad_core.eval.train_evaluator, "load_packaged_evaluator", lambda *a, **k: (evaluator,))
+    stage = _den_stage_doc(2)
+    stage_file = tmp_path / "dens@2.json"
+    stage_file.write_text(json.dumps(stage))
+    record = tmp_path / "probes.json"
+    assert mod.main(["score", "--stage-eval", str(stage_file), "--run", str(run), "--vae", str(other_vae),
+                     "--vae-label", "the other VAE", "--name", "x0_other", "--variant", "x0", "--set",
+                     "train.lr=0.001", "train.num_threads=1", "--label", "x prediction on another VAE", "--data",
+                     str(data), "--out", str(record)]) == 0
+    probe = load_probes(record)["x0_other"]
+    assert probe["change"] == {"vae": "the other VAE", "train.lr": 0.001}      # threads are not a change
+    assert probe["steps"] == 2 and probe["stage"] == "dens@2" and probe["base_variant"] == "x0"
+    assert Path(probe["trained_config"]["task"]["vae"]).parent == other_vae      # its checkpoint, <run>/latest
+    for key in ("split", "batch_size", "replications", "max_samples", "seed", "num_steps"):
+        assert probe["settings"][key] == stage["settings"][key], key
+    assert set(probe["values"]) >= {"FID", "R-precision top-3"}
+    assert all(len(probe["values"][m]) == 2 and np.isfinite(probe["values"][m]).all()
+               for m in ("FID", "R-precision top-3"))
+    assert "--vae-label 'the other VAE'" in probe["commands"][1] and f"--vae {other_vae}" in probe["commands"][0]
+    again = score_denoiser_probe(stage, run, vae=other_vae, label="again", change={}, base_variant="x0", data=data,
+                                 evaluator=evaluator)
+    assert again["values"] == probe["values"]
+    lines = probe_markdown(stage, {"x0_other": probe}).strip().splitlines()
+    assert lines[0] == "| model | parameters | FID | R-precision top-3 |" and len(lines) == 2 + 2 + 1
+    assert lines[2] == "| v prediction (full) | - | 3.100 ± 0.100 | 0.810 ± 0.050 |"
+    assert lines[4].startswith("| **probe** x prediction on another VAE (x0 with vae = the other VAE, "
+                               "train.lr = 0.001) | - | ")
+    with pytest.raises(ValueError, match="equal budget"):
+        score_denoiser_probe(_den_stage_doc(4), run, vae=other_vae, label="x", change={}, base_variant="x0",
+                             data=data, evaluator=evaluator)
+    with pytest.raises(ValueError, match="not a row of dens@2"):
+        score_denoiser_probe(stage, run, vae=other_vae, label="x", change={}, base_variant="eps", data=data,
+                             evaluator=evaluator)
+
+    # continued past the stage beside the study's run, scored paired with it; its figures at the stage: the probe's
+    cont = load_script("ablation_continuation_probe")
+    out_dir = tmp_path / "decay"
+    assert cont.main(["prepare", "--study-work", str(work), "--variants", "full", f"x0_other={run}", "--set",
+                      "train.max_steps=3", "--out-dir", str(out_dir)]) == 0
+    assert json.loads((out_dir / "den_x0_other.json").read_text())["train"]["lr"] == 0.001
+    for name in ("full", "x0_other"):
+        task = json.loads((out_dir / f"den_{name}" / "config.json").read_text())["task"]
+        assert train_main(["denoiser", "--data", str(data), "--out", str(out_dir / f"den_{name}"), "--config",
+                           str(out_dir / f"den_{name}.json"), "--vae", task["vae"], "--no-progress", "--resume"]) == 0
+    cont_record = tmp_path / "continuation_probe.json"
+    score = ["score", "--stage-eval", str(stage_file), "--out-dir", str(out_dir), "--variants", "full", "x0_other",
+             "--name", "longer", "--change-text", "one more step", "--data", str(data), "--out", str(cont_record)]
+    with pytest.raises(SystemExit, match="needs --probes"):
+        cont.main(score)
+    assert cont.main(score + ["--probes", str(record)]) == 0
+    longer = json.loads(cont_record.read_text())["longer"]
+    assert longer["steps"] == 3
+    assert longer["rows"]["x0_other"]["at_stage"] == {m: probe["summary"][m] for m in ("FID", "R-precision top-3")}
+    assert longer["rows"]["x0_other"]["label"].startswith("x prediction on another VAE, one more step")
+    from salad_core.ablations.orderings import paired_advantage
+
+    pair = longer["paired"]["full vs x0_other, FID"]
+    assert pair["at_stage"] == pytest.approx(list(paired_advantage(stage["rows"]["full"]["values"]["FID"],
+                                                                   probe["values"]["FID"], "FID")))

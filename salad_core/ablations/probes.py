@@ -13,10 +13,12 @@ maps a probe name to its row document (the layout of a stage's rows: ``values`` 
 compares with and the commands that made it. :func:`probe_markdown` prints the probe beside the stage's
 rows it answers.
 
-Trained probes at an equal budget are VAE probes (the VAE group had the measured questions); denoisers are probed
-by scoring the shipped models again with another sampler setting (``scripts/ablation_sampler_probe.py``,
-:func:`sampler_probe_markdown`) and by *continuing* the study's runs past their last stage with another schedule
-(``scripts/ablation_continuation_probe.py``, :func:`score_denoiser_continuation`,
+Trained probes at an equal budget are VAE probes (:func:`score_vae_probe`, ``scripts/ablation_vae_probe.py``) and
+denoiser probes (:func:`score_denoiser_probe`, ``scripts/ablation_denoiser_probe.py``: a study variant's denoiser
+trained on another frozen VAE, e.g. "w/o ST-latent" on the parameter-matched pose-vector VAE). Denoisers are also
+probed by scoring the shipped models again with another sampler setting (``scripts/ablation_sampler_probe.py``,
+:func:`sampler_probe_markdown`) and by *continuing* the study's runs (or a denoiser probe) past their last stage with
+another schedule (``scripts/ablation_continuation_probe.py``, :func:`score_denoiser_continuation`,
 :func:`continuation_probe_markdown`; their own record, not ``probes.json``: they trained longer than the stage).
 """
 from __future__ import annotations
@@ -29,7 +31,7 @@ from typing import Any, Mapping, Sequence
 
 from .stage_eval import _jsonable, _row_doc, _score_vae, latest_step
 
-__all__ = ["stage_settings", "score_vae_probe", "record_probe", "load_probes", "probe_markdown",
+__all__ = ["stage_settings", "score_vae_probe", "score_denoiser_probe", "record_probe", "load_probes", "probe_markdown",
            "sampler_probe_markdown", "score_denoiser_continuation", "continuation_probe_markdown",
            "paired_probe_markdown"]
 
@@ -129,21 +131,30 @@ def _cell(summary: Mapping[str, Sequence[float]], metric: str, scale: float, dig
 
 def probe_markdown(stage_doc: Mapping[str, Any], probes: Mapping[str, Mapping[str, Any]],
                    variants: Sequence[str] | None = None) -> str:
-    """A markdown table: the stage's rows ``variants`` (default: each probe's base variant and the table's
-    other rows it compares with) and every probe of ``probes`` made on that stage, with parameters, FID and
-    MPJPE (cm) as mean ± 95 % half-width over the replications."""
+    """A markdown table: the stage's rows ``variants`` (default: all of them) and every probe of ``probes`` made on
+    that stage, with parameters (``-`` where a row has no count, as denoiser rows) and the stage kind's metrics
+    (a VAE stage: FID and MPJPE in cm; a denoiser stage: FID and R-precision top-3) as mean ± 95 % half-width over
+    the replications."""
+    from .orderings import TABLE_METRICS
+
+    metrics = TABLE_METRICS[stage_doc["kind"]]
+    fmt = {"MPJPE": (100, 2)}
     mine = {k: p for k, p in probes.items() if p.get("stage") == stage_doc["stage"]}
     if variants is None:
         variants = list(stage_doc["rows"])
-    lines = ["| model | parameters | FID | MPJPE (cm) |", "|---|---:|---:|---:|"]
+
+    def cells(doc: Mapping[str, Any]) -> str:
+        n = doc.get("parameters")
+        return " | ".join([f"{n:,}" if n else "-"] + [_cell(doc["summary"], m, *fmt.get(m, (1, 3))) for m in metrics])
+
+    lines = ["| model | parameters | " + " | ".join(f"{m} (cm)" if m == "MPJPE" else m for m in metrics) + " |",
+             "|---|---:|" + "---:|" * len(metrics)]
     for v in variants:
         r = stage_doc["rows"][v]
-        lines.append(f"| {r['label']} ({v}) | {r.get('parameters') or 0:,} | {_cell(r['summary'], 'FID', 1, 3)} | "
-                     f"{_cell(r['summary'], 'MPJPE', 100, 2)} |")
+        lines.append(f"| {r['label']} ({v}) | {cells(r)} |")
     for k, p in mine.items():
         change = ", ".join(f"{a} = {b}" for a, b in p.get("change", {}).items())
-        lines.append(f"| **probe** {p['label']} ({p['base_variant']} with {change}) | {p.get('parameters') or 0:,} | "
-                     f"{_cell(p['summary'], 'FID', 1, 3)} | {_cell(p['summary'], 'MPJPE', 100, 2)} |")
+        lines.append(f"| **probe** {p['label']} ({p['base_variant']} with {change}) | {cells(p)} |")
     return "\n".join(lines) + "\n"
 
 
@@ -217,16 +228,25 @@ def score_denoiser_continuation(stage_doc: Mapping[str, Any], run: str | os.Path
         The row document of :mod:`~salad_core.ablations.stage_eval` (``values`` per replication, ``summary``,
         ``settings``, ``steps`` = the run's step) with ``label``, ``from_step`` and ``run``.
     """
-    from salad_core.train.assemble import assemble_pipeline
-
-    from .stage_eval import _score_denoiser
-
     settings = stage_settings(stage_doc, "denoiser")
     from_step = int(stage_doc["steps"])
     at = latest_step(run)
     if at is None or at <= from_step:
         raise ValueError(f"denoiser run {run} is at step {at}: a continuation of {stage_doc['stage']} must have "
                          f"trained past its {from_step} steps")
+    result = _score_denoiser_run(run, vae, label, data, evaluator, settings, text_encoder,
+                                 f"continuation {label} at {at} steps ({run})")
+    row = _row_doc(result, "continuation", label, at)
+    return _jsonable({**row, "label": label, "from_step": from_step, "stage": stage_doc["stage"], "run": str(run)})
+
+
+def _score_denoiser_run(run, vae, label: str, data, evaluator, settings, text_encoder, weights: str):
+    """Assemble the denoiser run ``run`` with the VAE ``vae`` (None: the one the run records) as the study's rows
+    were (fp16) and score it with ``settings``; return the evaluation result."""
+    from salad_core.train.assemble import assemble_pipeline
+
+    from .stage_eval import _score_denoiser
+
     if evaluator is None:
         from salad_core.eval.train_evaluator import load_packaged_evaluator
 
@@ -238,10 +258,60 @@ def score_denoiser_continuation(stage_doc: Mapping[str, Any], run: str | os.Path
                                          .get("task", {}).get("text_encoder", "minilm"))
     with tempfile.TemporaryDirectory() as tmp:
         folder = assemble_pipeline(vae, run, Path(tmp) / "pipeline", text_encoder=text_encoder)   # fp16, as shipped
-        result, _ = _score_denoiser(folder, label, data, evaluator, settings, f"continuation {label} at {at} steps "
-                                    f"({run})", text_encoder)
-    row = _row_doc(result, "continuation", label, at)
-    return _jsonable({**row, "label": label, "from_step": from_step, "stage": stage_doc["stage"], "run": str(run)})
+        result, _ = _score_denoiser(folder, label, data, evaluator, settings, weights, text_encoder)
+    return result
+
+
+def score_denoiser_probe(stage_doc: Mapping[str, Any], run: str | os.PathLike, *, vae: str | os.PathLike | None,
+                         label: str, change: Mapping[str, Any], base_variant: str, data: str | os.PathLike,
+                         evaluator=None, text_encoder=None) -> dict:
+    """Score a denoiser probe, trained from scratch to a denoiser stage's budget with one change to a study
+    variant (typically its frozen VAE), with that stage's protocol; return its row document.
+
+    The denoiser counterpart of :func:`score_vae_probe`: an equal budget, the stage's crops, captions and noise,
+    so the row is paired with the stage's rows (:func:`paired_probe_markdown`).
+
+    Parameters
+    ----------
+    stage_doc : dict
+        A denoiser group's stage evaluation; its ``steps`` are the budget the run must be at.
+    run : path
+        The probe's denoiser run (``python -m salad_core.train denoiser ... --vae VAE``).
+    vae : path or None
+        The frozen VAE it learned on (a VAE run or exported VAE folder); None: the one the run records.
+    label, change, base_variant
+        What the probe is, what it changed (e.g. ``{"vae": "pose_matched probe VAE"}``) and of which row of the
+        stage: recorded with the row.
+    data : path
+        The study's corpus.
+    evaluator, text_encoder : optional
+        Default: the packaged procedural-corpus evaluator and the run's text encoder.
+
+    Returns
+    -------
+    dict
+        The row document (``values``, ``summary``, ``settings``, ``steps``) with ``label``, ``change``,
+        ``base_variant``, ``stage`` and ``run``.
+
+    Raises
+    ------
+    ValueError
+        When the stage is not a denoiser stage, ``base_variant`` not one of its rows, or the run not at its steps.
+    """
+    settings = stage_settings(stage_doc, "denoiser")
+    steps = int(stage_doc["steps"])
+    if base_variant not in stage_doc["rows"]:
+        raise ValueError(f"base_variant {base_variant!r} is not a row of {stage_doc['stage']}; its rows: "
+                         f"{sorted(stage_doc['rows'])}")
+    at = latest_step(run)
+    if at != steps:
+        raise ValueError(f"probe run {run} is at step {at}, the stage {stage_doc['stage']} at {steps}: a probe "
+                         "compares at an equal budget; train it to that step (max_steps) first")
+    result = _score_denoiser_run(run, vae, label, data, evaluator, settings, text_encoder,
+                                 f"probe {label} at {steps} steps ({run})")
+    row = _row_doc(result, "probe", label, steps)
+    return _jsonable({**row, "label": label, "change": dict(change), "base_variant": base_variant,
+                      "stage": stage_doc["stage"], "run": str(run)})
 
 
 def continuation_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
