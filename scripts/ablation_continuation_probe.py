@@ -99,6 +99,9 @@ def main(argv=None) -> int:
                    "each run records; give it when the run's VAE moved, e.g. salad_core/weights/ablations/vae_st_long)")
     s.add_argument("--data", type=Path, required=True, help="the study's corpus")
     s.add_argument("--out", type=Path, required=True, help="the record (JSON, one entry per --name, merged)")
+    s.add_argument("--sampler", nargs="+", default=[], metavar="KEY=VALUE",
+                   help="score with other sampler settings than the stage's (guidance_scale, num_steps, solver), "
+                        "e.g. guidance_scale=3.5; the crops and noise stay the stage's")
     s.add_argument("--threads", type=int, default=None)
     args = ap.parse_args(argv)
     home = str(Path.home())
@@ -144,11 +147,14 @@ def main(argv=None) -> int:
     text_encoder = load_text_encoder("minilm")
     metrics = TABLE_METRICS["denoiser"]
     rows, steps = {}, set()
+    from salad_core.train.config import parse_overrides
+
+    sampler = parse_overrides(args.sampler, dotted=False) if args.sampler else None
     for v in args.variants:
         run = args.out_dir / f"den_{v}"
         row = score_denoiser_continuation(stage, run, vae=args.vae, label=f"{at_stage[v]['label']}, "
                                           f"{args.change_text}", data=args.data, evaluator=evaluator,
-                                          text_encoder=text_encoder)
+                                          text_encoder=text_encoder, sampler=sampler)
         row["at_stage"] = {m: at_stage[v]["summary"][m] for m in metrics}
         row["run"] = row["run"].replace(home, "~")
         cfg = args.out_dir / f"den_{v}.json"
@@ -171,7 +177,8 @@ def main(argv=None) -> int:
     prepared = made.read_text().split("\n") if made.is_file() else ["(prepared by hand: see each row's trained_config)"]
     record = json.loads(args.out.read_text()) if args.out.is_file() else {}
     record[args.name] = {"stage_eval": str(args.stage_eval), "stage": stage["stage"], "from_step": int(stage["steps"]),
-                         "steps": steps.pop(), "change_text": args.change_text, "rows": rows, "paired": paired,
+                         "steps": steps.pop(), "change_text": args.change_text, "sampler": sampler or {},
+                         "rows": rows, "paired": paired,
                          "commands": [c for c in prepared if c] + [command]}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(args.out, json.dumps(record, indent=1) + "\n")

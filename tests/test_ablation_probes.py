@@ -437,3 +437,25 @@ def test_denoiser_probe_trains_a_variant_on_another_vae_and_is_scored_paired_and
     pair = longer["paired"]["full vs x0_other, FID"]
     assert pair["at_stage"] == pytest.approx(list(paired_advantage(stage["rows"]["full"]["values"]["FID"],
                                                                    probe["values"]["FID"], "FID")))
+    # scored again with another guidance weight: the stage's crops and noise, the sampler's weight recorded and
+    # printed; a setting that would unpair the rows is refused
+    assert cont.main(["score", "--stage-eval", str(stage_file), "--out-dir", str(out_dir), "--variants", "full",
+                      "x0_other", "--name", "longer_w2", "--change-text", "one more step", "--sampler",
+                      "guidance_scale=2.0", "--probes", str(record), "--data", str(data), "--out",
+                      str(cont_record)]) == 0
+    w2 = json.loads(cont_record.read_text())["longer_w2"]
+    assert w2["sampler"] == {"guidance_scale": 2.0} and set(json.loads(cont_record.read_text())) == {"longer",
+                                                                                                    "longer_w2"}
+    for name in ("full", "x0_other"):
+        assert w2["rows"][name]["settings"]["guidance_scale"] == 2.0
+        assert longer["rows"][name]["settings"]["guidance_scale"] == stage["settings"].get("guidance_scale", 7.5)
+        for key in ("split", "batch_size", "replications", "max_samples", "seed", "num_steps"):
+            assert w2["rows"][name]["settings"][key] == stage["settings"][key], key
+    assert w2["rows"]["full"]["values"] != longer["rows"]["full"]["values"]        # the weight changed the samples
+    from salad_core.ablations.probes import continuation_probe_markdown, score_denoiser_continuation
+
+    text = continuation_probe_markdown({"longer_w2": w2})
+    assert "the stage's protocol with guidance_scale 2.0" in text and "at 3, guidance_scale 2.0" in text
+    with pytest.raises(ValueError, match=r"\['seed'\] are not sampler settings"):
+        score_denoiser_continuation(stage, out_dir / "den_full", label="x", data=data, evaluator=evaluator,
+                                    sampler={"seed": 3})

@@ -31,9 +31,13 @@ from typing import Any, Mapping, Sequence
 
 from .stage_eval import _jsonable, _row_doc, _score_vae, latest_step
 
-__all__ = ["stage_settings", "score_vae_probe", "score_denoiser_probe", "record_probe", "load_probes", "probe_markdown",
+__all__ = ["SAMPLER_SETTINGS", "stage_settings", "score_vae_probe", "score_denoiser_probe", "record_probe", "load_probes", "probe_markdown",
            "sampler_probe_markdown", "score_denoiser_continuation", "continuation_probe_markdown",
            "paired_probe_markdown"]
+
+
+#: evaluation settings a denoiser probe may change without unpairing its rows from the stage's crops and noise
+SAMPLER_SETTINGS = ("guidance_scale", "num_steps", "solver")
 
 
 def stage_settings(stage_doc: Mapping[str, Any], kind: str = "vae"):
@@ -196,7 +200,7 @@ def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
 
 def score_denoiser_continuation(stage_doc: Mapping[str, Any], run: str | os.PathLike, *,
                                 vae: str | os.PathLike | None = None, label: str, data: str | os.PathLike,
-                                evaluator=None, text_encoder=None) -> dict:
+                                evaluator=None, text_encoder=None, sampler: Mapping[str, Any] | None = None) -> dict:
     """Score a denoiser run that *continued* a stage's run (e.g. with a decaying learning rate) with that stage's
     protocol; return its row document.
 
@@ -221,14 +225,26 @@ def score_denoiser_continuation(stage_doc: Mapping[str, Any], run: str | os.Path
         The study's corpus.
     evaluator, text_encoder : optional
         Default: the packaged procedural-corpus evaluator and the run's text encoder.
+    sampler : dict, optional
+        Sampler settings that replace the stage's (:data:`SAMPLER_SETTINGS`: ``guidance_scale``, ``num_steps``,
+        ``solver``), e.g. ``{"guidance_scale": 3.5}``; the crops, captions and noise stay the stage's, so rows
+        scored with the same ``sampler`` are paired. Any other key is refused (it would unpair the rows).
 
     Returns
     -------
     dict
         The row document of :mod:`~salad_core.ablations.stage_eval` (``values`` per replication, ``summary``,
-        ``settings``, ``steps`` = the run's step) with ``label``, ``from_step`` and ``run``.
+        ``settings`` (the sampler's included), ``steps`` = the run's step) with ``label``, ``from_step`` and ``run``.
     """
+    import dataclasses
+
     settings = stage_settings(stage_doc, "denoiser")
+    if sampler:
+        other = sorted(set(sampler) - set(SAMPLER_SETTINGS))
+        if other:
+            raise ValueError(f"sampler settings {other} are not sampler settings ({list(SAMPLER_SETTINGS)}): "
+                             "changing the protocol would unpair the rows")
+        settings = dataclasses.replace(settings, **sampler)
     from_step = int(stage_doc["steps"])
     at = latest_step(run)
     if at is None or at <= from_step:
@@ -322,9 +338,12 @@ def continuation_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
     for name, probe in record.items():
         first = next(iter(probe["rows"]))
         s, n = probe["from_step"], probe["steps"]
-        out += [f"**{name}** ({probe['change_text']}; the stage's protocol):", ""]
-        out += _stage_and_probe_tables(probe, first, f"at {s:,}", f"at {n:,}", f"at {s:,} (the stage)",
-                                       f"at {n:,} (continued)")
+        sampler = ", ".join(f"{k} {v}" for k, v in probe.get("sampler", {}).items())
+        protocol = f"the stage's protocol with {sampler}" if sampler else "the stage's protocol"
+        out += [f"**{name}** ({probe['change_text']}; {protocol}):", ""]
+        cont = f"at {n:,} (continued{', ' + sampler if sampler else ''})"
+        out += _stage_and_probe_tables(probe, first, f"at {s:,}", f"at {n:,}{', ' + sampler if sampler else ''}",
+                                       f"at {s:,} (the stage)", cont)
         out += ["", "Made by:", ""] + [f"    {c}" for c in probe["commands"]] + [""]
     return "\n".join(out).rstrip() + "\n"
 
