@@ -67,8 +67,12 @@ def main(argv=None) -> int:
     sets = parse_sets(args.sets)
     home = str(Path.home())
     if args.what == "config":
-        if not args.vae.exists():
-            ap.error(f"--vae {args.vae} does not exist: train the probe's VAE first")
+        from salad_core.train.assemble import vae_source
+
+        try:
+            vae_source(args.vae)
+        except FileNotFoundError as err:
+            ap.error(f"--vae {args.vae}: {err} (train the probe's VAE first)")
         cfg = probe_config(args.study_configs, "den", args.variant, sets)
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(cfg, indent=2) + "\n")
