@@ -125,6 +125,7 @@ def main(argv=None) -> int:
     from salad_core.eval.train_evaluator import load_packaged_evaluator
     from salad_core.io import atomic_write_text
     from salad_core.text import load_text_encoder
+    from salad_core.train.config import parse_overrides
 
     stage = json.loads(args.stage_eval.read_text())
     if stage.get("kind") != "denoiser":
@@ -132,23 +133,19 @@ def main(argv=None) -> int:
     at_stage = dict(stage["rows"])                   # variant -> its row at the stage (a stage row or a probe's)
     probes = json.loads(args.probes.read_text()) if args.probes else {}
     for v in args.variants:
-        if v in at_stage:
-            continue
-        if v in probes and probes[v].get("stage") == stage["stage"]:
+        if v not in at_stage and v in probes and probes[v].get("stage") == stage["stage"]:
             at_stage[v] = probes[v]
-            continue
-        mine = sorted(k for k, p in probes.items() if p.get("stage") == stage["stage"])
-        raise SystemExit(f"variant {v!r} is not a row of {args.stage_eval} (rows: {sorted(stage['rows'])})"
-                         + (f" nor one of its probes in {args.probes} ({mine})" if args.probes else
-                            "; a denoiser probe's variant needs --probes"))
+        if v not in at_stage:
+            mine = sorted(k for k, p in probes.items() if p.get("stage") == stage["stage"])
+            raise SystemExit(f"variant {v!r} is not a row of {args.stage_eval} (rows: {sorted(stage['rows'])})"
+                             + (f" nor one of its probes in {args.probes} ({mine})" if args.probes else
+                                "; a denoiser probe's variant needs --probes"))
         if not (args.out_dir / f"den_{v}" / "latest.json").is_file():
             raise SystemExit(f"{args.out_dir / f'den_{v}'} holds no trained run: prepare and train it first")
     evaluator = load_packaged_evaluator()[0]
     text_encoder = load_text_encoder("minilm")
     metrics = TABLE_METRICS["denoiser"]
     rows, steps = {}, set()
-    from salad_core.train.config import parse_overrides
-
     sampler = parse_overrides(args.sampler, dotted=False) if args.sampler else None
     for v in args.variants:
         run = args.out_dir / f"den_{v}"

@@ -427,6 +427,10 @@ def test_denoiser_probe_trains_a_variant_on_another_vae_and_is_scored_paired_and
              "--name", "longer", "--change-text", "one more step", "--data", str(data), "--out", str(cont_record)]
     with pytest.raises(SystemExit, match="needs --probes"):
         cont.main(score)
+    with pytest.raises(SystemExit, match="holds no trained run"):          # a probe of the stage not continued
+        cont.main(["score", "--stage-eval", str(stage_file), "--out-dir", str(tmp_path / "elsewhere"), "--variants",
+                   "full", "x0_other", "--probes", str(record), "--name", "n", "--change-text", "t", "--data",
+                   str(data), "--out", str(cont_record)])
     assert cont.main(score + ["--probes", str(record)]) == 0
     longer = json.loads(cont_record.read_text())["longer"]
     assert longer["steps"] == 3
