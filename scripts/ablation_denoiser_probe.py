@@ -35,7 +35,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "scripts"))
-from ablation_vae_probe import parse_sets, probe_config  # noqa: E402  (the VAE probe's --set handling, shared)
+from ablation_vae_probe import parse_sets, write_probe_config  # noqa: E402  (the VAE probe's config writing, shared)
 
 #: config keys that change where or how fast a run trains, not what it learns (left out of the recorded change)
 NEUTRAL_KEYS = ("train.latent_cache_dir", "train.num_threads", "train.num_workers", "train.progress")
@@ -73,10 +73,7 @@ def main(argv=None) -> int:
             vae_source(args.vae)
         except FileNotFoundError as err:
             ap.error(f"--vae {args.vae}: {err} (train the probe's VAE first)")
-        cfg = probe_config(args.study_configs, "den", args.variant, sets)
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(cfg, indent=2) + "\n")
-        run = args.out.with_suffix("")
+        run = write_probe_config(args.study_configs, "den", args.variant, sets, args.out)
         print(f"wrote {args.out}; train it with:\n  python -m salad_core.train denoiser --data CORPUS --out {run} "
               f"--config {args.out} --vae {args.vae} --no-progress --resume")
         return 0

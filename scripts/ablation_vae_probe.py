@@ -60,6 +60,14 @@ def probe_config(study_configs: Path, prefix: str, variant: str, sets: dict) -> 
     return apply_sets(json.loads(src.read_text()), sets)
 
 
+def write_probe_config(study_configs: Path, prefix: str, variant: str, sets: dict, out: Path) -> Path:
+    """Write :func:`probe_config` to ``out``; return the probe's run folder (``out`` without ``.json``)."""
+    cfg = probe_config(study_configs, prefix, variant, sets)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(cfg, indent=2) + "\n")
+    return out.with_suffix("")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="what", required=True)
@@ -84,10 +92,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     sets = parse_sets(args.sets)
     if args.what == "config":
-        cfg = probe_config(args.study_configs, "vae", args.variant, sets)
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(cfg, indent=2) + "\n")
-        run = args.out.with_suffix("")
+        run = write_probe_config(args.study_configs, "vae", args.variant, sets, args.out)
         print(f"wrote {args.out}; train it with:\n  python -m salad_core.train vae --data CORPUS --out {run} "
               f"--config {args.out} --resume")
         return 0

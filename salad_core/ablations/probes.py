@@ -52,6 +52,20 @@ def stage_settings(stage_doc: Mapping[str, Any], kind: str = "vae"):
     return EvalSettings(**stage_doc["settings"])
 
 
+def _equal_budget(stage_doc: Mapping[str, Any], run, base_variant: str) -> int:
+    """The stage's steps, once ``base_variant`` is one of its rows and the probe run ``run`` is at those steps (an
+    equal budget); ValueError naming what is not."""
+    steps = int(stage_doc["steps"])
+    if base_variant not in stage_doc["rows"]:
+        raise ValueError(f"base_variant {base_variant!r} is not a row of {stage_doc['stage']}; its rows: "
+                         f"{sorted(stage_doc['rows'])}")
+    at = latest_step(run)
+    if at != steps:
+        raise ValueError(f"probe run {run} is at step {at}, the stage {stage_doc['stage']} at {steps}: a probe "
+                         "compares at an equal budget; train it to that step (max_steps) first")
+    return steps
+
+
 def score_vae_probe(stage_doc: Mapping[str, Any], run: str | os.PathLike, *, label: str, change: Mapping[str, Any],
                     base_variant: str, data: str | os.PathLike, evaluator=None) -> dict:
     """Score the VAE run ``run`` with the protocol of the VAE stage ``stage_doc``; return its row document.
@@ -87,14 +101,7 @@ def score_vae_probe(stage_doc: Mapping[str, Any], run: str | os.PathLike, *, lab
     from salad_core.train.assemble import export_vae
 
     settings = stage_settings(stage_doc)
-    steps = int(stage_doc["steps"])
-    if base_variant not in stage_doc["rows"]:
-        raise ValueError(f"base_variant {base_variant!r} is not a row of {stage_doc['stage']}; its rows: "
-                         f"{sorted(stage_doc['rows'])}")
-    at = latest_step(run)
-    if at != steps:
-        raise ValueError(f"probe run {run} is at step {at}, the stage {stage_doc['stage']} at {steps}: a probe "
-                         "compares at an equal budget; train it to that step (max_steps) first")
+    steps = _equal_budget(stage_doc, run, base_variant)
     if evaluator is None:
         from salad_core.eval.train_evaluator import load_packaged_evaluator
 
@@ -315,14 +322,7 @@ def score_denoiser_probe(stage_doc: Mapping[str, Any], run: str | os.PathLike, *
         When the stage is not a denoiser stage, ``base_variant`` not one of its rows, or the run not at its steps.
     """
     settings = stage_settings(stage_doc, "denoiser")
-    steps = int(stage_doc["steps"])
-    if base_variant not in stage_doc["rows"]:
-        raise ValueError(f"base_variant {base_variant!r} is not a row of {stage_doc['stage']}; its rows: "
-                         f"{sorted(stage_doc['rows'])}")
-    at = latest_step(run)
-    if at != steps:
-        raise ValueError(f"probe run {run} is at step {at}, the stage {stage_doc['stage']} at {steps}: a probe "
-                         "compares at an equal budget; train it to that step (max_steps) first")
+    steps = _equal_budget(stage_doc, run, base_variant)
     result = _score_denoiser_run(run, vae, label, data, evaluator, settings, text_encoder,
                                  f"probe {label} at {steps} steps ({run})")
     row = _row_doc(result, "probe", label, steps)
