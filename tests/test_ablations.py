@@ -371,7 +371,7 @@ def test_model_card_is_written_from_the_evaluation_files_alone(tmp_path):
     card = model_card({"vaes": outcome}, command="c", probes={"narrow": {**probe, "stage": "vaes@2"},
                                                                "old": {**probe, "stage": "vaes@1", "label": "old one"}})
     assert "| **probe** narrow pose VAE (pose with model.pose_width = 4) | 900 | 0.500 ± 0.020 | 5.00 ± 0.30 |" in card
-    assert "| label pose (pose) | 0 | 0.200 ± 0.010 | 2.00 ± 0.20 |" in card
+    assert "| label pose (pose) | - | 0.200 ± 0.010 | 2.00 ± 0.20 |" in card        # a row without a count
     assert "Probe `narrow` was made by:\n\n```bash\ntrain it\nscore it\n```" in card and "old one" not in card
 
 

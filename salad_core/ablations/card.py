@@ -167,7 +167,7 @@ def model_card(outcomes: Mapping[str, Any], *, command: str, recipe_path: str = 
 
             bases = list(dict.fromkeys(p["base_variant"] for p in mine.values()))
             others = [v for rows in group.tables.values() for v in rows if v not in bases]
-            table = probe_markdown({**final, "stage": stage}, mine, bases + list(dict.fromkeys(others)))
+            table = probe_markdown({**final, "stage": stage, "kind": group.kind}, mine, bases + list(dict.fromkeys(others)))
             out += ["Probes (`probes.json`): a variant changed in one setting, trained to the same steps outside the "
                     "study and scored with this stage's protocol (the same crops), to measure why an ordering "
                     "differs:", "", table.rstrip(), ""]
