@@ -18,7 +18,9 @@ VAE's decoded poses halve the flight (-3.30 m/s^2 against -7.66 with the true po
   normalisation (:attr:`PSTConfig.latent_norm`); a source PST without it cannot start such a model, so add
   ``--scratch``: a new PST trained from its initialisation with the recipe's schedule (learning rate, decay
   milestones, warm-up; ``--steps`` then counts the whole run, e.g. the recipe's 60,000), on the source keyframe
-  VAE's latents.
+  VAE's latents; ``--kf-vae RUN`` trains it on another keyframe VAE (a run folder, e.g. a wider latent; the
+  recipe's PST section must give its latent shape), and ``--export`` then assembles that VAE, the new PST and the
+  source's MMAE.
 * ``--stage kf_vae``: :attr:`KeyframeVAEConfig.lambda_root`, ``lambda_local_vel``, ``lambda_contact`` and
   ``lambda_feet_height`` (the root, joint-velocity, foot-contact and foot-height channels weighed again), by default with the encoder frozen
   (``--parts decoder``) so the source's PST, trained on its latents, still fits.
@@ -32,6 +34,8 @@ and with ``--export`` writes a pipeline folder: the source's other two models wi
     python scripts/finetune_keymotion.py --stage mmae --data CORPUS --out RUN --steps 3000      # train (resumable)
     python scripts/finetune_keymotion.py --stage pst --side-cue --data CORPUS --out RUN --steps 3000
     python scripts/finetune_keymotion.py --stage pst --latent-norm --scratch --data CORPUS --out RUN --steps 60000
+    python scripts/finetune_keymotion.py --stage pst --latent-norm --scratch --kf-vae VAE_RUN --recipe RECIPE \\
+        --data CORPUS --out RUN --steps 60000 --export DIR          # a PST on another keyframe VAE (its recipe's PST)
     python scripts/finetune_keymotion.py --stage kf_vae --lambda-feet-height 5 --data CORPUS \\
         --out RUN --steps 4000 --export DIR                                                    # train, then assemble
 
@@ -54,7 +58,7 @@ REPO = Path(__file__).resolve().parents[1]
 LOSS_FLAGS = {"mmae": ("lambda_foot",), "pst": (),
               "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact", "lambda_feet_height")}
 #: per stage: its other flags
-STAGE_FLAGS = {"mmae": ("roundtrip",), "kf_vae": ("parts",), "pst": ("side_cue", "latent_norm", "scratch")}
+STAGE_FLAGS = {"mmae": ("roundtrip",), "kf_vae": ("parts",), "pst": ("side_cue", "latent_norm", "scratch", "kf_vae")}
 #: the learning rate a stage gets when --lr is not given (the PST's probe of session 20 ran at 2e-4)
 DEFAULT_LR = {"mmae": 1e-4, "kf_vae": 1e-4, "pst": 2e-4}
 #: the weight a flag gets when not given
@@ -82,6 +86,9 @@ def main(argv=None, *, text_encoder=None) -> int:
                     help="pst: latent normalisation (PSTConfig.latent_norm; with a source PST without it, --scratch)")
     ap.add_argument("--scratch", action="store_const", const=True, default=None,
                     help="pst: train a new PST (the recipe's schedule) instead of starting from the source's")
+    ap.add_argument("--kf-vae", type=Path, default=None,
+                    help="pst, with --scratch: the keyframe VAE run folder to train on (default: the source's); "
+                         "--export then assembles it with the new PST and the source's MMAE")
     ap.add_argument("--roundtrip", type=float, default=None,
                     help="mmae: share of items whose input keyframes the source's keyframe VAE reconstructs (0)")
     ap.add_argument("--lambda-root", type=float, default=None, help="kf_vae: extra weight of the root channels (0)")
@@ -140,10 +147,15 @@ def main(argv=None, *, text_encoder=None) -> int:
             overrides = {k: v for k, v in overrides.items() if k in ("max_steps", "progress", "num_threads")}
             if args.lr is not None:
                 overrides["lr"] = args.lr
+        if args.kf_vae is not None and not args.scratch:
+            ap.error("--kf-vae needs --scratch: a trained PST only fits the keyframe VAE it was trained on")
+        if args.kf_vae is not None and not args.kf_vae.is_dir():
+            ap.error(f"--kf-vae {args.kf_vae}: no such run folder")
         train_cfg = replace(recipe.pst_train, **overrides)
         model_cfg = replace(recipe.pst_model, side_cue=bool(args.side_cue) or recipe.pst_model.side_cue,
                             latent_norm=bool(args.latent_norm) or recipe.pst_model.latent_norm)
-        result = train_pst(args.data, args.out, source / "kf_vae", model_cfg, train_cfg, text_encoder=encoder,
+        vae_path = args.kf_vae if args.kf_vae is not None else source / "kf_vae"
+        result = train_pst(args.data, args.out, vae_path, model_cfg, train_cfg, text_encoder=encoder,
                            resume=args.resume)
     else:
         if args.roundtrip is not None:
@@ -160,9 +172,11 @@ def main(argv=None, *, text_encoder=None) -> int:
     if result.interrupted:
         return 130
     if args.export is not None:
-        from salad_core.keymotion.export import export_with_component
+        from salad_core.keymotion.export import export_with_components
 
-        export_with_component(source, args.stage, args.out, args.export, text_encoder=text_encoder)
+        runs = {args.stage: args.out} if args.kf_vae is None else {"kf_vae": args.kf_vae,
+                                                                                   "pst": args.out}
+        export_with_components(source, runs, args.export, text_encoder=text_encoder)
         print(f"pipeline with the fine-tuned {args.stage} -> {args.export}")
     return 0
 

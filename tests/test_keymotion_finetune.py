@@ -318,3 +318,49 @@ def test_finetune_script_trains_a_latent_norm_pst_from_scratch_on_the_source_vae
     old, _, _ = load_model(source / "pst")
     assert float(new.latent_std.min()) > 0 and not torch.equal(new.latent_std, torch.ones_like(new.latent_std))
     assert not torch.equal(new.out.weight.half(), old.out.weight.half())
+
+
+def test_finetune_script_trains_a_pst_on_another_kf_vae_and_exports_them_together(tmp_path):
+    """--kf-vae RUN (with --scratch): the PST trains on a wider keyframe VAE's latents, and --export assembles that
+    VAE, the new PST and the source's MMAE into a pipeline that loads and samples; runs.json names both runs."""
+    from salad_core.keymotion.export import export_with_components
+    from salad_core.keymotion.train import train_kf_vae
+
+    script = load_script("finetune_keymotion")
+    pst_model = dict(latent_size=2, latent_dim=24, text_dim=TEXT_DIM, width=32, num_heads=4, ff_dim=64,
+                     num_cond_layers=1, num_cross_layers=2, dropout=0.0, max_length=96)
+    data, source = finetune_inputs(tmp_path, {"pst": {"model": pst_model, "train": {"latent_cache": False}}})
+    torch.manual_seed(1)
+    wide = tmp_path / "wide_vae"
+    train_kf_vae(data, wide, tiny_kf_vae_config(latent_dim=24),
+                 KeyMotionTrainConfig(batch_size=4, max_length=96, keyframe_method="uniform", num_threads=1,
+                                      max_steps=1, val_every=1, val_batches=1, ckpt_every=1, log_every=1,
+                                      progress=False))
+    enc = HashTextEncoder()
+    common = ["--stage", "pst", "--latent-norm", "--data", str(data), "--source", str(source), "--recipe",
+              str(tmp_path / "recipe.json"), "--steps", "2", "--kf-vae", str(wide)]
+    with pytest.raises(SystemExit):                          # a trained PST fits only its own VAE
+        script.main(common + ["--out", str(tmp_path / "bad")], text_encoder=enc)
+    assert script.main(common + ["--scratch", "--out", str(tmp_path / "run"), "--export", str(tmp_path / "out")],
+                       text_encoder=enc) == 0
+    out = KeyMotionPipeline.from_pretrained(tmp_path / "out", text_encoder=enc)
+    assert out.kf_vae.config.latent_dim == 24 and out.pst.config.latent_dim == 24 and out.pst.config.latent_norm
+    trained, _, _ = load_model(wide / "best")
+    assert all(torch.equal(a.half(), b) for a, b in zip(trained.state_dict().values(),
+                                                         out.kf_vae.half().state_dict().values()))
+    old_mmae, _, _ = load_model(source / "mmae")
+    assert all(torch.equal(a.half(), b.half()) for a, b in zip(old_mmae.state_dict().values(),
+                                                                out.mmae.state_dict().values()))
+    records = json.loads((tmp_path / "out" / "runs.json").read_text())
+    assert records["kf_vae"]["config"]["model"]["latent_dim"] == 24 and records["pst"]["step"] == 2
+    motion = KeyMotionPipeline.from_pretrained(tmp_path / "out", text_encoder=enc)(
+        "a person walks", lengths=40, num_steps=2, seed=0)
+    assert np.isfinite(np.asarray(motion.features)).all()
+    # one stage at a time cannot be assembled (the source's PST does not fit the wider VAE), nor a wrong run
+    with pytest.raises(ValueError, match="latents"):
+        export_with_components(source, {"kf_vae": wide}, tmp_path / "x", text_encoder=enc)
+    with pytest.raises(ValueError, match="not the kf_vae"):
+        export_with_components(source, {"kf_vae": tmp_path / "run"}, tmp_path / "x", text_encoder=enc)
+    with pytest.raises(ValueError, match="not a KeyMotion component"):
+        export_with_components(source, {"vae": wide}, tmp_path / "x", text_encoder=enc)
+    assert not (tmp_path / "x").exists()                     # nothing written by a refused export

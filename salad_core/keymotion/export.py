@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import torch
 
@@ -21,7 +21,7 @@ from salad_core.keymotion.train import STAGES
 from salad_core.sampling import Guidance
 from salad_core.train.assemble import run_checkpoint
 
-__all__ = ["run_record", "stage_records", "export_pipeline", "export_with_component"]
+__all__ = ["run_record", "stage_records", "export_pipeline", "export_with_component", "export_with_components"]
 
 
 def run_record(run: str | os.PathLike) -> dict[str, Any]:
@@ -114,18 +114,45 @@ def export_with_component(source: str | os.PathLike, stage: str, run: str | os.P
     measuring (``scripts/finetune_keymotion.py``). ``dest/runs.json`` keeps ``source``'s run records (if it has
     them) with the ``stage`` entry replaced by :func:`run_record` of ``run``, so a shipped pipeline says which run
     each of its models came from. Returns ``dest``."""
+    return export_with_components(source, {stage: run}, dest, text_encoder=text_encoder)
+
+
+def export_with_components(source: str | os.PathLike, runs: Mapping[str, str | os.PathLike],
+                           dest: str | os.PathLike, *, text_encoder: Any = None) -> Path:
+    """:func:`export_with_component` for several stages at once, ``runs`` mapping each replaced stage to its run
+    folder: how a PST trained on another keyframe VAE is assembled (``{"kf_vae": VAE_RUN, "pst": PST_RUN}``; one
+    stage at a time could not be, since the source's PST does not fit the new VAE's latents). The assembled
+    pipeline is checked as :class:`KeyMotionPipeline` checks any (latent shape, skeleton, text width) before
+    anything is written.
+
+    Raises
+    ------
+    ValueError
+        ``runs`` is empty or names a stage that is not a KeyMotion component, a run holds another kind of model,
+        or the assembled models do not fit each other (the message says how).
+    """
     from salad_core.io import load_model
     from salad_core.keymotion.pipeline import COMPONENTS
 
-    if stage not in COMPONENTS:
-        raise ValueError(f"stage={stage!r} is not a KeyMotion component; use one of {sorted(COMPONENTS)}")
+    if not runs:
+        raise ValueError("runs is empty: name at least one stage to replace")
+    for stage in runs:
+        if stage not in COMPONENTS:
+            raise ValueError(f"stage={stage!r} is not a KeyMotion component; use one of {sorted(COMPONENTS)}")
     pipe = KeyMotionPipeline.from_pretrained(source, **({"text_encoder": text_encoder} if text_encoder else {}))
-    record = run_record(run)                       # first: a run without its records fails before anything is written
-    model, _, _ = load_model(run_checkpoint(run))
-    setattr(pipe, stage, model.eval())
+    # first: a run without its records fails before anything is written
+    new_records = {stage: run_record(run) for stage, run in runs.items()}
+    for stage, run in runs.items():
+        checkpoint = run_checkpoint(run)
+        kind = json.loads(checkpoint.with_suffix(".json").read_text()).get("type")
+        if kind != COMPONENTS[stage]:
+            raise ValueError(f"{run} holds a {kind!r} model, not the {stage} ({COMPONENTS[stage]!r})")
+        model, _, _ = load_model(checkpoint)
+        setattr(pipe, stage, model.eval())
+    pipe._check_compatible()
     source_records = Path(source) / "runs.json"
     records = json.loads(source_records.read_text()) if source_records.is_file() else {}
-    records[stage] = record
+    records.update(new_records)
     out = pipe.save_pretrained(dest, dtype=torch.float16)
     atomic_write_text(out / "runs.json", json.dumps(records, indent=2) + "\n")
     return out
