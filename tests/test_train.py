@@ -448,6 +448,46 @@ def test_denoiser_resume_is_bit_identical(corpus, tiny_vae_run, tmp_path):
     assert_same_tensors(weights(run / "best.safetensors"), weights(ref / "best.safetensors"))
 
 
+def test_a_runs_validation_does_not_depend_on_whether_it_was_resumed(corpus, tiny_vae_run, tmp_path):
+    """Session 32's defect: the fused AdamW does not bump the weights' version counters, so the no-grad caches
+    (stacked Q/K/V, text keys/values) kept the weights of a run's first validation and every later validation of
+    the same process used them; a resumed run (new model, new caches) validated the same step differently."""
+    val = {}
+    for name, stops in (("straight", [4]), ("resumed", [2, 4])):
+        for i, steps in enumerate(stops):
+            train_denoiser(corpus, tmp_path / name, tiny_vae_run, tiny_denoiser_config(),
+                           den_train_config(max_steps=steps, adamw="fused", lr=2e-2), HashTextEncoder(),
+                           resume=i > 0)
+        rows = [json.loads(line) for line in (tmp_path / name / "log.jsonl").read_text().splitlines()]
+        val[name] = {r["step"]: r["val_loss"] for r in rows if "val_loss" in r}
+    assert set(val["straight"]) == {2, 4}
+    assert val["straight"][2] != val["straight"][4]                     # the weights did move between them
+    assert val["straight"] == pytest.approx(val["resumed"], rel=1e-6, abs=1e-7)
+
+
+def test_optimizer_step_lets_the_no_grad_caches_see_a_fused_update():
+    from salad_core.models.denoiser import Denoiser
+    from salad_core.train.common import optimizer_step
+    from salad_core.train.config import make_adamw
+
+    torch.manual_seed(0)
+    model = Denoiser(tiny_denoiser_config())
+    x, t = torch.randn(2, 3, 7, 8), torch.tensor([10, 500])
+    text, mask = torch.randn(2, 4, 16), torch.ones(2, 4, dtype=torch.bool)
+    params = [p for p in model.parameters() if p.requires_grad]
+    opt = make_adamw(params, den_train_config(adamw="fused"), lr=5e-2)
+    model.eval()
+    with torch.no_grad():
+        model(x, t, text, text_mask=mask)                                # builds the caches
+    model(x, t, text, text_mask=mask).square().mean().backward()
+    optimizer_step(opt, params)
+    with torch.no_grad():
+        after = model(x, t, text, text_mask=mask)
+        want = Denoiser(tiny_denoiser_config()).eval()                   # the same weights, no cache yet
+        want.load_state_dict(model.state_dict())
+        assert torch.allclose(after, want(x, t, text, text_mask=mask), atol=1e-6)
+
+
 def test_denoiser_batch_prep_drops_captions_masks_and_targets(corpus, tiny_vae_run):
     from salad_core.data.dataset import MotionTextDataset, collate_motion_text
     from salad_core.sampling import make_scheduler

@@ -264,11 +264,12 @@ def score_denoiser_continuation(stage_doc: Mapping[str, Any], run: str | os.Path
 
 
 def _score_denoiser_run(run, vae, label: str, data, evaluator, settings, text_encoder, weights: str):
-    """Assemble the denoiser run ``run`` with the VAE ``vae`` (None: the one the run records) as the study's rows
-    were (fp16) and score it with ``settings``; return the evaluation result."""
+    """Assemble the denoiser run ``run``'s ``latest`` checkpoint (the step a probe is reported at, never its
+    ``best``: a run's validation choice is not the stage's budget) with the VAE ``vae`` (None: the one the run
+    records) as the study's rows were (fp16) and score it with ``settings``; return the evaluation result."""
     from salad_core.train.assemble import assemble_pipeline
 
-    from .stage_eval import _score_denoiser
+    from .stage_eval import _score_denoiser, snapshot_run
 
     if evaluator is None:
         from salad_core.eval.train_evaluator import load_packaged_evaluator
@@ -280,7 +281,8 @@ def _score_denoiser_run(run, vae, label: str, data, evaluator, settings, text_en
         text_encoder = load_text_encoder(json.loads((Path(run) / "config.json").read_text())
                                          .get("task", {}).get("text_encoder", "minilm"))
     with tempfile.TemporaryDirectory() as tmp:
-        folder = assemble_pipeline(vae, run, Path(tmp) / "pipeline", text_encoder=text_encoder)   # fp16, as shipped
+        view = snapshot_run(run, Path(tmp) / "run", latest_step(run))       # latest.* only: no best.* to prefer
+        folder = assemble_pipeline(vae, view, Path(tmp) / "pipeline", text_encoder=text_encoder)   # fp16, as shipped
         result, _ = _score_denoiser(folder, label, data, evaluator, settings, weights, text_encoder)
     return result
 

@@ -53,8 +53,11 @@ def weight_signature(tensors: Iterable[torch.Tensor], owner: object = None) -> t
     """What a cache built from ``tensors`` depends on: the owner's identity and, per tensor, its
     identity, storage, in-place version counter and dtype.
 
-    Optimiser steps and other in-place updates bump the version counter,
-    ``load_state_dict(assign=True)`` replaces the tensors, ``.to()`` moves their storage. The version
+    In-place updates bump the version counter (PyTorch's fused optimisers do **not**: ``AdamW(fused=True)``
+    writes the weights in one kernel without bumping it, so a loop stepping one must call
+    ``torch.autograd.graph.increment_version`` on its parameters, as
+    :func:`salad_core.train.common.optimizer_step` does), ``load_state_dict(assign=True)`` replaces the
+    tensors, ``.to()`` moves their storage. The version
     counter is PyTorch's private ``Tensor._version``: no public API tells whether a tensor was changed
     in place, and comparing the weights' values at every call would cost more than the caches save.
     This is the one place salad reads it.

@@ -131,6 +131,19 @@ class TrainResult:
     threads: int = 0                # torch CPU threads the steps ran on
 
 
+def optimizer_step(optimizer: torch.optim.Optimizer, params: list[torch.Tensor]) -> None:
+    """``optimizer.step()``, then mark every parameter of ``params`` as modified in place.
+
+    PyTorch's fused AdamW (:attr:`TrainConfig.adamw` "fused", the default) updates the parameters in one kernel
+    without bumping their version counters, and the no-grad caches of the models (the stacked Q/K/V and the text
+    keys/values, :func:`salad_core.models.inference.weight_signature`) know a weight changed only by its version:
+    without this, every validation after the first ran with the Q/K/V weights of the first one (found in session
+    32: fresh runs' validation loss rose while their training loss fell, and ``best`` was chosen by it).
+    """
+    optimizer.step()
+    torch.autograd.graph.increment_version(params)
+
+
 def seed_everything(seed: int) -> None:
     """Seed torch (all devices), numpy and python ``random``."""
     import random
@@ -625,7 +638,7 @@ def _fit(task: TrainTask, out_dir: Path, config: TrainConfig, resume: bool, env:
                     losses = _forward_backward(objective, inputs, task, config, env)
                     if config.grad_clip is not None:
                         torch.nn.utils.clip_grad_norm_(params, config.grad_clip)
-                    optimizer.step()
+                    optimizer_step(optimizer, params)
                     step += 1
                     steps_this_call += 1
                     batch_in_epoch += 1

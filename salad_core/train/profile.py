@@ -31,6 +31,7 @@ from typing import Any
 
 import torch
 
+from .common import optimizer_step
 from .config import make_adamw
 
 __all__ = ["PARTS", "StepProfile", "StepRunner", "profile_denoiser_training"]
@@ -172,7 +173,7 @@ class StepRunner:
         torch.nn.utils.clip_grad_norm_(self.params, self.config.grad_clip or float("inf"))
         t["clip"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        self.optimizer.step()
+        optimizer_step(self.optimizer, self.params)
         t["optimizer"] = t_zero + time.perf_counter() - t0
         t0 = time.perf_counter()
         self.losses.append(total)
