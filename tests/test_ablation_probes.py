@@ -463,3 +463,38 @@ def test_denoiser_probe_trains_a_variant_on_another_vae_and_is_scored_paired_and
     with pytest.raises(ValueError, match=r"\['seed'\] are not sampler settings"):
         score_denoiser_continuation(stage, out_dir / "den_full", label="x", data=data, evaluator=evaluator,
                                     sampler={"seed": 3})
+
+
+def test_continued_pairs_markdown_pairs_rows_of_different_continuation_probes():
+    """Rows continued from one stage to one step with one sampler are paired across probes: the gap is the
+    orderings module's paired advantage; a run scored twice must agree (to float rounding), and rows of another
+    sampler, stage or step, or an unknown variant, are refused."""
+    from salad_core.ablations.orderings import paired_advantage
+    from salad_core.ablations.probes import continued_pairs_markdown
+
+    def row(fid, top3):
+        return {"values": {"FID": fid, "R-precision top-3": top3}}
+
+    seed_a = {"stage": "denoisers@8", "steps": 10, "sampler": None,
+              "rows": {"full": row([1.6, 1.8], [0.85, 0.86]), "no_st": row([1.5, 1.6], [0.83, 0.83])}}
+    seed_b = {"stage": "denoisers@8", "steps": 10, "sampler": {},
+              "rows": {"full_b": row([1.7, 1.6], [0.84, 0.85]), "full": row([1.6 + 1e-9, 1.8], [0.85, 0.86])}}
+    weak = {"stage": "denoisers@8", "steps": 10, "sampler": {"guidance_scale": 4.5},
+            "rows": {"full": row([1.1, 1.2], [0.8, 0.8]), "no_st": row([1.3, 1.2], [0.8, 0.81])}}
+    record = {"a": seed_a, "b": seed_b, "w4.5": weak}
+    table = continued_pairs_markdown(record, [("full_b", "no_st"), ("full", "full_b")]).splitlines()
+    assert table[0] == "| pair, at 10 steps | FID | R-precision top-3 |" and len(table) == 4
+    fid = paired_advantage([1.7, 1.6], [1.5, 1.6], "FID")
+    top3 = paired_advantage([0.84, 0.85], [0.83, 0.83], "R-precision top-3")
+    assert table[2] == f"| `full_b` over `no_st` | {fid[0]:+.3f} ± {fid[1]:.3f} | {top3[0]:+.3f} ± {top3[1]:.3f} |"
+    assert fid[0] < 0 < top3[0]
+    weak_table = continued_pairs_markdown(record, [("full", "no_st")], sampler={"guidance_scale": 4.5})
+    assert f"| `full` over `no_st` | {paired_advantage([1.1, 1.2], [1.3, 1.2], 'FID')[0]:+.3f}" in weak_table
+    with pytest.raises(KeyError, match="'full_b' is in no probe"):
+        continued_pairs_markdown(record, [("full", "full_b")], sampler={"guidance_scale": 4.5})
+    with pytest.raises(ValueError, match="not the same run"):
+        continued_pairs_markdown({**record, "b": {**seed_b, "rows": {**seed_b["rows"], "full": row([1.0, 1.8],
+                                                                                              [0.85, 0.86])}}},
+                                 [("full", "no_st")])
+    with pytest.raises(ValueError, match="not paired"):
+        continued_pairs_markdown({**record, "b": {**seed_b, "steps": 12}}, [("full_b", "no_st")])

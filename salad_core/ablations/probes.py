@@ -24,6 +24,7 @@ another schedule (``scripts/ablation_continuation_probe.py``, :func:`score_denoi
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -33,7 +34,7 @@ from .stage_eval import _jsonable, _row_doc, _score_vae, latest_step
 
 __all__ = ["SAMPLER_SETTINGS", "stage_settings", "score_vae_probe", "score_denoiser_probe", "record_probe", "load_probes", "probe_markdown",
            "sampler_probe_markdown", "score_denoiser_continuation", "continuation_probe_markdown",
-           "paired_probe_markdown"]
+           "paired_probe_markdown", "continued_pairs_markdown"]
 
 
 #: evaluation settings a denoiser probe may change without unpairing its rows from the stage's crops and noise
@@ -394,4 +395,57 @@ def paired_probe_markdown(stage_doc: Mapping[str, Any], probes: Mapping[str, Map
             scale, digits = (100, 2) if m == "MPJPE" else (1, 4 if stage_doc["kind"] == "vae" else 3)
             cells.append(f"{mean * scale:+.{digits}f} ± {half * scale:.{digits}f}")
         lines.append(f"| `{a}` over `{b}` | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def continued_pairs_markdown(record: Mapping[str, Mapping[str, Any]], pairs: Sequence[tuple[str, str]], *,
+                             sampler: Mapping[str, Any] | None = None) -> str:
+    """Paired gaps between continued rows of *different* probes of a continuation record, as a markdown table.
+
+    Each probe of ``scripts/ablation_continuation_probe.py`` pairs its first variant with the others; rows of two
+    probes are paired as well when both continued the same stage to the same step and were scored with the same
+    sampler settings (the stage's crops, captions and noise). ``pairs`` names ``(a, b)`` variants; a variant is
+    looked up in every probe of ``record`` scored with ``sampler`` (default: the stage's own, ``{}``). Each cell is
+    ``a``'s advantage over ``b`` after the continuation (positive: ``a`` better), mean ± 95 % half-width. A variant scored in two probes (the same run, scored
+    twice) must have the same figures there, to float rounding. (The gaps
+    at the stage itself are :func:`paired_probe_markdown`'s: the record keeps only the rows' stage summaries.)
+
+    Raises
+    ------
+    KeyError
+        A variant in no probe of ``record`` with these sampler settings.
+    ValueError
+        A variant whose rows in two probes differ (not the same run), or two variants continued from other stages or
+        to other steps (not paired).
+    """
+    from .orderings import paired_advantage
+
+    sampler = dict(sampler or {})
+    metrics = ("FID", "R-precision top-3")
+
+    def find(name: str) -> tuple[Mapping[str, Any], Mapping[str, Any]]:
+        found = [(probe, probe["rows"][name]) for probe in record.values()
+                 if dict(probe.get("sampler") or {}) == sampler and name in probe["rows"]]
+        if not found:
+            raise KeyError(f"{name!r} is in no probe scored with sampler settings {sampler or 'of the stage'} "
+                           f"(probes: {sorted(record)})")
+        for probe, row in found[1:]:
+            a, b = row["values"], found[0][1]["values"]   # the same run scored twice: equal to float noise
+            if set(a) != set(b) or any(not math.isclose(x, y, rel_tol=1e-5, abs_tol=1e-7)
+                                       for m in a for x, y in zip(a[m], b[m], strict=True)):
+                raise ValueError(f"{name!r} has other figures in two probes: not the same run, rename one")
+        return found[0]
+
+    steps = None
+    lines = ["| pair | " + " | ".join(metrics) + " |", "|---|" + "---:|" * len(metrics)]
+    for a, b in pairs:
+        (pa, ra), (pb, rb) = find(a), find(b)
+        if (pa["stage"], pa["steps"]) != (pb["stage"], pb["steps"]):
+            raise ValueError(f"{a!r} continued {pa['stage']} to {pa['steps']} steps, {b!r} {pb['stage']} to "
+                             f"{pb['steps']}: not paired")
+        steps = pa["steps"]
+        cells = [("{:+.3f} ± {:.3f}").format(*paired_advantage(ra["values"][m], rb["values"][m], m)) for m in metrics]
+        lines.append(f"| `{a}` over `{b}` | " + " | ".join(cells) + " |")
+    if steps is not None:
+        lines[0] = lines[0].replace("| pair |", f"| pair, at {steps:,} steps |")
     return "\n".join(lines) + "\n"
