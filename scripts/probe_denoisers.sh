@@ -21,6 +21,8 @@ WHAT=${3:?$usage}
 read -r -a SETS <<< "${4:?$usage}"
 shift 4
 [ $# -ge 1 ] || { echo "name at least one study denoiser variant (full, no_st, x0, ...)" >&2; exit 2; }
+[ ${#SETS[@]} -ge 1 ] || { echo "give at least one KEY=VALUE change (e.g. train.seed=2026)" >&2; exit 2; }
+case $TAG in *[!A-Za-z0-9_-]*) echo "TAG '$TAG': use letters, digits, _ and - (it names runs and configs)" >&2; exit 2;; esac
 PY=${PYTHON:-.venv/bin/python}
 STUDY_WORK=${STUDY_WORK:-$HOME/salad-runs/ablations_v3}
 DATA=${DATA:-$HOME/salad-runs/v3/corpus}
@@ -42,7 +44,7 @@ probe() {    # VARIANT: train from scratch with the change, score at the stage, 
     [ -f "$run.json" ] || "$PY" scripts/ablation_denoiser_probe.py config --study-configs "$STUDY_WORK/configs" \
         --variant "$v" --vae "$(vae_of "$v")" --set "${SETS[@]}" --out "$run.json"
     train "$run" "$run.json" "$(vae_of "$v")" 8000
-    if ! grep -q "\"${v}_$TAG\"" "$STUDY/probes.json"; then
+    if ! grep -qF "\"${v}_$TAG\"" "$STUDY/probes.json"; then
         "$PY" scripts/ablation_denoiser_probe.py score --stage-eval "$STUDY/evaluations/denoisers@8000.json" \
             --run "$run" --vae "$(vae_of "$v")" --name "${v}_$TAG" --variant "$v" \
             --vae-label "the study's own VAE for this row" --set "${SETS[@]}" \

@@ -498,3 +498,7 @@ def test_continued_pairs_markdown_pairs_rows_of_different_continuation_probes():
                                  [("full", "no_st")])
     with pytest.raises(ValueError, match="not paired"):
         continued_pairs_markdown({**record, "b": {**seed_b, "steps": 12}}, [("full_b", "no_st")])
+    with pytest.raises(ValueError, match="one table per step"):
+        continued_pairs_markdown({**record, "c": {**seed_b, "steps": 12, "rows": {"x": row([1.0, 1.1], [0.8, 0.8]),
+                                                                                 "y": row([1.0, 1.2], [0.8, 0.8])}}},
+                                 [("full_b", "no_st"), ("x", "y")])

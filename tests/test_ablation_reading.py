@@ -35,7 +35,7 @@ def test_orderings_and_verdicts():
     assert verdict(">", "=", ">") == "reproduced, paired only"
     assert verdict(">", "=", "=") == "level"
     assert verdict(">", "<", "<") == "reversed" and verdict(">", "=", "<") == "reversed"
-    assert verdict("=", "=", "<") == "reproduced"              # paired only, against a level paper pair: shown
+    assert verdict("=", "=", "<") == "reproduced"              # the paper's test is the rows' intervals
     assert verdict("=", ">", ">") == "ordered, the paper level"
 
 
@@ -72,6 +72,8 @@ def test_reading_refuses_other_stages_and_samplers():
         pair_readings({**_stage(), "kind": "keymotion"})
     with pytest.raises(ValueError, match="guidance_scale"):
         pair_readings(_stage(), {"steps": 10, "sampler": {"guidance_scale": 4.5}, "rows": {}})
+    with pytest.raises(ValueError, match="continued denoisers@6, not denoisers@8"):
+        pair_readings(_stage(), {"stage": "denoisers@6", "steps": 10, "rows": {}})
 
 
 def test_vae_stages_are_read_on_fid_and_mpjpe_in_cm():

@@ -1,7 +1,8 @@
 """The shell recipes of issue 24's denoiser probes call the probe scripts with the right arguments, in order.
 
 The Python steps they drive (config, training, scoring, continuation) are tested in test_ablation_probes.py; here a
-stand-in interpreter records each call, so the recipe's wiring is checked without training anything."""
+stand-in interpreter records each call's arguments one by one, so the recipe's wiring (and its word splitting) is
+checked without training anything."""
 from __future__ import annotations
 
 import json
@@ -15,7 +16,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 FAKE_PYTHON = """#!/usr/bin/env bash
-# records its arguments; answers the recipe's two inline questions (a run's VAE, a run's step)
+# records its arguments (one per field); answers the recipe's two inline questions (a run's VAE, a run's step)
 if [ "$1" = "-c" ]; then
     case "$2" in
         *'"task"'*) echo "VAE_OF_$(basename "$(dirname "$3")")" ;;
@@ -23,8 +24,11 @@ if [ "$1" = "-c" ]; then
     esac
     exit 0
 fi
-printf '%s\\n' "$*" >> "$CALLS"
+printf '%s\\037' "$@" >> "$CALLS"
+printf '\\n' >> "$CALLS"
 """
+SIZE_SETS = ["--set", "model.width=128", "model.ff_dim=512", "model.layers=5"]
+DECAY_SETS = ["--set", "train.max_steps=10000", "train.milestones=[7500,8500]"]
 
 
 @pytest.fixture()
@@ -40,8 +44,14 @@ def fake_python(tmp_path):
     return tmp_path, env
 
 
-def _calls(tmp_path: Path) -> list[str]:
-    return (tmp_path / "calls.txt").read_text().splitlines()
+def _calls(tmp_path: Path) -> list[list[str]]:
+    """Each call's arguments, as the interpreter received them."""
+    return [line.split("\037")[:-1] for line in (tmp_path / "calls.txt").read_text().splitlines()]
+
+
+def _train(tmp_path: Path, run: Path, vae: str) -> list[str]:
+    return ["-m", "salad_core.train", "denoiser", "--data", f"{tmp_path}/corpus", "--out", str(run), "--config",
+            f"{run}.json", "--vae", vae, "--no-progress", "--resume"]
 
 
 def test_size_probe_configures_trains_scores_and_continues_each_variant(fake_python):
@@ -50,26 +60,26 @@ def test_size_probe_configures_trains_scores_and_continues_each_variant(fake_pyt
     subprocess.run(["bash", str(REPO / "scripts" / "probe_denoiser_size.sh"), str(out), "no_st", "full"], env=env,
                    check=True, cwd=tmp_path)
     calls = _calls(tmp_path)
-    sets = "--set model.width=128 model.ff_dim=512 model.layers=5"
-    assert calls[0] == (f"scripts/ablation_denoiser_probe.py config --study-configs {tmp_path}/work/configs --variant "
-                        f"no_st --vae VAE_OF_den_no_st {sets} --out {out}/den_no_st_w128.json")
-    assert calls[1] == (f"-m salad_core.train denoiser --data {tmp_path}/corpus --out {out}/den_no_st_w128 --config "
-                        f"{out}/den_no_st_w128.json --vae VAE_OF_den_no_st --no-progress --resume")
+    assert calls[0] == (["scripts/ablation_denoiser_probe.py", "config", "--study-configs", f"{tmp_path}/work/configs",
+                         "--variant", "no_st", "--vae", "VAE_OF_den_no_st"] + SIZE_SETS
+                        + ["--out", f"{out}/den_no_st_w128.json"])
+    assert calls[1] == _train(tmp_path, out / "den_no_st_w128", "VAE_OF_den_no_st")
     # no_st_w128 is already in the record: only full is scored, with the same change and its own VAE
-    assert calls[2].startswith("scripts/ablation_denoiser_probe.py config") and "--variant full" in calls[2]
-    assert calls[3].startswith(f"-m salad_core.train denoiser --data {tmp_path}/corpus --out {out}/den_full_w128 ")
+    assert calls[2][:6] == ["scripts/ablation_denoiser_probe.py", "config", "--study-configs",
+                            f"{tmp_path}/work/configs", "--variant", "full"]
+    assert calls[3] == _train(tmp_path, out / "den_full_w128", "VAE_OF_den_full")
     score = calls[4]
-    assert score.startswith(f"scripts/ablation_denoiser_probe.py score --stage-eval {tmp_path}/study/evaluations/"
-                            f"denoisers@8000.json --run {out}/den_full_w128 --vae VAE_OF_den_full --name full_w128 "
-                            f"--variant full")
-    assert sets in score and "--label full, at the shipped denoiser's size (width 128, 5 layers)" in score
-    assert calls[5] == (f"scripts/ablation_continuation_probe.py prepare --study-work {tmp_path}/work --variants "
-                        f"no_st_w128={out}/den_no_st_w128 full_w128={out}/den_full_w128 --set train.max_steps=10000 "
-                        f"train.milestones=[7500,8500] --out-dir {out}/decay_w128")
-    assert calls[6].startswith(f"-m salad_core.train denoiser --data {tmp_path}/corpus --out "
-                               f"{out}/decay_w128/den_no_st_w128 --config {out}/decay_w128/den_no_st_w128.json")
-    assert calls[7].startswith(f"-m salad_core.train denoiser --data {tmp_path}/corpus --out "
-                               f"{out}/decay_w128/den_full_w128 ")
+    assert score[:14] == ["scripts/ablation_denoiser_probe.py", "score", "--stage-eval",
+                          f"{tmp_path}/study/evaluations/denoisers@8000.json", "--run", f"{out}/den_full_w128",
+                          "--vae", "VAE_OF_den_full", "--name", "full_w128", "--variant", "full", "--vae-label",
+                          "the study's own VAE for this row"]
+    assert score[14:18] == SIZE_SETS
+    assert score[18:20] == ["--label", "full, at the shipped denoiser's size (width 128, 5 layers)"]
+    assert calls[5] == (["scripts/ablation_continuation_probe.py", "prepare", "--study-work", f"{tmp_path}/work",
+                         "--variants", f"no_st_w128={out}/den_no_st_w128", f"full_w128={out}/den_full_w128"]
+                        + DECAY_SETS + ["--out-dir", f"{out}/decay_w128"])
+    assert calls[6] == _train(tmp_path, out / "decay_w128" / "den_no_st_w128", "VAE_OF_den_no_st")
+    assert calls[7] == _train(tmp_path, out / "decay_w128" / "den_full_w128", "VAE_OF_den_full")
     assert len(calls) == 8
 
 
@@ -79,14 +89,25 @@ def test_seed_probe_is_the_same_recipe_with_the_seed(fake_python):
     subprocess.run(["bash", str(REPO / "scripts" / "probe_training_seed.sh"), str(out), "2026", "full"], env=env,
                    check=True, cwd=tmp_path)
     calls = _calls(tmp_path)
-    assert calls[0].endswith(f"--set train.seed=2026 --out {out}/den_full_s2026.json")
-    assert "--name full_s2026" in calls[2] and "--label full, training seed 2026" in calls[2]
-    assert calls[3].endswith(f"--variants full_s2026={out}/den_full_s2026 --set train.max_steps=10000 "
-                             f"train.milestones=[7500,8500] --out-dir {out}/decay_s2026")
+    assert calls[0][-4:] == ["--set", "train.seed=2026", "--out", f"{out}/den_full_s2026.json"]
+    assert calls[2][8:10] == ["--name", "full_s2026"] and "full, training seed 2026" in calls[2]
+    assert calls[3][-6:] == [f"full_s2026={out}/den_full_s2026"] + DECAY_SETS + ["--out-dir", f"{out}/decay_s2026"]
 
 
-def test_probe_recipe_refuses_a_call_without_variants(fake_python):
+@pytest.mark.parametrize("args, message", [((), "name at least one study denoiser variant"),
+                                           (("full",), "")])
+def test_probe_recipe_refuses_a_call_without_variants_or_changes(fake_python, args, message):
     tmp_path, env = fake_python
+    sets = "train.seed=1" if not args else "  "
     res = subprocess.run(["bash", str(REPO / "scripts" / "probe_denoisers.sh"), str(tmp_path / "out"), "t", "what",
-                          "train.seed=1"], env=env, cwd=tmp_path, capture_output=True, text=True)
-    assert res.returncode == 2 and "name at least one study denoiser variant" in res.stderr
+                          sets, *args], env=env, cwd=tmp_path, capture_output=True, text=True)
+    assert res.returncode == 2
+    assert (message or "give at least one KEY=VALUE change") in res.stderr
+    assert not (tmp_path / "calls.txt").exists()
+
+
+def test_probe_recipe_refuses_a_tag_with_a_dot(fake_python):
+    tmp_path, env = fake_python
+    res = subprocess.run(["bash", str(REPO / "scripts" / "probe_denoisers.sh"), str(tmp_path / "out"), "lr0.5",
+                          "what", "train.lr=0.5", "full"], env=env, cwd=tmp_path, capture_output=True, text=True)
+    assert res.returncode == 2 and "TAG 'lr0.5'" in res.stderr

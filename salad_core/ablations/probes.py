@@ -404,7 +404,8 @@ def continued_pairs_markdown(record: Mapping[str, Mapping[str, Any]], pairs: Seq
 
     Each probe of ``scripts/ablation_continuation_probe.py`` pairs its first variant with the others; rows of two
     probes are paired as well when both continued the same stage to the same step and were scored with the same
-    sampler settings (the stage's crops, captions and noise). ``pairs`` names ``(a, b)`` variants; a variant is
+    sampler settings (the stage's crops, captions and noise). The schedule of each continuation is not compared:
+    pair rows of probes that changed the same thing (their ``change_text`` says what). ``pairs`` names ``(a, b)`` variants; a variant is
     looked up in every probe of ``record`` scored with ``sampler`` (default: the stage's own, ``{}``). Each cell is
     ``a``'s advantage over ``b`` after the continuation (positive: ``a`` better), mean ± 95 % half-width. A variant scored in two probes (the same run, scored
     twice) must have the same figures there, to float rounding. (The gaps
@@ -415,8 +416,8 @@ def continued_pairs_markdown(record: Mapping[str, Mapping[str, Any]], pairs: Seq
     KeyError
         A variant in no probe of ``record`` with these sampler settings.
     ValueError
-        A variant whose rows in two probes differ (not the same run), or two variants continued from other stages or
-        to other steps (not paired).
+        A variant whose rows in two probes differ (not the same run), two variants continued from other stages or
+        to other steps (not paired), or pairs at different steps (one table has one step).
     """
     from .orderings import paired_advantage
 
@@ -443,6 +444,8 @@ def continued_pairs_markdown(record: Mapping[str, Mapping[str, Any]], pairs: Seq
         if (pa["stage"], pa["steps"]) != (pb["stage"], pb["steps"]):
             raise ValueError(f"{a!r} continued {pa['stage']} to {pa['steps']} steps, {b!r} {pb['stage']} to "
                              f"{pb['steps']}: not paired")
+        if steps is not None and pa["steps"] != steps:
+            raise ValueError(f"the pairs were continued to {steps} and {pa['steps']} steps: one table per step")
         steps = pa["steps"]
         cells = [("{:+.3f} ± {:.3f}").format(*paired_advantage(ra["values"][m], rb["values"][m], m)) for m in metrics]
         lines.append(f"| `{a}` over `{b}` | " + " | ".join(cells) + " |")

@@ -11,8 +11,8 @@ continued: their reading is the stage's):
 * the paired advantage of the first row over the second (:func:`~salad_core.ablations.orderings.paired_advantage`),
   the finer reading, since the rows share their crops and noise: *significant* when its interval leaves 0.
 
-The verdict reads the continued rows where the pair was continued (the decayed checkpoints are the seed-stable
-ones: two training seeds of the full model agree after the decay and not before), else the stage's. Nothing is
+The verdict reads the continued rows where the pair was continued (two training seeds of the full model agree
+after the decay and not before: the decayed checkpoints are the steadier reading), else the stage's. Nothing is
 measured here: every figure comes from the evaluation and continuation records.
 """
 from __future__ import annotations
@@ -49,10 +49,10 @@ def verdict(paper: str, intervals: str, paired: str) -> str:
         return "reproduced"
     if paper == "=":
         return "ordered, the paper level"
-    if paired == paper:
-        return "reproduced, paired only"
     if intervals not in ("=", paper) or paired not in ("=", paper):
         return "reversed"
+    if paired == paper:
+        return "reproduced, paired only"
     return "level"
 
 
@@ -63,10 +63,10 @@ def pair_readings(stage_doc: Mapping[str, Any], continued: Mapping[str, Any] | N
 
     Parameters
     ----------
-    stage_doc : a denoiser stage's evaluation document (``evaluations/denoisers@<steps>.json``), with ``tables``
+    stage_doc : a VAE or denoiser stage's evaluation document (``evaluations/<group>@<steps>.json``), with ``tables``
         (paper table -> variant -> paper row label) and ``rows`` (variant -> ``values`` and ``summary``)
-    continued : one probe of ``continuation_probe.json`` (``rows`` variant -> ``values`` / ``summary``;
-        ``steps``), scored with the stage's protocol and sampler, or None
+    continued : one probe of ``continuation_probe.json`` that continued this stage (``stage``, ``rows`` variant ->
+        ``values`` / ``summary``, ``steps``), scored with the stage's protocol and sampler, or None
 
     Returns
     -------
@@ -79,6 +79,9 @@ def pair_readings(stage_doc: Mapping[str, Any], continued: Mapping[str, Any] | N
     kind = stage_doc.get("kind")
     if kind not in TABLE_METRICS:
         raise ValueError(f"stage {stage_doc.get('stage')!r} is a {kind!r} stage: this reads VAE and denoiser stages")
+    if continued is not None and continued.get("stage", stage_doc.get("stage")) != stage_doc.get("stage"):
+        raise ValueError(f"the continuation continued {continued['stage']}, not {stage_doc.get('stage')}: not paired "
+                         "with this stage's rows")
     if continued is not None and dict(continued.get("sampler") or {}):
         raise ValueError(f"the continuation was scored with sampler settings {continued['sampler']}: read the one "
                          "scored with the stage's protocol")
