@@ -178,3 +178,34 @@ def test_part_errors_put_a_joint_error_in_its_part():
     assert "root" not in errs and len(errs) == 6            # the root part is the root joint alone
     with pytest.raises(ValueError, match="22, 3"):
         part_errors(pred[:, :5], gt[:, :5], SK)
+
+
+def test_latent_noise_adds_that_share_of_the_spread_deterministically(corpus, evaluator, stats):
+    """With the identity 'VAE' the decoded features are the latents, so the noise is seen exactly: per channel it
+    is ``k x spread`` in normalised units; the same seed gives the same noise, k 0 is the plain reconstruction."""
+    from salad_core.eval.reconstruction import latent_spread
+
+    mean, std = stats
+    vae = FeatureVAE()
+    spread = latent_spread(vae, mean, std, corpus, SK, SETTINGS)
+    assert spread.shape == (SK.feature_dim,) and torch.all(spread >= 1.0)     # posterior variance 1 for this double
+    rng = np.random.default_rng(0)
+    x = (mean + std * rng.standard_normal((64, 16, SK.feature_dim))).astype(np.float32)
+    plain = reconstruct_features(vae, mean, std, x, [16] * 64)
+    assert np.array_equal(reconstruct_features(vae, mean, std, x, [16] * 64, latent_noise=0.0, latent_spread=spread),
+                          plain)
+    noisy = reconstruct_features(vae, mean, std, x, [16] * 64, seed=3, latent_noise=0.5, latent_spread=spread)
+    assert np.array_equal(noisy, reconstruct_features(vae, mean, std, x, [16] * 64, seed=3, latent_noise=0.5,
+                                                      latent_spread=spread))
+    measured = ((noisy - plain) / std).reshape(-1, SK.feature_dim).std(0)
+    assert measured == pytest.approx(0.5 * spread.numpy(), rel=0.08)
+    with pytest.raises(ValueError, match="needs latent_spread"):
+        reconstruct_features(vae, mean, std, x, [16] * 64, latent_noise=0.5)
+    with pytest.raises(ValueError, match=r"latent_spread has shape \(7, 32\)"):
+        reconstruct_features(vae, mean, std, x, [16] * 64, latent_noise=0.5, latent_spread=torch.ones(7, 32))
+    with pytest.raises(ValueError, match="finite share >= 0"):
+        reconstruct_features(vae, mean, std, x, [16] * 64, latent_noise=-1.0, latent_spread=spread)
+    clean = evaluate_reconstruction(vae, mean, std, corpus, evaluator, SETTINGS)
+    off = evaluate_reconstruction(vae, mean, std, corpus, evaluator, SETTINGS, latent_noise=1.0, latent_spread=spread)
+    assert off.settings["latent_noise"] == 1.0 and clean.settings["latent_noise"] == 0.0
+    assert min(off.values["MPJPE"]) > max(clean.values["MPJPE"]) and min(off.values["FID"]) > max(clean.values["FID"])

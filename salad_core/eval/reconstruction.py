@@ -34,7 +34,8 @@ from .paper_tables import paper_vae_tables  # noqa: F401  (kept importable from 
 from .settings import EvalSettings
 from .tables import format_mean_ci
 
-__all__ = ["RECONSTRUCTION_METRICS", "ReconstructionResult", "reconstruct_features", "evaluate_reconstruction",
+__all__ = ["RECONSTRUCTION_METRICS", "ReconstructionResult", "reconstruct_features", "latent_spread",
+           "evaluate_reconstruction",
            "part_errors", "reconstruction_frame", "reconstruction_markdown", "paper_vae_tables"]
 
 logger = logging.getLogger(__name__)
@@ -73,7 +74,8 @@ def _check_stats(mean, std, dim: int) -> tuple[np.ndarray, np.ndarray]:
 
 @torch.no_grad()
 def reconstruct_features(vae, mean, std, motions: np.ndarray, lengths: Sequence[int], *,
-                         sample: bool = False, seed: int = 0) -> np.ndarray:
+                         sample: bool = False, seed: int = 0, latent_noise: float = 0.0,
+                         latent_spread: torch.Tensor | None = None) -> np.ndarray:
     """Pass raw clips through a VAE, each at its own length.
 
     Parameters
@@ -88,7 +90,13 @@ def reconstruct_features(vae, mean, std, motions: np.ndarray, lengths: Sequence[
     sample : bool
         Decode ``mu + eps * sigma`` instead of the posterior mean ``mu`` (the default).
     seed : int
-        Seeds ``eps`` when ``sample``.
+        Seeds ``eps`` when ``sample``, and the latent noise.
+    latent_noise : float
+        Add ``latent_noise * latent_spread * eps'`` (Gaussian ``eps'``) to the latent before decoding: how much a
+        decoder's output suffers from a latent that is off by a given share of the latents' spread (a generator's
+        latents are never exact). 0 (the default) decodes the latent itself.
+    latent_spread : tensor ``latent.shape[2:]``, e.g. ``(P, Dz)``
+        The latents' spread per part and channel (:func:`latent_spread`); required when ``latent_noise`` > 0.
 
     Returns
     -------
@@ -107,23 +115,62 @@ def reconstruct_features(vae, mean, std, motions: np.ndarray, lengths: Sequence[
     bad = [x for x in lengths if x <= 0 or x > n or x % unit]
     if bad:
         raise ValueError(f"lengths {bad} are not multiples of the VAE's downsampling {unit} within 1..{n}")
+    if latent_noise < 0 or not math.isfinite(latent_noise):
+        raise ValueError(f"latent_noise must be a finite share >= 0, got {latent_noise}")
+    if latent_noise and latent_spread is None:
+        raise ValueError("latent_noise > 0 needs latent_spread (salad_core.eval.reconstruction.latent_spread)")
     vae.eval()
     gen = torch.Generator().manual_seed(int(seed)) if sample else None
+    noise_gen = torch.Generator().manual_seed(int(seed) + 7_919) if latent_noise else None
     out = np.zeros_like(motions)
     # clips of equal length share one forward pass (crops come in multiples of the unit length)
     for length in sorted(set(lengths)):
         idx = [i for i, x in enumerate(lengths) if x == length]
         x = torch.from_numpy((motions[idx, :length] - mean) / std)
         enc = vae.encode(x, sample=sample, generator=gen)
-        rec = vae.decode(enc.z).float().numpy()
+        z = enc.z
+        if latent_noise:
+            if tuple(latent_spread.shape) != tuple(z.shape[2:]):
+                raise ValueError(f"latent_spread has shape {tuple(latent_spread.shape)}; the latents "
+                                 f"{tuple(z.shape)} need {tuple(z.shape[2:])}")
+            z = z + latent_noise * latent_spread.to(z.dtype) * torch.randn(z.shape, generator=noise_gen)
+        rec = vae.decode(z).float().numpy()
         out[idx, :length] = rec * std + mean
     return out
 
 
 @torch.no_grad()
+def latent_spread(vae, mean, std, dataset_root: str | PathLike, skeleton,
+                  settings: EvalSettings | None = None) -> torch.Tensor:
+    """The spread of a VAE's latents per part and channel, ``sqrt(var(mu) + mean(sigma^2))`` over every latent
+    frame of the first replication's crops of ``settings.split`` (the scale a latent diffusion model normalises
+    by, :func:`salad_core.train.denoiser_trainer.denoiser_latent_stats`, here on the evaluation crops).
+    ``skeleton`` is the clips' (e.g. ``skeleton_of(evaluator)``).
+
+    Returns
+    -------
+    tensor ``(P, Dz)`` (the latents' shape past batch and frame)
+    """
+    settings = settings or EvalSettings()
+    ds = evaluation_dataset(dataset_root, settings, skeleton)
+    vae.eval()
+    mus, variances = [], []
+    for batch in batches_for(ds, settings, 0, 0):
+        motions = np.asarray(batch.motions, dtype=np.float32)
+        for length in sorted(set(int(x) for x in batch.lengths)):
+            idx = [i for i, x in enumerate(batch.lengths) if int(x) == length]
+            enc = vae.encode(torch.from_numpy((motions[idx, :length] - mean) / std), sample=False)
+            mus.append(enc.mu.reshape(-1, *enc.mu.shape[2:]).double())
+            variances.append(enc.logvar.exp().reshape(-1, *enc.mu.shape[2:]).double())
+    mu, var = torch.cat(mus), torch.cat(variances)
+    return (mu.var(0, unbiased=False) + var.mean(0)).sqrt().float()
+
+
+@torch.no_grad()
 def evaluate_reconstruction(vae, mean, std, dataset_root: str | PathLike, evaluator,
                             settings: EvalSettings | None = None, name: str = "VAE", *,
-                            sample: bool = False, weights: str | None = None) -> ReconstructionResult:
+                            sample: bool = False, weights: str | None = None, latent_noise: float = 0.0,
+                            latent_spread: torch.Tensor | None = None) -> ReconstructionResult:
     """FID and MPJPE of a VAE's reconstructions of the split's clips (see the module docstring).
 
     Parameters
@@ -144,6 +191,8 @@ def evaluate_reconstruction(vae, mean, std, dataset_root: str | PathLike, evalua
         Decode a posterior sample instead of its mean.
     weights : str, optional
         Recorded as the VAE's source.
+    latent_noise, latent_spread :
+        Decode latents off by ``latent_noise`` times their spread (:func:`reconstruct_features`; recorded).
 
     Returns
     -------
@@ -161,7 +210,8 @@ def evaluate_reconstruction(vae, mean, std, dataset_root: str | PathLike, evalua
         real_emb, rec_emb, errors, poses = [], [], 0.0, 0
         for i, batch in enumerate(batches_for(ds, settings, r, r)):
             rec = reconstruct_features(vae, mean, std, batch.motions, batch.lengths, sample=sample,
-                                       seed=settings.seed * 1_000_003 + r * 1_009 + i)
+                                       seed=settings.seed * 1_000_003 + r * 1_009 + i, latent_noise=latent_noise,
+                                       latent_spread=latent_spread)
             real_emb.append(motion_embeddings(evaluator, batch.motions, batch.lengths))
             rec_emb.append(motion_embeddings(evaluator, rec, batch.lengths))
             for k, length in enumerate(batch.lengths):
@@ -178,7 +228,7 @@ def evaluate_reconstruction(vae, mean, std, dataset_root: str | PathLike, evalua
     params = vae.num_parameters() if hasattr(vae, "num_parameters") else None
     recorded = dict(kind="vae", split=settings.split, batch_size=settings.batch_size,
                     replications=settings.replications, samples=samples, seed=settings.seed,
-                    max_samples=settings.max_samples, quick=settings.quick, sample=sample,
+                    max_samples=settings.max_samples, quick=settings.quick, sample=sample, latent_noise=latent_noise,
                     weights=weights, evaluator=getattr(evaluator, "source", type(evaluator).__name__),
                     data=str(dataset_root))
     return ReconstructionResult(name, {k: tuple(v) for k, v in vals.items()}, params, recorded)
