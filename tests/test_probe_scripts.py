@@ -49,17 +49,21 @@ def _calls(tmp_path: Path) -> list[list[str]]:
     return [line.split("\037")[:-1] for line in (tmp_path / "calls.txt").read_text().splitlines()]
 
 
+def _run_recipe(fake, script: str, *args: str) -> tuple[Path, Path, list[list[str]]]:
+    """Run ``scripts/<script>`` with the recording interpreter: ``(tmp_path, OUT, calls)``."""
+    tmp_path, env = fake
+    out = tmp_path / "out"
+    subprocess.run(["bash", str(REPO / "scripts" / script), str(out), *args], env=env, check=True, cwd=tmp_path)
+    return tmp_path, out, _calls(tmp_path)
+
+
 def _train(tmp_path: Path, run: Path, vae: str) -> list[str]:
     return ["-m", "salad_core.train", "denoiser", "--data", f"{tmp_path}/corpus", "--out", str(run), "--config",
             f"{run}.json", "--vae", vae, "--no-progress", "--resume"]
 
 
 def test_size_probe_configures_trains_scores_and_continues_each_variant(fake_python):
-    tmp_path, env = fake_python
-    out = tmp_path / "out"
-    subprocess.run(["bash", str(REPO / "scripts" / "probe_denoiser_size.sh"), str(out), "no_st", "full"], env=env,
-                   check=True, cwd=tmp_path)
-    calls = _calls(tmp_path)
+    tmp_path, out, calls = _run_recipe(fake_python, "probe_denoiser_size.sh", "no_st", "full")
     assert calls[0] == (["scripts/ablation_denoiser_probe.py", "config", "--study-configs", f"{tmp_path}/work/configs",
                          "--variant", "no_st", "--vae", "VAE_OF_den_no_st"] + SIZE_SETS
                         + ["--out", f"{out}/den_no_st_w128.json"])
@@ -84,11 +88,7 @@ def test_size_probe_configures_trains_scores_and_continues_each_variant(fake_pyt
 
 
 def test_seed_probe_is_the_same_recipe_with_the_seed(fake_python):
-    tmp_path, env = fake_python
-    out = tmp_path / "out"
-    subprocess.run(["bash", str(REPO / "scripts" / "probe_training_seed.sh"), str(out), "2026", "full"], env=env,
-                   check=True, cwd=tmp_path)
-    calls = _calls(tmp_path)
+    tmp_path, out, calls = _run_recipe(fake_python, "probe_training_seed.sh", "2026", "full")
     assert calls[0][-4:] == ["--set", "train.seed=2026", "--out", f"{out}/den_full_s2026.json"]
     assert calls[2][8:10] == ["--name", "full_s2026"] and "full, training seed 2026" in calls[2]
     assert calls[3][-6:] == [f"full_s2026={out}/den_full_s2026"] + DECAY_SETS + ["--out-dir", f"{out}/decay_s2026"]
