@@ -20,6 +20,7 @@ import argparse
 import json
 import shlex
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -63,16 +64,16 @@ def main(argv=None) -> int:
     from salad_core.ablations.orderings import paired_advantage
     from salad_core.eval.batches import skeleton_of
     from salad_core.eval.reconstruction import evaluate_reconstruction, latent_spread
-    from salad_core.eval.settings import EvalSettings
+    from salad_core.ablations.probes import stage_settings
     from salad_core.eval.train_evaluator import load_packaged_evaluator
     from salad_core.io import atomic_write_text
 
     stage = json.loads(args.stage_eval.read_text())
     if stage.get("kind") != "vae":
         raise SystemExit(f"{args.stage_eval} is a {stage.get('kind')!r} stage: give a VAE stage")
-    proto = stage["settings"]
-    settings = EvalSettings(split=proto["split"], batch_size=proto["batch_size"], max_samples=proto["max_samples"],
-                            seed=proto["seed"], replications=args.replications or proto["replications"])
+    settings = stage_settings(stage, "vae")                     # the stage's protocol: the same crops
+    if args.replications:
+        settings = replace(settings, replications=args.replications)
     evaluator = load_packaged_evaluator()[0]
     rows = {}
     for spec in args.variants:

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
-from .orderings import PAPER_PAIRS, TABLE_METRICS, compare, paired_advantage, paper_ordering
+from .orderings import PAPER_PAIRS, TABLE_METRICS, compare, paired_advantage, paper_ordering, paper_value
 
 __all__ = ["paired_ordering", "verdict", "pair_readings", "reading_markdown"]
 
@@ -85,8 +85,6 @@ def pair_readings(stage_doc: Mapping[str, Any], continued: Mapping[str, Any] | N
     if continued is not None and dict(continued.get("sampler") or {}):
         raise ValueError(f"the continuation was scored with sampler settings {continued['sampler']}: read the one "
                          "scored with the stage's protocol")
-    from .orderings import paper_value
-
     def reading(rows: Mapping[str, Any], a: str, b: str, metric: str) -> dict[str, Any]:
         sa, sb = (tuple(rows[v]["summary"][metric]) for v in (a, b))
         adv = paired_advantage(rows[a]["values"][metric], rows[b]["values"][metric], metric)
