@@ -41,6 +41,34 @@ from ablation_vae_probe import parse_sets, write_probe_config  # noqa: E402  (th
 NEUTRAL_KEYS = ("train.latent_cache_dir", "train.num_threads", "train.num_workers", "train.progress")
 
 
+def write_study_configs(recipe_path: Path, work: Path) -> int:
+    """Write ``work/configs/den_<v>.json`` (the config each denoiser variant trained its final stage with) and
+    ``work/study_vaes.json`` (variant -> the frozen VAE folder it learned on), from the study's recipe and its
+    evaluation files; what ``config`` and ``scripts/probe_denoisers.sh`` need when ``work`` holds only the groups
+    ``scripts/train_ablations.py`` restored (no run folders). An existing config that differs is not overwritten."""
+    from salad_core.ablations import load_staged_recipe
+    from salad_core.ablations.runner import final_denoiser_jobs
+
+    try:
+        jobs = final_denoiser_jobs(load_staged_recipe(recipe_path), work)
+    except RuntimeError as err:
+        raise SystemExit(f"{work}: {err} (restore the study first: scripts/train_ablations.py --recipe "
+                         f"{recipe_path} --data CORPUS --work {work})")
+    (work / "configs").mkdir(parents=True, exist_ok=True)
+    vaes = {}
+    for job in jobs:
+        path = work / "configs" / f"{job.run_dir.name}.json"
+        text = json.dumps(job.config, indent=2) + "\n"
+        if path.is_file() and json.loads(path.read_text()) != job.config:
+            raise SystemExit(f"{path} exists and differs from the recipe's final-stage config: not overwritten")
+        path.write_text(text)
+        vae = Path(job.depends_on)   # the packaged model's stem, as the study's own runs recorded it
+        vaes[job.variant.name] = str(vae / "vae" if (vae / "vae.safetensors").is_file() else vae)
+    (work / "study_vaes.json").write_text(json.dumps(vaes, indent=2) + "\n")
+    print(f"wrote {len(jobs)} denoiser configs to {work / 'configs'} and {work / 'study_vaes.json'}")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="what", required=True)
@@ -50,6 +78,10 @@ def main(argv=None) -> int:
     c.add_argument("--vae", type=Path, required=True, help="the frozen VAE the probe learns on (run or exported)")
     c.add_argument("--set", dest="sets", nargs="+", default=[], metavar="SECTION.KEY=VALUE")
     c.add_argument("--out", type=Path, required=True, help="the config file; the run is this path without .json")
+    w = sub.add_parser("study-configs", help="a study restored on a new machine: write its denoisers' configs and "
+                                             "the VAE each learned on (WORK/configs/den_<v>.json, WORK/study_vaes.json)")
+    w.add_argument("--recipe", type=Path, default=REPO / "configs" / "ablations_v2.json", help="the study's recipe")
+    w.add_argument("--work", type=Path, required=True, help="the study's work folder (its groups restored)")
     s = sub.add_parser("score", help="score a trained probe with a stage's protocol and record it")
     s.add_argument("--stage-eval", type=Path, required=True, help="the stage evaluation file (evaluations/G@S.json)")
     s.add_argument("--run", type=Path, required=True, help="the probe's denoiser run")
@@ -64,6 +96,8 @@ def main(argv=None) -> int:
     s.add_argument("--out", type=Path, required=True, help="the probe record (probes.json)")
     s.add_argument("--threads", type=int, default=1)
     args = ap.parse_args(argv)
+    if args.what == "study-configs":
+        return write_study_configs(args.recipe, args.work)
     sets = parse_sets(args.sets)
     home = str(Path.home())
     if args.what == "config":

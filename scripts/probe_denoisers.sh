@@ -9,6 +9,8 @@
 #   STUDY_WORK  the study's work folder (configs/, den_<variant>/; default ~/salad-runs/ablations_v3)
 #   DATA        its corpus (default ~/salad-runs/v3/corpus)
 #   STUDY       the kept study whose probes.json records the scores (default studies/ablations_v2 of this checkout)
+#   RECIPE      the study's recipe (default configs/ablations_v2.json), used only when STUDY_WORK has no configs/
+# On a new machine: build the corpus and restore the study first (docs/campaign.md, "Start again on a new machine").
 # Each variant learns on the frozen VAE its study row learned on. Run it again to resume: finished runs and recorded
 # scores are skipped. The first two variants are continued with the decay before the later ones train, so the first
 # pair's answer comes first. One torch thread per run (the trainer's default on this machine).
@@ -29,8 +31,18 @@ DATA=${DATA:-$HOME/salad-runs/v3/corpus}
 STUDY=${STUDY:-studies/ablations_v2}   # where the probe records go (a worktree may point at the main checkout)
 DECAY=$OUT/decay_$TAG
 mkdir -p "$OUT"
-vae_of() {   # the frozen VAE the study's variant learned on (its run's config.json records it)
-    "$PY" -c 'import json,sys; print(json.load(open(sys.argv[1]))["task"]["vae"])' "$STUDY_WORK/den_$1/config.json"
+# A study restored on a new machine (scripts/train_ablations.py into an empty work folder) has no run folders and
+# no configs/: write its denoisers' final-stage configs and the VAE each learned on (study_vaes.json) from the recipe.
+if [ ! -d "$STUDY_WORK/configs" ]; then
+    "$PY" scripts/ablation_denoiser_probe.py study-configs --recipe "${RECIPE:-configs/ablations_v2.json}" \
+        --work "$STUDY_WORK"
+fi
+vae_of() {   # the frozen VAE the study's variant learned on (its run's config.json records it, else study_vaes.json)
+    if [ -f "$STUDY_WORK/den_$1/config.json" ]; then
+        "$PY" -c 'import json,sys; print(json.load(open(sys.argv[1]))["task"]["vae"])' "$STUDY_WORK/den_$1/config.json"
+    else
+        "$PY" -c 'import json,sys; print(json.load(open(sys.argv[1]))[sys.argv[2]])' "$STUDY_WORK/study_vaes.json" "$1"
+    fi
 }
 step_of() { "$PY" -c 'import json,sys; print(json.load(open(sys.argv[1]))["meta"]["step"])' "$1/latest.json" 2>/dev/null || echo 0; }
 train() {    # RUN CONFIG VAE STEPS: train (or resume) RUN to STEPS

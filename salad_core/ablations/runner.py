@@ -33,9 +33,9 @@ from .keep import _run_name, group_fingerprint, keep_group, keep_progress, kept_
 from .stage_eval import evaluate_stage, load_evaluation, package_stage, snapshot_run, stage_dir
 from .staged import StagedRecipe, StudyGroup, stage_jobs
 from .stop_rule import StopDecision, decide
-from .study import job_command, run_jobs
+from .study import TrainJob, job_command, run_jobs
 
-__all__ = ["GroupOutcome", "run_study", "study_plan", "keep_study"]
+__all__ = ["GroupOutcome", "run_study", "study_plan", "keep_study", "final_denoiser_jobs"]
 
 log = logging.getLogger(__name__)
 
@@ -344,6 +344,25 @@ def keep_study(recipe: StagedRecipe, work: str | os.PathLike, keep: str | os.Pat
         done[group.name] = (f"in progress, evaluated up to {evaluated[-1]} steps" if evaluated else
                             "in progress, nothing evaluated yet") + f"; runs kept at {kept}"
     return done
+
+
+def final_denoiser_jobs(recipe: StagedRecipe, work: str | os.PathLike) -> list[TrainJob]:
+    """The training jobs of every denoiser variant at its group's final (stopped) stage, with the frozen VAE each
+    learned on as ``depends_on``, read from ``work``'s evaluation files alone (no run folder is needed).
+
+    This is what a probe beside the study needs on a machine where only the study's kept groups were restored
+    (``run_study`` with ``keep``): the variants' training configs and their VAEs. Raises ``RuntimeError`` when a
+    group has not stopped (its final stage is not known yet)."""
+    work = Path(work)
+    frozen: dict[str, Path] = {}
+    jobs: list[TrainJob] = []
+    for group in recipe.groups:
+        outcome = _replay(recipe, group, work)
+        if group.kind == "vae":
+            frozen.update(_frozen_of(group, outcome, work))
+        else:
+            jobs += stage_jobs(recipe, group, outcome.decision.steps, work, frozen)
+    return jobs
 
 
 def _frozen_of(group: StudyGroup, outcome: GroupOutcome, work: Path) -> dict[str, Path]:
