@@ -3,11 +3,13 @@
 
 The staged study scores its denoisers with 10 DDIM steps (a CPU budget); the paper samples with 50. This probe
 takes the protocol of one stage's evaluation file (split, crops, replications, seed, guidance), changes only the
-sampler steps, scores the named variants of the shipped ablation folder and prints each row and the paired
+sampler steps or the guidance weight, scores the named variants of the shipped ablation folder and prints each row and the paired
 advantage of the first variant over each other one (the same crops, captions and noise)::
 
     python scripts/ablation_sampler_probe.py --stage-eval studies/ablations_v2/evaluations/denoisers@8000.json \\
         --variants full x0 --num-steps 50 --data CORPUS_2.4 --out studies/ablations_v2/sampler_probe.json
+    python scripts/ablation_sampler_probe.py --stage-eval studies/ablations_v2/evaluations/denoisers@8000.json \
+        --variants full no_st x0 --guidance 1 --data CORPUS_2.4 --out studies/ablations_v2/sampler_probe.json
 
 The shipped models must be those of the stage (the card names the steps; checked against ``index.json``).
 The record keeps the command, so the probe can be made again on a new machine.
@@ -31,7 +33,9 @@ def main(argv=None) -> int:
     ap.add_argument("--stage-eval", type=Path, required=True, help="a denoiser stage's evaluation file")
     ap.add_argument("--variants", nargs="+", required=True, help="shipped denoiser variants; the first is compared "
                     "with each other one")
-    ap.add_argument("--num-steps", type=int, required=True, help="sampler steps (the stage used its own)")
+    ap.add_argument("--num-steps", type=int, default=None, help="sampler steps (default: the stage's)")
+    ap.add_argument("--guidance", type=float, default=None, help="classifier-free guidance weight (default: the "
+                    "stage's); 1 samples with the conditional prediction alone")
     ap.add_argument("--data", type=Path, required=True, help="the corpus the stage was scored on")
     ap.add_argument("--ablations", type=Path, default=None, help="shipped ablation folder (default: salad's own)")
     ap.add_argument("--out", type=Path, required=True, help="JSON record (one entry per --num-steps, merged)")
@@ -50,13 +54,21 @@ def main(argv=None) -> int:
     from salad_core.eval.train_evaluator import load_packaged_evaluator
     from salad_core.text import load_text_encoder
 
-    if args.num_steps < 1:
+    if args.num_steps is not None and args.num_steps < 1:
         raise SystemExit(f"--num-steps must be at least 1, got {args.num_steps}")
+    if args.guidance is not None and not args.guidance >= 1.0:
+        raise SystemExit(f"--guidance must be a weight >= 1 (1: no guidance), got {args.guidance}")
     stage = json.loads(args.stage_eval.read_text())
     try:
-        settings = dataclasses.replace(stage_settings(stage, "denoiser"), num_steps=args.num_steps)
+        settings = stage_settings(stage, "denoiser")
     except ValueError as err:
         raise SystemExit(f"{args.stage_eval} is not a denoiser stage: {err}") from None
+    base = settings
+    args.num_steps = base.num_steps if args.num_steps is None else args.num_steps
+    guidance = base.guidance_scale if args.guidance is None else args.guidance
+    settings = dataclasses.replace(base, num_steps=args.num_steps, guidance_scale=guidance)
+    at_stage = f"{base.num_steps} steps, w {base.guidance_scale:g}"
+    probe = f"{args.num_steps} steps, w {guidance:g}"
     index = list_ablations(args.ablations)
     for v in args.variants:
         if v not in stage["rows"]:
@@ -72,13 +84,13 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         gen = LengthBucketed(load_ablation_pipeline(v, args.ablations, text_encoder=text_encoder))
         res = evaluate_generator(gen, args.data, evaluator, settings, name=index[v]["label"],
-                                 weights=f"ablation {v} at {stage['steps']} steps, {args.num_steps} sampler steps")
+                                 weights=f"ablation {v} at {stage['steps']} steps, {probe}")
         values = {m: [float(x) for x in res.values[m]] for m in TABLE_METRICS["denoiser"]}
         summary = res.summary()
         rows[v] = {"values": values, "summary": {m: [float(x) for x in summary[m]] for m in values},
                    "at_stage": {m: stage["rows"][v]["summary"][m] for m in values}}
         print(f"{v}: {time.perf_counter() - t0:.0f} s;", ", ".join(
-            f"{m} {s[0]:.3f} ± {s[1]:.3f} (at {stage['settings']['num_steps']} steps {rows[v]['at_stage'][m][0]:.3f})"
+            f"{m} {s[0]:.3f} ± {s[1]:.3f} (at {at_stage} {rows[v]['at_stage'][m][0]:.3f})"
             for m, s in rows[v]["summary"].items()))
     first = args.variants[0]
     paired = {}
@@ -87,11 +99,15 @@ def main(argv=None) -> int:
             mean, half = paired_advantage(rows[first]["values"][m], rows[b]["values"][m], m)
             at = paired_advantage(stage["rows"][first]["values"][m], stage["rows"][b]["values"][m], m)
             paired[f"{first} vs {b}, {m}"] = {"probe": [mean, half], "at_stage": list(at)}
-            print(f"{first} vs {b}, {m}: paired advantage {mean:+.3f} ± {half:.3f} at {args.num_steps} steps "
-                  f"({at[0]:+.3f} ± {at[1]:.3f} at {stage['settings']['num_steps']})")
+            print(f"{first} vs {b}, {m}: paired advantage {mean:+.3f} ± {half:.3f} at {probe} "
+                  f"({at[0]:+.3f} ± {at[1]:.3f} at {at_stage})")
     record = json.loads(args.out.read_text()) if args.out.is_file() else {}
-    record[f"{stage['stage']}, {args.num_steps} steps"] = {
-        "stage_eval": str(args.stage_eval), "num_steps": args.num_steps,
+    key = f"{stage['stage']}, {args.num_steps} steps"
+    if guidance != base.guidance_scale:
+        key += f", w {guidance:g}"
+    record[key] = {
+        "stage_eval": str(args.stage_eval), "num_steps": args.num_steps, "guidance_scale": guidance,
+        "stage_guidance_scale": base.guidance_scale,
         "stage_num_steps": stage["settings"]["num_steps"], "settings": dataclasses.asdict(settings),
         "rows": rows, "paired": paired,
         "command": "python scripts/ablation_sampler_probe.py " + " ".join(

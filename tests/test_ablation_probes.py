@@ -502,3 +502,73 @@ def test_continued_pairs_markdown_pairs_rows_of_different_continuation_probes():
         continued_pairs_markdown({**record, "c": {**seed_b, "steps": 12, "rows": {"x": row([1.0, 1.1], [0.8, 0.8]),
                                                                                  "y": row([1.0, 1.2], [0.8, 0.8])}}},
                                  [("full_b", "no_st"), ("x", "y")])
+
+
+def test_study_configs_rebuild_a_restored_studys_denoiser_configs_as_its_probes_trained_them(tmp_path):
+    """On a new machine the study is restored from studies/ablations_v2 (no run folders, no configs/); the
+    ``study-configs`` step writes each denoiser's final-stage config and its frozen VAE. They must be what the
+    study's denoiser probes trained with: the committed probes' trained configs, less their recorded changes."""
+    from salad_core.ablations import load_staged_recipe, restore_group
+
+    spec = importlib.util.spec_from_file_location("ablation_denoiser_probe", REPO / "scripts" / "ablation_denoiser_probe.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    recipe_path = REPO / "configs" / "ablations_v2.json"
+    recipe = load_staged_recipe(recipe_path)
+    work = tmp_path / "work"
+    with pytest.raises(SystemExit, match="restore the study first"):
+        mod.main(["study-configs", "--recipe", str(recipe_path), "--work", str(work)])
+    for group in recipe.groups:
+        assert restore_group(recipe, group, REPO / "studies" / "ablations_v2", work)
+    assert mod.main(["study-configs", "--recipe", str(recipe_path), "--work", str(work)]) == 0
+    vaes = json.loads((work / "study_vaes.json").read_text())
+    assert vaes["full"] == str(work / "stages" / "vaes@6000" / "models" / "vae_st_long" / "vae")
+    assert vaes["no_st"] == str(work / "stages" / "vaes@6000" / "models" / "vae_pose_long" / "vae")
+    assert all((Path(v).parent / "vae.safetensors").is_file() for v in vaes.values())
+    compared = 0
+    for name, probe in load_probes(REPO / "studies" / "ablations_v2" / "probes.json").items():
+        if probe["stage"] != "denoisers@8000" or probe["change"].get("vae") != "the study's own VAE for this row":
+            continue
+        config = json.loads((work / "configs" / f"den_{probe['base_variant']}.json").read_text())
+        trained = probe["trained_config"]
+        changed = {k for k in probe["change"] if k != "vae"}
+        for section in ("model", "train", "diffusion"):
+            for key, value in config.get(section, {}).items():
+                if f"{section}.{key}" in changed or key == "latent_cache_dir":
+                    continue
+                got = trained[section][key] if section != "diffusion" else trained["task"]["diffusion"][key]
+                assert got == value, (name, section, key)
+        assert Path(vaes[probe["base_variant"]]).parts[-3:] == Path(trained["task"]["vae"]).parts[-3:], name
+        compared += 1
+    assert compared >= 2       # the seed and size probes of session 32-33 at least
+    # written again: identical, kept; a config edited by hand is not overwritten
+    assert mod.main(["study-configs", "--recipe", str(recipe_path), "--work", str(work)]) == 0
+    edited = work / "configs" / "den_full.json"
+    edited.write_text(json.dumps({**json.loads(edited.read_text()), "model": {"width": 1}}))
+    with pytest.raises(SystemExit, match="differs"):
+        mod.main(["study-configs", "--recipe", str(recipe_path), "--work", str(work)])
+
+
+def test_sampler_probe_markdown_names_a_guidance_probe_by_its_weight():
+    from salad_core.ablations.probes import sampler_probe_markdown
+
+    row = {"at_stage": {"FID": [2.0, 0.1], "R-precision top-3": [0.8, 0.01]},
+           "summary": {"FID": [4.0, 0.2], "R-precision top-3": [0.6, 0.02]}}
+    record = {"denoisers@8000, 10 steps, w 1": {
+        "num_steps": 10, "stage_num_steps": 10, "guidance_scale": 1.0, "stage_guidance_scale": 7.5,
+        "rows": {"full": row, "no_st": row}, "paired": {"full vs no_st, FID": {"at_stage": [0.1, 0.2], "probe": [1.0, 0.5]}},
+        "command": "python probe --guidance 1"}}
+    text = sampler_probe_markdown(record)
+    assert "10 sampler steps and guidance weight 1)" in text
+    assert "FID, 10 steps, w 7.5 | FID, 10 steps, w 1" in text
+    assert "| full vs no_st, FID | +0.100 ± 0.200 | +1.000 ± 0.500 |" in text
+
+
+def test_sampler_probe_refuses_a_guidance_weight_below_1(tmp_path):
+    main = _sampler_script().main
+    stage = tmp_path / "stage.json"
+    stage.write_text(json.dumps({"kind": "denoiser", "stage": "denoisers@100", "steps": 100, "rows": {},
+                                 "settings": {"num_steps": 10, "guidance_scale": 7.5}}))
+    with pytest.raises(SystemExit, match="--guidance must be a weight >= 1"):
+        main(["--stage-eval", str(stage), "--guidance", "0.5", "--data", str(tmp_path), "--out",
+              str(tmp_path / "o.json"), "--variants", "full"])

@@ -20,6 +20,7 @@ FAKE_PYTHON = """#!/usr/bin/env bash
 if [ "$1" = "-c" ]; then
     case "$2" in
         *'"task"'*) echo "VAE_OF_$(basename "$(dirname "$3")")" ;;
+        *'sys.argv[2]'*) echo "STUDY_VAE_OF_$4" ;;   # a restored study: study_vaes.json
         *) exit 1 ;;                       # no latest.json yet: the recipe reads step 0
     esac
     exit 0
@@ -39,6 +40,10 @@ def fake_python(tmp_path):
     study = tmp_path / "study"
     study.mkdir()
     (study / "probes.json").write_text(json.dumps({"no_st_w128": {}}))   # already scored: not scored again
+    for v in ("no_st", "full", "x0"):      # the study's work folder on the machine that trained it
+        (tmp_path / "work" / f"den_{v}").mkdir(parents=True)
+        (tmp_path / "work" / f"den_{v}" / "config.json").write_text("{}")
+    (tmp_path / "work" / "configs").mkdir()
     env = {**os.environ, "PYTHON": str(exe), "CALLS": str(tmp_path / "calls.txt"), "STUDY": str(study),
            "STUDY_WORK": str(tmp_path / "work"), "DATA": str(tmp_path / "corpus")}
     return tmp_path, env
@@ -92,6 +97,23 @@ def test_seed_probe_is_the_same_recipe_with_the_seed(fake_python):
     assert calls[0][-4:] == ["--set", "train.seed=2026", "--out", f"{out}/den_full_s2026.json"]
     assert calls[2][8:10] == ["--name", "full_s2026"] and "full, training seed 2026" in calls[2]
     assert calls[3][-6:] == [f"full_s2026={out}/den_full_s2026"] + DECAY_SETS + ["--out-dir", f"{out}/decay_s2026"]
+
+
+def test_probe_recipe_on_a_restored_study_writes_its_configs_and_reads_its_vaes(fake_python):
+    """A new machine: the study's work folder holds only the restored groups (no configs/, no den_<v>/)."""
+    tmp_path, env = fake_python
+    work = tmp_path / "restored"
+    work.mkdir()
+    env = {**env, "STUDY_WORK": str(work)}
+    out = tmp_path / "out"
+    subprocess.run(["bash", str(REPO / "scripts" / "probe_denoiser_size.sh"), str(out), "full"], env=env, check=True,
+                   cwd=REPO)
+    calls = _calls(tmp_path)
+    assert calls[0] == ["scripts/ablation_denoiser_probe.py", "study-configs", "--recipe", "configs/ablations_v2.json",
+                        "--work", str(work)]
+    assert calls[1][:8] == ["scripts/ablation_denoiser_probe.py", "config", "--study-configs", f"{work}/configs",
+                            "--variant", "full", "--vae", "STUDY_VAE_OF_full"]
+    assert calls[2] == _train(tmp_path, out / "den_full_w128", "STUDY_VAE_OF_full")
 
 
 @pytest.mark.parametrize("args, message", [((), "name at least one study denoiser variant"),

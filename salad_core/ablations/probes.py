@@ -192,16 +192,21 @@ def _stage_and_probe_tables(probe: Mapping[str, Any], first: str, stage_col: str
 
 def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
     """The record of ``scripts/ablation_sampler_probe.py`` (denoisers scored again with another number of sampler
-    steps, the stage's protocol otherwise) as markdown: per probe, each row at the stage's steps and at the probe's,
+    steps or another guidance weight, the stage's protocol otherwise) as markdown: per probe, each row at the stage's steps and at the probe's,
     then each pair's paired advantage at both, and the command that made it."""
     out = []
     for name, probe in record.items():
         n = probe["num_steps"]
         first = next(iter(probe["rows"]))
         stage_steps = probe.get("stage_num_steps", 10)
-        out += [f"**{name}** (the stage's protocol with {n} sampler steps):", ""]
-        out += _stage_and_probe_tables(probe, first, f"{stage_steps} steps", f"{n} steps", f"{stage_steps} steps",
-                                       f"{n} steps")
+        w, stage_w = probe.get("guidance_scale"), probe.get("stage_guidance_scale")
+        if w is None or w == stage_w:          # a probe of the sampler steps alone
+            ours, theirs, what = f"{n} steps", f"{stage_steps} steps", f"{n} sampler steps"
+        else:
+            ours, theirs = f"{n} steps, w {w:g}", f"{stage_steps} steps, w {stage_w:g}"
+            what = f"{n} sampler steps and guidance weight {w:g}"
+        out += [f"**{name}** (the stage's protocol with {what}):", ""]
+        out += _stage_and_probe_tables(probe, first, theirs, ours, theirs, ours)
         out += ["", f"Made by: `{probe['command']}`", ""]
     return "\n".join(out).rstrip() + "\n"
 
