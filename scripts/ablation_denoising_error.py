@@ -28,55 +28,6 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 
-def summarise(results: dict, first: str) -> dict:
-    """Per variant: ``means`` and, against ``first``, ``paired`` ``{metric: {mode: {t: [mean, half]}}}``."""
-    from salad_core.eval.denoising_error import paired_difference
-
-    out = {}
-    base = results[first]
-    for name, r in results.items():
-        row = {"prediction_type": r.prediction_type, "latent_shape": list(r.latent_shape), "means": r.means(),
-               "fid_clean": r.fid_clean}
-        if name != first:
-            paired = {}
-            for metric in ("latent", "joints"):
-                if metric == "latent" and r.latent_shape != base.latent_shape:
-                    continue                              # another VAE: its latent space is not comparable
-                mine, theirs = getattr(r, metric), getattr(base, metric)
-                paired[metric] = {mode: {t: list(paired_difference(v, theirs[mode][t])) for t, v in per_t.items()}
-                                  for mode, per_t in mine.items()}
-            row["paired_vs_" + first] = paired
-        out[name] = row
-    return out
-
-
-def markdown(record: dict, metric: str = "joints", mode: str = "guided", timesteps=None) -> str:
-    """One row per variant, one column per timestep: the mean, and for the other variants the paired difference
-    from the first (``+``: the first is better)."""
-    first = record["first"]
-    rows = record["variants"]
-    ts = [str(t) for t in (timesteps or record["timesteps"])]
-    unit = "cm" if metric == "joints" else ""
-    first_col = f"variant ({metric}, {mode}{', ' + unit if unit else ''})"
-    if metric == "fid":
-        first_col = f"variant (FID, {mode}; decoded clean latents)"
-    scale = 100.0 if metric == "joints" else 1.0
-    lines = [f"| {first_col} | " + " | ".join(f"t={t}" for t in ts) + " |",
-             "|---|" + "---|" * len(ts)]
-    for name, row in rows.items():
-        means = row["means"][metric][mode]
-        cells = []
-        for t in ts:
-            cell = f"{means[t] * scale:.3g}"
-            paired = row.get(f"paired_vs_{first}", {}).get(metric, {}).get(mode, {}).get(t)
-            if paired is not None:
-                cell += f" ({paired[0] * scale:+.2g} ± {paired[1] * scale:.2g})"
-            cells.append(cell)
-        label = f"{name} ({row['fid_clean']:.3g})" if metric == "fid" and row.get("fid_clean") is not None else name
-        lines.append(f"| {label} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=Path, required=True, help="the study's corpus")
@@ -95,6 +46,7 @@ def main(argv=None) -> int:
 
     torch.set_num_threads(args.threads)
     from salad_core.ablations.probes import stage_settings
+    from salad_core.ablations.denoising import denoising_markdown, summarise
     from salad_core.ablations.study import load_ablation_pipeline
     from salad_core.eval.batches import batches_for, evaluation_dataset
     from salad_core.eval.denoising_error import DEFAULT_TIMESTEPS, denoising_error
@@ -131,7 +83,7 @@ def main(argv=None) -> int:
     atomic_write_text(args.out, json.dumps(record, indent=1) + "\n")
     for metric in ("fid", "joints", "latent"):
         for mode in ("cond", "guided"):
-            print(markdown(record, metric, mode) + "\n")
+            print(denoising_markdown(record, metric, mode) + "\n")
     print(f"recorded in {args.out}")
     return 0
 

@@ -91,10 +91,8 @@ def test_bad_input_is_refused_with_what_is_wrong(pipe, sample_features):
 def test_the_scripts_record_pairs_variants_only_where_their_latents_compare():
     import json
 
-    from _doubles import load_script
+    from salad_core.ablations.denoising import denoising_markdown, summarise
     from salad_core.eval.denoising_error import DenoisingError
-
-    script = load_script("ablation_denoising_error")
 
     def result(kind, shape, latent, joints):
         return DenoisingError((10,), 7.5, kind, shape, ["a", "b", "c"],
@@ -103,14 +101,14 @@ def test_the_scripts_record_pairs_variants_only_where_their_latents_compare():
     results = {"full": result("v_prediction", (7, 4), [1.0, 2.0, 3.0], [0.01, 0.02, 0.03]),
                "x0": result("sample", (7, 4), [2.0, 3.0, 4.5], [0.02, 0.02, 0.05]),
                "no_st": result("v_prediction", (1, 16), [0.5, 0.5, 0.5], [0.03, 0.03, 0.03])}
-    rows = script.summarise(results, "full")
+    rows = summarise(results, "full")
     assert "paired_vs_full" not in rows["full"]
     mean, half = rows["x0"]["paired_vs_full"]["latent"]["cond"][10]
     assert mean == pytest.approx(9.5 / 3 - 2.0) and half > 0   # positive: the first (full) is better
     assert set(rows["no_st"]["paired_vs_full"]) == {"joints"}          # another VAE: no latent comparison
     assert rows["no_st"]["paired_vs_full"]["joints"]["cond"][10][0] == pytest.approx(0.01)
     record = json.loads(json.dumps({"first": "full", "timesteps": [10], "variants": rows}))
-    table = script.markdown(record, "joints", "cond")
+    table = denoising_markdown(record, "joints", "cond")
     assert "| x0 | 3 (+1 ± " in table and "| full | 2 |" in table
 
 
