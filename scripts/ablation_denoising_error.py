@@ -28,11 +28,29 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 
+def run_pipeline(run: Path):
+    """The pipeline of a denoiser run's ``latest`` checkpoint with the VAE the run records, assembled in fp16 as the
+    study's rows were (``salad_core.ablations.probes`` scores probes the same way)."""
+    import tempfile
+
+    from salad_core.ablations.stage_eval import latest_step, snapshot_run
+    from salad_core.pipeline import SaladPipeline
+    from salad_core.train.assemble import assemble_pipeline
+
+    if not (run / "latest.safetensors").is_file():
+        raise SystemExit(f"{run} holds no denoiser run (latest.safetensors)")
+    with tempfile.TemporaryDirectory() as tmp:
+        view = snapshot_run(run, Path(tmp) / "run", latest_step(run))
+        return SaladPipeline.from_pretrained(assemble_pipeline(None, view, Path(tmp) / "pipeline"))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=Path, required=True, help="the study's corpus")
     ap.add_argument("--stage-eval", type=Path, required=True, help="the denoiser stage whose protocol is used")
-    ap.add_argument("--variants", nargs="+", required=True, help="shipped denoiser ablations; the first is the base")
+    ap.add_argument("--variants", nargs="+", required=True, help="shipped denoiser ablations, or NAME=RUN for a "
+                    "denoiser training run (a probe's; read at its latest checkpoint with the VAE it records, fp16 "
+                    "as the study's rows); the first is the base")
     ap.add_argument("--weights", type=Path, default=None, help="their folder (default: salad_core/weights/ablations)")
     ap.add_argument("--timesteps", nargs="+", type=int, default=None, help="default: DEFAULT_TIMESTEPS")
     ap.add_argument("--batches", type=int, default=None, help="only the first N batches of the crops (default: all)")
@@ -55,28 +73,30 @@ def main(argv=None) -> int:
 
     stage = json.loads(args.stage_eval.read_text())
     settings = stage_settings(stage, "denoiser")
-    missing = [v for v in args.variants if v not in stage["rows"]]
+    missing = [v for v in args.variants if "=" not in v and v not in stage["rows"]]
     if missing:
         raise SystemExit(f"{missing} are not rows of {args.stage_eval} ({sorted(stage['rows'])})")
     timesteps = tuple(args.timesteps or DEFAULT_TIMESTEPS)
     evaluator = load_packaged_evaluator()[0]
     results, clips = {}, None
-    for name in args.variants:
-        pipe = load_ablation_pipeline(name, args.weights)
+    first = args.variants[0].partition("=")[0]
+    for spec in args.variants:
+        name, _, run = spec.partition("=")
+        pipe = load_ablation_pipeline(name, args.weights) if not run else run_pipeline(Path(run).expanduser())
         ds = evaluation_dataset(args.data, settings, pipe.skeleton)
         batches = batches_for(ds, settings, 0, 0)[: args.batches]
         r = denoising_error(pipe, batches, timesteps=timesteps, guidance_scale=settings.guidance_scale,
                             noise_seed=settings.seed, evaluator=evaluator)
         if clips is not None and r.clips != clips:
-            raise SystemExit(f"{name} was measured on other clips than {args.variants[0]}: not paired")
+            raise SystemExit(f"{name} was measured on other clips than {first}: not paired")
         clips = r.clips
         results[name] = r
         print(f"{name}: {len(r.clips)} clips, {r.prediction_type}", flush=True)
     record = {"what": "each denoiser's estimate of the clean latent at each timestep, on the stage's test crops "
                       "(first replication), the same noise per clip for denoisers of the same latent shape",
               "stage": stage["stage"], "steps": stage["steps"], "guidance_scale": settings.guidance_scale,
-              "clips": len(clips), "timesteps": list(timesteps), "first": args.variants[0],
-              "variants": summarise(results, args.variants[0]),
+              "clips": len(clips), "timesteps": list(timesteps), "first": first,
+              "variants": summarise(results, first),
               "command": "python scripts/ablation_denoising_error.py " + " ".join(
                   shlex.quote(str(a)) for a in (argv if argv is not None else sys.argv[1:])).replace(str(Path.home()), "~")}
     record = json.loads(json.dumps(record, default=float))      # int timestep keys -> strings, as read back

@@ -572,3 +572,27 @@ def test_sampler_probe_refuses_a_guidance_weight_below_1(tmp_path):
     with pytest.raises(SystemExit, match="--guidance must be a weight >= 1"):
         main(["--stage-eval", str(stage), "--guidance", "0.5", "--data", str(tmp_path), "--out",
               str(tmp_path / "o.json"), "--variants", "full"])
+
+
+def test_denoising_error_script_reads_a_probe_run_at_its_latest_checkpoint(tmp_path):
+    """``NAME=RUN`` in scripts/ablation_denoising_error.py: the run's latest weights, with the VAE it records, in fp16
+    as the study's rows (a run with a better-validating ``best`` must not be read at ``best``)."""
+    import shutil
+
+    import torch
+
+    from _doubles import load_script
+    from salad_core.io import load_model
+
+    data = make_fake_corpus(tmp_path / "corpus", n_train=8, n_val=3)
+    work, _ = _den_study(tmp_path / "work", data)
+    run = work / "den_x0"
+    shutil.copy(work / "den_full" / "latest.safetensors", run / "best.safetensors")   # a "best" of other weights
+    shutil.copy(run / "latest.json", run / "best.json")
+    pipe = load_script("ablation_denoising_error").run_pipeline(run)
+    latest, _, _ = load_model(run / "latest")
+    assert pipe.diffusion.prediction_type == "sample"
+    for (name, got), want in zip(pipe.denoiser.state_dict().items(), latest.state_dict().values()):
+        torch.testing.assert_close(got, want.half().float(), msg=name)
+    with pytest.raises(SystemExit, match="holds no denoiser run"):
+        load_script("ablation_denoising_error").run_pipeline(tmp_path / "corpus")
