@@ -6,6 +6,11 @@ from __future__ import annotations
 __all__ = ["summarise", "denoising_markdown"]
 
 
+def _short(x: float, sign: str = "") -> str:
+    """Two significant digits, without an exponent for the hundreds (``-176``, not ``-1.8e+02``)."""
+    return f"{x:{sign}.0f}" if abs(x) >= 100 else f"{x:{sign}.2g}"
+
+
 def summarise(results: dict, first: str) -> dict:
     """Per variant: ``means`` and, against ``first``, ``paired`` ``{metric: {mode: {t: [mean, half]}}}``."""
     from salad_core.eval.denoising_error import paired_difference
@@ -48,7 +53,7 @@ def denoising_markdown(record: dict, metric: str = "joints", mode: str = "guided
             cell = f"{means[t] * scale:.3g}"
             paired = row.get(f"paired_vs_{first}", {}).get(metric, {}).get(mode, {}).get(t)
             if paired is not None:
-                cell += f" ({paired[0] * scale:+.2g} ± {paired[1] * scale:.2g})"
+                cell += f" ({_short(paired[0] * scale, '+')} ± {_short(paired[1] * scale)})"
             cells.append(cell)
         label = f"{name} ({row['fid_clean']:.3g})" if metric == "fid" and row.get("fid_clean") is not None else name
         lines.append(f"| {label} | " + " | ".join(cells) + " |")

@@ -69,7 +69,7 @@ class DenoisingError:
     fid_clean: float | None = None                                     # FID of the decoded clean latents
 
     def means(self) -> dict[str, dict[str, dict[int, float]]]:
-        """``{"latent"|"joints": {mode: {t: mean over clips}}}``."""
+        """``{"latent"|"joints": {mode: {t: mean over clips}}}``, and ``"fid": {mode: {t: FID}}`` when measured."""
         out = {name: {mode: {t: float(v.mean()) for t, v in per_t.items()} for mode, per_t in table.items()}
                for name, table in (("latent", self.latent), ("joints", self.joints))}
         if self.fid:
