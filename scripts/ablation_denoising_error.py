@@ -33,15 +33,13 @@ def run_pipeline(run: Path):
     study's rows were (``salad_core.ablations.probes`` scores probes the same way)."""
     import tempfile
 
-    from salad_core.ablations.stage_eval import latest_step, snapshot_run
+    from salad_core.ablations.probes import assemble_latest
     from salad_core.pipeline import SaladPipeline
-    from salad_core.train.assemble import assemble_pipeline
 
     if not (run / "latest.safetensors").is_file():
         raise SystemExit(f"{run} holds no denoiser run (latest.safetensors)")
     with tempfile.TemporaryDirectory() as tmp:
-        view = snapshot_run(run, Path(tmp) / "run", latest_step(run))
-        return SaladPipeline.from_pretrained(assemble_pipeline(None, view, Path(tmp) / "pipeline"))
+        return SaladPipeline.from_pretrained(assemble_latest(run, None, tmp))
 
 
 def main(argv=None) -> int:

@@ -3,12 +3,12 @@
 
 The staged study scores its denoisers with 10 DDIM steps (a CPU budget); the paper samples with 50. This probe
 takes the protocol of one stage's evaluation file (split, crops, replications, seed, guidance), changes only the
-sampler steps or the guidance weight, scores the named variants of the shipped ablation folder and prints each row and the paired
-advantage of the first variant over each other one (the same crops, captions and noise)::
+sampler steps or the guidance weight, scores the named variants of the shipped ablation folder and prints each row
+and the paired advantage of the first variant over each other one (the same crops, captions and noise)::
 
     python scripts/ablation_sampler_probe.py --stage-eval studies/ablations_v2/evaluations/denoisers@8000.json \\
         --variants full x0 --num-steps 50 --data CORPUS_2.4 --out studies/ablations_v2/sampler_probe.json
-    python scripts/ablation_sampler_probe.py --stage-eval studies/ablations_v2/evaluations/denoisers@8000.json \
+    python scripts/ablation_sampler_probe.py --stage-eval studies/ablations_v2/evaluations/denoisers@8000.json \\
         --variants full no_st x0 --guidance 1 --data CORPUS_2.4 --out studies/ablations_v2/sampler_probe.json
 
 The shipped models must be those of the stage (the card names the steps; checked against ``index.json``).
@@ -38,7 +38,7 @@ def main(argv=None) -> int:
                     "stage's); 1 samples with the conditional prediction alone")
     ap.add_argument("--data", type=Path, required=True, help="the corpus the stage was scored on")
     ap.add_argument("--ablations", type=Path, default=None, help="shipped ablation folder (default: salad's own)")
-    ap.add_argument("--out", type=Path, required=True, help="JSON record (one entry per --num-steps, merged)")
+    ap.add_argument("--out", type=Path, required=True, help="JSON record (one entry per sampler setting, merged)")
     ap.add_argument("--threads", type=int, default=None)
     args = ap.parse_args(argv)
 
@@ -60,10 +60,9 @@ def main(argv=None) -> int:
         raise SystemExit(f"--guidance must be a weight >= 1 (1: no guidance), got {args.guidance}")
     stage = json.loads(args.stage_eval.read_text())
     try:
-        settings = stage_settings(stage, "denoiser")
+        base = stage_settings(stage, "denoiser")
     except ValueError as err:
         raise SystemExit(f"{args.stage_eval} is not a denoiser stage: {err}") from None
-    base = settings
     args.num_steps = base.num_steps if args.num_steps is None else args.num_steps
     guidance = base.guidance_scale if args.guidance is None else args.guidance
     settings = dataclasses.replace(base, num_steps=args.num_steps, guidance_scale=guidance)

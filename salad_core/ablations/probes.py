@@ -34,7 +34,7 @@ from .stage_eval import _jsonable, _row_doc, _score_vae, latest_step
 
 __all__ = ["SAMPLER_SETTINGS", "stage_settings", "score_vae_probe", "score_denoiser_probe", "record_probe", "load_probes", "probe_markdown",
            "sampler_probe_markdown", "score_denoiser_continuation", "continuation_probe_markdown",
-           "paired_probe_markdown", "continued_pairs_markdown"]
+           "paired_probe_markdown", "continued_pairs_markdown", "assemble_latest"]
 
 
 #: evaluation settings a denoiser probe may change without unpairing its rows from the stage's crops and noise
@@ -192,8 +192,8 @@ def _stage_and_probe_tables(probe: Mapping[str, Any], first: str, stage_col: str
 
 def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
     """The record of ``scripts/ablation_sampler_probe.py`` (denoisers scored again with another number of sampler
-    steps or another guidance weight, the stage's protocol otherwise) as markdown: per probe, each row at the stage's steps and at the probe's,
-    then each pair's paired advantage at both, and the command that made it."""
+    steps or another guidance weight, the stage's protocol otherwise) as markdown: per probe, each row at the stage's
+    setting and at the probe's, then each pair's paired advantage at both, and the command that made it."""
     out = []
     for name, probe in record.items():
         n = probe["num_steps"]
@@ -273,9 +273,7 @@ def _score_denoiser_run(run, vae, label: str, data, evaluator, settings, text_en
     """Assemble the denoiser run ``run``'s ``latest`` checkpoint (the step a probe is reported at, never its
     ``best``: a run's validation choice is not the stage's budget) with the VAE ``vae`` (None: the one the run
     records) as the study's rows were (fp16) and score it with ``settings``; return the evaluation result."""
-    from salad_core.train.assemble import assemble_pipeline
-
-    from .stage_eval import _score_denoiser, snapshot_run
+    from .stage_eval import _score_denoiser
 
     if evaluator is None:
         from salad_core.eval.train_evaluator import load_packaged_evaluator
@@ -287,10 +285,20 @@ def _score_denoiser_run(run, vae, label: str, data, evaluator, settings, text_en
         text_encoder = load_text_encoder(json.loads((Path(run) / "config.json").read_text())
                                          .get("task", {}).get("text_encoder", "minilm"))
     with tempfile.TemporaryDirectory() as tmp:
-        view = snapshot_run(run, Path(tmp) / "run", latest_step(run))       # latest.* only: no best.* to prefer
-        folder = assemble_pipeline(vae, view, Path(tmp) / "pipeline", text_encoder=text_encoder)   # fp16, as shipped
+        folder = assemble_latest(run, vae, tmp, text_encoder=text_encoder)
         result, _ = _score_denoiser(folder, label, data, evaluator, settings, weights, text_encoder)
     return result
+
+
+def assemble_latest(run, vae, tmp: str | os.PathLike, *, text_encoder=None) -> Path:
+    """A pipeline folder (under ``tmp``) of the denoiser run ``run``'s ``latest`` checkpoint, never its ``best``,
+    with the VAE ``vae`` (None: the one the run records), in fp16 as the study's rows were shipped."""
+    from salad_core.train.assemble import assemble_pipeline
+
+    from .stage_eval import snapshot_run
+
+    view = snapshot_run(run, Path(tmp) / "run", latest_step(run))           # latest.* only: no best.* to prefer
+    return assemble_pipeline(vae, view, Path(tmp) / "pipeline", text_encoder=text_encoder)
 
 
 def score_denoiser_probe(stage_doc: Mapping[str, Any], run: str | os.PathLike, *, vae: str | os.PathLike | None,

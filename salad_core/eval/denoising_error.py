@@ -116,9 +116,10 @@ def denoising_error(pipe: Any, batches: Sequence[Any], *, timesteps: Sequence[in
     """
     from salad_core.eval import metrics as M
     from salad_core.eval.batches import motion_embeddings
-
     from salad_core.sampling import make_scheduler
 
+    if evaluator is not None and not decode:
+        raise ValueError("the FID needs the decoded motions: decode=True")
     scheduler = make_scheduler(pipe.diffusion, "ddim")
     n_train = int(scheduler.config.num_train_timesteps)
     ts = tuple(int(t) for t in timesteps)
@@ -133,8 +134,7 @@ def denoising_error(pipe: Any, batches: Sequence[Any], *, timesteps: Sequence[in
     alphas = scheduler.alphas_cumprod
     unit = pipe.skeleton.unit_length
     den = pipe.denoiser.eval()
-    if evaluator is not None and not decode:
-        raise ValueError("the FID needs the decoded motions: decode=True")
+    p, dz = pipe.latent_shape
     real_emb, clean_emb = [], []
     est_emb = {m: {t: [] for t in ts} for m in modes}
     clip = 0
@@ -143,7 +143,6 @@ def denoising_error(pipe: Any, batches: Sequence[Any], *, timesteps: Sequence[in
         if any(x % unit or x <= 0 for x in lengths):
             raise ValueError(f"clip lengths {lengths} must be positive multiples of {unit}")
         n_lat = max(lengths) // unit
-        p, dz = pipe.latent_shape
         x0 = torch.zeros(len(lengths), n_lat, p, dz)
         for i, length in enumerate(lengths):
             x0[i, : length // unit] = pipe.encode_motion(np.asarray(batch.motions[i, :length], np.float32))[0]
@@ -153,7 +152,6 @@ def denoising_error(pipe: Any, batches: Sequence[Any], *, timesteps: Sequence[in
         text, null = pipe.encode_text(list(batch.captions))
         cond = den.prepare_text(text.features, text.mask)
         uncond = den.prepare_text(null.features, null.mask).repeat(len(lengths))
-        truth = None
         if decode:
             feats, truth = pipe.decode(x0, lengths, recovery="positions")
             if evaluator is not None:
