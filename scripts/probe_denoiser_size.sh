@@ -3,7 +3,8 @@
 # the shipped SALAD denoiser's size (width 128, ff 512, 5 layers; the study's recipe otherwise):
 # scripts/probe_denoisers.sh with those model keys (records <variant>_w128, continued runs in OUT/decay_w128).
 # Usage: bash scripts/probe_denoiser_size.sh OUT VARIANT [VARIANT ...]   (e.g. OUT no_st full)
-# Run it again to resume. At one thread: "full" about 0.8 steps/s (10,000 steps: 3.5 hours), "no_st" about 3.
+# Run it again to resume. "full" at one thread: 0.54 steps/s alone on session 35's machine (0.8 on an earlier one; 0.35
+# beside a second run), 0.65-0.74 on two threads (set train.num_threads in OUT/den_full_w128.json); "no_st" about 3.
 set -euo pipefail
 OUT=${1:?usage: bash scripts/probe_denoiser_size.sh OUT VARIANT [VARIANT ...]}
 shift
