@@ -15,6 +15,10 @@ metres against the decoded clean latent) and each variant's paired difference fr
 is better), with 95 % half-widths; the latent MSE is compared only between variants on the same VAE. It also keeps
 the FID (the shipped evaluator) of the motions decoded from each one-step estimate, per timestep, beside the FID of
 the decoded clean latents: at t = 0 that is what the sampler's last step does to a finished motion.
+``--unconditional`` adds the empty prompt's estimate (the branch guidance extrapolates away from)::
+
+    python scripts/ablation_denoising_error.py --data CORPUS_2.4 --stage-eval studies/ablations_v2/evaluations/denoisers@8000.json \\
+        --variants full no_st --unconditional --out studies/ablations_v2/denoising_error_unconditional.json
 """
 from __future__ import annotations
 
@@ -52,6 +56,8 @@ def main(argv=None) -> int:
     ap.add_argument("--weights", type=Path, default=None, help="their folder (default: salad_core/weights/ablations)")
     ap.add_argument("--timesteps", nargs="+", type=int, default=None, help="default: DEFAULT_TIMESTEPS")
     ap.add_argument("--batches", type=int, default=None, help="only the first N batches of the crops (default: all)")
+    ap.add_argument("--unconditional", action="store_true", help="also the empty prompt's estimate (mode 'uncond': "
+                    "the branch guidance extrapolates away from)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", type=Path, required=True, help="the record (JSON)")
     args = ap.parse_args(argv)
@@ -84,7 +90,7 @@ def main(argv=None) -> int:
         ds = evaluation_dataset(args.data, settings, pipe.skeleton)
         batches = batches_for(ds, settings, 0, 0)[: args.batches]
         r = denoising_error(pipe, batches, timesteps=timesteps, guidance_scale=settings.guidance_scale,
-                            noise_seed=settings.seed, evaluator=evaluator)
+                            noise_seed=settings.seed, evaluator=evaluator, unconditional=args.unconditional)
         if clips is not None and r.clips != clips:
             raise SystemExit(f"{name} was measured on other clips than {first}: not paired")
         clips = r.clips
@@ -94,13 +100,14 @@ def main(argv=None) -> int:
                       "(first replication), the same noise per clip for denoisers of the same latent shape",
               "stage": stage["stage"], "steps": stage["steps"], "guidance_scale": settings.guidance_scale,
               "clips": len(clips), "timesteps": list(timesteps), "first": first,
+              "modes": ["cond"] + ["uncond"] * args.unconditional + ["guided"],
               "variants": summarise(results, first),
               "command": "python scripts/ablation_denoising_error.py " + " ".join(
                   shlex.quote(str(a)) for a in (argv if argv is not None else sys.argv[1:])).replace(str(Path.home()), "~")}
     record = json.loads(json.dumps(record, default=float))      # int timestep keys -> strings, as read back
     atomic_write_text(args.out, json.dumps(record, indent=1) + "\n")
     for metric in ("fid", "joints", "latent"):
-        for mode in ("cond", "guided"):
+        for mode in ("cond",) + ("uncond",) * args.unconditional + ("guided",):
             print(denoising_markdown(record, metric, mode) + "\n")
     print(f"recorded in {args.out}")
     return 0

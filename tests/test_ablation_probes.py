@@ -564,6 +564,126 @@ def test_sampler_probe_markdown_names_a_guidance_probe_by_its_weight():
     assert "| full vs no_st, FID | +0.100 ± 0.200 | +1.000 ± 0.500 |" in text
 
 
+def test_sampler_probe_markdown_names_a_refined_guidance_and_its_guided_steps():
+    from salad_core.ablations.probes import sampler_probe_markdown
+
+    row = {"at_stage": {"FID": [2.0, 0.1], "R-precision top-3": [0.8, 0.01]},
+           "summary": {"FID": [6.5, 0.2], "R-precision top-3": [0.7, 0.02]}}
+    record = {"denoisers@8000, 10 steps, w=7.5 t/T in [0,0.5]": {
+        "num_steps": 10, "stage_num_steps": 10, "guidance_scale": 7.5, "stage_guidance_scale": 7.5,
+        "guidance_rescale": 0.0, "guidance_interval": [0.0, 0.5], "guided_timesteps": [500, 400, 300, 200, 100, 0],
+        "rows": {"full": row, "no_st": row}, "paired": {"full vs no_st, FID": {"at_stage": [0.1, 0.2], "probe": [-3.5, 1.0]}},
+        "command": "python probe --interval 0-0.5"}}
+    text = sampler_probe_markdown(record)
+    assert "guidance weight 7.5, only at 0 <= t/T <= 0.5 (guided timesteps: 500, 400, 300, 200, 100, 0))" in text
+    assert "FID, 10 steps, w 7.5 | FID, 10 steps, w 7.5 (only at 0 <= t/T <= 0.5)" in text
+    assert "| full vs no_st, FID | +0.100 ± 0.200 | -3.500 ± 1.000 |" in text
+    record[next(iter(record))].update(guidance_interval=None, guidance_rescale=0.7, guided_timesteps=None)
+    assert "FID, 10 steps, w 7.5 (rescale 0.7)" in sampler_probe_markdown(record)
+
+
+def test_guidance_pair_markdown_orders_one_pair_under_each_guidance():
+    """One row for the stage's setting (its paired advantage computed from the replications), one per probe that
+    scored both variants at the stage's steps with the pair's first variant first; other probes are left out."""
+    from salad_core.ablations.probes import guidance_pair_markdown
+
+    stage = {"settings": {"num_steps": 10, "guidance_scale": 7.5},
+             "rows": {"full": {"summary": {"FID": [3.0, 0.2], "R-precision top-3": [0.81, 0.01]},
+                               "values": {"FID": [3.0, 3.2, 2.8], "R-precision top-3": [0.8, 0.81, 0.82]}},
+                      "no_st": {"summary": {"FID": [2.0, 0.4], "R-precision top-3": [0.79, 0.02]},
+                                "values": {"FID": [2.0, 2.1, 1.9], "R-precision top-3": [0.79, 0.80, 0.78]}}}}
+    row = lambda f: {"summary": {"FID": [f, 0.5], "R-precision top-3": [0.7, 0.02]}}
+    pair = lambda f, r: {"full vs no_st, FID": {"probe": [f, 0.4]}, "full vs no_st, R-precision top-3": {"probe": [r, 0.03]}}
+    record = {
+        "s, 50 steps": {"num_steps": 50, "guidance_scale": 7.5, "rows": {"full": row(1), "no_st": row(1)},
+                        "paired": pair(9, 9)},
+        "s, 10 steps, w 1": {"num_steps": 10, "guidance_scale": 1.0, "rows": {"full": row(11.0), "no_st": row(11.5)},
+                             "paired": pair(0.5, -0.01)},
+        "s, interval": {"num_steps": 10, "guidance_scale": 7.5, "guidance_rescale": 0.0, "guidance_interval": [0.0, 0.5],
+                        "guided_timesteps": [500, 0], "rows": {"full": row(6.5), "no_st": row(3.0)},
+                        "paired": pair(-3.5, -0.04)},
+        "s, other first": {"num_steps": 10, "guidance_scale": 2.0, "rows": {"no_st": row(1), "full": row(1)},
+                           "paired": {}},
+    }
+    text = guidance_pair_markdown(stage, record, "full", "no_st")
+    lines = text.strip().splitlines()
+    assert len(lines) == 5                                       # head, rule, the stage, w 1, the interval
+    assert lines[2] == ("| w 7.5 at every step (the stage) | all | 3.000 ± 0.200 | 2.000 ± 0.400 | 0.810 ± 0.010 | "
+                        "0.790 ± 0.020 | -1.000 ± 0.092 | +0.020 ± 0.016 |")   # 1.96 sd / sqrt(3), sd over 3
+    assert lines[3].startswith("| w 1 (no guidance) | none | 11.000 ± 0.500 | 11.500 ± 0.500 |")
+    assert lines[3].endswith("| +0.500 ± 0.400 | -0.010 ± 0.030 |")
+    assert lines[4].startswith("| w 7.5, only at 0 <= t/T <= 0.5 | 500, 0 | 6.500 ± 0.500 | 3.000 ± 0.500 |")
+    assert "9.000" not in text
+
+
+def test_sampler_probe_refuses_a_bad_interval_or_rescale_before_loading(tmp_path):
+    main = _sampler_script().main
+    stage = tmp_path / "stage.json"
+    stage.write_text(json.dumps({"kind": "denoiser", "stage": "denoisers@100", "steps": 100, "rows": {"full": {}},
+                                 "settings": {"num_steps": 10, "guidance_scale": 7.5}}))
+    common = ["--stage-eval", str(stage), "--data", str(tmp_path), "--out", str(tmp_path / "o.json"), "--variants", "full"]
+    with pytest.raises(SystemExit, match="--interval 'low': give LO-HI"):
+        main([*common, "--interval", "low"])
+    with pytest.raises(SystemExit, match="0 <= lo < hi <= 1"):
+        main([*common, "--interval", "0.8-0.2"])
+    with pytest.raises(SystemExit, match=r"rescale must be in \[0, 1\]"):
+        main([*common, "--rescale", "2"])
+    assert not (tmp_path / "o.json").exists()
+
+
+def test_sampler_probe_guides_only_inside_its_interval(tmp_path, monkeypatch):
+    """``--interval``: each shipped pipeline is called with the whole Guidance (weight, interval), and the record
+    names the guided timesteps of the stage's sampler (10 DDIM steps: 900 ... 0)."""
+    import salad_core.ablations as abl
+    import salad_core.eval as ev
+    import salad_core.eval.train_evaluator as te
+    import salad_core.text as text
+    from salad_core.sampling import Guidance
+
+    mod = _sampler_script()
+    calls = []
+
+    class FakePipe:
+        diffusion = None
+        solver = "ddim"
+
+        def __call__(self, prompts, **kwargs):
+            from types import SimpleNamespace
+
+            calls.append(kwargs["guidance_scale"])
+            return SimpleNamespace(features=np.zeros((len(prompts), 40, 3)), joints=[None] * len(prompts))
+
+    class Result:
+        values = {"FID": [1.0, 2.0], "R-precision top-3": [0.5, 0.6]}
+
+        def summary(self):
+            return {"FID": (1.5, 0.1), "R-precision top-3": (0.55, 0.01)}
+
+    def fake_eval(gen, data, evaluator, settings, **kw):
+        gen(["a person walks"], lengths=[40], seed=0, guidance_scale=settings.guidance_scale,
+            num_steps=settings.num_steps)
+        return Result()
+
+    steps = json.loads((REPO / "salad_core" / "weights" / "ablations" / "index.json").read_text())["full"]["steps"]
+    stage = tmp_path / "stage.json"
+    rows = {v: {"summary": {"FID": [1.0, 0.1], "R-precision top-3": [0.5, 0.01]},
+                "values": {"FID": [1.0, 2.0], "R-precision top-3": [0.5, 0.6]}} for v in ("full", "no_st")}
+    stage.write_text(json.dumps({**_stage_doc(steps), "kind": "denoiser", "stage": f"denoisers@{steps}", "rows": rows,
+                                 "settings": {**_stage_doc(steps)["settings"], "num_steps": 10, "guidance_scale": 7.5}}))
+    monkeypatch.setattr(abl, "load_ablation_pipeline", lambda *a, **k: FakePipe())
+    monkeypatch.setattr(ev, "evaluate_generator", fake_eval)
+    monkeypatch.setattr(te, "load_packaged_evaluator", lambda: (None,))
+    monkeypatch.setattr(text, "load_text_encoder", lambda name: None)
+    out = tmp_path / "o.json"
+    assert mod.main(["--stage-eval", str(stage), "--data", str(tmp_path), "--out", str(out),
+                     "--variants", "full", "no_st", "--interval", "0-0.5"]) == 0
+    assert calls == [Guidance(7.5, 0.0, (0.0, 0.5))] * 2
+    rec = json.loads(out.read_text())[f"denoisers@{steps}, 10 steps, w=7.5 t/T in [0,0.5]"]
+    assert rec["guided_timesteps"] == [500, 400, 300, 200, 100, 0]
+    assert rec["guidance_interval"] == [0.0, 0.5] and rec["guidance_rescale"] == 0.0
+    assert "--interval 0-0.5" in rec["command"]
+
+
 def test_sampler_probe_refuses_a_guidance_weight_below_1(tmp_path):
     main = _sampler_script().main
     stage = tmp_path / "stage.json"

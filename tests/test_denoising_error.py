@@ -77,6 +77,21 @@ def test_the_same_denoiser_measured_twice_is_paired_exactly_and_guidance_1_is_th
     assert not np.array_equal(c.latent["cond"][700], a.latent["cond"][700]) and set(c.latent) == {"cond"}
 
 
+def test_the_unconditional_mode_is_guidance_at_weight_0(pipe, sample_features):
+    """``unconditional=True`` adds the empty prompt's estimate: what guidance at w = 0 gives, and not the caption's
+    (the tiny test denoiser still reads its text)."""
+    batches = _batches(sample_features)
+    r = denoising_error(pipe, batches, timesteps=(300,), guidance_scale=2.0, unconditional=True, decode=False)
+    w0 = denoising_error(pipe, batches, timesteps=(300,), guidance_scale=0.0, decode=False)
+    assert set(r.latent) == {"cond", "uncond", "guided"}
+    np.testing.assert_allclose(r.latent["uncond"][300], w0.latent["guided"][300], rtol=1e-5, atol=1e-8)
+    np.testing.assert_array_equal(r.latent["cond"][300], w0.latent["cond"][300])
+    assert not np.allclose(r.latent["uncond"][300], r.latent["cond"][300])
+    alone = denoising_error(pipe, batches, timesteps=(300,), guidance_scale=None, unconditional=True, decode=False)
+    assert set(alone.latent) == {"cond", "uncond"}
+    np.testing.assert_allclose(alone.latent["uncond"][300], r.latent["uncond"][300], rtol=1e-5, atol=1e-8)
+
+
 def test_bad_input_is_refused_with_what_is_wrong(pipe, sample_features):
     batches = _batches(sample_features)
     with pytest.raises(ValueError, match=r"must be in \[0, 1000\)"):

@@ -32,8 +32,8 @@ from typing import Any, Mapping, Sequence
 
 from .stage_eval import _jsonable, _row_doc, _score_vae, latest_step
 
-__all__ = ["SAMPLER_SETTINGS", "stage_settings", "score_vae_probe", "score_denoiser_probe", "record_probe", "load_probes", "probe_markdown",
-           "sampler_probe_markdown", "score_denoiser_continuation", "continuation_probe_markdown",
+__all__ = ["SAMPLER_SETTINGS", "stage_settings", "score_vae_probe", "score_denoiser_probe", "record_probe", "load_probes",
+           "probe_markdown", "sampler_probe_markdown", "guidance_pair_markdown", "score_denoiser_continuation", "continuation_probe_markdown",
            "paired_probe_markdown", "continued_pairs_markdown", "assemble_latest"]
 
 
@@ -192,7 +192,7 @@ def _stage_and_probe_tables(probe: Mapping[str, Any], first: str, stage_col: str
 
 def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
     """The record of ``scripts/ablation_sampler_probe.py`` (denoisers scored again with another number of sampler
-    steps or another guidance weight, the stage's protocol otherwise) as markdown: per probe, each row at the stage's
+    steps or another guidance: weight, rescale, interval; the stage's protocol otherwise) as markdown: per probe, each row at the stage's
     setting and at the probe's, then each pair's paired advantage at both, and the command that made it."""
     out = []
     for name, probe in record.items():
@@ -200,7 +200,16 @@ def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
         first = next(iter(probe["rows"]))
         stage_steps = probe.get("stage_num_steps", 10)
         w, stage_w = probe.get("guidance_scale"), probe.get("stage_guidance_scale")
-        if w is None or w == stage_w:          # a probe of the sampler steps alone
+        phi, interval = probe.get("guidance_rescale") or 0.0, probe.get("guidance_interval")
+        if phi or interval:                    # guidance refined: rescale and/or an interval of t/T
+            extra = [f"rescale {phi:g}"] * bool(phi)
+            if interval:
+                extra.append(f"only at {interval[0]:g} <= t/T <= {interval[1]:g}")
+            ours, theirs = f"{n} steps, w {w:g} ({', '.join(extra)})", f"{stage_steps} steps, w {stage_w:g}"
+            what = f"{n} sampler steps and guidance weight {w:g}, " + ", ".join(extra)
+            if probe.get("guided_timesteps") is not None:
+                what += f" (guided timesteps: {', '.join(str(t) for t in probe['guided_timesteps']) or 'none'})"
+        elif w is None or w == stage_w:        # a probe of the sampler steps alone
             ours, theirs, what = f"{n} steps", f"{stage_steps} steps", f"{n} sampler steps"
         else:
             ours, theirs = f"{n} steps, w {w:g}", f"{stage_steps} steps, w {stage_w:g}"
@@ -209,6 +218,53 @@ def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
         out += _stage_and_probe_tables(probe, first, theirs, ours, theirs, ours)
         out += ["", f"Made by: `{probe['command']}`", ""]
     return "\n".join(out).rstrip() + "\n"
+
+
+def guidance_pair_markdown(stage_doc: Mapping[str, Any], record: Mapping[str, Mapping[str, Any]], first: str,
+                           second: str) -> str:
+    """How one pair of denoisers orders under each guidance the sampler probe scored them with: one row for the stage's
+    own setting, then one per entry of ``record`` (``scripts/ablation_sampler_probe.py``) that scored both at the
+    stage's number of steps (other step counts are left out: one change at a time). Columns: the guided timesteps
+    (``all`` at the stage's setting), each row's FID and R-precision top-3 (mean ± 95 % half-width) and ``first``'s
+    paired advantage (positive: ``first`` better)."""
+    from .orderings import paired_advantage
+
+    metrics = ("FID", "R-precision top-3")
+    steps = stage_doc["settings"]["num_steps"]
+    head = (f"| guidance ({steps} sampler steps) | guided timesteps | "
+            + " | ".join(f"{m} `{v}`" for m in metrics for v in (first, second))
+            + " | " + " | ".join(f"{m}, paired" for m in metrics) + " |")
+    lines = [head, "|---|---|" + "---:|" * 6]
+
+    def cells(summary_a, summary_b, paired) -> str:
+        out = [f"{s[m][0]:.3f} ± {s[m][1]:.3f}" for m in metrics for s in (summary_a, summary_b)]
+        out += [f"{paired[m][0]:+.3f} ± {paired[m][1]:.3f}" for m in metrics]
+        return " | ".join(out)
+
+    rows = stage_doc["rows"]
+    paired = {m: paired_advantage(rows[first]["values"][m], rows[second]["values"][m], m) for m in metrics}
+    lines.append(f"| w {stage_doc['settings']['guidance_scale']:g} at every step (the stage) | all | "
+                 + cells(rows[first]["summary"], rows[second]["summary"], paired) + " |")
+    for probe in record.values():
+        if probe.get("num_steps") != steps or not {first, second} <= set(probe["rows"]):
+            continue
+        if first != next(iter(probe["rows"])):
+            continue                            # the record pairs its first variant with the others
+        w, phi, interval = probe["guidance_scale"], probe.get("guidance_rescale") or 0.0, probe.get("guidance_interval")
+        label = f"w {w:g}" + (f", rescale {phi:g}" if phi else "")
+        label += f", only at {interval[0]:g} <= t/T <= {interval[1]:g}" if interval else ""
+        label = f"{label} (no guidance)" if w == 1 else label
+        guided = probe.get("guided_timesteps")
+        if w == 1:
+            guided_text = "none"
+        elif guided is not None:
+            guided_text = ", ".join(str(t) for t in guided) or "none"
+        else:                                   # a record written before the probe listed them: every step
+            guided_text = "all"
+        pair = {m: probe["paired"][f"{first} vs {second}, {m}"]["probe"] for m in metrics}
+        lines.append(f"| {label} | {guided_text} | "
+                     + cells(probe["rows"][first]["summary"], probe["rows"][second]["summary"], pair) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def score_denoiser_continuation(stage_doc: Mapping[str, Any], run: str | os.PathLike, *,

@@ -10,7 +10,8 @@ motions can order them. This module measures exactly that, on real clips:
 * fixed Gaussian noise per clip (the same for every denoiser on the same latent shape: paired) and a grid of
   timesteps ``t``: ``x_t = sqrt(a_t) x0 + sqrt(1 - a_t) eps`` (the training scheduler's ``add_noise``);
 * the denoiser's output for the clip's caption (conditional) and, with classifier-free guidance at ``w``, the guided
-  output ``u + w (c - u)`` (the sampler's), each turned into ``x0_hat`` (:func:`x0_estimate`);
+  output ``u + w (c - u)`` (the sampler's), optionally the unconditional (empty-prompt) output ``u`` alone, each
+  turned into ``x0_hat`` (:func:`x0_estimate`);
 * per clip: the mean squared error of ``x0_hat`` in the normalised latent space over the clip's latent frames, and
   the mean joint distance between the motions decoded from ``x0_hat`` and from ``x0`` (raw position recovery,
   metres), which compares denoisers on different latent spaces too;
@@ -56,7 +57,8 @@ def x0_estimate(output: torch.Tensor, x_t: torch.Tensor, alpha_bar: torch.Tensor
 @dataclass
 class DenoisingError:
     """Per-clip errors of one denoiser: ``latent[mode][t]`` and ``joints[mode][t]`` are ``(clips,)`` arrays, ``mode``
-    ``"cond"`` (the caption's output) or ``"guided"`` (classifier-free guidance at ``guidance_scale``)."""
+    ``"cond"`` (the caption's output), ``"uncond"`` (the empty prompt's) or ``"guided"`` (classifier-free guidance at
+    ``guidance_scale``)."""
 
     timesteps: tuple[int, ...]
     guidance_scale: float
@@ -93,7 +95,7 @@ def _clip_noise(shape: tuple[int, ...], seed: int) -> torch.Tensor:
 @torch.inference_mode()
 def denoising_error(pipe: Any, batches: Sequence[Any], *, timesteps: Sequence[int] = DEFAULT_TIMESTEPS,
                     guidance_scale: float | None = 7.5, noise_seed: int = 0, decode: bool = True,
-                    evaluator: Any = None) -> DenoisingError:
+                    evaluator: Any = None, unconditional: bool = False) -> DenoisingError:
     """Measure ``pipe``'s denoiser on real batches.
 
     Parameters
@@ -113,6 +115,9 @@ def denoising_error(pipe: Any, batches: Sequence[Any], *, timesteps: Sequence[in
         Also decode ``x0_hat`` and ``x0`` and measure the joints (the slow part).
     evaluator : T2MEvaluator, optional
         Also the FID per mode and timestep (needs ``decode``), and of the decoded clean latents.
+    unconditional : bool
+        Also measure the unconditional output (mode ``"uncond"``: the branch classifier-free guidance extrapolates
+        away from).
     """
     from salad_core.eval import metrics as M
     from salad_core.eval.batches import motion_embeddings
@@ -126,7 +131,7 @@ def denoising_error(pipe: Any, batches: Sequence[Any], *, timesteps: Sequence[in
     if not ts or any(t < 0 or t >= n_train for t in ts):
         raise ValueError(f"timesteps {list(timesteps)} must be in [0, {n_train})")
     kind = pipe.diffusion.prediction_type
-    modes = ("cond",) + (("guided",) if guidance_scale is not None else ())
+    modes = ("cond",) + (("uncond",) if unconditional else ()) + (("guided",) if guidance_scale is not None else ())
     out = DenoisingError(ts, float(guidance_scale) if guidance_scale is not None else float("nan"), kind,
                          tuple(pipe.latent_shape))
     out.latent = {m: {t: [] for t in ts} for m in modes}
@@ -162,9 +167,12 @@ def denoising_error(pipe: Any, batches: Sequence[Any], *, timesteps: Sequence[in
             x_t = scheduler.add_noise(x0, noise, tt) * keep
             c = den(x_t, tt, frame_mask=mask, text_context=cond)
             outputs = {"cond": c}
-            if "guided" in modes:
+            if "guided" in modes or "uncond" in modes:
                 u = den(x_t, tt, frame_mask=mask, text_context=uncond)
-                outputs["guided"] = u + guidance_scale * (c - u)
+                if "uncond" in modes:
+                    outputs["uncond"] = u
+                if "guided" in modes:
+                    outputs["guided"] = u + guidance_scale * (c - u)
             a = alphas[tt]
             for mode, o in outputs.items():
                 est = x0_estimate(o, x_t, a, kind) * keep
