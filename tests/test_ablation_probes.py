@@ -602,17 +602,21 @@ def test_guidance_pair_markdown_orders_one_pair_under_each_guidance():
         "s, interval": {"num_steps": 10, "guidance_scale": 7.5, "guidance_rescale": 0.0, "guidance_interval": [0.0, 0.5],
                         "guided_timesteps": [500, 0], "rows": {"full": row(6.5), "no_st": row(3.0)},
                         "paired": pair(-3.5, -0.04)},
+        "s, w 2": {"num_steps": 10, "guidance_scale": 2.0, "guidance_rescale": 0.0, "guidance_interval": None,
+                   "guided_timesteps": list(range(900, -1, -100)), "rows": {"full": row(2.5), "no_st": row(2.0)},
+                   "paired": pair(-0.5, 0.01)},
         "s, other first": {"num_steps": 10, "guidance_scale": 2.0, "rows": {"no_st": row(1), "full": row(1)},
                            "paired": {}},
     }
     text = guidance_pair_markdown(stage, record, "full", "no_st")
     lines = text.strip().splitlines()
-    assert len(lines) == 5                                       # head, rule, the stage, w 1, the interval
+    assert len(lines) == 6                                       # head, rule, the stage, w 1, the interval, w 2
     assert lines[2] == ("| w 7.5 at every step (the stage) | all | 3.000 ± 0.200 | 2.000 ± 0.400 | 0.810 ± 0.010 | "
                         "0.790 ± 0.020 | -1.000 ± 0.092 | +0.020 ± 0.016 |")   # 1.96 sd / sqrt(3), sd over 3
     assert lines[3].startswith("| w 1 (no guidance) | none | 11.000 ± 0.500 | 11.500 ± 0.500 |")
     assert lines[3].endswith("| +0.500 ± 0.400 | -0.010 ± 0.030 |")
     assert lines[4].startswith("| w 7.5, only at 0 <= t/T <= 0.5 | 500, 0 | 6.500 ± 0.500 | 3.000 ± 0.500 |")
+    assert lines[5].startswith("| w 2 | all | 2.500 ± 0.500 | 2.000 ± 0.500 |")      # every step guided
     assert "9.000" not in text
 
 

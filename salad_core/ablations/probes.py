@@ -257,6 +257,8 @@ def guidance_pair_markdown(stage_doc: Mapping[str, Any], record: Mapping[str, Ma
         guided = probe.get("guided_timesteps")
         if w == 1:
             guided_text = "none"
+        elif guided is not None and len(guided) == probe["num_steps"]:
+            guided_text = "all"
         elif guided is not None:
             guided_text = ", ".join(str(t) for t in guided) or "none"
         else:                                   # a record written before the probe listed them: every step
