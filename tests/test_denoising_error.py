@@ -148,3 +148,32 @@ def test_the_fid_of_a_one_step_estimate_is_the_clean_latents_at_t0_and_grows_wit
     assert r.means()["fid"]["cond"][0] == r.fid["cond"][0]
     with pytest.raises(ValueError, match="decode=True"):
         denoising_error(pipe, batches, timesteps=(0,), evaluator=evaluator, decode=False)
+
+
+def test_the_text_response_is_recovered_exactly_from_the_three_errors():
+    """Made-up estimates with a known |c - u|^2 and <u - x0, c - u>: their three mean errors give both back."""
+    from salad_core.ablations.denoising import text_response, text_response_markdown
+
+    rng = np.random.default_rng(0)
+    x0, u_err, delta = rng.normal(size=(3, 5, 40))              # 5 clips x 40 latent elements
+    delta *= 0.3
+    u = x0 + u_err
+    c = u + delta
+    w = 7.5
+    g = u + w * (c - u)
+    mse = lambda e: float(((e - x0) ** 2).mean(axis=1).mean())
+    record = {"guidance_scale": w, "timesteps": [500],
+              "variants": {"full": {"means": {"latent": {"cond": {"500": mse(c)}, "uncond": {"500": mse(u)},
+                                                         "guided": {"500": mse(g)}}}}}}
+    got = text_response(record, "full")["500"]
+    want_d = float((delta ** 2).mean(axis=1).mean())
+    want_x = float((u_err * delta).mean(axis=1).mean())
+    np.testing.assert_allclose(got["response"], want_d, rtol=1e-9)
+    np.testing.assert_allclose(got["relative"], want_d / mse(c), rtol=1e-9)
+    np.testing.assert_allclose(got["cosine"], want_x / np.sqrt(mse(u) * want_d), rtol=1e-9)
+    assert f"{want_d / mse(c):.3f}" in text_response_markdown(record)
+    record["variants"]["full"]["means"]["latent"].pop("uncond")
+    with pytest.raises(ValueError, match="--unconditional"):
+        text_response(record, "full")
+    with pytest.raises(ValueError, match="guidance weight 1"):
+        text_response({**record, "guidance_scale": 1.0}, "full")
