@@ -61,8 +61,8 @@ def main(argv=None) -> int:
     from salad_core.eval import evaluate_generator
     from salad_core.eval.guidance_sweep import FixedGuidance, guidance_label
     from salad_core.eval.length_buckets import LengthBucketed
-    from salad_core.sampling import Guidance, make_scheduler
     from salad_core.eval.train_evaluator import load_packaged_evaluator
+    from salad_core.sampling import Guidance, make_scheduler
     from salad_core.text import load_text_encoder
 
     if args.num_steps is not None and args.num_steps < 1:

@@ -190,6 +190,16 @@ def _stage_and_probe_tables(probe: Mapping[str, Any], first: str, stage_col: str
     return lines
 
 
+def _guidance_refinements(probe: Mapping[str, Any]) -> list[str]:
+    """How a sampler probe refined classifier-free guidance beyond its weight, in words: ``["rescale 0.7"]``, ``["only
+    at 0 <= t/T <= 0.5"]``, both, or ``[]`` for plain guidance (records written before the probe had these keys too)."""
+    phi, interval = probe.get("guidance_rescale") or 0.0, probe.get("guidance_interval")
+    extra = [f"rescale {phi:g}"] if phi else []
+    if interval:
+        extra.append(f"only at {interval[0]:g} <= t/T <= {interval[1]:g}")
+    return extra
+
+
 def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
     """The record of ``scripts/ablation_sampler_probe.py`` (denoisers scored again with another number of sampler
     steps or another guidance: weight, rescale, interval; the stage's protocol otherwise) as markdown: per probe, each row at the stage's
@@ -200,11 +210,8 @@ def sampler_probe_markdown(record: Mapping[str, Mapping[str, Any]]) -> str:
         first = next(iter(probe["rows"]))
         stage_steps = probe.get("stage_num_steps", 10)
         w, stage_w = probe.get("guidance_scale"), probe.get("stage_guidance_scale")
-        phi, interval = probe.get("guidance_rescale") or 0.0, probe.get("guidance_interval")
-        if phi or interval:                    # guidance refined: rescale and/or an interval of t/T
-            extra = [f"rescale {phi:g}"] * bool(phi)
-            if interval:
-                extra.append(f"only at {interval[0]:g} <= t/T <= {interval[1]:g}")
+        extra = _guidance_refinements(probe)
+        if extra:                              # guidance refined: rescale and/or an interval of t/T
             ours, theirs = f"{n} steps, w {w:g} ({', '.join(extra)})", f"{stage_steps} steps, w {stage_w:g}"
             what = f"{n} sampler steps and guidance weight {w:g}, " + ", ".join(extra)
             if probe.get("guided_timesteps") is not None:
@@ -250,9 +257,8 @@ def guidance_pair_markdown(stage_doc: Mapping[str, Any], record: Mapping[str, Ma
             continue
         if first != next(iter(probe["rows"])):
             continue                            # the record pairs its first variant with the others
-        w, phi, interval = probe["guidance_scale"], probe.get("guidance_rescale") or 0.0, probe.get("guidance_interval")
-        label = f"w {w:g}" + (f", rescale {phi:g}" if phi else "")
-        label += f", only at {interval[0]:g} <= t/T <= {interval[1]:g}" if interval else ""
+        w = probe["guidance_scale"]
+        label = ", ".join([f"w {w:g}", *_guidance_refinements(probe)])
         label = f"{label} (no guidance)" if w == 1 else label
         guided = probe.get("guided_timesteps")
         if w == 1:
