@@ -5,12 +5,18 @@ keyframes of the ground truth are selected, either ``K = max(2, round(ratio x L)
 paper: 10 % on HumanML3D) or a fixed ``K``; the MMAE in-fills the motion from them and linear
 interpolation of the same keyframes is the baseline. Reported: the root-aligned MPJPE (cm, joints
 relative to the pelvis, mean over frames and joints) of both, pooled over frames, and the MMAE's
-gain ``1 - MMAE / LERP`` (the issue's target: at least 0.30 at the paper's ratio).
+gain ``1 - MMAE / LERP`` (the issue's target: at least 0.30 at the paper's ratio); and the foot skating of
+the clips themselves, of the MMAE's in-fillings and of LERP's (m/s, mean over windows, the physics benchmark's
+measure on the position joints: :func:`salad_core.eval.physics.measure_motion`), which says how far the in-filling
+stage alone, given a clip's own keyframes, is from the clip's planted feet. ``--words walk run`` keeps the windows
+whose caption names one of the words (the skating of gaits).
 
 Example::
 
     OMP_NUM_THREADS=1 nice -n 19 .venv/bin/python scripts/keymotion_infill_ratio.py \
         --data /tmp/corpus_small --limit 150 --ratios 0.1 0.25 --fixed 20
+    python scripts/keymotion_infill_ratio.py --data CORPUS --split val --words walk run jog --limit 30 \
+        --ratios 0.1 0.2 0.35 0.5 --fixed                  # in-filled gaits' skating by keyframe density
 """
 from __future__ import annotations
 
@@ -22,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from salad_core.eval.physics import measure_motion
 from salad_core.keymotion.kf_vae import gather_keyframes
 from salad_core.keymotion.mmae import keyframe_lerp, scatter_keyframes
 from salad_core.keymotion.pipeline import KeyMotionPipeline
@@ -35,9 +42,9 @@ def root_aligned_error(pred: np.ndarray, true: np.ndarray) -> np.ndarray:
 
 
 @torch.no_grad()
-def infill_errors(pipe: KeyMotionPipeline, x: np.ndarray, caption: str, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per-frame root-aligned errors (m) of the MMAE and of LERP from ``k`` MDO keyframes of ``x (N, D)``
-    (normalised features)."""
+def infill_joints(pipe: KeyMotionPipeline, x: np.ndarray, caption: str, k: int) -> dict[str, np.ndarray]:
+    """Joints ``(N, J, 3)`` (m) of a window ``x (N, D)`` (normalised features): ``"true"``, and its in-filling from
+    its ``k`` MDO keyframes by the MMAE (``"mmae"``) and by linear interpolation (``"lerp"``)."""
     n = len(x)
     idx = torch.from_numpy(select_keyframes(x, k, "mdo").astype(np.int64))[None]
     xt = torch.from_numpy(x)[None]
@@ -48,9 +55,21 @@ def infill_errors(pipe: KeyMotionPipeline, x: np.ndarray, caption: str, k: int) 
     lerp = keyframe_lerp(canvas, mask)
     den = pipe.mmae.norm.denormalize
     sk = pipe.skeleton
-    true = features_to_joints(den(xt)[0].numpy(), sk)
-    return (root_aligned_error(features_to_joints(den(out)[0].numpy(), sk), true),
-            root_aligned_error(features_to_joints(den(lerp)[0].numpy(), sk), true))
+    return {name: features_to_joints(den(t.float())[0].numpy(), sk) for name, t in
+            (("true", xt), ("mmae", out), ("lerp", lerp))}
+
+
+def infill_errors(pipe: KeyMotionPipeline, x: np.ndarray, caption: str, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame root-aligned errors (m) of the MMAE and of LERP from ``k`` MDO keyframes of ``x (N, D)``
+    (normalised features)."""
+    j = infill_joints(pipe, x, caption, k)
+    return root_aligned_error(j["mmae"], j["true"]), root_aligned_error(j["lerp"], j["true"])
+
+
+def skating(joints: np.ndarray, skeleton) -> float:
+    """Mean foot speed (m/s) in contact frames of one motion ``(N, J, 3)``, as the physics benchmark measures it
+    (nan when no foot touches the floor)."""
+    return float(measure_motion(joints, skeleton).skate_mean_ms)
 
 
 def main(argv=None) -> int:
@@ -61,6 +80,8 @@ def main(argv=None) -> int:
     ap.add_argument("--limit", type=int, default=150)
     ap.add_argument("--ratios", type=float, nargs="*", default=[0.1])
     ap.add_argument("--fixed", type=int, nargs="*", default=[20])
+    ap.add_argument("--words", nargs="*", default=None,
+                    help="keep only windows whose caption names one of these words (e.g. walk run jog)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
@@ -70,9 +91,18 @@ def main(argv=None) -> int:
     norm = pipe.mmae.norm
     ds = MotionTextDataset(args.data, args.split, max_length=pipe.max_length, random_crop=False,
                            mean=norm.mean.numpy(), std=norm.std.numpy())
-    pick = np.random.default_rng(0).choice(len(ds), size=min(args.limit, len(ds)), replace=False)
+    rng = np.random.default_rng(0)
+    if args.words:
+        import re
+
+        pattern = re.compile(r"\b(" + "|".join(map(re.escape, args.words)) + r")", re.IGNORECASE)
+        pick = [i for i in rng.permutation(len(ds)) if pattern.search(ds[int(i)]["caption"])][:args.limit]
+        if not pick:
+            raise SystemExit(f"no {args.split} window of {args.data} has a caption naming {args.words}")
+    else:                                        # the windows the model card's figures were measured on
+        pick = rng.choice(len(ds), size=min(args.limit, len(ds)), replace=False)
     settings = [(f"ratio {r:g}", r, None) for r in args.ratios] + [(f"K = {k}", None, k) for k in args.fixed]
-    errs = {name: ([], [], []) for name, _, _ in settings}
+    errs = {name: ([], [], [], [], [], []) for name, _, _ in settings}   # MMAE, LERP, ratio, skating true/MMAE/LERP
     for i in pick:
         item = ds[int(i)]
         n = int(item["length"])
@@ -81,18 +111,28 @@ def main(argv=None) -> int:
             kk = max(2, int(round(r * n))) if r is not None else k
             if kk > n:
                 continue
-            m, l = infill_errors(pipe, x, item["caption"], kk)
-            errs[name][0].append(m)
-            errs[name][1].append(l)
+            j = infill_joints(pipe, x, item["caption"], kk)
+            errs[name][0].append(root_aligned_error(j["mmae"], j["true"]))
+            errs[name][1].append(root_aligned_error(j["lerp"], j["true"]))
             errs[name][2].append(kk / n)
+            for slot, key in ((3, "true"), (4, "mmae"), (5, "lerp")):
+                errs[name][slot].append(skating(j[key], pipe.skeleton))
     report = {}
-    print("| keyframes | windows | mean ratio | MMAE cm | LERP cm | gain 1 - MMAE/LERP |")
-    print("|---|---|---|---|---|---|")
-    for name, (m, l, ratio) in errs.items():
+    print("| keyframes | windows | mean ratio | MMAE cm | LERP cm | gain 1 - MMAE/LERP "
+          "| skating m/s: clips | MMAE | LERP |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name, (m, l, ratio, s_true, s_mmae, s_lerp) in errs.items():
+        if not m:
+            print(f"| {name} | 0 | | | | | | | |")
+            continue
         mm, ll = float(np.concatenate(m).mean() * 100), float(np.concatenate(l).mean() * 100)
+        sk = {key: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")
+              for key, v in (("true", s_true), ("mmae", s_mmae), ("lerp", s_lerp))}
         report[name] = {"windows": len(m), "mean_ratio": float(np.mean(ratio)), "mmae_cm": mm, "lerp_cm": ll,
-                        "gain": 1 - mm / ll}
-        print(f"| {name} | {len(m)} | {np.mean(ratio):.3f} | {mm:.2f} | {ll:.2f} | {1 - mm / ll:+.3f} |")
+                        "gain": 1 - mm / ll, "skate_true_ms": sk["true"], "skate_mmae_ms": sk["mmae"],
+                        "skate_lerp_ms": sk["lerp"]}
+        print(f"| {name} | {len(m)} | {np.mean(ratio):.3f} | {mm:.2f} | {ll:.2f} | {1 - mm / ll:+.3f} "
+              f"| {sk['true']:.3f} | {sk['mmae']:.3f} | {sk['lerp']:.3f} |")
     if args.out:
         Path(args.out).write_text(json.dumps(report, indent=1) + "\n")
     return 0
