@@ -55,6 +55,18 @@ class HashTextEncoder:
         return self.encode([""] * n, allow_empty=True)
 
 
+def rest_pose(skeleton: str = "humanml3d") -> np.ndarray:
+    """``(J, 3)`` the skeleton's reference offsets standing (legs straight, arms hanging), lowest joint at y = 0,
+    facing +Z (left = +X), metres."""
+    sk = get_skeleton(skeleton)
+    pos = np.zeros((sk.num_joints, 3))
+    for j, parent in enumerate(sk.parents):
+        if parent >= 0:
+            pos[j] = pos[parent] + sk.target_offsets[j]
+    pos[:, 1] -= pos[:, 1].min()
+    return pos
+
+
 def make_fake_corpus(root: Path, n_train: int = 8, n_val: int = 3, lengths=(64, 72), seed: int = 0) -> Path:
     """A HumanML3D-layout folder with random smooth features (width from the skeleton), two captions
     per clip, train/val/test splits and Mean/Std."""

@@ -1,7 +1,6 @@
 """scripts/keymotion_infill_ratio.py: the MMAE against linear interpolation, and the in-fillings' foot skating."""
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
@@ -9,14 +8,12 @@ import numpy as np
 import pytest
 import torch
 
+from _doubles import load_script, rest_pose
 from salad_core.keymotion.pipeline import KeyMotionPipeline
 from salad_core.motion import features_to_joints
 from salad_core.skeleton import get_skeleton
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "keymotion_infill_ratio.py"
-spec = importlib.util.spec_from_file_location("keymotion_infill_ratio", SCRIPT)
-ir = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(ir)
+ir = load_script("keymotion_infill_ratio")
 
 SK = get_skeleton("humanml3d")
 
@@ -51,13 +48,7 @@ def test_fewer_keyframes_interpolate_worse(pipe, tiny_procedural_corpus):
 
 
 def test_skating_is_the_foot_speed_in_contact():
-    off = SK.target_offsets
-    pose = np.zeros((SK.num_joints, 3))
-    for j, p in enumerate(SK.parents):
-        if p >= 0:
-            pose[j] = pose[p] + off[j]
-    pose[:, 1] -= pose[:, 1].min()
-    still = np.repeat(pose[None], 60, axis=0)
+    still = np.repeat(rest_pose()[None], 60, axis=0)
     assert ir.skating(still, SK) == 0.0
     v = 0.5                                                               # the whole body slides at 0.5 m/s
     sliding = still + (np.arange(60) / SK.fps * v)[:, None, None] * np.array([1.0, 0, 0])

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from _doubles import rest_pose
 from salad_core.attention import CaptureConfig, EditController, Mirror, Reweight, TokenInfo, WordSwap, validate_edits
 from salad_core.attention.counting import (attention_signal, count_peaks, count_repetitions, motion_repetitions,
                                            motion_signal)
@@ -238,16 +239,6 @@ def _bumps(k: int, n: int = 120, width: int = 10) -> np.ndarray:
     return x
 
 
-def _rest_pose() -> np.ndarray:
-    sk = get_skeleton()
-    off = sk.target_offsets
-    pose = np.zeros((sk.num_joints, 3))
-    for j, parent in enumerate(sk.parents):
-        if parent >= 0:
-            pose[j] = pose[parent] + off[j]
-    return pose - np.array([0.0, pose[:, 1].min(), 0.0])
-
-
 @pytest.mark.parametrize("k", [1, 2, 3, 4])
 def test_count_peaks_counts_bumps(k):
     rng = np.random.default_rng(k)
@@ -278,7 +269,7 @@ def test_count_repetitions_reads_the_words_attention():
 @pytest.mark.parametrize("k", [1, 2, 3])
 def test_motion_repetitions_counts_kicks_and_squats(k):
     sk = get_skeleton()
-    pose = _rest_pose()
+    pose = rest_pose()
     n = 120
     b = _bumps(k, n, 8)
     kick = np.repeat(pose[None], n, 0)

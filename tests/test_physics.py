@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from _doubles import rest_pose
 from salad_core.eval import physics as ph
 from salad_core.eval import physics_prompts as pp
 from salad_core.skeleton import get_skeleton
@@ -15,18 +16,6 @@ from salad_core.skeleton import get_skeleton
 SK = get_skeleton("humanml3d")
 FPS = SK.fps
 J = {n: i for i, n in enumerate(SK.joint_names)}
-
-
-def rest_pose() -> np.ndarray:
-    """``(J, 3)`` the reference skeleton standing (legs straight, arms hanging), lowest joint at y=0,
-    facing +Z (left = +X)."""
-    off = SK.target_offsets
-    pos = np.zeros((SK.num_joints, 3))
-    for j, p in enumerate(SK.parents):
-        if p >= 0:
-            pos[j] = pos[p] + off[j]
-    pos[:, 1] -= pos[:, 1].min()
-    return pos
 
 
 def still(n: int = 40) -> np.ndarray:
