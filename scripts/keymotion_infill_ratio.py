@@ -102,7 +102,9 @@ def main(argv=None) -> int:
     else:                                        # the windows the model card's figures were measured on
         pick = rng.choice(len(ds), size=min(args.limit, len(ds)), replace=False)
     settings = [(f"ratio {r:g}", r, None) for r in args.ratios] + [(f"K = {k}", None, k) for k in args.fixed]
-    errs = {name: ([], [], [], [], [], []) for name, _, _ in settings}   # MMAE, LERP, ratio, skating true/MMAE/LERP
+    stages = ("true", "mmae", "lerp")
+    errs = {name: {key: [] for key in ("mmae", "lerp", "ratio", *(f"skate_{st}" for st in stages))}
+            for name, _, _ in settings}
     for i in pick:
         item = ds[int(i)]
         n = int(item["length"])
@@ -111,27 +113,26 @@ def main(argv=None) -> int:
             kk = max(2, int(round(r * n))) if r is not None else k
             if kk > n:
                 continue
-            j = infill_joints(pipe, x, item["caption"], kk)
-            errs[name][0].append(root_aligned_error(j["mmae"], j["true"]))
-            errs[name][1].append(root_aligned_error(j["lerp"], j["true"]))
-            errs[name][2].append(kk / n)
-            for slot, key in ((3, "true"), (4, "mmae"), (5, "lerp")):
-                errs[name][slot].append(skating(j[key], pipe.skeleton))
+            j, row = infill_joints(pipe, x, item["caption"], kk), errs[name]
+            row["mmae"].append(root_aligned_error(j["mmae"], j["true"]))
+            row["lerp"].append(root_aligned_error(j["lerp"], j["true"]))
+            row["ratio"].append(kk / n)
+            for st in stages:
+                row[f"skate_{st}"].append(skating(j[st], pipe.skeleton))
     report = {}
     print("| keyframes | windows | mean ratio | MMAE cm | LERP cm | gain 1 - MMAE/LERP "
           "| skating m/s: clips | MMAE | LERP |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for name, (m, l, ratio, s_true, s_mmae, s_lerp) in errs.items():
-        if not m:
+    for name, row in errs.items():
+        if not row["mmae"]:
             print(f"| {name} | 0 | | | | | | | |")
             continue
-        mm, ll = float(np.concatenate(m).mean() * 100), float(np.concatenate(l).mean() * 100)
-        sk = {key: float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")
-              for key, v in (("true", s_true), ("mmae", s_mmae), ("lerp", s_lerp))}
-        report[name] = {"windows": len(m), "mean_ratio": float(np.mean(ratio)), "mmae_cm": mm, "lerp_cm": ll,
-                        "gain": 1 - mm / ll, "skate_true_ms": sk["true"], "skate_mmae_ms": sk["mmae"],
-                        "skate_lerp_ms": sk["lerp"]}
-        print(f"| {name} | {len(m)} | {np.mean(ratio):.3f} | {mm:.2f} | {ll:.2f} | {1 - mm / ll:+.3f} "
+        mm, ll = (float(np.concatenate(row[key]).mean() * 100) for key in ("mmae", "lerp"))
+        sk = {st: float(np.nanmean(v)) if np.isfinite(v := np.asarray(row[f"skate_{st}"])).any() else float("nan")
+              for st in stages}
+        report[name] = {"windows": len(row["mmae"]), "mean_ratio": float(np.mean(row["ratio"])), "mmae_cm": mm,
+                        "lerp_cm": ll, "gain": 1 - mm / ll, **{f"skate_{st}_ms": sk[st] for st in stages}}
+        print(f"| {name} | {len(row['mmae'])} | {np.mean(row['ratio']):.3f} | {mm:.2f} | {ll:.2f} | {1 - mm / ll:+.3f} "
               f"| {sk['true']:.3f} | {sk['mmae']:.3f} | {sk['lerp']:.3f} |")
     if args.out:
         Path(args.out).write_text(json.dumps(report, indent=1) + "\n")
