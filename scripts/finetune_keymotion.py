@@ -21,6 +21,10 @@ VAE's decoded poses halve the flight (-3.30 m/s^2 against -7.66 with the true po
   VAE's latents; ``--kf-vae RUN`` trains it on another keyframe VAE (a run folder, e.g. a wider latent; the
   recipe's PST section must give its latent shape), and ``--export`` then assembles that VAE, the new PST and the
   source's MMAE.
+* ``--stage mmae --scratch``: a new MMAE of the recipe's architecture (e.g. ``configs/keymotion_mmae_large.json``,
+  wider and deeper than the shipped one) trained from its initialisation with the recipe's schedule (``--steps``
+  the whole run), keeping ``--lambda-foot`` and ``--roundtrip``; ``--export`` assembles it with the source's keyframe
+  VAE and PST (the MMAE is trained on the corpus's motion, independent of both).
 * ``--stage kf_vae``: :attr:`KeyframeVAEConfig.lambda_root`, ``lambda_local_vel``, ``lambda_contact`` and
   ``lambda_feet_height`` (the root, joint-velocity, foot-contact and foot-height channels weighed again), by default with the encoder frozen
   (``--parts decoder``) so the source's PST, trained on its latents, still fits.
@@ -58,7 +62,7 @@ REPO = Path(__file__).resolve().parents[1]
 LOSS_FLAGS = {"mmae": ("lambda_foot",), "pst": (),
               "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact", "lambda_feet_height")}
 #: per stage: its other flags
-STAGE_FLAGS = {"mmae": ("roundtrip",), "kf_vae": ("parts",), "pst": ("side_cue", "latent_norm", "scratch", "kf_vae")}
+STAGE_FLAGS = {"mmae": ("roundtrip", "scratch"), "kf_vae": ("parts",), "pst": ("side_cue", "latent_norm", "scratch", "kf_vae")}
 #: the learning rate a stage gets when --lr is not given (the PST's probe of session 20 ran at 2e-4)
 DEFAULT_LR = {"mmae": 1e-4, "kf_vae": 1e-4, "pst": 2e-4}
 #: the weight a flag gets when not given
@@ -85,7 +89,8 @@ def main(argv=None, *, text_encoder=None) -> int:
     ap.add_argument("--latent-norm", action="store_const", const=True, default=None,
                     help="pst: latent normalisation (PSTConfig.latent_norm; with a source PST without it, --scratch)")
     ap.add_argument("--scratch", action="store_const", const=True, default=None,
-                    help="pst: train a new PST (the recipe's schedule) instead of starting from the source's")
+                    help="pst, mmae: train a new model (the recipe's architecture and schedule) instead of starting "
+                         "from the source's")
     ap.add_argument("--kf-vae", type=Path, default=None,
                     help="pst, with --scratch: the keyframe VAE run folder to train on (default: the source's); "
                          "--export then assembles it with the new PST and the source's MMAE")
@@ -106,13 +111,16 @@ def main(argv=None, *, text_encoder=None) -> int:
     args = ap.parse_args(argv)
     if args.steps < 1:
         ap.error(f"--steps {args.steps}: use an integer >= 1")
+    allowed = set(LOSS_FLAGS[args.stage] + STAGE_FLAGS[args.stage])
     for stage, flags in LOSS_FLAGS.items():
         for flag in flags + STAGE_FLAGS[stage]:
-            if stage != args.stage and getattr(args, flag) is not None:
+            if flag not in allowed and getattr(args, flag) is not None:
                 ap.error(f"--{flag.replace('_', '-')} is for --stage {stage}, not {args.stage}")
     weights = {}
     for flag in LOSS_FLAGS[args.stage]:
         value = getattr(args, flag)
+        if value is None and args.scratch:              # a new model keeps the recipe's weights
+            continue
         value = DEFAULT_WEIGHTS[flag] if value is None else value
         if not value >= 0:
             ap.error(f"--{flag.replace('_', '-')} {value}: use a number >= 0")
@@ -162,6 +170,11 @@ def main(argv=None, *, text_encoder=None) -> int:
             if not 0.0 <= args.roundtrip <= 1.0:
                 ap.error(f"--roundtrip {args.roundtrip}: use a share in [0, 1]")
             overrides.update(keyframe_roundtrip=args.roundtrip, roundtrip_vae=str(source), keyframe_ratio=0.0)
+        if args.scratch:                    # the recipe's architecture and schedule; --steps counts the whole run
+            overrides = {k: v for k, v in overrides.items() if k not in ("lr", "milestones", "warmup_steps",
+                                                                         "init_from")}
+            if args.lr is not None:
+                overrides["lr"] = args.lr
         train_cfg = replace(recipe.mmae_train, **overrides)
         model_cfg = replace(recipe.mmae_model or MMAEConfig(), **weights)
         num_keyframes = json.loads((source / "kf_vae.json").read_text())["config"].get("num_keyframes", 20)

@@ -154,6 +154,36 @@ def test_finetune_script_starts_from_a_pipeline_and_exports_one_with_the_new_mma
         script.main(argv[:-1] + ["1.5"], text_encoder=enc)
 
 
+def test_finetune_script_trains_a_new_mmae_of_the_recipes_architecture_with_scratch(tmp_path):
+    """--stage mmae --scratch: an MMAE of another width than the source's (which --scratch-less fine-tuning
+    refuses), from its initialisation (no init_from), with the recipe's loss weights and schedule; --export puts it
+    beside the source's keyframe VAE and PST."""
+    script = load_script("finetune_keymotion")
+    wide = dataclasses.asdict(tiny_mmae_config(width=64, num_layers=2, lambda_foot=0.0))
+    data, source = finetune_inputs(tmp_path, {"mmae": {"model": wide, "train": {"keyframe_ratio": 0.1, "lr": 3e-4,
+                                                                                 "milestones": [1]}}})
+    enc = HashTextEncoder()
+    common = ["--stage", "mmae", "--data", str(data), "--source", str(source), "--recipe",
+              str(tmp_path / "recipe.json"), "--steps", "2"]
+    with pytest.raises(ValueError, match="another architecture"):
+        script.main(common + ["--out", str(tmp_path / "bad")], text_encoder=enc)
+    assert script.main(common + ["--scratch", "--out", str(tmp_path / "run"), "--export", str(tmp_path / "out")],
+                       text_encoder=enc) == 0
+    doc = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert doc["train"]["init_from"] is None and doc["model"]["width"] == 64
+    assert doc["model"]["lambda_foot"] == 0.0                       # the recipe's weight, not the fine-tuning's 5
+    assert doc["train"]["lr"] == 3e-4 and doc["train"]["milestones"] == [1] and doc["train"]["max_steps"] == 2
+    out = KeyMotionPipeline.from_pretrained(tmp_path / "out", text_encoder=enc)
+    assert out.mmae.config.width == 64 and out.mmae.config.num_layers == 2
+    np.testing.assert_allclose(out.mmae.norm.std.float().numpy(), np.load(data / "Std.npy"), rtol=1e-3)
+    for name in ("kf_vae", "pst"):
+        a, _, _ = load_model(source / name)
+        b, _, _ = load_model(tmp_path / "out" / name)
+        assert all(torch.equal(x.half(), y.half()) for x, y in zip(a.state_dict().values(), b.state_dict().values()))
+    with pytest.raises(SystemExit):                                 # --scratch is not the keyframe VAE's
+        script.main(["--stage", "kf_vae", "--scratch", "--data", str(data), "--out", str(tmp_path / "x")])
+
+
 # ------------------------------------------------------------------------------------------------ keyframe VAE
 def test_kf_vae_group_terms_are_the_mse_of_their_channels_added_with_their_weight():
     torch.manual_seed(0)
