@@ -143,6 +143,10 @@ def main(argv=None, *, text_encoder=None) -> int:
                  "init_from": str(source), "progress": False}
     if args.threads is not None:
         overrides["num_threads"] = args.threads
+    if args.scratch:                        # a new model: the recipe's schedule; --steps counts the whole run
+        overrides = {k: v for k, v in overrides.items() if k in ("max_steps", "progress", "num_threads")}
+        if args.lr is not None:
+            overrides["lr"] = args.lr
     if args.stage == "kf_vae":
         train_cfg = replace(recipe.kf_vae_train, train_parts=args.parts or "decoder", **overrides)
         model_cfg = replace(recipe.kf_vae_model or KeyframeVAEConfig(), **weights)
@@ -151,10 +155,6 @@ def main(argv=None, *, text_encoder=None) -> int:
         if recipe.pst_model is None:
             ap.error(f"--recipe {args.recipe}: its 'pst' section has no 'model' (the source PST's architecture is "
                      "needed)")
-        if args.scratch:                    # the recipe's schedule; --steps counts the whole run
-            overrides = {k: v for k, v in overrides.items() if k in ("max_steps", "progress", "num_threads")}
-            if args.lr is not None:
-                overrides["lr"] = args.lr
         if args.kf_vae is not None and not args.scratch:
             ap.error("--kf-vae needs --scratch: a trained PST only fits the keyframe VAE it was trained on")
         if args.kf_vae is not None and not args.kf_vae.is_dir():
@@ -170,11 +170,6 @@ def main(argv=None, *, text_encoder=None) -> int:
             if not 0.0 <= args.roundtrip <= 1.0:
                 ap.error(f"--roundtrip {args.roundtrip}: use a share in [0, 1]")
             overrides.update(keyframe_roundtrip=args.roundtrip, roundtrip_vae=str(source), keyframe_ratio=0.0)
-        if args.scratch:                    # the recipe's architecture and schedule; --steps counts the whole run
-            overrides = {k: v for k, v in overrides.items() if k not in ("lr", "milestones", "warmup_steps",
-                                                                         "init_from")}
-            if args.lr is not None:
-                overrides["lr"] = args.lr
         train_cfg = replace(recipe.mmae_train, **overrides)
         model_cfg = replace(recipe.mmae_model or MMAEConfig(), **weights)
         num_keyframes = json.loads((source / "kf_vae.json").read_text())["config"].get("num_keyframes", 20)
