@@ -35,7 +35,7 @@ def test_every_frame_a_keyframe_makes_interpolation_the_clip(pipe, tiny_procedur
     true = features_to_joints(pipe.mmae.norm.denormalize(torch.from_numpy(xn)).numpy(), pipe.skeleton)
     np.testing.assert_allclose(j["true"], true, atol=1e-5)
     np.testing.assert_allclose(j["lerp"], j["true"], atol=1e-4)         # LERP through every frame is the clip
-    assert j["mmae"].shape == j["true"].shape
+    assert j["mmae"].shape == j["true"].shape == j["mmae_fit"].shape
     m, l = ir.infill_errors(pipe, xn, "a person walks forward", len(xn))
     assert l.max() < 1e-5 and m.shape == (len(xn),)
 
@@ -45,6 +45,18 @@ def test_fewer_keyframes_interpolate_worse(pipe, tiny_procedural_corpus):
     sparse = ir.infill_errors(pipe, xn, "a person walks forward", 2)[1].mean()
     dense = ir.infill_errors(pipe, xn, "a person walks forward", len(xn) // 2)[1].mean()
     assert sparse > dense > 0
+
+
+def test_the_fitted_in_filling_keeps_the_skeletons_bone_lengths(pipe, tiny_procedural_corpus):
+    xn = clip_of(tiny_procedural_corpus, pipe)
+    j = ir.infill_joints(pipe, xn, "a person walks forward", max(2, len(xn) // 10))
+    bones = [(c, p) for c, p in enumerate(SK.parents) if p >= 0]
+    target = np.linalg.norm(SK.target_offsets, axis=-1)[[c for c, _ in bones]]
+    fitted = np.stack([np.linalg.norm(j["mmae_fit"][:, c] - j["mmae_fit"][:, p], axis=-1) for c, p in bones], -1)
+    raw = np.stack([np.linalg.norm(j["mmae"][:, c] - j["mmae"][:, p], axis=-1) for c, p in bones], -1)
+    assert np.abs(fitted - target).max() < 1e-3                           # the fit: every bone its skeleton length
+    assert np.abs(raw - target).max() > np.abs(fitted - target).max()   # the raw positions do not keep them
+    assert j["mmae_fit"][..., 1].min() >= -1e-6                          # nothing below the floor
 
 
 def test_skating_is_the_foot_speed_in_contact():
@@ -64,7 +76,7 @@ def test_the_table_reports_skating_and_keeps_the_card_keys(tiny_procedural_corpu
     row = report["ratio 0.1"]
     assert row["windows"] == 3 and 0.09 < row["mean_ratio"] < 0.12
     assert row["gain"] == pytest.approx(1 - row["mmae_cm"] / row["lerp_cm"])
-    for key in ("skate_true_ms", "skate_mmae_ms", "skate_lerp_ms"):
+    for key in ("skate_true_ms", "skate_mmae_ms", "skate_lerp_ms", "skate_mmae_fit_ms"):
         assert np.isfinite(row[key]) and row[key] >= 0
     assert "skating m/s: clips" in capsys.readouterr().out
 
