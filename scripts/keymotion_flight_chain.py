@@ -31,6 +31,8 @@ import numpy as np
 COLUMNS = (("flight_frames", "flight frames", "mean"), ("flight_accel_ms2", "flight accel (m/s^2)", "median"),
            ("longest_flight_s", "longest flight (s)", "median"), ("jump_rise_m", "pelvis rise (m)", "median"),
            ("skate_mean_ms", "skating (m/s)", "mean"), ("float_mean_cm", "float (cm)", "mean"))
+#: Decimals in the markdown table (default 2): skating is a few cm/s, where 2 decimals cannot tell stages apart.
+DECIMALS = {"skate_mean_ms": 3, "jump_rise_m": 3}
 
 
 def clips_with(data: Path, words: list[str], exclude: list[str], limit: int, split: str = "test"
@@ -63,7 +65,7 @@ def markdown(table: dict[str, dict[str, float]], n: int) -> str:
     head = "| stage (%d clips) | " % n + " | ".join(f"{label} ({stat})" for _, label, stat in COLUMNS) + " |"
     lines = [head, "|---|" + "---:|" * len(COLUMNS)]
     for stage, row in table.items():
-        lines.append(f"| {stage} | " + " | ".join(f"{row[k]:.2f}" for k, _, _ in COLUMNS) + " |")
+        lines.append(f"| {stage} | " + " | ".join(f"{row[k]:.{DECIMALS.get(k, 2)}f}" for k, _, _ in COLUMNS) + " |")
     return "\n".join(lines)
 
 

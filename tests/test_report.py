@@ -325,7 +325,12 @@ def test_flight_chain_script_writes_each_stage_with_its_recovery(keymotion_pipe,
     assert doc["recovery"] == "fit" and doc["guidance"] == 2.5 and len(doc["clips"]) == 2
     assert list(doc["table"]) == list(CHAIN_STAGES)
     assert all(len(doc["reports"][s]) == 2 for s in CHAIN_STAGES)
-    assert "| generated |" in capsys.readouterr().out
+    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("| generated |"))
+    cells = [c.strip() for c in row.strip("|").split("|")][1:]
+    keys = [k for k, _, _ in script.COLUMNS]
+    # skating printed to the millimetre per second (the stages differ by a few cm/s), the JSON's value
+    assert cells[keys.index("skate_mean_ms")] == f"{doc['table']['generated']['skate_mean_ms']:.3f}"
+    assert cells[keys.index("flight_frames")] == f"{doc['table']['generated']['flight_frames']:.2f}"
     with pytest.raises(SystemExit):
         script.main(["--data", str(tiny_procedural_corpus), "--recovery", "ik"], pipe=keymotion_pipe)
     # --kf-vae: another keyframe VAE (another latent width, which the weights' PST cannot denoise) in place of
