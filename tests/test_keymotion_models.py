@@ -657,7 +657,7 @@ def test_pipeline_warns_only_when_the_normalisations_really_differ(caplog):
     """Float-rounding differences between two builds of a corpus pass; a real mismatch is named with its size."""
     import logging
 
-    from salad_core.keymotion.pipeline import normalisation_gap
+    from salad_core.keymotion.models import normalisation_gap
 
     mean, std = np.full(D, 0.5, np.float32), np.full(D, 2.0, np.float32)
     torch.manual_seed(0)
@@ -665,12 +665,12 @@ def test_pipeline_warns_only_when_the_normalisations_really_differ(caplog):
         MotionMaskedAutoencoder(tiny_mmae_config())
     mmae.set_normalization(mean, std)
     vae.set_normalization(mean + 2e-3, std)           # 1e-3 of a std apart: the same corpus
-    assert normalisation_gap(vae.norm, mmae.norm) == pytest.approx(1e-3, rel=1e-3)
+    assert normalisation_gap(vae.norm.mean, vae.norm.std, mmae.norm.mean, mmae.norm.std) == pytest.approx(1e-3, rel=1e-3)
     with caplog.at_level(logging.WARNING, logger="salad_core.keymotion.pipeline"):
         KeyMotionPipeline(vae, pst, mmae, HashTextEncoder(), default_length=40)
     assert not [r for r in caplog.records if "normalisation" in r.getMessage()]
     vae.set_normalization(mean, std * 1.5)            # a different corpus: std half as large again
-    assert normalisation_gap(vae.norm, mmae.norm) == pytest.approx(0.5, rel=1e-6)
+    assert normalisation_gap(vae.norm.mean, vae.norm.std, mmae.norm.mean, mmae.norm.std) == pytest.approx(0.5, rel=1e-6)
     with caplog.at_level(logging.WARNING, logger="salad_core.keymotion.pipeline"):
         KeyMotionPipeline(vae, pst, mmae, HashTextEncoder(), default_length=40)
     messages = [r.getMessage() for r in caplog.records if "normalisation" in r.getMessage()]

@@ -166,6 +166,21 @@ class TransformerBlock(nn.Module):
 
 
 # ---------------------------------------------------------------------------- normaliser
+#: Normalisation statistics closer than this (in units of the channel's std) count as the same: two
+#: builds of one corpus differ by float rounding (about 4e-3 between two machines' builds of corpus 2.7),
+#: fp16 weights round the stored statistics by about 5e-4 of their value (under 5e-3 of a std here).
+NORMALISATION_TOLERANCE = 1e-2
+
+
+def normalisation_gap(mean_a, std_a, mean_b, std_b) -> float:
+    """Largest gap between two sets of statistics (each ``(D,)``, numpy or torch), in units of ``std_b``:
+    ``max_d max(|mean_a - mean_b|, |std_a - std_b|) / std_b``. 0 for identical statistics."""
+    mean_a, std_a, mean_b, std_b = (torch.as_tensor(v).detach().float().cpu().reshape(-1)
+                                    for v in (mean_a, std_a, mean_b, std_b))
+    scale = std_b.abs().clamp_min(1e-8)
+    return float(torch.maximum((mean_a - mean_b).abs(), (std_a - std_b).abs()).div(scale).max())
+
+
 class Normalizer(nn.Module):
     """Dataset ``mean`` and ``std`` ``(D,)`` as persistent buffers (saved in checkpoints).
 

@@ -60,6 +60,7 @@ from salad_core.text import TextEncoder
 
 from .kf_vae import KeyframeVAE, positions_to_indices
 from .mmae import MotionMaskedAutoencoder
+from .models import NORMALISATION_TOLERANCE, normalisation_gap
 from .pst import PST_DIFFUSION, ParallelSkipTransformer, sample_latents
 from .sides import side_ids_of
 
@@ -130,18 +131,6 @@ def _resolve_component(root: Path, name: str) -> Path:
                             "with best.* or latest.*")
 
 
-#: Normalisation statistics closer than this (in units of the channel's std) count as the same: two
-#: builds of one corpus differ by float rounding (about 4e-3 between two machines' builds of corpus 2.7).
-NORMALISATION_TOLERANCE = 1e-2
-
-
-def normalisation_gap(a, b) -> float:
-    """Largest gap between two normalisers' ``mean``/``std`` (each ``(D,)``), in units of ``b.std``:
-    ``max_d max(|a.mean - b.mean|, |a.std - b.std|) / b.std``. 0 for identical statistics."""
-    scale = b.std.abs().clamp_min(1e-8)
-    return float(torch.maximum((a.mean - b.mean).abs(), (a.std - b.std).abs()).div(scale).max())
-
-
 class KeyMotionPipeline:
     """Text -> motion with KeyMotion (keyframe VAE, PST denoiser, MMAE).
 
@@ -206,7 +195,7 @@ class KeyMotionPipeline:
             if dim is not None and cfg.text_dim != dim:
                 raise ValueError(f"the {name} expects {cfg.text_dim}-d text features but the text encoder "
                                  f"gives {dim}-d; use the encoder it was trained with")
-        gap = normalisation_gap(self.kf_vae.norm, self.mmae.norm)
+        gap = normalisation_gap(self.kf_vae.norm.mean, self.kf_vae.norm.std, self.mmae.norm.mean, self.mmae.norm.std)
         if gap > NORMALISATION_TOLERANCE:
             log.warning("the keyframe VAE and the MMAE were trained with different normalisation statistics "
                         "(up to %.3g of a channel's std apart); the MMAE's are used", gap)

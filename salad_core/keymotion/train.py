@@ -66,6 +66,7 @@ from salad_core.train.distributed import DistEnv, init_distributed
 
 from .kf_vae import KeyframeVAE, KeyframeVAEConfig, gather_keyframes, indices_to_positions
 from .mmae import MMAEConfig, MotionMaskedAutoencoder, scatter_keyframes
+from .models import NORMALISATION_TOLERANCE, normalisation_gap
 from .pst import PST_DIFFUSION, ParallelSkipTransformer, PSTConfig
 from .selection import KEYFRAME_METHODS, select_keyframes
 from .sides import side_ids
@@ -730,10 +731,8 @@ def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, mod
     _check_all_parts(train_config, "PST")
     _check_fixed_keyframes(train_config, "PST")
     train_set, val_set = _datasets(data_dir, vc.skeleton, vc.num_keyframes, train_config)
-    # fp16 weights (the shipped pipelines) round the stored statistics to ~5e-4 relative: not a different corpus
-    tol = {"rtol": 1e-3, "atol": 1e-5}
-    if not (np.allclose(train_set.mean, vae.norm.mean.float().cpu().numpy(), **tol)
-            and np.allclose(train_set.std, vae.norm.std.float().cpu().numpy(), **tol)):
+    # fp16 weights (the shipped pipelines) round the stored statistics: not a different corpus
+    if normalisation_gap(train_set.mean, train_set.std, vae.norm.mean, vae.norm.std) > NORMALISATION_TOLERANCE:
         log.warning("the keyframe VAE was trained with other normalisation statistics than %s's", data_dir)
     torch.manual_seed(train_config.seed)
     pst = ParallelSkipTransformer(model_config)
@@ -931,8 +930,8 @@ def build_mmae_task(data_dir: str | os.PathLike, model_config: MMAEConfig | None
             raise ValueError(f"KeyMotionTrainConfig.roundtrip_vae={train_config.roundtrip_vae!r} has "
                              f"{roundtrip_vae.num_keyframes} keyframes; this MMAE run selects num_keyframes="
                              f"{num_keyframes}")
-        if not (torch.allclose(roundtrip_vae.norm.mean.float(), mmae.norm.mean.float(), rtol=1e-3, atol=1e-5)
-                and torch.allclose(roundtrip_vae.norm.std.float(), mmae.norm.std.float(), rtol=1e-3, atol=1e-5)):
+        if normalisation_gap(roundtrip_vae.norm.mean, roundtrip_vae.norm.std, mmae.norm.mean,
+                             mmae.norm.std) > NORMALISATION_TOLERANCE:
             raise ValueError(f"KeyMotionTrainConfig.roundtrip_vae={train_config.roundtrip_vae!r} normalises features "
                              "with other statistics than the MMAE: its keyframes would mean something else to it")
         log.info("MMAE in-fills the keyframe VAE %s's reconstructions for %.0f%% of the items", roundtrip_stem,
@@ -1026,9 +1025,7 @@ def load_kf_vae_init(vae: KeyframeVAE, path: str | os.PathLike) -> Path:
 
 def _warn_other_statistics(dataset: KeyframeDataset, model: nn.Module, label: str, stem: Path) -> None:
     """Warn when the fine-tuning corpus's normalisation differs from the one the loaded model keeps."""
-    tol = {"rtol": 1e-3, "atol": 1e-5}             # fp16 weights round the stored statistics (as for the PST)
-    if not (np.allclose(dataset.mean, model.norm.mean.float().cpu().numpy(), **tol)
-            and np.allclose(dataset.std, model.norm.std.float().cpu().numpy(), **tol)):
+    if normalisation_gap(dataset.mean, dataset.std, model.norm.mean, model.norm.std) > NORMALISATION_TOLERANCE:
         log.warning("the %s of %s was trained with other normalisation statistics than this corpus's; it "
                     "keeps its own (its weights are tied to them)", label, stem)
 
