@@ -319,6 +319,8 @@ def cmd_generate(args: argparse.Namespace) -> int:
         prompts = validate_prompts(args.prompt)
     except (TypeError, ValueError) as exc:
         raise UserError(str(exc)) from None
+    if getattr(args, "keymotion", None) is not None:
+        return _generate_keymotion(args, prompts)
     _check_sampling_args(args, len(prompts))
     out = _check_out_dir(args.out, args.force)
     attention = not args.no_attention
@@ -349,15 +351,49 @@ def cmd_generate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _say_guidance(args: argparse.Namespace, guidance) -> None:
-    """Print the guidance a command samples with (:func:`_guidance`) and where it comes from."""
+def _generate_keymotion(args: argparse.Namespace, prompts: list[str]) -> int:
+    """``salad generate --keymotion [DIR]``: the same files from KeyMotion (the shipped weights, or a pipeline
+    folder), one call per prompt with seed ``SEED + b``, so that a prompt's motion does not depend on the others
+    given with it. KeyMotion has no 7-part cross-attention, so no attention figure is drawn."""
+    from salad_core.keymotion.pipeline import KeyMotionPipeline
+
+    if args.weights is not None:
+        raise UserError(f"--weights {args.weights} names a SALAD pipeline; with --keymotion give the KeyMotion "
+                        "folder as --keymotion DIR (or --keymotion alone for the shipped weights)")
+    _check_sampling_args(args, len(prompts), length=False)
+    if not args.no_attention and not args.quiet:
+        _note(args, "KeyMotion has no cross-attention maps: no attention figure is drawn")
+    out = _check_out_dir(args.out, args.force)
+    stems = _generate_stems(prompts)
+    _outputs(out, [f"{st}{ext}" for st in stems for ext in ("_features.npy", "_joints.npy", ".bvh")]
+             + [f"{st}.gif" for st in stems if not args.no_render], args.force, write=False)
+    source = None if args.keymotion == "shipped" else args.keymotion
+    pipe = KeyMotionPipeline.from_pretrained(source, solver=(args.solver or "ddim").lower())
+    if not pipe.num_keyframes <= args.length <= pipe.max_length:
+        raise UserError(f"--length {args.length} frames is out of range for KeyMotion; allowed: "
+                        f"{pipe.num_keyframes}..{pipe.max_length} (at least its {pipe.num_keyframes} keyframes)")
+    guidance = _guidance(args, pipe)
+    _say_guidance(args, guidance, source="keymotion.json")
+    for b, text in enumerate(prompts):
+        result = pipe(text, lengths=args.length, seed=args.seed + b, guidance_scale=guidance,
+                      num_steps=args.steps, progress=not args.quiet)
+        n = result.lengths[0]
+        files = _write_motion_files(out, stems[b], result.features[0, :n], result.joints[0], pipe.skeleton,
+                                    force=args.force, gif=not args.no_render, bvh=True, title=f"KeyMotion: {text}")
+        print(f"{text!r} ({n} frames, KeyMotion): " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def _say_guidance(args: argparse.Namespace, guidance, source: str = "pipeline.json") -> None:
+    """Print the guidance a command samples with (:func:`_guidance`) and where it comes from (``source``: the
+    weights' file that holds their default)."""
     if getattr(args, "quiet", False):
         return
     given = [flag for flag, attr in (("--guidance", "guidance"), ("--guidance-rescale", "guidance_rescale"),
                                      ("--guidance-interval", "guidance_interval"))
              if getattr(args, attr, None) is not None]
     print(f"guidance w = {guidance.describe()}"
-          + (f" ({', '.join(given)})" if given else " (the weights' default, pipeline.json)"))
+          + (f" ({', '.join(given)})" if given else f" (the weights' default, {source})"))
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -950,6 +986,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="do not capture and plot attention maps (by default one NN_<prompt>_attention.png per "
                         "prompt: a 7-part x frame heatmap per content word)")
     g.add_argument("--no-render", action="store_true", help="skip the GIF animation")
+    g.add_argument("--keymotion", nargs="?", const="shipped", default=None, metavar="DIR",
+                   help="generate with KeyMotion, the second generator, instead of SALAD: the shipped weights, or "
+                        "the KeyMotion pipeline folder DIR (guidance default: its keymotion.json, 7.5 for the shipped; "
+                        "lengths from its 20 keyframes to 196; no attention figure)")
     _generation_args(g, length=120)
 
     ed = _sub(sub, "edit", "edit a motion by modulating its cross-attention (word swap, refinement, "

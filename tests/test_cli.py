@@ -472,3 +472,36 @@ def test_help_texts_name_every_option(capsys):
         for action in sub.choices[name]._actions:
             if action.option_strings and action.dest != "help":
                 assert action.help, f"salad {name} {action.option_strings[0]} has no help text"
+
+
+def test_generate_with_keymotion_writes_the_pipelines_motions(tmp_path, capsys):
+    """``--keymotion`` writes what KeyMotionPipeline returns for prompt b at seed SEED + b, and no attention figure."""
+    from salad_core.keymotion.pipeline import KeyMotionPipeline
+
+    out = tmp_path / "km"
+    prompts = ["a person walks forward", "a man waves his right hand"]
+    assert cli.main(["-q", "generate", *prompts, "--keymotion", "--length", "40", "--steps", "3", "--seed", "7",
+                     "--no-render", "--out", str(out)]) == 0
+    stems = ["00_a_person_walks_forward", "01_a_man_waves_his_right_hand"]
+    assert sorted(p.name for p in out.iterdir()) == sorted(f"{st}{ext}" for st in stems
+                                                          for ext in ("_features.npy", "_joints.npy", ".bvh"))
+    pipe = KeyMotionPipeline.from_pretrained()
+    for b, (prompt, stem) in enumerate(zip(prompts, stems)):
+        ref = pipe(prompt, lengths=40, seed=7 + b, num_steps=3)
+        feats, joints = np.load(out / f"{stem}_features.npy"), np.load(out / f"{stem}_joints.npy")
+        assert feats.shape == (40, 263) and joints.shape == (40, 22, 3)
+        np.testing.assert_allclose(feats, ref.features[0], rtol=0, atol=1e-6)
+        np.testing.assert_allclose(joints, ref.joints[0], rtol=0, atol=1e-6)
+    # the two prompts' motions differ (not one motion written twice)
+    assert np.abs(np.load(out / f"{stems[0]}_joints.npy") - np.load(out / f"{stems[1]}_joints.npy")).max() > 0.05
+
+
+def test_generate_with_keymotion_refuses_what_it_cannot_do(tiny_weights, tmp_path, capsys):
+    base = ["-q", "generate", "a person walks", "--keymotion", "--steps", "2", "--no-render"]
+    code = cli.main([*base, "--weights", str(tiny_weights), "--out", str(tmp_path / "a")])
+    assert code == 2 and "--keymotion DIR" in _one_line_error(capsys) and not (tmp_path / "a").exists()
+    code = cli.main([*base, "--length", "12", "--out", str(tmp_path / "b")])
+    assert code == 2 and "allowed: 20..196" in _one_line_error(capsys) and not (tmp_path / "b").exists()
+    code = cli.main(["-q", "generate", "a person walks", "--keymotion", str(tmp_path / "nowhere"),
+                     "--out", str(tmp_path / "c")])
+    assert code == 2 and "nowhere" in _one_line_error(capsys) and not (tmp_path / "c").exists()
