@@ -131,6 +131,13 @@ def _slug(text: str, n: int = 40) -> str:
     return out or (words[0][:n] if words else "motion")
 
 
+def _motion_file_names(stem: str, *, gif: bool = True, bvh: bool = True) -> list[str]:
+    """The files one motion is written as (:func:`_write_motion_files`, in its order): features and joints
+    ``.npy``, then the GIF and the BVH when asked for."""
+    return [f"{stem}_features.npy", f"{stem}_joints.npy"] + ([f"{stem}.gif"] if gif else []) + \
+        ([f"{stem}.bvh"] if bvh else [])
+
+
 def _write_motion_files(out: Path, stem: str, features, joints, skeleton, *, force: bool,
                         gif: bool = True, bvh: bool = True, title: str | None = None) -> list[Path]:
     """Features/joints .npy, a GIF (titled ``title``, wrapped) and a BVH for one motion (each written
@@ -140,9 +147,7 @@ def _write_motion_files(out: Path, stem: str, features, joints, skeleton, *, for
     from salad_core.io import atomic_path
     from salad_viz import animate, export_bvh
 
-    names = [f"{stem}_features.npy", f"{stem}_joints.npy"] + ([f"{stem}.gif"] if gif else []) + \
-        ([f"{stem}.bvh"] if bvh else [])
-    paths = _outputs(out, names, force)
+    paths = _outputs(out, _motion_file_names(stem, gif=gif, bvh=bvh), force)
     for path, arr in zip(paths[:2], (features, joints)):
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
@@ -330,8 +335,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
             _note(args, f"prompt {b} {p!r} has no words: no attention figure for it", kind="warning")
     # every file of the run is checked before anything is written
     stems = _generate_stems(prompts)
-    _outputs(out, [f"{st}{ext}" for st in stems for ext in ("_features.npy", "_joints.npy", ".bvh")]
-             + [f"{st}.gif" for st in stems if not args.no_render]
+    _outputs(out, [name for st in stems for name in _motion_file_names(st, gif=not args.no_render)]
              + [f"{st}_attention.png" for st, fig in zip(stems, figures) if fig], args.force, write=False)
     pipe = _load_pipeline(args.weights)
     guidance = _guidance(args, pipe)
@@ -365,8 +369,8 @@ def _generate_keymotion(args: argparse.Namespace, prompts: list[str]) -> int:
         _note(args, "KeyMotion has no cross-attention maps: no attention figure is drawn")
     out = _check_out_dir(args.out, args.force)
     stems = _generate_stems(prompts)
-    _outputs(out, [f"{st}{ext}" for st in stems for ext in ("_features.npy", "_joints.npy", ".bvh")]
-             + [f"{st}.gif" for st in stems if not args.no_render], args.force, write=False)
+    _outputs(out, [name for st in stems for name in _motion_file_names(st, gif=not args.no_render)], args.force,
+             write=False)
     source = None if args.keymotion == "shipped" else args.keymotion
     pipe = KeyMotionPipeline.from_pretrained(source, solver=(args.solver or "ddim").lower())
     if not pipe.num_keyframes <= args.length <= pipe.max_length:
@@ -513,7 +517,7 @@ def cmd_edit(args: argparse.Namespace) -> int:
             _note(args, f"{args.motion} has {len(features)} frames, not a multiple of {sk.unit_length}; editing the "
                         f"first {len(features) - len(features) % sk.unit_length}")
     out = _check_out_dir(args.out, args.force)
-    names = [f"{b}{ext}" for b in ("source", "edited") for ext in ("_features.npy", "_joints.npy", ".bvh")]
+    names = [name for b in ("source", "edited") for name in _motion_file_names(b, gif=False)]
     _outputs(out, names + ["source_vs_edited.gif"], args.force, write=False)
     pipe = _load_pipeline(args.weights)
     guidance = _guidance(args, pipe)
@@ -666,7 +670,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     sk, loaded, features = _motion_input(args, check_length=False)
     out = _check_out_dir(args.out, args.force)
     stem = loaded.path.stem
-    names = [f"{stem}_features.npy", f"{stem}_joints.npy"] + ([] if args.no_render else [f"{stem}.gif"])
+    names = _motion_file_names(stem, gif=not args.no_render, bvh=False)
     paths = _outputs(out, names, args.force)
     joints = features_to_joints(features, sk)
     for path, arr in zip(paths[:2], (features, joints)):
@@ -764,7 +768,7 @@ def cmd_invert(args: argparse.Namespace) -> int:
     branches = ["reconstruction"] + (["edited"] if specs else [])
     gif_name = f"{stem}_source_vs_{branches[-1]}.gif"
     # refuse before any work: every file this run would write
-    _outputs(out, [f"{stem}_{b}{ext}" for b in branches for ext in ("_features.npy", "_joints.npy", ".bvh")]
+    _outputs(out, [name for b in branches for name in _motion_file_names(f"{stem}_{b}", gif=False)]
              + [f"{stem}_inversion.json"] + ([] if args.no_render else [gif_name])
              + ([f"{stem}_input_features.npy"] if loaded.kind != "features" else []), args.force, write=False)
     if len(features) % sk.unit_length:
