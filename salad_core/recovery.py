@@ -58,6 +58,9 @@ __all__ = [
     "fk_joints",
     "fit_joints",
     "fit_skeleton",
+    "branch_joints",
+    "branch_rest_offsets",
+    "plant_feet",
     "motion_bone_lengths",
     "contact_lock_mask",
     "lock_feet",
@@ -97,6 +100,15 @@ class RecoveryConfig:
     min_contact_frames: int = 3               # shorter contact runs are ignored (flicker, not a plant)
     blend_frames: int = 3                     # frames over which a lock fades in before and out after a run
     floor: bool = True                        # fit: no joint below y = 0 (feet by IK, else the frame is lifted)
+    max_foot_shift: float | None = 0.04       # fit: farthest (m, horizontal) a planted foot is held from where the
+                                              # model put it; a foot that glides further slides along (None: no limit)
+    reach_slack: float = 0.03                 # fit: how much straighter (m, hip-ankle distance) IK may make a leg than
+                                              # the model made it; beyond that the body (root) moves towards the foot
+    root_sigma: float = 2.0                   # fit: std (frames) of the Gaussian that smooths the root's shift
+    move_root: bool = False                   # fit: move the body where a leg cannot reach its planted foot
+                                              # (off: measured less faithful and no less sliding, see plant_feet)
+    rigid_branches: bool = True               # fit: hips/spine and neck/collars move as one rigid body each
+    refine: int = 2                           # fit: sweeps that turn each bone to bring its whole subtree closest
 
     def __post_init__(self) -> None:
         if self.lengths not in ("skeleton", "motion"):
@@ -117,6 +129,15 @@ class RecoveryConfig:
             raise ValueError(f"min_contact_frames must be an integer >= 1, got {self.min_contact_frames!r}")
         if int(self.blend_frames) != self.blend_frames or self.blend_frames < 0:
             raise ValueError(f"blend_frames must be an integer >= 0, got {self.blend_frames!r}")
+        if self.max_foot_shift is not None and not (np.isfinite(self.max_foot_shift) and self.max_foot_shift > 0):
+            raise ValueError(f"max_foot_shift must be a positive distance in metres or None, "
+                             f"got {self.max_foot_shift!r}")
+        if not (np.isfinite(self.reach_slack) and self.reach_slack >= 0):
+            raise ValueError(f"reach_slack must be a distance in metres >= 0, got {self.reach_slack!r}")
+        if isinstance(self.refine, bool) or int(self.refine) != self.refine or self.refine < 0:
+            raise ValueError(f"refine must be an integer >= 0, got {self.refine!r}")
+        if not (np.isfinite(self.root_sigma) and self.root_sigma >= 0):
+            raise ValueError(f"root_sigma must be a finite number of frames >= 0, got {self.root_sigma!r}")
 
 
 # =========================================================================== helpers
@@ -245,13 +266,70 @@ def fk_joints(features: Array, skeleton: SkeletonLike = "humanml3d", *,
 
 
 # =========================================================================== "fit"
+def branch_joints(skeleton: SkeletonLike = "humanml3d") -> dict[int, tuple[int, ...]]:
+    """Joints with two or more children and their children: ``{parent: (child, ...)}``.
+
+    For HumanML3D: the pelvis (hips and spine) and spine3 (neck and collars). A BVH (and every
+    rig) holds such a joint's children at fixed offsets in the joint's frame, so a fit whose output
+    a BVH is to reproduce exactly must move them together as one rigid body.
+    """
+    sk = get_skeleton(skeleton)
+    children: dict[int, list[int]] = {}
+    for j, par in enumerate(sk.parents):
+        if par >= 0:
+            children.setdefault(par, []).append(j)
+    return {par: tuple(ch) for par, ch in children.items() if len(ch) >= 2}
+
+
+def _kabsch(ref: np.ndarray, obs: np.ndarray) -> np.ndarray:
+    """Rotations ``(..., 3, 3)`` that best map the rest vectors ``ref (C, 3)`` onto ``obs (..., C, 3)``
+    (least squares, proper rotations)."""
+    m = np.einsum("...ci,cj->...ij", obs, ref)                            # sum_c obs_c ref_c^T
+    u, _, vt = np.linalg.svd(m)
+    d = np.sign(np.linalg.det(u @ vt))
+    u = u.copy()
+    u[..., :, -1] *= np.where(d == 0, 1.0, d)[..., None]
+    return u @ vt
+
+
+def branch_rest_offsets(offsets: np.ndarray, lengths: np.ndarray, iterations: int = 4) -> np.ndarray:
+    """The rigid rest geometry of one branch joint's children over a motion (a Procrustes mean).
+
+    Parameters
+    ----------
+    offsets : ndarray ``(N, C, 3)``
+        Per frame, each child's offset from the branch joint (e.g. the pelvis's to both hips and spine1).
+    lengths : ndarray ``(C,)``
+        The bone length each child keeps.
+
+    Returns
+    -------
+    ndarray ``(C, 3)``: offsets of exactly ``lengths``, in the orientation of the motion's median frame,
+    that every frame's offsets are closest to up to one rotation per frame. (A processed HumanML3D
+    clip's pelvis holds its hips 8-9 cm below and 6 cm beside it; the rig's unit rest directions, purely
+    sideways, are not this geometry, so it is measured, not assumed.)
+    """
+    o = np.asarray(offsets, dtype=np.float64)
+    ln = np.asarray(lengths, dtype=np.float64)[:, None]
+    rest = _normalize(o[o.shape[0] // 2]) * ln
+    for _ in range(iterations):
+        rot = _kabsch(rest, o)                                               # (N, 3, 3)
+        rest = _normalize(np.einsum("nji,ncj->nci", rot, o).mean(0)) * ln    # frames turned back, averaged
+    return rest
+
+
 def fit_skeleton(positions: np.ndarray, lengths: np.ndarray, skeleton: SkeletonLike = "humanml3d", *,
-                 directions: np.ndarray | None = None, direction_weight: float = 0.0) -> np.ndarray:
+                 directions: np.ndarray | None = None, direction_weight: float = 0.0,
+                 rigid_branches: bool = False, refine: int = 0) -> np.ndarray:
     """Fixed-bone-length joints closest to ``positions``, fitted root outwards.
 
     Joint ``j`` is placed at ``q[parent] + lengths[j] * u`` with ``u`` the unit vector from the
     fitted parent to the predicted ``positions[j]`` (blended with ``directions[j]`` by
-    ``direction_weight`` when given). The root stays where it is.
+    ``direction_weight`` when given). The root stays where it is. With ``rigid_branches`` the
+    children of each joint of :func:`branch_joints` are instead placed together: the skeleton's
+    rest offsets (rest direction x length) turned by the rotation that best maps them onto the
+    predicted offsets of that frame (Kabsch), so hips, spine, neck and collars keep the rig's
+    geometry in every frame (what a BVH can hold exactly).
 
     Parameters
     ----------
@@ -282,19 +360,59 @@ def fit_skeleton(positions: np.ndarray, lengths: np.ndarray, skeleton: SkeletonL
     raw = np.asarray(sk.raw_offsets, dtype=np.float64)
     q = np.empty_like(p)
     q[..., 0, :] = p[..., 0, :]
+    placed: dict[int, np.ndarray] = {}
+    if rigid_branches:
+        lens = np.broadcast_to(np.asarray(lengths, dtype=np.float64), p.shape[:-3] + (sk.num_joints,))
+        for par, kids in branch_joints(sk).items():
+            obs = p[..., list(kids), :] - p[..., par:par + 1, :]             # (..., N, C, 3) predicted offsets
+            flat_o = obs.reshape(-1, *obs.shape[-3:])
+            flat_l = lens.reshape(-1, sk.num_joints)[:, list(kids)]
+            if flat_l.shape[0] == 1 and flat_o.shape[0] > 1:
+                flat_l = np.repeat(flat_l, flat_o.shape[0], axis=0)
+            off = []
+            for o, kid_lengths in zip(flat_o, flat_l):
+                rest = branch_rest_offsets(o, kid_lengths)
+                off.append(np.einsum("nij,cj->nci", _kabsch(rest, o), rest))
+            off = np.stack(off).reshape(obs.shape)
+            for c, kid in enumerate(kids):
+                placed[kid] = off[..., c, :]
     for j in range(1, sk.num_joints):
         par = sk.parents[j]
+        if j in placed:
+            q[..., j, :] = q[..., par, :] + placed[j]
+            continue
         # fallback for a child predicted on its fitted parent: the predicted bone, else the rest direction
         fallback = _normalize(p[..., j, :] - p[..., par, :], fallback=raw[j])
         u = _normalize(p[..., j, :] - q[..., par, :], fallback=fallback)
         if directions is not None and direction_weight > 0:
             u = _normalize((1.0 - direction_weight) * u + direction_weight * directions[..., j, :], fallback=u)
         q[..., j, :] = q[..., par, :] + ln[..., j, :] * u
+    if refine > 0:
+        subtree = _subtrees(sk)
+        for _ in range(refine):
+            for j in range(1, sk.num_joints):
+                if j in placed:
+                    continue
+                par, sub = sk.parents[j], subtree[j]
+                # turn bone par -> j so that its whole subtree, carried along rigidly, lands closest
+                # to its predicted joints (one block of coordinate descent on sum |q - p|^2)
+                goal = (p[..., sub, :] - (q[..., sub, :] - q[..., j:j + 1, :])).mean(-2)
+                u = _normalize(goal - q[..., par, :], fallback=_normalize(q[..., j, :] - q[..., par, :]))
+                move = q[..., par, :] + ln[..., j, :] * u - q[..., j, :]
+                q[..., sub, :] += move[..., None, :]
     return q
 
 
+def _subtrees(sk: Skeleton) -> dict[int, list[int]]:
+    """Every joint's subtree (itself first, then its descendants)."""
+    out = {j: [j] for j in range(sk.num_joints)}
+    for j in range(sk.num_joints - 1, 0, -1):        # parents come before their children
+        out[sk.parents[j]] += out[j]
+    return out
+
+
 def two_bone_ik(root: np.ndarray, mid: np.ndarray, goal: np.ndarray, len1, len2,
-                hint: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                hint: np.ndarray | None = None, max_reach=None) -> tuple[np.ndarray, np.ndarray]:
     """Analytic two-bone IK: place ``mid`` and the end so that the end reaches ``goal``.
 
     The chain ``root -> mid -> end`` keeps its bone lengths; the bend stays in the plane of the
@@ -309,6 +427,9 @@ def two_bone_ik(root: np.ndarray, mid: np.ndarray, goal: np.ndarray, len1, len2,
         Lengths of ``root -> mid`` and ``mid -> end``.
     hint : ndarray ``(..., 3)``, optional
         Direction to bend towards when the current chain is straight (e.g. the foot's forward).
+    max_reach : float or ndarray ``(...)``, optional
+        Farthest root-to-end distance allowed (below ``len1 + len2``): a goal beyond it is approached
+        along the same line only that far, so the chain is never straighter than this.
 
     Returns
     -------
@@ -321,6 +442,8 @@ def two_bone_ik(root: np.ndarray, mid: np.ndarray, goal: np.ndarray, len1, len2,
     u = _normalize(v, fallback=_normalize(mid - root, fallback=-_UP))
     lo = np.abs(l1 - l2) + 1e-6
     hi = l1 + l2 - 1e-6
+    if max_reach is not None:
+        hi = np.minimum(hi, np.maximum(np.asarray(max_reach, dtype=np.float64)[..., None], lo))
     d = np.clip(dist, lo, hi)
     cos_a = np.clip((l1 ** 2 + d ** 2 - l2 ** 2) / (2.0 * l1 * d), -1.0, 1.0)
     sin_a = np.sqrt(1.0 - cos_a ** 2)
@@ -380,8 +503,8 @@ def contact_lock_mask(features: Array, joints: np.ndarray | None = None, skeleto
     return lock
 
 
-def _lock_goals(track: np.ndarray, lock: np.ndarray, blend: int, floor: float | None
-                ) -> tuple[np.ndarray, np.ndarray]:
+def _lock_goals(track: np.ndarray, lock: np.ndarray, blend: int, floor: float | None,
+                leash: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per-frame lock weight ``(N,)`` in [0, 1] and goal ``(N, 3)`` of one contact joint.
 
     Every locked run is anchored at the joint's median position over the run (height at least
@@ -402,15 +525,22 @@ def _lock_goals(track: np.ndarray, lock: np.ndarray, blend: int, floor: float | 
         anchor = np.median(track[s:e], axis=0)
         if floor is not None:
             anchor[1] = max(anchor[1], floor)
-        goal[s:e] = anchor
+        run_goal = np.broadcast_to(anchor, track[s:e].shape).copy()
+        if leash is not None:
+            # held at most ``leash`` (horizontally) from the joint's own track: a foot that the model
+            # glides further than that slides along instead of pulling the leg out of shape
+            off = run_goal[:, [0, 2]] - track[s:e][:, [0, 2]]
+            norm = np.linalg.norm(off, axis=-1, keepdims=True)
+            run_goal[:, [0, 2]] = track[s:e][:, [0, 2]] + off * np.minimum(1.0, leash / np.maximum(norm, _EPS))
+        goal[s:e] = run_goal
         weight[s:e] = 1.0
-        for edge, dist in ((s, s - idx), (e - 1, idx - (e - 1))):
+        for edge, dist, cor in ((s, s - idx, run_goal[0] - track[s]), (e - 1, idx - (e - 1), run_goal[-1] - track[e - 1])):
             near = (dist >= 1) & (dist <= blend) & ~lock
             if not near.any():
                 continue
             x = 1.0 - dist[near] / (blend + 1.0)
             w = x * x * (3.0 - 2.0 * x)
-            goal[near] += w[:, None] * (anchor - track[edge])
+            goal[near] += w[:, None] * cor
             weight[near] = np.maximum(weight[near], w)
     return weight, goal
 
@@ -480,6 +610,106 @@ def lock_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "hu
     return q
 
 
+def plant_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "humanml3d", *,
+               blend_frames: int = 3, floor: float | None = 0.0, max_foot_shift: float | None = 0.04,
+               reach_slack: float = 0.03, root_sigma: float = 2.0, move_root: bool = False) -> np.ndarray:
+    """Plant the feet where they are locked, moving the legs and, where a leg cannot reach, the body.
+
+    The faithful version of :func:`lock_feet`: it never stretches a leg to a place the model did
+    not put it. Per contact joint, each locked run is anchored at the joint's median position over
+    the run, but the goal stays within ``max_foot_shift`` (horizontally) of the joint's own track,
+    so a foot that the model glides further slides along; the correction fades in and out over
+    ``blend_frames`` frames. Then, per leg, the hip-to-ankle-goal distance is compared with how
+    far the model itself extended that leg in that frame (plus ``reach_slack``, at most the leg's
+    length): what is left over is the share the body must move, horizontally towards the goal (and
+    down only where the foot is further below the hip than the leg reaches). The
+    legs' shares are averaged (double support), smoothed over time with a Gaussian of
+    ``root_sigma`` frames and added to every joint (the root and the whole body translate, the pose
+    is kept). Last, hip -> knee -> ankle is solved by :func:`two_bone_ik` no straighter than that
+    reach, and the toe aimed at its goal. A foot joint below ``floor`` (planted or not) gets a goal
+    on the floor the same way.
+
+    Parameters
+    ----------
+    joints : ndarray ``(N, J, 3)``
+        One motion with fixed bone lengths.
+    lock : ndarray ``(N, 4)`` bool
+        From :func:`contact_lock_mask`, in ``skeleton.contact_joints`` order.
+    skeleton : name or Skeleton
+    blend_frames, floor, max_foot_shift, reach_slack, root_sigma, move_root
+        As in :class:`RecoveryConfig` (``move_root=False``: a foot out of reach is approached only
+        as far as ``reach`` allows and slides by the rest).
+
+    Returns
+    -------
+    ndarray ``(N, J, 3)`` float64, bone lengths unchanged.
+    """
+    sk = get_skeleton(skeleton)
+    q = np.array(joints, dtype=np.float64)
+    if q.ndim != 3 or q.shape[1:] != (sk.num_joints, 3):
+        raise ValueError(f"joints must have shape (N, {sk.num_joints}, 3), got shape {q.shape}")
+    lock = np.asarray(lock, dtype=bool)
+    if lock.shape != (q.shape[0], 4):
+        raise ValueError(f"lock must have shape ({q.shape[0]}, 4), got shape {lock.shape}")
+    n = q.shape[0]
+    legs = []
+    for side in (0, 1):
+        ankle, toe = sk.contact_joints[2 * side], sk.contact_joints[2 * side + 1]
+        if sk.parents[toe] != ankle:
+            raise ValueError(f"skeleton {sk.name!r}: contact joint {toe} is not the child of {ankle}")
+        hip, knee = _leg(sk, ankle)
+        l1 = np.linalg.norm(q[:, knee] - q[:, hip], axis=-1)
+        l2 = np.linalg.norm(q[:, ankle] - q[:, knee], axis=-1)
+        lf = np.linalg.norm(q[:, toe] - q[:, ankle], axis=-1)[:, None]
+        wa, goal_a = _lock_goals(q[:, ankle], lock[:, 2 * side], blend_frames, floor, max_foot_shift)
+        wt, goal_t = _lock_goals(q[:, toe], lock[:, 2 * side + 1], blend_frames, floor, max_foot_shift)
+        heel_free = (wt * (1.0 - wa))[:, None]
+        via_toe = goal_t + lf * _normalize(goal_a - goal_t, fallback=_UP)
+        goal_a = goal_a + heel_free * (via_toe - goal_a)
+        weight = np.maximum(wa, wt)
+        if floor is not None:
+            below = (q[:, ankle, 1] < floor) | (q[:, toe, 1] < floor)
+            goal_a[:, 1] = np.maximum(goal_a[:, 1], floor)
+            goal_t[:, 1] = np.maximum(goal_t[:, 1], floor)
+            weight = np.where(below, 1.0, weight)
+        # how straight the model made this leg, and how far IK may go beyond that
+        ext = np.linalg.norm(q[:, ankle] - q[:, hip], axis=-1)
+        reach = np.minimum(ext + reach_slack, l1 + l2 - 1e-6)
+        legs.append((ankle, toe, hip, knee, l1, l2, lf, goal_a, goal_t, weight, reach))
+    # the body's share: what the legs cannot reach without straightening beyond ``reach``
+    need = np.zeros((n, 3))
+    count = np.zeros((n, 1))
+    for ankle, toe, hip, knee, l1, l2, lf, goal_a, goal_t, weight, reach in legs:
+        v = goal_a - q[:, hip]
+        # horizontally first (a gliding body catches up with its planted foot); down only when the
+        # foot is lower than the leg reaches even straight below the hip (a body hovering over its feet)
+        horiz = np.linalg.norm(v[:, [0, 2]], axis=-1)
+        below = np.maximum(-v[:, 1], 0.0)
+        h_reach = np.sqrt(np.maximum(reach ** 2 - below ** 2, 0.0))
+        s_h = np.maximum(horiz - h_reach, 0.0) * (weight > 0)
+        s_v = np.maximum(below - reach, 0.0) * (weight > 0)
+        step = np.zeros_like(v)
+        step[:, [0, 2]] = (s_h / np.maximum(horiz, _EPS))[:, None] * v[:, [0, 2]]
+        step[:, 1] = -s_v
+        need += step
+        count += ((s_h > 0) | (s_v > 0))[:, None]
+    shift = need / np.maximum(count, 1.0) if move_root else need * 0.0
+    if root_sigma > 0 and n > 1:
+        shift = gaussian_filter1d(shift, root_sigma, axis=0, mode="nearest")
+    q += shift[:, None, :]
+    for ankle, toe, hip, knee, l1, l2, lf, goal_a, goal_t, weight, reach in legs:
+        active = weight > 0
+        if not active.any():
+            continue
+        new_knee, new_ankle = two_bone_ik(q[:, hip], q[:, knee], goal_a, l1, l2,
+                                          hint=q[:, toe] - q[:, ankle], max_reach=reach)
+        new_toe = new_ankle + lf * _normalize(goal_t - new_ankle, fallback=_normalize(q[:, toe] - q[:, ankle]))
+        q[active, knee] = new_knee[active]
+        q[active, ankle] = new_ankle[active]
+        q[active, toe] = new_toe[active]
+    return q
+
+
 def lift_above_floor(joints: np.ndarray, floor: float = 0.0) -> np.ndarray:
     """Lift every frame whose lowest joint is below ``floor`` by the difference (bones unchanged).
 
@@ -503,11 +733,14 @@ def _fit_one(f: np.ndarray, positions: np.ndarray, sk: Skeleton, cfg: RecoveryCo
         fk = _fk(f, positions, sk, cfg)
         parents = [max(p, 0) for p in sk.parents]
         directions = _normalize(fk - fk[..., parents, :])
-    q = fit_skeleton(positions, lengths, sk, directions=directions, direction_weight=cfg.rotation_weight)
+    q = fit_skeleton(positions, lengths, sk, directions=directions, direction_weight=cfg.rotation_weight,
+                     rigid_branches=cfg.rigid_branches, refine=cfg.refine)
     floor = 0.0 if cfg.floor else None
-    if cfg.lock_contacts:
-        lock = contact_lock_mask(f, q, sk, config=cfg)
-        q = lock_feet(q, lock, sk, blend_frames=cfg.blend_frames, floor=floor)
+    if cfg.lock_contacts or cfg.floor:
+        lock = contact_lock_mask(f, q, sk, config=cfg) if cfg.lock_contacts else np.zeros((q.shape[0], 4), bool)
+        q = plant_feet(q, lock, sk, blend_frames=cfg.blend_frames, floor=floor,
+                       max_foot_shift=cfg.max_foot_shift, reach_slack=cfg.reach_slack, root_sigma=cfg.root_sigma,
+                       move_root=cfg.move_root)
     if cfg.floor:
         q = lift_above_floor(q, 0.0)
     return q
