@@ -297,7 +297,7 @@ def test_reference_ranges_are_the_widened_extremes_of_the_reference_clips_and_sa
     # the benchmark's record says how many clips each measured range rests on (two clips make a thin range)
     res = pp.run_benchmark({"statue": lambda texts, lengths, seed: [still(n) for n in lengths]},
                            pp.BenchSettings(steps=1, seeds=(0,)), data_root=tiny_procedural_corpus,
-                           sample_dir=sample_dir, prompts=pp.PROMPTS[:1])
+                           sample_dir=sample_dir, prompts=pp.PROMPTS[:1], real_capture=False)
     for key, values in rises.items():
         assert f"{key} from {len(values)} clip" in res["reference_source"]
 
@@ -315,8 +315,10 @@ def test_runner_with_fake_generators(tiny_procedural_corpus, sample_dir):
 
     prompts = pp.PROMPTS[:1]                                         # "a person walks forward": >= 1 m
     res = pp.run_benchmark({"walker": walker, "statue": statue}, pp.BenchSettings(steps=1, seeds=(0, 1)),
-                           data_root=tiny_procedural_corpus, sample_dir=sample_dir, prompts=prompts)
-    assert set(res["references"]) == {"corpus test split (real)", "HumanML3D 012314 (real)"}
+                           data_root=tiny_procedural_corpus, sample_dir=sample_dir, prompts=prompts, deepmimic=False)
+    assert set(res["references"]) == {"corpus test split (real)", "HumanML3D 012314 (real)",
+                                      "real capture (HumanML3D 012314 only)"}
+    assert res["real_capture"]["name"] == "real capture (HumanML3D 012314 only)"
     w, s = res["generators"]["walker"], res["generators"]["statue"]
     # "a person walks forward": travels >= 1 m (the walker does) and makes strides (a glide does not)
     assert (w["checks_passed"], w["checks_total"]) == (2, 4) and s["checks_passed"] == 0
@@ -347,17 +349,26 @@ def test_salad_eval_physics_end_to_end(tiny_procedural_corpus, tmp_path, single_
     md = (out / "physics.md").read_text()
     assert doc["settings"]["steps"] == 5 and doc["settings"]["guidance"] is None      # the models' defaults
     assert doc["settings"]["salad_guidance"]["scale"] > 1 and doc["settings"]["keymotion_guidance"]["scale"] > 1
-    assert doc["settings"]["recovery"] == "positions"                 # the raw model output by default
+    # the measured joints are each pipeline's own recovery (the skeleton fit), compared with the raw read
+    assert doc["settings"]["recovery"] == "fit" and doc["settings"]["keymotion_recovery"] == "fit"
+    assert doc["settings"]["deviation_against"] == "positions"
     assert doc["settings"]["seeds"] == [0, 1] and doc["settings"]["weights"].endswith("salad")
     assert list(doc["generators"]) == ["SALAD", "KeyMotion"]
     for g in doc["generators"].values():
         assert g["aggregate"]["motions"] == 4 and g["checks_total"] == 8    # 2 checks x 2 prompts x 2 seeds
-        assert g["aggregate"]["bone_ref_max_cm"] > 0                 # generated bones are not rigid
+        assert g["aggregate"]["bone_ref_max_cm"] < 0.01                # the fit keeps the reference bones
+        assert g["aggregate"]["penetration_max_cm"] < 0.01               # and lifts everything above the floor
         assert g["aggregate"]["seed_diversity_cm"] > 0
         assert len(g["prompts"]) == 2 and len(g["prompts"][0]["reports"]) == 2
-    assert "corpus test split (real)" in doc["references"]
+        dev = g["deviation"]                                             # the raw read differs from the fit
+        assert dev["frames"] == 4 * 120 and 0 < dev["p95_cm"] <= dev["p99_cm"] <= dev["max_cm"]
+        assert len(dev["per_joint_p95_cm"]) == 22 and dev["travel_ratio"] > 0
+        assert set(g["prompts"][0]["summary"]) >= {"stance_slide_mean_ms", "gmd_skate_ratio", "deviation_p95_cm"}
+    assert "corpus test split (real)" in doc["references"] and doc["real_capture"]["name"] in doc["references"]
+    assert "## Shown vs raw" in md and "[field] shown vs raw" in md and "### KeyMotion" in md
     saved = np.load(out / "physics_motions.npz")
-    assert len(saved.files) == 8 and saved["SALAD/01/1"].shape == (120, 22, 3)
+    assert len(saved.files) == 16 and saved["SALAD/01/1"].shape == (120, 22, 3)        # shown and raw
+    assert saved["SALAD/01/1/raw"].shape == (120, 22, 3)
     rep = ph.measure_motion(saved["SALAD/01/1"])                     # the saved motion is the measured one
     measured = doc["generators"]["SALAD"]["prompts"][1]["reports"][1]["bone_ref_max_cm"]
     assert rep.bone_ref_max_cm == pytest.approx(measured, rel=1e-4)
@@ -393,6 +404,7 @@ def test_salad_eval_physics_no_salad_benchmarks_keymotion_alone(tiny_procedural_
     assert list(doc["generators"]) == ["KeyMotion"] and "salad_guidance" not in doc["settings"]
     assert doc["generators"]["KeyMotion"]["aggregate"]["motions"] == 2
     assert sorted({k.split("/")[0] for k in np.load(out / "physics_motions.npz").files}) == ["KeyMotion"]
+    assert doc["settings"]["recovery"] == "fit"
     capsys.readouterr()
     assert main(["--physics", "--data", str(tiny_procedural_corpus), "--no-salad"]) == 2      # nothing to benchmark
     assert "--no-salad benchmarks KeyMotion alone" in capsys.readouterr().err

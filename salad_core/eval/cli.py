@@ -30,7 +30,13 @@ reference rows for the corpus's test split and for the real clips of ``--sample`
 source checkout's ``tests/data/humanml3d_sample``, when present; ``--sample none`` leaves it out).
 It prints the Markdown report and with ``--out`` writes ``physics.md``, ``physics.json`` and the
 generated joints (``physics_motions.npz``); ``--motions physics_motions.npz`` measures such saved
-joints again without generating (after a change of the measures). The full
+joints again without generating (after a change of the measures). The measured joints are each
+pipeline's own recovery (``--recovery``, default the pipeline's: "fit" for the shipped weights); the
+same features are also read raw ("positions") for the shown-vs-raw deviation. Beside the old measures
+the report prints the field's (GMD's skating ratio, PhysDiff's joint-based Penetrate / Float /
+Skate, stance sliding apart from low swings, floating during stance, per-segment flight fits, pooled
+p99s, the per-prompt breakdown) with a real-capture reference row (HumanML3D 012314, shipped, and
+pybullet's DeepMimic clips when pybullet is installed). The full
 benchmark (41 prompts x 3 seeds, 50 steps) took 289 s for SALAD and 13 s for KeyMotion with one
 thread on this 2-core CPU while other jobs loaded it (load average about 7).
 
@@ -96,10 +102,12 @@ def build_parser() -> argparse.ArgumentParser:
     phys.add_argument("--seeds", type=int, default=3, help="seeds per prompt, from --seed (default 3)")
     phys.add_argument("--prompts", type=int, default=None, metavar="N",
                       help="only the first N benchmark prompts (default: all)")
-    phys.add_argument("--recovery", default="positions", metavar="METHOD",
-                      help="how joints are read from the generated features: 'positions' (the raw model output, "
-                           "HumanML3D's recover_from_ric; default), a salad_core.recovery method ('fk', 'fit') or "
-                           "'pipeline' (each pipeline's own out.joints)")
+    phys.add_argument("--recovery", default=None, metavar="METHOD",
+                      help="how the measured joints are read from the generated features: 'positions' (the raw "
+                           "model output, HumanML3D's recover_from_ric), a salad_core.recovery method ('fk', 'fit') "
+                           "or 'pipeline' (each pipeline's own out.joints). Default with --physics: each pipeline's "
+                           "own recovery (the shipped weights: 'fit'), and the shown-vs-raw deviation compares it "
+                           "with 'positions' of the same features; with --guidance-sweep: 'positions'")
     phys.add_argument("--no-salad", action="store_true",
                       help="with --keymotion: benchmark KeyMotion alone (comparing KeyMotion weights; SALAD's rows "
                            "take most of the run's time); checks relative to SALAD are then left out")
@@ -199,33 +207,47 @@ def _physics_generators(args, settings) -> tuple[dict, dict]:
 
     from .physics import joints_reader
 
+    from .physics_prompts import Generated
+
     pipe = SaladPipeline.from_pretrained(args.weights)
     # None keeps each model's own default guidance (a SALAD pipeline folder may set rescale/interval)
     g = settings.guidance
 
-    joints_of = joints_reader(args.recovery, pipe.skeleton)
+    def reader(model):
+        """Features generated once, read twice: the shown joints (``--recovery``, default the model's own
+        recovery) and the raw position read (the shown-vs-raw deviation)."""
+        method = args.recovery or getattr(model, "recovery", None) or "positions"
+        read = joints_reader(method, model.skeleton, with_raw=True)
+        return method, (lambda out: Generated(*read(out)))
+
+    salad_recovery, salad_of = reader(pipe)
 
     def salad(texts, lengths, seed):
-        return joints_of(pipe(texts, lengths=lengths, seed=[seed] * len(texts), num_steps=settings.steps,
-                              solver=args.solver, **({} if g is None else {"guidance_scale": g})))
+        return salad_of(pipe(texts, lengths=lengths, seed=[seed] * len(texts), num_steps=settings.steps,
+                             solver=args.solver, **({} if g is None else {"guidance_scale": g})))
 
     generators = {} if args.no_salad else {args.name: salad}
     resolved = pipe.resolve_guidance(g) if hasattr(pipe, "resolve_guidance") else (7.5 if g is None else g)
-    info = {"recovery": args.recovery} if args.no_salad else {
+    info = {} if args.no_salad else {
         "salad_guidance": resolved if isinstance(resolved, float) else _as_dict(resolved),
-        "solver": args.solver or pipe.solver, "weights": pipe.source, "recovery": args.recovery}
+        "solver": args.solver or pipe.solver, "weights": pipe.source, "recovery": salad_recovery}
     if args.keymotion is not None:
         from salad_core.keymotion.pipeline import KeyMotionPipeline
 
         km = KeyMotionPipeline.from_pretrained(None if args.keymotion == "shipped" else args.keymotion)
+        km_recovery, km_of = reader(km)
 
         def keymotion(texts, lengths, seed):
-            return joints_of(km(texts, lengths=lengths, seed=seed, num_steps=settings.steps,
-                                **({} if g is None else {"guidance_scale": g})))
+            return km_of(km(texts, lengths=lengths, seed=seed, num_steps=settings.steps,
+                            **({} if g is None else {"guidance_scale": g})))
 
         generators["KeyMotion"] = keymotion
         info["keymotion_guidance"] = _as_dict(km.resolve_guidance(g))
         info["keymotion_weights"] = args.keymotion
+        info["keymotion_recovery"] = km_recovery
+        info.setdefault("recovery", km_recovery)
+    info["recovery_requested"] = args.recovery or "each pipeline's own"
+    info["deviation_against"] = "positions"
     return generators, info
 
 
@@ -356,17 +378,18 @@ def run_guidance_sweep(args) -> int:
     print(f"{len(grid)} candidates; {settings.describe()}", flush=True)
     t0 = time.perf_counter()
     store = Path(args.out) / "candidates" if args.out else None
+    recovery = args.recovery or "positions"              # the sweep's recorded default (its candidates are kept by it)
     identity = {"weights": _weights_digest(pipe.source),
                 "evaluator": _weights_digest(args.evaluator or default_evaluator_dir()),
-                "recovery": args.recovery, "sample": None if sample is None else str(Path(sample).resolve())}
-    result = run_sweep(pipe, grid, data, evaluator, settings, bench, joints_of=joints_reader(args.recovery, pipe.skeleton),
+                "recovery": recovery, "sample": None if sample is None else str(Path(sample).resolve())}
+    result = run_sweep(pipe, grid, data, evaluator, settings, bench, joints_of=joints_reader(recovery, pipe.skeleton),
                        sample_dir=sample, log=lambda line: print(line, flush=True), store=store, identity=identity)
     reused = sum(1 for r in result["rows"] if r.get("reused"))
     if reused:
         print(f"{reused} of {len(grid)} candidates reused from {store} (measured before with the same settings)")
     pick, why = choose(result["rows"])
     result["chosen"] = {"index": pick, "why": why, "guidance": asdict(grid[pick])}
-    result["settings"].update(weights=pipe.source, data=str(data), recovery=args.recovery,
+    result["settings"].update(weights=pipe.source, data=str(data), recovery=recovery,
                               seconds=round(time.perf_counter() - t0, 1), identity=identity)
     md = sweep_markdown(result, pick) + f"\n\nChosen: {why}.\n"
     print(md)

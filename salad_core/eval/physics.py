@@ -13,11 +13,16 @@ Definitions (units in the names of :class:`PhysicsReport`'s fields):
   size is not charged for its size, only for its bones changing length. p95 and max over all
   frames x bones.
 * **Foot contact**: a foot joint (ankle, toe of each foot, ``Skeleton.contact_joints``) touches the
-  ground in a frame when its height above the clip's *contact level* (the lowest height any foot joint
-  reaches in the clip) is below ``PhysicsConfig.contact_heights`` (ankle, toe; the procedural
-  corpus's thresholds) and, if ``contact_max_vspeed`` is set, its vertical speed is below that.
-  The contact level is the clip's own, not ``y = 0``, so that a figure hovering over or sunk
-  into the floor is still checked for sliding (its floating / penetration is measured apart).
+  ground in a frame when its height above the clip's *contact level* is below
+  ``PhysicsConfig.contact_heights`` (ankle, toe; the procedural corpus's thresholds) and, if
+  ``contact_max_vspeed`` is set, its vertical speed is below that. The contact level
+  (``PhysicsConfig.contact_reference``, :func:`contact_level`) is by default a robust low percentile
+  (``contact_percentile``, 5 %) over frames of the lowest foot joint's height, so that one or a few
+  penetrating frames do not lift the level under the feet of every other frame (before, it was
+  the single lowest foot point of the clip: one frame 10 cm into the floor turned the whole stance into
+  "flight"); ``"floor"`` uses ``y = floor`` and ``"clip_min"`` the old lowest point. It is the clip's
+  own rather than ``y = 0`` by default so that a figure hovering over or sunk into the floor is still
+  checked for sliding (its floating / penetration is measured apart).
 * **Foot skating** (m/s), after PhysDiff (Yuan et al., ICCV 2023, "Skate"): the horizontal speed of a
   foot joint between two consecutive frames in which it is in contact in both; mean and p95 over
   those joint-transitions, and the share of them faster than ``skate_threshold`` (10 cm/s).
@@ -46,7 +51,11 @@ Definitions (units in the names of :class:`PhysicsReport`'s fields):
   whose neighbours are in flight too), which ballistic flight keeps near -9.81. The pelvis is not
   the centre of mass, so tucking the legs in flight moves it by a little. The ground is taken to
   be flat: a foot standing on a raised step counts as off the ground (corpus stair clips show
-  "flights" of 1.5-2.7 s for that reason).
+  "flights" of 1.5-2.7 s for that reason). Beside the pooled mean of the second differences (dominated by
+  whichever motion has most flight frames), :func:`flight_fit_accelerations` fits a parabola
+  ``y = a t^2 + b t + c`` (least squares) to the pelvis height over each flight segment of at least
+  ``flight_min_frames`` (3) frames and reports ``2a`` per segment; a motion reports the median over its
+  segments and their number, the aggregate the median over all segments of all motions.
 * **Stride** (m): how far a foot travels through the air between two ground contacts: the
   horizontal distance of its ankle from lift-off (the last frame of a run of at least
   ``min_contact_frames`` contact frames of the ankle or toe) to the next touch-down (the first
@@ -55,6 +64,45 @@ Definitions (units in the names of :class:`PhysicsReport`'s fields):
   (feet off the ground for seconds) has short or no strides however far it travels.
 * **Seed diversity** (cm): mean joint distance between motions of the same prompt made from
   different seeds (:func:`seed_diversity`).
+
+Measures of the field, beside the ones above:
+
+* **GMD foot-skating ratio** (:func:`gmd_skating_ratio`), as Guided Motion Diffusion (Karunratanakul et
+  al., ICCV 2023) defines it and OmniControl (Xie et al., ICLR 2024) reuses it: "the proportion of
+  frames in which either foot skids more than a certain distance (2.5 cm) while maintaining contact
+  with the ground (foot height < 5 cm)". As in their released code (``calculate_skating_ratio``): the
+  feet are the HumanML3D *toe* joints (``left_foot`` / ``right_foot``, indices 10 and 11); a frame pair
+  counts when a toe is below 5 cm above the floor (``y = floor``, absolute height, as HumanML3D floors
+  every clip) in both frames and its horizontal speed exceeds 0.5 m/s (2.5 cm per frame at 20 fps) both
+  in that pair and in the 5-frame moving average (``scipy.ndimage.uniform_filter1d``, zero padding at
+  the ends, as theirs); the ratio is over the N - 1 frame pairs.
+* **PhysDiff's Penetrate / Float / Skate / Phys-Err** (Yuan et al., ICCV 2023), a *joint-based*
+  version (:func:`physdiff_measures`; PhysDiff measures the SMPL mesh, which joint positions do not
+  have, so joint centres stand in for vertices and read lower than the mesh would: a standing toe
+  joint is 1-2 cm above the skin that touches the floor). Per frame, Penetrate is the depth below the
+  floor of the lowest joint (counted when deeper than the 5 mm tolerance), Float the height of the
+  lowest joint above the floor (counted when higher than 5 mm; UHC's mesh code takes the lowest vertex
+  *above* the floor, which for a sparse joint set would count a figure standing on one toe as floating
+  on its other joints, so the lowest joint itself is used); both are averaged over frames
+  (frames without count 0). Skate: "foot joints that contact the ground in two adjacent frames" (toe
+  joints within the 5 mm tolerance of the floor in both frames), their mean horizontal displacement
+  in that frame pair, averaged over all frame pairs (0 where no foot is in contact). Phys-Err is the
+  sum of the three. All in mm, as PhysDiff reports them; the tolerance is ``float_tolerance``.
+* **Stance sliding and low swings** (:func:`stance_analysis`): the old skating mixes sliding stance
+  feet with feet that pass low over the floor. A foot joint's frame pair is *low* when the joint is in
+  contact by height (above) at both ends; it is *stance* when, besides, its vertical speed over the
+  pair is below ``stance_max_vspeed`` (0.1 m/s: PhysDiff's 5 mm per frame at 20 fps) and the pair lies
+  in a run of such pairs spanning at least ``stance_min_frames`` (3) frames. Stance sliding (m/s):
+  the horizontal speed over the stance pairs (mean, p95, count); low swings: the same over the low
+  pairs that are not stance. **Floating during stance** (cm): for every foot and frame with one of its
+  joints in stance, the height above the floor (``y = floor``) of the lower of its ankle and toe joints,
+  averaged (signed: below 0 the stance foot is sunk).
+* **p99** of the reference bone-length error (over frames x bones) and of the per-frame penetration
+  depth, beside their max (one wild frame decides a max; the benchmark also pools the p99 over all
+  frames of all motions, :func:`pooled_bone_percentile`, :func:`pooled_penetration_percentile`).
+* **Shown vs raw** (:func:`recovery_deviation`): the distance (cm) between the joints a recovery shows
+  and the raw position read of the same features, per joint (p95, max) and over all frames x joints
+  (p95, p99, max), and the travel ratio (the shown pelvis's ground path over the raw one's).
 """
 from __future__ import annotations
 
@@ -72,10 +120,16 @@ __all__ = [
     "ground_penetration", "floating", "jitter", "acceleration", "flexion_angles", "hyperextension",
     "standing_height", "flight_frames", "flight_acceleration", "heading_yaw", "root_travel", "limb_activity",
     "seed_diversity", "GRAVITY", "report_table", "joints_reader",
+    "CONTACT_REFERENCES", "gmd_skating_ratio", "physdiff_measures", "stance_analysis", "flight_fit_accelerations",
+    "pooled_bone_percentile", "pooled_penetration_percentile", "recovery_deviation", "travel_ratio",
+    "FIELD_TABLE_COLUMNS",
 ]
 
 #: Standard gravity (m/s^2), what the pelvis's acceleration in flight should be near (negative: down).
 GRAVITY = 9.80665
+
+#: What the contact level of :func:`foot_contacts` is referenced to (``PhysicsConfig.contact_reference``).
+CONTACT_REFERENCES = ("percentile", "floor", "clip_min")
 
 
 @dataclass(frozen=True)
@@ -92,6 +146,14 @@ class PhysicsConfig:
     elbow_hang_deg: float = 45.0                      # upper arm within this of the trunk's down axis
     min_contact_frames: int = 2                       # shortest run of contact that counts as a footfall
     max_swing_s: float = 1.0                          # longest time (s) a foot may be off the ground in a step
+    contact_reference: str = "percentile"             # contact level: "percentile", "floor" or "clip_min"
+    contact_percentile: float = 5.0                   # with "percentile": of the lowest foot joint's height
+    stance_max_vspeed: float = 0.10                   # vertical speed (m/s) below which a low foot is in stance
+    stance_min_frames: int = 3                        # shortest run of stance (frames)
+    flight_min_frames: int = 3                        # shortest flight segment fitted with a parabola
+    gmd_height: float = 0.05                          # GMD skating ratio: toe height (m) in contact
+    gmd_speed: float = 0.50                           # GMD: horizontal toe speed (m/s) that skids
+    gmd_window: int = 5                               # GMD: moving-average window (frames)
 
     def __post_init__(self) -> None:
         if self.fps is not None and not (isinstance(self.fps, (int, float)) and self.fps > 0):
@@ -111,6 +173,17 @@ class PhysicsConfig:
             raise ValueError(f"max_swing_s must be positive (seconds), got {self.max_swing_s!r}")
         if not 0 < self.elbow_hang_deg < 90:
             raise ValueError(f"elbow_hang_deg must be in (0, 90) degrees, got {self.elbow_hang_deg!r}")
+        if self.contact_reference not in CONTACT_REFERENCES:
+            raise ValueError(f"contact_reference must be one of {CONTACT_REFERENCES}, got {self.contact_reference!r}")
+        if not 0 <= self.contact_percentile <= 100:
+            raise ValueError(f"contact_percentile must be in [0, 100], got {self.contact_percentile!r}")
+        for name in ("stance_max_vspeed", "gmd_height", "gmd_speed"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+        for name, low in (("stance_min_frames", 2), ("flight_min_frames", 3), ("gmd_window", 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < low:
+                raise ValueError(f"{name} must be an int >= {low}, got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -148,6 +221,25 @@ class PhysicsReport:
     flight_accel_ms2: float      # mean pelvis vertical acceleration inside flight (nan: none)
     flight_accel_count: int      # frames that mean is over
     stride_m: float              # median lift-off to touch-down distance of a foot (0: no step)
+    # ---- the field's measures (module docstring, "Measures of the field")
+    contact_level_m: float       # the contact level the contacts above were measured from
+    bone_ref_p99_cm: float       # |length - reference length|, p99 over frames x bones
+    penetration_p99_cm: float    # p99 over frames of the lowest joint's depth below the floor
+    gmd_skate_ratio: float       # GMD / OmniControl foot-skating ratio (share of frame pairs)
+    physdiff_penetrate_mm: float  # PhysDiff's Penetrate, joint-based (mean over frames)
+    physdiff_float_mm: float     # PhysDiff's Float, joint-based
+    physdiff_skate_mm: float     # PhysDiff's Skate, joint-based (mean over frame pairs)
+    physdiff_err_mm: float       # Phys-Err: the sum of the three
+    stance_slide_mean_ms: float  # horizontal speed of stance foot joints (nan: no stance)
+    stance_slide_p95_ms: float   # its p95
+    stance_count: int            # stance joint x frame pairs
+    low_swing_mean_ms: float     # horizontal speed of low foot joints not in stance (nan: none)
+    low_swing_count: int         # low, non-stance joint x frame pairs
+    stance_float_cm: float       # mean height above the floor of the stance feet (lower of ankle / toe)
+    stance_foot_frames: int      # foot x frames that mean is over
+    flight_fit_accel_ms2: float  # median over flight segments of the fitted pelvis acceleration (nan: none)
+    flight_segments: int         # flight segments of >= flight_min_frames frames
+    flight_segment_accels: tuple = ()  # each segment's fitted acceleration (m/s^2)
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -232,10 +324,19 @@ def bone_length_errors(joints, skeleton: str | Skeleton = "humanml3d") -> dict[s
     return out
 
 
-def contact_level(joints, skeleton: str | Skeleton = "humanml3d") -> float:
-    """The clip's contact level (m): the lowest height any foot joint reaches."""
+def contact_level(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfig | None = None) -> float:
+    """The clip's contact level (m), the height foot contact is measured from
+    (``config.contact_reference``): ``"percentile"`` the ``contact_percentile`` percentile over frames of
+    the lowest foot joint's height; ``"floor"`` ``config.floor``; ``"clip_min"`` the lowest height any
+    foot joint reaches (the only level there used to be; also what ``config=None`` gives, for callers of
+    the old one-argument form)."""
     x, sk = _prepare(joints, skeleton)
-    return float(x[:, list(sk.contact_joints), 1].min())
+    low = x[:, list(sk.contact_joints), 1].min(-1)
+    if config is None or config.contact_reference == "clip_min":
+        return float(low.min())
+    if config.contact_reference == "floor":
+        return float(config.floor)
+    return float(np.percentile(low, config.contact_percentile))
 
 
 def foot_contacts(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfig = PhysicsConfig()
@@ -244,7 +345,7 @@ def foot_contacts(joints, skeleton: str | Skeleton = "humanml3d", config: Physic
     ankle, right toe) in contact with the ground in each frame (see the module docstring)."""
     x, sk = _prepare(joints, skeleton)
     cj = list(sk.contact_joints)
-    h = x[:, cj, 1] - x[:, cj, 1].min()
+    h = x[:, cj, 1] - contact_level(x, sk, config)
     limit = np.asarray(config.contact_heights * 2)                   # ankle, toe, ankle, toe
     on = h < limit
     if config.contact_max_vspeed is not None:
@@ -471,6 +572,207 @@ def seed_diversity(motions: Sequence[np.ndarray]) -> float:
     return float(np.linalg.norm(x[i] - x[j], axis=-1).mean() * 100.0)
 
 
+# ------------------------------------------------------------------------------------ the field's measures
+def _toes(sk: Skeleton) -> list[int]:
+    return [_idx(sk, "left_foot"), _idx(sk, "right_foot")]
+
+
+def gmd_skating_ratio(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfig = PhysicsConfig()
+                      ) -> float:
+    """GMD's foot-skating ratio of one motion: the share of its N - 1 frame pairs in which either toe
+    joint skids (module docstring; Karunratanakul et al., "Guided Motion Diffusion for Controllable
+    Human Motion Synthesis", ICCV 2023, reused by OmniControl, ICLR 2024).
+
+    A toe (HumanML3D joints ``left_foot`` / ``right_foot``, 10 and 11, as in GMD's
+    ``calculate_skating_ratio``) skids over a frame pair when it is below ``config.gmd_height`` (5 cm)
+    above ``config.floor`` in both frames and its horizontal speed is above ``config.gmd_speed``
+    (0.5 m/s = 2.5 cm per frame at 20 fps) in the pair and in the ``gmd_window``-frame (5) moving
+    average of the speeds (zero-padded at the ends, ``uniform_filter1d(mode="constant")`` as GMD's)."""
+    from scipy.ndimage import uniform_filter1d
+
+    x, sk = _prepare(joints, skeleton)
+    toes = x[:, _toes(sk)]                                            # (N, 2, 3)
+    speed = np.linalg.norm(np.diff(toes[..., [0, 2]], axis=0), axis=-1) * _fps(sk, config)   # (N-1, 2)
+    avg = uniform_filter1d(speed, size=config.gmd_window, axis=0, mode="constant", origin=0)
+    low = toes[..., 1] - config.floor < config.gmd_height
+    contact = low[:-1] & low[1:]
+    skids = contact & (speed > config.gmd_speed) & (avg > config.gmd_speed)
+    return float(skids.any(-1).mean())
+
+
+def physdiff_measures(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfig = PhysicsConfig()
+                      ) -> dict[str, float]:
+    """PhysDiff's physical measures (Yuan et al., "PhysDiff: Physics-Guided Human Motion Diffusion
+    Model", ICCV 2023), computed on joints instead of the SMPL mesh (module docstring).
+
+    Returns
+    -------
+    dict (mm): ``penetrate`` (mean over frames of the lowest joint's depth below ``config.floor``, where
+    deeper than ``config.float_tolerance``), ``float`` (mean over frames of the lowest joint's height
+    above the floor, where higher than the tolerance), ``skate`` (mean over frame pairs of the mean
+    horizontal displacement of the toe joints within the tolerance of the floor in both frames; 0 for a
+    pair without such a toe) and ``err`` (Phys-Err, the sum of the three).
+    """
+    x, sk = _prepare(joints, skeleton)
+    tol = config.float_tolerance
+    y = x[..., 1] - config.floor                                      # (N, J)
+    low = y.min(-1)
+    pen = np.where(low < -tol, -low, 0.0)
+    flo = np.where(low > tol, low, 0.0)
+    toes = x[:, _toes(sk)]
+    on = toes[..., 1] - config.floor <= tol
+    both = on[:-1] & on[1:]                                           # (N-1, 2)
+    disp = np.linalg.norm(np.diff(toes[..., [0, 2]], axis=0), axis=-1)
+    n = both.sum(-1)
+    skate = np.where(n > 0, (disp * both).sum(-1) / np.maximum(n, 1), 0.0)
+    out = {"penetrate": float(pen.mean() * 1000), "float": float(flo.mean() * 1000),
+           "skate": float(skate.mean() * 1000)}
+    out["err"] = out["penetrate"] + out["float"] + out["skate"]
+    return out
+
+
+def _long_runs(mask: np.ndarray, min_len: int) -> np.ndarray:
+    """``mask`` (1-D bool) with the runs of True shorter than ``min_len`` cleared."""
+    m = np.concatenate([[False], mask.astype(bool), [False]])
+    edges = np.flatnonzero(m[1:] != m[:-1])
+    out = np.zeros(mask.shape, bool)
+    for a, b in zip(edges[::2], edges[1::2]):
+        if b - a >= min_len:
+            out[a:b] = True
+    return out
+
+
+def stance_analysis(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfig = PhysicsConfig()
+                    ) -> dict[str, np.ndarray]:
+    """Stance and low-swing frame pairs of the foot joints (module docstring, "Stance sliding").
+
+    Returns
+    -------
+    dict: ``low`` ``(N-1, 4)`` bool (foot joint in contact by height at both ends of the pair),
+    ``stance`` ``(N-1, 4)`` bool (low, vertical speed below ``stance_max_vspeed`` and in a run spanning
+    at least ``stance_min_frames`` frames), ``low_swing`` = low and not stance, ``speed`` ``(N-1, 4)``
+    horizontal speed (m/s), ``stance_frames`` ``(N, 4)`` bool (the frames of the stance pairs) and
+    ``stance_float`` ``(K,)`` (m): per foot x frame with a joint in stance, the height above
+    ``config.floor`` of the lower of that foot's ankle and toe. Columns in ``contact_joints`` order.
+    """
+    x, sk = _prepare(joints, skeleton)
+    fps = _fps(sk, config)
+    cj = list(sk.contact_joints)
+    feet = x[:, cj]                                                   # (N, 4, 3)
+    h = feet[..., 1] - contact_level(x, sk, config)
+    under = h < np.asarray(config.contact_heights * 2)
+    low = under[:-1] & under[1:]
+    vy = np.abs(np.diff(feet[..., 1], axis=0)) * fps
+    still = low & (vy < config.stance_max_vspeed)
+    stance = np.stack([_long_runs(still[:, k], config.stance_min_frames - 1) for k in range(4)], 1)
+    speed = np.linalg.norm(np.diff(feet[..., [0, 2]], axis=0), axis=-1) * fps
+    frames = np.zeros(h.shape, bool)
+    frames[:-1] |= stance
+    frames[1:] |= stance
+    heights = feet[..., 1] - config.floor
+    floats = []
+    for a, b in ((0, 1), (2, 3)):                                     # (ankle, toe) columns of each foot
+        on = frames[:, a] | frames[:, b]
+        floats.append(np.minimum(heights[:, a], heights[:, b])[on])
+    return {"low": low, "stance": stance, "low_swing": low & ~stance, "speed": speed, "stance_frames": frames,
+            "stance_float": np.concatenate(floats)}
+
+
+def flight_fit_accelerations(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfig = PhysicsConfig()
+                             ) -> np.ndarray:
+    """Per flight segment (a run of at least ``config.flight_min_frames`` flight frames), the pelvis's
+    vertical acceleration (m/s^2) of the least-squares parabola through its height over the segment
+    (``2a`` of ``y = a t^2 + b t + c``): a 1-D array in time order, empty without such a segment."""
+    x, sk = _prepare(joints, skeleton)
+    fps = _fps(sk, config)
+    fl = np.concatenate([[False], flight_frames(x, sk, config), [False]])
+    edges = np.flatnonzero(fl[1:] != fl[:-1])
+    out = []
+    for a, b in zip(edges[::2], edges[1::2]):
+        if b - a >= config.flight_min_frames:
+            t = np.arange(b - a) / fps
+            out.append(2.0 * np.polyfit(t, x[a:b, 0, 1], 2)[0])
+    return np.asarray(out, dtype=np.float64)
+
+
+def pooled_bone_percentile(motions: Sequence[np.ndarray], q: float = 99.0, skeleton: str | Skeleton = "humanml3d"
+                           ) -> float:
+    """The ``q``-th percentile (cm) of the reference bone-length error over all frames x bones of all
+    ``motions`` together (nan for a skeleton without reference lengths)."""
+    errs = [bone_length_errors(m, skeleton).get("ref_error") for m in motions]
+    errs = [e.ravel() for e in errs if e is not None]
+    return float(np.percentile(np.concatenate(errs), q) * 100.0) if errs else float("nan")
+
+
+def pooled_penetration_percentile(motions: Sequence[np.ndarray], q: float = 99.0,
+                                  skeleton: str | Skeleton = "humanml3d", config: PhysicsConfig = PhysicsConfig()
+                                  ) -> float:
+    """The ``q``-th percentile (cm) of the per-frame penetration depth (:func:`ground_penetration`) over
+    all frames of all ``motions`` together."""
+    if not len(motions):
+        return float("nan")
+    depth = np.concatenate([ground_penetration(m, skeleton, config) for m in motions])
+    return float(np.percentile(depth, q) * 100.0)
+
+
+def _path_length(x: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(x[:, 0, [0, 2]], axis=0), axis=-1).sum())
+
+
+def travel_ratio(shown, raw) -> float:
+    """The shown pelvis's ground path length over the raw one's (summed over motions when given
+    sequences of motions); nan when the raw pelvis does not travel."""
+    shown_l, raw_l = _motion_list(shown), _motion_list(raw)
+    s = sum(_path_length(a) for a in shown_l)
+    r = sum(_path_length(b) for b in raw_l)
+    return s / r if r > 0 else float("nan")
+
+
+def _motion_list(m) -> list[np.ndarray]:
+    if isinstance(m, np.ndarray) and m.ndim == 3:
+        return [np.asarray(m, dtype=np.float64)]
+    out = [np.asarray(a, dtype=np.float64) for a in m]
+    if not out or any(a.ndim != 3 or a.shape[-1] != 3 for a in out):
+        raise ValueError("expected joints (N, J, 3) or a non-empty sequence of them")
+    return out
+
+
+def recovery_deviation(shown, raw, skeleton: str | Skeleton | None = "humanml3d") -> dict:
+    """How far the joints a recovery shows are from the raw position read of the same features.
+
+    Parameters
+    ----------
+    shown, raw : ``(N, J, 3)`` joints of one motion (metres), or sequences of them (the same motions in
+        the same order, the same frames each): the deviations are then pooled over all motions.
+    skeleton : names the joints of ``worst_joint`` (None: joint indices).
+
+    Returns
+    -------
+    dict: ``per_joint_p95_cm`` and ``per_joint_max_cm`` (lists of J, over frames), ``p95_cm``, ``p99_cm``,
+    ``max_cm`` and ``mean_cm`` (over frames x joints), ``worst_joint`` (the joint of the largest p95),
+    ``travel_ratio`` (:func:`travel_ratio`), ``shown_path_m`` / ``raw_path_m`` (pelvis ground paths) and
+    ``frames``. Identical arrays give 0 everywhere and a travel ratio of 1 (nan without travel).
+    """
+    s_list, r_list = _motion_list(shown), _motion_list(raw)
+    if len(s_list) != len(r_list) or any(a.shape != b.shape for a, b in zip(s_list, r_list)):
+        raise ValueError(f"shown and raw must be the same motions with the same shapes, got "
+                         f"{[a.shape for a in s_list]} and {[b.shape for b in r_list]}")
+    if not all(np.isfinite(a).all() for a in s_list + r_list):
+        raise ValueError("shown / raw joints contain NaN or infinite values")
+    d = np.concatenate([np.linalg.norm(a - b, axis=-1) for a, b in zip(s_list, r_list)]) * 100.0   # (sum N, J)
+    per_p95 = np.percentile(d, 95, axis=0)
+    names = get_skeleton(skeleton).joint_names if skeleton is not None else None
+    worst = int(np.argmax(per_p95))
+    s_path = sum(_path_length(a) for a in s_list)
+    r_path = sum(_path_length(b) for b in r_list)
+    return {"per_joint_p95_cm": [float(v) for v in per_p95], "per_joint_max_cm": [float(v) for v in d.max(0)],
+            "p95_cm": float(np.percentile(d, 95)), "p99_cm": float(np.percentile(d, 99)), "max_cm": float(d.max()),
+            "mean_cm": float(d.mean()),
+            "worst_joint": names[worst] if names is not None and len(names) == d.shape[1] else worst,
+            "travel_ratio": s_path / r_path if r_path > 0 else float("nan"),
+            "shown_path_m": s_path, "raw_path_m": r_path, "frames": int(d.shape[0])}
+
+
 # ------------------------------------------------------------------------------------ one motion
 def _stat(v: np.ndarray, fn, scale: float = 1.0) -> float:
     return float(fn(v) * scale) if v.size else float("nan")
@@ -491,10 +793,15 @@ def measure_motion(joints, skeleton: str | Skeleton = "humanml3d", config: Physi
     on = foot_contacts(x, sk, config)
     fl = ~on.any(-1)
     facc = flight_acceleration(x, sk, config)
-    feet_low = x[:, list(sk.contact_joints), 1].min(-1) - x[:, list(sk.contact_joints), 1].min()
+    level = contact_level(x, sk, config)
+    feet_low = x[:, list(sk.contact_joints), 1].min(-1) - level
     pelvis = x[:, 0, 1]
     runs = _runs(fl)
     steps = strides(x, sk, config)
+    pd = physdiff_measures(x, sk, config)
+    st = stance_analysis(x, sk, config)
+    slide, swing = st["speed"][st["stance"]], st["speed"][st["low_swing"]]
+    fits = flight_fit_accelerations(x, sk, config)
     return PhysicsReport(
         frames=int(x.shape[0]),
         bone_ref_p95_cm=_stat(ref, lambda v: np.percentile(v, 95), 100.0),
@@ -523,13 +830,30 @@ def measure_motion(joints, skeleton: str | Skeleton = "humanml3d", config: Physi
         flight_accel_ms2=_stat(facc, np.mean),
         flight_accel_count=int(facc.size),
         stride_m=float(np.median(steps)) if steps.size else 0.0,
+        contact_level_m=level,
+        bone_ref_p99_cm=_stat(ref, lambda v: np.percentile(v, 99), 100.0),
+        penetration_p99_cm=float(np.percentile(pen, 99) * 100.0),
+        gmd_skate_ratio=gmd_skating_ratio(x, sk, config),
+        physdiff_penetrate_mm=pd["penetrate"], physdiff_float_mm=pd["float"], physdiff_skate_mm=pd["skate"],
+        physdiff_err_mm=pd["err"],
+        stance_slide_mean_ms=_stat(slide, np.mean),
+        stance_slide_p95_ms=_stat(slide, lambda v: np.percentile(v, 95)),
+        stance_count=int(slide.size),
+        low_swing_mean_ms=_stat(swing, np.mean),
+        low_swing_count=int(swing.size),
+        stance_float_cm=_stat(st["stance_float"], np.mean, 100.0),
+        stance_foot_frames=int(st["stance_float"].size),
+        flight_fit_accel_ms2=_stat(fits, np.median),
+        flight_segments=int(fits.size),
+        flight_segment_accels=tuple(float(v) for v in fits),
     )
 
 
 # ------------------------------------------------------------------------------------ aggregate
 #: How each field of :class:`PhysicsReport` is aggregated over motions: "mean" (of the per-motion
-#: values, nan ignored), "max", "sum", or "pooled:<count field>" (mean weighted by that count,
-#: i.e. the measure over all the motions' contact / flight frames together).
+#: values, nan ignored), "max", "sum", "pooled:<count field>" (mean weighted by that count,
+#: i.e. the measure over all the motions' contact / flight frames together), "median_of:<field>" (the
+#: median over the concatenated per-segment values of that tuple field) or "drop" (not aggregated).
 AGGREGATION: dict[str, str] = {
     "frames": "sum", "bone_ref_p95_cm": "mean", "bone_ref_max_cm": "max", "bone_self_p95_cm": "mean",
     "bone_self_max_cm": "max", "skate_mean_ms": "pooled:contact_count", "skate_p95_ms": "mean",
@@ -539,6 +863,13 @@ AGGREGATION: dict[str, str] = {
     "elbow_hyper_share": "mean", "pelvis_range_cm": "mean", "jump_rise_m": "mean", "feet_clearance_m": "mean",
     "flight_frames": "sum", "longest_flight_s": "max", "flight_accel_ms2": "pooled:flight_accel_count",
     "flight_accel_count": "sum", "stride_m": "mean",
+    "contact_level_m": "mean", "bone_ref_p99_cm": "mean", "penetration_p99_cm": "mean", "gmd_skate_ratio": "mean",
+    "physdiff_penetrate_mm": "mean", "physdiff_float_mm": "mean", "physdiff_skate_mm": "mean",
+    "physdiff_err_mm": "mean", "stance_slide_mean_ms": "pooled:stance_count", "stance_slide_p95_ms": "mean",
+    "stance_count": "sum", "low_swing_mean_ms": "pooled:low_swing_count", "low_swing_count": "sum",
+    "stance_float_cm": "pooled:stance_foot_frames", "stance_foot_frames": "sum",
+    "flight_fit_accel_ms2": "median_of:flight_segment_accels", "flight_segments": "sum",
+    "flight_segment_accels": "drop",
 }
 assert set(AGGREGATION) == {f.name for f in fields(PhysicsReport)}, "AGGREGATION must cover PhysicsReport"
 
@@ -546,15 +877,24 @@ assert set(AGGREGATION) == {f.name for f in fields(PhysicsReport)}, "AGGREGATION
 def aggregate_reports(reports: Iterable[PhysicsReport | Mapping[str, float]]) -> dict[str, float]:
     """Aggregate per-motion reports over many motions (rule per field in :data:`AGGREGATION`).
 
-    Returns a dict with every field of :class:`PhysicsReport` plus ``motions`` (how many) and
-    ``<field>_median`` for the "mean" fields (robust to one wild motion).
+    Returns a dict with every field of :class:`PhysicsReport` (but the "drop" ones) plus ``motions``
+    (how many) and ``<field>_median`` for the "mean" fields (robust to one wild motion). A mapping
+    without a field (a report saved before the field existed) counts as nan / empty for it.
     """
     rows = [r.as_dict() if isinstance(r, PhysicsReport) else dict(r) for r in reports]
     if not rows:
         raise ValueError("aggregate_reports needs at least one report")
     out: dict[str, float] = {"motions": len(rows)}
     for name, rule in AGGREGATION.items():
-        v = np.array([float(r[name]) for r in rows])
+        if rule == "drop":
+            continue
+        if rule.startswith("median_of:"):
+            vals = np.array([float(a) for r in rows for a in (r.get(rule.split(":", 1)[1]) or ())
+                             if a is not None], dtype=np.float64)
+            vals = vals[np.isfinite(vals)]
+            out[name] = float(np.median(vals)) if vals.size else float("nan")
+            continue
+        v = np.array([_num(r.get(name)) for r in rows])
         ok = v[np.isfinite(v)]
         if rule == "sum":
             out[name] = float(ok.sum())
@@ -564,10 +904,14 @@ def aggregate_reports(reports: Iterable[PhysicsReport | Mapping[str, float]]) ->
             out[name] = float(ok.mean()) if ok.size else float("nan")
             out[name + "_median"] = float(np.median(ok)) if ok.size else float("nan")
         else:
-            w = np.array([float(r[rule.split(":", 1)[1]]) for r in rows])
+            w = np.array([_num(r.get(rule.split(":", 1)[1])) for r in rows])
             keep = np.isfinite(v) & (w > 0)
             out[name] = float((v[keep] * w[keep]).sum() / w[keep].sum()) if keep.any() else float("nan")
     return out
+
+
+def _num(v) -> float:
+    return float("nan") if v is None else float(v)
 
 
 #: Columns of :func:`report_table`: (aggregate key, header, format).
@@ -594,6 +938,26 @@ TABLE_COLUMNS: tuple[tuple[str, str, str], ...] = (
 )
 
 
+#: Columns of the field's measures for :func:`report_table` (``columns=FIELD_TABLE_COLUMNS``).
+FIELD_TABLE_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("motions", "motions", "{:.0f}"),
+    ("stance_slide_mean_ms", "stance slide (m/s)", "{:.3f}"),
+    ("stance_slide_p95_ms", "stance slide p95 (m/s)", "{:.3f}"),
+    ("low_swing_mean_ms", "low swing (m/s)", "{:.3f}"),
+    ("gmd_skate_ratio", "GMD skate ratio", "{:.3f}"),
+    ("physdiff_penetrate_mm", "PhysDiff penetrate (mm)", "{:.1f}"),
+    ("physdiff_float_mm", "PhysDiff float (mm)", "{:.1f}"),
+    ("physdiff_skate_mm", "PhysDiff skate (mm)", "{:.1f}"),
+    ("physdiff_err_mm", "Phys-Err (mm)", "{:.1f}"),
+    ("stance_float_cm", "stance float (cm)", "{:.2f}"),
+    ("bone_ref_p99_pooled_cm", "bone err p99 pooled (cm)", "{:.2f}"),
+    ("penetration_p99_pooled_cm", "penetration p99 pooled (cm)", "{:.2f}"),
+    ("flight_fit_accel_ms2", "flight accel fit median (m/s^2)", "{:.1f}"),
+    ("flight_segments", "flight segments", "{:.0f}"),
+    ("contact_level_m", "contact level (m)", "{:.3f}"),
+)
+
+
 def report_table(rows: Mapping[str, Mapping[str, float]], columns=TABLE_COLUMNS) -> str:
     """A Markdown table with one row per name of ``rows`` (aggregates from :func:`aggregate_reports`,
     optionally with ``seed_diversity_cm`` and ``bone_ref_p95_pooled_cm`` from :func:`pooled_bone_p95`);
@@ -610,14 +974,21 @@ def report_table(rows: Mapping[str, Mapping[str, float]], columns=TABLE_COLUMNS)
     return "\n".join(lines)
 
 
-def joints_reader(method: str, skeleton: str | Skeleton = "humanml3d"):
+def joints_reader(method: str, skeleton: str | Skeleton = "humanml3d", with_raw: bool = False):
     """``output -> list of joints`` (``(N_b, J, 3)`` metres each): which joints of a generator's output
     the benchmark measures (``salad eval --physics --recovery METHOD``).
 
     ``method``: ``'positions'`` reads the raw position features (the model's own output);
     ``'fk'`` / ``'fit'``: :func:`salad_core.recovery.recover_joints`; ``'pipeline'``: ``out.joints``.
     The output needs ``features`` ``(B, N, D)`` and ``lengths`` (and ``joints`` for 'pipeline').
+
+    ``with_raw=True``: the reader returns ``(shown, raw)``, the joints of ``method`` and the raw
+    position read of the same features (for :func:`recovery_deviation`; the features are read twice,
+    not generated twice).
     """
+    if with_raw:
+        shown_of, raw_of = joints_reader(method, skeleton), joints_reader("positions", skeleton)
+        return lambda out: (shown_of(out), raw_of(out))
     if method == "pipeline":
         return lambda out: list(out.joints)
     if method == "positions":

@@ -22,16 +22,30 @@ rise (:func:`salad_core.eval.physics.measure_motion`'s ``jump_rise_m``) over the
 every caption is a single jump phrase (and over its jumping-jacks clips), measured with
 :func:`corpus_reference_ranges` on that corpus (all splits). The runner re-measures them on the
 corpus it is given when that corpus has annotations, and says which it used.
+
+The runner also reports the field's measures (:mod:`salad_core.eval.physics`: GMD's skating ratio, PhysDiff's
+joint-based Penetrate / Float / Skate, stance sliding apart from low swings, floating during stance,
+per-segment flight fits, p99 instead of single worst frames), the deviation of the shown joints from
+the raw position read of the same features (:func:`~salad_core.eval.physics.recovery_deviation`; a
+generator returns :class:`Generated` with both), a per-prompt breakdown and a reference row of real
+motion capture (:func:`real_capture_row`: HumanML3D clip 012314, shipped in
+``salad_core/eval/reference``, and pybullet's DeepMimic clips when pybullet is installed), against which
+:func:`targets` states the "[field]" targets. The real clips are evaluation data only: no threshold was
+set on them.
 """
 from __future__ import annotations
 
+import contextlib
+import functools
 import json
 import math
+import os
 import re
+import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
+from typing import Callable, Mapping, Sequence, Union
 
 import numpy as np
 
@@ -42,10 +56,23 @@ __all__ = ["Check", "CheckResult", "BenchmarkPrompt", "PROMPTS", "MEASURES", "RE
            "BenchSettings", "Generator", "corpus_reference_ranges", "corpus_reference_rises", "rise_ranges",
            "load_joints", "measure_clips",
            "caption_diversity", "reference_rows", "run_benchmark", "benchmark_markdown", "targets",
-           "saved_generators"]
+           "saved_generators", "Generated", "PROMPT_SUMMARY", "REAL_CAPTURE_DEEPMIMIC", "humanml3d_reference_joints",
+           "real_capture_clips", "real_capture_row"]
 
-#: A generator: ``(prompts, lengths, seed) -> list of joints (N_b, J, 3)``, one per prompt.
-Generator = Callable[[list[str], list[int], int], list[np.ndarray]]
+
+@dataclass(frozen=True)
+class Generated:
+    """What a generator made of one batch: the joints it shows (measured) and, optionally, the raw
+    position read of the same features (compared with them by
+    :func:`~salad_core.eval.physics.recovery_deviation`), one ``(N_b, J, 3)`` array per prompt each."""
+
+    shown: Sequence[np.ndarray]
+    raw: Sequence[np.ndarray] | None = None
+
+
+#: A generator: ``(prompts, lengths, seed) -> list of joints (N_b, J, 3)`` (one per prompt), or a
+#: :class:`Generated` with the raw joints beside the shown ones.
+Generator = Callable[[list[str], list[int], int], Union[list[np.ndarray], Generated]]
 
 SIDES = ("left", "right")
 
@@ -444,7 +471,7 @@ def reference_rows(data_root: str | Path | None = None, sample_dir: str | Path |
         motions = [load_joints(root, c, skeleton) for c in _split_ids(root, split)]
         motions = [x for x in motions if x.shape[0] >= 4]
         agg = ph.aggregate_reports([ph.measure_motion(x, skeleton) for x in motions])
-        agg["bone_ref_p95_pooled_cm"] = ph.pooled_bone_p95(motions, skeleton)
+        agg.update(_pooled_extras(motions, get_skeleton(skeleton)))
         agg["seed_diversity_cm"], agg["diversity_groups"] = caption_diversity(root, skeleton=skeleton)
         rows[f"corpus {split} split (real)"] = agg
     if sample_dir is not None:
@@ -455,9 +482,159 @@ def reference_rows(data_root: str | Path | None = None, sample_dir: str | Path |
             raise FileNotFoundError(f"sample folder {sdir} holds no new_joints/*.npy or new_joint_vecs/*.npy")
         motions = [load_joints(sdir, c, skeleton) for c in ids]
         agg = ph.aggregate_reports([ph.measure_motion(x, skeleton) for x in motions])
-        agg["bone_ref_p95_pooled_cm"] = ph.pooled_bone_p95(motions, skeleton)
+        agg.update(_pooled_extras(motions, get_skeleton(skeleton)))
         rows[f"HumanML3D {', '.join(ids)} (real)"] = agg
     return rows
+
+
+# ------------------------------------------------------------------------------------ real capture
+#: pybullet's DeepMimic clips (:mod:`salad_core.data.deepmimic`) in the real-capture row: the upright,
+#: foot-supported ones. Left out: cartwheel, crawl, roll and the two get-ups, which put hands, knees
+#: or the back on the floor (the foot measures do not describe them).
+REAL_CAPTURE_DEEPMIMIC: tuple[str, ...] = (
+    "backflip", "dance_a", "dance_b", "jump", "kick", "punch", "run", "spin", "spinkick", "walk",
+    "walker/0walk_forward", "walker/turn_left0", "walker/turn_left1", "walker/turn_right0", "walker/turn_right1")
+#: Looping DeepMimic clips are played enough cycles to last this many frames (HumanML3D's shortest clips).
+_MIN_CLIP_FRAMES = 40
+_SAMPLE_JOINTS = Path(__file__).resolve().parents[2] / "tests" / "data" / "humanml3d_sample" / "new_joints" / "012314.npy"
+
+
+def humanml3d_reference_joints(path: str | Path | None = None) -> np.ndarray | None:
+    """The joints ``(170, 22, 3)`` (metres, float64) of HumanML3D clip 012314, or None where it is missing.
+
+    The clip is not part of the installed package (HumanML3D's motions come from AMASS, whose licence
+    governs their redistribution): it is read from ``path`` or from a source checkout's
+    ``tests/data/humanml3d_sample`` (see its ``SOURCE.md``).
+    """
+    p = Path(path) if path is not None else _SAMPLE_JOINTS
+    if p.is_dir():
+        p = p / "new_joints" / "012314.npy"
+    return np.load(p).astype(np.float64) if p.is_file() else None
+
+
+@contextlib.contextmanager
+def _quiet_native_output():
+    """Silence file descriptors 1 and 2 inside the block: pybullet's C++ URDF importer prints a warning
+    per joint of every clip it loads (to the C ``stdout``, flushed before the descriptors come back)."""
+    streams = [f for f in (sys.stdout, sys.stderr) if f is not None]
+    try:
+        fds = sorted({f.fileno() for f in streams})
+    except (AttributeError, OSError, ValueError):
+        yield
+        return
+    for f in streams:
+        f.flush()
+    saved = [os.dup(fd) for fd in fds]
+    try:
+        with open(os.devnull, "w") as null:
+            for fd in fds:
+                os.dup2(null.fileno(), fd)
+            try:
+                yield
+            finally:
+                try:
+                    import ctypes
+
+                    ctypes.CDLL(None).fflush(None)
+                except (OSError, AttributeError):
+                    pass
+    finally:
+        for fd, keep in zip(fds, saved):
+            os.dup2(keep, fd)
+            os.close(keep)
+
+
+@functools.lru_cache(maxsize=1)
+def _deepmimic_joints() -> tuple[tuple[str, np.ndarray], ...]:
+    """The clips of :data:`REAL_CAPTURE_DEEPMIMIC` as HumanML3D joints: features of the converted clip
+    (retargeted to HumanML3D's bones, floor at the lowest joint, facing +Z, as HumanML3D processes its
+    clips) read back with the position recovery."""
+    from salad_core.data import deepmimic
+    from salad_core.motion import features_to_joints
+
+    out = []
+    with _quiet_native_output():
+        for name in REAL_CAPTURE_DEEPMIMIC:
+            clip = deepmimic.load_clip(name)
+            if clip.loop and clip.num_frames < _MIN_CLIP_FRAMES:
+                clip = deepmimic.load_clip(name, cycles=math.ceil(_MIN_CLIP_FRAMES / max(clip.num_frames - 1, 1)))
+            joints = features_to_joints(deepmimic.clip_features(clip), "humanml3d")
+            out.append((name, np.asarray(joints, dtype=np.float64)))
+    return tuple(out)
+
+
+def real_capture_clips(deepmimic: bool | None = None) -> tuple[dict[str, np.ndarray], str]:
+    """The real motion-capture clips of the reference row, ``name -> joints (N, 22, 3)``, and a note on
+    what they are.
+
+    ``deepmimic``: None (default) adds pybullet's DeepMimic clips when pybullet is installed; True
+    requires them (ImportError naming the extra without pybullet); False leaves them out. HumanML3D clip
+    012314 is always in.
+    """
+    use, auto = _resolve_deepmimic(deepmimic)
+    return _clips(use, auto)
+
+
+def _resolve_deepmimic(deepmimic: bool | None) -> tuple[bool, bool]:
+    """(use the DeepMimic clips, decided by whether pybullet is installed)."""
+    if deepmimic is not None:
+        return bool(deepmimic), False
+    from salad_core.data.deepmimic import pybullet_available
+
+    with _quiet_native_output():                       # importing pybullet prints its build time
+        return pybullet_available(), True
+
+
+def _clips(use: bool, auto: bool) -> tuple[dict[str, np.ndarray], str]:
+    sample = humanml3d_reference_joints()
+    clips = {} if sample is None else {"HumanML3D 012314": sample}
+    first = "" if sample is None else "HumanML3D 012314 and "
+    if use:
+        deepmimic = {f"DeepMimic {n}": x for n, x in _deepmimic_joints()}
+        clips.update(deepmimic)
+        note = (f"{first}{len(deepmimic)} of pybullet's DeepMimic clips "
+                f"({', '.join(REAL_CAPTURE_DEEPMIMIC)}), converted to HumanML3D joints")
+    elif sample is None:
+        note = ("none: the HumanML3D sample 012314 ships only with a source checkout (tests/data) and pybullet "
+                "(the optional extra 'deepmimic') is " + ("not installed" if auto else "left out"))
+    elif auto:
+        note = "the HumanML3D sample 012314 alone: pybullet (the optional extra 'deepmimic') is not installed"
+    else:
+        note = "the HumanML3D sample 012314 alone (DeepMimic clips left out)"
+    return clips, note
+
+
+@functools.lru_cache(maxsize=8)
+def _real_capture_cached(use: bool, auto: bool, skeleton_name: str) -> tuple[str, dict, dict, str]:
+    clips, note = _clips(use, auto)
+    sk = get_skeleton(skeleton_name)
+    reports = {n: ph.measure_motion(x, sk) for n, x in clips.items()}
+    agg = ph.aggregate_reports(list(reports.values()))
+    agg.update(_pooled_extras(list(clips.values()), sk))
+    dm = sum(1 for n in clips if n.startswith("DeepMimic"))
+    hml = "HumanML3D 012314" in clips
+    name = (f"real capture (HumanML3D 012314 + {dm} DeepMimic clips)" if dm and hml else
+            f"real capture ({dm} DeepMimic clips)" if dm else
+            "real capture (HumanML3D 012314 only)" if hml else "real capture (none available)")
+    return name, agg, {n: r.as_dict() for n, r in reports.items()}, note
+
+
+def real_capture_row(deepmimic: bool | None = None, skeleton: str | Skeleton = "humanml3d") -> dict:
+    """The real-capture reference row, measured once per process.
+
+    ``deepmimic`` as :func:`real_capture_clips`.
+
+    Returns
+    -------
+    dict: ``name`` (the row's label, which says whether DeepMimic clips are in), ``aggregate``
+    (:func:`~salad_core.eval.physics.aggregate_reports` of the clips, with the pooled bone p95 / p99 and
+    penetration p99), ``clips`` (each clip's report) and ``note`` (what the clips are; says so when
+    pybullet is missing).
+    """
+    sk = get_skeleton(skeleton)
+    use, auto = _resolve_deepmimic(deepmimic)
+    name, agg, clips, note = _real_capture_cached(use, auto, sk.name)
+    return {"name": name, "aggregate": dict(agg), "clips": {k: dict(v) for k, v in clips.items()}, "note": note}
 
 
 # ------------------------------------------------------------------------------------ the runner
@@ -495,16 +672,39 @@ def _clean(v):
     return v
 
 
+#: Per-prompt summary: the report fields averaged over a prompt's seeds (nan ignored), and
+#: from the shown-vs-raw deviation ``deviation_p95_cm``, ``deviation_p99_cm``, ``travel_ratio``.
+PROMPT_SUMMARY: tuple[str, ...] = (
+    "bone_ref_p99_cm", "bone_ref_max_cm", "penetration_p99_cm", "penetration_max_cm", "skate_mean_ms",
+    "stance_slide_mean_ms", "low_swing_mean_ms", "gmd_skate_ratio", "physdiff_penetrate_mm", "physdiff_float_mm",
+    "physdiff_skate_mm", "physdiff_err_mm", "stance_float_cm", "jump_rise_m", "stride_m", "flight_accel_ms2",
+    "flight_fit_accel_ms2", "flight_segments")
+
+
+def _mean_of(values) -> float:
+    v = np.array([np.nan if x is None else float(x) for x in values], dtype=np.float64)
+    v = v[np.isfinite(v)]
+    return float(v.mean()) if v.size else float("nan")
+
+
+def _pooled_extras(motions: Sequence[np.ndarray], sk: Skeleton) -> dict[str, float]:
+    return {"bone_ref_p95_pooled_cm": ph.pooled_bone_p95(motions, sk),
+            "bone_ref_p99_pooled_cm": ph.pooled_bone_percentile(motions, 99.0, sk),
+            "penetration_p99_pooled_cm": ph.pooled_penetration_percentile(motions, 99.0, sk)}
+
+
 def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings = BenchSettings(),
                   data_root: str | Path | None = None, sample_dir: str | Path | None = None,
                   prompts: Sequence[BenchmarkPrompt] = PROMPTS, skeleton: str | Skeleton = "humanml3d",
                   info: Mapping[str, object] | None = None, log: Callable[[str], None] | None = None,
-                  motions_sink: dict | None = None) -> dict:
+                  motions_sink: dict | None = None, real_capture: bool = True,
+                  deepmimic: bool | None = None) -> dict:
     """Generate every prompt with every seed and generator, measure, check and aggregate.
 
     Parameters
     ----------
-    generators : name -> :data:`Generator`, in table order (e.g. SALAD, then KeyMotion)
+    generators : name -> :data:`Generator`, in table order (e.g. SALAD, then KeyMotion). A generator
+        returning :class:`Generated` with ``raw`` joints gets the shown-vs-raw deviation measured.
     settings : BenchSettings
     data_root : corpus folder for the reference row (its test split) and the jump ranges
     sample_dir : folder of real clips (HumanML3D layout) for a reference row of its own
@@ -512,15 +712,20 @@ def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings =
     info : extra settings to record (weights paths, ...)
     log : called with progress lines
     motions_sink : dict, optional
-        Receives the generated joints, ``"<generator>/<prompt index>/<seed>" -> (N, J, 3)``, so they
-        can be saved and measured again without generating.
+        Receives the generated joints, ``"<generator>/<prompt index>/<seed>" -> (N, J, 3)`` (and the raw
+        ones under ``".../raw"``), so they can be saved and measured again without generating.
+    real_capture : add the real-capture reference row (:func:`real_capture_row`; HumanML3D skeleton only)
+    deepmimic : with it, pybullet's DeepMimic clips (None: when pybullet is installed)
 
     Returns
     -------
-    dict (JSON-ready): ``settings``, ``references`` (aggregates of real motions), ``reference_ranges``
-    and their ``reference_source``, and per generator its ``aggregate`` (with ``seed_diversity_cm``),
-    ``checks_passed`` / ``checks_total``, ``seconds`` and per prompt the per-seed reports, check
-    results and the seed diversity.
+    dict (JSON-ready): ``settings``, ``references`` (aggregates of real motions), ``real_capture`` (the
+    real-capture row's ``name``, ``note`` and per-clip reports, or None), ``reference_ranges`` and their
+    ``reference_source``, and per generator its ``aggregate`` (with ``seed_diversity_cm`` and the pooled
+    p95 / p99 columns), ``deviation`` (:func:`~salad_core.eval.physics.recovery_deviation` pooled over
+    all its motions, or None without raw joints), ``checks_passed`` / ``checks_total``, ``seconds`` and
+    per prompt the per-seed reports, deviations and check results, the seed diversity and ``summary``
+    (:data:`PROMPT_SUMMARY` averaged over the seeds).
     """
     say = log or (lambda s: None)
     sk = get_skeleton(skeleton)
@@ -534,23 +739,36 @@ def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings =
             source = f"measured on {data_root} ({counts}; others recorded)"
     t0 = time.perf_counter()
     references = reference_rows(data_root, sample_dir, skeleton=sk)
+    real = None
+    if real_capture and sk.name == "humanml3d":
+        row = real_capture_row(deepmimic, sk)
+        references[row["name"]] = row["aggregate"]
+        real = {"name": row["name"], "note": row["note"], "clips": row["clips"]}
     say(f"reference rows measured ({time.perf_counter() - t0:.0f} s)")
     texts, lengths = [p.text for p in chosen], [p.length for p in chosen]
     out_gens: dict[str, dict] = {}
     for name, gen in generators.items():
         t0 = time.perf_counter()
         motions: list[list[np.ndarray]] = [[] for _ in chosen]
+        raws: list[list[np.ndarray]] | None = [[] for _ in chosen]
         for seed in settings.seeds:
-            joints = gen(texts, lengths, int(seed))
-            if len(joints) != len(chosen):
+            made = gen(texts, lengths, int(seed))
+            joints, raw = (made.shown, made.raw) if isinstance(made, Generated) else (made, None)
+            if len(joints) != len(chosen) or (raw is not None and len(raw) != len(chosen)):
                 raise ValueError(f"generator {name!r} returned {len(joints)} motions for {len(chosen)} prompts")
+            if raw is None:
+                raws = None
             for i, x in enumerate(joints):
                 motions[i].append(np.asarray(x, dtype=np.float64))
+                if raws is not None:
+                    raws[i].append(np.asarray(raw[i], dtype=np.float64))
                 if motions_sink is not None:
                     motions_sink[f"{name}/{i:02d}/{seed}"] = np.asarray(x, dtype=np.float32)
+                    if raw is not None:
+                        motions_sink[f"{name}/{i:02d}/{seed}/raw"] = np.asarray(raw[i], dtype=np.float32)
             say(f"{name}: seed {seed} generated ({time.perf_counter() - t0:.0f} s)")
         per_prompt, reports, passed, total, div = [], [], 0, 0, []
-        for p, xs in zip(chosen, motions):
+        for i, (p, xs) in enumerate(zip(chosen, motions)):
             reps = [ph.measure_motion(x, sk) for x in xs]
             checks = [[c.evaluate(x, sk, ranges) for c in p.checks] for x in xs]
             d = ph.seed_diversity(xs) if len(xs) > 1 else float("nan")
@@ -558,29 +776,55 @@ def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings =
             reports += reps
             passed += sum(r.passed for row in checks for r in row)
             total += sum(len(row) for row in checks)
+            rows = [r.as_dict() for r in reps]
+            summary = {k: _mean_of(r[k] for r in rows) for k in PROMPT_SUMMARY}
+            devs = None
+            if raws is not None:
+                devs = []
+                for x, r in zip(xs, raws[i]):
+                    dv = ph.recovery_deviation(x, r, sk)
+                    devs.append({k: dv[k] for k in ("p95_cm", "p99_cm", "max_cm", "mean_cm", "travel_ratio",
+                                                     "worst_joint")})
+                summary.update(deviation_p95_cm=_mean_of(v["p95_cm"] for v in devs),
+                               deviation_p99_cm=_mean_of(v["p99_cm"] for v in devs),
+                               travel_ratio=_mean_of(v["travel_ratio"] for v in devs))
             per_prompt.append({"text": p.text, "action": p.action, "length": p.length,
-                               "seeds": list(settings.seeds), "diversity_cm": d,
-                               "reports": [r.as_dict() for r in reps],
+                               "seeds": list(settings.seeds), "diversity_cm": d, "summary": summary,
+                               "reports": rows, "deviations": devs,
                                "checks": [[asdict(r) for r in row] for row in checks]})
         agg = ph.aggregate_reports(reports)
-        agg["bone_ref_p95_pooled_cm"] = ph.pooled_bone_p95([x for xs in motions for x in xs], sk)
+        every = [x for xs in motions for x in xs]
+        agg.update(_pooled_extras(every, sk))
         agg["seed_diversity_cm"] = float(np.nanmean(div)) if np.isfinite(div).any() else float("nan")
-        out_gens[name] = {"aggregate": agg, "checks_passed": passed, "checks_total": total,
+        deviation = None
+        if raws is not None:
+            deviation = ph.recovery_deviation(every, [x for xs in raws for x in xs], sk)
+            deviation["joint_names"] = list(sk.joint_names)
+        out_gens[name] = {"aggregate": agg, "deviation": deviation, "checks_passed": passed, "checks_total": total,
                           "seconds": time.perf_counter() - t0, "prompts": per_prompt}
         say(f"{name}: measured, checks {passed}/{total}")
     doc = {"settings": {**asdict(settings), "num_prompts": len(chosen), "skeleton": sk.name,
                         "data": None if data_root is None else str(data_root),
                         "sample": None if sample_dir is None else str(sample_dir), **dict(info or {})},
-           "references": references, "reference_ranges": {k: list(v) for k, v in ranges.items()},
+           "references": references, "real_capture": real,
+           "reference_ranges": {k: list(v) for k, v in ranges.items()},
            "reference_source": source, "generators": out_gens}
     return _clean(doc)
 
 
 def targets(result: Mapping) -> list[dict]:
     """The issues' targets (issue 20's; issue 22's, written for KeyMotion, shown for every generator
-    except the relative diversity one, which compares with the first generator) evaluated on a
-    :func:`run_benchmark` result: per target its text and, per generator, ``(value, passed)``
-    (``passed`` None when the reference it needs is missing)."""
+    except the relative diversity one, which compares with the first generator; the field's, stated
+    against the real-capture row and marked "[field]") evaluated on a :func:`run_benchmark` result:
+    per target its text and, per generator, ``(value, passed)`` (``passed`` None when the reference or
+    the raw joints it needs are missing).
+
+    The "[field]" targets: stance sliding and GMD's skating ratio on the forward walks and runs at most 1.5x
+    the real-capture row's (over all its clips); floating during stance at most 2 cm; the shown joints
+    within p95 5 cm and p99 10 cm of the raw position read; bones exact (pooled p99 of the reference
+    bone error at most 0.1 cm); nothing below the floor (pooled p99 penetration at most 0.5 cm,
+    PhysDiff's 5 mm tolerance); the shown pelvis travelling within 20 % of the raw one; and the jumps'
+    median per-segment flight fit within 25 % of -9.81 m/s^2."""
     gens = result["generators"]
     corpus = next((v for k, v in result["references"].items() if k.startswith("corpus")), None)
     ref = (lambda key: None if corpus is None or corpus.get(key) is None else float(corpus[key]))
@@ -622,7 +866,56 @@ def targets(result: Mapping) -> list[dict]:
     add("[issue 22] seed diversity >= half of the first generator's",
         lambda a, g: (a.get("seed_diversity_cm"), None if sd is None else _ge(a.get("seed_diversity_cm"), sd / 2)),
         only_later=True)
+    # ---- the field's measures, against the real-capture row
+    real_name = (result.get("real_capture") or {}).get("name")
+    real = result["references"].get(real_name) if real_name else None
+    rv = (lambda key: None if real is None or real.get(key) is None else float(real[key]))
+    slide, gmd = rv("stance_slide_mean_ms"), rv("gmd_skate_ratio")
+    add(f"[field] stance sliding on the forward walks and runs <= 1.5x the real capture's "
+        f"({_fmt(slide, '{:.3f}')} m/s)",
+        lambda a, g: ratio(_pooled(g, _FORWARD_GAITS, "stance_slide_mean_ms", "stance_count"),
+                           None if slide is None else 1.5 * slide))
+    add(f"[field] GMD skating ratio on the forward walks and runs <= 1.5x the real capture's "
+        f"({_fmt(gmd, '{:.3f}')})",
+        lambda a, g: ratio(_mean_over(g, _FORWARD_GAITS, "gmd_skate_ratio"), None if gmd is None else 1.5 * gmd))
+    add("[field] floating during stance <= 2 cm (mean height of the stance feet above the floor)",
+        lambda a, g: (a.get("stance_float_cm"), _le(a.get("stance_float_cm"), 2.0)))
+    add("[field] shown vs raw: p95 <= 5 cm and p99 <= 10 cm", _deviation_cell)
+    add("[field] bones exact: bone error p99 <= 0.1 cm (pooled over frames x bones x motions)",
+        lambda a, g: (a.get("bone_ref_p99_pooled_cm"), _le(a.get("bone_ref_p99_pooled_cm"), 0.1)))
+    add("[field] nothing below the floor: penetration p99 <= 0.5 cm (pooled over frames x motions)",
+        lambda a, g: (a.get("penetration_p99_pooled_cm"), _le(a.get("penetration_p99_pooled_cm"), 0.5)))
+    add("[field] travel within 20 % of raw (shown / raw pelvis ground path)", _travel_cell)
+    add("[field] jumps near-ballistic: median per-segment flight fit on the jump prompts within 25 % of "
+        "-9.81 m/s^2", lambda a, g: _ballistic(_segments_median(g, ("jump", "jumping_jacks"))))
     return rows
+
+
+def _mean_over(gen: Mapping, actions: Sequence[str], key: str) -> float | None:
+    """Mean of ``key`` over one generator's per-motion reports on the prompts of ``actions``."""
+    v = [r[key] for p in gen["prompts"] if p["action"] in actions for r in p["reports"] if r.get(key) is not None]
+    return float(np.mean(v)) if v else None
+
+
+def _segments_median(gen: Mapping, actions: Sequence[str]) -> float | None:
+    """Median of the per-segment flight fits of one generator's motions on the prompts of ``actions``."""
+    v = [a for p in gen["prompts"] if p["action"] in actions for r in p["reports"]
+         for a in (r.get("flight_segment_accels") or ()) if a is not None]
+    return float(np.median(v)) if v else None
+
+
+def _deviation_cell(agg: Mapping, gen: Mapping):
+    dev = gen.get("deviation")
+    if not dev or dev.get("p95_cm") is None or dev.get("p99_cm") is None:
+        return (None, None)
+    return (f"p95 {dev['p95_cm']:.2f} / p99 {dev['p99_cm']:.2f} cm",
+            bool(dev["p95_cm"] <= 5.0 and dev["p99_cm"] <= 10.0))
+
+
+def _travel_cell(agg: Mapping, gen: Mapping):
+    dev = gen.get("deviation")
+    v = None if not dev else dev.get("travel_ratio")
+    return (v, None if v is None else bool(0.8 <= v <= 1.2))
 
 
 #: Actions of the prompts whose skating issue 22's walking target is about.
@@ -667,13 +960,17 @@ def _check_measure(desc: str) -> str:
 
 def saved_generators(motions: Mapping[str, np.ndarray]) -> dict[str, Generator]:
     """Generators that replay the joints a run saved (``run_benchmark(..., motions_sink=...)``, e.g.
-    ``physics_motions.npz``: ``"<generator>/<prompt index>/<seed>" -> (N, J, 3)``), so the same
-    motions can be measured again (after a change of the measures) without generating them."""
+    ``physics_motions.npz``: ``"<generator>/<prompt index>/<seed>" -> (N, J, 3)``, and the raw joints
+    under ``".../raw"`` when the run had them), so the same motions can be measured again (after a
+    change of the measures) without generating them. A generator whose raw joints were saved replays
+    :class:`Generated` (shown and raw), otherwise the list of shown joints."""
     names: dict[str, None] = {}
     for key in motions:
         parts = key.split("/")
-        if len(parts) != 3 or not parts[1].isdigit() or not parts[2].lstrip("-").isdigit():
-            raise ValueError(f"saved motion key {key!r} is not '<generator>/<prompt index>/<seed>'")
+        ok = len(parts) in (3, 4) and parts[1].isdigit() and parts[2].lstrip("-").isdigit() and \
+            (len(parts) == 3 or parts[3] == "raw")
+        if not ok:
+            raise ValueError(f"saved motion key {key!r} is not '<generator>/<prompt index>/<seed>[/raw]'")
         names.setdefault(parts[0], None)
 
     def replay(name: str) -> Generator:
@@ -683,7 +980,10 @@ def saved_generators(motions: Mapping[str, np.ndarray]) -> dict[str, Generator]:
             if missing:
                 raise KeyError(f"the saved motions have no {missing[0]!r} (and {len(missing) - 1} more); "
                                "replay with the prompts and seeds of the saved run")
-            return [np.asarray(motions[k]) for k in keys]
+            shown = [np.asarray(motions[k]) for k in keys]
+            if all(f"{k}/raw" in motions for k in keys):
+                return Generated(shown, [np.asarray(motions[f"{k}/raw"]) for k in keys])
+            return shown
         return gen
 
     return {name: replay(name) for name in names}
@@ -693,22 +993,37 @@ def _fmt(v, fmt: str = "{:.2f}") -> str:
     return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v)
 
 
-#: Per-prompt columns of the report: (report field or "diversity_cm", header, format, reducer over seeds).
+#: Per-prompt columns of the report: (key of the prompt's ``summary`` or "diversity_cm",
+#: header, format); every value is the mean over the prompt's seeds.
 _PROMPT_COLUMNS = (
-    ("bone_ref_max_cm", "bone max (cm)", "{:.0f}", max),
-    ("skate_mean_ms", "skate (m/s)", "{:.2f}", None),
-    ("penetration_max_cm", "penetr. (cm)", "{:.0f}", max),
-    ("jump_rise_m", "rise (m)", "{:.2f}", None),
-    ("stride_m", "stride (m)", "{:.2f}", None),
-    ("flight_accel_ms2", "flight acc", "{:.1f}", None),
+    ("bone_ref_p99_cm", "bone p99 (cm)", "{:.2f}"),
+    ("penetration_p99_cm", "penetr. p99 (cm)", "{:.1f}"),
+    ("stance_slide_mean_ms", "stance slide (m/s)", "{:.3f}"),
+    ("low_swing_mean_ms", "low swing (m/s)", "{:.2f}"),
+    ("gmd_skate_ratio", "GMD ratio", "{:.3f}"),
+    ("stance_float_cm", "stance float (cm)", "{:.1f}"),
+    ("physdiff_err_mm", "Phys-Err (mm)", "{:.0f}"),
+    ("jump_rise_m", "rise (m)", "{:.2f}"),
+    ("stride_m", "stride (m)", "{:.2f}"),
+    ("flight_fit_accel_ms2", "flight fit (m/s^2)", "{:.1f}"),
+    ("deviation_p95_cm", "shown-raw p95 (cm)", "{:.1f}"),
+    ("travel_ratio", "travel ratio", "{:.2f}"),
+    ("diversity_cm", "div (cm)", "{:.1f}"),
 )
 
 
+def _nan_rows(rows: Mapping[str, Mapping]) -> dict[str, dict]:
+    return {k: {kk: (float("nan") if vv is None else vv) for kk, vv in v.items()
+                if not isinstance(vv, (list, tuple, dict, str))} for k, v in rows.items()}
+
+
 def benchmark_markdown(result: Mapping) -> str:
-    """The report of :func:`run_benchmark` as Markdown: settings, the measures table (real motions
-    first), the per-action checks and a per-prompt table."""
+    """The report of :func:`run_benchmark` as Markdown: settings, the measures tables (real motions
+    first: the old measures, then the field's with the real-capture row), the shown-vs-raw
+    deviation, the targets, the per-action checks and a per-prompt table per generator."""
     s = result["settings"]
     gens = result["generators"]
+    real = result.get("real_capture")
     lines = ["# Physical-plausibility benchmark", "",
              "Settings: " + ", ".join(f"{k} = {v}" for k, v in s.items()), "",
              f"Jump-height ranges: {result['reference_ranges']} ({result['reference_source']}).", "",
@@ -718,12 +1033,43 @@ def benchmark_markdown(result: Mapping) -> str:
              "", "## Measures", ""]
     rows = dict(result["references"])
     rows.update({name: g["aggregate"] for name, g in gens.items()})
-    rows = {k: {kk: (float("nan") if vv is None else vv) for kk, vv in v.items()} for k, v in rows.items()}
+    rows = _nan_rows(rows)
     lines += [ph.report_table(rows), ""]
+    lines += ["## The field's measures", "",
+              "Stance sliding: foot joints low and vertically still for >= 3 frames (pooled over those frame pairs); "
+              "low swing: low but not in stance; GMD skate ratio: share of frames with a toe below 5 cm skidding "
+              "faster than 0.5 m/s (GMD / OmniControl); PhysDiff's Penetrate / Float / Skate computed on joints, not "
+              "the mesh; stance float: height of the stance feet above the floor; p99 columns pooled over every "
+              "frame of every motion; flight fit: median over flight segments of the pelvis parabola's "
+              "acceleration. Contact is measured from the 5th percentile of the lowest foot joint's height.", ""]
+    if real:
+        lines += [f"Real capture: {real['note']}. Evaluation only: no threshold was set on these clips.", ""]
+    lines += [ph.report_table(rows, ph.FIELD_TABLE_COLUMNS), ""]
+    if real and real.get("clips"):
+        lines += ["Real capture, per clip:", "",
+                  ph.report_table(_nan_rows(real["clips"]), _CLIP_COLUMNS), ""]
     if not gens:
         return "\n".join(lines) + "\n"
     names = list(gens)
-    lines += ["## Targets (issues 20 and 22)", "", "| target | " + " | ".join(names) + " |",
+    lines += ["## Shown vs raw", "",
+              "Distance between the joints measured above (the recovery of the settings) and the raw position read "
+              "of the same features, over all frames x joints of every motion; travel ratio = shown pelvis ground "
+              "path / raw.", "",
+              "| generator | p95 (cm) | p99 (cm) | max (cm) | mean (cm) | worst joint (its p95, cm) | travel ratio |",
+              "|---|---:|---:|---:|---:|---|---:|"]
+    for n in names:
+        dev = gens[n].get("deviation")
+        if not dev:
+            lines.append(f"| {n} | - | - | - | - | (no raw joints) | - |")
+            continue
+        worst = dev["worst_joint"]
+        jn = dev.get("joint_names") or []
+        wi = jn.index(worst) if worst in jn else (worst if isinstance(worst, int) else None)
+        wp = dev["per_joint_p95_cm"][wi] if wi is not None else None
+        lines.append(f"| {n} | {_fmt(dev['p95_cm'])} | {_fmt(dev['p99_cm'])} | {_fmt(dev['max_cm'])} | "
+                     f"{_fmt(dev['mean_cm'])} | {worst} ({_fmt(wp)}) | {_fmt(dev['travel_ratio'], '{:.3f}')} |")
+    lines.append("")
+    lines += ["## Targets", "", "| target | " + " | ".join(names) + " |",
               "|---|" + "---|" * len(names)]
     for t in targets(result):
         cells = []
@@ -752,19 +1098,28 @@ def benchmark_markdown(result: Mapping) -> str:
             lines.append(f"| {text} | {p['checks'][0][c]['check']} | " + " | ".join(cells) + " |")
     passed = "; ".join(f"{n} {g['checks_passed']}/{g['checks_total']}" for n, g in gens.items())
     lines += ["", "Checks passed: " + passed, "", "## Per prompt", "",
-              "Worst seed for bone max and penetration, mean over seeds otherwise; diversity = mean joint "
-              "distance between the seeds' motions (cm).", ""]
-    columns = (*_PROMPT_COLUMNS, ("", "div (cm)", "", None))
-    head = "| prompt | " + " | ".join(f"{n} {h}" for n in names for _, h, _, _ in columns)
-    lines += [head + " |", "|---|" + "---:|" * (len(names) * (len(_PROMPT_COLUMNS) + 1))]
-    for i, p in enumerate(first):
-        cells = []
-        for n in names:
-            q = gens[n]["prompts"][i]
-            for key, _, fmt, red in _PROMPT_COLUMNS:
-                vals = [r[key] for r in q["reports"] if r[key] is not None]
-                v = (red(vals) if red else float(np.mean(vals))) if vals else None
-                cells.append(_fmt(v, fmt))
-            cells.append(_fmt(q["diversity_cm"], "{:.1f}"))
-        lines.append(f"| {p['text']} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+              "Every value is the mean over the prompt's seeds (nan ignored); diversity = mean joint distance "
+              "between the seeds' motions (cm).", ""]
+    for n in names:
+        lines += [f"### {n}", "", "| prompt | " + " | ".join(h for _, h, _ in _PROMPT_COLUMNS) + " |",
+                  "|---|" + "---:|" * len(_PROMPT_COLUMNS)]
+        for q in gens[n]["prompts"]:
+            summary = dict(q.get("summary") or {}, diversity_cm=q["diversity_cm"])
+            lines.append(f"| {q['text']} | " + " | ".join(_fmt(summary.get(k), fmt) for k, _, fmt in _PROMPT_COLUMNS)
+                         + " |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+#: Columns of the real-capture per-clip table.
+_CLIP_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("frames", "frames", "{:.0f}"),
+    ("stance_slide_mean_ms", "stance slide (m/s)", "{:.3f}"),
+    ("low_swing_mean_ms", "low swing (m/s)", "{:.3f}"),
+    ("gmd_skate_ratio", "GMD skate ratio", "{:.3f}"),
+    ("physdiff_err_mm", "Phys-Err (mm)", "{:.1f}"),
+    ("stance_float_cm", "stance float (cm)", "{:.2f}"),
+    ("penetration_p99_cm", "penetration p99 (cm)", "{:.2f}"),
+    ("flight_fit_accel_ms2", "flight fit (m/s^2)", "{:.1f}"),
+    ("flight_segments", "flight segments", "{:.0f}"),
+)
