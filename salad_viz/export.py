@@ -5,6 +5,13 @@ root channels ``Xposition Yposition Zposition Zrotation Yrotation Xrotation`` an
 channels ``Zrotation Yrotation Xrotation`` per joint (rotation = Rz @ Ry @ Rx, degrees), an End
 Site after every leaf so that importers draw the last bones (feet, head, hands), and a frame time
 of 1 / fps (0.05 s for HumanML3D's 20 fps). Rotations come from :mod:`salad_viz.kinematics`.
+
+The file holds the motion of the joints it was written from: its OFFSETs are the motion's own
+bone lengths and rigid branch geometry (pelvis -> hips and spine, chest -> neck and collars), so
+for joints with constant bone lengths and rigid branches (what the pipeline's ``"fit"`` recovery
+gives) any BVH reader gets the joints back to float precision (< 0.01 mm). For other joints the
+file is the closest rigid skeleton; :func:`export_bvh` measures what a reader gets back and returns
+it with the path (:class:`BvhFile`).
 """
 from __future__ import annotations
 
@@ -18,18 +25,37 @@ import numpy as np
 from salad_core.skeleton import Skeleton, get_skeleton
 
 from ._arrays import as_joints, as_joints_list, atomic_output, check_frame
-from .kinematics import SolvedMotion, children_of, fk_error, solve_rotations
+from .kinematics import SolvedMotion, children_of, solve_rotations
 
 log = logging.getLogger(__name__)
 
-__all__ = ["export_bvh", "bvh_text", "euler_zyx", "export_glb", "export_npy"]
+__all__ = ["export_bvh", "bvh_text", "bvh_errors", "BvhFile", "euler_zyx", "export_glb", "export_npy"]
 
-_FK_NOTE_M = 0.01  # log (info) when the BVH cannot reproduce the joints to 1 cm
-# ... and warn beyond 5 cm. A BVH moves the hips and the spine with one rigid pelvis (likewise the chest
-# and its three children); the shipped model's fitted joints (fixed bone lengths) miss that rigid
-# triangle by about 2.4 cm (quickstart prompt), which is not worth a warning in every notebook, while
-# stretching bones (10 cm) or the raw position features (40 cm) are.
+#: Warn when a reader of the BVH gets joints back more than this far (metres) from the input: bones
+#: that stretch (10 cm) or the raw position features (40 cm) are another motion than the file's rigid
+#: skeleton can hold. Below it (a non-rigid pelvis or chest: about 2 cm before the rigid fit) the
+#: figure is only returned (:attr:`BvhFile.max_error`) and logged at debug level.
 _FK_WARN_M = 0.05
+#: What counts as exact (metres): the 6-decimal text of the file, far below this.
+EXACT_M = 1e-4
+
+
+class BvhFile(type(Path())):
+    """The path of a BVH file written by :func:`export_bvh`, with how closely it holds the joints.
+
+    A :class:`pathlib.Path` in every other respect. ``max_error`` and ``mean_error`` (metres) are the
+    largest and mean distances between the joints given to :func:`export_bvh` and the joints a BVH
+    reader gets back from the written file (its text read by :func:`salad_core.bvh.parse_bvh`);
+    ``None`` on paths derived from it.
+    """
+
+    max_error: float | None = None
+    mean_error: float | None = None
+
+    @property
+    def exact(self) -> bool:
+        """Whether a reader gets the joints back to within :data:`EXACT_M` (0.1 mm)."""
+        return self.max_error is not None and self.max_error <= EXACT_M
 
 
 def euler_zyx(rotations) -> np.ndarray:
@@ -136,8 +162,24 @@ def bvh_text(solved: SolvedMotion, skeleton: str | Skeleton = "humanml3d", *, fp
     return "\n".join(lines) + "\n"
 
 
+def bvh_errors(text: str, joints, skeleton: str | Skeleton, *, scale: float = 1.0) -> np.ndarray:
+    """Distances ``(N, J)`` in metres between ``joints`` and what a BVH reader gets from ``text``.
+
+    The text is parsed and its forward kinematics run by :mod:`salad_core.bvh` (joints matched by
+    the names :func:`bvh_text` writes); ``scale`` is the length unit the text was written in.
+    """
+    from salad_core.bvh.reader import parse_bvh
+
+    skel = get_skeleton(skeleton)
+    motion = parse_bvh(text)
+    pos = motion.world_positions()[:, : len(motion.joints)] / scale
+    index = {n: i for i, n in enumerate(motion.joint_names)}
+    order = [index[n] for n in _names(skel)]
+    return np.linalg.norm(pos[:, order] - np.asarray(joints, dtype=np.float64), axis=-1)
+
+
 def export_bvh(joints, skeleton: str | Skeleton, path: str | os.PathLike, fps: float | None = None, *,
-               lengths: str = "motion", scale: float = 1.0) -> Path:
+               lengths: str = "motion", scale: float = 1.0) -> BvhFile:
     """Write a motion as BVH (rotations solved from joint positions).
 
     Parameters
@@ -151,17 +193,20 @@ def export_bvh(joints, skeleton: str | Skeleton, path: str | os.PathLike, fps: f
     fps : float, optional
         Frame rate; default the skeleton's (20 for HumanML3D, frame time 0.05 s).
     lengths : {"motion", "target"}
-        Rest bone lengths: the motion's median lengths (reproduces the joints exactly when bone
-        lengths are constant) or the skeleton's target lengths.
+        Rest bone lengths: the motion's own (its median bone lengths and its branches' rigid
+        geometry: reproduces the joints exactly when bone lengths are constant and the branches
+        rigid) or the skeleton's target lengths.
     scale : float
         Length unit factor (1 = metres; Blender's importer reads 1 unit = 1 m).
 
     Returns
     -------
-    Path
-        The written file. When forward kinematics of the file misses the input by more than 1 cm
-        (bones that change length, or a non-rigid pelvis/chest in generated data) this is logged:
-        as information up to 5 cm, as a warning beyond.
+    BvhFile
+        The written file's path, with ``max_error`` / ``mean_error``: how far (metres) the joints
+        a BVH reader gets back from the file are from ``joints``. 0 to float precision for joints
+        with constant bone lengths and rigid branches (the pipeline's ``"fit"`` recovery); for
+        other joints the file holds the closest rigid skeleton, and the figure says how close
+        (logged as a warning only beyond 5 cm: bones that stretch, raw position features).
     """
     skel = get_skeleton(skeleton)
     motion = as_joints(joints, skel)
@@ -173,15 +218,21 @@ def export_bvh(joints, skeleton: str | Skeleton, path: str | os.PathLike, fps: f
         raise ValueError(f"scale must be a positive finite number (1 = metres), got {scale!r}")
     _check_bones(motion, skel)
     solved = solve_rotations(motion, skel, lengths=lengths)
-    err = fk_error(solved, motion)
-    if err > _FK_NOTE_M:
-        log.log(logging.WARNING if err > _FK_WARN_M else logging.INFO,
-                "BVH reproduces the joints only to %.1f cm (bone lengths vary or the pelvis/chest "
-                "children are not rigid in this motion)", err * 100)
     text = bvh_text(solved, skel, fps=skel.fps if fps is None else float(fps), scale=scale)
+    err = bvh_errors(text, motion, skel, scale=float(scale))
+    max_err, mean_err = float(err.max()), float(err.mean())
+    if max_err > _FK_WARN_M:
+        log.warning("the BVH holds these joints only to %.1f cm (mean %.1f cm): its skeleton is rigid and "
+                    "these joints' bones change length (raw position features? recover joints with "
+                    "salad_core.recovery.recover_joints(features, 'fit'))", max_err * 100, mean_err * 100)
+    elif max_err > EXACT_M:
+        log.debug("BVH %s holds the joints to %.2f cm max, %.2f cm mean (non-rigid branches or bones)",
+                  path, max_err * 100, mean_err * 100)
     with atomic_output(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
-    return Path(path)
+    out = BvhFile(path)
+    out.max_error, out.mean_error = max_err, mean_err
+    return out
 
 
 #: Bones shorter than this (metres, median over the motion) have no direction to solve a rotation from.

@@ -7,21 +7,29 @@ position. HumanML3D joints only give positions, so :func:`solve_rotations` recov
   sideways and the head points up (HumanML3D's raw offsets hang the arms down and point the head
   forward, which imports into Blender as an odd rest pose). Bone lengths are the motion's median
   lengths (or the skeleton's target lengths).
-* **Joints with several children** (pelvis, spine3; KIT's root and chest). Their children are
-  rigid with respect to each other in HumanML3D data (e.g. the two hips and spine1 keep fixed
-  angles), but not at the rest angles of the raw offsets. So the rest offsets of these children
-  keep the motion's own measured geometry (their average direction in a frame built from two of
-  the children), turned as close as possible to the T-pose directions. The joint's rotation is
-  then the least-squares (Kabsch) rotation mapping the rest offsets onto the observed ones, which
-  is exact for HumanML3D data.
+* **Joints with several children** (pelvis -> hips and spine1, spine3 -> neck and collars; KIT's
+  root and chest). Their children move as one rigid body in HumanML3D data and in the pipeline's
+  ``"fit"`` recovery, but not at the rest angles of the raw offsets. So the rest offsets of these
+  children are the motion's own rigid geometry: the Procrustes mean of the children's offsets over
+  the frames (:func:`procrustes_mean`; frame 0's geometry when the group is rigid), turned as a
+  whole as close as possible to the T-pose directions. The joint's rotation is then the
+  least-squares (Kabsch) rotation mapping the rest offsets onto the observed ones: exact for a
+  rigid group, the least-squares compromise for a group that is not.
 * **Joints with one child.** The rotation is the *swing* that moves the rest bone direction (as
   carried by the parent) onto the observed direction, with zero twist relative to the parent:
-  positions do not constrain twist, and zero relative twist keeps limbs from spinning.
+  positions do not constrain twist, and zero relative twist keeps limbs from spinning; a (nearly)
+  half-turn swing, whose smallest-swing axis is undefined, keeps the previous frame's axis, so the
+  twist stays continuous over time.
 * **Leaves** copy their parent's rotation (no child to orient).
 
+Each rotation aims from where the BVH puts the joint (the forward kinematics of the rotations
+solved so far), not from the input's own position of it, so a joint the rigid skeleton cannot
+reach exactly does not pass its error down the chain.
+
 Forward kinematics of the result reproduces the input to float precision when bone lengths are
-constant and multi-child groups are rigid (real HumanML3D data); otherwise the residual is the
-deviation from that, which :func:`fk_error` reports.
+constant and multi-child groups are rigid (real HumanML3D data, the ``"fit"`` recovery);
+otherwise the residual is the deviation from that, which :func:`fk_error` / :func:`fk_errors`
+report.
 """
 from __future__ import annotations
 
@@ -39,6 +47,8 @@ __all__ = [
     "forward_kinematics",
     "solve_rotations",
     "fk_error",
+    "fk_errors",
+    "procrustes_mean",
     "swing_rotation",
     "kabsch",
     "axis_angle_matrix",
@@ -209,26 +219,44 @@ def _measured_lengths(joints: np.ndarray, parents) -> np.ndarray:
     return lengths
 
 
-def _group_rest_offsets(joints: np.ndarray, joint: int, kids, rest_dirs: np.ndarray, lengths: np.ndarray):
-    """Rest offsets of a multi-child joint's children keeping the motion's measured geometry."""
+def procrustes_mean(vectors, *, iterations: int = 20, tol: float = 1e-12) -> np.ndarray:
+    """The rigid template ``(K, 3)`` best fitting per-frame vectors ``(N, K, 3)`` up to a rotation per frame.
+
+    Generalised Procrustes without scaling: start from frame 0, rotate every frame onto the template
+    (Kabsch), average, repeat until the template stops moving. When the vectors are one rigid body
+    turned per frame (``vectors[t] = R_t @ template``) the result is frame 0's geometry exactly;
+    otherwise it is the least-squares rigid body, so that the per-frame fit spreads the residual
+    over all the vectors instead of putting it on some of them.
+    """
+    vec = np.asarray(vectors, dtype=np.float64)
+    tmpl = vec[0].copy()
+    for _ in range(iterations):
+        rot = kabsch(tmpl, vec)                                          # (N, 3, 3): template -> frame
+        new = np.einsum("nji,nkj->nki", rot, vec).mean(axis=0)          # frames turned back, averaged
+        done = float(np.abs(new - tmpl).max()) <= tol * max(1.0, float(np.abs(tmpl).max()))
+        tmpl = new
+        if done:
+            break
+    return tmpl
+
+
+def _group_rest_offsets(joints: np.ndarray, joint: int, kids, rest_dirs: np.ndarray, lengths: np.ndarray | None):
+    """Rest offsets of a multi-child joint's children: the motion's own rigid geometry (the
+    Procrustes mean of the children's offsets, :func:`procrustes_mean`), turned as a whole as close
+    as possible onto the T-pose directions. ``lengths`` (``(J,)``) rescales each offset to a given
+    length (``None``: keep the motion's)."""
     vecs = joints[:, list(kids)] - joints[:, joint][:, None]                 # (N, K, 3)
-    dirs = vecs / np.maximum(np.linalg.norm(vecs, axis=-1, keepdims=True), 1e-9)
-    # frame from the two most orthogonal rest directions (e.g. spine1 and a hip)
-    best, pair = 2.0, (0, 1)
-    for a in range(len(kids)):
-        for b in range(a + 1, len(kids)):
-            d = abs(float(rest_dirs[kids[a]] @ rest_dirs[kids[b]]))
-            if d < best - 1e-9:
-                best, pair = d, (a, b)
-    e1 = dirs[:, pair[0]]
-    e2 = dirs[:, pair[1]] - np.sum(dirs[:, pair[1]] * e1, -1, keepdims=True) * e1
-    e2 /= np.maximum(np.linalg.norm(e2, axis=-1, keepdims=True), 1e-9)
-    frame = np.stack([e1, e2, np.cross(e1, e2)], axis=-1)                    # (N, 3, 3) columns
-    local = np.einsum("nji,nkj->nki", frame, dirs).mean(axis=0)              # (K, 3) in that frame
-    local /= np.linalg.norm(local, axis=-1, keepdims=True)
-    # turn the measured group as close as possible onto the T-pose directions
-    align = kabsch(local, rest_dirs[list(kids)][None])[0]
-    return {c: align @ local[i] * lengths[c] for i, c in enumerate(kids)}
+    tmpl = procrustes_mean(vecs)                                             # (K, 3)
+    norm = np.maximum(np.linalg.norm(tmpl, axis=-1, keepdims=True), 1e-12)
+    # turn the measured group as close as possible onto the T-pose directions (one rotation)
+    align = kabsch(tmpl / norm, rest_dirs[list(kids)][None])[0]
+    out = {}
+    for i, c in enumerate(kids):
+        off = align @ tmpl[i]
+        if lengths is not None:
+            off = off / norm[i, 0] * lengths[c]
+        out[c] = off
+    return out
 
 
 def solve_rotations(joints, skeleton: str | Skeleton = "humanml3d", *, lengths: str = "motion") -> SolvedMotion:
@@ -240,8 +268,9 @@ def solve_rotations(joints, skeleton: str | Skeleton = "humanml3d", *, lengths: 
         Joint positions in metres.
     skeleton : str or Skeleton
     lengths : {"motion", "target"}
-        Bone lengths of the rest offsets: the motion's median lengths (exact FK for any skeleton
-        scale) or the skeleton's target lengths.
+        Bone lengths of the rest offsets: the motion's own (median lengths of the single-child
+        bones, the rigid geometry of the branches: exact FK for any skeleton scale) or the
+        skeleton's target lengths (directions as with ``"motion"``).
 
     Returns
     -------
@@ -265,25 +294,30 @@ def solve_rotations(joints, skeleton: str | Skeleton = "humanml3d", *, lengths: 
     offsets = dirs * bone[:, None]
     for j, ch in enumerate(kids):
         if len(ch) >= 2:
-            for c, off in _group_rest_offsets(pos, j, ch, dirs, bone).items():
+            group = _group_rest_offsets(pos, j, ch, dirs, None if lengths == "motion" else bone)
+            for c, off in group.items():
                 offsets[c] = off
     n, J = pos.shape[:2]
     world = np.empty((n, J, 3, 3))
+    # where the file puts each joint: rotations aim from these (not from the input's own parent
+    # position), so that a joint the rigid skeleton cannot reach exactly does not pass its error on
+    placed = np.empty_like(pos)
     eye = np.broadcast_to(np.eye(3), (n, 3, 3))
     for j in range(J):
         p = parents[j]
         parent_world = eye if p < 0 else world[:, p]
+        placed[:, j] = pos[:, j] if p < 0 else placed[:, p] + np.einsum("nab,b->na", world[:, p], offsets[j])
         ch = kids[j]
         if len(ch) >= 2:
-            observed = pos[:, list(ch)] - pos[:, j][:, None]
+            observed = pos[:, list(ch)] - placed[:, j][:, None]
             world[:, j] = kabsch(offsets[list(ch)], observed)
         elif len(ch) == 1:
             c = ch[0]
-            v = pos[:, c] - pos[:, j]
+            v = pos[:, c] - placed[:, j]
             norm = np.linalg.norm(v, axis=-1, keepdims=True)
             carried = parent_world @ (offsets[c] / max(np.linalg.norm(offsets[c]), 1e-12))
             target = np.where(norm > 1e-9, v / np.maximum(norm, 1e-12), carried)
-            world[:, j] = swing_rotation(carried, target) @ parent_world
+            world[:, j] = _continuous_swing(carried, target) @ parent_world
         else:
             world[:, j] = parent_world
     local = np.empty_like(world)
@@ -293,6 +327,38 @@ def solve_rotations(joints, skeleton: str | Skeleton = "humanml3d", *, lengths: 
     end_sites = {j: dirs[j] * max(0.04, 0.5 * bone[j]) for j in range(1, J) if not kids[j]}
     return SolvedMotion(offsets=offsets, end_sites=end_sites, rotations=local,
                         root_positions=pos[:, 0].copy(), parents=tuple(parents))
+
+
+def _continuous_swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`swing_rotation` of unit vectors ``a`` onto ``b`` ``(N, 3)``, with the axis of
+    (nearly) half-turn swings, where the smallest swing's axis is undefined, taken from the
+    previous frame's axis so that the joint does not spin about its bone from one frame to the next."""
+    rot = swing_rotation(a, b)
+    c = np.sum(a * b, axis=-1)
+    s = np.linalg.norm(np.cross(a, b), axis=-1)
+    flip = np.nonzero((c < 0) & (s < 1e-3))[0]
+    if flip.size == 0:
+        return rot
+    axes = np.cross(a, b)
+    axes /= np.maximum(np.linalg.norm(axes, axis=-1, keepdims=True), 1e-12)
+    for t in flip:
+        if t == 0:
+            continue
+        prev = axes[t - 1] - np.dot(axes[t - 1], a[t]) * a[t]      # last frame's axis, perpendicular to a
+        if np.linalg.norm(prev) < 1e-6:
+            continue
+        prev /= np.linalg.norm(prev)
+        turn = axis_angle_matrix(prev, np.arctan2(s[t], c[t]))
+        # the rotation about ``prev`` by the swing angle takes a close to b; finish with the tiny swing
+        rot[t] = swing_rotation(turn @ a[t], b[t]) @ turn
+        axes[t] = prev
+    return rot
+
+
+def fk_errors(solved: SolvedMotion, joints) -> np.ndarray:
+    """Distances ``(N, J)`` in metres between ``joints`` ``(N, J, 3)`` and the FK of ``solved``."""
+    rec = forward_kinematics(solved.offsets, solved.parents, solved.rotations, solved.root_positions)
+    return np.linalg.norm(rec - np.asarray(joints, dtype=np.float64), axis=-1)
 
 
 def fk_error(solved: SolvedMotion, joints) -> float:

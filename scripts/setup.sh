@@ -15,6 +15,8 @@ fi
 # - the Mesa libraries: off-screen rendering uses the VTK wheel's EGL path;
 # - Debian's Chromium: tests/test_browser.py drives it through Playwright (never `playwright
 #   install`, which would download a browser build of its own); without it that test skips.
+# - Debian's Blender: tests/test_bvh_blender.py reads the BVH files salad writes with Blender's own
+#   importer (measured: 65 s, 178 packages, 74 MB download); without it that test skips.
 APT_UPDATED=0
 apt_install() {  # apt_install WHAT PACKAGE...: quiet; warn and carry on when it fails
   local what=$1; shift
@@ -36,6 +38,9 @@ if ! ldconfig -p | grep 'libEGL.so.1' >/dev/null || ! ldconfig -p | grep 'libOSM
 fi
 if [ ! -x /usr/bin/chromium ]; then
   apt_install "Chromium (tests/test_browser.py will skip)" chromium
+fi
+if ! command -v blender >/dev/null 2>&1; then
+  apt_install "Blender (tests/test_bvh_blender.py will skip)" blender
 fi
 .venv/bin/python -c "import salad_core, torch; print('salad', salad_core.__version__, '| torch', torch.__version__)"
 echo "Set-up done. Activate with: source .venv/bin/activate"

@@ -648,6 +648,131 @@ def test_shipped_test_files_import():
         assert np.median(err) < 0.002 and err.max() < 0.08, (name, np.median(err), err.max())
 
 
+# ----------------------------------------------------------------------------- a real take (bvhtoolbox's MocapBank file)
+MOCAPBANK = DATA / "mocapbank.bvh"
+
+
+@pytest.fixture(scope="module")
+def mocapbank():
+    return read_bvh(MOCAPBANK), import_bvh(MOCAPBANK)
+
+
+def test_a_real_take_keeps_its_own_skeleton_and_floor(mocapbank):
+    """bvhtoolbox's MocapBank take (30 fps, cm; stands, kneels on the right knee, stands up): the import is the take
+    itself, at 20 fps, frame for frame; the HumanML3D-retargeted copy is beside it, with its error."""
+    motion, take = mocapbank
+    assert (take.units, take.up, take.source_frames, take.num_frames) == ("cm", "y", 455, 303)
+    assert take.source_fps == pytest.approx(30.0, rel=1e-4) and take.fps == 20.0
+    # its own bone lengths: the thigh is the file's LeftHip -> LeftKnee offset, 0.49 m (HumanML3D's: 0.39 m)
+    thigh_file = 0.01 * np.linalg.norm(motion.joints[motion.joint_names.index("LeftKnee")].offset)
+    assert thigh_file == pytest.approx(0.488, abs=0.002)
+    for side in ("left", "right"):
+        thigh = np.linalg.norm(take.joints[:, J[f"{side}_knee"]] - take.joints[:, J[f"{side}_hip"]], axis=-1)
+        assert np.abs(thigh - thigh_file).max() < 1e-3 if side == "left" else thigh.std() < 1e-4
+    # frame for frame: every second 20-fps frame is every third file frame (the file's rig through the mapping),
+    # only moved down by the clip's lowest joint (its floor: y = 0)
+    src = take.rig.apply(motion.world_positions() * 0.01)                      # (455, 22, 3) metres, Y up
+    src[..., 1] -= src[..., 1].min()
+    assert np.linalg.norm(take.joints[::2] - src[::3][:152], axis=-1).max() < 1e-3
+    # on its floor: the kneeling knee touches it (1.2 cm), the standing feet stand on it (0.6 cm)
+    knees = take.joints[:, [J["left_knee"], J["right_knee"]], 1].min(1)
+    feet = take.joints[:, [J["left_ankle"], J["right_ankle"], J["left_foot"], J["right_foot"]], 1].min(1)
+    assert knees.min() < 0.02 and np.median(feet) < 0.01 and take.joints[..., 1].min() == 0.0
+    # the retargeted copy (what the features hold): shorter thighs, the knee and the feet off the floor
+    ret = take.retargeted
+    assert ret.shape == take.joints.shape
+    thigh = np.linalg.norm(ret[:, J["left_knee"]] - ret[:, J["left_hip"]], axis=-1)
+    assert thigh == pytest.approx(get_skeleton("humanml3d").bone_lengths[J["left_knee"]], abs=1e-4)
+    assert ret[:, [J["left_knee"], J["right_knee"]], 1].min() > 0.08            # measured 11.1 cm
+    assert np.median(ret[:, [J["left_ankle"], J["right_ankle"], J["left_foot"], J["right_foot"]], 1].min(1)) > 0.04
+    err = take.retarget_error                                                   # measured 9.4 cm mean, 22.9 max
+    assert 8.0 < err.mean_cm < 11.0 and 20.0 < err.max_cm < 26.0, err
+    rec = features_to_joints(take.features())
+    assert rec.shape == (302, 22, 3) and np.abs(rec - ret[:-1]).max() < 1e-4
+
+
+def test_take_in_the_features_frame(mocapbank):
+    """``take_in_features_frame``: the take's own joints placed where the features put the retargeted copy, for
+    errors against the take (salad invert), also for a crop starting later in the take."""
+    from salad_core.bvh import take_in_features_frame
+    from salad_core.eval.metrics import mpjpe
+
+    _, take = mocapbank
+    feats = take.features()
+    for start, n in ((0, 120), (100, 80)):
+        crop = feats[start:start + n]
+        placed = take_in_features_frame(take.joints, crop, start)
+        given = features_to_joints(crop).astype(np.float64)
+        assert placed.shape == given.shape == (n, 22, 3)
+        # the take's bones and shape, turned and moved only: pairwise joint distances per frame unchanged
+        own = take.joints[start:start + n].astype(np.float64)
+        d_own = np.linalg.norm(own[:, :, None] - own[:, None], axis=-1)
+        np.testing.assert_allclose(np.linalg.norm(placed[:, :, None] - placed[:, None], axis=-1), d_own, atol=1e-5)
+        np.testing.assert_allclose(placed[..., 1], own[..., 1], atol=1e-5)          # on its own floor
+        # first roots together horizontally; the root-aligned distance is the retargeting's alone
+        np.testing.assert_allclose(placed[0, 0, [0, 2]], given[0, 0, [0, 2]], atol=1e-5)
+        assert mpjpe(given, placed) == pytest.approx(mpjpe(take.retargeted[start:start + n], _aligned(take.joints)
+                                                           [start:start + n]), abs=2e-3)
+    # on HumanML3D's own skeleton retargeting changes nothing: the take lands on the features' joints
+    walk = rigid(corpus_joints()[:40])
+    placed = take_in_features_frame(walk, joints_to_features(walk)[10:30], 10)
+    assert np.abs(placed - features_to_joints(joints_to_features(walk)[10:30])).max() < 1e-3
+
+
+def _aligned(joints):
+    from salad_core.motion import process_joints
+
+    return process_joints(joints, retarget=False).astype(np.float64)
+
+
+def test_salads_own_bvh_round_trips_frame_for_frame(tmp_path, sample_features):
+    """What salad writes (the pipeline's fit of clip 012314, 100 frames at 20 fps) comes back as 100 frames, each
+    within a centimetre (the floor: the import puts the lowest joint on y = 0; everything else to float precision);
+    also through ``salad import``, whose joints file is the take and whose messages agree on the counts."""
+    from salad_core import cli
+    from salad_core.recovery import recover_joints
+    from salad_viz import export_bvh
+
+    joints = np.asarray(recover_joints(sample_features[:100], "fit"), dtype=np.float64)
+    path = export_bvh(joints, "humanml3d", tmp_path / "clip.bvh")
+    take = import_bvh(path)
+    assert take.source_frames == take.num_frames == 100 and take.rig.style == "smpl" and take.units == "m"
+    floor = joints[..., 1].min()                                              # measured 0.8 cm
+    err = np.linalg.norm(take.joints - joints, axis=-1)
+    assert err.max() < 0.01 and floor < 0.01
+    assert np.abs(take.joints - (joints - [0, floor, 0])).max() < 1e-5
+    out = tmp_path / "imp"
+    assert cli.main(["import", str(path), "--out", str(out), "--no-render"]) == 0
+    np.testing.assert_allclose(np.load(out / "clip_joints.npy"), take.joints, atol=1e-6)
+    assert np.load(out / "clip_features.npy").shape == (99, 263)
+
+
+@pytest.mark.parametrize("frame_time, frames, expected", [
+    ("0.050000", 100, 100), ("0.049999", 100, 100), ("0.050001", 100, 100), ("0.05", 1000, 1000),
+    ("0.049999", 1000, 1000), ("0.033333", 91, 61), ("0.0333333", 91, 61), ("0.008333", 121, 21),
+    ("0.025000", 81, 41), ("0.1", 11, 21),
+])
+def test_resampling_keeps_every_frame(frame_time, frames, expected):
+    """A 20 fps file keeps its frames (also with a rounded Frame Time); other rates give every 20-fps frame
+    of the take, the last one included where the rates divide."""
+    rows = "\n".join(f"{t * 0.01:.4f} 90 0 0 0 {t % 7}" for t in range(frames))
+    text = _GOOD.split("MOTION")[0] + f"MOTION\nFrames: {frames}\nFrame Time: {frame_time}\n" + rows + "\n"
+    text = text.replace("CHANNELS 3 Zrotation Yrotation Xrotation", "CHANNELS 0")
+    text = text.replace("CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation",
+                        "CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation")
+    from salad_core.bvh.convert import _resample
+
+    motion = parse_bvh(text)
+    pos = motion.world_positions()
+    got = _resample(pos, motion.fps, 20.0)
+    assert len(got) == expected
+    # every output frame is the take at its time (x moves 1 cm per source frame); within the rounding of a
+    # Frame Time (1e-4), a 20 fps take is a 20 fps take: its frames as they are
+    ratio = 1.0 / 20.0 / float(frame_time)
+    src_time = np.arange(expected) * (1.0 if abs(ratio - 1) <= 1e-4 else ratio)
+    np.testing.assert_allclose(got[:, 0, 0], np.minimum(src_time, frames - 1) * 0.01, atol=2e-5)
+
+
 def regenerate() -> None:
     """Write the small takes of tests/data/bvh: the first 13 frames of the stored corpus motion in
     this project's export and in each test rig (the rigid version for the rigs)."""
@@ -701,6 +826,14 @@ def test_cli_inverts_and_mirrors_a_bvh_take_with_the_shipped_weights(cmu_take, t
     assert report["input_frames"] == 40 and report["frames"] == 40     # 41 joint frames -> 40 feature frames
     assert f"reconstruction MPJPE {report['errors']['mpjpe_cm']:.2f} cm" in printed
     assert 0 < report["errors"]["mpjpe_cm"] < 20
+    # and against the take itself (its own skeleton), beside the retargeting's own share
+    vs = report["errors_vs_take"]
+    assert set(vs) == {"mpjpe_cm", "mpjpe_global_cm", "retargeting_mpjpe_cm", "retargeting_mpjpe_global_cm"}
+    assert (f"against the take itself (its own bone lengths; the line above is against its copy retargeted to "
+            f"humanml3d, which the model was given): reconstruction MPJPE {vs['mpjpe_cm']:.2f} cm root-aligned, "
+            f"{vs['mpjpe_global_cm']:.2f} cm global") in printed
+    assert 0 < vs["mpjpe_cm"] < 25 and 0 < vs["retargeting_mpjpe_cm"] < 5      # the take is scaled to HumanML3D's size
+    print("vs take", vs, "vs retargeted", report["errors"])
     # the input features are those of the take; the edit differs from the reconstruction
     inp = np.load(out / "my_take_input_features.npy")
     np.testing.assert_allclose(inp, bvh_to_features(cmu_take), atol=1e-5)
@@ -716,6 +849,32 @@ def test_cli_inverts_and_mirrors_a_bvh_take_with_the_shipped_weights(cmu_take, t
     frames = iio.imread(out / "my_take_source_vs_edited.gif", index=None)
     assert frames.shape[0] == 20 and frames.shape[2] > frames.shape[1]    # two panels side by side
     assert frames.std() > 10
+
+
+def test_cli_invert_reports_errors_against_the_take_and_its_retargeted_copy(tmp_path, capsys, single_thread):
+    """``salad invert`` of the real MocapBank take (the kneel, 6-10 s; shipped weights, 5 steps): the errors against
+    the retargeted copy the model was given, and against the take itself, whose thighs are 10 cm longer."""
+    from salad_core import cli
+    from salad_core.bvh import take_in_features_frame
+    from salad_core.eval.metrics import mpjpe
+
+    out = tmp_path / "out"
+    assert cli.main(["-q", "invert", str(MOCAPBANK), "--prompt", "a person kneels down on one knee and stands up",
+                     "--crop", "6:10", "--steps", "5", "--no-render", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    report = json.loads((out / "mocapbank_inversion.json").read_text())
+    assert report["frames"] == report["input_frames"] == 80
+    vs, errors = report["errors_vs_take"], report["errors"]
+    assert f"reconstruction MPJPE {errors['mpjpe_cm']:.2f} cm root-aligned" in printed
+    assert f"reconstruction MPJPE {vs['mpjpe_cm']:.2f} cm root-aligned, {vs['mpjpe_global_cm']:.2f} cm global" in printed
+    # the retargeted input alone is that far from the take (the features' joints against the take's frames 120-199)
+    take = import_bvh(MOCAPBANK)
+    feats = np.load(out / "mocapbank_input_features.npy")
+    placed = take_in_features_frame(take.joints, feats, 120)
+    assert vs["retargeting_mpjpe_cm"] == pytest.approx(100 * mpjpe(features_to_joints(feats), placed), abs=1e-3)
+    assert 6.0 < vs["retargeting_mpjpe_cm"] < 14.0                      # kneeling on 10 cm shorter thighs
+    assert vs["mpjpe_cm"] > errors["mpjpe_cm"]
+    print("mocapbank kneel: vs take", vs, "vs retargeted copy", errors)
 
 
 @pytest.mark.parametrize("extra, name, message", [
@@ -764,7 +923,18 @@ def test_cli_import_converts_a_take_for_the_other_commands(tmp_path, capsys, rig
     assert "rig mixamo (detected)" in printed and "left_collar     <- mixamorig:LeftShoulder" in printed
     feats = np.load(out / "mixamo_features.npy")
     np.testing.assert_allclose(feats, bvh_to_features(path), atol=1e-6)
-    assert np.load(out / "mixamo_joints.npy").shape == (len(walk) - 1, 22, 3)
+    # the take's own joints first (its bone lengths, its floor), the HumanML3D-retargeted copy beside them
+    take = import_bvh(path)
+    np.testing.assert_allclose(np.load(out / "mixamo_joints.npy"), take.joints, atol=1e-6)
+    np.testing.assert_allclose(np.load(out / "mixamo_joints.npy"), _resampled(_upsampled(walk, 30), 30, 20),
+                               atol=1e-3)          # the 30 fps take back at 20 fps
+    np.testing.assert_allclose(np.load(out / "mixamo_retargeted_joints.npy"), take.retargeted, atol=1e-6)
+    assert feats.shape == (len(walk) - 1, 263)
+    # the messages agree on the frame counts: 57 frames at 30 fps -> 57... (the summary), joints 57, features 56
+    n = len(walk)
+    assert f"-> {n} at 20 fps" in printed and f"\n{n} frames at 20 fps ({n / 20:.2f} s): take joints and " \
+        f"retargeted joints {n} frames, features {n - 1} (one per step between frames)" in printed
+    assert f"{take.retarget_error} from the take (per frame, root and heading aligned)" in printed
     # the converted features go anywhere a features .npy goes, e.g. salad export
     assert cli.main(["-q", "export", str(out / "mixamo_features.npy"), "--format", "bvh", "--out", str(out)]) == 0
     assert bvh_to_joints(out / "mixamo_features.bvh").shape == (len(walk) - 1, 22, 3)

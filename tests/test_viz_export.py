@@ -128,6 +128,108 @@ def test_bvh_rest_pose_is_a_t_pose_in_metres(tmp_path, sample_joints):
     assert np.linalg.norm(elbow) == pytest.approx(SKEL.bone_lengths[j], abs=1e-4)
 
 
+# ----------------------------------------------------------------------------- joints the fit gives
+def rigid_branch_motion(n: int = 60, seed: int = 0) -> np.ndarray:
+    """Joints ``(n, 22, 3)`` with the properties of the pipeline's ``"fit"`` recovery, made here by forward
+    kinematics (written here, independently of salad_viz) of random smooth rotations on a skeleton with SMPL's
+    rest offsets: constant bone lengths, and the children of the pelvis (hips, spine1) and of spine3 (neck,
+    collars) rigid per frame (at SMPL's angles, not the T-pose's). The root turns a full circle."""
+    from scipy.spatial.transform import Rotation
+
+    from salad_core.data.procedural.kinematics import body_model
+
+    offsets = np.asarray(body_model("humanml3d").rest_offsets, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    j = SKEL.num_joints
+    t = np.arange(n) / 20.0
+    amp, freq, phase = rng.uniform(0.2, 1.0, (j, 3)), rng.uniform(0.3, 1.5, (j, 3)), rng.uniform(0, 2 * np.pi, (j, 3))
+    rotvec = amp * np.sin(2 * np.pi * freq * t[:, None, None] + phase)                # (n, J, 3)
+    rotvec[:, 0] = 0.0
+    rotvec[:, 0, 1] = np.linspace(0.0, 2 * np.pi, n, endpoint=False)                   # the root turns around
+    rot = Rotation.from_rotvec(rotvec.reshape(-1, 3)).as_matrix().reshape(n, j, 3, 3)
+    world = np.empty_like(rot)
+    pos = np.empty((n, j, 3))
+    for k, p in enumerate(SKEL.parents):
+        if p < 0:
+            world[:, k] = rot[:, k]
+            pos[:, k] = np.stack([0.8 * t, 0.95 + 0.05 * np.sin(3 * t), 0.3 * t], axis=1)
+        else:
+            world[:, k] = world[:, p] @ rot[:, k]
+            pos[:, k] = pos[:, p] + world[:, p] @ offsets[k]
+    return pos
+
+
+def _own_reader_error(path, joints) -> np.ndarray:
+    """Distances ``(N, J)`` between ``joints`` and salad_core.bvh's reading of the file."""
+    from salad_core.bvh import read_bvh
+
+    motion = read_bvh(path)
+    pos = motion.world_positions()[:, : len(motion.joints)]
+    order = [motion.joint_names.index(n) for n in SKEL.joint_names]
+    return np.linalg.norm(pos[:, order] - joints, axis=-1)
+
+
+def test_bvh_of_joints_with_rigid_branches_is_exact(tmp_path, caplog):
+    """The fit's joints (constant bones, rigid pelvis and chest): any reader gets them back to float precision,
+    the returned figures say so, and nothing is logged."""
+    joints = rigid_branch_motion()
+    ref = joints - joints[:, :1]
+    angle = np.degrees(np.arccos(np.clip((ref[:, 1] * ref[:, 3]).sum(-1) / np.linalg.norm(ref[:, 1], axis=-1)
+                                         / np.linalg.norm(ref[:, 3], axis=-1), -1, 1)))
+    assert np.ptp(angle) < 1e-9 and abs(angle[0] - 90.0) > 5        # rigid, and not at the T-pose's angle
+    with caplog.at_level(logging.DEBUG, logger="salad_viz"):
+        path = export_bvh(joints, SKEL, tmp_path / "rigid.bvh")
+    assert not caplog.records
+    assert path.exact and path.max_error < 1e-5 and path.mean_error <= path.max_error    # measured: 1e-6 m
+    assert path.name == "rigid.bvh" and path.read_text().startswith("HIERARCHY")
+    assert _own_reader_error(path, joints).max() < 1e-5                         # salad_core.bvh
+    assert _check_bvh_reproduces(path, joints, list(range(0, 60, 7)), tol=1e-5) < 1e-5    # PyPI bvh + FK here
+    # in centimetres too
+    path = export_bvh(joints, SKEL, tmp_path / "rigid_cm.bvh", scale=100.0)
+    assert path.max_error < 1e-5
+
+
+def test_bvh_offsets_are_the_motions_own_geometry(tmp_path):
+    """Single-child bones: the T-pose direction at the motion's bone length; the children of the pelvis and of
+    spine3: the motion's rigid geometry (pairwise distances of frame 0), turned as a whole."""
+    import bvh
+
+    joints = rigid_branch_motion(20, seed=3)
+    path = export_bvh(joints, SKEL, tmp_path / "o.bvh")
+    with open(path) as fh:
+        mocap = bvh.Bvh(fh.read())
+    offsets = {n: np.asarray(mocap.joint_offset(n)) for n in SKEL.joint_names[1:]}
+    for j, name in enumerate(SKEL.joint_names[1:], start=1):
+        length = np.linalg.norm(joints[0, j] - joints[0, SKEL.parents[j]])
+        assert np.linalg.norm(offsets[name]) == pytest.approx(length, abs=2e-6), name
+    kids = children_of(SKEL)
+    for j in (0, SKEL.joint_names.index("spine3")):
+        names = [SKEL.joint_names[c] for c in kids[j]]
+        got = np.stack([offsets[n] for n in names])
+        want = joints[0, list(kids[j])] - joints[0, j]
+        np.testing.assert_allclose(np.linalg.norm(got[:, None] - got[None], axis=-1),
+                                   np.linalg.norm(want[:, None] - want[None], axis=-1), atol=2e-6)
+    np.testing.assert_allclose(offsets["left_elbow"] / np.linalg.norm(offsets["left_elbow"]), [1, 0, 0], atol=1e-6)
+
+
+def test_bvh_of_non_rigid_joints_returns_its_error(tmp_path, caplog):
+    """Joints a rigid skeleton cannot hold (the hips and collars wobble a centimetre): the file is the closest
+    rigid skeleton, the returned figure is what a reader gets back, and it is not logged as a fault."""
+    joints = rigid_branch_motion(40, seed=1)
+    rng = np.random.default_rng(0)
+    wobble = joints.copy()
+    for name in ("left_hip", "right_hip", "left_collar", "right_collar"):
+        wobble[:, SKEL.joint_names.index(name)] += rng.normal(scale=0.005, size=(40, 3))
+    with caplog.at_level(logging.INFO, logger="salad_viz"):
+        path = export_bvh(wobble, SKEL, tmp_path / "w.bvh")
+    assert not caplog.records
+    err = _own_reader_error(path, wobble)
+    assert path.max_error == pytest.approx(err.max(), abs=1e-6) and path.mean_error == pytest.approx(err.mean(), abs=1e-6)
+    assert not path.exact and 0.002 < path.max_error < 0.05
+    # the residual stays where the wobble is: each joint is aimed at from where the file puts its parent
+    assert err.mean() < 0.006
+
+
 def test_bvh_warns_when_bones_stretch(tmp_path, caplog):
     walk = synthetic_motion(SKEL, 10)
     wrist = SKEL.joint_names.index("left_wrist")
@@ -136,8 +238,32 @@ def test_bvh_warns_when_bones_stretch(tmp_path, caplog):
     stretched[5:, wrist] += 0.1 * (walk[5:, wrist] - walk[5:, elbow]) / np.linalg.norm(
         walk[5:, wrist] - walk[5:, elbow], axis=-1, keepdims=True)
     with caplog.at_level(logging.WARNING, logger="salad_viz.export"):
-        export_bvh(stretched, SKEL, tmp_path / "s.bvh")
-    assert any("reproduces the joints only to" in r.message for r in caplog.records)
+        path = export_bvh(stretched, SKEL, tmp_path / "s.bvh")
+    assert any("holds these joints only to" in r.message and "bones change length" in r.message
+               for r in caplog.records)
+    assert path.max_error > 0.05
+
+
+def test_export_of_features_gives_generates_joints_and_bvh(make_tiny_pipeline, tmp_path, capsys, single_thread):
+    """``salad export X_features.npy`` (bvh and npy) writes the motion of the ``X_joints.npy`` and ``X.bvh`` that
+    ``salad generate`` wrote for it: the same recovery (the pipeline's default fit), not the raw positions."""
+    from salad_core import cli
+    from salad_core.recovery import DEFAULT_METHOD
+
+    weights = make_tiny_pipeline(seed=0).save_pretrained(tmp_path / "w")
+    gen = tmp_path / "gen"
+    assert cli.main(["-q", "generate", "a person walks", "--length", "24", "--steps", "2", "--no-render",
+                     "--no-attention", "--weights", str(weights), "--out", str(gen)]) == 0
+    stem = "00_a_person_walks"
+    features = gen / f"{stem}_features.npy"
+    for fmt in ("bvh", "npy"):
+        assert cli.main(["-q", "export", str(features), "--format", fmt, "--out", str(tmp_path / "exp")]) == 0
+    assert DEFAULT_METHOD == "fit"
+    joints = np.load(gen / f"{stem}_joints.npy")
+    np.testing.assert_allclose(np.load(tmp_path / "exp" / f"{stem}_features.npy"), joints, atol=1e-6)
+    assert (tmp_path / "exp" / f"{stem}_features.bvh").read_text() == (gen / f"{stem}.bvh").read_text()
+    err = _own_reader_error(gen / f"{stem}.bvh", joints.astype(np.float64))
+    print(f"tiny random model: BVH vs its joints {100 * err.max():.3f} cm max")
 
 
 def test_euler_angles_are_continuous():
@@ -169,6 +295,22 @@ def test_rotation_helpers():
     rest = rng.normal(size=(3, 3))
     obs = np.einsum("nij,kj->nki", true, rest)
     np.testing.assert_allclose(kabsch(rest, obs), true, atol=1e-9)
+
+
+def test_half_turn_swings_keep_their_twist_continuous():
+    """A bone swinging through a half turn from its rest direction: the smallest swing's axis is undefined at
+    180 degrees; the solver keeps the previous frame's axis there, so the joint does not spin about its bone."""
+    from salad_viz.kinematics import _continuous_swing
+
+    deg = np.array([176.0, 178.0, 180.0, 182.0, 184.0])
+    a = np.broadcast_to([0.0, 1.0, 0.0], (5, 3))
+    b = np.einsum("nij,j->ni", axis_angle_matrix(np.array([1.0, 0.0, 0.0]), np.radians(deg)), [0.0, 1.0, 0.0])
+    rot = _continuous_swing(a, b)
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", rot, a), b, atol=1e-9)
+    step = [np.degrees(np.arccos(np.clip((np.trace(rot[t].T @ rot[t + 1]) - 1) / 2, -1, 1))) for t in range(4)]
+    assert max(step) < 2.5, step                          # 2 degrees a frame, as the bone moves
+    plain = swing_rotation(a, b)                          # the smallest swing alone turns 180 degrees at 180
+    assert np.degrees(np.arccos(np.clip((np.trace(plain[1].T @ plain[2]) - 1) / 2, -1, 1))) > 90
 
 
 def test_rest_pose_and_synthetic_motion_geometry():

@@ -1,4 +1,4 @@
-"""BVH files to HumanML3D joints and features; one loader for every motion file the CLI accepts.
+"""BVH files to joints (the take's own and HumanML3D's) and features; one loader for every motion file.
 
 :func:`import_bvh` runs the whole conversion:
 
@@ -14,13 +14,18 @@
    by more than a factor 1.6 (unusual units such as the CMU conversion's 1/0.45 inch), the rig is
    scaled to that target length and the unit is reported as ``"fit"``; ``units=`` overrides;
 5. resample to ``fps`` (20, HumanML3D's rate) from the file's Frame Time, linearly in joint
-   positions (when the rates divide, every output frame is a source frame);
+   positions (when the rates divide, every output frame is a source frame; a file already at
+   ``fps`` keeps every frame);
 6. put the lowest joint of the clip (the lowest foot, in any upright motion) on the floor,
    ``y = 0``, as HumanML3D does.
 
-The joints keep the take's horizontal position and heading. :func:`bvh_to_features` then runs
-:func:`salad_core.motion.joints_to_features`, which itself retargets the bone lengths to the
-target skeleton, puts the first frame's root at the origin and turns it to face +Z.
+The result, :attr:`BvhImport.joints`, is **the take itself**: its own bone lengths, its horizontal
+position and heading, on its floor. Beside it, :attr:`BvhImport.retargeted` is the copy on
+HumanML3D's target skeleton that the models see (:func:`salad_core.motion.process_joints`: bone
+directions kept, lengths replaced, the root path scaled by the leg-length ratio, first frame at the
+origin facing +Z), and :attr:`BvhImport.retarget_error` says how far that copy is from the take
+(per-frame root-aligned, after the same heading alignment). :meth:`BvhImport.features` are the
+retargeted copy's HumanML3D features (one fewer frame than the joints: they hold velocities).
 """
 from __future__ import annotations
 
@@ -28,19 +33,22 @@ import logging
 import math
 import os
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 
-from salad_core.motion import check_features, check_joints, features_to_joints, joints_to_features
+from salad_core.motion import (check_features, check_joints, features_to_joints, joints_to_features,
+                               process_joints)
 from salad_core.skeleton import get_skeleton
 
 from .reader import BvhMotion, read_bvh
 from .rigs import HML_NAMES, RigMapping, map_rig
 
 __all__ = ["BvhImportOptions", "BvhImport", "import_bvh", "bvh_to_joints", "bvh_to_features", "LoadedMotion",
-           "load_motion", "JointsConversionError", "UNITS", "UP_AXES", "TARGET_STATURE", "stature"]
+           "load_motion", "JointsConversionError", "UNITS", "UP_AXES", "TARGET_STATURE", "stature",
+           "retargeted_joints", "take_in_features_frame", "retarget_error", "RetargetError"]
 
 #: Metres per file unit of the length units :func:`import_bvh` knows.
 UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "ft": 0.3048}
@@ -135,15 +143,92 @@ class BvhImportOptions:
             object.__setattr__(self, "name_map", os.fspath(self.name_map))
 
 
+@dataclass(frozen=True)
+class RetargetError:
+    """How far the HumanML3D-retargeted copy of a take is from the take, in centimetres.
+
+    Per frame, both are root-aligned (each pose's pelvis subtracted) after the same heading
+    alignment (first frame facing +Z); ``mean_cm`` averages over joints and frames, ``max_cm`` is
+    the largest joint distance.
+    """
+
+    mean_cm: float
+    max_cm: float
+
+    def __str__(self) -> str:
+        return f"{self.mean_cm:.1f} cm mean, {self.max_cm:.1f} cm max"
+
+
+def retargeted_joints(joints: np.ndarray, skeleton="humanml3d") -> np.ndarray:
+    """The HumanML3D-retargeted copy ``(N, 22, 3)`` float32 of a take's joints: target bone lengths,
+    on the floor, first frame's root at the origin facing +Z (:func:`salad_core.motion.process_joints`;
+    what :func:`~salad_core.motion.joints_to_features` encodes, one frame more)."""
+    return process_joints(np.asarray(joints, dtype=np.float64), skeleton)
+
+
+def _aligned(joints: np.ndarray, skeleton="humanml3d") -> np.ndarray:
+    """The take's joints in the retargeted copy's frame (floor, origin, facing +Z), bones unchanged."""
+    return process_joints(np.asarray(joints, dtype=np.float64), skeleton, retarget=False).astype(np.float64)
+
+
+def retarget_error(joints: np.ndarray, skeleton="humanml3d") -> RetargetError:
+    """:class:`RetargetError` of the retargeted copy (:func:`retargeted_joints`) of ``joints`` ``(N, J, 3)``."""
+    take = _aligned(joints, skeleton)
+    ret = retargeted_joints(joints, skeleton).astype(np.float64)
+    d = np.linalg.norm((ret - ret[:, :1]) - (take - take[:, :1]), axis=-1)
+    return RetargetError(float(d.mean() * 100.0), float(d.max() * 100.0))
+
+
+def _yaw(src: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """The rotation ``(3, 3)`` about +Y that best turns the horizontal spread of ``src`` onto ``ref``
+    (same shape ``(..., 3)``; least squares over every point after centring)."""
+    a = src[..., [0, 2]].reshape(-1, 2)
+    b = ref[..., [0, 2]].reshape(-1, 2)
+    a = a - a.mean(0)
+    b = b - b.mean(0)
+    # rotation about y by t: x' = cos t x + sin t z, z' = -sin t x + cos t z
+    sin = float((a[:, 1] * b[:, 0] - a[:, 0] * b[:, 1]).sum())
+    cos = float((a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]).sum())
+    t = math.atan2(sin, cos)
+    c, s_ = math.cos(t), math.sin(t)
+    return np.array([[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]])
+
+
+def take_in_features_frame(joints: np.ndarray, features: np.ndarray, start: int = 0,
+                           skeleton="humanml3d") -> np.ndarray:
+    """A take's own joints placed where ``features_to_joints(features)`` puts its retargeted copy.
+
+    ``features`` ``(n, 263)`` are (a crop starting at joint frame ``start`` of) the take's features,
+    ``joints_to_features(joints)[start:start + n]``. The result ``(n, 22, 3)`` float64 is
+    ``joints[start:start + n]`` with the take's own bone lengths, on its floor, turned about the
+    vertical as the features' joints are and with its first root on theirs (horizontally): the
+    reference for errors "against the take" of anything made from the features.
+    """
+    feats = np.asarray(features)
+    n = int(feats.shape[0])
+    if not (0 <= start and start + n <= len(joints)):
+        raise ValueError(f"features of {n} frames from frame {start} do not fit a take of {len(joints)} frames")
+    ref = np.asarray(features_to_joints(feats, skeleton), dtype=np.float64)
+    ret = retargeted_joints(joints, skeleton).astype(np.float64)[start:start + n]
+    take = _aligned(joints, skeleton)[start:start + n]
+    rot = _yaw(ret, ref)                        # the features' heading (exact: a rigid turn of ret)
+    out = take @ rot.T
+    shift = ref[0, 0] - out[0, 0]
+    out[..., 0] += shift[0]
+    out[..., 2] += shift[2]
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class BvhImport:
-    """A BVH take converted to HumanML3D joints.
+    """A BVH take converted to the 22 HumanML3D joints.
 
     Attributes
     ----------
     joints : ndarray (N, 22, 3) float32
-        HumanML3D joints, metres, +Y up, lowest joint on y = 0, at ``fps``; the take's own
-        horizontal position and heading.
+        The take itself: its own bone lengths, metres, +Y up, lowest joint of the clip on y = 0, at
+        ``fps``; the take's own horizontal position and heading. (``salad import`` writes these as
+        ``<take>_joints.npy``.)
     fps : float
     source_fps : float
         The file's frame rate (1 / Frame Time).
@@ -157,6 +242,9 @@ class BvhImport:
         Which of ``"units"``, ``"up"``, ``"rig"`` were detected rather than given.
     rig : RigMapping
     path : str
+
+    Derived: :attr:`retargeted` (the copy on HumanML3D's skeleton, ``N`` frames), :attr:`retarget_error`
+    (its distance from the take), :meth:`features` (``N - 1`` frames).
     """
 
     joints: np.ndarray
@@ -174,8 +262,20 @@ class BvhImport:
     def num_frames(self) -> int:
         return int(self.joints.shape[0])
 
+    @cached_property
+    def retargeted(self) -> np.ndarray:
+        """``(N, 22, 3)`` float32: the take on HumanML3D's target skeleton (:func:`retargeted_joints`):
+        what the features hold (``features_to_joints(self.features()) == self.retargeted[:-1]``)."""
+        return retargeted_joints(self.joints)
+
+    @cached_property
+    def retarget_error(self) -> RetargetError:
+        """How far :attr:`retargeted` is from the take (:func:`retarget_error`)."""
+        return retarget_error(self.joints)
+
     def features(self) -> np.ndarray:
-        """``(N-1, 263)`` HumanML3D features (:func:`salad_core.motion.joints_to_features`)."""
+        """``(N-1, 263)`` HumanML3D features of the retargeted take
+        (:func:`salad_core.motion.joints_to_features`; one fewer than the joints: velocities)."""
         if self.num_frames < 2:
             raise ValueError(f"{self.path}: the take has {self.num_frames} frame at {self.fps:g} fps; features "
                              "need at least 2")
@@ -231,18 +331,27 @@ def _detect_units(size: float) -> tuple[str, float]:
     return name, per
 
 
+#: Frame Times are written with few decimals (``0.033333`` for 30 fps, ``0.049999`` for 20), so a take
+#: may look a little shorter or longer than it is: rates within this relative difference of the output
+#: rate count as that rate (the frames are kept as they are), and an output frame at most this fraction
+#: of the take's duration (or 0.01 frame) past its last frame is kept (it is the last frame).
+_RATE_SLACK = 1e-4
+
+
 def _resample(joints: np.ndarray, src_fps: float, fps: float) -> np.ndarray:
     """Linear resampling over time of ``(N, J, 3)`` from ``src_fps`` to ``fps`` (first frame kept).
 
-    Frame times written with few decimals (``0.033333`` for 30 fps) make the take a hair shorter
-    than its frame count says; a relative slack of 1e-4 keeps the last frame that such rounding
-    would drop (it is then the last source frame).
+    Output frame ``k`` is at source position ``k * src_fps / fps``; there are as many as fit in the
+    take, up to the rounding slack :data:`_RATE_SLACK`. A take already at ``fps`` (up to that
+    rounding) keeps every frame as it is: a 20 fps file neither loses nor gains a frame.
     """
     n = joints.shape[0]
-    if n == 1 or abs(src_fps - fps) < 1e-9 * fps:
+    ratio = src_fps / fps                       # source frames per output frame
+    if n == 1 or abs(ratio - 1.0) <= _RATE_SLACK:
         return joints
-    n_out = int(np.floor((n - 1) / src_fps * fps * (1 + 1e-4) + 1e-9)) + 1
-    pos = np.minimum(np.arange(n_out) * (src_fps / fps), n - 1)
+    span = (n - 1) / ratio                      # the take's duration in output frames
+    n_out = int(math.floor(span * (1.0 + _RATE_SLACK) + 0.01)) + 1
+    pos = np.minimum(np.arange(n_out) * ratio, n - 1)
     k = np.minimum(np.floor(pos + 1e-9).astype(int), n - 1)
     k1 = np.minimum(k + 1, n - 1)
     w = np.clip(pos - k, 0.0, 1.0)[:, None, None]
@@ -250,7 +359,7 @@ def _resample(joints: np.ndarray, src_fps: float, fps: float) -> np.ndarray:
 
 
 def import_bvh(source: str | os.PathLike | BvhMotion, options: BvhImportOptions | None = None, **kwargs) -> BvhImport:
-    """Convert a BVH take to HumanML3D joints (see the module docstring for the steps).
+    """Convert a BVH take to the 22 HumanML3D joints (see the module docstring for the steps).
 
     Parameters
     ----------
@@ -263,6 +372,9 @@ def import_bvh(source: str | os.PathLike | BvhMotion, options: BvhImportOptions 
     Returns
     -------
     BvhImport
+        ``.joints``: the take itself (its bone lengths, on its floor, at ``fps``);
+        ``.retargeted``: its copy on HumanML3D's skeleton, ``.retarget_error`` how far that is;
+        ``.features()``: the copy's HumanML3D features.
 
     Raises
     ------
@@ -307,7 +419,8 @@ def import_bvh(source: str | os.PathLike | BvhMotion, options: BvhImportOptions 
 
 def bvh_to_joints(source: str | os.PathLike | BvhMotion, *, name_map=None, rig: str | None = None,
                   fps: float = 20.0, units: str | float | None = None, up: str | None = None) -> np.ndarray:
-    """HumanML3D joints ``(N, 22, 3)`` (float32, metres, +Y up, on the floor) of a BVH take.
+    """The take's own joints ``(N, 22, 3)`` (HumanML3D's joints of its rig: float32, metres, +Y up, on the
+    floor, its own bone lengths) of a BVH take.
 
     See :func:`import_bvh` for the arguments; this returns only ``import_bvh(...).joints``.
     """
@@ -330,9 +443,12 @@ class LoadedMotion:
     Attributes
     ----------
     features : ndarray (N, D) float32
-        HumanML3D features (for joints input: of ``N + 1`` joint frames).
+        HumanML3D features (for BVH and joints input: of the retargeted copy of ``N + 1`` joint
+        frames).
     joints : ndarray (M, J, 3) float32
-        The joints as given (BVH: as imported; joints .npy: as stored; features .npy: recovered).
+        The joints as given: for a BVH file the take itself (:attr:`BvhImport.joints`: its own bone
+        lengths, on its floor; ``M = N + 1``); for a joints .npy as stored (``M = N + 1``); for a
+        features .npy the position features' joints (``features_to_joints``, ``M = N``).
     kind : {"bvh", "features", "joints"}
     path : Path
     bvh : BvhImport or None
