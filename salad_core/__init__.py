@@ -11,10 +11,12 @@ pipeline       ``SaladPipeline``: text -> motion, ``edit``, ``invert``; the ship
 sampling       diffusion schedules, classifier-free guidance and the one denoising loop
 models         the networks: skeleto-temporal VAE, skeleton-aware denoiser, attention sites and kernels
 attention      cross-attention capture; hooks, caches, patching on every site; the paper's edits and more; inversion
+vocabulary     what the weights were trained to read: training vocabularies, unknown-word checks and warnings
 text           text encoders (CLIP, MiniLM) behind the ``TextEncoder`` protocol, word <-> token maps
 skeleton       the HumanML3D and KIT-ML skeletons: joints, the 7 body parts, the feature layout
 motion         joints <-> 263-d features (``recover_from_ric``), mirroring, normalisation
 recovery       joints from decoded features with fixed bone lengths and planted feet (``out.joints``)
+side_check     the sides a prompt names and a motion uses; when mirroring makes them agree
 part_activity  how much each body part moves (part speeds, each in the part's own frame)
 quaternion     quaternion and rotation-matrix helpers for numpy and torch
 retarget       re-pose a motion on another rig's rigid torso (HumanML3D's), every limb kept
@@ -23,7 +25,7 @@ data           the HumanML3D layout and loaders; ``data.procedural``: the embedd
 train          trainers of the VAE and the denoiser (one ``fit`` loop), configs, batching, latent cache
 keymotion      KeyMotion: keyframe selection, keyframe VAE, Parallel Skip Transformer, MMAE, pipeline
 eval           T2M evaluator and metrics, the protocol, tables, the paper's numbers, physics benchmark
-ablations      the paper's ablation models (Tables 2-3, supplement Tables 2-4), trained small
+ablation_models the shipped ablation models (Tables 2-3, supplement Tables 2-4) and the study's reading
 bench          ``salad bench``: speed, roofline fraction, overheads, memory, training rate
 io             safe, atomic checkpoint and output files (safetensors with their configs)
 allocator      keep freed memory for reuse (glibc ``mallopt``), as the ``salad`` command does

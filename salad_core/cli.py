@@ -169,9 +169,11 @@ def _has_words(text: str) -> bool:
     return any(ch.isalnum() for ch in text)
 
 
-def _attention_figure(out: Path, stem: str, result, b: int, force: bool) -> Path | None:
+def _attention_figure(out: Path, stem: str, result, b: int, force: bool, normalize: str = "global") -> Path | None:
     """The Fig. 6-style per-word heatmap grid of sample ``b`` (needs captured attention): one panel
-    per content word, repeated words told apart by their index in the prompt."""
+    per content word, repeated words told apart by their index in the prompt, words the weights never
+    saw in training marked "(unknown)"; ``normalize``: one colour scale for all panels ("global") or
+    each panel to its own maximum ("each"). None when there is nothing to draw (:func:`_no_figure_reason`)."""
     if result.attention is None:
         return None
     import numpy as np
@@ -187,7 +189,9 @@ def _attention_figure(out: Path, stem: str, result, b: int, force: bool) -> Path
     keep = [i for i, w in enumerate(words) if w not in _FUNCTION_WORDS] or list(range(len(words)))
     # (P, N', W) word maps; the panels pick words by position, so repeated words are fine
     stacked = np.stack([maps.word_map(b, i) for i in range(len(words))], axis=-1)
-    fig = plot_attention_grid(stacked, words, word_ids=keep, prompt=result.texts[b])
+    unknown = getattr(result, "unknown_words", None)
+    fig = plot_attention_grid(stacked, words, word_ids=keep, prompt=result.texts[b], normalize=normalize,
+                              unknown_words=unknown[b] if unknown else ())
     import matplotlib.pyplot as plt
 
     try:
@@ -196,6 +200,15 @@ def _attention_figure(out: Path, stem: str, result, b: int, force: bool) -> Path
     finally:
         plt.close(fig)
     return path
+
+
+def _no_figure_reason(result, b: int) -> str:
+    """Why :func:`_attention_figure` drew nothing for sample ``b``."""
+    if result.attention is None:
+        return "no attention maps were captured"
+    if not result.attention.words(b):
+        return "the prompt has no English (a-z) words, the words attention maps are drawn for"
+    return "nothing to draw"
 
 
 # ----------------------------------------------------------------------------- generate / demo
@@ -313,11 +326,26 @@ def _note(args: argparse.Namespace, text: str, kind: str = "note") -> None:
     print(f"salad {getattr(args, 'command', '')}: {kind}: {text}", file=sys.stderr)
 
 
+def _note_unknown_words(args: argparse.Namespace, pipe, prompts: list[str], labels: list[str] | None = None) -> None:
+    """One line per prompt holding words the weights never saw in training (their ``vocabulary.json``) or
+    text in another script or emoji; the pipeline's own UnknownWordsWarning is turned off, so it is said once.
+    A prompt without any word already got its own line ("has no words")."""
+    from salad_core.vocabulary import check_prompt, describe_unknown
+
+    pipe.warn_unknown_words = False
+    for b, p in enumerate(prompts):
+        check = check_prompt(p, getattr(pipe, "vocabulary", None))
+        if check and _has_words(p):
+            _note(args, describe_unknown(check, labels[b] if labels else b, getattr(pipe, "vocabulary_source", None)),
+                  kind="warning")
+
+
 def _generate_stems(texts: list[str]) -> list[str]:
     return [f"{b:02d}_{_slug(text)}" for b, text in enumerate(texts)]
 
 
 def cmd_generate(args: argparse.Namespace) -> int:
+    from salad_core.data.texts import split_words
     from salad_core.pipeline import validate_prompts
 
     try:
@@ -333,11 +361,16 @@ def cmd_generate(args: argparse.Namespace) -> int:
     for b, p in enumerate(prompts):
         if attention and not figures[b]:
             _note(args, f"prompt {b} {p!r} has no words: no attention figure for it", kind="warning")
+        elif figures[b] and not split_words(p):     # e.g. another script: the maps are drawn per a-z word
+            figures[b] = False
+            _note(args, f"prompt {b} {p!r} has no English (a-z) words, the words attention maps are drawn for: "
+                        "no attention figure for it", kind="warning")
     # every file of the run is checked before anything is written
     stems = _generate_stems(prompts)
     _outputs(out, [name for st in stems for name in _motion_file_names(st, gif=not args.no_render)]
              + [f"{st}_attention.png" for st, fig in zip(stems, figures) if fig], args.force, write=False)
     pipe = _load_pipeline(args.weights)
+    _note_unknown_words(args, pipe, prompts)
     guidance = _guidance(args, pipe)
     _say_guidance(args, guidance)
     result = pipe(prompts, lengths=args.length, seed=args.seed, guidance_scale=guidance,
@@ -349,8 +382,11 @@ def cmd_generate(args: argparse.Namespace) -> int:
         files = _write_motion_files(out, stem, result.features[b, :n], result.joints[b], pipe.skeleton,
                                     force=args.force, gif=not args.no_render, bvh=True, title=text)
         if figures[b]:
-            fig = _attention_figure(out, stem, result, b, args.force)
+            fig = _attention_figure(out, stem, result, b, args.force, normalize=getattr(args, "normalize", "global"))
             files += [fig] if fig else []
+            if not fig:
+                _note(args, f"prompt {b} {text!r}: no attention figure ({_no_figure_reason(result, b)})",
+                      kind="warning")
         print(f"{text!r} ({n} frames): " + ", ".join(str(f) for f in files))
     return 0
 
@@ -365,17 +401,18 @@ def _generate_keymotion(args: argparse.Namespace, prompts: list[str]) -> int:
         raise UserError(f"--weights {args.weights} names a SALAD pipeline; with --keymotion give the KeyMotion "
                         "folder as --keymotion DIR (or --keymotion alone for the shipped weights)")
     _check_sampling_args(args, len(prompts), length=False)
-    if not args.no_attention and not args.quiet:
-        _note(args, "KeyMotion has no cross-attention maps: no attention figure is drawn")
     out = _check_out_dir(args.out, args.force)
     stems = _generate_stems(prompts)
     _outputs(out, [name for st in stems for name in _motion_file_names(st, gif=not args.no_render)], args.force,
              write=False)
     source = None if args.keymotion == "shipped" else args.keymotion
     pipe = KeyMotionPipeline.from_pretrained(source, solver=(args.solver or "ddim").lower())
+    _note_unknown_words(args, pipe, prompts)
     if not pipe.num_keyframes <= args.length <= pipe.max_length:
         raise UserError(f"--length {args.length} frames is out of range for KeyMotion; allowed: "
                         f"{pipe.num_keyframes}..{pipe.max_length} (at least its {pipe.num_keyframes} keyframes)")
+    if not args.no_attention:      # also under -q: a figure is never left out silently
+        _note(args, "KeyMotion has no cross-attention maps: no attention figure is drawn")
     guidance = _guidance(args, pipe)
     _say_guidance(args, guidance, source="keymotion.json")
     for b, text in enumerate(prompts):
@@ -518,17 +555,20 @@ def cmd_edit(args: argparse.Namespace) -> int:
                         f"first {len(features) - len(features) % sk.unit_length}")
     out = _check_out_dir(args.out, args.force)
     names = [name for b in ("source", "edited") for name in _motion_file_names(b, gif=False)]
-    _outputs(out, names + ["source_vs_edited.gif"], args.force, write=False)
+    attention = bool(getattr(args, "attention", False))
+    _outputs(out, names + ["source_vs_edited.gif"] + ["edited_attention.png"] * attention, args.force, write=False)
     pipe = _load_pipeline(args.weights)
+    _note_unknown_words(args, pipe, [args.source] + [args.target] * bool(args.target), ["source", "target"])
     guidance = _guidance(args, pipe)
     _say_guidance(args, guidance)
     if features is not None:
         inv = _invert(pipe, features, args.source, args, method="fixed_point", guidance=guidance)
-        result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet)
+        result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet,
+                           capture_attention=attention)
     else:
         result = pipe.edit(args.source, args.target, edits=specs, lengths=args.length, seed=args.seed,
                            guidance_scale=guidance, num_steps=args.steps, solver=args.solver,
-                           progress=not args.quiet)
+                           progress=not args.quiet, capture_attention=attention)
     src, dst = result.source, result.edited
     n = src.lengths[0]
     files = _write_motion_files(out, "source", src.features[0, :n], src.joints[0], pipe.skeleton, force=args.force,
@@ -540,6 +580,11 @@ def cmd_edit(args: argparse.Namespace) -> int:
     (gif,) = _outputs(out, ["source_vs_edited.gif"], args.force)
     files.append(animate([src.joints[0], dst.joints[0]], pipe.skeleton, gif, layout="side",
                          titles=[f"source: {src.texts[0]}", f"edited: {dst.texts[0]}"], size=(240, 240), stride=2))
+    if attention:    # the maps the edited motion used (a negative re-weight: negative, on a diverging scale)
+        fig = _attention_figure(out, "edited", dst, 0, args.force, normalize=args.normalize)
+        files += [fig] if fig else []
+        if not fig:
+            _note(args, f"no attention figure ({_no_figure_reason(dst, 0)})", kind="warning")
     print(f"{src.texts[0]!r} -> {dst.texts[0]!r} with {[type(e).__name__ for e in specs]}: "
           + ", ".join(str(f) for f in files))
     return 0
@@ -587,11 +632,19 @@ def _load_motion_array(motion: str, skeleton: str):
 
 
 def _load_joints(motion: str, skeleton: str):
-    """``(skeleton, joints (N, J, 3), path)`` from a features ``(N, D)`` or joints ``(N, J, 3)`` .npy."""
-    from salad_core.motion import features_to_joints
+    """``(skeleton, joints (N, J, 3), path)`` from a features ``(N, D)`` or joints ``(N, J, 3)`` .npy.
+
+    Features are recovered as the pipeline recovers them (:data:`salad_core.recovery.DEFAULT_METHOD`, the
+    skeleton fit), so that ``salad export`` and ``salad render`` of a ``*_features.npy`` show the joints that
+    ``salad generate`` wrote beside it (and its BVH), not the raw position features."""
+    import numpy as np
+
+    from salad_core.recovery import DEFAULT_METHOD, recover_joints
 
     sk, arr, path = _load_motion_array(motion, skeleton)
-    return sk, (features_to_joints(arr, sk) if arr.ndim == 2 else arr), path
+    if arr.ndim == 2:
+        arr = np.asarray(recover_joints(arr, DEFAULT_METHOD, sk), dtype=np.float32)
+    return sk, arr, path
 
 
 def _load_features(motion: str, skeleton: str):
@@ -622,6 +675,29 @@ def _invert(pipe, features, prompt: str, args: argparse.Namespace, method: str, 
           f"{cm['mpjpe_cm']:.2f} cm root-aligned, {cm['mpjpe_global_cm']:.2f} cm global "
           f"(VAE floor {cm['vae_mpjpe_cm']:.2f} cm)")
     return inv
+
+
+def _take_errors(loaded, features, start: int, reconstruction, skeleton) -> dict[str, float] | None:
+    """Errors (cm) against the take itself, for a .bvh or joints .npy input (``None`` for features): the
+    reconstruction's joints ``(n, J, 3)`` (raw position recovery, as ``inversion.errors``) and the retargeted input's
+    (what the model was given, ``features_to_joints(features)``) against the take's own joints of the same frames
+    (from ``start``), placed in the features' frame (:func:`salad_core.bvh.take_in_features_frame`): MPJPE
+    root-aligned and global."""
+    if loaded.kind == "features" or skeleton.bone_lengths is None:
+        return None
+    import numpy as np
+
+    from salad_core.bvh import take_in_features_frame
+    from salad_core.eval.metrics import mpjpe
+    from salad_core.motion import features_to_joints
+
+    take = take_in_features_frame(loaded.joints, features, start, skeleton)
+    given = np.asarray(features_to_joints(features, skeleton), dtype=np.float64)
+    rec = np.asarray(reconstruction, dtype=np.float64)
+    cm = 100.0 * skeleton.feature_scale
+    return {"mpjpe_cm": cm * mpjpe(rec, take), "mpjpe_global_cm": cm * mpjpe(rec, take, root_aligned=False),
+            "retargeting_mpjpe_cm": cm * mpjpe(given, take),
+            "retargeting_mpjpe_global_cm": cm * mpjpe(given, take, root_aligned=False)}
 
 
 def _errors_cm(errors: dict, skeleton) -> dict[str, float]:
@@ -661,38 +737,68 @@ def _bvh_args(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
-    """Convert a BVH take (or a joints .npy) to HumanML3D features and joints for the other commands."""
+    """Convert a BVH take (or a joints .npy) for the other commands: the take's own joints (its bone lengths, on its
+    floor, 20 fps), their copy retargeted to HumanML3D's skeleton and that copy's features."""
     import numpy as np
 
     from salad_core.io import atomic_path
-    from salad_core.motion import features_to_joints
+    from salad_core.motion import joints_to_features
+    from salad_core.recovery import DEFAULT_METHOD, recover_joints
 
-    sk, loaded, features = _motion_input(args, check_length=False)
+    sk, loaded, features, start = _motion_input(args, check_length=False)
     out = _check_out_dir(args.out, args.force)
     stem = loaded.path.stem
+    retargeted = None
+    if loaded.kind == "features":        # no take: the features' joints, recovered as the pipeline does
+        take = np.asarray(recover_joints(features, DEFAULT_METHOD, sk), dtype=np.float32)
+    else:
+        take = np.asarray(loaded.joints[start:start + len(features) + 1], dtype=np.float32)
+        if len(take) < 2:
+            raise UserError(f"--crop {args.crop} leaves {len(take)} frame of {loaded.path.name}; a motion needs 2")
+        if start or len(take) < len(loaded.joints):     # cropped: the features of exactly these frames
+            features = joints_to_features(take.astype(np.float64), sk)
+        if sk.bone_lengths is not None:
+            from salad_core.bvh import retarget_error, retargeted_joints
+
+            retargeted = retargeted_joints(take, sk)
     names = _motion_file_names(stem, gif=not args.no_render, bvh=False)
+    names += [f"{stem}_retargeted_joints.npy"] if retargeted is not None else []
     paths = _outputs(out, names, args.force)
-    joints = features_to_joints(features, sk)
-    for path, arr in zip(paths[:2], (features, joints)):
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.save(fh, np.asarray(arr, dtype=np.float32))
+    arrays = {f"{stem}_features.npy": features, f"{stem}_joints.npy": take,
+              f"{stem}_retargeted_joints.npy": retargeted}
+    for path in paths:
+        if path.suffix == ".npy":
+            with atomic_path(path) as tmp:
+                with open(tmp, "wb") as fh:
+                    np.save(fh, np.asarray(arrays[path.name], dtype=np.float32))
     if not args.no_render:
         from salad_viz import animate
 
-        animate(joints, sk, paths[2], size=(320, 320), stride=2)
+        animate(take, sk, out / f"{stem}.gif", size=(320, 320), stride=2)
     if loaded.bvh is not None and not args.quiet:
         for hml, src in loaded.bvh.rig.describe().items():
             print(f"  {hml:15s} <- {src}")
-    print(f"{len(features)} frames at {sk.fps:g} fps ({len(features) / sk.fps:.2f} s): " + ", ".join(map(str, paths)))
+    if retargeted is not None:
+        print(f"retargeted to the {sk.name} skeleton (what the features and {stem}_retargeted_joints.npy hold): "
+              f"{retarget_error(take, sk)} from the take (per frame, root and heading aligned)")
+    n = len(take)
+    cropped = f" (--crop {args.crop} from frame {start})" if args.crop is not None else ""
+    if loaded.kind == "features":
+        what = f"joints {n} frames (the pipeline's {DEFAULT_METHOD} recovery of the features), features {len(features)}"
+    else:
+        what = (("take joints and retargeted joints " if retargeted is not None else "joints ")
+                + f"{n} frames, features {len(features)} (one per step between frames)")
+    print(f"{n} frames at {sk.fps:g} fps ({n / sk.fps:.2f} s){cropped}: {what}: " + ", ".join(map(str, paths)))
     return 0
 
 
 def _motion_input(args: argparse.Namespace, check_length: bool = True):
-    """``(skeleton, loaded motion, features to invert)`` from a .bvh take or a .npy of features or joints.
+    """``(skeleton, loaded motion, features to invert, first frame)`` from a .bvh take or a .npy of features or
+    joints.
 
     BVH takes and joints are converted with :func:`salad_core.motion.joints_to_features`
-    (retargeted, on the floor, facing +Z); ``--crop`` then cuts the features (20 fps).
+    (retargeted, on the floor, facing +Z); ``--crop`` then cuts the features (20 fps), which start at
+    frame ``first frame`` of the loaded motion (0 without ``--crop``).
     """
     from salad_core.bvh import JointsConversionError, load_motion
     from salad_core.skeleton import get_skeleton
@@ -727,6 +833,7 @@ def _motion_input(args: argparse.Namespace, check_length: bool = True):
     if top > MAX_FEATURE_MAGNITUDE:      # before any weights load; the inversion would diverge
         raise UserError(f"{path} reaches |value| = {top:.3g}, beyond {MAX_FEATURE_MAGNITUDE:g}: not HumanML3D "
                         "features (metres, radians, metres per frame; of order 1); check its units")
+    i = 0
     if args.crop is not None:
         a, b = _parse_crop(args.crop)
         i, j = int(round(a * sk.fps)), (len(features) if b is None else int(round(b * sk.fps)))
@@ -739,7 +846,7 @@ def _motion_input(args: argparse.Namespace, check_length: bool = True):
         hint = "" if args.crop is not None else "; pick a part with --crop START:STOP (seconds)"
         raise UserError(f"{path} has {len(features)} frames; allowed: {unit}..{max_len} (at {sk.fps:g} fps, "
                         f"{max_len / sk.fps:g} s at most{hint})")
-    return sk, loaded, features
+    return sk, loaded, features, i
 
 
 def cmd_invert(args: argparse.Namespace) -> int:
@@ -749,7 +856,6 @@ def cmd_invert(args: argparse.Namespace) -> int:
 
     from salad_core.attention import INVERSION_METHODS
     from salad_core.io import atomic_write_text
-    from salad_core.motion import features_to_joints
 
     specs = _edit_specs(args, required=False)
     if args.method not in INVERSION_METHODS:
@@ -761,7 +867,7 @@ def cmd_invert(args: argparse.Namespace) -> int:
     if args.iterations is not None and (args.iterations < 0 or (args.method != "ddim" and args.iterations < 1)):
         raise UserError(f"--iterations {args.iterations}: allowed {0 if args.method == 'ddim' else 1} or more "
                         f"for --method {args.method}")
-    sk, loaded, features = _motion_input(args)
+    sk, loaded, features, start = _motion_input(args)
     path = loaded.path
     out = _check_out_dir(args.out, args.force)
     stem = path.stem
@@ -775,6 +881,7 @@ def cmd_invert(args: argparse.Namespace) -> int:
         n = len(features) - len(features) % sk.unit_length
         _note(args, f"the motion has {len(features)} frames, not a multiple of {sk.unit_length}; inverting the first {n}")
     pipe = _load_pipeline(args.weights)
+    _note_unknown_words(args, pipe, [args.prompt] + [args.target] * bool(specs and args.target), ["prompt", "target"])
     if pipe.skeleton.name != sk.name:
         raise UserError(f"the weights are for skeleton {pipe.skeleton.name!r}, the motion was read as {sk.name!r}; "
                         f"pass --skeleton {pipe.skeleton.name}")
@@ -792,6 +899,13 @@ def cmd_invert(args: argparse.Namespace) -> int:
                   exact=args.exact)
     rec = inv.reconstruction
     n = rec.lengths[0]
+    vs_take = _take_errors(loaded, inv.features[0][:n], start, rec.raw_joints[0][:n], pipe.skeleton)
+    if vs_take is not None:
+        print(f"against the take itself (its own bone lengths; the line above is against its copy retargeted to "
+              f"{pipe.skeleton.name}, which the model was given): reconstruction MPJPE "
+              f"{vs_take['mpjpe_cm']:.2f} cm root-aligned, {vs_take['mpjpe_global_cm']:.2f} cm global; the "
+              f"retargeted input alone is {vs_take['retargeting_mpjpe_cm']:.2f} cm root-aligned, "
+              f"{vs_take['retargeting_mpjpe_global_cm']:.2f} cm global from it")
     files += _write_motion_files(out, f"{stem}_reconstruction", rec.features[0, :n], rec.joints[0], pipe.skeleton,
                                  force=args.force, gif=False, bvh=True)
     target, shown = None, rec.joints[0]
@@ -805,7 +919,9 @@ def cmd_invert(args: argparse.Namespace) -> int:
         from salad_viz import animate
 
         (gif,) = _outputs(out, [gif_name], args.force)
-        source = features_to_joints(inv.features[0][:n], pipe.skeleton)
+        from salad_core.recovery import recover_joints
+
+        source = recover_joints(inv.features[0][:n], pipe.recovery, pipe.skeleton)   # as the reconstruction's
         files.append(animate([source, shown], pipe.skeleton, gif, layout="side", titles=["source", branches[-1]],
                              size=(240, 240), stride=2))
     report = {"motion": str(path), "prompt": inv.prompts[0], "frames": n, "input_frames": int(len(features)),
@@ -814,6 +930,8 @@ def cmd_invert(args: argparse.Namespace) -> int:
               "errors": _errors_cm(inv.errors, pipe.skeleton), "weights": pipe.source,
               "edit": None if not specs else {"target": target, "edits": [repr(e) for e in specs]},
               "input": {"kind": loaded.kind, "crop": args.crop}}
+    if vs_take is not None:
+        report["errors_vs_take"] = vs_take
     if loaded.bvh is not None:
         b = loaded.bvh
         report["input"]["bvh"] = {"source_fps": b.source_fps, "source_frames": b.source_frames, "units": b.units,
@@ -860,7 +978,13 @@ def cmd_export(args: argparse.Namespace) -> int:
     sk, arr, path = _load_joints(args.motion, args.skeleton)
     (p,) = _outputs(out, [f"{path.stem}.{args.format}"], args.force)
     fn = {"bvh": export_bvh, "glb": export_glb, "npy": export_npy}[args.format]
-    print(fn(arr, sk, p))
+    written = fn(arr, sk, p)
+    print(written)
+    err = getattr(written, "max_error", None)      # BVH: how far a reader's joints are from these
+    if err is not None and err > 0.005:
+        _note(args, f"{written.name} holds these joints to {100 * err:.1f} cm ({100 * written.mean_error:.2f} cm "
+                    "mean): a BVH skeleton is rigid, and these joints' bones change length or their pelvis or "
+                    "chest is not rigid")
     return 0
 
 
@@ -958,6 +1082,13 @@ def _generation_args(p: argparse.ArgumentParser, length: int) -> None:
     p.add_argument("--force", action="store_true", help="overwrite existing files")
 
 
+def _normalize_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--normalize", choices=["global", "each"], default="global",
+                   help="colour scale of the attention figure's panels: global = one scale for all panels (default; "
+                        "a dim word looks dim), each = every panel to its own maximum (shapes only; brightness does "
+                        "not compare across panels)")
+
+
 def _resolve_sampler(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
     """Fill ``args.solver``/``args.steps`` from ``--preset`` (exclusive with them) or the defaults."""
     if args.preset is not None:
@@ -980,6 +1111,7 @@ def build_parser() -> argparse.ArgumentParser:
              "render it, draw its attention maps, export a BVH", "salad demo --out demo_out")
     d.add_argument("--out", default="salad_demo", help="output folder (default: salad_demo)")
     d.add_argument("--prompt", default=None, help=f"text prompt (default: {DEMO_PROMPT!r})")
+    _normalize_arg(d)
     _generation_args(d, length=120)
 
     g = _sub(sub, "generate", "generate motions from text prompts",
@@ -990,6 +1122,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="do not capture and plot attention maps (by default one NN_<prompt>_attention.png per "
                         "prompt: a 7-part x frame heatmap per content word)")
     g.add_argument("--no-render", action="store_true", help="skip the GIF animation")
+    _normalize_arg(g)
     g.add_argument("--keymotion", nargs="?", const="shipped", default=None, metavar="DIR",
                    help="generate with KeyMotion, the second generator, instead of SALAD: the shipped weights, or "
                         "the KeyMotion pipeline folder DIR (guidance default: its keymotion.json, 7.5 for the shipped; "
@@ -1004,6 +1137,10 @@ def build_parser() -> argparse.ArgumentParser:
     ed.add_argument("--motion", default=None, help="a features .npy (N, 263) to edit instead of a generated one "
                     "(inverted first; see also salad invert)")
     ed.add_argument("--out", required=True, help="output folder (created if missing)")
+    ed.add_argument("--attention", action="store_true",
+                    help="also write edited_attention.png: the cross-attention maps the edited motion used, one panel "
+                         "per content word (a negative re-weight shows on a blue-white-red scale centred at 0)")
+    _normalize_arg(ed)
     _generation_args(ed, length=100)
 
     iv = _sub(sub, "invert", "invert a given motion to noise under its prompt: write its reconstruction and the "
@@ -1033,7 +1170,9 @@ def build_parser() -> argparse.ArgumentParser:
     iv.add_argument("--force", action="store_true", help="overwrite existing files")
 
     im = _sub(sub, "import", "convert a BVH motion-capture take (SMPL, Mixamo, CMU and similar rigs, any frame rate, "
-              "unit and up axis) to HumanML3D features and joints (.npy, 20 fps) and a GIF",
+              "unit and up axis) to the 22 HumanML3D joints at 20 fps: the take's own (its bone lengths, on its "
+              "floor: NAME_joints.npy), a copy retargeted to HumanML3D's skeleton (NAME_retargeted_joints.npy, with "
+              "its distance from the take printed) and that copy's features (NAME_features.npy), and a GIF",
               "salad import my_take.bvh --out takes")
     im.add_argument("motion", help="a .bvh take (or a joints .npy (N, 22, 3))")
     im.add_argument("--out", required=True, help="output folder")

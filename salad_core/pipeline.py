@@ -41,6 +41,8 @@ from salad_core.sampling import DiffusionConfig, Guidance, denoise, make_schedul
 from salad_core.sampling import MAX_GUIDANCE  # noqa: F401  (salad_core.cli imports it from here)
 from salad_core.skeleton import Skeleton
 from salad_core.text import TextBatch, TextEncoder, load_text_encoder
+from salad_core.vocabulary import (UnknownWordsWarning, check_prompt, unknown_words_message, vocabulary_and_source,
+                                   write_vocabulary)
 
 if TYPE_CHECKING:  # pragma: no cover - annotations only: salad_core.attention is imported when used
     from salad_core.attention import AttentionMaps, CaptureConfig, EditController, EditSpec, Inversion
@@ -83,6 +85,9 @@ class MotionOutput:
         Captured attention maps (:class:`salad_core.attention.AttentionMaps`) when requested.
     settings : dict
         Guidance scale, steps, solver: everything needed to regenerate.
+    unknown_words : list of list of str
+        Per prompt, what of it the weights never saw in training (:attr:`SaladPipeline.vocabulary`):
+        unknown words and pieces in another script or emoji, in prompt order; ``[]`` when all known.
     """
 
     features: np.ndarray
@@ -94,6 +99,7 @@ class MotionOutput:
     seeds: list[int]
     attention: AttentionMaps | None = None
     settings: dict = field(default_factory=dict)
+    unknown_words: list[list[str]] = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.texts)
@@ -217,6 +223,14 @@ class SaladPipeline:
     #: large activation of the big batch is page-faulted in anew), but 0.62 s in one batch and
     #: 0.77 s in chunks of 8 with the tuned allocator of :mod:`salad_core.allocator`.
     max_batch: int | None = None
+    #: Words of the captions these weights were trained on (``vocabulary.json`` of the weights folder,
+    #: :func:`salad_core.vocabulary.load_vocabulary`); None: not recorded, so only text in another script,
+    #: emoji and ``[UNK]`` tokens are reported. Prompts with other words warn (:class:`UnknownWordsWarning`).
+    vocabulary: frozenset[str] | None = None
+    #: Where the vocabulary comes from (e.g. "procedural corpus 2.4"), named in the warning.
+    vocabulary_source: str | None = None
+    #: Warn about unknown words (the command line turns it off and prints its own note instead).
+    warn_unknown_words: bool = True
 
     def __init__(self, vae: MotionVAE, denoiser: Denoiser, text_encoder: TextEncoder, mean: np.ndarray,
                  std: np.ndarray, diffusion: DiffusionConfig | None = None, solver: str = "ddim",
@@ -294,9 +308,11 @@ class SaladPipeline:
         except (TypeError, ValueError) as err:
             raise CheckpointError(f"{cfg_path}: bad \"guidance\" entry {cfg.get('guidance')!r} ({err})") from err
         latent_stats = (stats["latent_mean"], stats["latent_std"]) if "latent_mean" in stats else None
-        return cls(vae, denoiser, text_encoder, stats["mean"].numpy(), stats["std"].numpy(), latent_stats=latent_stats,
+        pipe = cls(vae, denoiser, text_encoder, stats["mean"].numpy(), stats["std"].numpy(), latent_stats=latent_stats,
                    diffusion=diffusion, solver=cfg.get("solver", "ddim"), source=str(root), guidance=guidance,
                    recovery=cfg.get("recovery"))
+        pipe.vocabulary, pipe.vocabulary_source = vocabulary_and_source(root)
+        return pipe
 
     def save_pretrained(self, path: str | Path, *, dtype: torch.dtype | None = None, meta: dict | None = None) -> Path:
         """Write this pipeline as a folder that :meth:`from_pretrained` reads."""
@@ -314,6 +330,8 @@ class SaladPipeline:
                "diffusion": config_to_dict(self.diffusion), "solver": self.solver,
                "guidance": asdict(self.guidance), "recovery": self.recovery, "skeleton": self.skeleton.name}
         atomic_write_text(root / "pipeline.json", json.dumps(doc, indent=2) + "\n")
+        if self.vocabulary is not None:     # what the weights can read travels with them
+            write_vocabulary(self.vocabulary, root, source=self.vocabulary_source)
         return root
 
     # ------------------------------------------------------------------ pieces
@@ -327,6 +345,27 @@ class SaladPipeline:
         batch = self.text_encoder.encode(prompts)
         null = self.text_encoder.encode([""], allow_empty=True)
         return batch, null
+
+    def unknown_words(self, text: TextBatch | Sequence[str], *, warn: bool = False, stacklevel: int = 1
+                      ) -> list[list[str]]:
+        """Per prompt, its words outside :attr:`vocabulary` and its pieces in another script or emoji
+        (:func:`salad_core.vocabulary.check_prompt`); with ``warn``, one :class:`UnknownWordsWarning`
+        for the call naming them (and saying which prompts are mostly unknown, or hold ``[UNK]`` tokens)."""
+        checks = self._prompt_checks(text)
+        if warn:
+            self._warn_unknown(checks, stacklevel + 1)
+        return [c.terms for c in checks]
+
+    def _prompt_checks(self, text: TextBatch | Sequence[str]) -> list:
+        prompts = list(text.prompts) if isinstance(text, TextBatch) else validate_prompts(text)
+        tokens = list(text.tokens) if isinstance(text, TextBatch) else [None] * len(prompts)
+        return [check_prompt(p, self.vocabulary, t) for p, t in zip(prompts, tokens)]
+
+    def _warn_unknown(self, checks: list, stacklevel: int, labels: Sequence[str] | None = None) -> None:
+        """One :class:`UnknownWordsWarning` naming what ``checks`` found (nothing if all is known)."""
+        if self.warn_unknown_words and any(checks):
+            warnings.warn(unknown_words_message(checks, self.vocabulary_source, labels), UnknownWordsWarning,
+                          stacklevel=stacklevel + 1)
 
     def make_noise(self, seeds: Sequence[int], latent_frames: int) -> torch.Tensor:
         """``(B, N', P, Dz)`` standard-normal noise; sample ``b`` from ``torch.Generator(seed_b)``.
@@ -519,6 +558,7 @@ class SaladPipeline:
         else:
             noise = _check_noise(noise, (len(prompts), n_lat, *self.latent_shape))
         text, null = self.encode_text(prompts)
+        unknown = self.unknown_words(text, warn=True, stacklevel=2 + caller_depth)
         uncond = self.denoiser.prepare_text(null.features, null.mask)
         settings = dict(_guidance_settings(guidance), num_steps=int(num_steps), solver=solver or self.solver,
                         weights=self.source, **self._output_settings())
@@ -540,7 +580,8 @@ class SaladPipeline:
             latents = self._denoise_in_chunks(text, uncond, noise, lengths, guidance, int(num_steps),
                                               solver or self.solver, progress)
         feats, joints = self.decode(latents, lengths)
-        return MotionOutput(feats, joints, prompts, lengths, latents, noise, seeds, attention, settings), text
+        return MotionOutput(feats, joints, prompts, lengths, latents, noise, seeds, attention, settings,
+                            unknown_words=unknown), text
 
     def _denoise_hooked(self, text: TextBatch, uncond: TextContext, noise: torch.Tensor, lengths: Sequence[int],
                         guidance: Guidance, num_steps: int, solver: str, progress: bool,
@@ -690,6 +731,11 @@ class SaladPipeline:
         _check_edit_does_something(edits, prompts, targets, WordSwap, Refine)
         text_src, null = self.encode_text(prompts)
         text_tgt = text_src if targets == prompts else self.text_encoder.encode(targets)
+        checks = {"source": self._prompt_checks(text_src), "edited": self._prompt_checks(text_tgt)}
+        self._warn_unknown(checks["source"] + checks["edited"] * (text_tgt is not text_src), 2,
+                           [f"{kind} {b}" for kind in ("source", "target")[:1 + (text_tgt is not text_src)]
+                            for b in range(len(prompts))])
+        unknown = {branch: [c.terms for c in cs] for branch, cs in checks.items()}
         if inversion is not None and inversion.null_texts is not None:
             null_schedule = [self.denoiser.prepare_text(f, inversion.null_mask) for f in inversion.null_texts]
             null_width = inversion.null_mask.shape[1]
@@ -722,7 +768,7 @@ class SaladPipeline:
                                                ("edited", run.edited, targets, edited_noise, edited_seeds)):
             feats, joints = self.decode(latents, lengths)
             out.append(MotionOutput(feats, joints, list(texts), list(lengths), latents, z0, s0,
-                                    controller.maps(branch), dict(settings)))
+                                    controller.maps(branch), dict(settings), unknown_words=unknown[branch]))
         settings.update(probe=bool(probe), forward_rows=run.rows, probe_steps=run.probe_steps,
                         cost_vs_generation=run.rows / generation_rows,
                         inversion=None if inversion is None else inversion.method)
@@ -808,6 +854,7 @@ class SaladPipeline:
             latents[b, : f.shape[0] // unit] = self.encode_motion(f)[0]
         mask = self.frame_mask(lengths, n_lat)
         text, null = self.encode_text(prompts)
+        self.unknown_words(text, warn=True, stacklevel=2)
         res = invert_latents(self.denoiser, make_scheduler(self.diffusion, "ddim"), latents,
                              self.denoiser.prepare_text(text.features, text.mask),
                              self.denoiser.prepare_text(null.features, null.mask), mask, method=method,
@@ -873,7 +920,7 @@ class SaladPipeline:
         return MotionOutput(feats, joints, prompts, lengths, run.source, inversion.noise, [], controller.maps("source"),
                             dict(_guidance_settings(w), num_steps=steps, solver="ddim", weights=self.source,
                                  **self._output_settings(),
-                                 inversion=inversion.method))
+                                 inversion=inversion.method), unknown_words=self.unknown_words(text))
 
 
     def _record(self, controller: EditController, capture: bool | CaptureConfig | dict,

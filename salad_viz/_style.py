@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import colorsys
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
@@ -26,11 +27,16 @@ __all__ = [
     "chain_sides",
     "chain_palette",
     "joint_chain",
+    "limb_colors",
     "bone_colors",
     "motion_bone_colors",
     "part_colors",
     "to_rgb",
     "to_uint8",
+    "CaptionFont",
+    "caption_font",
+    "figure_text",
+    "fonts_covering",
 ]
 
 BACKGROUND = (1.0, 1.0, 1.0)
@@ -119,6 +125,20 @@ def joint_chain(skeleton: Skeleton) -> tuple[int, ...]:
     return tuple(fallback if o < 0 else o for o in owner)
 
 
+@lru_cache(maxsize=None)
+def limb_colors(skeleton: Skeleton) -> tuple[tuple[str, str, tuple[float, float, float]], ...]:
+    """``(side, limb, rgb)`` of each left/right chain as :func:`chain_palette` draws it, legs first:
+    e.g. ``("left", "leg", dark blue), ("left", "arm", light blue), ...``. A chain hanging from the root
+    is a leg, one hanging from the trunk an arm (HumanML3D and KIT)."""
+    palette = chain_palette(skeleton)
+    out = []
+    for c, (side, chain) in enumerate(zip(chain_sides(skeleton), skeleton.kinematic_chains)):
+        if side != "mid":
+            limb = "leg" if chain[0] == 0 else "arm"
+            out.append((side, limb, tuple(float(x) for x in palette[c])))
+    return tuple(sorted(out, key=lambda e: (e[0] != "left", e[1] != "leg")))
+
+
 def _theme_colors(skeleton: Skeleton, hue_deg: float) -> np.ndarray:
     """``(C, 3)`` chain colours of one hue: darker for left, lighter for right, mid for spine."""
     lightness = {"left": 0.30, "right": 0.62, "mid": 0.45}
@@ -179,3 +199,199 @@ def part_colors() -> np.ndarray:
 
     cmap = colormaps["tab10"]
     return np.asarray([cmap(i)[:3] for i in range(len(PART_NAMES))], dtype=np.float64)
+
+
+# ----------------------------------------------------------------------------------- text fonts
+#: Fonts never used as a fallback: matplotlib's "Last Resort" draws a box for every character.
+_EXCLUDED_FONTS = ("lastresort",)
+#: What to install when no font has a prompt's characters (named in the warning).
+FONT_HINT = "install a font that has them, e.g. Debian's fonts-noto-cjk or fonts-noto-color-emoji"
+
+
+def _needs_glyph(ch: str) -> bool:
+    """Whether ``ch`` is drawn (letters, digits, punctuation, symbols); spaces, controls, joiners and
+    variation selectors are not."""
+    import unicodedata
+
+    return unicodedata.category(ch)[0] in "LNPS"
+
+
+@lru_cache(maxsize=None)
+def _font_files() -> tuple[str, ...]:
+    """Installed font files (the system's and matplotlib's own), regular styles first."""
+    import matplotlib.font_manager as fm
+
+    files = set(fm.findSystemFonts(fontext="ttf")) | {f.fname for f in fm.fontManager.ttflist}
+    files = {f for f in files if not any(x in f.lower().replace("-", "").replace("_", "") for x in _EXCLUDED_FONTS)}
+    styled = ("bold", "italic", "oblique", "light", "thin", "black", "condensed", "mono", "math", "serif")
+    liked = ("dejavusans", "notosans", "liberationsans", "droidsans", "wqy")
+
+    def key(f: str) -> tuple:
+        name = Path(f).name.lower().replace("-", "").replace("_", "")
+        rank = next((k for k, x in enumerate(liked) if name.startswith(x)), len(liked))
+        return sum(s in name for s in styled), rank, name
+
+    return tuple(sorted(files, key=key))
+
+
+@lru_cache(maxsize=None)
+def _cmap(source) -> frozenset[int]:
+    """Code points a font file (path or bytes) has glyphs for (empty if it cannot be read)."""
+    import io
+
+    from fontTools.ttLib import TTFont
+
+    try:
+        with TTFont(io.BytesIO(source) if isinstance(source, bytes) else source, fontNumber=0, lazy=True) as font:
+            return frozenset(font.getBestCmap() or ())
+    except Exception:  # noqa: BLE001 - an unreadable font is no candidate
+        return frozenset()
+
+
+@lru_cache(maxsize=None)
+def _default_font_bytes() -> bytes | None:
+    """The bytes of Pillow's default scalable font (the one the GIF captions use), if it has any."""
+    from PIL import ImageFont
+
+    try:
+        font = ImageFont.load_default(size=12)
+    except TypeError:       # Pillow without FreeType sizes: a bitmap font
+        return None
+    path = getattr(font, "path", None)
+    return path.getvalue() if hasattr(path, "getvalue") else None
+
+
+def fonts_covering(text: str, base: frozenset[int] = frozenset()) -> tuple[list[str], str]:
+    """Font files for the characters of ``text`` that ``base`` (a cmap) lacks, best first.
+
+    Returns ``(paths, missing)``: installed fonts that have every lacking character (or, if none
+    does, the one that has the most), and the characters no installed font has.
+    """
+    need = {ord(c) for c in text if _needs_glyph(c)} - set(base)
+    if not need:
+        return [], ""
+    scored = []
+    for path in _font_files():
+        have = len(need & _cmap(path))
+        if have:
+            scored.append((-have, path))
+    scored.sort(key=lambda item: item[0])    # stable: the preferred fonts first among equals
+    full = [p for s, p in scored if -s == len(need)]
+    best = full or [p for _, p in scored[:3]]
+    covered = set().union(*(_cmap(p) for p in best)) if best else set()
+    missing = "".join(sorted({chr(c) for c in need - covered}, key=text.index))
+    return best, missing
+
+
+def _replace_missing(text: str, missing: str) -> str:
+    return "".join("?" if c in missing else c for c in text)
+
+
+class CaptionFont:
+    """Pillow fonts to draw one caption: Pillow's default font, then, per character it lacks, the first
+    installed font that has it (CJK from e.g. Noto Sans CJK or Droid Sans Fallback, emoji from an emoji
+    font Pillow can scale). Characters no loadable font has are drawn as ``"?"``, never as tofu boxes,
+    with one UserWarning naming them.
+
+    Attributes
+    ----------
+    text : str
+        The caption as it will be drawn (missing characters replaced by ``"?"``).
+    missing : str
+        The characters that no installed font draws.
+    """
+
+    def __init__(self, text: str, size: int, *, warn: bool = True, stacklevel: int = 2) -> None:
+        import warnings
+
+        from PIL import ImageFont
+
+        try:
+            default = ImageFont.load_default(size=size)
+        except TypeError:      # Pillow without FreeType sizes: a fixed bitmap font
+            default = ImageFont.load_default()
+        raw = _default_font_bytes()
+        base = _cmap(raw) if raw else frozenset(range(32, 127))
+        self.fonts: list = [default]
+        self._cmaps: list[frozenset[int]] = [base]
+        remaining = {ord(c) for c in text if _needs_glyph(c)} - base
+        if remaining:
+            for path in _font_files():
+                cover = remaining & _cmap(path)
+                if not cover:
+                    continue
+                try:
+                    font = ImageFont.truetype(path, size)
+                except OSError:    # e.g. a colour-bitmap emoji font that has one pixel size only
+                    continue
+                self.fonts.append(font)
+                self._cmaps.append(_cmap(path))
+                remaining -= cover
+                if not remaining:
+                    break
+        self.missing = "".join(dict.fromkeys(c for c in text if ord(c) in remaining))
+        self.text = _replace_missing(text, self.missing)
+        if self.missing and warn:
+            warnings.warn(f"the caption {text!r} has characters that no installed font draws ({self.missing}): "
+                          f"drawn as '?'; {FONT_HINT}", UserWarning, stacklevel=stacklevel + 1)
+        metrics = [f.getmetrics() if hasattr(f, "getmetrics") else (size, 0) for f in self.fonts]
+        self.ascent = max(m[0] for m in metrics)
+        self.line_height = self.ascent + max(m[1] for m in metrics) + 2
+
+    def runs(self, text: str) -> list[tuple[object, str]]:
+        """``text`` cut into ``(font, piece)`` runs, each piece drawn by the first font that has it."""
+        out: list[tuple[object, str]] = []
+        for ch in text:
+            k = next((i for i, cm in enumerate(self._cmaps) if ord(ch) in cm), 0) if _needs_glyph(ch) else \
+                (self.fonts.index(out[-1][0]) if out else 0)
+            font = self.fonts[k]
+            if out and out[-1][0] is font:
+                out[-1] = (font, out[-1][1] + ch)
+            else:
+                out.append((font, ch))
+        return out
+
+    def length(self, text: str) -> float:
+        """Width of ``text`` in pixels."""
+        return float(sum(font.getlength(piece) for font, piece in self.runs(text)))
+
+    def draw(self, draw, xy: tuple[float, float], text: str, **kwargs) -> None:
+        """Write ``text`` with its top-left corner at ``xy`` (``kwargs``: ``fill``, ``stroke_width``, ...),
+        every run on one baseline."""
+        x, y = xy
+        for font, piece in self.runs(text):
+            draw.text((x, y + self.ascent), piece, font=font, anchor="ls", **kwargs)
+            x += font.getlength(piece)
+
+
+def caption_font(text: str, size: int, *, warn: bool = True) -> CaptionFont:
+    """:class:`CaptionFont` of ``text`` at ``size`` pixels (warnings point at the caller's caller)."""
+    return CaptionFont(text, size, warn=warn, stacklevel=3)
+
+
+def figure_text(text: str, *, warn: bool = True) -> tuple[str, list[str] | None]:
+    """``(text, fontfamily)`` for a matplotlib title: the families to list (DejaVu Sans, then installed
+    fallbacks that have the characters DejaVu lacks; None when DejaVu has them all), and the text with
+    characters no installed font has replaced by ``"?"`` (warned about), so no glyph is drawn as a box."""
+    import warnings
+
+    import matplotlib.font_manager as fm
+
+    base = _cmap(fm.findfont(fm.FontProperties(family="DejaVu Sans")))
+    paths, missing = fonts_covering(text, base)
+    families = None
+    if paths:
+        families = ["DejaVu Sans"]
+        for path in paths:
+            try:
+                fm.fontManager.addfont(path)
+                name = fm.FontProperties(fname=path).get_name()
+            except Exception:  # noqa: BLE001 - a font matplotlib cannot read is no fallback
+                continue
+            if name not in families:
+                families.append(name)
+        families = families if len(families) > 1 else None
+    if missing and warn:
+        warnings.warn(f"the title {text!r} has characters that no installed font draws ({missing}): drawn as '?'; "
+                      f"{FONT_HINT}", UserWarning, stacklevel=3)
+    return _replace_missing(text, missing), families

@@ -15,9 +15,9 @@ import numpy as np
 from salad_core.skeleton import Skeleton, get_skeleton
 
 from ._arrays import as_joints_list, atomic_output, check_frames_memory, check_size
-from ._style import SIDE_COLORS, THEME_HUES
+from ._style import THEME_HUES, limb_colors
 from .camera import fixed_camera, follow_camera, shared_follow_framing
-from .raster import hstack_images
+from .raster import caption_band, hstack_images
 from .render import SkeletonRenderer
 
 __all__ = ["LAYOUTS", "render_frames", "animate", "write_video", "show_animation"]
@@ -64,8 +64,10 @@ def render_frames(
         of the same size look the same size). ``"overlay"``: all motions in one scene, one colour
         theme each.
     titles : sequence of str, optional
-        One per motion: panel titles (``"side"``) or a legend in the theme colours (``"overlay"``);
-        long titles wrap onto several lines.
+        One per motion: panel titles (``"side"``) or a legend in the theme colours (``"overlay"``),
+        written in a white band *above* the scene (the scene gets the rest of ``size``, so no caption
+        covers the figure); long titles wrap onto several lines (at most 3, then "..."). Characters
+        the default font lacks (CJK, emoji) come from an installed font that has them, else "?".
     size : (width, height)
         Size of one panel in pixels.
     frames : sequence of int, optional
@@ -74,9 +76,12 @@ def render_frames(
         As in :func:`salad_viz.render.render_skeleton`; ``colors`` and ``joint_colors`` take one
         entry per motion.
     side_legend : bool
-        Draw a "left"/"right" key in the chain colours (blue = left, red = right) in the bottom
-        corner, where the motions are drawn in those colours (no ``colors``/``joint_colors``,
-        not an overlay of several motions).
+        Draw a key of the limb colours as drawn ("left: leg arm" in the left leg's and arm's blues,
+        "right: leg arm" in the right's red and orange) in the bottom-left corner, where the motions
+        are drawn in those colours (no ``colors``/``joint_colors``, not an overlay of several motions).
+
+    The following camera keeps every joint of every frame in view (hands raised above the head and
+    jumps included), at one distance for the whole motion.
 
     Returns
     -------
@@ -99,36 +104,53 @@ def render_frames(
     jc = joint_colors
     if jc is not None and not isinstance(jc, (list, tuple)):
         jc = [jc] + [None] * (len(motions) - 1) if len(motions) > 1 else jc
+    # the captions go in a band above the scene (made once: they do not change from frame to frame)
+    bands = _title_bands(titles, w, h, side=side) if titles else None
+    hs = h - (bands[0].shape[0] if bands else 0)
     if side:
-        distance, height = shared_follow_framing(motions, aspect=w / h)
-        shared_fixed = None if follow else fixed_camera(motions, view=view, elevation=elevation, aspect=w / h)
+        distance, height = shared_follow_framing(motions, aspect=w / hs, view=view, elevation=elevation)
+        shared_fixed = None if follow else fixed_camera(motions, view=view, elevation=elevation, aspect=w / hs)
     out = []
-    with SkeletonRenderer(skel, size=(w, h), backend=backend, bone_shape=bone_shape) as r:
+    with SkeletonRenderer(skel, size=(w, hs), backend=backend, bone_shape=bone_shape) as r:
         for f in idx:
             if layout == "overlay" or len(motions) == 1:
                 img = r.render(motions, f, view=view, elevation=elevation, follow=follow, colors=colors,
                                joint_colors=jc, floor=floor, trajectory=trajectory)
-                if titles:
-                    img = _legend(img, titles, themed=len(motions) > 1)
+                if bands:
+                    img = np.concatenate([bands[0], img], axis=0)
             else:
                 panels = []
                 for k, m in enumerate(motions):
                     fk = min(f, len(m) - 1)
                     # one scale for every panel: the same distance and focal height
-                    cam = (follow_camera([m], fk, view=view, elevation=elevation, aspect=w / h, distance=distance,
+                    cam = (follow_camera([m], fk, view=view, elevation=elevation, aspect=w / hs, distance=distance,
                                          height=height) if follow else shared_fixed)
                     panel = r.render(m, fk, camera=cam, view=view, elevation=elevation, follow=follow,
                                      colors=None if colors is None else [colors[k]],
                                      joint_colors=None if jc is None else jc[k], floor=floor,
                                      trajectory=trajectory)
-                    if titles:
-                        panel = _legend(panel, [titles[k]], themed=False)
+                    if bands:
+                        panel = np.concatenate([bands[k], panel], axis=0)
                     panels.append(panel)
                 img = hstack_images(panels, gap=4)
             if side_legend and chain_coloured:
-                img = _side_key(img)
+                img = _side_key(img, skel)
             out.append(img)
     return np.stack(out)
+
+
+def _title_bands(titles: Sequence[str], w: int, h: int, *, side: bool) -> list[np.ndarray]:
+    """Caption bands of one height: one per panel (``side``) or one with every title (themed colours when
+    several motions share the scene)."""
+    if side:
+        bands = [caption_band([t], w, h) for t in titles]
+    elif len(titles) > 1:
+        bands = [caption_band(titles, w, h, colors=[_theme_text_color(k) for k in range(len(titles))],
+                              max_lines=max(1, 4 // len(titles)))]
+    else:
+        bands = [caption_band(titles, w, h)]
+    top = max(b.shape[0] for b in bands)
+    return [np.pad(b, ((0, top - b.shape[0]), (0, 0), (0, 0)), constant_values=255) for b in bands]
 
 
 def _font(h: int):
@@ -140,56 +162,34 @@ def _font(h: int):
         return ImageFont.load_default()
 
 
-def _wrap(draw, text: str, font, width: float, max_lines: int = 3) -> list[str]:
-    """Greedy word wrap of ``text`` to ``width`` pixels; more than ``max_lines`` lines end in "..."."""
-    lines: list[str] = []
-    for word in str(text).split():
-        if lines and draw.textlength(lines[-1] + " " + word, font=font) <= width:
-            lines[-1] += " " + word
-        else:
-            lines.append(word)
-    if len(lines) > max_lines:
-        lines = lines[:max_lines]
-        last = lines[-1]
-        while last and draw.textlength(last + " ...", font=font) > width:
-            last = last[:-1]
-        lines[-1] = last.rstrip() + " ..."
-    return lines or [""]
-
-
-def _side_key(img: np.ndarray) -> np.ndarray:
-    """A "left" (blue) / "right" (red) key of the chain colours in the bottom-left corner."""
+def _side_key(img: np.ndarray, skeleton: Skeleton | None = None) -> np.ndarray:
+    """A key of the limb colours as drawn, in the bottom-left corner: one line per side, ``left: leg arm``
+    with "leg" and "arm" written in that leg's and arm's colours (:func:`salad_viz._style.limb_colors`)."""
     from PIL import Image, ImageDraw
 
+    skel = get_skeleton("humanml3d" if skeleton is None else skeleton)
     h = img.shape[0]
     font = _font(min(h, 240))
     pil = Image.fromarray(np.ascontiguousarray(img))
     draw = ImageDraw.Draw(pil)
-    x, y = 6, h - 6
-    for text, side in (("left", "left"), ("right", "right")):
-        col = tuple(int(round(c * 255)) for c in SIDE_COLORS[side][0])
-        box = draw.textbbox((x, 0), text, font=font)
-        draw.text((x, y - (box[3] - box[1]) - box[1]), text, fill=col, font=font, stroke_width=2,
-                  stroke_fill=(255, 255, 255))
-        x = box[2] + 8
-    return np.asarray(pil).copy()
-
-
-def _legend(img: np.ndarray, titles: Sequence[str], *, themed: bool) -> np.ndarray:
-    """Titles in the top-left corner, each wrapped to the image width (at most 3 lines)."""
-    from PIL import Image, ImageDraw
-
-    h, w = img.shape[:2]
-    font = _font(h)
-    pil = Image.fromarray(np.ascontiguousarray(img))
-    draw = ImageDraw.Draw(pil)
-    y = 4
-    for k, text in enumerate(titles):
-        col = tuple(int(round(c * 255)) for c in (_theme_text_color(k) if themed else (0.1, 0.1, 0.1)))
-        for line in _wrap(draw, str(text), font, w - 12):
-            draw.text((6, y), line, fill=col, font=font, stroke_width=2, stroke_fill=(255, 255, 255))
-            y = draw.textbbox((6, y), line or " ", font=font)[3] + 2
-        y += 1
+    entries = limb_colors(skel)
+    sides = [s for s in ("left", "right") if any(e[0] == s for e in entries)]
+    line_h = draw.textbbox((0, 0), "right:", font=font)[3] + 2
+    label_w = max(draw.textlength(f"{s}:", font=font) for s in sides)
+    width = label_w + 5 + max(sum(draw.textlength(e[1], font=font) + 5 for e in entries if e[0] == s) for s in sides)
+    if line_h * len(sides) > 0.25 * h or 6 + width > 0.75 * img.shape[1]:
+        return img                     # too small a frame: the key would cover the figure
+    y = h - 4 - line_h * len(sides)
+    for side in sides:
+        draw.text((6, y), f"{side}:", fill=(60, 60, 60), font=font, stroke_width=2, stroke_fill=(255, 255, 255))
+        x = 6 + label_w + 5
+        for s, limb, rgb in entries:
+            if s != side:
+                continue
+            col = tuple(int(round(c * 255)) for c in rgb)
+            draw.text((x, y), limb, fill=col, font=font, stroke_width=2, stroke_fill=(255, 255, 255))
+            x += draw.textlength(limb, font=font) + 5
+        y += line_h
     return np.asarray(pil).copy()
 
 

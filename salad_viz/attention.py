@@ -26,6 +26,7 @@ import numpy as np
 from salad_core.skeleton import PART_MIRROR, PART_NAMES, Skeleton, get_skeleton
 
 from ._arrays import to_numpy
+from ._style import figure_text
 
 __all__ = [
     "AXES",
@@ -416,18 +417,36 @@ def _new_axes(ax, figsize):
     return fig, fig.subplots()
 
 
+#: Colour map of signed maps (an edit's re-weighted maps can be negative): blue < 0 < red, white at 0.
+DIVERGING_CMAP = "RdBu_r"
+#: ``normalize`` values: one scale for all panels ("global", alias "shared"), per panel ("each", True), raw.
+NORMALIZE = ("global", "shared", "each", "none")
+#: Title colour of a panel whose word the model never saw in training.
+UNKNOWN_COLOR = "#b2182b"
+
+
 def _normalise(maps: np.ndarray, normalize) -> tuple[np.ndarray, float, float]:
-    """Scale ``(K, P, N')`` maps for display: "each" (per map max), "shared" (common max) or none."""
+    """Scale ``(K, P, N')`` maps for display: "each" (per map max), "global"/"shared" (common max) or none.
+
+    Returns ``(shown, vmin, vmax)``. Maps with negative values (signed, e.g. an edit's negative
+    re-weight) keep their sign and get symmetric limits ``vmin = -vmax``, drawn with a diverging
+    colour map centred at 0 (:func:`_draw_map`); others are clipped at 0 as the official plots do.
+    """
+    signed = bool((maps < 0).any())
+    low = (lambda x: x) if signed else (lambda x: np.clip(x, 0, None))
     if normalize in (True, "each"):
         top = np.abs(maps).reshape(len(maps), -1).max(axis=1)
-        out = np.where(top[:, None, None] > 0, np.clip(maps, 0, None) / np.where(top > 0, top, 1)[:, None, None], 0.0)
-        return out, 0.0, 1.0
-    if normalize == "shared":
+        out = np.where(top[:, None, None] > 0, low(maps) / np.where(top > 0, top, 1)[:, None, None], 0.0)
+        return out, (-1.0 if signed else 0.0), 1.0
+    if normalize in ("global", "shared"):
         top = float(np.abs(maps).max())
-        return (np.clip(maps, 0, None) / top if top > 0 else np.zeros_like(maps)), 0.0, 1.0
+        return (low(maps) / top if top > 0 else np.zeros_like(maps)), (-1.0 if signed else 0.0), 1.0
     if normalize in (False, None, "none"):
+        if signed:
+            lim = float(np.abs(maps).max())
+            return maps, -lim, lim
         return maps, float(min(0.0, maps.min())), float(maps.max()) if maps.max() > 0 else 1.0
-    raise ValueError(f"normalize must be 'each' (True), 'shared' or 'none' (False), got {normalize!r}")
+    raise ValueError(f"normalize must be 'global' ('shared'), 'each' (True) or 'none' (False), got {normalize!r}")
 
 
 def _draw_map(ax, m: np.ndarray, *, fpl: int, cmap, vmin, vmax, title, part_labels: bool, fps=None,
@@ -435,8 +454,14 @@ def _draw_map(ax, m: np.ndarray, *, fpl: int, cmap, vmin, vmax, title, part_labe
     p, n_lat = m.shape
     n_frames = n_lat * fpl
     scale = 1.0 / fps if fps else 1.0
-    im = ax.imshow(m, aspect="auto", cmap=cmap, vmin=vmin, vmax=vmax, interpolation="nearest",
-                   extent=(0, n_frames * scale, p - 0.5, -0.5))
+    if vmin is not None and vmax is not None and vmin < 0 < vmax and np.isclose(-vmin, vmax):
+        from matplotlib.colors import CenteredNorm   # signed: 0 is the centre of the colour map
+
+        limits = dict(norm=CenteredNorm(vcenter=0.0, halfrange=float(vmax)))
+    else:
+        limits = dict(vmin=vmin, vmax=vmax)
+    im = ax.imshow(m, aspect="auto", cmap=cmap, interpolation="nearest",
+                   extent=(0, n_frames * scale, p - 0.5, -0.5), **limits)
     ax.set_yticks(np.arange(p))
     ax.set_yticklabels(part_names if part_labels else [])
     if not part_labels:
@@ -455,7 +480,7 @@ def _draw_map(ax, m: np.ndarray, *, fpl: int, cmap, vmin, vmax, title, part_labe
 def plot_word_attention(maps, word: str | None = None, *, ax=None, skeleton: str | Skeleton = "humanml3d",
                         frames_per_latent: int = 4, normalize="each", cmap: str = "viridis",
                         colorbar: bool = True, part_labels: bool = True, fps: float | None = None,
-                        frame: int | None = None):
+                        frame: int | None = None, diverging_cmap: str = DIVERGING_CMAP):
     """Heatmap of one word: 7 body-part rows (paper order, labelled) x motion time.
 
     Parameters
@@ -470,10 +495,12 @@ def plot_word_attention(maps, word: str | None = None, *, ax=None, skeleton: str
         Checked for consistency; the part names are the paper's 7 parts.
     frames_per_latent : int
         Motion frames per latent column (4 in SALAD); the x axis is in motion frames.
-    normalize : {"each", "shared", "none"} or bool
+    normalize : {"each", "global", "shared", "none"} or bool
         "each"/True divides by the map's maximum (the official plots do), "none" shows raw values.
     cmap : str
         Colormap (viridis, as in the official code).
+    diverging_cmap : str
+        Colormap of a signed map (negative values, e.g. after a negative re-weight), centred at 0.
     colorbar, part_labels : bool
     fps : float, optional
         Label the x axis in seconds instead of frames.
@@ -489,16 +516,17 @@ def plot_word_attention(maps, word: str | None = None, *, ax=None, skeleton: str
     fpl = _check_fpl(frames_per_latent)
     shown, vmin, vmax = _normalise(m[None], normalize)
     fig, ax = _new_axes(ax, (max(3.5, 0.12 * m.shape[1] * fpl / 4 + 2.0), 2.4))
-    im = _draw_map(ax, shown[0], fpl=fpl, cmap=cmap, vmin=vmin, vmax=vmax, title=word,
-                   part_labels=part_labels, fps=fps, frame=frame)
+    im = _draw_map(ax, shown[0], fpl=fpl, cmap=diverging_cmap if vmin < 0 else cmap, vmin=vmin, vmax=vmax,
+                   title=word, part_labels=part_labels, fps=fps, frame=frame)
     if colorbar:
         cb = fig.colorbar(im, ax=ax, fraction=0.05, pad=0.02)
-        cb.set_label(colorbar_label(normalize))
+        cb.set_label(colorbar_label(normalize, signed=vmin < 0))
     return fig
 
 
 def _grid(maps: np.ndarray, titles: Sequence[str], *, ncols, fpl, cmap, normalize, suptitle, panel_size,
-          colorbar, fps=None, row_titles=None, diverging_cols=(), ncols_fixed=None):
+          colorbar, fps=None, row_titles=None, diverging_cols=(), ncols_fixed=None,
+          diverging_cmap: str = DIVERGING_CMAP, marked: Sequence[int] = ()):
     k = len(maps)
     ncols = ncols_fixed or (min(k, 4) if ncols is None else int(ncols))
     if ncols < 1:
@@ -507,29 +535,36 @@ def _grid(maps: np.ndarray, titles: Sequence[str], *, ncols, fpl, cmap, normaliz
     fig = new_figure((panel_size[0] * ncols + 1.2, panel_size[1] * nrows + 0.6))
     axs = fig.subplots(nrows, ncols, squeeze=False)
     shown, vmin, vmax = _normalise(maps, normalize)
+    signed = vmin < 0
     im = None
     for i in range(nrows * ncols):
         ax = axs[i // ncols][i % ncols]
         if i >= k:
             ax.axis("off")
             continue
-        im = _draw_map(ax, shown[i], fpl=fpl, cmap=cmap, vmin=vmin, vmax=vmax, title=titles[i],
-                       part_labels=(i % ncols == 0), fps=fps, xlabel=(i + ncols >= k))
+        im = _draw_map(ax, shown[i], fpl=fpl, cmap=diverging_cmap if signed else cmap, vmin=vmin, vmax=vmax,
+                       title=titles[i], part_labels=(i % ncols == 0), fps=fps, xlabel=(i + ncols >= k))
+        if i in marked:
+            ax.title.set_color(UNKNOWN_COLOR)
     if suptitle:
-        fig.suptitle(_wrap_title(suptitle, panel_size[0] * ncols + 1.2))
+        # a prompt in another script: an installed font that has it, else "?" (said), never boxes
+        text, family = figure_text(str(suptitle))
+        fig.suptitle(_wrap_title(text, panel_size[0] * ncols + 1.2), **({"fontfamily": family} if family else {}))
     if colorbar and im is not None:
         cb = fig.colorbar(im, ax=axs, fraction=0.03, pad=0.01, shrink=0.9)
-        cb.set_label(colorbar_label(normalize))
+        cb.set_label(colorbar_label(normalize, signed=signed))
     return fig
 
 
-def colorbar_label(normalize) -> str:
-    """What the colours of a heatmap mean under ``normalize`` (the colour bar's label)."""
+def colorbar_label(normalize, signed: bool = False) -> str:
+    """What the colours of a heatmap mean under ``normalize`` (the colour bar's label); ``signed``: the
+    maps have negative values (scaled by their largest magnitude, 0 at the centre)."""
+    top = "largest |value|" if signed else "maximum"
     if normalize in (True, "each"):
-        return "attention / its panel's maximum"
-    if normalize == "shared":
-        return "attention / maximum over all panels"
-    return "attention weight (softmax probability)"
+        return f"attention / its panel's {top}"
+    if normalize in ("shared", "global"):
+        return f"attention / {top} over all panels"
+    return "attention (signed, after the edit)" if signed else "attention weight (softmax probability)"
 
 
 def _wrap_title(text: str, width_inches: float, points: float = 12.0) -> str:
@@ -550,13 +585,17 @@ def _distinct_labels(labels: Sequence[str], index: Sequence[str]) -> list[str]:
 
 def plot_attention_grid(attention, tokens: Sequence[str], word_ids=None, *, ncols: int | None = None,
                         prompt: str | None = None, skeleton: str | Skeleton = "humanml3d",
-                        frames_per_latent: int = 4, normalize="each", cmap: str = "viridis",
+                        frames_per_latent: int = 4, normalize="global", cmap: str = "viridis",
                         panel_size: tuple[float, float] = (3.4, 2.0), colorbar: bool = True,
-                        fps: float | None = None):
+                        fps: float | None = None, unknown_words: Sequence[str] = (),
+                        diverging_cmap: str = DIVERGING_CMAP):
     """Heatmaps of several words in the layout of the paper's Fig. 6.
 
     One panel per entry of ``word_ids`` (a row of up to 4, wrapping), part labels on the left
-    column, the prompt as the figure title.
+    column, the prompt as the figure title. By default every panel shares one colour scale
+    (``normalize="global"``), so a word that draws little attention looks dim; ``"each"`` scales
+    each panel to its own maximum (the official plots), which shows every map's shape but makes a
+    word the model ignores look as bright as the one it follows.
 
     Parameters
     ----------
@@ -569,13 +608,22 @@ def plot_attention_grid(attention, tokens: Sequence[str], word_ids=None, *, ncol
         Panels per row (default ``min(K, 4)``).
     prompt : str, optional
         Figure title.
-    skeleton, frames_per_latent, normalize, cmap, fps
+    normalize : {"global", "each", "none"} or bool
+        "global" (default; alias "shared"): every panel divided by the largest value of all panels;
+        "each"/True: by its own maximum; "none": raw values.
+    skeleton, frames_per_latent, cmap, fps
         As in :func:`plot_word_attention`.
     panel_size : (width, height)
         Inches per panel.
     colorbar : bool
         One shared colorbar, labelled with what the colours mean (with ``"each"``: every panel is
         divided by its own maximum, so colours compare within a panel, not across panels).
+    unknown_words : sequence of str
+        Words the model never saw in training (e.g. ``out.unknown_words[b]``): their panels are
+        titled ``"cartwheel (unknown)"`` in red, since their maps say nothing the model learned.
+    diverging_cmap : str
+        Colour map used instead of ``cmap`` when a map has negative values (an edit's negative
+        re-weight): centred at 0 (white), negative blue, positive red; the scale is symmetric.
 
     Panels of a word that occurs more than once are labelled with its index (``forward [3]``: the
     word index for ``word_ids=None`` and for integer ids, else the panel's position).
@@ -592,8 +640,12 @@ def plot_attention_grid(attention, tokens: Sequence[str], word_ids=None, *, ncol
         ids = [word_ids] if isinstance(word_ids, (str, int, np.integer)) else list(word_ids)
         index = [str(w) if isinstance(w, (int, np.integer)) else str(k) for k, w in enumerate(ids)]
     labels = _distinct_labels(labels, index)
+    unknown = {w.lower() for w in (unknown_words or ())}
+    marked = [k for k, lab in enumerate(labels) if unknown & set(WORD_CHARS.findall(lab.lower()))]
+    labels = [f"{lab} (unknown)" if k in marked else lab for k, lab in enumerate(labels)]
     return _grid(maps, labels, ncols=ncols, fpl=_check_fpl(frames_per_latent), cmap=cmap, normalize=normalize,
-                 suptitle=prompt, panel_size=panel_size, colorbar=colorbar, fps=fps)
+                 suptitle=prompt, panel_size=panel_size, colorbar=colorbar, fps=fps,
+                 diverging_cmap=diverging_cmap, marked=marked)
 
 
 def plot_attention_by_layer(attention, tokens: Sequence[str], word, *, axes: str = "slhnpw", steps=None,
@@ -749,7 +801,8 @@ def _comparison_figure(rows, labels, diff_label, *, fpl, cmap, diff_cmap, normal
     axs = fig.subplots(n, 3, squeeze=False)
     for r, (word, a, b, diff) in enumerate(rows):
         both = np.stack([np.nan_to_num(a), np.nan_to_num(b)])
-        if normalize in (True, "each", "shared"):
+        signed = bool((both < 0).any())       # an edit's negative re-weight: centred diverging scale
+        if normalize in (True, "each", "shared", "global"):
             top = float(np.abs(both).max()) or 1.0
             a_s, b_s, d_s, vmax = a / top, b / top, diff / top, 1.0
         elif normalize in (False, None, "none"):
@@ -764,11 +817,12 @@ def _comparison_figure(rows, labels, diff_label, *, fpl, cmap, diff_cmap, normal
                 ax.text(0.5, 0.5, f"{word!r} absent", ha="center", va="center", transform=ax.transAxes)
                 ax.set_xticks([]), ax.set_yticks([])
                 continue
-            im = _draw_map(ax, m, fpl=fpl, cmap=cmap, vmin=0.0, vmax=vmax, title=f"{title}: {word}",
-                           part_labels=(c == 0), xlabel=last)
+            im = _draw_map(ax, m, fpl=fpl, cmap=diff_cmap if signed else cmap, vmin=-vmax if signed else 0.0,
+                           vmax=vmax, title=f"{title}: {word}", part_labels=(c == 0), xlabel=last)
         if im is not None:
             cb = fig.colorbar(im, ax=axs[r][:2], fraction=0.03, pad=0.01)
-            cb.set_label("attention / row max" if normalize in (True, "each", "shared") else "attention weight")
+            cb.set_label(("attention / row max" if normalize in (True, "each", "shared", "global") else
+                          "attention weight") + (" (signed)" if signed else ""))
         ax = axs[r][2]
         if np.isnan(d_s).all():
             ax.text(0.5, 0.5, "no difference (word absent)", ha="center", va="center", transform=ax.transAxes)

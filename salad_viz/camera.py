@@ -77,13 +77,6 @@ def view_direction(view: str | float, elevation: float | None = None) -> np.ndar
     return np.array([np.cos(e) * np.sin(a), np.sin(e), np.cos(e) * np.cos(a)])
 
 
-def _fit_distance(radius: float, view_angle: float, aspect: float) -> float:
-    """Distance at which a sphere of ``radius`` fills the narrower field of view."""
-    half_v = np.radians(view_angle) / 2.0
-    half_h = np.arctan(np.tan(half_v) * aspect)
-    return float(radius / np.sin(min(half_v, half_h)))
-
-
 def _smoothed_root(joints: np.ndarray, window: int) -> np.ndarray:
     """``(N, 3)`` root trajectory averaged over ``2*window+1`` frames (so the camera does not shake)."""
     root = joints[:, 0, :]
@@ -92,6 +85,43 @@ def _smoothed_root(joints: np.ndarray, window: int) -> np.ndarray:
     pad = np.pad(root, ((window, window), (0, 0)), mode="edge")
     kernel = np.ones(2 * window + 1) / (2 * window + 1)
     return np.stack([np.convolve(pad[:, k], kernel, mode="valid") for k in range(3)], axis=1)
+
+
+#: Share of the image half-width/height the framed motion may fill (1 / margin of the follow framing).
+FOLLOW_MARGIN = 1.1
+
+
+def _follow_cloud(joints: Sequence[np.ndarray], smooth: int) -> np.ndarray:
+    """``(M, 3)`` every joint of every frame relative to its frame's smoothed root in x and z (y as it
+    is), plus the floor under the root: what a camera following the root must keep in view."""
+    pts = [np.zeros((1, 3))]
+    for m in joints:
+        root = _smoothed_root(m, smooth)
+        rel = m - (root * np.array([1.0, 0.0, 1.0]))[:, None, :]
+        pts.append(rel.reshape(-1, 3))
+    return np.concatenate(pts)
+
+
+def _fit_follow(cloud: np.ndarray, view: str | float, elevation: float | None, view_angle: float, aspect: float,
+                margin: float = FOLLOW_MARGIN) -> tuple[float, float]:
+    """``(distance, height)`` of the nearest follow camera that sees every point of ``cloud`` (root-relative,
+    :func:`_follow_cloud`) inside the image shrunk by ``margin``, the focal height chosen to need the least
+    distance. Points above the head (raised hands, a jump) count like any other."""
+    direction = view_direction(view, elevation)
+    right, up, fwd = Camera(tuple(direction), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), view_angle).basis()
+    tan_v = np.tan(np.radians(view_angle) / 2.0) / margin
+    tan_h = tan_v * aspect
+    a, b, c = cloud @ right, cloud @ up, cloud @ fwd
+    lo, hi = float(cloud[:, 1].min()), float(cloud[:, 1].max())
+    heights = np.linspace(lo, hi, 41)[:, None]
+    # focal point (0, h, 0): a point p is at (a, b - h up[1], c - h fwd[1]) from it in the camera basis,
+    # and at depth D + c - h fwd[1]; it is in view when |a| <= depth tan_h and |b - h up[1]| <= depth tan_v
+    cc = c[None, :] - heights * fwd[1]
+    need = np.maximum(np.abs(a)[None, :] / tan_h, np.abs(b[None, :] - heights * up[1]) / tan_v) - cc
+    dist = need.max(axis=1)
+    k = int(np.argmin(dist))
+    near = float((-cc[k]).max()) + 0.3          # every point well in front of the camera
+    return max(float(dist[k]), near), float(heights[k, 0])
 
 
 def follow_camera(
@@ -121,38 +151,41 @@ def follow_camera(
     aspect : float
         Image width / height, used to fit the figure in the narrower field of view.
     distance : float, optional
-        Camera distance in metres; by default fitted to the body height and the spread of roots.
+        Camera distance in metres; by default the nearest at which every joint of every frame (hands
+        raised above the head and jumps included) and the floor under the root stay in view while the
+        camera follows the root (:func:`shared_follow_framing`).
     smooth : int
         Half-width in frames of the moving average applied to the root before following it.
     height : float, optional
-        Height of the focal point in metres; by default the middle of the motions' vertical extent.
+        Height of the focal point in metres; by default the one that frames the motion tightest.
         Side-by-side panels pass one ``distance`` and ``height`` so all are drawn at one scale.
     """
     roots = np.stack([_smoothed_root(m, smooth)[min(frame, len(m) - 1)] for m in joints])
-    all_y = np.concatenate([m[..., 1].ravel() for m in joints])
-    top = float(np.percentile(np.concatenate([m[..., 1].max(axis=1) for m in joints]), 95))
-    bottom = min(0.0, float(all_y.min()))
     centre = roots.mean(axis=0)
-    centre[1] = 0.5 * (top + bottom) if height is None else float(height)
-    if distance is None:
-        spread = float(np.linalg.norm(roots - centre, axis=1).max()) if len(roots) > 1 else 0.0
-        radius = 0.5 * (top - bottom) * 1.12 + spread + 0.15  # room for limbs reaching out
-        distance = _fit_distance(radius, view_angle, aspect)
+    if distance is None or height is None:
+        # each motion around its own root, placed where its root is now relative to the focal point (one
+        # motion: the same cloud at every frame, so the distance does not change while following)
+        cloud = np.concatenate([_follow_cloud([m], smooth) + (r - centre) * np.array([1.0, 0.0, 1.0])
+                                for m, r in zip(joints, roots)])
+        fit_d, fit_h = _fit_follow(cloud, view, elevation, view_angle, aspect)
+        distance = fit_d if distance is None else distance
+        height = fit_h if height is None else height
+    centre[1] = float(height)
     eye = centre + distance * view_direction(view, elevation)
     return Camera(tuple(eye), tuple(centre), (0.0, 1.0, 0.0), view_angle)
 
 
 def shared_follow_framing(motions: Sequence[np.ndarray], *, view_angle: float = 30.0,
-                          aspect: float = 4.0 / 3.0) -> tuple[float, float]:
+                          aspect: float = 4.0 / 3.0, view: str | float = "three_quarter",
+                          elevation: float | None = None, smooth: int = 4) -> tuple[float, float]:
     """``(distance, height)`` in metres at which :func:`follow_camera` frames each motion alone and
-    all at one scale: the distance the tallest motion needs, the focal height of their joint extent.
+    all at one scale: the nearest distance and its focal height at which every joint of every frame of
+    every motion (raised hands, jumps) stays in view of a camera following that motion's root.
 
     Used for side-by-side panels, so that figures of the same size look the same size.
     """
-    tops = [float(np.percentile(m[..., 1].max(axis=1), 95)) for m in motions]
-    bottoms = [min(0.0, float(m[..., 1].min())) for m in motions]
-    radius = max(0.5 * (t - b) * 1.12 + 0.15 for t, b in zip(tops, bottoms))
-    return _fit_distance(radius, view_angle, aspect), 0.5 * (max(tops) + min(bottoms))
+    cloud = np.concatenate([_follow_cloud([m], smooth) for m in motions])
+    return _fit_follow(cloud, view, elevation, view_angle, aspect)
 
 
 def fixed_camera(

@@ -16,12 +16,13 @@ import numpy as np
 
 from salad_core.skeleton import Skeleton
 
-from ._style import BACKGROUND, FLOOR_DARK, FLOOR_LIGHT, to_rgb, to_uint8
+from ._style import BACKGROUND, FLOOR_DARK, FLOOR_LIGHT, caption_font, to_rgb, to_uint8
 from .camera import Camera, project_points
 from .meshes import FLOOR_TILE as _TILE
 from .scene import FrameScene
 
-__all__ = ["rasterize_skeleton", "rasterize_scene", "draw_title", "hstack_images", "vstack_images"]
+__all__ = ["rasterize_skeleton", "rasterize_scene", "draw_title", "caption_band", "wrap_text", "hstack_images",
+           "vstack_images"]
 
 _NEAR = 0.05  # metres: primitives closer to the camera than this are skipped
 _OUTLINE = 0.55  # outline colour = fill colour x this factor
@@ -194,7 +195,7 @@ def rasterize_skeleton(
         Drawing resolution factor used for anti-aliasing.
     background : colour
     title : str, optional
-        Text written in the top-left corner.
+        Text written in a white band above the scene (the scene gets the rest of ``size``).
 
     Returns
     -------
@@ -210,17 +211,76 @@ def rasterize_skeleton(
 
 
 def draw_title(image: np.ndarray, title: str, *, color=(0.1, 0.1, 0.1), size: int | None = None) -> np.ndarray:
-    """A copy of ``image`` ``(H, W, 3)`` uint8 with ``title`` written at the top-left (Pillow)."""
-    from PIL import Image, ImageDraw, ImageFont
+    """A copy of ``image`` ``(H, W, 3)`` uint8 with ``title`` written at the top-left (Pillow; characters
+    the default font lacks from an installed font that has them, else as "?": :func:`_style.caption_font`)."""
+    from PIL import Image, ImageDraw
 
     h = image.shape[0]
-    font_size = size or max(10, min(24, h // 16))
-    try:
-        font = ImageFont.load_default(size=font_size)
-    except TypeError:  # Pillow without FreeType sizes
-        font = ImageFont.load_default()
+    font = caption_font(str(title), size or max(10, min(24, h // 16)))
     pil = Image.fromarray(np.ascontiguousarray(image))
-    ImageDraw.Draw(pil).text((6, 4), str(title), fill=tuple(int(c) for c in to_uint8(to_rgb(color))), font=font)
+    font.draw(ImageDraw.Draw(pil), (6, 4), font.text, fill=tuple(int(c) for c in to_uint8(to_rgb(color))))
+    return np.asarray(pil).copy()
+
+
+def caption_size(panel_height: int) -> int:
+    """Font size (pixels) of the captions of a panel ``panel_height`` pixels high."""
+    return max(10, min(20, int(panel_height) // 16))
+
+
+def wrap_text(draw, text: str, font, width: float, max_lines: int = 3) -> list[str]:
+    """Greedy word wrap of ``text`` to ``width`` pixels (``font``: a Pillow font or a
+    :class:`~salad_viz._style.CaptionFont`); more than ``max_lines`` lines end in "...". Text without
+    spaces (Chinese) is cut where the width is reached."""
+    measure = font.length if hasattr(font, "runs") else (lambda t: draw.textlength(t, font=font))
+    lines: list[str] = []
+    for word in str(text).split():
+        if lines and measure(lines[-1] + " " + word) <= width:
+            lines[-1] += " " + word
+            continue
+        while len(word) > 1 and measure(word) > width:       # a word wider than the line: cut it
+            cut = max(1, next((k for k in range(len(word), 0, -1) if measure(word[:k]) <= width), 1))
+            lines.append(word[:cut])
+            word = word[cut:]
+        lines.append(word)
+    if len(lines) > max_lines:
+        lines = lines[:max_lines]
+        last = lines[-1]
+        while last and measure(last + " ...") > width:
+            last = last[:-1]
+        lines[-1] = last.rstrip() + " ..."
+    return lines or [""]
+
+
+def caption_band(titles: Sequence[str], width: int, panel_height: int, *, colors=None, max_lines: int = 3,
+                 max_fraction: float = 0.4) -> np.ndarray:
+    """A white band ``(B, width, 3)`` uint8 with ``titles`` written one under the other, each wrapped to
+    ``width`` (at most ``max_lines`` lines, fewer if the band would take more than ``max_fraction`` of
+    ``panel_height``), to be stacked *above* a scene so that no caption covers the figure.
+
+    ``colors``: one RGB per title (default dark grey). Characters no installed font has are drawn as
+    "?" (warned about once per title, :func:`salad_viz._style.caption_font`).
+    """
+    from PIL import Image, ImageDraw
+
+    size = caption_size(panel_height)
+    cols = [(0.1, 0.1, 0.1)] * len(titles) if colors is None else list(colors)
+    fonts = [caption_font(str(t), size) for t in titles]
+    probe = ImageDraw.Draw(Image.new("RGB", (4, 4)))
+    while True:
+        wrapped = [wrap_text(probe, font.text, font, width - 12, max_lines) for font in fonts]
+        height = 6 + sum(len(lines) * font.line_height for lines, font in zip(wrapped, fonts)) \
+            + 2 * max(0, len(wrapped) - 1)
+        if height <= max_fraction * panel_height or max_lines <= 1:
+            break
+        max_lines -= 1
+    pil = Image.new("RGB", (int(width), int(height)), (255, 255, 255))
+    draw = ImageDraw.Draw(pil)
+    y = 3
+    for font, lines, col in zip(fonts, wrapped, cols):
+        for line in lines:
+            font.draw(draw, (6, y), line, fill=tuple(int(c) for c in to_uint8(to_rgb(col))))
+            y += font.line_height
+        y += 2
     return np.asarray(pil).copy()
 
 

@@ -25,7 +25,7 @@ from ._arrays import as_joints_list, check_frame, check_size
 from ._style import BACKGROUND, to_rgb
 from .camera import Camera
 from .meshes import BONE_SHAPES, body_mesh, floor_mesh
-from .raster import draw_title, hstack_images, rasterize_scene, vstack_images
+from .raster import caption_band, draw_title, hstack_images, rasterize_scene, vstack_images
 from .scene import FrameScene, build_scene
 
 log = logging.getLogger(__name__)
@@ -182,7 +182,8 @@ class SkeletonRenderer:
                elevation: float | None = None, follow: bool = True, colors=None, joint_colors=None,
                floor: bool = True, trajectory: bool = True, bone_radius: float = 0.022,
                joint_radius: float = 0.032, title: str | None = None) -> np.ndarray:
-        """One frame as an image; arguments as in :func:`render_skeleton`.
+        """One frame as an image; arguments as in :func:`render_skeleton`. A ``title`` goes in a white band
+        above the scene (the scene gets the rest of the image), so it never covers the figure.
 
         Returns
         -------
@@ -191,35 +192,42 @@ class SkeletonRenderer:
         motions = as_joints_list(joints, self.skeleton)
         frame = check_frame(frame, max(len(m) for m in motions))
         w, h = self.size
+        band = caption_band([title], w, h) if title else None
+        hs = h - (0 if band is None else band.shape[0])
         scene = build_scene(motions, self.skeleton, frame, camera=camera, view=view, elevation=elevation,
-                            follow=follow, aspect=w / h, colors=colors, joint_colors=joint_colors,
+                            follow=follow, aspect=w / hs, colors=colors, joint_colors=joint_colors,
                             trajectory=trajectory, floor=floor, bone_radius=bone_radius,
                             joint_radius=joint_radius)
-        img = self.render_scene(scene)
-        return draw_title(img, title) if title else img
+        img = self.render_scene(scene, size=(w, hs))
+        return img if band is None else np.concatenate([band, img], axis=0)
 
-    def render_scene(self, scene: FrameScene) -> np.ndarray:
-        """Draw a prepared :class:`~salad_viz.scene.FrameScene` -> ``(H, W, 3)`` uint8."""
+    def render_scene(self, scene: FrameScene, size: Sequence[int] | None = None) -> np.ndarray:
+        """Draw a prepared :class:`~salad_viz.scene.FrameScene` -> ``(H, W, 3)`` uint8 (``size``: the
+        renderer's unless given)."""
+        size = self.size if size is None else tuple(int(v) for v in size)
         if self.backend == "raster":
-            return rasterize_scene(scene, self.skeleton, self.size, supersample=self.supersample,
+            return rasterize_scene(scene, self.skeleton, size, supersample=self.supersample,
                                    background=self.background)
-        return self._render_pyvista(scene)
+        return self._render_pyvista(scene, size)
 
-    def _get_plotter(self):
+    def _get_plotter(self, size: tuple[int, int] | None = None):
+        size = self.size if size is None else tuple(size)
         if self._plotter is None:
             _prepare_vtk_env()
             import pyvista as pv
 
-            self._plotter = pv.Plotter(off_screen=True, window_size=self.size)
+            self._plotter = pv.Plotter(off_screen=True, window_size=size)
             self._plotter.set_background(self.background)
             if self.supersample > 1:
                 self._plotter.enable_anti_aliasing("ssaa")
+        elif tuple(self._plotter.window_size) != size:
+            self._plotter.window_size = size
         return self._plotter
 
-    def _render_pyvista(self, scene: FrameScene) -> np.ndarray:
+    def _render_pyvista(self, scene: FrameScene, size: tuple[int, int] | None = None) -> np.ndarray:
         import pyvista as pv
 
-        p = self._get_plotter()
+        p = self._get_plotter(size)
         p.clear_actors()
         if scene.floor_centre is not None:
             # the tiles are snapped to a world grid: rebuild only when the patch changes

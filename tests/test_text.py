@@ -106,6 +106,19 @@ def test_minilm_truncation_warns_with_dropped_words(minilm):
         MiniLMTextEncoder(max_tokens=600)
 
 
+def test_minilm_has_no_words_for_emoji_and_unknown_tokens_for_other_scripts(minilm):
+    """What the pipelines' UnknownWordsWarning reads: emoji and most CJK become [UNK] and map to no word."""
+    from salad_core.vocabulary import check_prompt
+
+    tb = minilm.encode(["🕺💃🤸", "一个人在跳舞", "a person walks 🤸"])
+    assert tb.words == [[], [], ["a", "person", "walks"]]
+    assert tb.tokens[0] == ["[CLS]", "[UNK]", "[SEP]"] and "[UNK]" in tb.tokens[1]
+    assert all(w is None for w in tb.token_to_word[1])
+    checks = [check_prompt(p, {"a", "person", "walks"}, t) for p, t in zip(tb.prompts, tb.tokens)]
+    assert [c.unk_tokens for c in checks] == [1, tb.tokens[1].count("[UNK]"), 1]
+    assert [c.mostly_unknown for c in checks] == [True, True, False]
+
+
 def test_prompt_validation_and_null_text(minilm):
     for bad in ([""], ["   "], ["a man walks", "\t"]):
         with pytest.raises(ValueError, match="empty or whitespace"):

@@ -141,19 +141,99 @@ def test_side_panels_share_one_scale_and_are_labelled(walk):
 
 
 def test_left_right_key_in_the_chain_colours(walk):
-    from salad_viz._style import SIDE_COLORS
+    from salad_viz._style import SIDE_COLORS, limb_colors
 
+    # the key names the colours of legs and arms as drawn: left leg dark blue, left arm light blue,
+    # right leg red, right arm orange (HumanML3D's chains)
+    assert [(side, limb) for side, limb, _ in limb_colors(SKEL)] == [("left", "leg"), ("left", "arm"),
+                                                                     ("right", "leg"), ("right", "arm")]
+    assert [rgb for *_, rgb in limb_colors(SKEL)] == [SIDE_COLORS["left"][0], SIDE_COLORS["left"][1],
+                                                       SIDE_COLORS["right"][0], SIDE_COLORS["right"][1]]
     with_key = render_frames(walk, SKEL, size=(160, 160), frames=[0], backend="raster")[0]
     without = render_frames(walk, SKEL, size=(160, 160), frames=[0], backend="raster", side_legend=False)[0]
-    corner = (slice(130, 160), slice(0, 80))
+    corner = (slice(120, 160), slice(0, 100))
     diff = np.abs(with_key.astype(int) - without.astype(int))
     assert diff[corner].sum() > 0 and diff.sum() == diff[corner].sum()      # only the bottom-left corner
-    assert _colour_pixels(with_key[corner], SIDE_COLORS["left"][0]) > _colour_pixels(without[corner],
-                                                                                      SIDE_COLORS["left"][0])
-    assert _colour_pixels(with_key[corner], SIDE_COLORS["right"][0]) > _colour_pixels(without[corner],
-                                                                                       SIDE_COLORS["right"][0])
+    for side in ("left", "right"):
+        for shade in SIDE_COLORS[side]:                                      # the leg's and the arm's colour
+            assert _colour_pixels(with_key[corner], shade) > _colour_pixels(without[corner], shade) + 3
+    # too small a frame for the key: left out rather than drawn over the figure
+    small = render_frames(walk, SKEL, size=(64, 80), frames=[0], backend="raster")[0]
+    assert np.array_equal(small, render_frames(walk, SKEL, size=(64, 80), frames=[0], backend="raster",
+                                               side_legend=False)[0])
     # an overlay of two motions uses theme colours, not the chain colours: no key
     over = render_frames([walk, walk + 0.5], SKEL, layout="overlay", size=(160, 160), frames=[0], backend="raster")
     over_nokey = render_frames([walk, walk + 0.5], SKEL, layout="overlay", size=(160, 160), frames=[0],
                                backend="raster", side_legend=False)
     assert np.array_equal(over, over_nokey)
+
+
+# ----------------------------------------------------------------------------- issue 64: caption, camera, fonts
+def _raised_hands(walk: np.ndarray) -> np.ndarray:
+    """The walk with both hands raised far above the head (2.4 m) in two frames."""
+    out = walk.copy()
+    for j in (20, 21):                                                      # the wrists
+        out[5:7, j, 1] = 2.4
+    return out
+
+
+def test_follow_camera_keeps_raised_hands_and_feet_in_view(walk):
+    from salad_viz.camera import follow_camera, project_points, shared_follow_framing
+
+    m = _raised_hands(walk)
+    w, h = 160, 120
+    for f in range(len(m)):
+        cam = follow_camera([m], f, aspect=w / h)
+        pix, depth = project_points(m[f], cam, (w, h))
+        assert (depth > 0).all()
+        assert (pix[:, 0] >= 0).all() and (pix[:, 0] < w).all() and (pix[:, 1] >= 0).all() and (pix[:, 1] < h).all()
+    # the same distance all along (no zooming while following), and side panels share it
+    cams = [follow_camera([m], f, aspect=w / h) for f in (0, 6, 11)]
+    assert len({round(float(np.linalg.norm(np.subtract(c.position, c.focal_point))), 6) for c in cams}) == 1
+    d, height = shared_follow_framing([walk, m], aspect=w / h)
+    assert d >= shared_follow_framing([walk], aspect=w / h)[0] - 1e-9
+
+
+def test_caption_sits_above_the_scene_and_raised_hands_stay_below_it(walk):
+    from salad_viz._style import SIDE_COLORS
+    from salad_viz.raster import caption_band
+
+    m = _raised_hands(walk)
+    title = "a man raises both hands high above his head while he walks forward slowly"
+    frames = render_frames(m, SKEL, size=(200, 200), titles=[title], frames=[0, 5], backend="raster",
+                           side_legend=False)
+    assert frames.shape == (2, 200, 200, 3)                                # the size is the whole frame
+    band = caption_band([title], 200, 200)
+    b = band.shape[0]
+    assert 20 < b < 80 and (band.max(axis=-1) < 90).any()                  # dark caption text, wrapped
+    # the top rows are the caption band and nothing else; the scene (raised arms included) is below it
+    assert np.array_equal(frames[1][:b], band) and np.array_equal(frames[0][:b], band)
+    scene = render_frames(m, SKEL, size=(200, 200 - b), frames=[5], backend="raster", side_legend=False)[0]
+    assert np.array_equal(frames[1][b:], scene)
+    arms = _colour_pixels(scene, SIDE_COLORS["left"][1]) + _colour_pixels(scene, SIDE_COLORS["right"][1])
+    assert arms > 20
+    # the side layout: each panel's band above its own scene, at one height
+    side = render_frames([walk, m], SKEL, size=(160, 160), titles=["source", "edited: hands up"], frames=[5],
+                         backend="raster", side_legend=False)[0]
+    assert side.shape == (160, 324, 3)
+    b1, b2 = caption_band(["source"], 160, 160), caption_band(["edited: hands up"], 160, 160)
+    assert b1.shape == b2.shape and np.array_equal(side[:b1.shape[0], :160], b1)
+    assert np.array_equal(side[:b2.shape[0], 164:], b2)
+
+
+def test_captions_in_another_script_use_a_fallback_font_or_question_marks(monkeypatch):
+    from salad_viz import _style
+    from salad_viz.raster import caption_band
+
+    text = "一个人在跳舞"
+    monkeypatch.setattr(_style, "_font_files", lambda: ())                  # no installed font has them
+    with pytest.warns(UserWarning, match="no installed font draws.*drawn as '\\?'"):
+        band = caption_band([text], 200, 200)
+    assert np.array_equal(band, caption_band(["??????"], 200, 200))           # question marks, not boxes
+    monkeypatch.undo()
+    font = _style.CaptionFont(text + " 🤸 walks", 16, warn=False)
+    if len(font.fonts) == 1:
+        pytest.skip("no installed font has CJK characters (e.g. Debian fonts-noto-cjk, fonts-droid-fallback)")
+    assert font.text.startswith(text) and font.text.endswith("walks")       # CJK and Latin drawn, each by a font
+    assert {piece for _, piece in font.runs(font.text)} >= {text, " walks"} or len(font.runs(font.text)) >= 2
+    assert not np.array_equal(caption_band([text], 200, 200), caption_band(["??????"], 200, 200))

@@ -162,7 +162,7 @@ def test_attention_grid_layout_of_fig6():
     att = _attention()
     words = ["jumps forward", "walks forward", ["waving", "arms"]]
     prompt = "a man jumps forward and then walks forward, while waving his arms"
-    fig = plot_attention_grid(att, TOKENS, words, prompt=prompt)
+    fig = plot_attention_grid(att, TOKENS, words, prompt=prompt, normalize="each")
     images = _image_of(fig)
     assert len(images) == 3
     panels = [ax for ax in fig.axes if ax.images]
@@ -269,7 +269,7 @@ def test_joint_attention_colors_use_heatmap_colormap():
 
 def test_colour_bar_says_what_the_colours_mean_and_repeated_words_are_indexed():
     att = _attention()
-    fig = plot_attention_grid(att, TOKENS, [4, 8, 3])             # "forward" twice, then "jumps"
+    fig = plot_attention_grid(att, TOKENS, [4, 8, 3], normalize="each")   # "forward" twice, then "jumps"
     panels = [ax for ax in fig.axes if ax.images]
     assert [ax.get_title() for ax in panels] == ["forward [4]", "forward [8]", "jumps"]
     cbar = [ax for ax in fig.axes if not ax.images and ax.get_ylabel()]
@@ -294,3 +294,98 @@ def test_long_prompt_titles_wrap():
     fig = plot_attention_grid(_attention(), TOKENS, ["jumps"], prompt=prompt)
     lines = fig._suptitle.get_text().split("\n")
     assert len(lines) >= 3 and " ".join(lines) == prompt.strip()
+
+
+# ----------------------------------------------------------------------------- issue 64: global scale, signs
+def _two_panel_attention() -> tuple[np.ndarray, list[str]]:
+    """'walks' draws twice the attention of 'waves' (same shape)."""
+    tokens = ["[CLS]", "walks", "waves", "[SEP]"]
+    att = np.full((P, 10, 4), 0.05)
+    att[:, :, 1] = 0.4
+    att[:, :, 2] = 0.2
+    att[2, 5, 1], att[2, 5, 2] = 0.8, 0.4
+    return att, tokens
+
+
+def _panel_rgb(fig, k: int, part: str, frame: float) -> np.ndarray:
+    fig.canvas.draw()
+    rgba = np.asarray(fig.canvas.buffer_rgba())
+    ax = [a for a in fig.axes if a.images][k]
+    x, y = ax.transData.transform((frame, PART_NAMES.index(part)))
+    return rgba[int(round(rgba.shape[0] - y)), int(round(x)), :3].astype(int)
+
+
+def test_attention_grid_defaults_to_one_colour_scale_for_all_panels():
+    att, tokens = _two_panel_attention()
+    fig = plot_attention_grid(att, tokens)                                   # normalize="global"
+    walks, waves = _image_of(fig)
+    assert np.asarray(walks.get_array()).max() == pytest.approx(1.0)
+    assert np.asarray(waves.get_array()).max() == pytest.approx(0.5)        # half as bright, as the data says
+    assert walks.norm.vmin == waves.norm.vmin == 0 and walks.norm.vmax == waves.norm.vmax == 1
+    assert [ax.get_ylabel() for ax in fig.axes if not ax.images and ax.get_ylabel()] == \
+        ["attention / maximum over all panels"]
+    # the peak cell is drawn in different colours in the two panels
+    assert np.abs(_panel_rgb(fig, 0, "right leg", 22.0) - _panel_rgb(fig, 1, "right leg", 22.0)).max() > 40
+    plt.close(fig)
+    fig = plot_attention_grid(att, tokens, normalize="each")                 # the official per-panel scaling
+    assert [np.asarray(im.get_array()).max() for im in _image_of(fig)] == pytest.approx([1.0, 1.0])
+    assert np.abs(_panel_rgb(fig, 0, "right leg", 22.0) - _panel_rgb(fig, 1, "right leg", 22.0)).max() <= 3
+    with pytest.raises(ValueError, match="normalize must be 'global'"):
+        plot_attention_grid(att, tokens, normalize="per-panel")
+
+
+def test_signed_maps_use_a_diverging_scale_centred_at_zero():
+    from matplotlib.colors import CenteredNorm
+
+    att, tokens = _two_panel_attention()
+    att[:, :, 2] *= -1                                                       # a negative re-weight of "waves"
+    for normalize in ("global", "each"):
+        fig = plot_attention_grid(att, tokens, normalize=normalize)
+        for im in _image_of(fig):
+            assert isinstance(im.norm, CenteredNorm) and im.norm.vcenter == 0 and im.get_cmap().name == "RdBu_r"
+            assert im.norm.vmin == pytest.approx(-im.norm.vmax)
+        waves = np.asarray(_image_of(fig)[1].get_array())
+        assert waves.min() < -0.2 and waves.max() <= 0                      # kept, not clipped to a blank panel
+        # the negative panel is blue, the positive red, zero white
+        neg, pos = _panel_rgb(fig, 1, "right leg", 22.0), _panel_rgb(fig, 0, "right leg", 22.0)
+        assert neg[2] > neg[0] + 60 and pos[0] > pos[2] + 60
+        plt.close(fig)
+    fig = plot_word_attention(-np.abs(_attention()[:, :, 3]), "high")
+    im = fig.axes[0].images[0]
+    assert isinstance(im.norm, CenteredNorm) and im.get_cmap().name == "RdBu_r"
+    assert np.asarray(im.get_array()).min() == pytest.approx(-1.0)
+
+
+def test_unknown_words_are_marked_in_the_panel_titles():
+    tokens = ["[CLS]", "a", "person", "does", "a", "cart", "##wheel", "[SEP]"]
+    att = _attention(8)[:, :, :len(tokens)]
+    fig = plot_attention_grid(att, tokens, ["person", "does", "cartwheel"], unknown_words=["cartwheel"])
+    panels = [ax for ax in fig.axes if ax.images]
+    assert [ax.get_title() for ax in panels] == ["person", "does", "cartwheel (unknown)"]
+    assert panels[2].title.get_color() != panels[0].title.get_color()
+
+
+def test_titles_in_another_script_never_draw_boxes(monkeypatch):
+    import warnings
+
+    from salad_viz import _style
+
+    tokens = ["[CLS]", "a", "person", "walks", "[SEP]"]
+    prompt = "一个人在跳舞 a person walks"
+    monkeypatch.setattr(_style, "_font_files", lambda: ())                  # no font has the characters
+    with pytest.warns(UserWarning, match="no installed font draws .*一个人在跳舞.*drawn as '\\?'"):
+        fig = plot_attention_grid(_attention(6)[:, :, :5], tokens, prompt=prompt)
+    assert fig._suptitle.get_text() == "?????? a person walks"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                                       # no "Glyph missing" warning
+        fig.canvas.draw()
+    monkeypatch.undo()
+    fonts, missing = _style.fonts_covering("一", _style._cmap(
+        __import__("matplotlib").font_manager.findfont("DejaVu Sans")))
+    if not fonts:
+        pytest.skip("no installed font has CJK characters (e.g. Debian fonts-noto-cjk, fonts-droid-fallback)")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fig = plot_attention_grid(_attention(6)[:, :, :5], tokens, prompt=prompt)
+        fig.canvas.draw()
+    assert fig._suptitle.get_text() == prompt and len(fig._suptitle.get_fontfamily()) > 1

@@ -46,6 +46,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
@@ -87,6 +88,8 @@ class KeyMotionOutput:
     keyframe_features: np.ndarray     # (B, K, D) decoded keyframes (de-normalised), in keyframe order
     latents: np.ndarray               # (B, Lz, Dz) denoised keyframe latents
     settings: dict = field(default_factory=dict)   # "recovery", "skeleton"
+    #: per prompt: words the weights never saw in training, pieces in another script or emoji (as SALAD's)
+    unknown_words: list[list[str]] = field(default_factory=list)
 
     @property
     def raw_joints(self) -> list[np.ndarray]:
@@ -134,6 +137,9 @@ def _resolve_component(root: Path, name: str) -> Path:
 class KeyMotionPipeline:
     """Text -> motion with KeyMotion (keyframe VAE, PST denoiser, MMAE).
 
+    Prompts with words outside :attr:`vocabulary` (the training captions' words, ``vocabulary.json``
+    of the weights folder) warn with :class:`salad_core.vocabulary.UnknownWordsWarning`, as SALAD's.
+
     Parameters
     ----------
     kf_vae : KeyframeVAE
@@ -155,6 +161,11 @@ class KeyMotionPipeline:
         How ``out.joints`` are recovered from the features (:data:`salad_core.recovery.METHODS`; default
         ``"fit"`` where the skeleton has target bone lengths, else ``"positions"``), as SALAD's pipeline.
     """
+
+    #: Training vocabulary (``vocabulary.json``; None: not recorded), its corpus, and whether to warn.
+    vocabulary: frozenset[str] | None = None
+    vocabulary_source: str | None = None
+    warn_unknown_words: bool = True
 
     def __init__(self, kf_vae: KeyframeVAE, pst: ParallelSkipTransformer, mmae: MotionMaskedAutoencoder,
                  text_encoder: TextEncoder, *, diffusion: DiffusionConfig | None = None, solver: str = "ddim",
@@ -297,9 +308,13 @@ class KeyMotionPipeline:
                 guidance = Guidance(**entry)
             except (TypeError, ValueError) as err:
                 raise ValueError(f"{root / 'keymotion.json'}: bad \"guidance\" entry {entry!r} ({err})") from err
-        return cls(models["kf_vae"], models["pst"], models["mmae"], encoder, diffusion=diffusion, solver=solver,
+        pipe = cls(models["kf_vae"], models["pst"], models["mmae"], encoder, diffusion=diffusion, solver=solver,
                    default_length=length, text_encoder_name=enc_name, guidance=guidance,
                    recovery=recovery if recovery is not None else doc.get("recovery"))
+        from salad_core.vocabulary import vocabulary_and_source
+
+        pipe.vocabulary, pipe.vocabulary_source = vocabulary_and_source(root)
+        return pipe
 
     def save_pretrained(self, path: str | os.PathLike, *, dtype: torch.dtype | None = None) -> Path:
         """Write the three checkpoints and ``keymotion.json`` into ``path`` (created); returns it.
@@ -314,6 +329,10 @@ class KeyMotionPipeline:
                "diffusion": config_to_dict(self.diffusion), "default_length": self.default_length,
                "guidance": asdict(self.guidance), "recovery": self.recovery}
         atomic_write_text(root / "keymotion.json", json.dumps(doc, indent=2) + "\n")
+        if self.vocabulary is not None:     # what the weights can read travels with them
+            from salad_core.vocabulary import write_vocabulary
+
+            write_vocabulary(self.vocabulary, root, source=self.vocabulary_source)
         return root
 
     # ---------------------------------------------------------------------- generation
@@ -372,6 +391,7 @@ class KeyMotionPipeline:
         dev = self.device
         len_t = torch.tensor(lens, dtype=torch.long, device=dev)
         tb = self.text_encoder.encode(texts)
+        unknown = self.unknown_words(tb, warn=True, stacklevel=2)
         text, text_mask = tb.features.to(dev), tb.mask.to(dev)
         guidance = self.resolve_guidance(guidance_scale)
         null_text = null_mask = None
@@ -403,4 +423,18 @@ class KeyMotionPipeline:
         return KeyMotionOutput(features=feats, joints=joints, texts=texts, lengths=lens,
                                keyframes=[row for row in indices.cpu().numpy().astype(np.int64)],
                                keyframe_features=kf_feats, latents=z.float().cpu().numpy(),
-                               settings={"recovery": method, "skeleton": self.skeleton.name})
+                               settings={"recovery": method, "skeleton": self.skeleton.name},
+                               unknown_words=unknown)
+
+    def unknown_words(self, text, *, warn: bool = False, stacklevel: int = 1) -> list[list[str]]:
+        """Per prompt (a list of prompts or a ``TextBatch``): its words outside :attr:`vocabulary` and its
+        pieces in another script or emoji; with ``warn``, one ``UnknownWordsWarning`` naming them."""
+        from salad_core.vocabulary import UnknownWordsWarning, check_prompt, unknown_words_message
+
+        prompts = [text] if isinstance(text, str) else list(getattr(text, "prompts", text))
+        tokens = list(getattr(text, "tokens", [None] * len(prompts)))
+        checks = [check_prompt(p, self.vocabulary, t) for p, t in zip(prompts, tokens)]
+        if warn and self.warn_unknown_words and any(checks):
+            warnings.warn(unknown_words_message(checks, self.vocabulary_source), UnknownWordsWarning,
+                          stacklevel=stacklevel + 1)
+        return [c.terms for c in checks]
