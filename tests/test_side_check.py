@@ -88,3 +88,33 @@ def test_bad_inputs(clip):
         side_measure(clip[:, :5], "arm")
     with pytest.raises(TypeError, match="prompt must be a string"):
         side_cues(None)
+
+
+# ------------------------------------------------------------------------------ KeyMotion's side check
+@pytest.mark.usefixtures("single_thread")
+def test_keymotion_pipeline_mirrors_exactly_the_motions_that_break_their_side():
+    from salad_core.keymotion.pipeline import DEFAULT_WEIGHTS_DIR, KeyMotionPipeline
+    from salad_core.motion import mirror_features
+
+    if not (DEFAULT_WEIGHTS_DIR / "keymotion.json").is_file():
+        pytest.skip("needs the shipped KeyMotion weights")
+    km = KeyMotionPipeline.from_pretrained()
+    assert km.side_check is True
+    prompts = ["a man kicks with his left leg", "a person kicks his right leg forward", "a person walks forward"]
+    seen = {True: 0, False: 0}
+    for seed in (0, 1):
+        plain = km(prompts, lengths=60, seed=seed, num_steps=10, side_check=False)
+        checked = km(prompts, lengths=60, seed=seed, num_steps=10)
+        assert plain.mirrored == [False] * 3 and checked.settings["side_check"] is True
+        assert checked.mirrored[2] is False                       # no side named: never mirrored
+        for i, p in enumerate(prompts):
+            f0, f1 = plain.features[i, :60], checked.features[i, :60]
+            if checked.mirrored[i]:
+                assert should_mirror(p, plain.joints[i])
+                np.testing.assert_allclose(f1, mirror_features(f0), atol=1e-6)
+                assert not should_mirror(p, checked.joints[i])   # the mirror image keeps the side
+            else:
+                assert not should_mirror(p, plain.joints[i])
+                np.testing.assert_array_equal(f1, f0)
+            seen[checked.mirrored[i]] += 1
+    assert seen[True] >= 1                                        # KeyMotion 0.2 gets some sides wrong

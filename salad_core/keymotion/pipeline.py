@@ -90,6 +90,8 @@ class KeyMotionOutput:
     settings: dict = field(default_factory=dict)   # "recovery", "skeleton"
     #: per prompt: words the weights never saw in training, pieces in another script or emoji (as SALAD's)
     unknown_words: list[list[str]] = field(default_factory=list)
+    #: per sample: replaced by its mirror image by the side check (``KeyMotionPipeline.side_check``)
+    mirrored: list[bool] = field(default_factory=list)
 
     @property
     def raw_joints(self) -> list[np.ndarray]:
@@ -162,6 +164,10 @@ class KeyMotionPipeline:
         ``"fit"`` where the skeleton has target bone lengths, else ``"positions"``), as SALAD's pipeline.
     """
 
+    #: Sampling-time side check (:mod:`salad_core.side_check`): a motion that uses the other side than
+    #: its prompt names (and none that it names) is replaced by its exact mirror image. KeyMotion 0.2
+    #: takes the side from its noise, not its text; ``keymotion.json`` "side_check" (default true).
+    side_check: bool = True
     #: Training vocabulary (``vocabulary.json``; None: not recorded), its corpus, and whether to warn.
     vocabulary: frozenset[str] | None = None
     vocabulary_source: str | None = None
@@ -314,6 +320,10 @@ class KeyMotionPipeline:
         from salad_core.vocabulary import vocabulary_and_source
 
         pipe.vocabulary, pipe.vocabulary_source = vocabulary_and_source(root)
+        side_check = doc.get("side_check", True)
+        if not isinstance(side_check, bool):
+            raise ValueError(f"{root / 'keymotion.json'}: \"side_check\" must be true or false, got {side_check!r}")
+        pipe.side_check = side_check
         return pipe
 
     def save_pretrained(self, path: str | os.PathLike, *, dtype: torch.dtype | None = None) -> Path:
@@ -327,7 +337,7 @@ class KeyMotionPipeline:
             save_checkpoint(root / name, model, model_type=COMPONENTS[name], config=model.config, dtype=dtype)
         doc = {"format": _FORMAT, "version": 1, "text_encoder": self.text_encoder_name,
                "diffusion": config_to_dict(self.diffusion), "default_length": self.default_length,
-               "guidance": asdict(self.guidance), "recovery": self.recovery}
+               "guidance": asdict(self.guidance), "recovery": self.recovery, "side_check": self.side_check}
         atomic_write_text(root / "keymotion.json", json.dumps(doc, indent=2) + "\n")
         if self.vocabulary is not None:     # what the weights can read travels with them
             from salad_core.vocabulary import write_vocabulary
@@ -355,7 +365,7 @@ class KeyMotionPipeline:
     def __call__(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None = None, seed: int = 0,
                  guidance_scale: "float | Guidance | None" = None, num_steps: int = 50, *,
                  keep_keyframes: bool = False, recovery: str | None = None,
-                 progress: bool = False) -> KeyMotionOutput:
+                 side_check: bool | None = None, progress: bool = False) -> KeyMotionOutput:
         """Generate one motion per prompt.
 
         Parameters
@@ -376,6 +386,9 @@ class KeyMotionPipeline:
             may correct them, as in the paper).
         recovery : str, optional
             How ``joints`` are recovered from the features (default :attr:`recovery`).
+        side_check : bool, optional
+            Mirror a motion whose measured side contradicts its prompt (default :attr:`side_check`;
+            ``out.mirrored`` says which were; their ``latents`` stay the sampled, unmirrored ones).
         progress : bool
             Show a progress bar over the denoising steps.
 
@@ -420,11 +433,23 @@ class KeyMotionPipeline:
         method = check_method(self.recovery if recovery is None else recovery)
 
         joints = [recover_joints(feats[i, :n], method, self.skeleton).astype(np.float32) for i, n in enumerate(lens)]
+        mirrored = [False] * b
+        if self.side_check if side_check is None else side_check:
+            from salad_core.motion import mirror_features
+            from salad_core.side_check import should_mirror
+
+            for i, n in enumerate(lens):
+                if should_mirror(texts[i], joints[i], self.skeleton):
+                    mirrored[i] = True
+                    feats[i, :n] = mirror_features(feats[i, :n], self.skeleton)
+                    kf_feats[i] = mirror_features(kf_feats[i], self.skeleton)
+                    joints[i] = recover_joints(feats[i, :n], method, self.skeleton).astype(np.float32)
         return KeyMotionOutput(features=feats, joints=joints, texts=texts, lengths=lens,
                                keyframes=[row for row in indices.cpu().numpy().astype(np.int64)],
                                keyframe_features=kf_feats, latents=z.float().cpu().numpy(),
-                               settings={"recovery": method, "skeleton": self.skeleton.name},
-                               unknown_words=unknown)
+                               settings={"recovery": method, "skeleton": self.skeleton.name,
+                                         "side_check": bool(self.side_check if side_check is None else side_check)},
+                               unknown_words=unknown, mirrored=mirrored)
 
     def unknown_words(self, text, *, warn: bool = False, stacklevel: int = 1) -> list[list[str]]:
         """Per prompt (a list of prompts or a ``TextBatch``): its words outside :attr:`vocabulary` and its
