@@ -4,7 +4,7 @@ In training (attention dropout 0.1) the denoiser's attention used to go to PyTor
 ``scaled_dot_product_attention`` with ``dropout_p > 0``, which runs its unfused math path; now short key
 axes take :func:`salad_core.models.kernels.fast_attention`'s explicit route there too (probabilities,
 ``F.dropout`` on them, one product with the values), as they already did in sampling. This times whole
-training steps (forward under bf16 autocast as ``configs/v3_denoiser.json`` trains, backward, AdamW) of
+training steps (forward under bf16 autocast as ``configs/salad-0.3/denoiser.json`` trains, backward, AdamW) of
 the denoiser of a config on one random batch (32 latent windows of 30 frames, 20 text tokens, half the
 batch with 12-token prompts), the two routes interleaved in one process with the order flipped every
 round (the reference inside :func:`~salad_core.models.kernels.sdpa_attention_dropout`), and prints the
@@ -28,7 +28,7 @@ HERE = Path(__file__).resolve().parents[1]
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--config", type=Path, default=HERE / "configs" / "v3_denoiser.json")
+    p.add_argument("--config", type=Path, default=HERE / "configs" / "salad-0.3" / "denoiser.json")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--rounds", type=int, default=6)
     args = p.parse_args(argv)

@@ -6,7 +6,7 @@ the same machine. Prints the median seconds per step of each and their ratio.
 
 Example::
 
-    python bench/bench_denoiser_step.py --config configs/v3_denoiser.json --threads 1 --rounds 4
+    python bench/bench_denoiser_step.py --config configs/salad-0.3/denoiser.json --threads 1 --rounds 4
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ HERE = Path(__file__).resolve().parents[1]
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--config", type=Path, default=HERE / "configs" / "v3_denoiser.json")
+    p.add_argument("--config", type=Path, default=HERE / "configs" / "salad-0.3" / "denoiser.json")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--batch", type=int, default=32)
     p.add_argument("--frames", type=int, default=120, help="motion frames (latent frames = frames / 4)")

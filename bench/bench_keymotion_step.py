@@ -1,7 +1,7 @@
 """KeyMotion's three training steps (keyframe VAE, PST, MMAE) in float32 and under bf16 autocast (or, with
 ``--compare adamw``, with PyTorch's per-tensor AdamW loop and the fused AdamW), side by side.
 
-Builds each stage's real training task from a KeyMotion recipe (default ``configs/v2_keymotion.json``) on a
+Builds each stage's real training task from a KeyMotion recipe (default ``configs/keymotion-0.2.json``) on a
 corpus, twice: once as configured with ``autocast`` off and once with ``autocast="bf16"`` (float32 weights and
 optimiser; only the forward under ``torch.autocast``, what ``TrainConfig.autocast`` does in the trainer). The two
 start from the same weights and draw the same batches; their optimiser steps run interleaved (one of each in
@@ -35,7 +35,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", required=True, help="procedural corpus folder (salad corpus build --out ...)")
-    p.add_argument("--config", type=Path, default=HERE / "configs" / "v2_keymotion.json")
+    p.add_argument("--config", type=Path, default=HERE / "configs" / "keymotion-0.2.json")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--steps", type=int, default=12, help="timed steps of each setting per stage")
     p.add_argument("--warmup", type=int, default=2, help="untimed steps of each setting first")

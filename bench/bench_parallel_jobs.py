@@ -14,9 +14,9 @@ clock starts), the settings' order rotated every round, and the script prints th
 each setting summed over its processes, and the ratio to one run alone. Run it on an otherwise idle machine
 (stop or pause training runs: ``kill -STOP`` / ``-CONT``), or the figures measure the other load too.
 
-Workloads (``--what``): ``vae`` (``configs/v2_vae.json``, batch 64 x 40 frames: the ablation study's VAEs),
-``denoiser`` (``configs/v2_denoiser.json`` at the ablation study's small size, width 96, 3 layers, batch 32 x 30
-latent frames), ``pst`` (KeyMotion's Parallel Skip Transformer, ``configs/v2_keymotion.json``, batch 32).
+Workloads (``--what``): ``vae`` (``lab/configs/v2_vae.json``, batch 64 x 40 frames: the ablation study's VAEs),
+``denoiser`` (``lab/configs/v2_denoiser.json`` at the ablation study's small size, width 96, 3 layers, batch 32 x 30
+latent frames), ``pst`` (KeyMotion's Parallel Skip Transformer, ``configs/keymotion-0.2.json``, batch 32).
 
 Example::
 
@@ -35,7 +35,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parents[1]
 #: setting name -> (processes, threads per process)
 SETTINGS = {"1 process x 1 thread": (1, 1), "1 process x 2 threads": (1, 2), "2 processes x 1 thread": (2, 1)}
-#: the ablation study's denoiser size (configs/ablations_v2.json, "denoiser_model")
+#: the ablation study's denoiser size (lab/configs/ablations_v2.json, "denoiser_model")
 SMALL_DENOISER = {"width": 96, "heads": 4, "ff_dim": 384, "layers": 3}
 
 
@@ -51,7 +51,7 @@ def _make_step(what: str):
         from salad_core.models.vae import MotionVAE, VAEConfig
         from salad_core.train.vae_trainer import VAEObjective
 
-        vae = MotionVAE(config_from_dict(VAEConfig, json.loads((HERE / "configs" / "v2_vae.json").read_text())
+        vae = MotionVAE(config_from_dict(VAEConfig, json.loads((HERE / "lab" / "configs" / "v2_vae.json").read_text())
                                          ["model"])).train()
         d = vae.feature_dim
         objective = VAEObjective(vae, stats=(torch.zeros(d), torch.ones(d)))
@@ -63,7 +63,7 @@ def _make_step(what: str):
     elif what == "denoiser":
         from salad_core.models.denoiser import Denoiser, DenoiserConfig
 
-        doc = json.loads((HERE / "configs" / "v2_denoiser.json").read_text())["model"]
+        doc = json.loads((HERE / "lab" / "configs" / "v2_denoiser.json").read_text())["model"]
         model = Denoiser(config_from_dict(DenoiserConfig, {**doc, **SMALL_DENOISER})).train()
         params = model.parameters()
         cfg = model.config
@@ -75,7 +75,7 @@ def _make_step(what: str):
     elif what == "pst":
         from salad_core.keymotion.pst import ParallelSkipTransformer, PSTConfig
 
-        doc = json.loads((HERE / "configs" / "v2_keymotion.json").read_text())["pst"]["model"]
+        doc = json.loads((HERE / "configs" / "keymotion-0.2.json").read_text())["pst"]["model"]
         model = ParallelSkipTransformer(config_from_dict(PSTConfig, doc)).train()
         params = model.parameters()
         cfg = model.config

@@ -17,7 +17,7 @@ Example::
     python bench/bench_training.py --old /tmp/h3_old --data /tmp/h3_corpus --what denoiser --steps 300
     python bench/bench_training.py --old /tmp/h3_old --data /tmp/h3_corpus --what vae --steps 200
     python bench/bench_training.py --old /tmp/f_old --data /tmp/h3_corpus --what vae --steps 200 \
-        --config configs/v2_vae.json --new-train autocast=bf16   # a field for the new side only
+        --config lab/configs/v2_vae.json --new-train autocast=bf16   # a field for the new side only
     python bench/bench_training.py --threads-ab --data /tmp/h3_corpus --what vae   # 1 vs 2 threads, this checkout
 
 ``--threads-ab`` alternates 1 and 2 torch threads in one process of this checkout's trainer (rounds of a
@@ -106,9 +106,9 @@ print("RESULT " + json.dumps({"steps": res.step, "steps_per_s": res.steps_per_s,
 
 
 def _config_path(args: argparse.Namespace) -> Path:
-    """``--config`` or the default config of ``--what`` (``configs/default_<what>.json``)."""
+    """``--config`` or the default config of ``--what`` (``lab/configs/default_<what>.json``)."""
     name = "keymotion" if args.what in ("pst", "mmae") else args.what
-    return args.config if args.config is not None else HERE / "configs" / f"default_{name}.json"
+    return args.config if args.config is not None else HERE / "lab" / "configs" / f"default_{name}.json"
 
 
 def _train_overrides(pairs: list[str]) -> dict:
@@ -238,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--vae", type=Path, default=HERE / "salad_core" / "weights" / "salad" / "vae",
                    help="frozen VAE of the denoiser runs (default: the shipped one)")
     p.add_argument("--config", type=Path, default=None,
-                   help="config JSON of both sides (default: configs/default_<what>.json)")
+                   help="config JSON of both sides (default: lab/configs/default_<what>.json)")
     p.add_argument("--new-train", action="append", default=[], metavar="KEY=VALUE",
                    help="a training-config field for the new side only (repeatable), e.g. autocast=bf16")
     p.add_argument("--steps", type=int, default=300)

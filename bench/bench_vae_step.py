@@ -1,6 +1,6 @@
 """One VAE training step, the skeleto-temporal convolution's forms side by side (issue 19).
 
-Builds the VAE of a config (default ``configs/v2_vae.json``), then times forward + backward + AdamW on
+Builds the VAE of a config (default ``lab/configs/v2_vae.json``), then times forward + backward + AdamW on
 one random batch (``--batch`` windows of ``--window`` frames) with :class:`STConv` computed as
 
 * ``conv1d + graph conv``: paper eq. 1 as written (the release-0.6 code),
@@ -67,7 +67,7 @@ def autograd_product_forward(self: layers.STConv, x: torch.Tensor) -> torch.Tens
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--config", type=Path, default=HERE / "configs" / "v2_vae.json")
+    p.add_argument("--config", type=Path, default=HERE / "lab" / "configs" / "v2_vae.json")
     p.add_argument("--batch", type=int, default=64)
     p.add_argument("--window", type=int, default=40)
     p.add_argument("--threads", type=int, default=1)

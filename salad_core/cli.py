@@ -1045,7 +1045,7 @@ def cmd_train(args: argparse.Namespace, rest: list[str]) -> int:
                     else "it is not UTF-8 text")
             if config is not None:
                 raise UserError(f"--config {config} is not a JSON document ({what}); see "
-                                "configs/default_vae.json for the format") from None
+                                "configs/salad-0.3/vae.json for the format") from None
         raise
 
 
@@ -1068,7 +1068,7 @@ def _generation_args(p: argparse.ArgumentParser, length: int) -> None:
     p.add_argument("--guidance-rescale", type=float, default=None, metavar="PHI",
                    help="guidance rescale phi in [0, 1] (Lin et al. 2024; default: the weights' own, 0 for the shipped "
                         "SALAD): keeps strong guidance from inflating the motion; 0.7 at w 4.5 measured straighter "
-                        "bones and less skating but weaker re-weighting (docs/plausibility.md)")
+                        "bones and less skating but weaker re-weighting (see the model card)")
     p.add_argument("--guidance-interval", default=None, metavar="LO:HI",
                    help="guide only at steps with LO <= t/T <= HI, 0 <= LO < HI <= 1 (Kynkaenniemi et al. 2024; "
                         "default: the weights' own, every step for the shipped SALAD); e.g. 0:0.5 = the "

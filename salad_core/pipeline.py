@@ -288,7 +288,7 @@ class SaladPipeline:
         cfg_path = root / "pipeline.json"
         if not cfg_path.is_file():
             hint = (" (the shipped weights are missing from this installation: reinstall salad, or train "
-                    "them with scripts/train_default.sh)") if path is None else ""
+                    "them with scripts/reproduce_salad.sh)") if path is None else ""
             raise CheckpointError(f"no pipeline.json in {root}{hint}")
         try:
             cfg = json.loads(cfg_path.read_text())

@@ -1,10 +1,10 @@
-"""Move a motion from one rig's rigid torso geometry to another's, keeping every limb (issue 21).
+"""Move a motion from one rig's rigid torso geometry to another's, keeping every limb.
 
 HumanML3D's joints are those of SMPL bodies, so its rigid torso relations are fixed for every clip: the
 hips hang about 58 degrees below the line between them, the spine and collars keep SMPL's rest angles.
 Motion capture of another rig (DeepMimic's humanoid: hips level with the pelvis, a straight spine; a BVH
 file's rig) brings other rigid relations; the VAE, which has only ever seen SMPL's, "corrects" them (the
-DeepMimic hips came back 9-11 cm off, the root height about 6 cm: ``docs/vae_real_motion.md``).
+DeepMimic hips came back 9-11 cm off, the root height about 6 cm: ``lab/docs/vae_real_motion.md``).
 :func:`rerig` re-poses such a motion on the target rig:
 
 * the torso's two rigid segments (:data:`SEGMENTS`: the pelvis with the hips and the lower spine; the

@@ -1,15 +1,12 @@
 """Test doubles shared by several test modules: a hashing text encoder, a fake corpus folder, a tiny
-random evaluator, the scripts of ``scripts/`` loaded as modules, and a recording stand-in python for the
+random evaluator and a recording stand-in python for the
 resumable shell scripts."""
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
-import sys
 import zlib
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import torch
@@ -18,8 +15,6 @@ from salad_core.data.texts import split_words
 from salad_core.skeleton import get_skeleton
 from salad_core.text import TextBatch
 
-#: The repository's ``scripts/`` folder.
-SCRIPTS_DIR = Path(__file__).resolve().parents[1] / "scripts"
 #: Verbs of the fake corpus's captions (one per clip, cycled).
 WORDS = ("walks", "jumps", "runs", "waves", "kicks", "turns")
 
@@ -114,19 +109,6 @@ def make_tiny_evaluator(corpus_root, seed: int = 0, **dims):
         ev.std.copy_(torch.from_numpy(std))
     ev.source = "tiny-random-evaluator"
     return ev.eval()
-
-
-def load_script(name: str) -> ModuleType:
-    """``scripts/{name}.py`` as a module, imported as ``python scripts/{name}.py`` runs it: with
-    ``scripts/`` on ``sys.path`` while it loads, for its sibling helpers (``_measure_common``)."""
-    spec = importlib.util.spec_from_file_location(name, SCRIPTS_DIR / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.path.insert(0, str(SCRIPTS_DIR))
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        sys.path.remove(str(SCRIPTS_DIR))
-    return module
 
 
 def recording_python(folder: Path) -> tuple[Path, Path]:

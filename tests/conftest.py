@@ -100,3 +100,38 @@ def recorder(tmp_path) -> tuple[Path, Path]:
     from _doubles import recording_python
 
     return recording_python(tmp_path)
+
+
+# ----------------------------------------------------------------------------------------------- test tiers
+#: The slow tier (``pytest -m slow``); the fast tier is ``pytest -m "not slow"`` (docs/testing.md). Whole modules:
+#: every notebook run, the browser, several processes, trainers run to convergence. Single tests: the slowest of
+#: ``pytest --durations`` on this project's 2-core machine (each 4-20 s: real training runs, shipped-weight
+#: measurements, second processes, byte-for-byte corpus builds).
+SLOW_MODULES = frozenset({"test_notebooks", "test_browser", "test_distributed", "test_train_evaluator",
+                          "test_keymotion_export"})
+SLOW_TESTS = frozenset({
+    "test_inversion.py::test_trained_inversion_is_faithful",
+    "test_robustness.py::test_same_seed_gives_identical_files_in_two_separate_processes",
+    "test_train.py::test_vae_then_denoiser_on_the_procedural_corpus",
+    "test_procedural.py::test_build_is_deterministic_byte_for_byte",
+    "test_keymotion_train.py::test_cli_trains_three_stages_then_resumes_exactly",
+    "test_keymotion_models.py::test_kf_vae_overfits_keyframes_and_indices",
+    "test_keymotion_models.py::test_pst_learns_epsilon_on_a_fixed_latent",
+    "test_keymotion_models.py::test_train_keymotion_end_to_end_and_resume",
+    "test_guidance_sweep.py::test_cli_sweep_on_the_shipped_weights",
+    "test_bench_parallel_jobs.py::test_measure_sums_the_processes",
+    "test_vae.py::test_overfit_one_real_clip",
+    "test_reconstruction.py::test_real_vae_round_trip_is_deterministic_and_sampling_differs",
+    "test_editing.py::test_trained_attention_is_localised_on_the_annotated_parts_and_frames",
+})
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark the slow tier (:data:`SLOW_MODULES`, :data:`SLOW_TESTS`) for ``-m "not slow"``."""
+    for item in items:
+        path = getattr(item, "path", None)
+        if path is None:
+            continue
+        name = getattr(item, "originalname", item.name)
+        if path.stem in SLOW_MODULES or f"{path.name}::{name}" in SLOW_TESTS:
+            item.add_marker(pytest.mark.slow)

@@ -22,7 +22,7 @@ from salad_core.keymotion.pst import PST_DIFFUSION, ParallelSkipTransformer, PST
 from salad_core.keymotion.sides import LEFT, NO_SIDE, RIGHT, side_ids, side_ids_of
 from salad_core.keymotion.train import KeyMotionTrainConfig, load_pst_init
 from salad_core.sampling import make_scheduler
-from _doubles import HashTextEncoder, load_script
+from _doubles import HashTextEncoder
 
 TEXT_DIM = 16
 K = 8
@@ -459,39 +459,3 @@ def test_fp16_keyframe_vae_statistics_are_not_another_corpus(side_corpus, tmp_pa
     assert warned == {"same_fp16": False, "other": True}
 
 
-def test_finetune_script_starts_from_a_pipeline_and_exports_one_with_the_cue(side_corpus, tmp_path):
-    """scripts/finetune_keymotion.py --stage pst --side-cue: a cue PST fine-tuned from a pipeline's PST on its own
-    keyframe VAE, then a pipeline with the source's keyframe VAE and MMAE and the new PST."""
-    script = load_script("finetune_keymotion")
-    train, _ = _keyframe_sets(side_corpus)
-    vae = _tiny_kf_vae(train)
-    torch.manual_seed(0)
-    plain = ParallelSkipTransformer(tiny_pst_config(max_length=96))
-    mmae = MotionMaskedAutoencoder(MMAEConfig(text_dim=TEXT_DIM, width=32, num_layers=1, num_heads=4, ff_dim=64,
-                                              dropout=0.0, max_length=96))
-    mmae.set_normalization(train.mean, train.std)
-    enc = HashTextEncoder()
-    source = KeyMotionPipeline(vae, plain, mmae, enc, default_length=40).save_pretrained(tmp_path / "source")
-    pst_model = dataclasses.asdict(tiny_pst_config(max_length=96))
-    recipe = {"text_encoder": "hash", "train": {"batch_size": 4, "max_length": 96, "keyframe_method": "uniform",
-                                                "num_threads": 1, "val_every": 2, "val_batches": 1, "ckpt_every": 1,
-                                                "log_every": 1, "seed": 3},
-              "pst": {"model": pst_model, "train": {}}}
-    (tmp_path / "recipe.json").write_text(json.dumps(recipe))
-    argv = ["--stage", "pst", "--side-cue", "--data", str(side_corpus), "--out", str(tmp_path / "run"), "--source",
-            str(source), "--recipe", str(tmp_path / "recipe.json"), "--steps", "2", "--lr", "1e-3", "--export",
-            str(tmp_path / "out")]
-    assert script.main(argv, text_encoder=enc) == 0
-    out = KeyMotionPipeline.from_pretrained(tmp_path / "out", text_encoder=enc)
-    assert out.pst.config.side_cue is True and torch.count_nonzero(out.pst.side_embed.weight[1:]) > 0
-    for name in ("kf_vae", "mmae"):                       # the source's other two components, unchanged
-        a, _, _ = load_model(source / name)
-        b, _, _ = load_model(tmp_path / "out" / name)
-        assert all(torch.equal(x.half(), y.half()) for x, y in zip(a.state_dict().values(), b.state_dict().values()))
-    doc = json.loads((tmp_path / "run" / "config.json").read_text())
-    assert doc["train"]["init_from"] == str(source) and doc["train"]["max_steps"] == 2
-    with pytest.raises(SystemExit):
-        script.main(["--stage", "pst", "--data", str(side_corpus), "--out", str(tmp_path / "x"), "--source",
-                     str(tmp_path)])
-    with pytest.raises(SystemExit):                       # a flag of another stage
-        script.main(["--stage", "mmae", "--side-cue", "--data", str(side_corpus), "--out", str(tmp_path / "x")])

@@ -24,7 +24,7 @@ from salad_core.train.cli import main as train_main
 from _doubles import HashTextEncoder
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_CONFIG = ROOT / "configs" / "default_keymotion.json"
+DEFAULT_CONFIG = ROOT / "configs" / "keymotion-0.2.json"    # the shipped KeyMotion's recipe
 D = get_skeleton("humanml3d").feature_dim
 TEXT_DIM = 16
 SIZE_CAP = 10 * 1024 * 1024

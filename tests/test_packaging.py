@@ -70,4 +70,39 @@ def test_version_is_one_number_everywhere():
     version = tomllib.loads((root / "pyproject.toml").read_text())["project"]["version"]
     assert salad_core.__version__ == version
     major_minor = ".".join(version.split(".")[:2])
-    assert f"## Status (version {major_minor})" in (root / "README.md").read_text()
+    assert f"(version {major_minor})" in (root / "README.md").read_text()
+
+
+def test_the_lab_is_not_packaged():
+    """The wheel holds the toolkit only: no package of lab/ is found, and the package data globs stay inside
+    salad_core/weights (the ablation study's weights ship once, there)."""
+    from setuptools import find_packages
+
+    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    packages = find_packages(where=str(ROOT), include=cfg["packages"]["find"]["include"])
+    assert packages and all(p.split(".")[0] in ("salad_core", "salad_viz") for p in packages), packages
+    assert not any(p.startswith(("lab", "salad_lab")) for p in packages)
+    for pkg, globs in cfg["package-data"].items():
+        assert pkg == "salad_core" and all(not g.startswith("..") for g in globs)
+
+
+def test_readme_is_a_short_users_guide():
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 150
+    assert "bash scripts/setup.sh" in text and ".venv/bin/salad demo --out demo_out" in text
+    assert '-m "not slow"' in text
+
+
+def test_the_slow_tier_names_existing_tests():
+    """Every module and test tests/conftest.py marks slow exists (a renamed test would leave the fast tier slow)."""
+    import ast
+
+    import conftest
+
+    tests = ROOT / "tests"
+    for module in conftest.SLOW_MODULES:
+        assert (tests / f"{module}.py").is_file(), module
+    for key in conftest.SLOW_TESTS:
+        file, name = key.split("::")
+        tree = ast.parse((tests / file).read_text())
+        assert name in {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}, key

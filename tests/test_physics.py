@@ -330,10 +330,10 @@ def test_runner_with_fake_generators(tiny_procedural_corpus, sample_dir):
     rows = {t["target"].split(" (")[0]: t["cells"] for t in pp.targets(res)}
     assert rows["bone error max <= 8 cm"]["walker"] == (pytest.approx(0.0, abs=1e-9), True)
     assert rows["foot skating <= 1.5x the corpus's"]["walker"][1] is False        # 1.5 m/s glide
-    assert rows["[issue 22] walking stride >= 0.4 m"]["statue"] == ("0/2", False)
-    assert rows["[issue 22] foot skating on the forward walks and runs <= 2x the corpus's"]["walker"][0] == \
+    assert rows["[generator] walking stride >= 0.4 m"]["statue"] == ("0/2", False)
+    assert rows["[generator] foot skating on the forward walks and runs <= 2x the corpus's"]["walker"][0] == \
         pytest.approx(1.5)
-    assert "walker" not in rows["[issue 22] seed diversity >= half of the first generator's"]
+    assert "walker" not in rows["[generator] seed diversity >= half of the first generator's"]
     assert rows["jump heights within the corpus's range"]["walker"] == ("0/0", None)
 
 

@@ -307,57 +307,6 @@ def test_generation_chain_after_the_skeleton_fit(keymotion_pipe, sample_features
     assert np.abs(w1["generated"] - raw["generated"]).max() > 1e-4
 
 
-def test_flight_chain_script_writes_each_stage_with_its_recovery(keymotion_pipe, tiny_procedural_corpus, tmp_path,
-                                                                  capsys):
-    """``scripts/keymotion_flight_chain.py --recovery fit``: a table row per stage, the setting in the JSON."""
-    import importlib.util
-
-    from salad_core.eval.keymotion_roundtrip import CHAIN_STAGES
-
-    path = Path(__file__).resolve().parents[1] / "scripts" / "keymotion_flight_chain.py"
-    spec = importlib.util.spec_from_file_location("keymotion_flight_chain", path)
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
-    out = tmp_path / "chain.json"
-    assert script.main(["--data", str(tiny_procedural_corpus), "--words", "a", "--exclude", "--limit", "2",
-                        "--recovery", "fit", "--guidance", "2.5", "--out", str(out)], pipe=keymotion_pipe) == 0
-    doc = json.loads(out.read_text())
-    assert doc["recovery"] == "fit" and doc["guidance"] == 2.5 and len(doc["clips"]) == 2
-    assert list(doc["table"]) == list(CHAIN_STAGES)
-    assert all(len(doc["reports"][s]) == 2 for s in CHAIN_STAGES)
-    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("| generated |"))
-    cells = [c.strip() for c in row.strip("|").split("|")][1:]
-    keys = [k for k, _, _ in script.COLUMNS]
-    # skating printed to the millimetre per second (the stages differ by a few cm/s), the JSON's value
-    assert cells[keys.index("skate_mean_ms")] == f"{doc['table']['generated']['skate_mean_ms']:.3f}"
-    assert cells[keys.index("flight_frames")] == f"{doc['table']['generated']['flight_frames']:.2f}"
-    with pytest.raises(SystemExit):
-        script.main(["--data", str(tiny_procedural_corpus), "--recovery", "ik"], pipe=keymotion_pipe)
-    # --kf-vae: another keyframe VAE (another latent width, which the weights' PST cannot denoise) in place of
-    # the weights' own; the chain stops before the generated stage and its VAE stage is that VAE's
-    from salad_core.io import save_checkpoint
-    from salad_core.keymotion.kf_vae import KeyframeVAE, KeyframeVAEConfig
-
-    own = keymotion_pipe.kf_vae
-    torch.manual_seed(5)
-    wide_cfg = KeyframeVAEConfig(**{**own.config.__dict__, "latent_dim": 32})
-    wide = KeyframeVAE(wide_cfg)
-    wide.norm.load_state_dict(own.norm.state_dict())             # the same data statistics
-    save_checkpoint(tmp_path / "wide" / "best", wide, model_type="keymotion_kf_vae", config=wide_cfg)
-    wout = tmp_path / "wide.json"
-    try:
-        assert script.main(["--data", str(tiny_procedural_corpus), "--words", "a", "--exclude", "--limit", "2",
-                            "--recovery", "fit", "--kf-vae", str(tmp_path / "wide"), "--out", str(wout)],
-                           pipe=keymotion_pipe) == 0
-    finally:
-        keymotion_pipe.kf_vae = own                               # the fixture is shared
-    wdoc = json.loads(wout.read_text())
-    assert list(wdoc["table"]) == ["true", "true_keyframes", "vae_keyframes"] and wdoc["kf_vae"].endswith("wide")
-    assert wdoc["reports"]["true_keyframes"] == doc["reports"]["true_keyframes"]      # the same MMAE, clips, keyframes
-    assert wdoc["reports"]["vae_keyframes"] != doc["reports"]["vae_keyframes"]        # another VAE
-    assert "| generated |" not in capsys.readouterr().out
-
-
 def test_procedural_eval_corpus_picks_heldout_clips_or_the_given_root(tmp_path):
     from salad_core.eval.heldout import procedural_eval_corpus
 

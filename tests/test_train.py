@@ -693,17 +693,13 @@ def test_assemble_refuses_a_vae_the_denoiser_did_not_train_on(corpus, tiny_vae_r
 
 
 def test_every_vae_location_resolves_to_the_same_weights_and_statistics(corpus, tiny_vae_run, tmp_path):
-    """vae_source is the one resolver: the denoiser trainer (load_frozen_vae, vae_statistics), export_vae and
-    scripts/measure_vae_real.py's load_vae accept a run folder, a checkpoint stem or file in it, an exported VAE
-    folder or its stem, and a pipeline folder, and all give the same weights and Mean/Std."""
-    import importlib.util
-
+    """vae_source is the one resolver: the denoiser trainer (load_frozen_vae, vae_statistics) and export_vae
+    accept a run folder, a checkpoint stem or file in it, an exported VAE folder or its stem, and a pipeline
+    folder, and all give the same weights and Mean/Std (the lab's measure_vae_real.py reads them alike:
+    lab/tests/test_measure_vae_real.py)."""
     from salad_core.train.assemble import assemble_pipeline, export_vae, vae_source
     from salad_core.train.denoiser_trainer import load_frozen_vae, vae_statistics
 
-    spec = importlib.util.spec_from_file_location("mvr", Path(__file__).resolve().parents[1] / "scripts" / "measure_vae_real.py")
-    mvr = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mvr)
     den = tmp_path / "den"
     train_denoiser(corpus, den, tiny_vae_run, tiny_denoiser_config(), den_train_config(max_steps=1), HashTextEncoder())
     exported = export_vae(tiny_vae_run, tmp_path / "exported", dtype=None)
@@ -723,10 +719,6 @@ def test_every_vae_location_resolves_to_the_same_weights_and_statistics(corpus, 
         mean, std = vae_statistics(where)
         np.testing.assert_array_equal(mean, want_mean)
         np.testing.assert_array_equal(std, want_std)
-        vae, m2, s2, desc = mvr.load_vae(where)
-        assert_same_tensors(vae.state_dict(), want)
-        np.testing.assert_array_equal(m2, want_mean)
-        assert source.stats.name in desc
     again = export_vae(exported, tmp_path / "re-exported", dtype=None)      # an exported VAE exports again
     assert_same_tensors(load_tensors(again / "vae.safetensors"), load_tensors(exported / "vae.safetensors"))
     assert json.loads((again / "runs.json").read_text()) == json.loads((exported / "runs.json").read_text())
@@ -735,8 +727,6 @@ def test_every_vae_location_resolves_to_the_same_weights_and_statistics(corpus, 
     (tmp_path / "nostats").mkdir()
     for name in ("vae.json", "vae.safetensors"):
         (tmp_path / "nostats" / name).write_bytes((exported / name).read_bytes())
-    with pytest.raises(FileNotFoundError, match="stats.safetensors"):
-        mvr.load_vae(tmp_path / "nostats")
     assert vae_statistics(tmp_path / "nostats") == (None, None)
 
 

@@ -15,7 +15,7 @@ signal can separate repetitions at most about 2.5 per second; motion signals are
 frame rate. Joints are ``(N, J, 3)`` metres, Y up.
 
 Measured with the shipped weights on 16 held-out captions that state a count (12 say two, 4 say
-three; ``scripts/measure_new_edits.py --sections d``): the attention count equalled the generated
+three; ``lab/scripts/editing/measure_new_edits.py --sections d``): the attention count equalled the generated
 motion's own count for 11 of 16 (0.69) but the caption's number for 5 (0.31), because the motions
 mostly do the action once (the motion count matched the caption for 3 of 16; answering "2" always
 would score 0.75). The motion counter itself matched the caption on 7 of these 16 corpus clips
@@ -39,7 +39,7 @@ __all__ = ["count_peaks", "attention_signal", "count_repetitions", "motion_signa
 #: signal's range above its surroundings; ``smooth`` is a Gaussian sigma in latent frames.
 ATTENTION_COUNT = {"prominence": 0.3, "smooth": 0.0}
 #: Defaults of :func:`motion_repetitions` (motion frames), chosen on training-split corpus clips
-#: (``scripts/measure_new_edits.py --calibrate --split train``: 0.755 of 155 stated-count phrases of 200
+#: (``lab/scripts/editing/measure_new_edits.py --calibrate --split train``: 0.755 of 155 stated-count phrases of 200
 #: training-split motions counted right), never on the test clips it reports.
 MOTION_COUNT = {"prominence": 0.6, "smooth": 0.0}
 

@@ -419,7 +419,7 @@ class Erase(EditSpec):
     (default) gives it to the special tokens (``[CLS]``, ``[SEP]``), which carry the sentence but no
     word of their own; ``"others"`` re-normalises every (part, frame) over the prompt's remaining
     tokens, so the parts follow the other words there; ``"zero"`` drops it, which is
-    ``Reweight(words, 0)``. The default was chosen by ``scripts/measure_new_edits.py`` (shipped
+    ``Reweight(words, 0)``. The default was chosen by ``lab/scripts/editing/measure_new_edits.py`` (shipped
     weights, 16 held-out captions, 50 steps): the erased phrase's parts lost 31 % of their activity
     with ``"special"``, 15 % with ``"others"`` (deleting the words from the prompt: 11 %), while the
     other parts moved 2.2 and 2.3 cm (deleting the words: 4.6 cm).
@@ -464,7 +464,7 @@ class Shift(EditSpec):
     The maps move exactly (tests), but with the shipped weights the motion does not follow them:
     shifting 16 held-out captions' phrases by 20 frames moved their parts' activity by -0.3 frames on
     average along the shift, 2 of 16 within the 10 % target (with :class:`ShiftTemporal` too: +2
-    frames, 3 of 16; ``scripts/measure_new_edits.py --sections b``).
+    frames, 3 of 16; ``lab/scripts/editing/measure_new_edits.py --sections b``).
     """
 
     words: Union[str, tuple, Sequence] = ()   # word(s), phrase(s) or (start, stop) word span(s)
@@ -546,7 +546,7 @@ class ExampleBased(EditSpec):
     example's timing and structure then drive new content: similar yet not the same motion.
     Outside the window, or with a window that holds no step, it is plain sampling from ``seed``.
 
-    Measured with the shipped weights (``scripts/measure_new_edits.py --sections c``: 3 inverted
+    Measured with the shipped weights (``lab/scripts/editing/measure_new_edits.py --sections c``: 3 inverted
     held-out clips x 3 seeds, 50 steps): the variations were 9.8-9.9 cm (root-aligned MPJPE) from the
     example against 10.2 cm for plain samples of its caption from the same seeds, and as diverse
     (4.6-5.2 cm between variations, 4.9 cm between plain samples), with the temporal maps over the

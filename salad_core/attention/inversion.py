@@ -32,7 +32,7 @@ back after each sampling step of both branches, which makes the source reconstru
 float rounding (the deterministic analogue of edit-friendly DDPM inversion). It changes nothing
 at the source but shifts the edited branch by the same corrections.
 
-Choice of the default, by measurement (``scripts/measure_editing.py``; no shipped weights existed
+Choice of the default, by measurement (``lab/scripts/editing/measure_editing.py``; no shipped weights existed
 yet, so a width-64 denoiser trained for 1,000 steps on the tiny procedural corpus; 3 test motions,
 50 DDIM steps, w = 7.5). Error the inversion adds on top of the VAE (root-aligned MPJPE of the
 reconstruction against the VAE's own decoding; the VAE's floor was 2.8 cm) and wall time:
@@ -69,7 +69,7 @@ steps), while the corrections cost nothing extra and do not weaken the edit, so
 :func:`invert_latents` itself keeps ``exact=False`` as its default (the plain method).
 
 The v3 weights (session 12; 12 held-out corpus 2.4 motions, 50 steps, w = 7.5, VAE floor 1.7 cm;
-``scripts/measure_editing.py``): ddim 9.6 cm, fixed_point 5.5 cm, null_text 2.4 cm, fixed_point + exact
+``lab/scripts/editing/measure_editing.py``): ddim 9.6 cm, fixed_point 5.5 cm, null_text 2.4 cm, fixed_point + exact
 1.7 cm; mirror acts 0.77 / 0.97 / 0.95 / 1.13. The sharper model is less contractive under guidance at
 a few low-noise steps: on 80 frames of HumanML3D 012314 at 20 steps and w = 4.5, five fixed-point
 iterations leave 4.8 cm, twenty 1.0 cm (DDIM 30 cm); the exact replay closes the rest either way.

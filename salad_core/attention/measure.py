@@ -1,6 +1,6 @@
 """Numbers that say whether attention and edits do what they claim (pure functions of arrays).
 
-Used by ``scripts/measure_editing.py`` and by the tests that need trained weights:
+Used by ``lab/scripts/editing/measure_editing.py`` and by the tests that need trained weights:
 
 * :func:`localisation`: the share of a phrase's attention on its annotated body parts and frames,
   against the share a uniform map would put there (chance);

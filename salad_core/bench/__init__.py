@@ -113,7 +113,7 @@ __all__ = ["Row", "Case", "Plan", "SECTIONS", "OPTIONAL_SECTIONS", "compile_rows
            "roofline_seconds", "time_denoiser_steps", "speed_rows", "forward_variant_rows", "overhead_rows",
            "training_rows", "memory_rows", "peak_rss_delta", "denoiser_cases", "TrainRecipe", "train_recipe",
            "bench_pipeline", "machine_header", "run_benchmarks", "format_table", "main",
-           # public since the split into a package (issue 26)
+           # public since the split into a package
            "ONCE_PER_CALL", "step_products", "paired_step_times", "folded_keys", "best_rates", "random_inputs",
            "naive_algorithm1", "NaiveAlgorithm1Prediction", "build_parser", "BATCHES", "COLUMNS", "GUIDANCE",
            "MOTION_FRAMES", "PROMPT_TOKENS", "REFINED", "SAMPLING_STEPS", "SHORT_FRAMES", "SKELETON", "SOURCE",

@@ -32,7 +32,7 @@ def denoiser_cases(weights: str | Path | None = None) -> tuple[Case, Case]:
     try:
         shipped = config_from_dict(DenoiserConfig, json.loads(path.read_text())["config"])
     except (OSError, ValueError, KeyError) as exc:
-        # the shipped recipe (configs/default_denoiser.json), when the weights are not installed
+        # the shipped recipe (lab/configs/default_denoiser.json), when the weights are not installed
         log.warning("cannot read %s (%s); using the shipped recipe's denoiser config", path, exc)
         shipped = DenoiserConfig(width=128, heads=4, ff_dim=512, layers=5, text_dim=384)
     return Case("paper", DenoiserConfig(), 77), Case("default", shipped, 32)

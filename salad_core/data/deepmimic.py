@@ -27,7 +27,7 @@ as 1-DoF angles (``pybullet_envs/deep_mimic/env/humanoid_pose_interpolator.py``)
    below the line between them and whose spine and collars keep SMPL's rest angles in every clip, while
    DeepMimic's humanoid has level hips and a straight spine. The torso segments' rotations and every limb
    bone's direction are kept per frame; ``rig="deepmimic"`` keeps the humanoid's own geometry (the
-   conversion before this step existed). Measured with the general VAE (``docs/vae_real_motion.md``):
+   conversion before this step existed). Measured with the general VAE (``lab/docs/vae_real_motion.md``):
    the humanoid's geometry alone cost about 4 cm of its 7 cm reconstruction error;
 6. :func:`salad_core.motion.joints_to_features` then retargets the bone lengths, puts the floor at 0
    and faces frame 0 to +Z as for any HumanML3D clip.

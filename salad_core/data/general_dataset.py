@@ -20,7 +20,7 @@ half buys coverage of poses, orientations and root paths the 25 actions never sh
 corpus is seen as often per epoch as without the mixture; epochs take twice the steps).
 
 **Normalisation.** Pass one pair of statistics to both parts (the VAE has one input scaling).
-Measured (``scripts/measure_vae_real.py --stats``, corpus "small" seed 0 against the general set
+Measured (``lab/scripts/vae/measure_vae_real.py --stats``, corpus "small" seed 0 against the general set
 n=4000 seed 0, training splits): 7-14 % of the general values of root velocity and ric fall
 outside the corpus's per-dimension range, the per-dimension std of the general set is 2-6 times
 the corpus's, and its 99th percentile of ``|x - mean| / std`` under the corpus statistics is 7-12

@@ -1,4 +1,4 @@
-"""How well a latent diffusion model's denoiser recovers the clean latent at each noise level (issue 24).
+"""How well a latent diffusion model's denoiser recovers the clean latent at each noise level.
 
 Two denoisers that differ only in what they predict (the clean latent ``x0``, the noise ``eps`` or the velocity
 ``v``) define the same sampler once their outputs are turned into an estimate of ``x0``; if the two estimates are

@@ -1,6 +1,6 @@
 """Choosing a model's default guidance from one sweep over the T2M metrics and the physical measures.
 
-Issue 20 asks for the default guidance weight (and its options, rescale and interval) to be chosen from
+A model's default guidance weight (and its options, rescale and interval) is chosen from
 a sweep over FID, R-precision and the physical-plausibility benchmark, not taken from the paper (whose
 w = 7.5 was chosen for its own model). This module runs that sweep and applies one fixed, documented
 rule (:func:`choose`), so the choice is reproducible and printed with its reasons:

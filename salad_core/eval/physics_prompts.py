@@ -287,7 +287,7 @@ _JUMP = (_C("jump_rise_m", reference="jump_rise_m"), _C("flight_frames", lo=2)) 
 _ARM = {s: _C("arm_ratio", lo=2.0, side=s) for s in SIDES}
 _LEG = {s: _C("leg_ratio", lo=2.0, side=s) for s in SIDES}
 _BOTH_ARMS = _C("arms_balance", lo=0.5)                                            # corpus >= 0.88
-# Walking makes steps: issue 22's target stride (corpus minima: walk 0.83 m, slow walk 0.50 m, march 0.60 m,
+# Walking makes steps: the generators' target stride (corpus minima: walk 0.83 m, slow walk 0.50 m, march 0.60 m,
 # jog 1.11 m, run 1.46 m)
 _STRIDE = _C("stride_m", lo=0.4)
 
@@ -813,7 +813,7 @@ def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings =
 
 
 def targets(result: Mapping) -> list[dict]:
-    """The issues' targets (issue 20's; issue 22's, written for KeyMotion, shown for every generator
+    """The benchmark's targets (the plausibility targets; the generator targets, written for KeyMotion, shown for every generator
     except the relative diversity one, which compares with the first generator; the field's, stated
     against the real-capture row and marked "[field]") evaluated on a :func:`run_benchmark` result:
     per target its text and, per generator, ``(value, passed)`` (``passed`` None when the reference or
@@ -855,15 +855,15 @@ def targets(result: Mapping) -> list[dict]:
     dv = ref("seed_diversity_cm")
     add(f"seed diversity >= the corpus's paraphrases ({_fmt(dv, '{:.1f}')} cm)",
         lambda a, g: (a.get("seed_diversity_cm"), None if dv is None else _ge(a.get("seed_diversity_cm"), dv)))
-    add("[issue 22] walking stride >= 0.4 m (stride checks passed)", lambda a, g: _count_cell(g, "stride_m"))
-    add("[issue 22] foot skating on the forward walks and runs <= 2x the corpus's",
+    add("[generator] walking stride >= 0.4 m (stride checks passed)", lambda a, g: _count_cell(g, "stride_m"))
+    add("[generator] foot skating on the forward walks and runs <= 2x the corpus's",
         lambda a, g: ratio(_pooled(g, _FORWARD_GAITS, "skate_mean_ms", "contact_count"),
                            None if sk is None else 2 * sk))
-    add("[issue 22] jumps near-ballistic: pelvis acceleration in flight on the jump prompts within 25 % of "
+    add("[generator] jumps near-ballistic: pelvis acceleration in flight on the jump prompts within 25 % of "
         "-9.81 m/s^2", lambda a, g: _ballistic(_pooled(g, ("jump", "jumping_jacks"), "flight_accel_ms2",
                                                         "flight_accel_count")))
     sd = None if first is None else first["aggregate"].get("seed_diversity_cm")
-    add("[issue 22] seed diversity >= half of the first generator's",
+    add("[generator] seed diversity >= half of the first generator's",
         lambda a, g: (a.get("seed_diversity_cm"), None if sd is None else _ge(a.get("seed_diversity_cm"), sd / 2)),
         only_later=True)
     # ---- the field's measures, against the real-capture row
@@ -918,7 +918,7 @@ def _travel_cell(agg: Mapping, gen: Mapping):
     return (v, None if v is None else bool(0.8 <= v <= 1.2))
 
 
-#: Actions of the prompts whose skating issue 22's walking target is about.
+#: Actions of the prompts whose skating the generators' walking target is about.
 _FORWARD_GAITS = ("walk", "run", "jog", "march")
 
 

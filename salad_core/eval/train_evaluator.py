@@ -19,7 +19,7 @@ bar and ``log.jsonl``:
 
 The optimiser is Adam (AdamW with zero weight decay). T2M's learning rate is 1e-4 for a 20 M
 parameter model trained for days. The small model trained for minutes uses 1e-3 in
-``scripts/train_evaluator.sh`` (chosen by the short comparison reported there); the config
+``scripts/reproduce_evaluator.sh`` (chosen by the short comparison reported there); the config
 default stays 1e-4.
 
 Normalisation: the evaluator's statistics are the corpus ``Mean.npy``/``Std.npy`` (computed on its
@@ -440,7 +440,7 @@ def load_packaged_evaluator(folder: str | os.PathLike | None = None) -> tuple[T2
     if not stem.with_suffix(".json").is_file():
         raise FileNotFoundError(
             f"no evaluator in {root} (expected {PACKAGE_STEM}.safetensors and {PACKAGE_STEM}.json). Train one with "
-            f"scripts/train_evaluator.sh, or: python -m salad_core.eval.train_evaluator --data CORPUS --out RUN "
+            f"scripts/reproduce_evaluator.sh, or: python -m salad_core.eval.train_evaluator --data CORPUS --out RUN "
             f"--export {root}")
     model, meta = load_evaluator(stem)
     model.source = str(root)

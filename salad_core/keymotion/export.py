@@ -111,7 +111,7 @@ def export_with_component(source: str | os.PathLike, stage: str, run: str | os.P
     """Write the KeyMotion pipeline folder ``source`` to ``dest`` (fp16) with its ``stage`` model ("kf_vae",
     "pst" or "mmae") replaced by the one of the run folder ``run`` (its ``best``, else ``latest``), the
     other two components, the guidance and the settings unchanged: how a fine-tuned stage is assembled for
-    measuring (``scripts/finetune_keymotion.py``). ``dest/runs.json`` keeps ``source``'s run records (if it has
+    measuring (``lab/scripts/keymotion/finetune_keymotion.py``). ``dest/runs.json`` keeps ``source``'s run records (if it has
     them) with the ``stage`` entry replaced by :func:`run_record` of ``run``, so a shipped pipeline says which run
     each of its models came from. Returns ``dest``."""
     return export_with_components(source, {stage: run}, dest, text_encoder=text_encoder)

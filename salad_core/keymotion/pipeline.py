@@ -275,7 +275,7 @@ class KeyMotionPipeline:
         if path is None and not (root / "keymotion.json").is_file():
             raise FileNotFoundError(
                 f"no shipped KeyMotion weights at {root} (missing from this installation: reinstall salad, or "
-                "train them with scripts/train_keymotion.sh, or `salad train keymotion --data DIR --out RUN` "
+                "train them with scripts/reproduce_keymotion.sh, or `salad train keymotion --data DIR --out RUN` "
                 "and pass RUN as path)")
         if not root.is_dir():
             raise FileNotFoundError(f"KeyMotion folder {root} does not exist")

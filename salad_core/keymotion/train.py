@@ -26,7 +26,7 @@ handling and ``torchrun`` DDP as the SALAD trainers. The stages:
 
 :func:`train_keymotion` runs the three stages into ``out/kf_vae``, ``out/pst``, ``out/mmae`` and
 writes ``out/keymotion.json``, so ``KeyMotionPipeline.from_pretrained(out)`` loads the result.
-:class:`KeyMotionRecipe` is its JSON configuration (``configs/default_keymotion.json``), read by
+:class:`KeyMotionRecipe` is its JSON configuration (``configs/keymotion-0.2.json``), read by
 ``salad train keymotion`` (:mod:`salad_core.train.cli`). The PST and MMAE stages share one
 caption-feature cache, filled in batches at their first step (:class:`PrefilledCaptions`).
 
@@ -34,7 +34,7 @@ Items come from :class:`~salad_core.data.dataset.MotionTextDataset` (random crop
 lengths multiples of 4); every item keeps ``K = num_keyframes`` keyframes whatever its length.
 All random draws of a step come from the trainer's shared generator for the global batch.
 
-Throughput (issue 19; switches in :class:`KeyMotionTrainConfig`): the PST looks the keyframe VAE's
+Throughput (switches in :class:`KeyMotionTrainConfig`): the PST looks the keyframe VAE's
 posteriors up in a latent cache of every window an item can take (``latent_cache``; keyframes
 selected and encoded once per keyframe VAE and corpus, ``eps`` still drawn per step); the MMAE,
 whose cost grows with the frames of a batch, gets length-bucketed batches (``batching``) and then
@@ -1140,7 +1140,7 @@ _MODEL_CONFIGS: dict[str, type] = {"kf_vae": KeyframeVAEConfig, "pst": PSTConfig
 class KeyMotionRecipe:
     """Everything :func:`train_keymotion` needs, read from / written to one JSON document.
 
-    The document (``configs/default_keymotion.json``; a run's ``config.json``)::
+    The document (``configs/keymotion-0.2.json``; a run's ``config.json``)::
 
         {"text_encoder": "minilm",
          "train":  {...},                                  fields shared by the three stages

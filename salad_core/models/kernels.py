@@ -107,7 +107,7 @@ def explicit_route(num_keys: int, dropout_p: float) -> bool:
     (:func:`attention_probs` then a matmul) rather than SDPA.
 
     With attention dropout (training) too: PyTorch's CPU SDPA with ``dropout_p > 0`` falls back to its
-    unfused math path, and a denoiser training step (``configs/v3_denoiser.json``, batch 32, bf16
+    unfused math path, and a denoiser training step (``configs/salad-0.3/denoiser.json``, batch 32, bf16
     autocast, one thread) took 2.00 s that way against 1.67 s with explicit probabilities dropped out by
     ``F.dropout`` (``bench/bench_attention_dropout.py``). Inside :func:`sdpa_attention_dropout` training
     attention goes to SDPA as before."""

@@ -92,7 +92,7 @@ class VAEConfig:
     posterior_noise: float = 1.0      # training only: scale of the reparameterisation noise eps * sigma
                                       # (1 = official: decode posterior samples; 0 = decode the posterior
                                       # mean). Why: the heading rate lives in directions of mu whose spread is
-                                      # below sigma, so a decoder trained on samples cannot read it (issue 21)
+                                      # below sigma, so a decoder trained on samples cannot read it
     pose_latent_dim: int | None = None  # "pose" only: Dz of the one-vector latent; None -> parts x latent_dim
     pose_width: int | None = None     # "pose" only: width of MLP/conv stack; None -> the pose latent dim
 
@@ -546,7 +546,7 @@ class MotionVAE(nn.Module):
         toes) over the frames where the **input's** contact channels say that joint is planted and, unless
         ``config.foot_planted_step`` is None, the input's own joint moves less than that between the two frames.
         The second condition keeps the term off feet that really move: HumanML3D's contact channels mark any
-        foot slower than ~0.9 m/s. Measured (``scripts/measure_decoder_feet.py``, 60 corpus 2.4 test clips,
+        foot slower than ~0.9 m/s. Measured (``lab/scripts/vae/measure_decoder_feet.py``, 60 corpus 2.4 test clips,
         SALAD 0.3's VAE: MPJPE 1.54 cm, skating 0.054 m/s, the clips 0.007): 1,500-step decoder fine-tunes
         with lambda 20 gave 2.50 cm / 0.066 m/s (channels alone) and 2.31 cm / 0.059 m/s (with this
         condition), against 1.52 cm / 0.054 m/s without the term; so neither variant lowers skating by
@@ -555,7 +555,7 @@ class MotionVAE(nn.Module):
 
         Why: every other term compares features, and a reconstruction 1-2 cm off in position can still let a
         planted foot slide by centimetres per frame, which the eye reads as skating (the v3 general VAE's
-        reconstructions of corpus clips slide 0.061 m/s where the clips slide 0.008, issue 20). Speeds are
+        reconstructions of corpus clips slide 0.061 m/s where the clips slide 0.008). Speeds are
         taken on the global joints of :meth:`root_trajectory` (the path the recovery integrates), between
         frames ``t`` and ``t + 1`` where the joint is in contact at both and both are valid.
 
@@ -642,7 +642,7 @@ class MotionVAE(nn.Module):
 
         Why: the other terms compare features frame by frame, so a small bias in the root's angular
         or linear velocity costs almost nothing while it integrates into a heading that drifts by tens
-        of degrees over a clip (issue 21). Both windows are integrated from the same start
+        of degrees over a clip. Both windows are integrated from the same start
         (:meth:`root_trajectory`) and compared on valid frames:
 
         * ``yaw = mean_t |yaw_rec(t) - yaw_in(t)|`` (radians), and

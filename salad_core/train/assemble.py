@@ -1,7 +1,7 @@
 """Assemble a :class:`~salad_core.pipeline.SaladPipeline` folder from a VAE run and a denoiser run.
 
 Used for the shipped default weights (``scripts/assemble_weights.py``) and for the small ablation
-models (``scripts/train_ablations.py``). Each run's ``best`` checkpoint is taken (else ``latest``),
+models (``lab/scripts/ablations/train_ablations.py``). Each run's ``best`` checkpoint is taken (else ``latest``),
 the VAE run's Mean/Std, the denoiser run's text encoder and diffusion config; the folder gets
 ``pipeline.json``, ``vae.*``, ``denoiser.*``, ``stats.safetensors`` and ``runs.json`` (the runs'
 configs and last log lines, for model cards).

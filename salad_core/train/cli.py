@@ -10,7 +10,7 @@ which is the shape of a run's own ``config.json``. With ``--resume`` and no ``--
 
 ``keymotion`` trains the keyframe VAE, the PST and the MMAE one after the other into
 ``--out/{kf_vae,pst,mmae}`` (:func:`salad_core.keymotion.train.train_keymotion`). Its ``--config``
-is a :class:`~salad_core.keymotion.train.KeyMotionRecipe` document (``configs/default_keymotion.json``:
+is a :class:`~salad_core.keymotion.train.KeyMotionRecipe` document (``configs/keymotion-0.2.json``:
 ``text_encoder``, shared ``train`` fields, and ``kf_vae``/``pst``/``mmae`` sections with ``model`` and
 ``train``); the resolved recipe is written to ``--out/config.json``, which ``--resume`` reads when
 no ``--config`` is given. ``--steps`` and ``--batch-size`` apply to every stage,
@@ -42,11 +42,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="salad train", formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Train the SALAD VAE or denoiser, or the three KeyMotion models.",
-        epilog="example:\n  salad train vae --data data/procedural --out runs/vae --config configs/default_vae.json\n"
-               "  salad train vae --data data/procedural --out runs/vae_dec --config configs/v2_vae_decoder.json "
+        epilog="example:\n  salad train vae --data data/procedural --out runs/vae --config configs/salad-0.3/vae.json\n"
+               "  salad train vae --data data/procedural --out runs/vae_dec --config lab/configs/v2_vae_decoder.json "
                "--init-from runs/vae --train-parts decoder\n"
                "  salad train denoiser --data data/procedural --out runs/denoiser --vae runs/vae\n"
-               "  salad train keymotion --data data/procedural --out runs/keymotion --config configs/default_keymotion.json")
+               "  salad train keymotion --data data/procedural --out runs/keymotion --config configs/keymotion-0.2.json")
     parser.add_argument("what", choices=TRAIN_TARGETS, help="which model to train")
     parser.add_argument("--data", required=True, help="HumanML3D-layout data folder")
     parser.add_argument("--out", required=True, help="run folder (checkpoints, logs)")

@@ -6,7 +6,7 @@ encodes them, samples ``z = mu + eps * exp(logvar / 2)``, decodes and minimises
 
 Fine-tuning: ``VAETrainConfig.init_from`` starts from a trained VAE (weights and normalisation) and
 ``train_parts="decoder"`` freezes its encoder, so the posteriors a denoiser was trained on stay
-bit-identical while the decoder learns new terms (e.g. ``lambda_root``, issue 21).
+bit-identical while the decoder learns new terms (e.g. ``lambda_root``).
 
 The reparameterisation noise ``eps`` comes from the trainer's shared generator for the global
 batch (see :class:`~salad_core.train.distributed.GlobalBatchRandom`), so runs are reproducible and

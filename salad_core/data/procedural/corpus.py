@@ -41,7 +41,7 @@ __all__ = ["build_corpus", "corpus_figures", "corpus_digest", "make_motion", "SI
 
 logger = logging.getLogger(__name__)
 
-#: Bump when the generator's output changes. 2.7 (issue 27): whole-body actions with their own
+#: Bump when the generator's output changes. 2.7: whole-body actions with their own
 #: captions (touch_toes, swing, reach_up, balance; side and back kicks, the side lunge), the draw
 #: reweighted (kicks, spins and runs more; sitting, lying down and getting up and stairs more to keep
 #: the root height's spread: see :data:`.primitives.PRIMITIVES`), held hands re-solved nearest to

@@ -16,7 +16,7 @@ oriented); this module solves where the body is in the world:
   touch the floor (a flat foot neither slides nor turns, a rolling foot pivots about the end that is
   down) and re-solves the leg with exact two-bone IK (:func:`~.kinematics.two_bone_ik`). Generator
   1.1 (pins on both ends, the body's turn no longer turning a planted foot): the set's feet skate
-  0.07 m/s on :mod:`salad_core.eval.physics`'s measure instead of 1.0's 0.23 (``scripts/general_skating.py``).
+  0.07 m/s on :mod:`salad_core.eval.physics`'s measure instead of 1.0's 0.23 (``lab/scripts/vae/general_skating.py``).
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Realism figures of a motion corpus: the targets of Corpus 2.0 (issue 27), measured.
+"""Realism figures of a motion corpus: the targets of Corpus 2.0, measured.
 
 Pure functions over joints ``(N, J, 3)`` (metres, +Y up, 20 fps, as in ``new_joints/<id>.npy``),
 263-d features ``(N, D)`` and annotation dicts; :func:`corpus_realism` pools them over a corpus
@@ -68,7 +68,7 @@ BOUNDARY_PAD = 2
 #: Contact joint speed (m/s) above which an in-contact foot joint "moves" (pivots, shuffles).
 CONTACT_MOVING = 0.10
 
-#: Figures of the generator 1.0 corpus, the "before" of issue 27: ``salad corpus build --size small
+#: Figures of the generator 1.0 corpus, the "before" of Corpus 2.0: ``salad corpus build --size small
 #: --seed 0`` (1,000 motions), measured on the originals by ``scripts/corpus_stats.py
 #: --reference tests/data/humanml3d_sample``. The relative targets (spread, sliding) use them.
 BASELINE = {
@@ -82,7 +82,7 @@ BASELINE = {
     "jog_bob": 0.0110, "jog_arm_back": -69.5, "jog_arm_front": -7.5,
     "foot_sliding": 0.0206,           # real clip 012314: 0.232
     "min_joint_height": 0.0,
-    "contact_moving_share": 0.050,    # real (issue 27): 0.275
+    "contact_moving_share": 0.050,    # real: 0.275
     "primitives": 25, "vocabulary": 186, "sentence_frames": 37,
 }
 
