@@ -79,4 +79,4 @@ from salad_core import openmp as _openmp
 # (see salad_core.openmp for the measurement; SALAD_OMP_WAIT=keep leaves the runtime's default)
 _openmp.configure()
 
-__version__ = "0.6.0"
+__version__ = "0.7.0"
