@@ -675,3 +675,25 @@ def test_pipeline_warns_only_when_the_normalisations_really_differ(caplog):
         KeyMotionPipeline(vae, pst, mmae, HashTextEncoder(), default_length=40)
     messages = [r.getMessage() for r in caplog.records if "normalisation" in r.getMessage()]
     assert len(messages) == 1 and "0.5 of a channel's std" in messages[0]
+
+
+def test_planted_foot_velocity_loss_counts_only_truly_still_feet():
+    from salad_core.keymotion.models import planted_foot_velocity_loss
+    from salad_core.skeleton import get_skeleton
+
+    sk = get_skeleton("humanml3d")
+    t = 10
+    true = torch.zeros(1, t, sk.num_joints, 3)
+    ankle = sk.contact_joints[0]
+    true[0, 5:, ankle, 0] = torch.arange(5, dtype=torch.float32) * 0.05     # 1 m/s from frame 5: not planted
+    assert planted_foot_velocity_loss(true, true, sk).item() == 0.0
+    pred = true.clone()
+    pred[0, :, ankle, 2] += torch.arange(t, dtype=torch.float32) * 0.01     # slides 0.01 m/frame in z throughout
+    loss = planted_foot_velocity_loss(pred, true, sk)
+    # counted: 4 still joints x 9 pairs, except the ankle's 4 moving pairs (frames 5-9): 32 joint-pairs x 3 coords;
+    # error: the ankle's 5 still pairs (frames 0-5) with 0.01 in z
+    assert loss.item() == pytest.approx(5 * 0.01 / (32 * 3), rel=1e-5)
+    # a gate above 1 m/s counts the moving pairs too (their error 0.01 each)
+    assert planted_foot_velocity_loss(pred, true, sk, max_speed=2.0).item() == pytest.approx(9 * 0.01 / (36 * 3), rel=1e-5)
+    mask = torch.zeros(1, t, dtype=torch.bool)
+    assert planted_foot_velocity_loss(pred, true, sk, mask).item() == 0.0

@@ -55,6 +55,7 @@ from .models import (
     check_unit_interval,
     foot_contact_loss,
     masked_mean,
+    planted_foot_velocity_loss,
     position_sinusoid,
     velocity_loss,
 )
@@ -81,6 +82,8 @@ class MMAEConfig:
     lambda_bone: float = 1.0      # weight of the bone-length term (eq. 10), metres
     lambda_vel: float = 1.0       # weight of the joint-velocity term (eq. 11), metres per frame
     lambda_foot: float = 0.0      # weight of the foot-contact term (planted feet stay put; MDM's, not the paper's)
+    lambda_foot_vel: float = 0.0  # weight of the planted-foot velocity error (truly still feet only; not the paper's)
+    foot_vel_gate: float = 0.2    # fastest ground-truth foot speed (m/s) that the planted-foot term counts
     max_text_tokens: int = 512    # rows of the text positional table
 
     def __post_init__(self) -> None:
@@ -98,8 +101,10 @@ class MMAEConfig:
             raise ValueError(f"{name}.activation={self.activation!r} is invalid; choose one of {ACTIVATIONS}")
         if not isinstance(self.lerp_residual, bool):
             raise ValueError(f"{name}.lerp_residual={self.lerp_residual!r} is invalid; use True or False")
-        for f in ("lambda_bone", "lambda_vel", "lambda_foot"):
+        for f in ("lambda_bone", "lambda_vel", "lambda_foot", "lambda_foot_vel"):
             check_non_negative(name, f, getattr(self, f))
+        if not (isinstance(self.foot_vel_gate, (int, float)) and self.foot_vel_gate > 0):
+            raise ValueError(f"{name}.foot_vel_gate={self.foot_vel_gate!r} is invalid; use a positive speed in m/s")
 
 
 def scatter_keyframes(keyframes: torch.Tensor, indices: torch.Tensor, num_frames: int
@@ -274,7 +279,8 @@ class MotionMaskedAutoencoder(nn.Module):
 
     def loss(self, pred: torch.Tensor, target: torch.Tensor, frame_mask: torch.Tensor) -> dict[str, torch.Tensor]:
         """Eq. 9: ``L = L_mse + λ_bone L_bone + λ_vel L_vel`` over the valid frames, plus ``λ_foot L_foot``
-        (:func:`~salad_core.keymotion.models.foot_contact_loss`, 0 by default: not in the paper).
+        (:func:`~salad_core.keymotion.models.foot_contact_loss`) and ``λ_foot_vel L_foot_vel``
+        (:func:`~salad_core.keymotion.models.planted_foot_velocity_loss`), both 0 by default: not in the paper.
 
         Parameters
         ----------
@@ -283,15 +289,16 @@ class MotionMaskedAutoencoder(nn.Module):
 
         Returns
         -------
-        dict of scalar tensors ``loss``, ``rec``, ``bone``, ``vel`` (and ``foot`` when ``lambda_foot > 0``).
+        dict of scalar tensors ``loss``, ``rec``, ``bone``, ``vel`` (and ``foot`` / ``foot_vel`` when their
+        weights are above 0).
         """
         if pred.shape != target.shape:
             raise ValueError(f"pred must have the shape of target {tuple(target.shape)}, got {tuple(pred.shape)}")
         cfg = self.config
         rec = masked_mean(F.mse_loss(pred, target, reduction="none"), frame_mask)
         zero = rec.new_zeros(())
-        bone, vel, foot = zero, zero, zero
-        if cfg.lambda_bone > 0 or cfg.lambda_vel > 0 or cfg.lambda_foot > 0:
+        bone, vel, foot, foot_vel = zero, zero, zero, zero
+        if cfg.lambda_bone > 0 or cfg.lambda_vel > 0 or cfg.lambda_foot > 0 or cfg.lambda_foot_vel > 0:
             scale = self.skeleton.feature_scale
             true_feats = self.norm.denormalize(target)
             pj = features_to_joints(self.norm.denormalize(pred), self.skeleton) * scale     # (B, N, J, 3)
@@ -303,10 +310,15 @@ class MotionMaskedAutoencoder(nn.Module):
             if cfg.lambda_foot > 0:
                 contacts = true_feats[..., self.skeleton.feature_slices["contacts"]]
                 foot = foot_contact_loss(pj, contacts, self.skeleton, frame_mask)
-        total = rec + cfg.lambda_bone * bone + cfg.lambda_vel * vel + cfg.lambda_foot * foot
+            if cfg.lambda_foot_vel > 0:
+                foot_vel = planted_foot_velocity_loss(pj, tj, self.skeleton, frame_mask, cfg.foot_vel_gate)
+        total = (rec + cfg.lambda_bone * bone + cfg.lambda_vel * vel + cfg.lambda_foot * foot
+                 + cfg.lambda_foot_vel * foot_vel)
         out = {"loss": total, "rec": rec, "bone": bone, "vel": vel}
         if cfg.lambda_foot > 0:
             out["foot"] = foot
+        if cfg.lambda_foot_vel > 0:
+            out["foot_vel"] = foot_vel
         return out
 
     def num_parameters(self) -> int:

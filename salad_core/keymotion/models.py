@@ -39,6 +39,7 @@ __all__ = [
     "bone_length_loss",
     "velocity_loss",
     "foot_contact_loss",
+    "planted_foot_velocity_loss",
     "masked_mean",
     "check_positive_int",
     "check_unit_interval",
@@ -294,6 +295,38 @@ def foot_contact_loss(pred_joints: torch.Tensor, true_contacts: torch.Tensor, sk
         w = w & (mask[:, 1:] & mask[:, :-1])[..., None]
     w = w.to(speed.dtype)[..., None]                                        # (B, T-1, 4, 1)
     return (speed * w).sum() / (w.sum() * 3).clamp_min(1.0)
+
+
+def planted_foot_velocity_loss(pred_joints: torch.Tensor, true_joints: torch.Tensor, skeleton: str | Skeleton,
+                               mask: torch.Tensor | None = None, max_speed: float = 0.2) -> torch.Tensor:
+    """Mean ``|v - v*|`` (metres/frame, L1 over x, y, z) of the 4 contact joints at the frames where the ground
+    truth's foot joint is truly planted: it moves slower than ``max_speed`` (m/s) between the two frames.
+
+    HumanML3D's contact label admits feet moving up to 0.9 m/s, so a term on the label (e.g.
+    :func:`foot_contact_loss`, which pushes the absolute foot speed to 0 wherever the label is on) fights the
+    ground truth on rising heels and slow slides; this one asks only for the ground truth's own velocity, and only
+    where the foot is really still.
+
+    Parameters
+    ----------
+    pred_joints, true_joints : Tensor ``(B, T, J, 3)``
+        Generated and ground-truth joints (metres).
+    skeleton : name or Skeleton
+        Its ``fps`` turns ``max_speed`` into metres per frame.
+    mask : Tensor ``(B, T)`` bool, optional
+        Valid frames; a velocity counts when both of its frames are valid.
+    max_speed : float
+        Fastest ground-truth foot speed (m/s) that counts as planted.
+    """
+    sk = get_skeleton(skeleton)
+    feet = list(sk.contact_joints)
+    vp = pred_joints[:, 1:, feet] - pred_joints[:, :-1, feet]               # (B, T-1, 4, 3)
+    vt = true_joints[:, 1:, feet] - true_joints[:, :-1, feet]
+    w = vt.norm(dim=-1) < max_speed / sk.fps                                 # (B, T-1, 4)
+    if mask is not None:
+        w = w & (mask[:, 1:] & mask[:, :-1])[..., None]
+    w = w.to(vp.dtype)[..., None]
+    return ((vp - vt).abs() * w).sum() / (w.sum() * 3).clamp_min(1.0)
 
 
 def velocity_loss(pred_joints: torch.Tensor, true_joints: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:

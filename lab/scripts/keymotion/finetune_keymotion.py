@@ -7,7 +7,8 @@ feet: the MMAE's in-filling of the clips' own keyframes already slides (0.14 m/s
 VAE's decoded poses halve the flight (-3.30 m/s^2 against -7.66 with the true poses). Two stages can be fine-tuned:
 
 * ``--stage mmae``: :attr:`MMAEConfig.lambda_foot` (:func:`salad_core.keymotion.models.foot_contact_loss`:
-  planted feet stay put), with the recipe's MMAE settings (keyframe ratio, keyframe noise, batch, buckets);
+  planted feet stay put) and ``lambda_foot_vel`` (:func:`~salad_core.keymotion.models.planted_foot_velocity_loss`:
+  the ground truth's velocity where a foot is truly still; ``--fixed-keyframes`` trains at generation's density), with the recipe's MMAE settings (keyframe ratio, keyframe noise, batch, buckets);
   ``--roundtrip P`` gives a share ``P`` of the items the source keyframe VAE's reconstruction of their keyframes
   (``KeyMotionTrainConfig.keyframe_roundtrip``: the errors generation makes) and selects the VAE's fixed number
   of keyframes for every item (``keyframe_ratio`` 0).
@@ -59,14 +60,14 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[3]
 
 #: per stage: the flags (and model config fields) of its extra loss weights
-LOSS_FLAGS = {"mmae": ("lambda_foot",), "pst": (),
+LOSS_FLAGS = {"mmae": ("lambda_foot", "lambda_foot_vel"), "pst": (),
               "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact", "lambda_feet_height")}
 #: per stage: its other flags
-STAGE_FLAGS = {"mmae": ("roundtrip", "scratch"), "kf_vae": ("parts",), "pst": ("side_cue", "latent_norm", "scratch", "kf_vae")}
+STAGE_FLAGS = {"mmae": ("roundtrip", "scratch", "fixed_keyframes"), "kf_vae": ("parts",), "pst": ("side_cue", "latent_norm", "scratch", "kf_vae")}
 #: the learning rate a stage gets when --lr is not given (the PST's probe of session 20 ran at 2e-4)
 DEFAULT_LR = {"mmae": 1e-4, "kf_vae": 1e-4, "pst": 2e-4}
 #: the weight a flag gets when not given
-DEFAULT_WEIGHTS = {"lambda_foot": 5.0, "lambda_root": 0.0, "lambda_local_vel": 0.0, "lambda_contact": 0.0,
+DEFAULT_WEIGHTS = {"lambda_foot": 5.0, "lambda_foot_vel": 0.0, "lambda_root": 0.0, "lambda_local_vel": 0.0, "lambda_contact": 0.0,
                    "lambda_feet_height": 0.0}
 
 
@@ -84,6 +85,11 @@ def main(argv=None, *, text_encoder=None) -> int:
     ap.add_argument("--lr", type=float, default=None, help="constant after a 200-step warm-up (default 1e-4, where "
                                                              "the recipe's stages ended; the PST 2e-4)")
     ap.add_argument("--lambda-foot", type=float, default=None, help="mmae: weight of the foot-contact term (5)")
+    ap.add_argument("--lambda-foot-vel", type=float, default=None,
+                    help="mmae: weight of the planted-foot velocity error (truly still feet only; 0)")
+    ap.add_argument("--fixed-keyframes", action="store_const", const=True, default=None,
+                    help="mmae: train with the keyframe VAE's fixed number of keyframes per item (the density "
+                         "generation uses: 20 of 80-196 frames), not the recipe's ratio")
     ap.add_argument("--side-cue", action="store_const", const=True, default=None,
                     help="pst: add the side cue (PSTConfig.side_cue) to the source PST")
     ap.add_argument("--latent-norm", action="store_const", const=True, default=None,
@@ -170,6 +176,8 @@ def main(argv=None, *, text_encoder=None) -> int:
             if not 0.0 <= args.roundtrip <= 1.0:
                 ap.error(f"--roundtrip {args.roundtrip}: use a share in [0, 1]")
             overrides.update(keyframe_roundtrip=args.roundtrip, roundtrip_vae=str(source), keyframe_ratio=0.0)
+        if args.fixed_keyframes:
+            overrides.update(keyframe_ratio=0.0)
         train_cfg = replace(recipe.mmae_train, **overrides)
         model_cfg = replace(recipe.mmae_model or MMAEConfig(), **weights)
         num_keyframes = json.loads((source / "kf_vae.json").read_text())["config"].get("num_keyframes", 20)
