@@ -27,7 +27,7 @@ handling and ``torchrun`` DDP as the SALAD trainers. The stages:
 :func:`train_keymotion` runs the three stages into ``out/kf_vae``, ``out/pst``, ``out/mmae`` and
 writes ``out/keymotion.json``, so ``KeyMotionPipeline.from_pretrained(out)`` loads the result.
 :class:`KeyMotionRecipe` is its JSON configuration (``configs/keymotion-0.2.json``), read by
-``salad train keymotion`` (:mod:`salad_core.train.cli`). The PST and MMAE stages share one
+``salad train keymotion`` (:mod:`salad_core.cli.train`). The PST and MMAE stages share one
 caption-feature cache, filled in batches at their first step (:class:`PrefilledCaptions`).
 
 Items come from :class:`~salad_core.data.dataset.MotionTextDataset` (random crops and captions,
@@ -977,7 +977,8 @@ def _check_fixed_keyframes(config: KeyMotionTrainConfig, stage: str) -> None:
 
 #: MMAEConfig fields that may differ between a fine-tuned MMAE and the one it starts from (loss weights,
 #: dropout, table sizes); every other field defines the network and must match.
-MMAE_FREE_FIELDS = ("lambda_bone", "lambda_vel", "lambda_foot", "dropout", "max_text_tokens")
+MMAE_FREE_FIELDS = ("lambda_bone", "lambda_vel", "lambda_foot", "lambda_foot_vel", "foot_vel_gate", "dropout",
+                    "max_text_tokens")
 
 #: KeyframeVAEConfig fields that may differ between a fine-tuned keyframe VAE and the one it starts from (loss
 #: weights and dropout).
