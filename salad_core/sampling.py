@@ -489,7 +489,8 @@ def denoise(denoiser: torch.nn.Module, scheduler, cond: TextInput | None = None,
             prediction: Prediction | None = None, corrections: torch.Tensor | None = None,
             controller_hooks: Iterable[Callable[[StepInfo], None]] | None = None,
             callback: Callable[[StepInfo, torch.Tensor], None] | None = None,
-            progress: bool = False, generator: torch.Generator | None = None) -> torch.Tensor:
+            progress: bool = False, generator: torch.Generator | None = None,
+            latent_hook: Callable[[StepInfo, torch.Tensor], torch.Tensor] | None = None) -> torch.Tensor:
     """Run the reverse diffusion from ``latents``: the one sampling loop of salad.
 
     Per step ``i`` with timestep ``t``: the hooks learn the step (:class:`StepInfo`); the strategy
@@ -533,6 +534,10 @@ def denoise(denoiser: torch.nn.Module, scheduler, cond: TextInput | None = None,
         Show a tqdm bar.
     generator : torch.Generator, optional
         Passed to stochastic schedulers' ``step`` (DDPM, Euler ancestral).
+    latent_hook : callable, optional
+        ``latent_hook(step_info, latents) -> latents`` after each step's correction, before re-masking:
+        a latent-space edit of the new latents (in-painting's replacement of the kept region,
+        :class:`salad_core.attention.inpaint.Inpaint`). None: the loop as it always was.
 
     Returns
     -------
@@ -584,6 +589,8 @@ def denoise(denoiser: torch.nn.Module, scheduler, cond: TextInput | None = None,
             z = scheduler.step(out, t, z, **step_kwargs).prev_sample
             if corrections is not None:
                 z = z + corrections[i]
+            if latent_hook is not None:
+                z = latent_hook(info, z)
             if keep is not None:
                 z = z * keep
             if callback is not None:

@@ -11,6 +11,8 @@
 * :mod:`.edits`: typed edit specifications (:class:`WordSwap`, :class:`Refine`,
   :class:`Reweight`, :class:`Mirror`, :class:`InjectSelfAttention`; beyond the paper, after MotionCLR:
   :class:`Erase`, :class:`Shift`, :class:`ShiftTemporal`, :class:`ExampleBased`) and their pure kernels.
+* :mod:`.inpaint`: :class:`Inpaint`, regenerate chosen body parts / a frame span and keep the rest
+  (a latent-space step of the edit loop), and :func:`parse_inpaint` for ``PARTS[@START:END]``.
 * :mod:`.counting`: counting an action's repetitions from its attention over frames
   (:func:`count_repetitions`) and from the motion itself (:func:`motion_repetitions`).
 * :mod:`.align`: token alignment of source and target prompts.
@@ -29,6 +31,7 @@ from .edits import (ERASE_MODES, MIRROR_GROUPS, REWEIGHT_RANGE, EditSpec, Erase,
                     MirrorSelfAttention, Refine, Reweight, Shift, ShiftTemporal, WordSwap, erase_columns, map_columns, mirror_parts,
                     mirror_permutation, mirror_self_attention, refine_columns, reweight_columns, seeded_noise, shift_columns, shift_temporal,
                     validate_edits)
+from .inpaint import INPAINT_GROUPS, Inpaint, inpaint_parts, parse_inpaint
 from .inversion import INVERSION_METHODS, Inversion, LatentInversion, ddim_step_coefficients, invert_latents
 from .hooks import (ActivationCache, HookContext, HookPoint, hook_point_names, hook_points, select_hook_points,
                     use_hooks)
@@ -39,7 +42,7 @@ __all__ = [
     "capture_cross_attention", "CaptureConfig", "AttentionStore", "AttentionMaps", "TokenInfo", "as_capture_config",
     "EditSpec", "WordSwap", "Refine", "Reweight", "Mirror", "MirrorSelfAttention", "InjectSelfAttention", "validate_edits",
     "Erase", "Shift", "ShiftTemporal", "ExampleBased", "ERASE_MODES", "erase_columns", "shift_columns",
-    "shift_temporal", "seeded_noise",
+    "shift_temporal", "seeded_noise", "Inpaint", "INPAINT_GROUPS", "inpaint_parts", "parse_inpaint",
     "count_repetitions", "motion_repetitions", "count_peaks", "attention_signal", "motion_signal",
     "MIRROR_GROUPS", "REWEIGHT_RANGE", "mirror_parts", "mirror_self_attention", "mirror_permutation", "reweight_columns", "map_columns",
     "refine_columns", "global_align", "alignment_matrix", "word_swap_matrix",

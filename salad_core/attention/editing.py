@@ -50,6 +50,7 @@ class EditRun:
     rows: int                       # forward rows summed over the steps (plain CFG generation: 2 B S)
     probe_steps: int                # steps that ran probe rows
     edited_noise: torch.Tensor | None = None   # (B, N', P, Dz) the edited sample's own noise, if not the source's
+    inpaint_mask: torch.Tensor | None = None   # (B, N', P, 1) the in-painting region (1 = regenerated), if any
 
 
 def pad_context(ctx: TextContext, width: int) -> TextContext:
@@ -258,10 +259,20 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
     if corrections is not None:
         corrections = (torch.cat([corrections, torch.zeros_like(corrections)], 1) if own_noise
                        else corrections.repeat(1, k, 1, 1, 1))
+    inpaint = next((e for e in controller.edits if e.role == "latent"), None) if prediction.edited else None
+    region = hook = None
+    if inpaint is not None:
+        # in-painting: after each step the edited latents outside the region are the source's of that step
+        region = inpaint.mask(frame_mask, noise.shape[2]).to(noise)
+
+        def hook(info, z: torch.Tensor) -> torch.Tensor:
+            if not inpaint.active(info.fraction):
+                return z
+            return torch.cat([z[:b], z[b:] * region + z[:b] * (1.0 - region)])
     z = denoise(denoiser, scheduler, latents=latents, frame_mask=frame_mask.repeat(k, 1),
                 num_steps=num_steps, prediction=prediction, progress=progress, generator=generator,
-                corrections=corrections)
+                corrections=corrections, latent_hook=hook)
     log.debug("edit loop: %d steps, %d forward rows, %d probe steps", num_steps, controller.rows_total,
               controller.probe_steps)
     return EditRun(z[:b], z[b:] if prediction.edited else None, controller.rows_total, controller.probe_steps,
-                   edited_noise if own_noise else None)
+                   edited_noise if own_noise else None, region)

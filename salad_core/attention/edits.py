@@ -31,6 +31,9 @@ SALAD's 7-part x frame x word maps):
                             noise and takes the example's temporal self-attention early on
 ==========================  ================================================================
 
+In-painting, :class:`~salad_core.attention.inpaint.Inpaint` (:mod:`.inpaint`), is an edit of the latents, not of
+the maps (role ``"latent"``): it composes with all of the above.
+
 Specs compose in order, Prompt-to-Prompt style: at most one *replacement* (WordSwap or Refine)
 builds the base map from ``M`` and ``M*``; *modifiers* (Reweight, Mirror, Erase, Shift) change the map in
 the order given; with no replacement the base is the source's own map ``M`` (paper: reweighting
@@ -592,7 +595,10 @@ def validate_edits(edits: EditSpec | Sequence[EditSpec] | None) -> tuple[EditSpe
     for i, e in enumerate(out):
         if not isinstance(e, EditSpec) or type(e) is EditSpec:
             raise TypeError(f"edits[{i}] must be WordSwap, Refine, Reweight, Mirror or InjectSelfAttention (or Erase, "
-                            f"Shift, ShiftTemporal, ExampleBased), got {e!r}")
+                            f"Shift, ShiftTemporal, ExampleBased, Inpaint), got {e!r}")
+    latent = [e for e in out if e.role == "latent"]
+    if len(latent) > 1:
+        raise ValueError(f"at most one in-painting edit (Inpaint) per edit, got {latent}; name all the parts in one")
     seeded = [e for e in out if e.edited_seed is not None]
     if len(seeded) > 1:
         raise ValueError(f"at most one edit may give the edited sample its own noise, got {seeded}")

@@ -1,0 +1,220 @@
+"""In-painting (issue 67): regenerate body parts or a frame span of a motion, keep the rest.
+
+Usage:
+    python lab/scripts/editing/measure_inpaint.py [--steps 50] [--frames 120] [--threads 1]
+        [--blends 0,1,2] [--json lab/records/editing/inpaint.json]
+
+Cases (held out: nothing here is trained; the only choice made on them is ``Inpaint.blend``):
+
+- generated, parts: a source prompt (walking, standing, jogging in place, squatting) is generated from a seed
+  and its arms / legs / head regenerated from a benchmark prompt of ``salad_core.eval.physics_prompts``
+  whose checks test that limb (``a man waves his right hand`` -> ``arm_ratio[right] >= 2``, ...);
+- generated, frames: the source's frames ``[40, 80)`` (in-between) or ``[80, end)`` (suffix) regenerated
+  from ``a person jumps`` / ``a person squats down`` / ``a person turns left``;
+- real: DeepMimic takes (pybullet), the MocapBank BVH take and the HumanML3D sample, inverted with their
+  prompt (``pipe.invert``, its defaults) and edited as above (arms from the wave prompt; the middle third
+  of the take from the jump prompt).
+
+Measured per case (joints: the pipeline's ``out.joints``, metres -> cm):
+
+- ``kept_cm``: root-aligned MPJPE between source and edit over what is kept (the other parts' joints, all
+  frames; or every joint over the kept frames); ``kept_pose_cm`` the same after turning each pose to face
+  +z (the heading of the kept frames after a regenerated span follows from the span's turning: a
+  relative-feature motion integrates it);
+- ``edited_cm``: the same over the regenerated joints / frames (it must be far from 0);
+- ``seam_jerk_ratio`` (frame spans): the largest jerk (third difference of the joint positions, mean
+  over joints, m/s^3) within 4 frames of an inner seam over the source's own 95th percentile of jerk;
+- ``check``: the prompt's checks on the edit (the whole motion; a turn over the regenerated span), and
+  whether the source passed them already (``fresh``: it did not, so the pass is the edit's doing).
+
+Targets (issue 67): kept <= 2 cm, seam jerk <= 1.5x, checks pass in >= 80 % of cases.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from salad_core.attention import Inpaint
+from salad_core.eval.physics_prompts import PROMPTS
+from salad_core.pipeline import SaladPipeline
+from salad_core.skeleton import PART_NAMES, get_skeleton
+
+from _measure_common import deepmimic_items, finish_run, mean, run_settings, start_run  # scripts/
+
+ROOT = Path(__file__).resolve().parents[3]
+SOURCES = ("a person walks forward", "a person stands still", "a man jogs in place", "a person squats down")
+PART_TARGETS = (("arms", "a man waves his right hand"), ("arms", "a woman waves with her left hand"),
+                ("arms", "a person raises his left arm"), ("arms", "someone punches forward with their right fist"),
+                ("arms", "a person raises both arms"), ("legs", "a man kicks with his left leg"),
+                ("head", "a man nods his head"))
+SPAN_SOURCES = ("a person walks forward", "a person stands still")
+SPAN_TARGETS = ("a person jumps", "a person squats down", "a person turns left")
+DEEPMIMIC = ("walk", "run", "punch", "dance_a", "kick", "walker/0walk_forward", "walker/turn_left0", "spin")
+BY_TEXT = {p.text: p for p in PROMPTS}
+
+
+def facing(joints: np.ndarray, sk) -> np.ndarray:
+    """Root-aligned poses turned about the vertical so that the hips' left-right axis is +x."""
+    x = joints - joints[:, :1]
+    li, ri = sk.joint_names.index("left_hip"), sk.joint_names.index("right_hip")
+    across = x[:, li] - x[:, ri]
+    ang = np.arctan2(across[:, 2], across[:, 0])
+    c, s = np.cos(-ang), np.sin(-ang)
+    out = x.copy()
+    out[..., 0] = c[:, None] * x[..., 0] - s[:, None] * x[..., 2]
+    out[..., 2] = s[:, None] * x[..., 0] + c[:, None] * x[..., 2]
+    return out
+
+
+def dist_cm(a: np.ndarray, b: np.ndarray, frames, joints) -> float:
+    if not len(frames) or not len(joints):
+        return float("nan")
+    d = np.linalg.norm(a[np.ix_(frames, joints)] - b[np.ix_(frames, joints)], axis=-1)
+    return float(d.mean() * 100)
+
+
+def jerk(joints: np.ndarray, fps: float) -> np.ndarray:
+    """Per-frame jerk (N - 3,), mean over joints, m/s^3; entry i spans frames i..i+3."""
+    d3 = joints[3:] - 3 * joints[2:-1] + 3 * joints[1:-2] - joints[:-3]
+    return np.linalg.norm(d3, axis=-1).mean(-1) * fps ** 3
+
+
+def evaluate(prompt: str, joints: np.ndarray, span: tuple[int, int] | None) -> bool:
+    results = []
+    for c in BY_TEXT[prompt].checks:
+        x = joints[span[0]:span[1]] if (span is not None and c.measure in ("turn_deg", "abs_turn_deg")) else joints
+        results.append(c.evaluate(x).passed)
+    return all(results)
+
+
+def measure(pipe, out, inp: Inpaint, target: str, sk) -> dict:
+    src, ed = out.source.joints[0], out.edited.joints[0]
+    n = len(src)
+    jt = np.array(sk.joint_to_part)
+    parts = inp.parts or PART_NAMES
+    regen_j = [j for j in range(len(jt)) if PART_NAMES[jt[j]] in parts]
+    kept_j = [j for j in range(len(jt)) if j not in regen_j]
+    if inp.frames is None:
+        span, regen_f, kept_f = None, list(range(n)), list(range(n))
+    else:
+        s, e = inp.latent_span(n)
+        span = (s * inp.unit_length, e * inp.unit_length)
+        regen_f = list(range(*span))
+        kept_f = [f for f in range(n) if f not in regen_f]
+        kept_j = list(range(len(jt))) if inp.parts is None else kept_j
+    ra_s, ra_e = src - src[:, :1], ed - ed[:, :1]
+    fa_s, fa_e = facing(src, sk), facing(ed, sk)
+    if inp.frames is None:
+        kept, kept_pose = dist_cm(ra_s, ra_e, kept_f, kept_j), dist_cm(fa_s, fa_e, kept_f, kept_j)
+    else:       # kept frames: every joint (the chosen parts too, when only some were regenerated)
+        allj = list(range(len(jt)))
+        kept, kept_pose = dist_cm(ra_s, ra_e, kept_f, allj), dist_cm(fa_s, fa_e, kept_f, allj)
+    row = {"kept_cm": kept, "kept_pose_cm": kept_pose, "edited_cm": dist_cm(fa_s, fa_e, regen_f, regen_j)}
+    if span is not None:
+        js, je = jerk(src, sk.fps), jerk(ed, sk.fps)
+        p95 = float(np.percentile(js, 95))
+        seams = [b for b in span if 0 < b < n]
+        idx = sorted({i for b in seams for i in range(max(0, b - 5), min(len(je), b + 3))})
+        row["seam_jerk"] = float(je[idx].max()) if idx else float("nan")
+        row["source_jerk_p95"] = p95
+        row["seam_jerk_ratio"] = row["seam_jerk"] / max(p95, 1e-9)
+    row["check"] = evaluate(target, ed, span)
+    row["source_check"] = evaluate(target, src, span)
+    return row
+
+
+def summarize(rows: list[dict]) -> dict:
+    fresh = [r for r in rows if not r["source_check"]]
+    out = {"cases": len(rows), "kept_cm": mean(r["kept_cm"] for r in rows),
+           "kept_cm_max": max((r["kept_cm"] for r in rows), default=float("nan")),
+           "kept_pose_cm": mean(r["kept_pose_cm"] for r in rows),
+           "kept_within_2cm": mean(float(r["kept_cm"] <= 2.0) for r in rows),
+           "edited_cm": mean(r["edited_cm"] for r in rows),
+           "check_pass": mean(float(r["check"]) for r in rows),
+           "check_pass_fresh": mean(float(r["check"]) for r in fresh), "fresh_cases": len(fresh)}
+    if any("seam_jerk_ratio" in r for r in rows):
+        out["seam_jerk_ratio"] = mean(r.get("seam_jerk_ratio") for r in rows)
+        out["seam_within_1.5x"] = mean(float(r["seam_jerk_ratio"] <= 1.5) for r in rows if "seam_jerk_ratio" in r)
+    return out
+
+
+def real_takes(sk, frames: int) -> list[dict]:
+    items = [it for it in deepmimic_items(sk, 64) if it["id"] in DEEPMIMIC]
+    from salad_core.bvh.convert import bvh_to_features
+    mocap = bvh_to_features(ROOT / "tests/data/bvh/mocapbank.bvh")
+    items.append({"id": "mocapbank", "features": mocap, "prompt": "a person kneels down on the right knee and stands up"})
+    hml = ROOT / "tests/data/humanml3d_sample/new_joint_vecs/012314.npy"
+    items.append({"id": "humanml3d_012314", "features": np.load(hml),
+                  "prompt": "a person walks forward and turns around"})
+    for it in items:
+        f = np.asarray(it["features"], np.float32)
+        n = min(len(f), frames)
+        it["features"] = f[:n - n % 4]
+    return [it for it in items if len(it["features"]) >= 48]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=50)
+    ap.add_argument("--frames", type=int, default=120)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--blends", default="0,1,2", help="Inpaint.blend values to compare on the frame spans")
+    ap.add_argument("--seeds", type=int, default=1, help="seeds per generated case")
+    ap.add_argument("--skip-real", action="store_true")
+    ap.add_argument("--json", type=Path, default=ROOT / "lab/records/editing/inpaint.json")
+    args = ap.parse_args()
+    t0 = start_run(args.threads)
+    pipe = SaladPipeline.from_pretrained()
+    sk = get_skeleton()
+    blends = [int(b) for b in args.blends.split(",")]
+    n = args.frames
+    rows: list[dict] = []
+
+    def run(kind, name, blend, inp, target, **kw):
+        out = pipe.edit(target=target, edits=[inp], num_steps=None if "inversion" in kw else args.steps, **kw)
+        row = dict(kind=kind, case=name, target=target, inpaint=inp.describe(), blend=blend, **measure(pipe, out, inp, target, sk))
+        rows.append(row)
+        print(f"{kind:14s} {name[:28]:28s} {inp.describe():10s} b{blend} kept {row['kept_cm']:5.2f} "
+              f"pose {row['kept_pose_cm']:5.2f} edited {row['edited_cm']:5.1f} "
+              f"seam {row.get('seam_jerk_ratio', float('nan')):5.2f} check {row['check']!s:5s} (src {row['source_check']})",
+              flush=True)
+
+    for seed in range(args.seeds):
+        for src in SOURCES:
+            for parts, target in PART_TARGETS:
+                run("gen/parts", f"{src} s{seed}", 0, Inpaint(parts=parts), target, source=src, lengths=n, seed=seed)
+        for src in SPAN_SOURCES:
+            for target in SPAN_TARGETS:
+                for span in ((40, 80), (80, None)):
+                    for blend in blends:
+                        run("gen/frames", f"{src} s{seed}", blend, Inpaint(frames=span, blend=blend), target,
+                            source=src, lengths=n, seed=seed)
+    if not args.skip_real:
+        for it in real_takes(sk, n):
+            inv = pipe.invert(it["features"], it["prompt"], num_steps=args.steps)
+            print(f"inverted {it['id']}: {inv.errors['inversion_mpjpe'] * 100:.2f} cm", flush=True)
+            run("real/parts", it["id"], 0, Inpaint(parts="arms"), "a man waves his right hand", inversion=inv)
+            m = len(it["features"])         # the middle third of the take (whole latent frames)
+            span = (4 * round(m / 12), 4 * round(m / 6))
+            for blend in blends:
+                run("real/frames", it["id"], blend, Inpaint(frames=span, blend=blend), "a person jumps",
+                    inversion=inv)
+
+    summary = {}
+    for kind in sorted({r["kind"] for r in rows}):
+        for blend in sorted({r["blend"] for r in rows if r["kind"] == kind}):
+            summary[f"{kind} blend={blend}"] = summarize([r for r in rows if r["kind"] == kind and r["blend"] == blend])
+    cols = ("cases", "kept_cm", "kept_cm_max", "kept_pose_cm", "kept_within_2cm", "edited_cm", "seam_jerk_ratio",
+            "seam_within_1.5x", "check_pass", "check_pass_fresh", "fresh_cases")
+    print("\n| setting | " + " | ".join(cols) + " |")
+    print("|---" * (len(cols) + 1) + "|")
+    for k, v in summary.items():
+        cells = [("-" if v.get(c) is None else (f"{v[c]:.2f}" if isinstance(v[c], float) else str(v[c]))) for c in cols]
+        print(f"| {k} | " + " | ".join(cells) + " |")
+    finish_run({"settings": run_settings(args), "summary": summary, "rows": rows}, t0, args.json)
+
+
+if __name__ == "__main__":
+    main()
