@@ -1,5 +1,5 @@
 """In-painting in the latent space: regenerate chosen body parts and/or a frame span of a motion from
-the edit's target prompt, keep the rest (issue 67, "edit your own motion").
+the edit's target prompt, keep the rest.
 
 The latents are ``(B, N', P, Dz)``: ``N' = frames / unit_length`` latent frames of the 7 body parts of
 :data:`salad_core.skeleton.PART_NAMES`. :class:`Inpaint` names a *region* of them, the chosen parts
