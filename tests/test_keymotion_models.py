@@ -492,7 +492,7 @@ def test_pipeline_end_to_end_fields_and_determinism():
     assert float(np.abs(out.features[0, 40:]).sum()) == 0.0
     assert [j.shape for j in out.joints] == [(40, SK.num_joints, 3), (64, SK.num_joints, 3)]
     # joints are recovered as SALAD's pipeline recovers them: the skeleton fit by default, the raw reading kept
-    assert pipe.recovery == "fit" and out.settings == {"recovery": "fit", "skeleton": SK.name}
+    assert pipe.recovery == "fit" and out.settings == {"recovery": "fit", "skeleton": SK.name, "side_check": True}
     np.testing.assert_allclose(out.raw_joints[1], features_to_joints(out.features[1], SK), atol=1e-5)
     bones = np.linalg.norm(out.joints[1][:, 1:] - out.joints[1][:, list(SK.parents[1:])], axis=-1)   # (N, J-1)
     np.testing.assert_allclose(bones, np.broadcast_to(np.asarray(SK.bone_lengths)[1:], bones.shape), atol=1e-4)
@@ -697,3 +697,22 @@ def test_planted_foot_velocity_loss_counts_only_truly_still_feet():
     assert planted_foot_velocity_loss(pred, true, sk, max_speed=2.0).item() == pytest.approx(9 * 0.01 / (36 * 3), rel=1e-5)
     mask = torch.zeros(1, t, dtype=torch.bool)
     assert planted_foot_velocity_loss(pred, true, sk, mask).item() == 0.0
+
+
+def test_pst_middle_skip_pair_is_optional():
+    """With 4 cross layers the pairs are (0, 3) and (1, 2); (1, 2) feeds layer 2 its own input twice, and
+    middle_skip=False drops it (layer 2 then has no skip projection)."""
+    from salad_core.keymotion.pst import ParallelSkipTransformer, PSTConfig
+
+    base = dict(latent_size=2, latent_dim=8, text_dim=16, width=16, num_heads=2, ff_dim=32, num_cross_layers=4,
+                dropout=0.0)
+    paper = ParallelSkipTransformer(PSTConfig(**base))
+    fixed = ParallelSkipTransformer(PSTConfig(**base, middle_skip=False))
+    assert paper.skip_pairs == ((0, 3), (1, 2)) and fixed.skip_pairs == ((0, 3),)
+    assert paper.cross_layers[2].skip_x is not None and fixed.cross_layers[2].skip_x is None
+    five = ParallelSkipTransformer(PSTConfig(**{**base, "num_cross_layers": 5}, middle_skip=False))
+    assert five.skip_pairs == ((0, 4), (1, 3))                     # odd L: nothing adjacent, nothing dropped
+    x, text, mask = torch.randn(2, 2, 8), torch.randn(2, 3, 16), torch.ones(2, 3, dtype=torch.bool)
+    assert fixed(x, torch.tensor([10, 20]), text, mask, lengths=torch.tensor([40, 60])).shape == (2, 2, 8)
+    with pytest.raises(ValueError, match="middle_skip"):
+        PSTConfig(**base, middle_skip=1)

@@ -20,7 +20,9 @@ Choices where the paper is silent or that we made:
   back to ``w`` by a linear layer, in both streams (the U-Net/MLD pairing). Counting layers from
   1 as the paper does, the outputs of layers ``l`` and ``L - l`` are concatenated and projected
   before layer ``L - l + 1``: the paper's skip "from layer l to layer L - l". With odd ``L`` the
-  middle layer has no skip. :attr:`ParallelSkipTransformer.skip_pairs` lists the 0-based
+  middle layer has no skip; with even ``L`` the middle pair ``(L/2 - 1, L/2)`` is adjacent, so its skip
+  concatenates layer ``L/2``'s input with itself (the paper's pairing, kept by default for the shipped weights;
+  ``PSTConfig(middle_skip=False)`` drops it). :attr:`ParallelSkipTransformer.skip_pairs` lists the 0-based
   ``(source, receiver)`` pairs.
 * **Parallel streams** follow ViLBERT's co-attention: each stream's block is self-attention,
   cross-attention to the *other* stream's previous output, then a feed-forward layer (pre-norm).
@@ -102,6 +104,9 @@ class PSTConfig:
     max_text_tokens: int = 512    # rows of the text positional table
     side_cue: bool = False        # add a learned left/right embedding to the text tokens (needs text_sides)
     latent_norm: bool = False     # diffuse (z - latent_mean) / latent_std (training-set statistics in the weights)
+    middle_skip: bool = True      # with even L, also the adjacent middle pair (L/2-1, L/2), whose skip concatenates
+                                  # layer L/2's input with itself (the paper's pairing; KeyMotion 0.2 has it); False
+                                  # drops that degenerate pair
 
     def __post_init__(self) -> None:
         name = type(self).__name__
@@ -121,6 +126,8 @@ class PSTConfig:
             raise ValueError(f"{name}.side_cue={self.side_cue!r} is invalid; use True or False")
         if not isinstance(self.latent_norm, bool):
             raise ValueError(f"{name}.latent_norm={self.latent_norm!r} is invalid; use True or False")
+        if not isinstance(self.middle_skip, bool):
+            raise ValueError(f"{name}.middle_skip={self.middle_skip!r} is invalid; use True or False")
 
 
 class ParallelCrossLayer(nn.Module):
@@ -216,9 +223,14 @@ class ParallelSkipTransformer(nn.Module):
 
     @property
     def skip_pairs(self) -> tuple[tuple[int, int], ...]:
-        """``(source, receiver)`` layer pairs ``(i, L - 1 - i)`` for ``i < L // 2`` (0-based)."""
+        """``(source, receiver)`` layer pairs ``(i, L - 1 - i)`` for ``i < L // 2`` (0-based); without
+        :attr:`PSTConfig.middle_skip`, only pairs whose receiver is not the source's next layer (for even
+        ``L`` the middle pair's receiver gets its own input twice)."""
         n = self.config.num_cross_layers
-        return tuple((i, n - 1 - i) for i in range(n // 2))
+        pairs = tuple((i, n - 1 - i) for i in range(n // 2))
+        if not self.config.middle_skip:
+            pairs = tuple((i, j) for i, j in pairs if j > i + 1)
+        return pairs
 
     @property
     def num_special_tokens(self) -> int:
