@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import sys
 
-from salad_core.bench import main
+from salad_core.cli.bench import main
 
 if __name__ == "__main__":
     sys.exit(main(["--sections", "overheads", *sys.argv[1:]]))

@@ -28,9 +28,10 @@ eval           T2M evaluator and metrics, the protocol, tables, the paper's numb
 ablation_models the shipped ablation models (Tables 2-3, supplement Tables 2-4) and the study's reading
 bench          ``salad bench``: speed, roofline fraction, overheads, memory, training rate
 io             safe, atomic checkpoint and output files (safetensors with their configs)
+limits         what is accepted from outside (files, weight folders, prompts): named limits, their checks
 allocator      keep freed memory for reuse (glibc ``mallopt``), as the ``salad`` command does
-openmp         how OpenMP worker threads wait between parallel regions (set below, before torch loads)
-cli            the ``salad`` command
+openmp         how OpenMP worker threads wait between parallel regions (the command line sets it)
+cli            the ``salad`` command, on top: a module per command group; draws (salad_viz), tunes the process
 weights        the shipped weights and model cards (data, not code)
 
 The paper, equation by equation
@@ -73,10 +74,7 @@ Cross-attention maps as figures (Fig. 6): ``salad_viz.plot_attention_grid``; the
 Table 1 and Fig. 5: ``salad_core.eval.protocol``; the paper's own numbers:
 ``salad_core.eval.paper_tables``.
 """
-from salad_core import openmp as _openmp
-
-# before anything imports torch: OpenMP workers sleep instead of spinning between parallel regions
-# (see salad_core.openmp for the measurement; SALAD_OMP_WAIT=keep leaves the runtime's default)
-_openmp.configure()
-
+# Importing salad_core changes nothing in the process: the salad command line (salad_core.cli) chooses the OpenMP
+# wait policy and tunes the allocator before a command loads torch; salad_core.openmp.configure() does the first
+# for a Python program that wants it.
 __version__ = "0.7.0"

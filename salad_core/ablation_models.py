@@ -46,7 +46,8 @@ def load_ablation_pipeline(name: str, root: str | os.PathLike | None = None, *, 
     if entries.get(name, {}).get("kind") != "denoiser":
         raise KeyError(f"{name!r} is not a shipped denoiser ablation; choose one of "
                        f"{sorted(k for k, e in entries.items() if e['kind'] == 'denoiser')}")
-    return SaladPipeline.from_pretrained(root / name, text_encoder=text_encoder)
+    # the variants share VAEs and statistics with their siblings in root ("vae": "../vae_st_long/vae")
+    return SaladPipeline.from_pretrained(root / name, text_encoder=text_encoder, allow_outside_paths=root)
 
 
 def load_ablation_vae(name: str, root: str | os.PathLike | None = None):

@@ -27,7 +27,12 @@ __all__ = [
     "config_to_dict",
     "save_checkpoint",
     "read_checkpoint",
+    "read_checkpoint_doc",
+    "checkpoint_files",
+    "build_model",
+    "load_model",
     "CheckpointError",
+    "CheckpointTypeError",
 ]
 
 
@@ -36,7 +41,13 @@ os.umask(_UMASK)
 
 
 class CheckpointError(ValueError):
-    """A checkpoint is missing, truncated, corrupt or does not fit the model."""
+    """A checkpoint is missing, truncated, corrupt or does not fit the model; or a weight folder's JSON
+    is invalid, beyond the limits of :mod:`salad_core.limits`, or names a file outside the folder."""
+
+
+class CheckpointTypeError(CheckpointError, TypeError):
+    """A weight folder's JSON holds a value of the wrong type (``"solver": 42``): both a
+    :class:`CheckpointError` and a :class:`TypeError`."""
 
 
 @contextmanager
@@ -89,9 +100,12 @@ def load_tensors(path: str | os.PathLike) -> dict[str, torch.Tensor]:
     """Read a safetensors file; a missing, truncated or corrupt file raises :class:`CheckpointError`."""
     from safetensors.torch import load_file
 
+    from salad_core import limits
+
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"weight file not found: {path}")
+    limits.check_file_size(path, limits.CHECKPOINT_MAX_BYTES, "weight file", CheckpointError)
     try:
         return load_file(str(path))
     except Exception as exc:  # safetensors raises several types for bad headers / short files
@@ -126,37 +140,72 @@ def save_checkpoint(stem: str | os.PathLike, model: torch.nn.Module, *, model_ty
     return weights
 
 
-def read_checkpoint(stem_or_path: str | os.PathLike) -> tuple[dict[str, Any], dict[str, torch.Tensor]]:
-    """Return ``(doc, state_dict)`` for a checkpoint given its stem, .json or .safetensors path."""
-    p = Path(stem_or_path)
-    stem = p.with_suffix("") if p.suffix in (".json", ".safetensors") else p
-    cfg_path = stem.with_suffix(".json")
+#: The keys of a checkpoint's ``<stem>.json``.
+CHECKPOINT_KEYS = ("type", "config", "meta")
+
+
+def read_checkpoint_doc(cfg_path: str | os.PathLike) -> dict[str, Any]:
+    """The checked ``{"type", "config", "meta"}`` document of a checkpoint's ``.json``.
+
+    Read with :func:`salad_core.limits.read_json` (size, UTF-8, nesting before parsing); ``type`` must
+    be a string, ``config`` and ``meta`` objects, and no other key may appear (a misspelt one is named
+    with the closest known key). Raises :class:`CheckpointError` (:class:`CheckpointTypeError` for a
+    wrong type).
+    """
+    from salad_core import limits
+
+    cfg_path = Path(cfg_path)
     if not cfg_path.is_file():
         raise CheckpointError(f"checkpoint config not found: {cfg_path}")
-    try:
-        doc = json.loads(cfg_path.read_text())
-    except json.JSONDecodeError as exc:
-        raise CheckpointError(f"checkpoint config {cfg_path} is not valid JSON: {exc}") from exc
+    doc = limits.read_json(cfg_path, "checkpoint config", error=CheckpointError, expect=None)
     if not isinstance(doc, dict) or "type" not in doc or "config" not in doc:
         raise CheckpointError(f"checkpoint config {cfg_path} lacks the 'type' and 'config' keys")
-    return doc, load_tensors(stem.with_suffix(".safetensors"))
+    limits.check_fields(doc, {"type": str, "config": dict, "meta": dict}, str(cfg_path), CheckpointError,
+                        CheckpointTypeError)
+    return doc
+
+
+def checkpoint_files(stem_or_path: str | os.PathLike) -> tuple[Path, Path]:
+    """``(<stem>.json, <stem>.safetensors)`` of a checkpoint given its stem, .json or .safetensors path:
+    the two files :func:`read_checkpoint` opens."""
+    p = Path(stem_or_path)
+    stem = p.with_suffix("") if p.suffix in (".json", ".safetensors") else p
+    try:
+        return stem.with_suffix(".json"), stem.with_suffix(".safetensors")
+    except ValueError as exc:       # a path with an empty name ("/")
+        raise CheckpointError(f"{stem_or_path} is not a checkpoint path ({exc})") from None
+
+
+def read_checkpoint(stem_or_path: str | os.PathLike) -> tuple[dict[str, Any], dict[str, torch.Tensor]]:
+    """Return ``(doc, state_dict)`` for a checkpoint given its stem, .json or .safetensors path
+    (:func:`checkpoint_files`; the document checked by :func:`read_checkpoint_doc`, the weights by
+    :func:`load_tensors`)."""
+    cfg_path, weights_path = checkpoint_files(stem_or_path)
+    doc = read_checkpoint_doc(cfg_path)
+    return doc, load_tensors(weights_path)
+
+
+def _state_mismatch(own: dict[str, Any], state: dict[str, torch.Tensor], source: str) -> list[str]:
+    """What keeps ``state`` from loading into a model whose state dict is ``own`` (empty: it fits)."""
+    missing = sorted(set(own) - set(state))
+    unexpected = sorted(set(state) - set(own))
+    bad_shape = [k for k in own if k in state and tuple(own[k].shape) != tuple(state[k].shape)]
+    parts = []
+    if missing:
+        parts.append(f"missing keys {missing[:5]}{'...' if len(missing) > 5 else ''}")
+    if unexpected:
+        parts.append(f"unexpected keys {unexpected[:5]}{'...' if len(unexpected) > 5 else ''}")
+    if bad_shape:
+        k = bad_shape[0]
+        parts.append(f"shape mismatch at {k}: model {tuple(own[k].shape)} vs {source} {tuple(state[k].shape)}")
+    return parts
 
 
 def load_state_into(model: torch.nn.Module, state: dict[str, torch.Tensor], *, source: str = "checkpoint") -> None:
     """Strictly load ``state`` into ``model`` (casting dtypes), with a clear error on mismatch."""
     own = model.state_dict()
-    missing = sorted(set(own) - set(state))
-    unexpected = sorted(set(state) - set(own))
-    bad_shape = [k for k in own if k in state and tuple(own[k].shape) != tuple(state[k].shape)]
-    if missing or unexpected or bad_shape:
-        parts = []
-        if missing:
-            parts.append(f"missing keys {missing[:5]}{'...' if len(missing) > 5 else ''}")
-        if unexpected:
-            parts.append(f"unexpected keys {unexpected[:5]}{'...' if len(unexpected) > 5 else ''}")
-        if bad_shape:
-            k = bad_shape[0]
-            parts.append(f"shape mismatch at {k}: model {tuple(own[k].shape)} vs {source} {tuple(state[k].shape)}")
+    parts = _state_mismatch(own, state, source)
+    if parts:
         raise CheckpointError(f"{source} does not fit {type(model).__name__}: " + "; ".join(parts))
     cast = {k: v.to(own[k].dtype) for k, v in state.items()}
     model.load_state_dict(cast, strict=True)
@@ -183,26 +232,91 @@ def _import_model_registries() -> None:
         importlib.import_module(mod)
 
 
-def load_model(stem_or_path: str | os.PathLike) -> tuple[torch.nn.Module, Any, dict[str, Any]]:
-    """Rebuild a model from our checkpoint alone; returns ``(model in eval mode, config, meta)``."""
+def _check_model_fits(builder: Callable[[Any], torch.nn.Module], config: Any, state: dict[str, torch.Tensor],
+                      source: str) -> None:
+    """Build the model on PyTorch's meta device (shapes only, no memory) and refuse, before the real
+    build allocates anything, a model over :data:`salad_core.limits.MODEL_MAX_BYTES` or one the
+    checkpoint's tensors do not fit (a config asking for a positional table of 10^10 rows whose file
+    holds 5000). A builder that cannot run on the meta device is skipped (the real build checks)."""
+    from salad_core import limits
+
+    try:
+        with torch.device("meta"):
+            ghost = builder(config)
+    except Exception:
+        return
+    tensors = [*ghost.named_parameters(), *ghost.named_buffers()]
+    total = sum(t.numel() * t.element_size() for _, t in tensors)
+    if total > limits.MODEL_MAX_BYTES:
+        name, big = max(tensors, key=lambda nt: nt[1].numel() * nt[1].element_size())
+        raise CheckpointError(f"{source}: its config builds a {type(ghost).__name__} of {limits.human_bytes(total)}, "
+                              f"over the limit of {limits.human_bytes(limits.MODEL_MAX_BYTES)} (largest: {name} "
+                              f"{tuple(big.shape)}); the config does not match the weights")
+    parts = _state_mismatch(ghost.state_dict(), state, source)
+    if parts:
+        raise CheckpointError(f"{source} does not fit {type(ghost).__name__} as its config describes it: "
+                              + "; ".join(parts))
+
+
+def build_model(doc: dict[str, Any], state: dict[str, torch.Tensor], source: str,
+                expected_type: str | None = None, config_source: str | None = None) -> tuple[torch.nn.Module, Any]:
+    """The model of a checkpoint document (:func:`read_checkpoint`) with ``state`` loaded, in eval mode,
+    and its config. The config is checked (:func:`config_from_dict` with ``source``: keys, JSON types,
+    integers within :data:`salad_core.limits.CONFIG_MAX_INT`) and the model's size and shapes checked on
+    the meta device before the real build; ``expected_type`` refuses another model type. Messages name
+    ``source`` (``config_source`` for the config's, default ``source``)."""
     _import_model_registries()
-
-    doc, state = read_checkpoint(stem_or_path)
-    if doc["type"] not in _REGISTRY:
-        raise CheckpointError(f"unknown model type {doc['type']!r} in {stem_or_path}; known: {sorted(_REGISTRY)}")
-    config_cls, builder = _REGISTRY[doc["type"]]
-    config = config_from_dict(config_cls, doc["config"])
+    kind = doc["type"]
+    if expected_type is not None and kind != expected_type:
+        raise CheckpointError(f"{source} holds a {kind!r}, not a {expected_type!r}")
+    if kind not in _REGISTRY:
+        raise CheckpointError(f"unknown model type {kind!r} in {source}; known: {sorted(_REGISTRY)}")
+    config_cls, builder = _REGISTRY[kind]
+    config = config_from_dict(config_cls, doc["config"], source=f"{config_source or source}: 'config'")
+    _check_model_fits(builder, config, state, source)
     model = builder(config)
-    load_state_into(model, state, source=str(stem_or_path))
-    return model.eval(), config, doc.get("meta", {})
+    load_state_into(model, state, source=source)
+    return model.eval(), config
 
 
-def config_from_dict(config_cls: type, data: dict[str, Any]) -> Any:
+def load_model(stem_or_path: str | os.PathLike, *, expected_type: str | None = None
+               ) -> tuple[torch.nn.Module, Any, dict[str, Any]]:
+    """Rebuild a model from our checkpoint alone; returns ``(model in eval mode, config, meta)``.
+
+    Every problem (a missing, oversized, truncated or invalid file, a config of the wrong types or
+    beyond the limits, weights that do not fit) raises :class:`CheckpointError` naming the file.
+    """
+    doc, state = read_checkpoint(stem_or_path)
+    model, config = build_model(doc, state, str(stem_or_path), expected_type, str(checkpoint_files(stem_or_path)[0]))
+    return model, config, doc.get("meta", {})
+
+
+def config_from_dict(config_cls: type, data: dict[str, Any], *, source: str | None = None) -> Any:
     """Build a (frozen) config dataclass from a dict, turning lists back into tuples and
-    rejecting unknown keys with a clear error."""
+    rejecting unknown keys with a clear error (naming the closest known key).
+
+    With ``source`` (where the dict comes from, e.g. ``"<folder>/pipeline.json: 'diffusion'"``) the dict
+    is from outside: every value's JSON type is checked against the field's annotation, integers must
+    lie within :data:`salad_core.limits.CONFIG_MAX_INT`, and anything the dataclass refuses raises
+    :class:`CheckpointError` (:class:`CheckpointTypeError` for a wrong type) naming ``source``.
+    """
+    from salad_core import limits
+
+    where = source or config_cls.__name__
+    if not isinstance(data, dict):
+        err = CheckpointTypeError if source else TypeError
+        raise err(f"{where} must be an object {{...}} of {config_cls.__name__} fields, got {type(data).__name__} "
+                  f"{limits.short_json(data)}")
     fields = {f.name: f for f in dataclasses.fields(config_cls)}
-    unknown = sorted(set(data) - set(fields))
+    unknown = [k for k in data if k not in fields]
     if unknown:
-        raise CheckpointError(f"{config_cls.__name__}: unknown config keys {unknown}")
+        raise CheckpointError(f"{where}: unknown config keys [{limits.unknown_keys_message(unknown, fields)}] for "
+                              f"{config_cls.__name__}; known: {', '.join(fields)}")
     kwargs = {k: (tuple(v) if isinstance(v, list) else v) for k, v in data.items()}
-    return config_cls(**kwargs)
+    if source is None:
+        return config_cls(**kwargs)
+    limits.check_config_values(config_cls, data, where, CheckpointError, CheckpointTypeError)
+    try:
+        return config_cls(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise CheckpointError(f"{where}: {exc}") from None

@@ -9,8 +9,8 @@ a paper-configuration step at batch 1 took 1.3-4.6 s with the default and 0.14-0
 ``OMP_WAIT_POLICY=PASSIVE`` (``bench/bench_under_load.py``, same run, 2 threads). On a quiet machine
 the passive policy costs instead: 74-81 ms against 57-65 ms per step (the workers' wake-up latency), and
 intermediate spin counts (``GOMP_SPINCOUNT`` 20,000 or 200,000) were as fast as the default quiet but
-no better than it under load. So the default (``auto``) decides once, at import: passive when the
-1-minute load average is at least 3/4 of the cores (other work is running), the runtime's spinning
+no better than it under load. So the default (``auto``) decides once, when the process starts: passive when
+the 1-minute load average is at least 3/4 of the cores (other work is running), the runtime's spinning
 default otherwise.
 
 Training runs are the exception: they last hours, and a machine quiet when one starts rarely stays
@@ -21,8 +21,16 @@ quiet machine (VAE step at 2 threads, ``bench/bench_training.py --threads-ab --w
 (``python -m salad_core.train``, ``torchrun -m salad_core.train``, ``salad train``) whatever the load.
 
 libgomp reads these variables once, when the library is loaded (that is, when ``torch`` is first
-imported), so :func:`configure` must run before that: ``import salad_core`` does it, and it is a
-no-op when torch (libgomp) is already loaded, when the user set ``OMP_WAIT_POLICY`` or
+imported), so :func:`configure` must run before that. The command line does it
+(:func:`salad_core.cli.tune_process`: ``salad``, ``python -m salad_core.cli``, ``python -m salad_core.train``,
+``torchrun -m salad_core.train``, ``python -m salad_core.bench``) before a command loads torch; ``import
+salad_core`` does not (a library leaves its host process alone). A Python program that wants the same policy
+calls :func:`configure` itself, before it imports torch::
+
+    from salad_core import openmp
+    openmp.configure()          # then: import torch, salad_core.pipeline, ...
+
+It is a no-op when torch (libgomp) is already loaded, when the user set ``OMP_WAIT_POLICY`` or
 ``GOMP_SPINCOUNT`` themselves, or when ``SALAD_OMP_WAIT=keep``. :func:`wait_policy` says what is
 in force. ``SALAD_OMP_WAIT=active`` or ``passive`` chooses explicitly; ``auto`` is the default.
 """
@@ -87,6 +95,9 @@ def configure(environ: dict[str, str] | None = None, *, load: float | None = Non
               cores: int | None = None, argv: list[str] | None = None) -> str:
     """Set ``OMP_WAIT_POLICY`` for this process if nothing chose one yet; returns the policy in force.
 
+    The command line calls it before a command loads torch; call it yourself, before importing torch, for the
+    same policy in your own program (``import salad_core`` does not call it).
+
     Parameters
     ----------
     environ : mapping, optional
@@ -113,14 +124,14 @@ def configure(environ: dict[str, str] | None = None, *, load: float | None = Non
     elif choice == "keep":
         policy, reason = "runtime default", f"{ENV_VAR}=keep"
     elif choice == "auto" and not training and not _busy(load, cores):
-        policy, reason = "runtime default", "auto: the machine was not busy at import"
+        policy, reason = "runtime default", "auto: the machine was not busy when configured"
     elif environ is None and _openmp_loaded():
-        policy, reason = "runtime default", "torch was imported before salad_core"
+        policy, reason = "runtime default", "torch was imported before the policy was chosen"
     else:
         chosen = "passive" if choice == "auto" else choice
         env["OMP_WAIT_POLICY"] = chosen.upper()
         policy = chosen
-        why = "a training run; " if training else "the machine was busy at import; "
+        why = "a training run; " if training else "the machine was busy; "
         reason = (f"auto: {why}" if choice == "auto" else "") + "set by salad_core before torch loaded"
     if environ is None:
         _state.update(policy=policy, reason=reason)

@@ -32,15 +32,16 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 import torch
 
-from salad_core.io import (CheckpointError, atomic_write_text, config_from_dict, config_to_dict, load_model,
-                           load_tensors, save_checkpoint, save_tensors)
+from salad_core import limits
+from salad_core.io import (CheckpointError, CheckpointTypeError, atomic_write_text, checkpoint_files, config_from_dict,
+                           config_to_dict, load_model, load_tensors, save_checkpoint, save_tensors)
 from salad_core.models.denoiser import Denoiser, TextContext
 from salad_core.models.vae import MotionVAE
 from salad_core.motion import MAX_FEATURE_MAGNITUDE, denormalize, features_to_joints, normalize
-from salad_core.sampling import DiffusionConfig, Guidance, denoise, make_scheduler, resolve_guidance
+from salad_core.sampling import SOLVERS, DiffusionConfig, Guidance, denoise, make_scheduler, resolve_guidance
 from salad_core.sampling import MAX_GUIDANCE  # noqa: F401  (salad_core.cli imports it from here)
 from salad_core.skeleton import Skeleton
-from salad_core.text import TextBatch, TextEncoder, load_text_encoder
+from salad_core.text import TextBatch, TextEncoder, load_text_encoder, validate_prompts
 from salad_core.vocabulary import (UnknownWordsWarning, check_prompt, unknown_words_message, vocabulary_and_source,
                                    write_vocabulary)
 
@@ -49,7 +50,7 @@ if TYPE_CHECKING:  # pragma: no cover - annotations only: salad_core.attention i
     from salad_core.attention.hooks import ActivationCache, HookFn, NameFilter
 
 __all__ = ["SaladPipeline", "MotionOutput", "EditOutput", "default_weights_dir", "validate_prompts",
-           "validate_lengths"]
+           "validate_lengths", "PIPELINE_JSON_FIELDS", "guidance_from_json"]
 
 log = logging.getLogger(__name__)
 
@@ -142,24 +143,6 @@ class EditOutput:
     settings: dict = field(default_factory=dict)
 
 
-def validate_prompts(prompts: str | Sequence[str]) -> list[str]:
-    """A prompt or a list of prompts -> list of stripped non-empty strings (clear errors otherwise)."""
-    if isinstance(prompts, str):
-        prompts = [prompts]
-    if not isinstance(prompts, (list, tuple)):
-        raise TypeError(f"prompts must be a string or a list of strings, got {type(prompts).__name__}")
-    if len(prompts) == 0:
-        raise ValueError("prompts is empty; give at least one text prompt")
-    out = []
-    for i, p in enumerate(prompts):
-        if not isinstance(p, str):
-            raise TypeError(f"prompt {i} must be a string, got {type(p).__name__}: {p!r}")
-        if not p.strip():
-            raise ValueError(f"prompt {i} is empty or whitespace; describe a motion, e.g. 'a person walks forward'")
-        out.append(" ".join(p.split()))
-    return out
-
-
 def validate_lengths(lengths: int | Sequence[int] | None, n: int, skeleton: Skeleton,
                      default: int = 120, stacklevel: int = 3) -> list[int]:
     """Per-sample lengths in frames: positive, at most ``skeleton.max_length``; lengths that are
@@ -196,6 +179,30 @@ def validate_lengths(lengths: int | Sequence[int] | None, n: int, skeleton: Skel
             length = floored
         out.append(length)
     return out
+
+
+#: The keys of a SALAD weight folder's ``pipeline.json`` and their JSON types (checked by
+#: :meth:`SaladPipeline.from_pretrained` with :func:`salad_core.limits.check_fields`).
+PIPELINE_JSON_FIELDS: dict[str, Any] = {
+    "vae": str, "denoiser": str, "stats": str, "text_encoder": str, "diffusion": dict, "solver": str,
+    "guidance": dict | None, "recovery": str | None, "skeleton": str,
+}
+
+
+def guidance_from_json(entry: Any, source: str | Path) -> Guidance | None:
+    """The :class:`~salad_core.sampling.Guidance` of a weight folder's ``"guidance"`` entry (``None``
+    stays None): its keys and types checked, the weight within :data:`MAX_GUIDANCE`; a bad entry raises
+    :class:`~salad_core.io.CheckpointError` ``<source>: bad "guidance" entry ...``."""
+    if entry is None:
+        return None
+    try:
+        guidance = config_from_dict(Guidance, entry, source="guidance")
+        if abs(guidance.scale) > MAX_GUIDANCE:
+            raise CheckpointError(f"scale {guidance.scale:g} is beyond {MAX_GUIDANCE:g}")
+    except CheckpointError as err:
+        cls = CheckpointTypeError if isinstance(err, TypeError) else CheckpointError
+        raise cls(f'{source}: bad "guidance" entry {limits.short_json(entry)} ({err})') from None
+    return guidance
 
 
 class SaladPipeline:
@@ -266,6 +273,7 @@ class SaladPipeline:
         if self.mean.shape != (d,) or self.std.shape != (d,):
             raise ValueError(f"mean/std must have shape ({d},) for {self.skeleton.name}, "
                              f"got {self.mean.shape} and {self.std.shape}")
+        limits.check_stats(self.mean, self.std, "the feature statistics")      # finite, std > 0
         for p in [*self.vae.parameters(), *self.denoiser.parameters()]:
             p.requires_grad_(False)
         #: Latent normalisation of the diffusion (latent diffusion models' scale factor, per part and
@@ -281,36 +289,81 @@ class SaladPipeline:
 
     # ------------------------------------------------------------------ loading
     @classmethod
-    def from_pretrained(cls, path: str | Path | None = None, *,
-                        text_encoder: TextEncoder | None = None) -> "SaladPipeline":
-        """Load a pipeline folder (``None``: the shipped default weights)."""
+    def from_pretrained(cls, path: str | Path | None = None, *, text_encoder: TextEncoder | None = None,
+                        allow_outside_paths: bool | str | Path = False) -> "SaladPipeline":
+        """Load a pipeline folder (``None``: the shipped default weights).
+
+        ``pipeline.json`` is checked before anything loads (:data:`PIPELINE_JSON_FIELDS`: known keys
+        only, a misspelt one named with the closest known key; JSON types; nesting and size limits of
+        :mod:`salad_core.limits`), and so are the checkpoints (:func:`salad_core.io.load_model`) and the
+        statistics (``mean`` and ``std`` present, finite, ``std > 0``).
+
+        The paths it names (``vae``, ``denoiser``, ``stats``, a ``text_encoder`` folder) must resolve
+        inside the folder (after ``..`` and symbolic links; folders of the shipped weights may share
+        files with each other). ``allow_outside_paths=True`` accepts any path, a folder accepts paths
+        inside that folder too. Relative paths are relative to the folder.
+
+        Raises
+        ------
+        CheckpointError
+            Naming the file, the key and the problem (:class:`~salad_core.io.CheckpointTypeError`, also a
+            TypeError, for a value of the wrong JSON type).
+        """
         root = Path(path) if path is not None else default_weights_dir()
         cfg_path = root / "pipeline.json"
         if not cfg_path.is_file():
             hint = (" (the shipped weights are missing from this installation: reinstall salad, or train "
                     "them with scripts/reproduce_salad.sh)") if path is None else ""
             raise CheckpointError(f"no pipeline.json in {root}{hint}")
-        try:
-            cfg = json.loads(cfg_path.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as err:
-            raise CheckpointError(f"{cfg_path} is not valid JSON ({err}); restore the file or re-run "
-                                  "scripts/assemble_weights.py") from err
-        if not isinstance(cfg, dict):
-            raise CheckpointError(f"{cfg_path} must hold a JSON object, found {type(cfg).__name__}")
-        vae, _, _ = load_model(root / cfg.get("vae", "vae"))
-        denoiser, _, _ = load_model(root / cfg.get("denoiser", "denoiser"))
-        stats = load_tensors(root / cfg.get("stats", "stats.safetensors"))
+        cfg = limits.read_json(cfg_path, "file", expect=None, error=lambda msg: CheckpointError(
+            f"{msg}; restore the file or re-run scripts/assemble_weights.py"))
+        limits.check_fields(cfg, PIPELINE_JSON_FIELDS, str(cfg_path), CheckpointError, CheckpointTypeError)
+
+        def inside(key: str, value: str) -> Path:
+            return limits.resolve_inside(root, value, key, cfg_path, allow_outside_paths, CheckpointError,
+                                         CheckpointTypeError)
+
+        stems = {key: inside(key, cfg.get(key, key)) for key in ("vae", "denoiser")}
+        for key, stem in stems.items():         # the very files load_model opens (a symbolic link may leave)
+            for file in checkpoint_files(stem):
+                limits.check_inside(root, file, key, cfg[key] if key in cfg else key, cfg_path, allow_outside_paths,
+                                    CheckpointError)
+        stats_path = inside("stats", cfg.get("stats", "stats.safetensors"))
+        vae, _, _ = load_model(stems["vae"], expected_type="salad_vae")
+        denoiser, _, _ = load_model(stems["denoiser"], expected_type="denoiser")
+        stats = load_tensors(stats_path)
+        for key in ("mean", "std", *(("latent_mean", "latent_std") if "latent_mean" in stats else ())):
+            if key not in stats:
+                raise CheckpointError(f"{stats_path} lacks the tensor {key!r} (it holds {sorted(stats)}); the "
+                                      "statistics file needs 'mean' and 'std' (and 'latent_std' with 'latent_mean')")
+        mean, std = stats["mean"].float().numpy(), stats["std"].float().numpy()
+        limits.check_stats(mean, std, str(stats_path), CheckpointError)
+        latent_stats = None
+        if "latent_mean" in stats:
+            limits.check_stats(stats["latent_mean"].float().numpy(), stats["latent_std"].float().numpy(),
+                               str(stats_path), CheckpointError, names=("latent_mean", "latent_std"))
+            latent_stats = (stats["latent_mean"], stats["latent_std"])
         if text_encoder is None:
-            text_encoder = load_text_encoder(cfg.get("text_encoder", "minilm"))
-        diffusion = config_from_dict(DiffusionConfig, cfg.get("diffusion", {}))
+            name = cfg.get("text_encoder", "minilm")
+            where = name if name.lower() == "minilm" else inside("text_encoder", name)
+            try:
+                text_encoder = load_text_encoder(where)
+            except (ValueError, OSError) as err:
+                raise CheckpointError(f"{cfg_path}: 'text_encoder' {name!r} cannot be loaded: {err}") from None
+        diffusion = config_from_dict(DiffusionConfig, cfg.get("diffusion", {}), source=f"{cfg_path}: 'diffusion'")
+        solver = cfg.get("solver", "ddim")
+        if solver not in SOLVERS:
+            raise CheckpointError(f"{cfg_path}: 'solver' {solver!r} is unknown; known: {', '.join(SOLVERS)}")
+        guidance = guidance_from_json(cfg.get("guidance"), cfg_path)
         try:
-            guidance = Guidance(**cfg["guidance"]) if cfg.get("guidance") is not None else None
-        except (TypeError, ValueError) as err:
-            raise CheckpointError(f"{cfg_path}: bad \"guidance\" entry {cfg.get('guidance')!r} ({err})") from err
-        latent_stats = (stats["latent_mean"], stats["latent_std"]) if "latent_mean" in stats else None
-        pipe = cls(vae, denoiser, text_encoder, stats["mean"].numpy(), stats["std"].numpy(), latent_stats=latent_stats,
-                   diffusion=diffusion, solver=cfg.get("solver", "ddim"), source=str(root), guidance=guidance,
-                   recovery=cfg.get("recovery"))
+            recovery = _check_recovery(cfg.get("recovery")) if cfg.get("recovery") is not None else None
+        except ValueError as err:
+            raise CheckpointError(f"{cfg_path}: 'recovery': {err}") from None
+        if "skeleton" in cfg and cfg["skeleton"] != vae.skeleton.name:
+            raise CheckpointError(f"{cfg_path}: 'skeleton' is {cfg['skeleton']!r} but the VAE is built for "
+                                  f"{vae.skeleton.name!r}")
+        pipe = cls(vae, denoiser, text_encoder, mean, std, latent_stats=latent_stats, diffusion=diffusion,
+                   solver=solver, source=str(root), guidance=guidance, recovery=recovery)
         pipe.vocabulary, pipe.vocabulary_source = vocabulary_and_source(root)
         return pipe
 
@@ -387,10 +440,12 @@ class SaladPipeline:
         return torch.arange(latent_frames)[None, :] < n_lat[:, None]
 
     def decode(self, latents: torch.Tensor, lengths: Sequence[int],
-               recovery: str | None = None) -> tuple[np.ndarray, list[np.ndarray]]:
+               recovery: str | None = None, *, progress: bool = False) -> tuple[np.ndarray, list[np.ndarray]]:
         """Latents ``(B, N', P, Dz)`` -> de-normalised features ``(B, 4N', D)`` (zero past each
         length) and per-sample joints ``(N_b, J, 3)`` recovered by ``recovery`` (default
-        :attr:`recovery`)."""
+        :attr:`recovery`); ``progress`` shows a bar over the motions."""
+        from salad_core.sampling import progress_bar
+
         from salad_core.recovery import recover_joints
 
         method = _check_recovery(self.recovery if recovery is None else recovery)
@@ -398,7 +453,7 @@ class SaladPipeline:
         feats = np.zeros((latents.shape[0], latents.shape[1] * unit, self.skeleton.feature_dim), np.float32)
         joints = []
         with torch.inference_mode():
-            for b, length in enumerate(lengths):
+            for b, length in progress_bar(list(enumerate(lengths)), "decoding", progress):
                 # decode each motion at its own length: the VAE's temporal convolutions would
                 # otherwise see the batch's zero padding near the end of shorter motions
                 z = self.from_diffusion(latents[b:b + 1, : length // unit].float())
@@ -548,6 +603,9 @@ class SaladPipeline:
         ``caller_depth``: frames between the user's call and this one (warnings point at the user)."""
         prompts = validate_prompts(prompts)
         lengths = validate_lengths(lengths, len(prompts), self.skeleton, stacklevel=3 + caller_depth)
+        if len(prompts) > limits.PROMPT_CHUNK:
+            log.info("generating %d motions in chunks of %d (progress=True shows a bar)", len(prompts),
+                     self.chunk_size())
         guidance = self.resolve_guidance(guidance_scale)
         num_steps = _check_steps(num_steps, self.diffusion.num_train_timesteps)
         solver = _check_solver(solver)
@@ -579,7 +637,7 @@ class SaladPipeline:
         else:
             latents = self._denoise_in_chunks(text, uncond, noise, lengths, guidance, int(num_steps),
                                               solver or self.solver, progress)
-        feats, joints = self.decode(latents, lengths)
+        feats, joints = self.decode(latents, lengths, progress=progress and len(lengths) > limits.PROMPT_CHUNK)
         return MotionOutput(feats, joints, prompts, lengths, latents, noise, seeds, attention, settings,
                             unknown_words=unknown), text
 
@@ -632,10 +690,14 @@ class SaladPipeline:
         Every sample keeps its own noise, so the motions are those of one batched call up to float
         rounding (the GEMMs block differently at another batch size).
         """
+        from salad_core.sampling import progress_bar
+
         unit = self.skeleton.unit_length
         latents = torch.zeros_like(noise)
         chunk = self.chunk_size()
-        for start in range(0, len(lengths), chunk):
+        starts = range(0, len(lengths), chunk)
+        many = progress and len(lengths) > limits.PROMPT_CHUNK      # a bar over the chunks too
+        for start in progress_bar(starts, f"motions ({chunk} per chunk)", many, total=len(starts)):
             rows = slice(start, start + chunk)
             n_lat = max(lengths[rows]) // unit
             cond = self.denoiser.prepare_text(text.features[rows], text.mask[rows])
@@ -667,7 +729,9 @@ class SaladPipeline:
         edits : EditSpec or sequence of EditSpec
             :class:`~salad_core.attention.WordSwap`, :class:`~salad_core.attention.Refine`,
             :class:`~salad_core.attention.Reweight`, :class:`~salad_core.attention.Mirror`,
-            :class:`~salad_core.attention.InjectSelfAttention`, composed in order; empty: the
+            :class:`~salad_core.attention.InjectSelfAttention`, composed in order (and
+            :class:`~salad_core.attention.Inpaint`: regenerate chosen body parts / a frame span from the
+            target, keep the rest of the source or the inverted motion); empty: the
             edited motion is a plain generation of the target from the same noise (with the
             source as target that is the source itself: warned). A word swap or a refinement
             needs a target that differs from the source (refused otherwise); a refinement whose

@@ -26,6 +26,7 @@ from __future__ import annotations
 import logging
 import re
 import threading
+import unicodedata
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,6 +46,8 @@ __all__ = [
     "word_spans",
     "clear_text_encoder_cache",
     "minilm_default_path",
+    "check_prompt_text",
+    "validate_prompts",
 ]
 
 logger = logging.getLogger(__name__)
@@ -218,6 +221,78 @@ def _map_tokens_to_words(offsets: Sequence[tuple[int, int]], special: Sequence[i
     return out
 
 
+# ------------------------------------------------------------------------------- prompt checks
+def _repair_surrogates(prompt: str, label: str) -> str:
+    """``prompt`` without lone surrogates: bytes a shell could not decode arrive as U+DC80..U+DCFF
+    (Python's ``surrogateescape``); when they are UTF-8 after all (a shell in the C locale), the text is
+    decoded again, else the prompt is refused naming the first bad byte."""
+    if not any("\ud800" <= ch <= "\udfff" for ch in prompt):
+        return prompt
+    try:
+        return prompt.encode("utf-8", "surrogateescape").decode("utf-8")
+    except UnicodeError:
+        pos = next(i for i, ch in enumerate(prompt) if "\ud800" <= ch <= "\udfff")
+        code = ord(prompt[pos])
+        what = f"the byte 0x{code - 0xDC00:02x}" if 0xDC80 <= code <= 0xDCFF else f"a lone surrogate U+{code:04X}"
+        raise ValueError(f"{label} is not valid UTF-8 text: it holds {what} at character {pos} "
+                         f"({prompt[:pos][-20:]!r} comes before it); write the prompt in UTF-8") from None
+
+
+#: Unicode categories that make a prompt more than punctuation: letters of any script, and other symbols
+#: (emoji), which the unknown-words check reports (salad_core.vocabulary) rather than this one refusing.
+_WORDLIKE = frozenset({"Lu", "Ll", "Lt", "Lm", "Lo", "So"})
+
+
+def check_prompt_text(prompt: Any, label: str = "prompt") -> str:
+    """One prompt from outside, normalised, or refused with a message naming ``label`` and the problem.
+
+    Both pipelines' prompt handling goes through this (:func:`validate_prompts`). Normalised: bytes
+    that a shell passed undecoded are decoded as UTF-8 when they are UTF-8; runs of whitespace (tabs,
+    newlines) become one space; the ends are stripped. Refused (``ValueError``; ``TypeError`` for a
+    non-string): text that is not valid UTF-8 (lone surrogates), control characters (``U+0000``,
+    escape sequences), an empty prompt, more than :data:`salad_core.limits.PROMPT_MAX_CHARS` characters,
+    a word (whitespace-separated) longer than :data:`salad_core.limits.PROMPT_MAX_WORD_CHARS`
+    characters (the tokenizer reads none of it), and a prompt without any letter (``"!!! ..."``, ``"42"``:
+    it describes no motion; letters of any script count, and emoji, which the pipelines warn about as
+    text the model cannot read).
+    """
+    from salad_core import limits
+
+    if not isinstance(prompt, str):
+        raise TypeError(f"{label} must be a string, got {type(prompt).__name__}: {prompt!r}"[:300])
+    text = _repair_surrogates(prompt, label)
+    bad = next((i for i, ch in enumerate(text) if unicodedata.category(ch) == "Cc" and not ch.isspace()), None)
+    if bad is not None:
+        raise ValueError(f"{label} holds the control character U+{ord(text[bad]):04X} at character {bad}; "
+                         "prompts are plain text")
+    text = " ".join(text.split())
+    if not text:
+        raise ValueError(f"{label} is empty or whitespace; describe a motion, e.g. 'a person walks forward'")
+    if len(text) > limits.PROMPT_MAX_CHARS:
+        raise ValueError(f"{label} has {len(text):,} characters, more than the {limits.PROMPT_MAX_CHARS:,} a prompt "
+                         "may have; describe the motion in a sentence or two")
+    longest = max(text.split(" "), key=len)
+    if len(longest) > limits.PROMPT_MAX_WORD_CHARS:
+        raise ValueError(f"{label} has a word of {len(longest):,} characters ({longest[:20]!r}...), longer than the "
+                         f"{limits.PROMPT_MAX_WORD_CHARS} characters the text encoder reads in one word")
+    if not any(unicodedata.category(ch) in _WORDLIKE for ch in text):
+        raise ValueError(f"{label} {text[:40]!r} has no letters (only punctuation, digits or signs); describe a "
+                         "motion in words, e.g. 'a person walks forward'")
+    return text
+
+
+def validate_prompts(prompts: str | Sequence[str]) -> list[str]:
+    """A prompt or a list of prompts -> list of checked, normalised prompts (:func:`check_prompt_text`
+    on each, ``"prompt <i>"``); clear errors otherwise. Used by both pipelines (SALAD's and KeyMotion's)."""
+    if isinstance(prompts, str):
+        prompts = [prompts]
+    if not isinstance(prompts, (list, tuple)):
+        raise TypeError(f"prompts must be a string or a list of strings, got {type(prompts).__name__}")
+    if len(prompts) == 0:
+        raise ValueError("prompts is empty; give at least one text prompt")
+    return [check_prompt_text(p, f"prompt {i}") for i, p in enumerate(prompts)]
+
+
 def _check_prompts(prompts: Any, allow_empty: bool) -> list[str]:
     if isinstance(prompts, str):
         raise TypeError(f"prompts must be a list of strings, got the single string {prompts!r}; wrap it in a list")
@@ -233,7 +308,8 @@ def _check_prompts(prompts: Any, allow_empty: bool) -> list[str]:
                 f"prompts[{i}] is empty or whitespace ({p!r}); only the null text \"\" is allowed, "
                 "and only with allow_empty=True (or use encode_null)"
             )
-    return list(prompts)
+    # the tokenizers cannot take lone surrogates (undecoded shell bytes): decoded, or refused by name
+    return [_repair_surrogates(p, f"prompts[{i}]") for i, p in enumerate(prompts)]
 
 
 # ------------------------------------------------------------------------------ model cache

@@ -105,13 +105,15 @@ def write_vocabulary(words: Iterable[str], weights_dir: str | Path, **info) -> P
 
 def vocabulary_info(weights_dir: str | Path) -> dict | None:
     """The whole ``vocabulary.json`` of a weights folder (words and provenance), or None without one."""
+    from salad_core import limits
+
     path = Path(weights_dir) / VOCABULARY_FILE
     if not path.is_file():
         return None
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as err:
-        raise ValueError(f"{path} is not valid JSON ({err})") from err
+    try:    # size, UTF-8 and nesting checked before parsing (salad_core.limits)
+        doc = limits.read_json(path, "vocabulary file", expect=None)
+    except OSError as err:
+        raise ValueError(f"{path} cannot be read ({err})") from err
     if not isinstance(doc, dict) or not isinstance(doc.get("words"), list):
         raise ValueError(f"{path} must hold a JSON object with a \"words\" list")
     return doc

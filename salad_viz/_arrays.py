@@ -14,6 +14,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from salad_core.limits import MAX_JOINT_MAGNITUDE
 from salad_core.skeleton import Skeleton
 
 log = logging.getLogger(__name__)
@@ -40,7 +41,8 @@ def to_numpy(x, name: str) -> np.ndarray:
 
 
 def as_joints(joints, skeleton: Skeleton, name: str = "joints") -> np.ndarray:
-    """Validate one motion: ``(N, J, 3)`` (or one pose ``(J, 3)``), finite, J = skeleton joints.
+    """Validate one motion: ``(N, J, 3)`` (or one pose ``(J, 3)``), finite, within
+    :data:`salad_core.limits.MAX_JOINT_MAGNITUDE` metres, J = skeleton joints.
 
     Returns a float64 copy of shape ``(N, J, 3)``.
     """
@@ -57,6 +59,12 @@ def as_joints(joints, skeleton: Skeleton, name: str = "joints") -> np.ndarray:
     if not np.isfinite(arr).all():
         bad = np.argwhere(~np.isfinite(arr))[0]
         raise ValueError(f"{name} contains NaN or inf (first at frame {bad[0]}, joint {bad[1]})")
+    top = float(np.abs(arr).max())
+    if top > MAX_JOINT_MAGNITUDE:       # a kilometre from the origin: another unit, or a broken array
+        bad = np.unravel_index(int(np.argmax(np.abs(arr))), arr.shape)
+        raise ValueError(f"{name} reaches |value| = {top:.3g} (frame {bad[0]}, joint {bad[1]}), beyond "
+                         f"{MAX_JOINT_MAGNITUDE:g} m; joints are positions in metres (KIT millimetres: multiply by "
+                         "skeleton.feature_scale)")
     extent = float(np.ptp(arr.reshape(-1, 3), axis=0).max())
     if extent > _MAX_PLAUSIBLE_EXTENT_M:
         log.warning("%s spans %.1f units; salad_viz expects metres (multiply KIT millimetres by "

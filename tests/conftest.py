@@ -14,6 +14,11 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 # the test process keeps glibc's allocator: the salad command would otherwise tune it for the whole
 # session (salad_core.allocator), and tests measure memory growth
 os.environ.setdefault("SALAD_ALLOCATOR", "system")
+# the OpenMP wait policy as the salad command chooses it, before any test imports torch (importing salad_core
+# changes nothing in the process; salad_core.openmp)
+from salad_core import openmp as _openmp  # noqa: E402
+
+_openmp.configure()
 
 DATA_DIR = Path(__file__).parent / "data"
 SAMPLE_DIR = DATA_DIR / "humanml3d_sample"

@@ -13,6 +13,7 @@ import pytest
 import torch
 
 from salad_core import bench
+from salad_core.cli import bench as bench_cli
 from salad_core.models.denoiser import Denoiser, DenoiserConfig
 
 TINY = DenoiserConfig(latent_dim=4, num_parts=7, width=8, heads=2, ff_dim=16, layers=3, text_dim=6)
@@ -170,12 +171,12 @@ def test_run_benchmarks_prints_one_table_with_the_machine(monkeypatch, tmp_path,
     assert "Notes:" in text and "training rates from 1 step(s)" in text
 
     out = tmp_path / "bench.md"
-    assert bench.main(["--quick", "--threads", "1", "--sections", "training", "--out", str(out)]) == 0
+    assert bench_cli.main(["--quick", "--threads", "1", "--sections", "training", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     written = out.read_text()
     assert written in printed and "| training | VAE steps/s |" in written
     with pytest.raises(FileExistsError, match="--force"):
-        bench.main(["--quick", "--sections", "training", "--out", str(out)])
+        bench_cli.main(["--quick", "--sections", "training", "--out", str(out)])
     with pytest.raises(ValueError, match="unknown bench sections"):
         bench.run_benchmarks(quick=True, threads=1, sections=["nope"])
     with pytest.raises(ValueError, match="threads=0"):
@@ -308,7 +309,7 @@ def test_train_profile_rows_time_every_part_before_and_after(tmp_path, single_th
 
 
 def test_python_dash_m_and_salad_bench_share_one_parser(monkeypatch):
-    """``python -m salad_core.bench`` runs the package's ``main``; ``salad bench --help`` shows its parser."""
+    """``python -m salad_core.bench`` runs ``salad_core.cli.bench.main``; ``salad bench --help`` shows its parser."""
     import re
     import subprocess
     import sys
@@ -318,7 +319,7 @@ def test_python_dash_m_and_salad_bench_share_one_parser(monkeypatch):
                          timeout=120, env=dict(os.environ))
     assert out.returncode == 0, out.stderr
     threads = lambda text: re.sub(r"here \d+", "here N", text)  # noqa: E731  (torch threads may differ)
-    assert threads(out.stdout) == threads(bench.build_parser().format_help())
+    assert threads(out.stdout) == threads(bench_cli.build_parser().format_help())
     assert out.stdout.startswith("usage: salad bench") and "--sections" in out.stdout
     for section in bench.SECTIONS + bench.OPTIONAL_SECTIONS:
         assert section in out.stdout

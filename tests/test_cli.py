@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from salad_core import cli
+from salad_core.cli import generate
 
 
 @pytest.fixture(scope="module")
@@ -277,7 +278,7 @@ def _one_line_error(capsys) -> str:
     (["--reweight", "high=2", "--window", "0.8:0.2"], "Reweight.steps=(0.8, 0.2) must satisfy 0 <= start < stop"),
     (["--mirror", "all", "--window", "0:inf"], "must satisfy 0 <= start < stop <= 1"),
     (["--mirror", "all", "--window", "half"], "--window takes START:STOP"),
-    (["--swap", "0.8", "--window", "0:0.5"], "--window applies to --refine, --reweight and --mirror"),
+    (["--swap", "0.8", "--window", "0:0.5"], "--window applies to --refine, --reweight, --mirror, --erase and --shift"),
     (["--reweight", "high=2", "--mirror-self-attention"], "--mirror-self-attention goes with --mirror PARTS"),
     (["--reweight", "high=nan"], "--reweight high=nan: Reweight.scale must be a finite number, got nan"),
     (["--reweight", "high=inf"], "--reweight high=inf: Reweight.scale must be a finite number, got inf"),
@@ -308,19 +309,19 @@ def test_edit_flags_build_the_specs_with_their_window():
     args = parser.parse_args(["edit", "a man raises his hand", "--target", "a man slowly raises his hand high",
                               "--refine", "--reweight", "high=-1.5", "--mirror", "arms", "--window", "0.2:0.6",
                               "--out", "x"])
-    assert cli._edit_specs(args) == [Refine(steps=(0.2, 0.6)), Reweight("high", -1.5, steps=(0.2, 0.6)),
+    assert generate._edit_specs(args) == [Refine(steps=(0.2, 0.6)), Reweight("high", -1.5, steps=(0.2, 0.6)),
                                      Mirror("arms", steps=(0.2, 0.6))]
     args = parser.parse_args(["invert", "m.npy", "--prompt", "a man walks", "--mirror", "legs", "--mirror-self-attention",
                               "--window", "0:0.5", "--out", "x"])
-    assert cli._edit_specs(args) == [Mirror("legs", steps=(0.0, 0.5)), MirrorSelfAttention("legs", steps=(0.0, 0.5))]
+    assert generate._edit_specs(args) == [Mirror("legs", steps=(0.0, 0.5)), MirrorSelfAttention("legs", steps=(0.0, 0.5))]
     args = parser.parse_args(["invert", "m.npy", "--prompt", "a man walks", "--swap", "0.7", "--out", "x"])
-    assert cli._edit_specs(args, required=False) == [WordSwap(tau=0.7)]
+    assert generate._edit_specs(args, required=False) == [WordSwap(tau=0.7)]
     args = parser.parse_args(["invert", "m.npy", "--prompt", "a man walks", "--out", "x"])
     assert args.exact is True
     assert parser.parse_args(["invert", "m.npy", "--prompt", "a man walks", "--out", "x", "--no-exact"]).exact is False
-    assert cli._edit_specs(args, required=False) == []
+    assert generate._edit_specs(args, required=False) == []
     with pytest.raises(cli.UserError, match="give at least one edit"):
-        cli._edit_specs(args)
+        generate._edit_specs(args)
 
 
 # ----------------------------------------------------------------------------- unknown skeleton

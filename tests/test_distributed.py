@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from salad_core.io import load_tensors
-from salad_core.train import main
+from salad_core.cli.train import main
 from salad_core.train.state import load_train_state
 
 sys.path.insert(0, str(Path(__file__).parent))

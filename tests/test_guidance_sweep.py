@@ -182,7 +182,7 @@ def test_a_stopped_sweep_continues_from_its_kept_candidates(tiny_procedural_corp
 
 
 def test_cli_sweep_on_the_shipped_weights(tiny_procedural_corpus, tmp_path, capsys):
-    from salad_core.eval.cli import main
+    from salad_core.cli.eval import main
 
     out = tmp_path / "sweep"
     status = main(["--guidance-sweep", "--data", str(tiny_procedural_corpus), "--scales", "5", "--intervals",

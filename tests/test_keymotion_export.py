@@ -15,7 +15,7 @@ from salad_core.keymotion.export import export_pipeline, export_with_component, 
 from salad_core.keymotion.pipeline import KeyMotionPipeline
 from salad_core.keymotion.train import STAGES
 from salad_core.sampling import Guidance, parse_guidance_setting
-from salad_core.train.cli import main as train_main
+from salad_core.cli.train import main as train_main
 
 from _doubles import HashTextEncoder
 from test_keymotion_train import TINY_DOC

@@ -19,8 +19,8 @@ from salad_core.io import load_tensors
 from salad_core.keymotion.pipeline import DEFAULT_WEIGHTS_DIR, KeyMotionPipeline
 from salad_core.keymotion.train import STAGES, KeyMotionRecipe, KeyMotionTrainConfig, load_keymotion_recipe
 from salad_core.skeleton import get_skeleton
-from salad_core.train.cli import TRAIN_TARGETS, build_parser
-from salad_core.train.cli import main as train_main
+from salad_core.cli.train import TRAIN_TARGETS, build_parser
+from salad_core.cli.train import main as train_main
 from _doubles import HashTextEncoder
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -6,8 +6,8 @@ import pytest
 import torch
 
 from salad_core.attention import Refine
-from salad_core.bench import REFINED, SOURCE, naive_algorithm1
-from salad_core.bench.naive_algorithm1 import NaiveAlgorithm1Prediction
+from salad_core.bench import REFINED, SOURCE
+from salad_core.bench.naive_algorithm1 import NaiveAlgorithm1Prediction, naive_algorithm1
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,5 @@
-"""salad_core.openmp: the OpenMP wait policy set before torch loads."""
+"""salad_core.openmp: the OpenMP wait policy, set by the command line before torch loads (not by
+``import salad_core``)."""
 from __future__ import annotations
 
 import os
@@ -46,14 +47,36 @@ def _child(code: str, **extra: str) -> str:
     return out.stdout.strip()
 
 
-def test_importing_salad_before_torch_sets_the_policy_for_the_process():
-    code = ("import os, salad_core, torch; from salad_core.openmp import wait_policy; "
-            "print(os.environ.get('OMP_WAIT_POLICY'), '|', wait_policy())")
+REPORT = "print(os.environ.get('OMP_WAIT_POLICY'), '|', wait_policy())"
+
+
+def test_importing_salad_core_leaves_the_process_alone():
+    """``import salad_core`` (and its command-line package, train and bench) chooses no policy and loads no torch:
+    the command line chooses it, when it runs."""
+    code = ("import os, sys, salad_core, salad_core.cli, salad_core.train, salad_core.bench; "
+            "from salad_core.openmp import wait_policy; "
+            "print(sorted(m for m in ('torch', 'salad_viz', 'matplotlib') if m in sys.modules), '|', end=' '); "
+            + REPORT)
+    assert _child(code) == "[] | None | not configured"
+    assert _child("import os, salad_core, torch; from salad_core.openmp import wait_policy; " + REPORT) \
+        == "None | not configured"
+
+
+def test_the_command_line_sets_the_policy_before_torch_loads():
+    # a command that fails fast (no such corpus) still ran the process tuning first, before any torch import
+    code = ("import os, sys; from salad_core.cli import main; from salad_core.openmp import wait_policy; "
+            "assert main(['-q', 'corpus', 'check', '--out', '/nonexistent/corpus']) == 2; import torch; " + REPORT)
     assert _child(code) == "PASSIVE | passive (set by salad_core before torch loaded)"
     # torch first: too late for libgomp, so salad changes nothing and says why
-    late = ("import torch, os, salad_core; from salad_core.openmp import wait_policy; "
-            "print(os.environ.get('OMP_WAIT_POLICY'), '|', wait_policy())")
-    assert _child(late) == "None | runtime default (torch was imported before salad_core)"
+    late = ("import torch, os; from salad_core.cli import main; from salad_core.openmp import wait_policy; "
+            "main(['-q', 'corpus', 'check', '--out', '/nonexistent/corpus']); " + REPORT)
+    assert _child(late) == "None | runtime default (torch was imported before the policy was chosen)"
+
+
+def test_a_python_program_may_choose_the_policy_itself():
+    code = ("import os; from salad_core import openmp; openmp.configure(); import torch; "
+            "from salad_core.openmp import wait_policy; " + REPORT)
+    assert _child(code) == "PASSIVE | passive (set by salad_core before torch loaded)"
 
 
 def test_auto_is_passive_for_a_training_command_even_on_a_quiet_machine():
@@ -74,10 +97,11 @@ def test_auto_is_passive_for_a_training_command_even_on_a_quiet_machine():
 
 def test_a_training_process_reports_the_training_rule():
     env = {k: v for k, v in os.environ.items() if k not in ("OMP_WAIT_POLICY", "GOMP_SPINCOUNT", openmp.ENV_VAR)}
-    # the interpreter's own command line as `python -m salad_core.train vae` would leave it, before the import
+    # the interpreter's own command line as `python -m salad_core.train vae` leaves it; its __main__ tunes the
+    # process (salad_core.cli.tune_process) before it imports the trainers
     code = ("import sys; sys.orig_argv = [sys.executable, '-m', 'salad_core.train', 'vae']; "
-            "import os, salad_core, torch; from salad_core.openmp import wait_policy; "
-            "print(os.environ.get('OMP_WAIT_POLICY'), '|', wait_policy())")
+            "import os; from salad_core.cli import tune_process; tune_process(); import torch; "
+            "from salad_core.openmp import wait_policy; " + REPORT)
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ("PASSIVE | passive (auto: a training run; set by salad_core before torch "
                                   "loaded)")

@@ -339,7 +339,7 @@ def test_runner_with_fake_generators(tiny_procedural_corpus, sample_dir):
 
 def test_salad_eval_physics_end_to_end(tiny_procedural_corpus, tmp_path, single_thread):
     """``salad eval --physics`` on the shipped SALAD and KeyMotion weights: 2 prompts x 2 seeds x 5 steps."""
-    from salad_core.eval.cli import main
+    from salad_core.cli.eval import main
 
     out = tmp_path / "phys"
     status = main(["--physics", "--data", str(tiny_procedural_corpus), "--keymotion", "--prompts", "2",
@@ -387,7 +387,7 @@ def test_salad_eval_physics_end_to_end(tiny_procedural_corpus, tmp_path, single_
 
 
 def test_salad_eval_physics_rejects_protocol_flags(tiny_procedural_corpus, capsys):
-    from salad_core.eval.cli import main
+    from salad_core.cli.eval import main
 
     assert main(["--physics", "--data", str(tiny_procedural_corpus), "--cfg-sweep"]) == 2
     assert "--cfg-sweep does not apply to --physics" in capsys.readouterr().err
@@ -395,7 +395,7 @@ def test_salad_eval_physics_rejects_protocol_flags(tiny_procedural_corpus, capsy
 
 def test_salad_eval_physics_no_salad_benchmarks_keymotion_alone(tiny_procedural_corpus, tmp_path, single_thread,
                                                                capsys):
-    from salad_core.eval.cli import main
+    from salad_core.cli.eval import main
 
     out = tmp_path / "km"
     assert main(["--physics", "--data", str(tiny_procedural_corpus), "--keymotion", "--no-salad", "--prompts", "1",

@@ -556,7 +556,7 @@ def test_denoiser_with_the_real_minilm_encoder(corpus, tiny_vae_run, tmp_path):
 
 
 def test_cli_main_trains_and_resumes(corpus, tmp_path, capsys):
-    from salad_core.train import main
+    from salad_core.cli.train import main
 
     conf = tmp_path / "conf.json"
     conf.write_text(json.dumps({"model": {"latent_dim": 8, "n_extra_layers": 0},
@@ -800,7 +800,7 @@ def test_run_config_records_batching_threads_numerics_and_the_card_says_so(corpu
 def test_resuming_a_run_from_before_buckets_keeps_its_numerics(corpus, tiny_vae_run, tmp_path, monkeypatch):
     """A run folder whose config.json predates the batching/latent-cache fields resumes with random
     batches and the VAE per step (its own numerics), not today's defaults."""
-    from salad_core.train import cli
+    from salad_core.cli import train as cli
 
     seen = {}
 
@@ -831,7 +831,7 @@ def test_resuming_a_run_from_before_buckets_keeps_its_numerics(corpus, tiny_vae_
 def test_a_run_from_before_the_adamw_field_resumes_with_the_loop(corpus, tiny_vae_run, tmp_path, monkeypatch):
     """A run folder whose config.json has no ``adamw`` trained with PyTorch's per-tensor loop and resumes with
     it; a run that recorded its implementation keeps it; a new run gets the fused default."""
-    from salad_core.train import cli
+    from salad_core.cli import train as cli
 
     seen = {}
 

@@ -169,7 +169,7 @@ def test_missing_evaluator_error_says_how_to_train(tmp_path):
 
 # ------------------------------------------------------------------------------ CLI
 def test_cli_quick_mode_end_to_end(run, corpus, tmp_path, capsys):
-    from salad_core.eval.cli import main
+    from salad_core.cli.eval import main
     from salad_core.models.denoiser import Denoiser, DenoiserConfig
     from salad_core.models.vae import MotionVAE, VAEConfig
     from salad_core.pipeline import SaladPipeline
@@ -202,7 +202,7 @@ def test_cli_quick_mode_end_to_end(run, corpus, tmp_path, capsys):
 def test_cli_evaluates_keymotion_with_the_same_protocol(run, corpus, tmp_path, capsys):
     """``salad eval --keymotion`` (Table 1's other row): the shipped KeyMotion through the same T2M protocol and
     evaluator as SALAD, labelled and recorded as KeyMotion; naming both models in one run is refused."""
-    from salad_core.eval.cli import main
+    from salad_core.cli.eval import main
 
     out, _ = run
     export_evaluator(out, tmp_path / "evaluator")

@@ -311,7 +311,7 @@ def test_root_features_term_moves_the_decoder_towards_the_root_channels():
 
 # ------------------------------------------------------------------------ CLI flags
 def test_cli_parses_init_from_and_train_parts(tmp_path):
-    from salad_core.train.cli import build_parser, main
+    from salad_core.cli.train import build_parser, main
 
     args = build_parser().parse_args(["vae", "--data", "d", "--out", "o", "--init-from", "runs/vae",
                                       "--train-parts", "decoder"])
@@ -326,7 +326,7 @@ def test_cli_parses_init_from_and_train_parts(tmp_path):
 
 
 def test_cli_init_from_flag_error_message(capsys):
-    from salad_core.train.cli import main
+    from salad_core.cli.train import main
 
     with pytest.raises(SystemExit):
         main(["denoiser", "--data", "d", "--out", "o", "--train-parts", "decoder"])
@@ -338,7 +338,7 @@ def test_cli_init_from_flag_error_message(capsys):
 
 def test_cli_decoder_fine_tuning_two_steps(fake_corpus, base_run, tmp_path, capsys):
     from salad_core.io import load_model
-    from salad_core.train import main
+    from salad_core.cli.train import main
 
     conf = tmp_path / "conf.json"
     conf.write_text(json.dumps({

@@ -232,7 +232,7 @@ def run_jobs(jobs: list[TrainJob], data: str | os.PathLike, *, max_parallel: int
 
 
 def _run_inline(jobs: list[TrainJob], data: str | os.PathLike) -> dict[str, int]:
-    from salad_core.train.cli import main as train_main
+    from salad_core.cli.train import main as train_main
 
     codes: dict[str, int] = _outside_dependencies(jobs)
     for job in jobs:

@@ -44,7 +44,7 @@ def _stage_doc(steps: int) -> dict:
 
 
 def _train(config: Path, run: Path, data: Path) -> None:
-    from salad_core.train.cli import main as train_main
+    from salad_core.cli.train import main as train_main
 
     assert train_main(["vae", "--data", str(data), "--out", str(run), "--config", str(config), "--resume",
                        "--no-progress"]) == 0
@@ -201,7 +201,7 @@ def _den_study(root: Path, data: Path) -> tuple[Path, Path]:
     """A study's work folder as the staged study leaves it: two denoiser variants (v and x prediction, tiny) trained
     2 steps at a constant learning rate on one frozen VAE, their configs in ``configs/``."""
     from salad_core.train import train_vae
-    from salad_core.train.cli import main as train_main
+    from salad_core.cli.train import main as train_main
     from salad_core.train.config import VAETrainConfig
 
     vae = root / "vae"
@@ -241,7 +241,7 @@ def test_continuation_probe_continues_the_study_runs_with_a_decaying_rate_and_sc
 
     import salad_core.eval.train_evaluator
     import salad_core.text
-    from salad_core.train.cli import main as train_main
+    from salad_core.cli.train import main as train_main
     from _lab import load_script
 
     monkeypatch.setattr(salad_core.text, "load_text_encoder", functools.lru_cache(salad_core.text.load_text_encoder))
@@ -352,7 +352,7 @@ def test_denoiser_probe_trains_a_variant_on_another_vae_and_is_scored_paired_and
     import salad_core.text
     from salad_lab.probes import score_denoiser_probe
     from salad_core.train import train_vae
-    from salad_core.train.cli import main as train_main
+    from salad_core.cli.train import main as train_main
     from salad_core.train.config import VAETrainConfig
     from _lab import load_script
 

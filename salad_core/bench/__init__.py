@@ -44,7 +44,7 @@ Six sections, each a function returning rows of the table (:class:`Row`), run in
   for itself. If compiling fails, the row says so and sampling is unaffected (salad never compiles
   by default).
 
-``salad bench`` (:func:`main`) runs with the tuned allocator of :mod:`salad_core.allocator`, as the
+``salad bench`` (:func:`salad_core.cli.bench.main`) runs with the tuned allocator of :mod:`salad_core.allocator`, as the
 ``salad`` command does (``SALAD_ALLOCATOR=system`` for glibc's default); the header says which. Freed
 memory then stays with the process, so the memory rows measure growth beyond what it already holds.
 
@@ -67,54 +67,50 @@ One job per module:
 ``compile_trial``     the opt-in ``compile`` section
 ``run``               :func:`run_benchmarks`: every section into one table
 ``table``             the table as Markdown
-``cli``               :func:`main`: ``salad bench`` and ``python -m salad_core.bench``
+
+The command line (``salad bench``, ``python -m salad_core.bench``) is :mod:`salad_core.cli.bench`.
 """
 
-from .cli import build_parser, main
-from .compile_trial import compile_rows
-from .flops import ONCE_PER_CALL, gemm_flops, step_flops
-from .inputs import attended_tokens, denoiser_cases, folded_keys, random_inputs
-from .memory import memory_rows, peak_rss_delta
-from .naive_algorithm1 import NaiveAlgorithm1Prediction, naive_algorithm1
-from .overheads import batching_rows, bench_pipeline, overhead_rows
-from .plan import (
-    BATCHES,
-    COLUMNS,
-    GUIDANCE,
-    MOTION_FRAMES,
-    OPTIONAL_SECTIONS,
-    PROMPT_TOKENS,
-    REFINED,
-    SAMPLING_STEPS,
-    SECTIONS,
-    SHORT_FRAMES,
-    SKELETON,
-    SOURCE,
-    SWAPPED,
-    Case,
-    Plan,
-    Row,
-)
-from .roofline import (
-    best_rates,
-    matmul_rates,
-    matmul_rates_by_backend,
-    paired_step_times,
-    roofline_seconds,
-    step_products,
-)
-from .run import run_benchmarks
-from .speed import forward_variant_rows, speed_rows, time_denoiser_steps
-from .table import format_table, machine_header
-from .training import TrainRecipe, train_profile_rows, train_recipe, training_rows
+import importlib
+
+#: The public names and the module each comes from.
+_EXPORTS: dict[str, str] = {
+    "compile_rows": "compile_trial", "ONCE_PER_CALL": "flops", "gemm_flops": "flops", "step_flops": "flops",
+    "attended_tokens": "inputs", "denoiser_cases": "inputs", "folded_keys": "inputs", "random_inputs": "inputs",
+    "memory_rows": "memory", "peak_rss_delta": "memory", "NaiveAlgorithm1Prediction": "naive_algorithm1",
+    "batching_rows": "overheads", "bench_pipeline": "overheads",
+    "overhead_rows": "overheads", "BATCHES": "plan", "COLUMNS": "plan", "GUIDANCE": "plan",
+    "MOTION_FRAMES": "plan", "OPTIONAL_SECTIONS": "plan", "PROMPT_TOKENS": "plan", "REFINED": "plan",
+    "SAMPLING_STEPS": "plan", "SECTIONS": "plan", "SHORT_FRAMES": "plan", "SKELETON": "plan", "SOURCE": "plan",
+    "SWAPPED": "plan", "Case": "plan", "Plan": "plan", "Row": "plan", "best_rates": "roofline",
+    "matmul_rates": "roofline", "matmul_rates_by_backend": "roofline", "paired_step_times": "roofline",
+    "roofline_seconds": "roofline", "step_products": "roofline", "run_benchmarks": "run",
+    "forward_variant_rows": "speed", "speed_rows": "speed", "time_denoiser_steps": "speed",
+    "format_table": "table", "machine_header": "table", "TrainRecipe": "training",
+    "train_profile_rows": "training", "train_recipe": "training", "training_rows": "training",
+}
 
 __all__ = ["Row", "Case", "Plan", "SECTIONS", "OPTIONAL_SECTIONS", "compile_rows", "train_profile_rows",
            "batching_rows", "gemm_flops", "step_flops", "matmul_rates", "attended_tokens", "matmul_rates_by_backend",
            "roofline_seconds", "time_denoiser_steps", "speed_rows", "forward_variant_rows", "overhead_rows",
            "training_rows", "memory_rows", "peak_rss_delta", "denoiser_cases", "TrainRecipe", "train_recipe",
-           "bench_pipeline", "machine_header", "run_benchmarks", "format_table", "main",
+           "bench_pipeline", "machine_header", "run_benchmarks", "format_table",
            # public since the split into a package
            "ONCE_PER_CALL", "step_products", "paired_step_times", "folded_keys", "best_rates", "random_inputs",
-           "naive_algorithm1", "NaiveAlgorithm1Prediction", "build_parser", "BATCHES", "COLUMNS", "GUIDANCE",
+           "NaiveAlgorithm1Prediction", "BATCHES", "COLUMNS", "GUIDANCE",
            "MOTION_FRAMES", "PROMPT_TOKENS", "REFINED", "SAMPLING_STEPS", "SHORT_FRAMES", "SKELETON", "SOURCE",
            "SWAPPED"]
+
+
+def __getattr__(name: str):
+    # imported on first use: importing the package loads no torch (python -m tunes the process first)
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

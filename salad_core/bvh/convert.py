@@ -39,16 +39,18 @@ from typing import Mapping
 
 import numpy as np
 
-from salad_core.motion import (check_features, check_joints, features_to_joints, joints_to_features,
-                               process_joints)
+from salad_core import limits
+from salad_core.motion import (MAX_FEATURE_MAGNITUDE, _check_magnitude, check_features, check_joints,
+                               features_to_joints, joints_to_features, process_joints)
 from salad_core.skeleton import get_skeleton
 
-from .reader import BvhMotion, read_bvh
+from .reader import BvhError, BvhMotion, read_bvh
 from .rigs import HML_NAMES, RigMapping, map_rig
 
 __all__ = ["BvhImportOptions", "BvhImport", "import_bvh", "bvh_to_joints", "bvh_to_features", "LoadedMotion",
            "load_motion", "JointsConversionError", "UNITS", "UP_AXES", "TARGET_STATURE", "stature",
-           "retargeted_joints", "take_in_features_frame", "retarget_error", "RetargetError"]
+           "retargeted_joints", "take_in_features_frame", "retarget_error", "RetargetError", "load_motion_array",
+           "resampled_frames"]
 
 #: Metres per file unit of the length units :func:`import_bvh` knows.
 UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "ft": 0.3048}
@@ -338,19 +340,41 @@ def _detect_units(size: float) -> tuple[str, float]:
 _RATE_SLACK = 1e-4
 
 
-def _resample(joints: np.ndarray, src_fps: float, fps: float) -> np.ndarray:
-    """Linear resampling over time of ``(N, J, 3)`` from ``src_fps`` to ``fps`` (first frame kept).
+def resampled_frames(n: int, src_fps: float, fps: float) -> int:
+    """How many frames :func:`_resample` makes of ``n`` frames at ``src_fps`` for ``fps`` (no array made).
 
     Output frame ``k`` is at source position ``k * src_fps / fps``; there are as many as fit in the
-    take, up to the rounding slack :data:`_RATE_SLACK`. A take already at ``fps`` (up to that
-    rounding) keeps every frame as it is: a 20 fps file neither loses nor gains a frame.
+    take, up to the rounding slack :data:`_RATE_SLACK`. A take already at ``fps`` (up to that rounding)
+    keeps its ``n`` frames. May be a float ``inf`` for absurd rates (refused by the caller).
+    """
+    ratio = src_fps / fps                       # source frames per output frame
+    if n == 1 or abs(ratio - 1.0) <= _RATE_SLACK:
+        return n
+    span = (n - 1) / ratio if ratio > 0 else math.inf      # the take's duration in output frames
+    count = span * (1.0 + _RATE_SLACK) + 0.01
+    return int(math.floor(count)) + 1 if math.isfinite(count) else math.inf
+
+
+def _check_resample(n: int, src_fps: float, fps: float, path: str) -> int:
+    """:func:`resampled_frames`, if within :func:`salad_core.limits.resample_problem` (else BvhError)."""
+    n_out = resampled_frames(n, src_fps, fps)
+    if (problem := limits.resample_problem(n, src_fps, n_out, fps, len(HML_NAMES))) is not None:
+        raise BvhError(path, None, problem)
+    return n_out
+
+
+def _resample(joints: np.ndarray, src_fps: float, fps: float, path: str = "<array>") -> np.ndarray:
+    """Linear resampling over time of ``(N, J, 3)`` from ``src_fps`` to ``fps`` (first frame kept).
+
+    :func:`resampled_frames` output frames (checked against :mod:`salad_core.limits` before any array
+    is made); a take already at ``fps`` (up to rounding) keeps every frame as it is: a 20 fps file
+    neither loses nor gains a frame.
     """
     n = joints.shape[0]
     ratio = src_fps / fps                       # source frames per output frame
-    if n == 1 or abs(ratio - 1.0) <= _RATE_SLACK:
+    n_out = _check_resample(n, src_fps, fps, path)
+    if n_out == n and (n == 1 or abs(ratio - 1.0) <= _RATE_SLACK):
         return joints
-    span = (n - 1) / ratio                      # the take's duration in output frames
-    n_out = int(math.floor(span * (1.0 + _RATE_SLACK) + 0.01)) + 1
     pos = np.minimum(np.arange(n_out) * ratio, n - 1)
     k = np.minimum(np.floor(pos + 1e-9).astype(int), n - 1)
     k1 = np.minimum(k + 1, n - 1)
@@ -379,7 +403,8 @@ def import_bvh(source: str | os.PathLike | BvhMotion, options: BvhImportOptions 
     Raises
     ------
     BvhError
-        For a malformed file (message with the line).
+        For a malformed file (message with the line), or one whose resampled take would exceed
+        :data:`salad_core.limits.IMPORT_MAX_FRAMES` frames (checked before any work).
     RigError
         When the rig's joints cannot be mapped (message lists the missing joints).
     ValueError
@@ -390,6 +415,8 @@ def import_bvh(source: str | os.PathLike | BvhMotion, options: BvhImportOptions 
     elif kwargs:
         raise TypeError("give either options or keyword arguments, not both")
     motion = source if isinstance(source, BvhMotion) else read_bvh(source)
+    # the output's size, before any work: forward kinematics and resampling scale with it
+    _check_resample(motion.num_frames, motion.fps, float(options.fps), motion.path)
     name_map = dict(options.name_map) if isinstance(options.name_map, tuple) else options.name_map
     mapping = map_rig(motion.joint_names, motion.point_names(), motion.point_parents(),
                       rest=motion.world_positions(rest=True)[0], name_map=name_map, style=options.rig,
@@ -409,7 +436,7 @@ def import_bvh(source: str | os.PathLike | BvhMotion, options: BvhImportOptions 
         units, per = options.units, UNITS[options.units]
     else:
         units, per = "custom", float(options.units)
-    joints = _resample(joints * per, motion.fps, float(options.fps))
+    joints = _resample(joints * per, motion.fps, float(options.fps), motion.path)
     joints[..., 1] -= joints[..., 1].min()
     if options.rig is None:
         detected.append("rig")
@@ -502,24 +529,47 @@ def load_motion(path: str | os.PathLike, skeleton: str = "humanml3d", **bvh_opti
     if bvh_options and any(v is not None for v in bvh_options.values()):
         given = ", ".join(k for k, v in bvh_options.items() if v is not None)
         raise ValueError(f"{p}: {given} appl{'ies' if ',' not in given else 'y'} to BVH files only")
+    arr = load_motion_array(p, sk)
+    if arr.ndim == 2:
+        return LoadedMotion(arr, np.asarray(features_to_joints(arr, sk), np.float32), "features", p)
+    check_joints(arr, sk, name=str(p), min_frames=2)
     try:
-        arr = np.load(p, allow_pickle=False)      # never unpickle: a .npy must not run code
-    except (ValueError, OSError, EOFError) as exc:
-        raise ValueError(f"cannot read {p} as a .npy array (truncated, corrupt or pickled?): {exc}") from None
-    if not isinstance(arr, np.ndarray) or not np.issubdtype(arr.dtype, np.number):
-        raise ValueError(f"{p} does not hold a numeric array (got {getattr(arr, 'dtype', type(arr).__name__)})")
+        feats = joints_to_features(arr.astype(np.float64), sk)
+    except ValueError as exc:
+        raise JointsConversionError(f"{p} holds joints {arr.shape} that cannot be converted to HumanML3D "
+                                    f"features: {exc}") from None
+    return LoadedMotion(feats, arr, "joints", p)
+
+
+def load_motion_array(path: str | os.PathLike, skeleton: str = "humanml3d") -> np.ndarray:
+    """A motion ``.npy`` from outside, checked: features ``(N, D)`` or joints ``(N, J, 3)``, float32.
+
+    The header is read first (:func:`salad_core.limits.read_npy`: never unpickles, refuses a header
+    that does not parse, a non-numeric dtype, a claimed size over 1 GiB or more than the file holds),
+    then the shape against ``skeleton``, then the values: finite, features within
+    :data:`salad_core.motion.MAX_FEATURE_MAGNITUDE` and joints within
+    :data:`salad_core.limits.MAX_JOINT_MAGNITUDE` metres.
+
+    Raises
+    ------
+    FileNotFoundError
+        ``"motion file not found: <path>"``.
+    ValueError
+        Naming the file and the problem.
+    """
+    sk = get_skeleton(skeleton)
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"motion file not found: {p}")
+    arr = limits.read_npy(p, kinds="iuf")
     if arr.ndim == 2:
         check_features(arr, sk, name=str(p))
-        feats = arr.astype(np.float32, copy=False)
-        return LoadedMotion(feats, np.asarray(features_to_joints(feats, sk), np.float32), "features", p)
+        _check_magnitude(arr, f"{p}: the features", MAX_FEATURE_MAGNITUDE)
+        return arr.astype(np.float32, copy=False)
     if arr.ndim == 3 and arr.shape[1:] == (sk.num_joints, 3):
-        check_joints(arr, sk, name=str(p), min_frames=2)
-        joints = arr.astype(np.float32, copy=False)
-        try:
-            feats = joints_to_features(joints.astype(np.float64), sk)
-        except ValueError as exc:
-            raise JointsConversionError(f"{p} holds joints {arr.shape} that cannot be converted to HumanML3D "
-                                        f"features: {exc}") from None
-        return LoadedMotion(feats, joints, "joints", p)
+        check_joints(arr, sk, name=str(p))
+        limits.check_array_values(arr, f"{p}: the joints", max_abs=limits.MAX_JOINT_MAGNITUDE,
+                                  hint="joints are positions in metres; check the array's units")
+        return arr.astype(np.float32, copy=False)
     raise ValueError(f"{p} has shape {arr.shape}; expected features (N, {sk.feature_dim}), joints "
                      f"(N, {sk.num_joints}, 3) or a .bvh file")

@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from salad_core import limits
+
 __all__ = ["BvhError", "BvhJoint", "BvhMotion", "read_bvh", "parse_bvh", "CHANNEL_NAMES"]
 
 #: Channel names a BVH file may declare (matched case-insensitively).
@@ -256,6 +258,8 @@ class _Tokens:
             value = float(tok)
         except ValueError:
             raise self.error(line, f"{what} must be a number, got {tok!r}") from None
+        if (problem := limits.ascii_number_problem(tok, what)) is not None:
+            raise self.error(line, problem)
         if not math.isfinite(value):
             raise self.error(line, f"{what} is {tok} (NaN or infinite)")
         return value
@@ -266,7 +270,12 @@ def _parse_offset(tokens: _Tokens, owner: str) -> tuple[float, float, float]:
     return tuple(tokens.number(f"OFFSET {axis} of {owner}") for axis in "xyz")  # type: ignore[return-value]
 
 
-def _parse_joint(tokens: _Tokens, kw_line: int, parent: int, joints: list[BvhJoint], n_channels: list[int]) -> None:
+def _open_joint(tokens: _Tokens, kw_line: int, parent: int, joints: list[BvhJoint], n_channels: int,
+                depth: int) -> int:
+    """Read a ROOT/JOINT header (name, ``{``, OFFSET, optional CHANNELS), append the joint; returns the
+    channel count so far. The joint count and the nesting ``depth`` are checked first."""
+    if (problem := limits.hierarchy_problem(len(joints) + 1, depth)) is not None:
+        raise tokens.error(kw_line, problem)
     name_toks = tokens.rest_of_line(kw_line)
     if not name_toks:
         raise tokens.error(kw_line, "a ROOT/JOINT keyword without a joint name")
@@ -279,10 +288,9 @@ def _parse_joint(tokens: _Tokens, kw_line: int, parent: int, joints: list[BvhJoi
     if nxt is not None and nxt[0].upper() == "CHANNELS":
         _, ch_line = tokens.next("CHANNELS")
         count_tok, line = tokens.next("the channel count")
-        try:
-            count = int(count_tok)
-        except ValueError:
-            raise tokens.error(line, f"CHANNELS of joint {name!r}: the count must be an integer, got {count_tok!r}") from None
+        if not (count_tok.isascii() and count_tok.lstrip("+-").isdigit()):
+            raise tokens.error(line, f"CHANNELS of joint {name!r}: the count must be an integer, got {count_tok!r}")
+        count = int(count_tok)
         names = tokens.rest_of_line(ch_line)
         if count < 0 or count > 6 or count != len(names):
             raise tokens.error(ch_line, f"CHANNELS of joint {name!r} declares {count} channel(s) but lists "
@@ -296,15 +304,25 @@ def _parse_joint(tokens: _Tokens, kw_line: int, parent: int, joints: list[BvhJoi
         if len(set(canon)) != len(canon):
             raise tokens.error(ch_line, f"joint {name!r} declares a channel twice: {' '.join(names)}")
         channels = tuple(canon)
-    index = len(joints)
-    joints.append(BvhJoint(name, parent, offset, channels, n_channels[0], None, kw_line, ch_line))
-    n_channels[0] += len(channels)
-    end_site = None
-    while True:
+    joints.append(BvhJoint(name, parent, offset, channels, n_channels, None, kw_line, ch_line))
+    return n_channels + len(channels)
+
+
+def _parse_hierarchy(tokens: _Tokens, root_line: int) -> tuple[list[BvhJoint], int]:
+    """The joints (depth first) and the channel count of the hierarchy whose ROOT keyword is on
+    ``root_line``. Iterative (a stack of the open joints), so no file can make Python recurse; the
+    nesting is bounded by :data:`salad_core.limits.BVH_MAX_DEPTH`."""
+    joints: list[BvhJoint] = []
+    n_channels = _open_joint(tokens, root_line, -1, joints, 0, 1)
+    stack: list[list] = [[0, None]]           # open joints: [index, End Site offset or None]
+    while stack:
+        index, end_site = stack[-1]
+        name = joints[index].name
         tok, line = tokens.next(f"'}}' closing joint {name!r}")
         key = tok.upper()
         if key == "JOINT":
-            _parse_joint(tokens, line, index, joints, n_channels)
+            n_channels = _open_joint(tokens, line, index, joints, n_channels, len(stack) + 1)
+            stack.append([len(joints) - 1, None])
         elif key == "END":
             site = tokens.rest_of_line(line)
             if [s.upper() for s in site] != ["SITE"]:
@@ -312,17 +330,21 @@ def _parse_joint(tokens: _Tokens, kw_line: int, parent: int, joints: list[BvhJoi
             if end_site is not None:
                 raise tokens.error(line, f"joint {name!r} has a second End Site")
             tokens.expect("{")
-            end_site = _parse_offset(tokens, f"the End Site of {name!r}")
+            stack[-1][1] = _parse_offset(tokens, f"the End Site of {name!r}")
             tokens.expect("}")
         elif tok == "}":
-            break
+            stack.pop()
+            if end_site is not None:
+                j = joints[index]
+                joints[index] = BvhJoint(j.name, j.parent, j.offset, j.channels, j.first_channel, end_site, j.line,
+                                         j.channels_line)
         else:
             raise tokens.error(line, f"expected JOINT, End Site or '}}' in joint {name!r}, got {tok!r}")
-    if end_site is not None:
-        joints[index] = BvhJoint(name, parent, offset, channels, joints[index].first_channel, end_site, kw_line,
-                                 ch_line)
+    return joints, n_channels
 
 
+#: Characters of a frame line of plain ASCII numbers (a line with others is checked token by token).
+_ROW_CHARS = re.compile(r"[0-9eE+\-.\s]*", re.ASCII)
 _FRAMES_RE = re.compile(r"^\s*Frames\s*:\s*(\S+)\s*$", re.IGNORECASE)
 _FRAME_TIME_RE = re.compile(r"^\s*Frame\s+Time\s*:\s*(\S+)\s*$", re.IGNORECASE)
 
@@ -347,6 +369,8 @@ def _root_chain(joints: tuple[BvhJoint, ...]) -> list[BvhJoint]:
 
 def parse_bvh(text: str, path: str = "<string>") -> BvhMotion:
     """Parse the contents of a BVH file (see :func:`read_bvh`)."""
+    if (problem := limits.file_size_problem(len(text), limits.BVH_MAX_FILE_BYTES, "BVH text")) is not None:
+        raise BvhError(path, None, problem)
     lines = text.splitlines()
     tokens = _Tokens(lines, path)
     first = tokens.peek()
@@ -358,9 +382,7 @@ def parse_bvh(text: str, path: str = "<string>") -> BvhMotion:
     tok, line = tokens.next("ROOT")
     if tok.upper() != "ROOT":
         raise BvhError(path, line, f"expected ROOT after HIERARCHY, got {tok!r}")
-    joints: list[BvhJoint] = []
-    n_channels = [0]
-    _parse_joint(tokens, line, -1, joints, n_channels)
+    joints, width = _parse_hierarchy(tokens, line)
     if (extra := tokens.peek()) is not None:
         problem = ("a second ROOT: files with several skeletons are not supported" if extra[0].upper() == "ROOT"
                    else f"unexpected {extra[0]!r} after the hierarchy (expected MOTION)")
@@ -389,12 +411,14 @@ def parse_bvh(text: str, path: str = "<string>") -> BvhMotion:
     m = _FRAMES_RE.match(header[0][0])
     if not m:
         raise BvhError(path, header[0][1], f"expected 'Frames: <count>', got {header[0][0].strip()!r}")
-    try:
-        n_frames = int(m.group(1))
-    except ValueError:
-        raise BvhError(path, header[0][1], f"the frame count must be an integer, got {m.group(1)!r}") from None
+    if not re.fullmatch(r"[+-]?[0-9]+", m.group(1)):    # int() would also read other digits and '1_000'
+        raise BvhError(path, header[0][1], f"the frame count must be an integer, got {m.group(1)!r}")
+    n_frames = int(m.group(1))
     if n_frames <= 0:
         raise BvhError(path, header[0][1], f"the file has {n_frames} frames; a motion needs at least one")
+    n_points = len(joints_t) + sum(j.end_site is not None for j in joints_t)
+    if (problem := limits.bvh_size_problem(n_frames, len(joints_t), n_points)) is not None:
+        raise BvhError(path, header[0][1], problem)
     if len(header) < 2:
         raise BvhError(path, header[0][1], "the file ends after 'Frames:': no 'Frame Time:' line")
     m = _FRAME_TIME_RE.match(header[1][0])
@@ -404,10 +428,11 @@ def parse_bvh(text: str, path: str = "<string>") -> BvhMotion:
         frame_time = float(m.group(1))
     except ValueError:
         raise BvhError(path, header[1][1], f"the frame time must be a number, got {m.group(1)!r}") from None
-    if not (math.isfinite(frame_time) and frame_time > 0):
-        raise BvhError(path, header[1][1], f"the frame time must be a positive number of seconds, got {m.group(1)}")
+    problem = (limits.ascii_number_problem(m.group(1), "the frame time")
+               or limits.frame_time_problem(frame_time))
+    if problem is not None:
+        raise BvhError(path, header[1][1], problem)
 
-    width = n_channels[0]
     rows: list[list[str]] = []
     row_lines: list[int] = []
     while i < len(lines) and len(rows) < n_frames:
@@ -419,6 +444,15 @@ def parse_bvh(text: str, path: str = "<string>") -> BvhMotion:
             hint = " (the line looks cut short: is the file truncated?)" if len(toks) < width else ""
             raise BvhError(path, i, f"frame {len(rows) + 1} has {len(toks)} values, but the hierarchy declares "
                                     f"{width} channels{hint}")
+        if not _ROW_CHARS.fullmatch(lines[i - 1]):       # numpy, like float(), reads other digits too
+            for c, t in enumerate(toks):
+                what = f"frame {len(rows) + 1}: value ({_channel_label(joints_t, c)})"
+                try:
+                    float(t)
+                except ValueError:
+                    continue            # reported below as "is not a number"
+                if (problem := limits.ascii_number_problem(t, what)) is not None:
+                    raise BvhError(path, i, problem)
         rows.append(toks)
         row_lines.append(i)
     if len(rows) < n_frames:
@@ -465,11 +499,16 @@ def read_bvh(path: str | os.PathLike) -> BvhMotion:
         If the file does not exist.
     BvhError
         If the file is malformed (truncated, a frame line with the wrong number of values, NaN or
-        infinite values, no root position channels, zero frames, Frame Time <= 0, ...); the
-        message names the problem and the line.
+        infinite values, numbers in other than ASCII digits, no root position channels, zero frames,
+        ...) or beyond the limits of :mod:`salad_core.limits` (a Frame Time outside 1e-4..1 s, more than
+        1,000,000 frames, a hierarchy of more than 1,000 joints or nested more than 128 deep, a file over
+        64 MiB, forward kinematics over 1 GiB); the message names the problem and the line.
     """
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"BVH file not found: {p}")
+    problem = limits.file_size_problem(p.stat().st_size, limits.BVH_MAX_FILE_BYTES, "file")
+    if problem is not None:
+        raise BvhError(str(p), None, problem)
     text = p.read_text(encoding="utf-8-sig", errors="replace")
     return parse_bvh(text, str(p))

@@ -45,7 +45,6 @@ Joints without a counterpart are placed, not invented:
 """
 from __future__ import annotations
 
-import json
 import os
 import re
 from dataclasses import dataclass
@@ -219,21 +218,25 @@ def load_name_map(name_map: Mapping[str, str] | str | os.PathLike | None) -> dic
     Raises
     ------
     RigError
-        If the map is not an object of strings, or a key is not a HumanML3D joint name.
+        If the map is not an object of strings, or a key is not a HumanML3D joint name; for a file,
+        also if it is over 1 MiB, not UTF-8 text (a binary file) or not valid JSON.
     """
     if name_map is None:
         return {}
     if isinstance(name_map, (str, os.PathLike)):
+        from salad_core import limits
+
         path = Path(name_map)
         if not path.is_file():
             raise RigError(f"name_map: file not found: {path}")
-        try:
-            name_map = json.loads(path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise RigError(f"name_map: {path} is not valid JSON: {exc}") from None
+        # size, UTF-8 (a binary file given by mistake), nesting and an object at the top, before parsing
+        name_map = limits.read_json(path, "name map", max_bytes=limits.NAME_MAP_MAX_BYTES,
+                                    error=lambda msg: RigError(f"name_map: {msg}"), expect=None)
     if not isinstance(name_map, Mapping) or not all(isinstance(k, str) and isinstance(v, str)
                                                     for k, v in name_map.items()):
-        raise RigError(f"name_map must map joint names to joint names (strings), got {name_map!r}")
+        import reprlib
+
+        raise RigError(f"name_map must map joint names to joint names (strings), got {reprlib.repr(name_map)}")
     out = dict(name_map)
     hml = set(HML_NAMES)
     if out and not set(out) <= hml and set(out.values()) <= hml:

@@ -31,6 +31,7 @@ import torch
 from torch.utils.data import Dataset
 from tqdm.auto import tqdm
 
+from salad_core import limits
 from salad_core.data.texts import TextLine, parse_text_line, split_words
 from salad_core.skeleton import PART_NAMES, Skeleton, get_skeleton
 
@@ -100,7 +101,7 @@ def load_mean_std(root: str | Path, skeleton: str | Skeleton = "humanml3d") -> t
         path = root / fname
         if not path.is_file():
             raise FileNotFoundError(f"{fname} not found: looked for {path}")
-        arr = np.load(path, allow_pickle=False)
+        arr = limits.read_npy(path)       # header checked first: never unpickles, bounded size
         if arr.shape != (sk.feature_dim,):
             raise ValueError(f"{path} has shape {arr.shape}; skeleton {sk.name!r} expects ({sk.feature_dim},)")
         if not np.isfinite(arr).all():
@@ -172,12 +173,9 @@ def _load_motion(path: Path, sk: Skeleton) -> np.ndarray | str:
     """``(N, D)`` float32 features, or ``"nonfinite"``; wrong shape raises naming the file."""
     if not path.is_file():
         raise FileNotFoundError(f"split id {path.stem!r} has no motion file: looked for {path}")
-    try:
-        arr = np.load(path, allow_pickle=False)     # never unpickle
-    except (ValueError, OSError, EOFError):
-        # numpy calls any file without the .npy header "pickled data" and suggests allow_pickle
-        raise ValueError(f"{path} is not a .npy array (a text, pickled, truncated or corrupt file); motion files "
-                         "hold float (N, D) features written by numpy.save") from None
+    # the header first (salad_core.limits.read_npy): never unpickles, refuses a text file, a header that
+    # does not parse, a size over the limit or beyond the file's end, before reading the data
+    arr = limits.read_npy(path)
     if arr.dtype.kind not in "iuf":
         raise ValueError(f"{path} holds {arr.dtype} values; motion files hold float (N, D) features")
     if arr.ndim != 2 or arr.shape[1] != sk.feature_dim:

@@ -73,14 +73,16 @@ def mixture_mean_std(corpus_root: str | Path, general_root: str | Path, ratio: f
     if not 0.0 <= float(ratio) < 1.0:
         raise ValueError(f"ratio={ratio!r} must be a float in [0, 1)")
     corpus_root, general_root = Path(corpus_root), Path(general_root)
-    arrays = [np.load(corpus_root / "new_joint_vecs" / f"{i}.npy") for i in read_split(corpus_root, split)]
+    from salad_core.limits import read_npy
+
+    arrays = [read_npy(corpus_root / "new_joint_vecs" / f"{i}.npy") for i in read_split(corpus_root, split)]
     want = float(ratio) / (1.0 - float(ratio)) * sum(len(a) for a in arrays)
     ids = read_split(general_root, split)
     got = 0
     for k in np.random.default_rng([int(seed), 0x57A7]).permutation(len(ids)):
         if got >= want:
             break
-        a = np.load(general_root / "new_joint_vecs" / f"{ids[k]}.npy")
+        a = read_npy(general_root / "new_joint_vecs" / f"{ids[k]}.npy")
         arrays.append(a)
         got += len(a)
     mean, std = compute_mean_std(arrays, get_skeleton(skeleton))

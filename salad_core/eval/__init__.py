@@ -26,10 +26,9 @@ protocol that runs them, its tables and the paper's published numbers. One job p
   own keyframes.
 - :mod:`salad_core.eval.train_evaluator`: train, export and load the small evaluator shipped for
   the procedural corpus (imported lazily: it pulls in the trainer).
-- :mod:`salad_core.eval.cli`: ``salad eval``.
 
-The CFG-sweep figure (SALAD Fig. 5) is :func:`salad_viz.plots.plot_cfg_sweep` (salad_core draws
-nothing); ``salad_core.eval.plot_cfg_sweep`` still reaches it for old imports.
+The command line ``salad eval`` is :mod:`salad_core.cli.eval`. The CFG-sweep figure (SALAD Fig. 5) is
+:func:`salad_viz.plots.plot_cfg_sweep` (salad_core draws nothing).
 """
 from .metrics import (
     activation_statistics,
@@ -70,15 +69,7 @@ __all__ = [
     "POS_ENUMERATOR", "VIP_LISTS", "UnsafePickleError", "WordVectorizer", "load_plain_pickle",
     "build_word_vectorizer", "corpus_vocabulary", "minilm_word_vectors",
     "DEFAULT_CFG_SCALES", "METRICS", "EvalResult", "EvalSettings", "MotionGenerator", "cfg_sweep",
-    "evaluate_generator", "evaluate_real", "format_mean_ci", "paper_cfg_sweep", "plot_cfg_sweep",
+    "evaluate_generator", "evaluate_real", "format_mean_ci", "paper_cfg_sweep",
     "results_frame", "run_ablation", "to_latex", "to_markdown",
 ]
 
-
-def __getattr__(name: str):
-    # the plot moved to salad_viz (salad_core has no plotting); imported on first use
-    if name == "plot_cfg_sweep":
-        from salad_viz.plots import plot_cfg_sweep
-
-        return plot_cfg_sweep
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -110,7 +110,10 @@ def official_salad_pipeline(checkpoints_dir: str | os.PathLike, dataset: str = "
     for f in ("mean.npy", "std.npy"):
         if not (meta / f).is_file():
             raise FileNotFoundError(f"normalisation statistics {meta / f} not found; pass meta_dir")
-    mean, std = np.load(meta / "mean.npy"), np.load(meta / "std.npy")
+    from salad_core import limits
+
+    mean, std = limits.read_npy(meta / "mean.npy"), limits.read_npy(meta / "std.npy")
+    limits.check_stats(mean, std, str(meta))
 
     if text_encoder is None or isinstance(text_encoder, (str, os.PathLike)):
         if text_encoder is None:

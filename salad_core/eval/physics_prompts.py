@@ -347,14 +347,16 @@ def load_joints(root: str | Path, clip_id: str, skeleton: str | Skeleton = "huma
     recovered from ``new_joint_vecs/<id>.npy`` when the folder has no joints."""
     root = Path(root)
     path = root / "new_joints" / f"{clip_id}.npy"
+    from .. import limits
+
     if path.is_file():
-        return np.load(path).astype(np.float64)
+        return limits.read_npy(path).astype(np.float64)
     vec = root / "new_joint_vecs" / f"{clip_id}.npy"
     if not vec.is_file():
         raise FileNotFoundError(f"clip {clip_id!r}: neither {path} nor {vec} exists")
     from ..motion import features_to_joints
 
-    return np.asarray(features_to_joints(np.load(vec), skeleton), dtype=np.float64)
+    return np.asarray(features_to_joints(limits.read_npy(vec), skeleton), dtype=np.float64)
 
 
 def _split_ids(root: Path, split: str) -> list[str]:

@@ -34,7 +34,6 @@ from torch import nn
 from torch.nn.utils.rnn import pack_padded_sequence
 
 from salad_core.io import (
-    config_from_dict,
     load_state_into,
     read_checkpoint,
     register_model,
@@ -389,13 +388,14 @@ class T2MEvaluator(nn.Module):
             if key not in ckpt:
                 raise CheckpointError(f"{paths['weights']} lacks the key {key!r} (has {sorted(ckpt)})")
             load_state_into(getattr(model, key), ckpt[key], source=f"{paths['weights']}[{key!r}]")
-        mean = np.load(paths["mean"], allow_pickle=False)
-        std = np.load(paths["std"], allow_pickle=False)
+        from salad_core import limits
+
+        mean = limits.read_npy(paths["mean"], error=CheckpointError)
+        std = limits.read_npy(paths["std"], error=CheckpointError)
         for name, arr in (("mean", mean), ("std", std)):
             if arr.shape != (cfg.dim_pose,):
                 raise CheckpointError(f"{paths[name]} has shape {arr.shape}, expected ({cfg.dim_pose},)")
-        if not (std > 0).all():
-            raise CheckpointError(f"{paths['std']} has non-positive entries")
+        limits.check_stats(mean, std, f"{paths['mean']} and std.npy", CheckpointError)
         with torch.no_grad():
             model.mean.copy_(torch.from_numpy(mean.astype(np.float32)))
             model.std.copy_(torch.from_numpy(std.astype(np.float32)))
@@ -452,12 +452,13 @@ def save_evaluator(stem: str | PathLike, evaluator: T2MEvaluator, meta: dict | N
 
 def load_evaluator(stem_or_path: str | PathLike) -> tuple[T2MEvaluator, dict]:
     """Rebuild an evaluator from our checkpoint; returns ``(evaluator in eval mode, meta)``."""
-    doc, state = read_checkpoint(stem_or_path)
-    if doc["type"] != MODEL_TYPE:
-        raise CheckpointError(f"{stem_or_path} holds a {doc['type']!r}, not a {MODEL_TYPE!r}")
-    model = T2MEvaluator(config_from_dict(EvaluatorConfig, doc["config"]))
-    load_state_into(model, state, source=str(stem_or_path))
-    return model.eval(), doc.get("meta", {})
+    from salad_core.io import build_model
+
+    doc, state = read_checkpoint(stem_or_path)       # the checks of salad_core.io.load_model
+    from salad_core.io import checkpoint_files
+
+    model, _ = build_model(doc, state, str(stem_or_path), MODEL_TYPE, str(checkpoint_files(stem_or_path)[0]))
+    return model, doc.get("meta", {})
 
 
 register_model(MODEL_TYPE, EvaluatorConfig, T2MEvaluator)

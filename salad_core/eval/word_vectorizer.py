@@ -151,7 +151,9 @@ class WordVectorizer:
             if not p.is_file():
                 raise FileNotFoundError(f"GloVe file not found: {p} (expected {prefix}_data.npy, "
                                         f"{prefix}_words.pkl and {prefix}_idx.pkl in {folder})")
-        table = np.load(paths["data.npy"], allow_pickle=False)
+        from salad_core import limits
+
+        table = limits.read_npy(paths["data.npy"], kinds="f")   # header checked before the data
         words = load_plain_pickle(paths["words.pkl"])
         word2idx = load_plain_pickle(paths["idx.pkl"])
         if not isinstance(words, (list, tuple)) or not all(isinstance(w, str) for w in words):

@@ -65,7 +65,8 @@ from .models import NORMALISATION_TOLERANCE, normalisation_gap
 from .pst import PST_DIFFUSION, ParallelSkipTransformer, sample_latents
 from .sides import side_ids_of
 
-__all__ = ["KeyMotionPipeline", "KeyMotionOutput", "decode_keyframes", "DEFAULT_WEIGHTS_DIR", "COMPONENTS"]
+__all__ = ["KeyMotionPipeline", "KeyMotionOutput", "decode_keyframes", "DEFAULT_WEIGHTS_DIR", "COMPONENTS",
+           "KEYMOTION_JSON_FIELDS"]
 
 log = logging.getLogger(__name__)
 
@@ -124,16 +125,30 @@ def decode_keyframes(vae: KeyframeVAE, z: torch.Tensor, lengths: torch.Tensor) -
     return keyframes, positions_to_indices(positions, lengths)
 
 
-def _resolve_component(root: Path, name: str) -> Path:
-    """Checkpoint stem of component ``name`` in a pretrained folder or a training root."""
+def _resolve_component(root: Path, name: str, allow_outside_paths: bool | str | os.PathLike = False) -> Path:
+    """Checkpoint stem of component ``name`` in a pretrained folder or a training root; its files must
+    lie inside ``root`` after symbolic links are resolved (:func:`salad_core.limits.resolve_inside`)."""
+    from salad_core import limits
+    from salad_core.io import CheckpointError, checkpoint_files
+
     if (root / f"{name}.json").is_file():
-        return root / name
-    run = root / name
-    for stem in ("best", "latest"):
-        if (run / f"{stem}.json").is_file():
-            return run / stem
-    raise FileNotFoundError(f"{root} holds no {name}.json / {name}.safetensors and no run folder {run} "
-                            "with best.* or latest.*")
+        stem = root / name
+    else:
+        stem = next((root / name / s for s in ("best", "latest") if (root / name / f"{s}.json").is_file()), None)
+        if stem is None:
+            raise FileNotFoundError(f"{root} holds no {name}.json / {name}.safetensors and no run folder "
+                                    f"{root / name} with best.* or latest.*")
+    for file in checkpoint_files(stem):
+        limits.check_inside(root, file, name, str(file.relative_to(root)), root, allow_outside_paths, CheckpointError)
+    return stem
+
+
+#: The keys of ``keymotion.json`` and their JSON types (checked by :meth:`KeyMotionPipeline.from_pretrained`
+#: with :func:`salad_core.limits.check_fields`).
+KEYMOTION_JSON_FIELDS: dict[str, Any] = {
+    "format": str, "version": int, "text_encoder": str, "diffusion": dict | None, "default_length": int,
+    "guidance": dict | None, "recovery": str | None, "side_check": bool,
+}
 
 
 class KeyMotionPipeline:
@@ -253,7 +268,8 @@ class KeyMotionPipeline:
     def from_pretrained(cls, path: str | os.PathLike | None = None, *,
                         text_encoder: str | TextEncoder | None = None, device: str | torch.device = "cpu",
                         solver: str = "ddim", default_length: int | None = None,
-                        recovery: str | None = None) -> "KeyMotionPipeline":
+                        recovery: str | None = None, allow_outside_paths: bool | str | os.PathLike = False
+                        ) -> "KeyMotionPipeline":
         """Load a pretrained folder or a training root; ``path=None`` loads the shipped weights.
 
         Parameters
@@ -270,6 +286,14 @@ class KeyMotionPipeline:
             Overrides the stored default length.
         recovery : str, optional
             Overrides the stored recovery of ``out.joints`` (``keymotion.json`` "recovery"; default "fit").
+        allow_outside_paths : bool or path
+            The checkpoints and a ``text_encoder`` folder named in ``keymotion.json`` must lie inside the
+            folder (after symbolic links are resolved); True accepts any place, a folder that folder too.
+
+        ``keymotion.json`` is checked before anything loads (:data:`KEYMOTION_JSON_FIELDS`: known keys,
+        a misspelt one named with the closest known key, JSON types, the nesting and size limits of
+        :mod:`salad_core.limits`), and so are the checkpoints (:func:`salad_core.io.load_model`); problems
+        raise :class:`~salad_core.io.CheckpointError` (a ValueError) naming the file and the key.
         """
         root = Path(path) if path is not None else DEFAULT_WEIGHTS_DIR
         if path is None and not (root / "keymotion.json").is_file():
@@ -279,51 +303,56 @@ class KeyMotionPipeline:
                 "and pass RUN as path)")
         if not root.is_dir():
             raise FileNotFoundError(f"KeyMotion folder {root} does not exist")
+        from salad_core import limits
+        from salad_core.io import CheckpointError, CheckpointTypeError
+        from salad_core.pipeline import guidance_from_json
+
+        doc_path = root / "keymotion.json"
         doc: dict[str, Any] = {}
-        if (root / "keymotion.json").is_file():
-            doc = json.loads((root / "keymotion.json").read_text())
-            if doc.get("format") != _FORMAT:
-                raise ValueError(f"{root / 'keymotion.json'} is not a KeyMotion pipeline description "
-                                 f"(format {doc.get('format')!r}, expected {_FORMAT!r})")
+        if doc_path.is_file():
+            doc = limits.read_json(doc_path, "file", error=CheckpointError, expect=None)
+            if not isinstance(doc, dict) or doc.get("format") != _FORMAT:
+                found = doc.get("format") if isinstance(doc, dict) else limits.short_json(doc)
+                raise CheckpointError(f"{doc_path} is not a KeyMotion pipeline description "
+                                      f"(format {found!r}, expected {_FORMAT!r})")
+            limits.check_fields(doc, KEYMOTION_JSON_FIELDS, str(doc_path), CheckpointError, CheckpointTypeError)
         models = {}
         metas = {}
         for name, model_type in COMPONENTS.items():
-            stem = _resolve_component(root, name)
-            kind = json.loads(stem.with_suffix(".json").read_text()).get("type")
-            if kind != model_type:
-                raise ValueError(f"{stem}.json holds a {kind!r} model, expected {model_type!r}")
-            model, _, meta = load_model(stem)
+            stem = _resolve_component(root, name, allow_outside_paths)
+            model, _, meta = load_model(stem, expected_type=model_type)
             models[name] = model.to(device).eval()
             metas[name] = meta
+        where = doc_path if doc.get("diffusion") else f"{_resolve_component(root, 'pst')}.json: meta"
         diffusion = doc.get("diffusion") or metas["pst"].get("diffusion")
-        diffusion = config_from_dict(DiffusionConfig, diffusion) if diffusion else PST_DIFFUSION
+        diffusion = (config_from_dict(DiffusionConfig, diffusion, source=f"{where}: 'diffusion'") if diffusion
+                     else PST_DIFFUSION)
         enc_name = doc.get("text_encoder") or metas["pst"].get("text_encoder") or "minilm"
         if text_encoder is None or isinstance(text_encoder, (str, os.PathLike)):
             from salad_core.text import load_text_encoder
 
-            enc_name = str(text_encoder) if text_encoder is not None else enc_name
-            encoder = load_text_encoder(enc_name, device=device)
+            if text_encoder is not None:            # the caller's choice: taken as given
+                enc_name = str(text_encoder)
+                encoder = load_text_encoder(enc_name, device=device)
+            else:
+                if not isinstance(enc_name, str):
+                    raise CheckpointTypeError(f"{where}: 'text_encoder' must be a string, got {enc_name!r}")
+                path = (enc_name if enc_name.lower() == "minilm" else
+                        limits.resolve_inside(root, enc_name, "text_encoder", doc_path, allow_outside_paths,
+                                              CheckpointError, CheckpointTypeError))
+                encoder = load_text_encoder(path, device=device)
         else:
             encoder = text_encoder
             enc_name = getattr(encoder, "name", type(encoder).__name__)
-        length = default_length if default_length is not None else int(doc.get("default_length", 120))
-        guidance = None
-        if doc.get("guidance") is not None:
-            entry = doc["guidance"]
-            try:
-                guidance = Guidance(**entry)
-            except (TypeError, ValueError) as err:
-                raise ValueError(f"{root / 'keymotion.json'}: bad \"guidance\" entry {entry!r} ({err})") from err
+        length = default_length if default_length is not None else doc.get("default_length", 120)
+        guidance = guidance_from_json(doc.get("guidance"), doc_path)
         pipe = cls(models["kf_vae"], models["pst"], models["mmae"], encoder, diffusion=diffusion, solver=solver,
                    default_length=length, text_encoder_name=enc_name, guidance=guidance,
                    recovery=recovery if recovery is not None else doc.get("recovery"))
         from salad_core.vocabulary import vocabulary_and_source
 
         pipe.vocabulary, pipe.vocabulary_source = vocabulary_and_source(root)
-        side_check = doc.get("side_check", True)
-        if not isinstance(side_check, bool):
-            raise ValueError(f"{root / 'keymotion.json'}: \"side_check\" must be true or false, got {side_check!r}")
-        pipe.side_check = side_check
+        pipe.side_check = doc.get("side_check", True)          # a bool: checked with the fields above
         return pipe
 
     def save_pretrained(self, path: str | os.PathLike, *, dtype: torch.dtype | None = None) -> Path:
@@ -390,16 +419,27 @@ class KeyMotionPipeline:
             Mirror a motion whose measured side contradicts its prompt (default :attr:`side_check`;
             ``out.mirrored`` says which were; their ``latents`` stay the sampled, unmirrored ones).
         progress : bool
-            Show a progress bar over the denoising steps.
+            Show a progress bar over the denoising steps (and, for more than
+            :data:`salad_core.limits.PROMPT_CHUNK` prompts, over the motions' joint recovery).
+
+        Prompts are checked and normalised as SALAD's are (:func:`salad_core.text.validate_prompts`).
+        A batch is denoised in one piece: the noise of all motions comes from one generator seeded by
+        ``seed`` (and stochastic solvers draw from it at every step), so splitting a batch would change
+        the motions; callers with thousands of prompts split them themselves (each call with its seed).
 
         Returns
         -------
         KeyMotionOutput
         """
-        texts = [prompts] if isinstance(prompts, str) else list(prompts)
-        if not texts:
-            raise ValueError("prompts must hold at least one prompt, got none")
+        from salad_core import limits
+        from salad_core.sampling import progress_bar
+        from salad_core.text import validate_prompts
+
+        texts = validate_prompts(prompts)        # the prompt checks SALAD's pipeline makes (salad_core.text)
         b = len(texts)
+        many = b > limits.PROMPT_CHUNK
+        if many:
+            log.info("generating %d motions in one batch (denoising, then %d joint recoveries)", b, b)
         lens = self._lengths(lengths, b)
         dev = self.device
         len_t = torch.tensor(lens, dtype=torch.long, device=dev)
@@ -432,7 +472,8 @@ class KeyMotionPipeline:
 
         method = check_method(self.recovery if recovery is None else recovery)
 
-        joints = [recover_joints(feats[i, :n], method, self.skeleton).astype(np.float32) for i, n in enumerate(lens)]
+        joints = [recover_joints(feats[i, :n], method, self.skeleton).astype(np.float32)
+                  for i, n in progress_bar(list(enumerate(lens)), "recovering joints", progress and many)]
         mirrored = [False] * b
         if self.side_check if side_check is None else side_check:
             from salad_core.motion import mirror_features

@@ -1,19 +1,20 @@
 """Trainers for the SALAD VAE and denoiser: atomic checkpoints, exact resume, ``torchrun``/DDP.
 
-Entry points: :func:`train_vae`, :func:`train_denoiser`, their configs, and :func:`main` (the
-``salad train`` command line). The shared loop and the out-folder layout are described in
-:mod:`salad_core.train.common`; length-bucketed batches in :mod:`salad_core.train.batching`, the
-cache of frozen-VAE posteriors in :mod:`salad_core.train.latent_cache`, and the per-part step profile
-(``salad bench --sections train``) in :mod:`salad_core.train.profile`.
+Entry points: :func:`train_vae`, :func:`train_denoiser` and their configs; the ``salad train`` command
+line is :mod:`salad_core.cli.train` (also ``python -m salad_core.train``). The shared loop and the
+out-folder layout are described in :mod:`salad_core.train.common`; length-bucketed batches in
+:mod:`salad_core.train.batching`, the cache of frozen-VAE posteriors in :mod:`salad_core.train.latent_cache`,
+and the per-part step profile (``salad bench --sections train``) in :mod:`salad_core.train.profile`.
 """
-from .cli import main
-from .batching import LengthBucketBatchSampler
-from .common import TrainResult, TrainTask, fit
-from .config import DenoiserTrainConfig, TrainConfig, VAETrainConfig, load_train_config, save_train_config
-from .denoiser_trainer import train_denoiser
-from .latent_cache import LatentCache
-from .schedules import lr_at_step
-from .vae_trainer import train_vae
+import importlib
+
+#: The public names and the module each comes from.
+_EXPORTS: dict[str, str] = {
+    "LengthBucketBatchSampler": "batching", "TrainResult": "common", "TrainTask": "common", "fit": "common",
+    "DenoiserTrainConfig": "config", "TrainConfig": "config", "VAETrainConfig": "config",
+    "load_train_config": "config", "save_train_config": "config", "train_denoiser": "denoiser_trainer",
+    "LatentCache": "latent_cache", "lr_at_step": "schedules", "train_vae": "vae_trainer",
+}
 
 __all__ = [
     "train_vae",
@@ -29,5 +30,18 @@ __all__ = [
     "LengthBucketBatchSampler",
     "LatentCache",
     "lr_at_step",
-    "main",
 ]
+
+
+def __getattr__(name: str):
+    # imported on first use: importing the package loads no torch (python -m tunes the process first)
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -32,7 +32,7 @@ def relative_spread(latents, reference) -> float:
 
 def parse_scales(text: str) -> list[float]:
     """The ``--scales`` list; a bad one ends the script with the reason."""
-    from salad_core.eval.cli import comma_floats
+    from salad_core.cli.eval import comma_floats
 
     try:
         return comma_floats("--scales", text)

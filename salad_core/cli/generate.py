@@ -1,164 +1,21 @@
-"""The ``salad`` command line.
-
-Each sub-command lives in a small function that parses nothing itself: ``main`` builds the parser,
-and errors that users can fix (bad input, missing files) print one line and exit with status 2,
-without a traceback unless ``--debug`` is given.
-"""
+"""``salad demo``, ``salad generate``, ``salad edit`` and ``salad invert``: motions from text, their attention
+figures, edits through the cross-attention, and the inversion of a given motion."""
 from __future__ import annotations
 
 import argparse
-import logging
 import math
-import os
-import sys
 from pathlib import Path
 from typing import Callable
 
-log = logging.getLogger("salad")
-
-EXAMPLES: dict[str, str] = {}
-
-
-class UserError(Exception):
-    """An error the user can fix; printed as one line."""
-
-
-def _sub(subparsers, name: str, help: str, example: str, **kwargs) -> argparse.ArgumentParser:
-    EXAMPLES[name] = example
-    return subparsers.add_parser(
-        name, help=help, description=f"{help}\n\nexample:\n  {example}",
-        formatter_class=argparse.RawDescriptionHelpFormatter, **kwargs,
-    )
-
-
-class _Created:
-    """What the running command created: new output files and folders. When the command fails (an
-    error or Ctrl-C) they are removed again, so a failed call leaves nothing behind."""
-
-    def __init__(self) -> None:
-        self.files: list[Path] = []
-        self.dirs: list[Path] = []
-
-    def clean_up(self) -> None:
-        for f in reversed(self.files):
-            try:
-                f.unlink(missing_ok=True)
-            except OSError:
-                pass
-        for d in reversed(self.dirs):       # deepest first; only folders left empty
-            try:
-                d.rmdir()
-            except OSError:
-                pass
-        self.files, self.dirs = [], []
-
-
-_CREATED = _Created()
-
-
-def _check_out_dir(path: str | os.PathLike, force: bool = False) -> Path:
-    """Check that ``--out`` is (or can become) a writable folder; nothing is created here (the first
-    output written creates it, see :func:`_outputs`)."""
-    out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise UserError(f"--out {out} exists and is not a folder")
-    probe = out
-    while not probe.exists():              # the nearest existing ancestor must be a writable folder
-        if probe.parent == probe:
-            break
-        probe = probe.parent
-    if probe.exists() and not probe.is_dir():
-        raise UserError(f"cannot create output folder {out}: {probe} is not a folder")
-    if probe.exists() and not os.access(probe, os.W_OK | os.X_OK):
-        raise UserError(f"output folder {out} is not writable" if probe == out else
-                        f"cannot create output folder {out}: {probe} is not writable")
-    return out
-
-
-def _make_out_dir(out: Path) -> Path:
-    """Create ``out`` (and missing parents), remembering what was new for :meth:`_Created.clean_up`."""
-    if out.is_dir():
-        return out
-    new = []
-    probe = out
-    while not probe.exists() and probe.parent != probe:
-        new.append(probe)
-        probe = probe.parent
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UserError(f"cannot create output folder {out}: {exc.strerror}") from None
-    _CREATED.dirs.extend(reversed(new))
-    return out
-
-
-# ----------------------------------------------------------------------------- outputs
-def _outputs(out_dir: Path, names: list[str], force: bool, *, write: bool = True) -> list[Path]:
-    """Paths in ``out_dir``; refuse to overwrite any existing one unless ``force``.
-
-    With ``write`` (the default) the folder is created and the new paths are remembered, so that a
-    failing command removes them again; ``write=False`` only checks (call it for every file of a run
-    before writing any).
-    """
-    paths = [out_dir / n for n in names]
-    existing = [p.name for p in paths if p.exists()]
-    if existing and not force:
-        raise UserError(f"{out_dir} already holds {', '.join(existing)}; pass --force to overwrite")
-    if write:
-        _make_out_dir(out_dir)
-        _CREATED.files.extend(p for p in paths if not p.exists())
-    return paths
+from ._common import (UserError, _check_finite, _check_out_dir, _motion_file_names, _note, _outputs, _slug, _sub,
+                      _write_motion_files)
+from .files import _bvh_args, _load_features, _motion_input
 
 
 def _load_pipeline(weights: str | None):
     from salad_core.pipeline import SaladPipeline
 
     return SaladPipeline.from_pretrained(weights)   # a missing or corrupt folder raises CheckpointError
-
-
-def _slug(text: str, n: int = 40) -> str:
-    """A file-name stem from a prompt: lower-case words joined by ``_``, at most ``n`` characters, cut
-    at a word boundary (a single word longer than ``n`` is cut)."""
-    import re
-
-    words = re.findall(r"[a-z0-9]+", text.lower())
-    out = ""
-    for w in words:
-        cand = f"{out}_{w}" if out else w
-        if len(cand) > n:
-            break
-        out = cand
-    return out or (words[0][:n] if words else "motion")
-
-
-def _motion_file_names(stem: str, *, gif: bool = True, bvh: bool = True) -> list[str]:
-    """The files one motion is written as (:func:`_write_motion_files`, in its order): features and joints
-    ``.npy``, then the GIF and the BVH when asked for."""
-    return [f"{stem}_features.npy", f"{stem}_joints.npy"] + ([f"{stem}.gif"] if gif else []) + \
-        ([f"{stem}.bvh"] if bvh else [])
-
-
-def _write_motion_files(out: Path, stem: str, features, joints, skeleton, *, force: bool,
-                        gif: bool = True, bvh: bool = True, title: str | None = None) -> list[Path]:
-    """Features/joints .npy, a GIF (titled ``title``, wrapped) and a BVH for one motion (each written
-    atomically)."""
-    import numpy as np
-
-    from salad_core.io import atomic_path
-    from salad_viz import animate, export_bvh
-
-    paths = _outputs(out, _motion_file_names(stem, gif=gif, bvh=bvh), force)
-    for path, arr in zip(paths[:2], (features, joints)):
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.save(fh, np.asarray(arr, dtype=np.float32))
-    written = paths[:2]
-    if gif:
-        written.append(animate(joints, skeleton, out / f"{stem}.gif", size=(320, 320), stride=2,
-                               titles=None if title is None else [title]))
-    if bvh:
-        written.append(export_bvh(joints, skeleton, out / f"{stem}.bvh"))
-    return written
 
 
 _FUNCTION_WORDS = frozenset("a an the and then while his her their its is are to of in on up with as".split())
@@ -211,7 +68,6 @@ def _no_figure_reason(result, b: int) -> str:
     return "nothing to draw"
 
 
-# ----------------------------------------------------------------------------- generate / demo
 DEMO_PROMPT = "a man jumps forward and then walks forward, while waving his arms"
 
 
@@ -219,13 +75,12 @@ def _weights_info(weights: str | None) -> tuple[str, int]:
     """``(skeleton name, diffusion timesteps)`` from a pipeline folder's ``pipeline.json``, read
     without loading any weights, so that arguments can be checked first; the defaults
     (humanml3d, 1000) when the file is missing or odd (loading the weights then says why)."""
-    import json
-
+    from salad_core.limits import read_json
     from salad_core.pipeline import default_weights_dir
 
     root = Path(weights) if weights is not None else default_weights_dir()
     try:
-        cfg = json.loads((root / "pipeline.json").read_text())
+        cfg = read_json(root / "pipeline.json", "pipeline.json")      # size and nesting checked before parsing
         skeleton = str(cfg.get("skeleton", "humanml3d"))
         steps = int(cfg.get("diffusion", {}).get("num_train_timesteps", 1000))
     except (OSError, ValueError, TypeError, AttributeError):
@@ -319,11 +174,6 @@ def _guidance(args: argparse.Namespace, pipe):
         _note(args, f"--guidance-rescale and --guidance-interval change nothing at w = {guidance.scale:g} "
                     "(no guidance)")
     return replace(guidance, **changes) if changes else guidance
-
-
-def _note(args: argparse.Namespace, text: str, kind: str = "note") -> None:
-    """One line on stderr, ``salad <command>: note: ...`` (also under -q: it changes the result)."""
-    print(f"salad {getattr(args, 'command', '')}: {kind}: {text}", file=sys.stderr)
 
 
 def _note_unknown_words(args: argparse.Namespace, pipe, prompts: list[str], labels: list[str] | None = None) -> None:
@@ -457,9 +307,21 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mirror-self-attention", action="store_true",
                    help="with --mirror: also swap the parts' temporal and skeletal self-attention (the source's, "
                         "MirrorSelfAttention; beyond the paper): the side swaps more often, the rest moves more")
+    p.add_argument("--erase", action="append", metavar="WORDS",
+                   help="erase a word or phrase: its attention goes to the special tokens (Erase; beyond the paper)")
+    p.add_argument("--shift", action="append", metavar="WORDS=FRAMES",
+                   help="move a phrase's attention in time by FRAMES motion frames, a multiple of 4 (Shift)")
+    p.add_argument("--example-seed", type=int, default=None, metavar="SEED",
+                   help="a variation of the source from new noise SEED that keeps its temporal self-attention "
+                        "(ExampleBased)")
+    p.add_argument("--inpaint", default=None, metavar="PARTS[@START:END]",
+                   help="regenerate body parts and/or frames from --target, keep the rest (Inpaint): e.g. arms, "
+                        "legs@40:80, @40:80, all@:40")
+    p.add_argument("--inpaint-blend", type=int, default=1, metavar="N",
+                   help="latent frames over which an in-painted span fades into the kept frames (default 1)")
     p.add_argument("--window", default=None, metavar="START:STOP",
-                   help="step window of --refine/--reweight/--mirror as fractions of the sampling steps, "
-                        "0 <= START < STOP <= 1 (0 = the noisiest step; default 0:1)")
+                   help="step window of --refine/--reweight/--mirror/--erase/--shift as fractions of the sampling "
+                        "steps, 0 <= START < STOP <= 1 (0 = the noisiest step; default 0:1)")
 
 
 def _parse_window(text: str) -> tuple[float, float]:
@@ -483,7 +345,8 @@ def _spec(flag: str, build: Callable):
 def _edit_specs(args: argparse.Namespace, required: bool = True) -> list:
     """Edit specifications from the flags of :func:`_edit_args`, in the order the pipeline needs
     (the replacement first, then the modifiers); ``[]`` if none was given and not ``required``."""
-    from salad_core.attention import Mirror, MirrorSelfAttention, Refine, Reweight, WordSwap
+    from salad_core.attention import (Erase, ExampleBased, Mirror, MirrorSelfAttention, Refine, Reweight, Shift,
+                                      WordSwap, parse_inpaint)
 
     window = {} if args.window is None else {"steps": _parse_window(args.window)}
     in_window = "" if args.window is None else f" --window {args.window}"
@@ -508,30 +371,42 @@ def _edit_specs(args: argparse.Namespace, required: bool = True) -> list:
                                lambda: MirrorSelfAttention(parts=args.mirror, **window)))
     elif getattr(args, "mirror_self_attention", False):
         raise UserError("--mirror-self-attention goes with --mirror PARTS (it mirrors the same parts' self-attention)")
-    if args.window is not None and not (args.refine or args.reweight or args.mirror):
-        raise UserError("--window applies to --refine, --reweight and --mirror; give one of them "
+    for words in getattr(args, "erase", None) or []:
+        specs.append(_spec(f"--erase {words}{in_window}", lambda: Erase(words=words, **window)))
+    for item in getattr(args, "shift", None) or []:
+        words, sep, frames = item.rpartition("=")
+        if not sep or not words:
+            raise UserError(f"--shift takes WORDS=FRAMES (e.g. 'waves=20'), got {item!r}")
+        try:
+            n = int(frames)
+        except ValueError:
+            raise UserError(f"--shift {item!r}: FRAMES {frames!r} is not a whole number of frames") from None
+        specs.append(_spec(f"--shift {item}{in_window}", lambda: Shift(words=words, frames=n, **window)))
+    if getattr(args, "example_seed", None) is not None:
+        specs.append(_spec(f"--example-seed {args.example_seed}", lambda: ExampleBased(seed=args.example_seed)))
+    if getattr(args, "inpaint", None) is not None:
+        specs.append(_spec(f"--inpaint {args.inpaint}", lambda: parse_inpaint(args.inpaint, blend=args.inpaint_blend)))
+    if args.window is not None and not (args.refine or args.reweight or args.mirror or getattr(args, "erase", None)
+                                        or getattr(args, "shift", None)):
+        raise UserError("--window applies to --refine, --reweight, --mirror, --erase and --shift; give one of them "
                         "(word swap is timed by TAU alone)")
     if not specs and required:
-        raise UserError("give at least one edit: --swap TAU, --refine, --reweight WORD=SCALE or --mirror PARTS")
+        raise UserError("give at least one edit: --swap TAU, --refine, --reweight WORD=SCALE, --mirror PARTS, "
+                        "--erase WORDS, --shift WORDS=FRAMES, --example-seed SEED or --inpaint PARTS[@START:END]")
     return specs
-
-
-def _check_finite(flag: str, value: float) -> float:
-    """NaN and infinite scales are refused here, before any weights are loaded."""
-    if not math.isfinite(value):
-        raise UserError(f"{flag} must be a finite number, got {value}")
-    return value
 
 
 def _check_edit_target(args: argparse.Namespace, source: str) -> None:
     """A word swap or a refinement into the source prompt itself gives back the source: refuse it."""
-    kind = "--swap" if args.swap is not None else "--refine" if args.refine else None
+    kind = ("--swap" if args.swap is not None else "--refine" if args.refine else
+            "--inpaint" if getattr(args, "inpaint", None) is not None else None)
     if kind is None:
         return
     target = " ".join((args.target or "").split())
     if not target or target.lower() == " ".join(source.split()).lower():
-        what = "replaces the source's words with the target's" if kind == "--swap" else \
-            "keeps the source's maps for the target's words shared with it"
+        what = {"--swap": "replaces the source's words with the target's",
+                "--refine": "keeps the source's maps for the target's words shared with it",
+                "--inpaint": "regenerates the chosen parts or frames from the target prompt"}[kind]
         raise UserError(f"{kind} needs --target, a prompt that differs from the source ({kind[2:]} {what}); "
                         f"without one the edit gives back the source motion")
 
@@ -590,77 +465,6 @@ def cmd_edit(args: argparse.Namespace) -> int:
     return 0
 
 
-# ----------------------------------------------------------------------------- motion files
-def _load_motion_array(motion: str, skeleton: str):
-    """``(skeleton, array, path)``: a validated features ``(N, D)`` or joints ``(N, J, 3)`` .npy."""
-    import numpy as np
-
-    from salad_core.motion import MAX_FEATURE_MAGNITUDE, check_features
-    from salad_core.skeleton import get_skeleton
-
-    try:
-        sk = get_skeleton(skeleton)
-    except (KeyError, ValueError) as exc:
-        raise UserError(f"--skeleton: {exc.args[0] if exc.args else exc}") from None
-    path = Path(motion)
-    if not path.is_file():
-        raise UserError(f"motion file not found: {path}")
-    try:
-        arr = np.load(path, allow_pickle=False)   # never unpickle: a .npy must not run code
-    except (ValueError, OSError, EOFError):
-        # numpy calls any file without the .npy header "pickled" and suggests allow_pickle: never that
-        raise UserError(f"cannot read {path} as a .npy array (a text, pickled, truncated or corrupt file); motion "
-                        "files hold float arrays written by numpy.save") from None
-    if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "iuf":     # complex parts would be dropped
-        raise UserError(f"{path} does not hold a numeric array (got {getattr(arr, 'dtype', type(arr).__name__)})")
-    if arr.ndim == 2:
-        try:
-            check_features(arr, sk, name=str(path))
-        except ValueError as exc:
-            raise UserError(str(exc)) from None
-        top = float(np.abs(arr).max(initial=0.0))
-        if top > MAX_FEATURE_MAGNITUDE:
-            raise UserError(f"{path} reaches |value| = {top:.3g}, beyond {MAX_FEATURE_MAGNITUDE:g}: not HumanML3D "
-                            "features (metres, radians, metres per frame; of order 1); check its units")
-        return sk, arr.astype(np.float32, copy=False), path
-    if arr.ndim == 3 and arr.shape[1:] == (sk.num_joints, 3):
-        if not np.isfinite(arr).all():
-            raise UserError(f"{path} contains NaN or infinite values")
-        return sk, arr.astype(np.float32, copy=False), path
-    raise UserError(f"{path} has shape {arr.shape}; expected features (N, {sk.feature_dim}) or "
-                    f"joints (N, {sk.num_joints}, 3)")
-
-
-def _load_joints(motion: str, skeleton: str):
-    """``(skeleton, joints (N, J, 3), path)`` from a features ``(N, D)`` or joints ``(N, J, 3)`` .npy.
-
-    Features are recovered as the pipeline recovers them (:data:`salad_core.recovery.DEFAULT_METHOD`, the
-    skeleton fit), so that ``salad export`` and ``salad render`` of a ``*_features.npy`` show the joints that
-    ``salad generate`` wrote beside it (and its BVH), not the raw position features."""
-    import numpy as np
-
-    from salad_core.recovery import DEFAULT_METHOD, recover_joints
-
-    sk, arr, path = _load_motion_array(motion, skeleton)
-    if arr.ndim == 2:
-        arr = np.asarray(recover_joints(arr, DEFAULT_METHOD, sk), dtype=np.float32)
-    return sk, arr, path
-
-
-def _load_features(motion: str, skeleton: str):
-    """``(skeleton, features (N, D), path)``: the models need features; joints files are refused."""
-    sk, arr, path = _load_motion_array(motion, skeleton)
-    if arr.ndim != 2:
-        raise UserError(f"{path} holds joints {arr.shape}; inversion needs HumanML3D features (N, {sk.feature_dim}) "
-                        "(the *_features.npy that salad generate writes)")
-    unit, max_len = sk.unit_length, sk.max_length
-    if not unit <= len(arr) - len(arr) % unit <= max_len:
-        raise UserError(f"{path} has {len(arr)} frames; allowed: {unit}..{max_len} (at {sk.fps:g} fps; longer "
-                        f"motions must be cropped first)")
-    return sk, arr, path
-
-
-# ----------------------------------------------------------------------------- invert
 def _invert(pipe, features, prompt: str, args: argparse.Namespace, method: str, iterations=None, exact=True,
             guidance=None):
     """Invert one motion under its prompt and print the reconstruction error in cm; ``guidance`` is the command's
@@ -705,148 +509,6 @@ def _errors_cm(errors: dict, skeleton) -> dict[str, float]:
     to_cm = 100.0 * skeleton.feature_scale    # feature_scale: the skeleton's length unit in metres
     return {(f"{k}_cm" if "mpjpe" in k else k): float(v) * (to_cm if "mpjpe" in k else 1.0)
             for k, v in errors.items()}
-
-
-def _parse_crop(text: str) -> tuple[float, float | None]:
-    """``START:STOP`` in seconds (STOP may be empty: to the end)."""
-    start, sep, stop = text.partition(":")
-    try:
-        a = float(start) if start.strip() else 0.0
-        b = float(stop) if stop.strip() else None
-    except ValueError:
-        a = b = float("nan")
-    if not sep or not math.isfinite(a) or a < 0 or (b is not None and not (math.isfinite(b) and b > a)):
-        raise UserError(f"--crop takes START:STOP in seconds, 0 <= START < STOP (e.g. 2:9.5 or 2:), got {text!r}")
-    return a, b
-
-
-def _bvh_args(p: argparse.ArgumentParser) -> None:
-    """The BVH import options shared by ``salad invert`` and ``salad import``."""
-    p.add_argument("--crop", default=None, metavar="START:STOP",
-                   help="use only this part of the motion, in seconds (e.g. 2:9.5; STOP empty = to the end)")
-    p.add_argument("--rig", default=None, choices=["smpl", "mixamo", "cmu", "generic"],
-                   help="BVH: the rig's naming style (default: detected from the joint names)")
-    p.add_argument("--name-map", default=None, metavar="FILE.json",
-                   help='BVH: JSON object {"humanml3d_joint": "RigJoint", ...} for joints the rig names '
-                        "differently (the error for an unknown rig lists them)")
-    p.add_argument("--units", default=None,
-                   help="BVH: length unit, m, cm, mm, inch, ft or metres per unit (default: detected from the "
-                        "skeleton's size)")
-    p.add_argument("--up", default=None, choices=["y", "z", "-y", "-z", "x", "-x"],
-                   help="BVH: the file's up axis (default: detected)")
-
-
-def cmd_import(args: argparse.Namespace) -> int:
-    """Convert a BVH take (or a joints .npy) for the other commands: the take's own joints (its bone lengths, on its
-    floor, 20 fps), their copy retargeted to HumanML3D's skeleton and that copy's features."""
-    import numpy as np
-
-    from salad_core.io import atomic_path
-    from salad_core.motion import joints_to_features
-    from salad_core.recovery import DEFAULT_METHOD, recover_joints
-
-    sk, loaded, features, start = _motion_input(args, check_length=False)
-    out = _check_out_dir(args.out, args.force)
-    stem = loaded.path.stem
-    retargeted = None
-    if loaded.kind == "features":        # no take: the features' joints, recovered as the pipeline does
-        take = np.asarray(recover_joints(features, DEFAULT_METHOD, sk), dtype=np.float32)
-    else:
-        take = np.asarray(loaded.joints[start:start + len(features) + 1], dtype=np.float32)
-        if len(take) < 2:
-            raise UserError(f"--crop {args.crop} leaves {len(take)} frame of {loaded.path.name}; a motion needs 2")
-        if start or len(take) < len(loaded.joints):     # cropped: the features of exactly these frames
-            features = joints_to_features(take.astype(np.float64), sk)
-        if sk.bone_lengths is not None:
-            from salad_core.bvh import retarget_error, retargeted_joints
-
-            retargeted = retargeted_joints(take, sk)
-    names = _motion_file_names(stem, gif=not args.no_render, bvh=False)
-    names += [f"{stem}_retargeted_joints.npy"] if retargeted is not None else []
-    paths = _outputs(out, names, args.force)
-    arrays = {f"{stem}_features.npy": features, f"{stem}_joints.npy": take,
-              f"{stem}_retargeted_joints.npy": retargeted}
-    for path in paths:
-        if path.suffix == ".npy":
-            with atomic_path(path) as tmp:
-                with open(tmp, "wb") as fh:
-                    np.save(fh, np.asarray(arrays[path.name], dtype=np.float32))
-    if not args.no_render:
-        from salad_viz import animate
-
-        animate(take, sk, out / f"{stem}.gif", size=(320, 320), stride=2)
-    if loaded.bvh is not None and not args.quiet:
-        for hml, src in loaded.bvh.rig.describe().items():
-            print(f"  {hml:15s} <- {src}")
-    if retargeted is not None:
-        print(f"retargeted to the {sk.name} skeleton (what the features and {stem}_retargeted_joints.npy hold): "
-              f"{retarget_error(take, sk)} from the take (per frame, root and heading aligned)")
-    n = len(take)
-    cropped = f" (--crop {args.crop} from frame {start})" if args.crop is not None else ""
-    if loaded.kind == "features":
-        what = f"joints {n} frames (the pipeline's {DEFAULT_METHOD} recovery of the features), features {len(features)}"
-    else:
-        what = (("take joints and retargeted joints " if retargeted is not None else "joints ")
-                + f"{n} frames, features {len(features)} (one per step between frames)")
-    print(f"{n} frames at {sk.fps:g} fps ({n / sk.fps:.2f} s){cropped}: {what}: " + ", ".join(map(str, paths)))
-    return 0
-
-
-def _motion_input(args: argparse.Namespace, check_length: bool = True):
-    """``(skeleton, loaded motion, features to invert, first frame)`` from a .bvh take or a .npy of features or
-    joints.
-
-    BVH takes and joints are converted with :func:`salad_core.motion.joints_to_features`
-    (retargeted, on the floor, facing +Z); ``--crop`` then cuts the features (20 fps), which start at
-    frame ``first frame`` of the loaded motion (0 without ``--crop``).
-    """
-    from salad_core.bvh import JointsConversionError, load_motion
-    from salad_core.skeleton import get_skeleton
-
-    try:
-        sk = get_skeleton(args.skeleton)
-    except (KeyError, ValueError) as exc:
-        raise UserError(f"--skeleton: {exc.args[0] if exc.args else exc}") from None
-    path = Path(args.motion)
-    given = {k: getattr(args, k) for k in ("rig", "name_map", "units", "up") if getattr(args, k) is not None}
-    if given and path.suffix.lower() != ".bvh":
-        flags = ", ".join("--" + k.replace("_", "-") for k in given)
-        raise UserError(f"{flags} appl{'y' if len(given) > 1 else 'ies'} to .bvh files; {path.name} is not one")
-    if "units" in given:
-        try:
-            given["units"] = float(given["units"])      # metres per unit; otherwise a unit name
-        except ValueError:
-            pass
-    try:
-        loaded = load_motion(path, sk.name, **given)
-    except JointsConversionError as exc:
-        needs = "inversion needs" if getattr(args, "command", "") in ("invert", "edit") else "salad works on"
-        raise UserError(f"{needs} HumanML3D features (N, {sk.feature_dim}); {exc}") from None
-    except (FileNotFoundError, ValueError) as exc:   # BvhError and RigError name the file (and line)
-        raise UserError(str(exc)) from None
-    if loaded.bvh is not None:
-        print(loaded.bvh.summary())
-    features = loaded.features
-    from salad_core.motion import MAX_FEATURE_MAGNITUDE
-
-    top = float(abs(features).max(initial=0.0))
-    if top > MAX_FEATURE_MAGNITUDE:      # before any weights load; the inversion would diverge
-        raise UserError(f"{path} reaches |value| = {top:.3g}, beyond {MAX_FEATURE_MAGNITUDE:g}: not HumanML3D "
-                        "features (metres, radians, metres per frame; of order 1); check its units")
-    i = 0
-    if args.crop is not None:
-        a, b = _parse_crop(args.crop)
-        i, j = int(round(a * sk.fps)), (len(features) if b is None else int(round(b * sk.fps)))
-        if i >= len(features):
-            raise UserError(f"--crop {args.crop}: the motion lasts {len(features) / sk.fps:.2f} s "
-                            f"({len(features)} frames at {sk.fps:g} fps)")
-        features = features[i:j]
-    unit, max_len = sk.unit_length, sk.max_length
-    if check_length and not unit <= len(features) - len(features) % unit <= max_len:
-        hint = "" if args.crop is not None else "; pick a part with --crop START:STOP (seconds)"
-        raise UserError(f"{path} has {len(features)} frames; allowed: {unit}..{max_len} (at {sk.fps:g} fps, "
-                        f"{max_len / sk.fps:g} s at most{hint})")
-    return sk, loaded, features, i
 
 
 def cmd_invert(args: argparse.Namespace) -> int:
@@ -943,118 +605,6 @@ def cmd_invert(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_render(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from salad_viz import animate, keyframe_strip
-
-    from salad_viz._arrays import MAX_SIZE
-
-    if not 8 <= args.size <= MAX_SIZE:
-        raise UserError(f"--size {args.size}: allowed 8..{MAX_SIZE} pixels (the side of a square frame)")
-    out = _check_out_dir(args.out, args.force)
-    sk, joints, path = _load_joints(args.motion, args.skeleton)
-    stem = path.stem
-    _outputs(out, [f"{stem}.{args.format}"] + ([f"{stem}_strip.png"] if args.strip else []), args.force,
-             write=False)
-    if args.strip:
-        from salad_core.io import atomic_path
-        import imageio.v3 as iio
-
-        (p,) = _outputs(out, [f"{stem}_strip.png"], args.force)
-        img = keyframe_strip(joints, sk, np.linspace(0, len(joints) - 1, 6).astype(int), layout="row")
-        with atomic_path(p) as tmp:
-            iio.imwrite(tmp, img, extension=".png")
-        print(p)
-    (p,) = _outputs(out, [f"{stem}.{args.format}"], args.force)
-    print(animate(joints, sk, p, size=(args.size, args.size)))
-    return 0
-
-
-def cmd_export(args: argparse.Namespace) -> int:
-    from salad_viz import export_bvh, export_glb, export_npy
-
-    out = _check_out_dir(args.out, args.force)
-    sk, arr, path = _load_joints(args.motion, args.skeleton)
-    (p,) = _outputs(out, [f"{path.stem}.{args.format}"], args.force)
-    fn = {"bvh": export_bvh, "glb": export_glb, "npy": export_npy}[args.format]
-    written = fn(arr, sk, p)
-    print(written)
-    err = getattr(written, "max_error", None)      # BVH: how far a reader's joints are from these
-    if err is not None and err > 0.005:
-        _note(args, f"{written.name} holds these joints to {100 * err:.1f} cm ({100 * written.mean_error:.2f} cm "
-                    "mean): a BVH skeleton is rigid, and these joints' bones change length or their pelvis or "
-                    "chest is not rigid")
-    return 0
-
-
-# ----------------------------------------------------------------------------- corpus
-def cmd_corpus(args: argparse.Namespace) -> int:
-    from salad_core.data.procedural import build_corpus, corpus_figures
-
-    if args.action == "build":
-        summary = build_corpus(args.out, size=args.size, seed=args.seed, overwrite=args.force,
-                               progress=not args.quiet)
-        print(f"corpus written to {args.out}: " + ", ".join(f"{k}={v}" for k, v in summary.items()
-                                                            if isinstance(v, (int, float, str))))
-    else:
-        root = Path(args.out)
-        missing = [n for n in ("all.txt", "new_joint_vecs", "texts") if not (root / n).exists()]
-        if not root.is_dir() or missing:
-            raise UserError(f"--out {root} is not a corpus folder" + (f" (no {', '.join(missing)})" if root.is_dir()
-                            else " (no such folder)") + f"; build one with: salad corpus build --out {root}")
-        figs = corpus_figures(args.out)
-        for k, v in figs.items():
-            print(f"{k}: {v}")
-    return 0
-
-
-# ----------------------------------------------------------------------------- train
-def cmd_eval(args: argparse.Namespace, rest: list[str]) -> int:
-    from salad_core.eval.cli import main as eval_main
-
-    return int(eval_main(rest) or 0)
-
-
-def _option_value(rest: list[str], flag: str) -> str | None:
-    """The value of ``flag`` (``--flag V`` or ``--flag=V``) among pass-through arguments."""
-    for i, item in enumerate(rest):
-        if item == flag and i + 1 < len(rest):
-            return rest[i + 1]
-        if item.startswith(flag + "="):
-            return item.split("=", 1)[1]
-    return None
-
-
-def cmd_train(args: argparse.Namespace, rest: list[str]) -> int:
-    import json
-
-    from salad_core.train import main as train_main
-
-    try:
-        return int(train_main(([args.what] if args.what else []) + rest) or 0)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        # the trainers' parser reads --config without naming it in the error: say which file and why
-        config = _option_value(rest, "--config")
-        try:
-            if config is None:
-                raise ValueError
-            json.loads(Path(config).read_text(encoding="utf-8"))
-        except (OSError, ValueError):        # the --config file is the culprit (JSONDecodeError is a ValueError)
-            what = (f"{exc.msg} at line {exc.lineno}, column {exc.colno}" if isinstance(exc, json.JSONDecodeError)
-                    else "it is not UTF-8 text")
-            if config is not None:
-                raise UserError(f"--config {config} is not a JSON document ({what}); see "
-                                "configs/salad-0.3/vae.json for the format") from None
-        raise
-
-
-def cmd_bench(args: argparse.Namespace, rest: list[str]) -> int:
-    from salad_core.bench import main as bench_main
-
-    return int(bench_main(rest) or 0)
-
-
 def _generation_args(p: argparse.ArgumentParser, length: int) -> None:
     p.add_argument("--length", type=int, default=length,
                    help=f"frames at 20 fps, 4..196 (default {length}); other values are rounded down to a "
@@ -1101,12 +651,8 @@ def _resolve_sampler(args: argparse.Namespace, parser: argparse.ArgumentParser) 
         args.steps = 50
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="salad", description="salad: text-driven motion generation and attention-based editing")
-    p.add_argument("--debug", action="store_true", help="show full tracebacks")
-    p.add_argument("-q", "--quiet", action="store_true", help="less output, no progress bars")
-    sub = p.add_subparsers(dest="command", metavar="COMMAND")
-
+def add_parsers(sub) -> None:
+    """The sub-commands of this module: demo, generate, edit, invert."""
     d = _sub(sub, "demo", "the main job on the embedded defaults: generate the paper's Fig. 6 prompt, "
              "render it, draw its attention maps, export a BVH", "salad demo --out demo_out")
     d.add_argument("--out", default="salad_demo", help="output folder (default: salad_demo)")
@@ -1169,135 +715,5 @@ def build_parser() -> argparse.ArgumentParser:
                     "default) or kit (21)")
     iv.add_argument("--force", action="store_true", help="overwrite existing files")
 
-    im = _sub(sub, "import", "convert a BVH motion-capture take (SMPL, Mixamo, CMU and similar rigs, any frame rate, "
-              "unit and up axis) to the 22 HumanML3D joints at 20 fps: the take's own (its bone lengths, on its "
-              "floor: NAME_joints.npy), a copy retargeted to HumanML3D's skeleton (NAME_retargeted_joints.npy, with "
-              "its distance from the take printed) and that copy's features (NAME_features.npy), and a GIF",
-              "salad import my_take.bvh --out takes")
-    im.add_argument("motion", help="a .bvh take (or a joints .npy (N, 22, 3))")
-    im.add_argument("--out", required=True, help="output folder")
-    _bvh_args(im)
-    im.add_argument("--no-render", action="store_true", help="skip the GIF")
-    im.add_argument("--skeleton", default="humanml3d", help=argparse.SUPPRESS)
-    im.add_argument("--force", action="store_true", help="overwrite existing files")
 
-    r = _sub(sub, "render", "animate a motion file (features .npy or joints .npy) as GIF or MP4",
-             "salad render gen_out/00_a_person_jumps_joints.npy --out renders --format mp4")
-    r.add_argument("motion", help="a .npy file: features (N, 263) or joints (N, 22, 3)")
-    r.add_argument("--out", required=True, help="output folder (created if missing)")
-    r.add_argument("--format", choices=["gif", "mp4"], default="gif", help="animation format (default gif)")
-    r.add_argument("--size", type=int, default=320, help="side of the square frame in pixels, 8..4096 (default 320)")
-    r.add_argument("--strip", action="store_true", help="also write a keyframe strip PNG")
-    r.add_argument("--skeleton", default="humanml3d", help="skeleton of the motion: humanml3d (default) or kit")
-    r.add_argument("--force", action="store_true", help="overwrite existing files")
-
-    e = _sub(sub, "export", "export a motion file to BVH (Blender), GLB or NPY joints",
-             "salad export gen_out/00_a_person_jumps_features.npy --format bvh --out exports")
-    e.add_argument("motion", help="a .npy file: features (N, 263) or joints (N, 22, 3)")
-    e.add_argument("--out", required=True, help="output folder (created if missing)")
-    e.add_argument("--format", choices=["bvh", "glb", "npy"], default="bvh",
-                   help="bvh (Blender; default), glb (first frame as a 3D scene) or npy (joints (N, J, 3), metres)")
-    e.add_argument("--skeleton", default="humanml3d", help="skeleton of the motion: humanml3d (default) or kit")
-    e.add_argument("--force", action="store_true", help="overwrite existing files")
-
-    c = _sub(sub, "corpus", "build or inspect the procedural motion-language corpus",
-             "salad corpus build --out data/procedural --size default --seed 0")
-    c.add_argument("action", choices=["build", "check"], help="build a corpus, or print the figures of one")
-    c.add_argument("--out", required=True, help="corpus folder (HumanML3D layout)")
-    c.add_argument("--size", default="default", choices=["tiny", "small", "default"],
-                   help="build: how many motions (default: the full corpus, 4,000 plus mirrors)")
-    c.add_argument("--seed", type=int, default=0, help="build: random seed (default 0)")
-    c.add_argument("--force", action="store_true", help="write into a non-empty folder")
-
-    t = _sub(sub, "train", "train the SALAD VAE or denoiser, or the three KeyMotion models (torchrun-ready)",
-             "salad train vae --data data/procedural --out runs/vae", add_help=False)
-    # --help and the choices go to salad_core.train.cli (TRAIN_TARGETS), which owns them; importing
-    # them here would load torch for every command
-    t.add_argument("what", nargs="?", help="vae, denoiser or keymotion")
-
-    _sub(sub, "eval", "evaluate generators with the T2M protocol (R-precision, FID, MM-Dist, Diversity, "
-         "MultiModality), CFG sweeps", "salad eval --data data/procedural --quick --out eval_out",
-         add_help=False)  # --help goes to the evaluation's own parser
-    _sub(sub, "bench", "measure speed, roofline fraction, edit overheads, training rate and memory on this "
-         "machine; one table", "salad bench --quick --threads 1 --out bench.md",
-         add_help=False)  # --help goes to salad_core.bench's own parser
-    return p
-
-
-COMMANDS: dict[str, Callable] = {"corpus": cmd_corpus, "demo": cmd_demo, "generate": cmd_generate,
-                                 "render": cmd_render, "export": cmd_export, "edit": cmd_edit, "invert": cmd_invert,
-                                 "import": cmd_import}
-#: Commands whose remaining arguments go to another module's parser.
-PASS_THROUGH: dict[str, Callable] = {"train": cmd_train, "eval": cmd_eval, "bench": cmd_bench}
-
-
-def run_reporting_errors(label: str, debug: bool, call: Callable[[], int]) -> int:
-    """Run a command: Ctrl-C exits 130; any error prints one line ``<label>: error: ...`` and exits 2
-    (the full traceback only with ``debug``). Either way the files and folders the command created
-    are removed again; Python warnings print as one line ``<label>: warning: ...``."""
-    import warnings
-
-    def one_line(message, category, filename, lineno, file=None, line=None):
-        text = " ".join(str(message).split())
-        print(f"{label}: warning: {text}", file=sys.stderr)
-
-    _CREATED.files, _CREATED.dirs = [], []
-    try:
-        with warnings.catch_warnings():
-            warnings.showwarning = one_line
-            return call()
-    except KeyboardInterrupt:
-        _CREATED.clean_up()
-        print(f"{label}: interrupted", file=sys.stderr)
-        return 130
-    except Exception as exc:  # one clear line unless --debug
-        _CREATED.clean_up()
-        if debug:
-            raise
-        print(f"{label}: error: {exc}", file=sys.stderr)
-        return 2
-    finally:
-        _CREATED.files, _CREATED.dirs = [], []
-
-
-def _quiet_libraries() -> None:
-    """-q: no progress bars from the text encoder's libraries (transformers' "Loading weights")."""
-    os.environ["HF_HUB_DISABLE_PROGRESS_BARS"] = "1"        # read when transformers is imported
-    os.environ.setdefault("TRANSFORMERS_VERBOSITY", "error")
-    if "transformers" in sys.modules:                       # already imported (e.g. in a notebook)
-        try:
-            from transformers.utils import logging as hf_logging
-
-            hf_logging.disable_progress_bar()
-            hf_logging.set_verbosity_error()
-        except Exception:   # an old transformers without these: only the bar stays
-            pass
-
-
-def main(argv: list[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
-    args, rest = parser.parse_known_args(argv)
-    logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO,
-                        format="%(levelname)s %(name)s: %(message)s")
-    if args.command is None:
-        parser.print_help()
-        return 2
-    if args.quiet:
-        _quiet_libraries()
-    from salad_core.allocator import tune_from_environment
-
-    try:
-        tune_from_environment()     # large activations from the heap, freed memory kept for reuse
-    except ValueError as exc:
-        parser.error(str(exc))
-    if rest and args.command not in PASS_THROUGH:
-        parser.error(f"unrecognized arguments: {' '.join(rest)}")
-    if hasattr(args, "preset"):
-        _resolve_sampler(args, parser)
-    if args.command in PASS_THROUGH:
-        return run_reporting_errors(f"salad {args.command}", args.debug, lambda: PASS_THROUGH[args.command](args, rest))
-    return run_reporting_errors(f"salad {args.command}", args.debug, lambda: COMMANDS[args.command](args))
-
-if __name__ == "__main__":
-    sys.exit(main())
+COMMANDS: dict[str, Callable] = {"demo": cmd_demo, "generate": cmd_generate, "edit": cmd_edit, "invert": cmd_invert}

@@ -28,7 +28,7 @@ from typing import Any, Sequence
 
 from salad_core.io import config_from_dict
 
-from .config import DenoiserTrainConfig, VAETrainConfig
+from salad_core.train.config import DenoiserTrainConfig, VAETrainConfig
 
 log = logging.getLogger(__name__)
 
@@ -150,7 +150,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     from salad_core.allocator import tune_from_environment
 
-    tune_from_environment()   # as the salad command does; also under torchrun -m salad_core.train
+    tune_from_environment()   # as the salad command does; also under torchrun -m salad_core.train (whose
+    # __main__ chose the OpenMP wait policy before torch loaded: salad_core.cli.tune_process)
     doc = _read_doc(args)
     if args.what == "keymotion":
         return _main_keymotion(args, doc)
@@ -164,7 +165,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         overrides["progress"] = False
     train_config = config_from_dict(cls, {**train_doc, **{k: v for k, v in overrides.items() if v is not None}})
 
-    from .distributed import init_distributed, shutdown_distributed
+    from salad_core.train.distributed import init_distributed, shutdown_distributed
 
     env = init_distributed(train_config.device)
     if not env.is_main:
@@ -173,7 +174,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.what == "vae":
             from salad_core.models.vae import VAEConfig
 
-            from .vae_trainer import train_vae
+            from salad_core.train.vae_trainer import train_vae
 
             model_config = config_from_dict(VAEConfig, doc["model"]) if "model" in doc else None
             result = train_vae(args.data, args.out, model_config, train_config, resume=args.resume, env=env)
@@ -181,7 +182,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from salad_core.models.denoiser import DenoiserConfig
             from salad_core.sampling import DiffusionConfig
 
-            from .denoiser_trainer import train_denoiser
+            from salad_core.train.denoiser_trainer import train_denoiser
 
             task_doc = doc.get("task", {})
             vae_path = args.vae or task_doc.get("vae")
@@ -222,7 +223,7 @@ def _main_keymotion(args: argparse.Namespace, doc: dict[str, Any]) -> int:
         raise SystemExit(f"{out} already holds a KeyMotion training run; pass --resume to continue it "
                          "or choose another --out folder")
 
-    from .distributed import init_distributed, shutdown_distributed
+    from salad_core.train.distributed import init_distributed, shutdown_distributed
 
     env = init_distributed(recipe.kf_vae_train.device)
     if not env.is_main:

@@ -137,7 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _settings(args):
-    from .settings import EvalSettings
+    from salad_core.eval.settings import EvalSettings
 
     changes = dict(split=args.split, num_steps=args.steps,
                    guidance_scale=7.5 if args.guidance is None else args.guidance, solver=args.solver,
@@ -163,7 +163,7 @@ def comma_floats(flag: str, text: str) -> list[float]:
 
 
 def _scales(text: str | None) -> list[float]:
-    from .settings import DEFAULT_CFG_SCALES
+    from salad_core.eval.settings import DEFAULT_CFG_SCALES
 
     if text is None:
         return list(DEFAULT_CFG_SCALES)
@@ -205,9 +205,9 @@ def _physics_generators(args, settings) -> tuple[dict, dict]:
     """The generators of ``--physics`` (SALAD, and KeyMotion with ``--keymotion``) and their settings."""
     from salad_core.pipeline import SaladPipeline
 
-    from .physics import joints_reader
+    from salad_core.eval.physics import joints_reader
 
-    from .physics_prompts import Generated
+    from salad_core.eval.physics_prompts import Generated
 
     pipe = SaladPipeline.from_pretrained(args.weights)
     # None keeps each model's own default guidance (a SALAD pipeline folder may set rescale/interval)
@@ -253,7 +253,7 @@ def _physics_generators(args, settings) -> tuple[dict, dict]:
 
 def run_physics(args) -> int:
     """``salad eval --physics``: generate the benchmark prompts, measure, check and report."""
-    from .physics_prompts import BenchSettings, benchmark_markdown, run_benchmark
+    from salad_core.eval.physics_prompts import BenchSettings, benchmark_markdown, run_benchmark
 
     for flag, on in (("--cfg-sweep", args.cfg_sweep), ("--quick", args.quick), ("--official", args.official)):
         if on:
@@ -280,7 +280,7 @@ def run_physics(args) -> int:
     if args.motions is not None:
         import numpy as np
 
-        from .physics_prompts import saved_generators
+        from salad_core.eval.physics_prompts import saved_generators
 
         path = Path(args.motions)
         if not path.is_file():
@@ -352,10 +352,10 @@ def run_guidance_sweep(args) -> int:
 
     from salad_core.pipeline import SaladPipeline
 
-    from .guidance_sweep import choose, guidance_grid, run_sweep, sweep_markdown
-    from .physics import joints_reader
-    from .physics_prompts import BenchSettings
-    from .train_evaluator import default_evaluator_dir, load_packaged_evaluator
+    from salad_core.eval.guidance_sweep import choose, guidance_grid, run_sweep, sweep_markdown
+    from salad_core.eval.physics import joints_reader
+    from salad_core.eval.physics_prompts import BenchSettings
+    from salad_core.eval.train_evaluator import default_evaluator_dir, load_packaged_evaluator
 
     if args.cfg_sweep or args.official or args.keymotion is not None or args.motions is not None:
         raise ValueError("--guidance-sweep takes neither --cfg-sweep, --official, --keymotion nor --motions")
@@ -406,9 +406,9 @@ def run_guidance_sweep(args) -> int:
 def run(args) -> int:
     import torch
 
-    from .protocol import cfg_sweep, evaluate_generator, evaluate_real
-    from .tables import results_frame, to_latex, to_markdown
-    from .train_evaluator import load_packaged_evaluator
+    from salad_core.eval.protocol import cfg_sweep, evaluate_generator, evaluate_real
+    from salad_core.eval.tables import results_frame, to_latex, to_markdown
+    from salad_core.eval.train_evaluator import load_packaged_evaluator
 
     if args.threads is not None:
         if args.threads < 1:
@@ -429,7 +429,7 @@ def run(args) -> int:
         raise FileNotFoundError(f"--data {data} is not a folder")
     settings = _settings(args)
     if args.official is not None:
-        from .t2m import T2MEvaluator
+        from salad_core.eval.t2m import T2MEvaluator
 
         evaluator = T2MEvaluator.from_official(args.official, args.dataset)
         evaluator.source = f"official T2M evaluator ({args.dataset}) from {args.official}"
@@ -474,7 +474,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     if not logging.getLogger().handlers:
         logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    from salad_core.cli import run_reporting_errors
+    from salad_core.cli._common import run_reporting_errors
 
     return run_reporting_errors("salad eval", args.debug, lambda: run(args))
 

@@ -8,9 +8,9 @@ from typing import Sequence
 
 import torch
 
-from .plan import OPTIONAL_SECTIONS, SECTIONS
-from .run import run_benchmarks
-from .table import format_table
+from salad_core.bench.plan import OPTIONAL_SECTIONS, SECTIONS
+from salad_core.bench.run import run_benchmarks
+from salad_core.bench.table import format_table
 
 __all__ = ["build_parser", "main"]
 
