@@ -338,7 +338,7 @@ def test_a_motion_npy_that_is_really_text_never_suggests_unpickling(tmp_path, ca
     path.write_text("0.1 0.2 0.3\n")
     out = tmp_path / "e"
     line = _fails_cleanly(["export", str(path), "--out", str(out)], capsys, out,
-                          f"cannot read {path} as a .npy array (a text, pickled, truncated or corrupt file)")
+                          f"cannot read {path} as a .npy array (a text, pickled, truncated or corrupt file")
     assert "allow_pickle" not in line and "pickle.load" not in line
 
 

@@ -285,8 +285,9 @@ def run_physics(args) -> int:
         path = Path(args.motions)
         if not path.is_file():
             raise FileNotFoundError(f"--motions {path} does not exist (a physics_motions.npz of salad eval --physics)")
-        with np.load(path) as saved:
-            generators = saved_generators({k: saved[k] for k in saved.files})
+        from salad_core.limits import read_npz
+
+        generators = saved_generators(read_npz(path))        # every member's header checked, never unpickled
         info = {"motions": str(path)}
         run_json = path.parent / "physics.json"
         if run_json.is_file():                  # the steps, guidance and weights the motions were made with

@@ -25,10 +25,12 @@ def _load_motion_array(motion: str, skeleton: str):
     path = Path(motion)
     if not path.is_file():
         raise UserError(f"motion file not found: {path}")
+    from salad_core.limits import MAX_JOINT_MAGNITUDE, read_npy
+
     try:
-        arr = np.load(path, allow_pickle=False)   # never unpickle: a .npy must not run code
-    except (ValueError, OSError, EOFError):
-        # numpy calls any file without the .npy header "pickled" and suggests allow_pickle: never that
+        # the header first (size, dtype, truncation) and never unpickled: salad_core.limits.read_npy
+        arr = read_npy(path, kinds="biuf", error=UserError)
+    except (OSError, EOFError):
         raise UserError(f"cannot read {path} as a .npy array (a text, pickled, truncated or corrupt file); motion "
                         "files hold float arrays written by numpy.save") from None
     if not isinstance(arr, np.ndarray) or arr.dtype.kind not in "iuf":     # complex parts would be dropped
@@ -46,6 +48,10 @@ def _load_motion_array(motion: str, skeleton: str):
     if arr.ndim == 3 and arr.shape[1:] == (sk.num_joints, 3):
         if not np.isfinite(arr).all():
             raise UserError(f"{path} contains NaN or infinite values")
+        top = float(np.abs(arr).max(initial=0.0))
+        if top > MAX_JOINT_MAGNITUDE:
+            raise UserError(f"{path} reaches |value| = {top:.3g}, beyond {MAX_JOINT_MAGNITUDE:g} m: not joint "
+                            "positions in metres; check its units")
         return sk, arr.astype(np.float32, copy=False), path
     raise UserError(f"{path} has shape {arr.shape}; expected features (N, {sk.feature_dim}) or "
                     f"joints (N, {sk.num_joints}, 3)")
