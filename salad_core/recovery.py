@@ -40,7 +40,7 @@ differentiable), float32 for float32 input and float64 otherwise.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Union
+from typing import Callable, NamedTuple, Union
 
 import numpy as np
 import torch
@@ -545,6 +545,59 @@ def _lock_goals(track: np.ndarray, lock: np.ndarray, blend: int, floor: float | 
     return weight, goal
 
 
+class _Leg(NamedTuple):
+    """One leg's joints, bone lengths ``(N,)`` (foot ``(N, 1)``) and goals ``(N, 3)`` for :func:`lock_feet` /
+    :func:`plant_feet`; ``weight (N,)`` > 0 where a goal applies."""
+
+    ankle: int
+    toe: int
+    hip: int
+    knee: int
+    l1: np.ndarray
+    l2: np.ndarray
+    lf: np.ndarray
+    goal_a: np.ndarray
+    goal_t: np.ndarray
+    weight: np.ndarray
+
+
+def _leg_goals(q: np.ndarray, lock: np.ndarray, side: int, sk: Skeleton, blend: int, floor: float | None,
+               leash: float | None = None) -> _Leg:
+    """The goals of one leg's ankle and toe from their locks (:func:`_lock_goals`); where the toe is planted and
+    the heel free, the ankle goes a foot length from the toe's goal; goals no lower than ``floor``."""
+    ankle, toe = sk.contact_joints[2 * side], sk.contact_joints[2 * side + 1]
+    if sk.parents[toe] != ankle:
+        raise ValueError(f"skeleton {sk.name!r}: contact joint {toe} is not the child of {ankle}")
+    hip, knee = _leg(sk, ankle)
+    l1 = np.linalg.norm(q[:, knee] - q[:, hip], axis=-1)
+    l2 = np.linalg.norm(q[:, ankle] - q[:, knee], axis=-1)
+    lf = np.linalg.norm(q[:, toe] - q[:, ankle], axis=-1)[:, None]
+    wa, goal_a = _lock_goals(q[:, ankle], lock[:, 2 * side], blend, floor, leash)
+    wt, goal_t = _lock_goals(q[:, toe], lock[:, 2 * side + 1], blend, floor, leash)
+    heel_free = (wt * (1.0 - wa))[:, None]
+    via_toe = goal_t + lf * _normalize(goal_a - goal_t, fallback=_UP)
+    goal_a = goal_a + heel_free * (via_toe - goal_a)
+    if floor is not None:
+        goal_a[:, 1] = np.maximum(goal_a[:, 1], floor)
+        goal_t[:, 1] = np.maximum(goal_t[:, 1], floor)
+    return _Leg(ankle, toe, hip, knee, l1, l2, lf, goal_a, goal_t, np.maximum(wa, wt))
+
+
+def _solve_leg(q: np.ndarray, leg: _Leg, max_reach=None) -> None:
+    """In place: hip -> knee -> ankle by :func:`two_bone_ik` towards the ankle goal, the toe aimed at its goal,
+    on the frames where the leg's weight is above 0."""
+    active = leg.weight > 0
+    if not active.any():
+        return
+    new_knee, new_ankle = two_bone_ik(q[:, leg.hip], q[:, leg.knee], leg.goal_a, leg.l1, leg.l2,
+                                      hint=q[:, leg.toe] - q[:, leg.ankle], max_reach=max_reach)
+    new_toe = new_ankle + leg.lf * _normalize(leg.goal_t - new_ankle,
+                                              fallback=_normalize(q[:, leg.toe] - q[:, leg.ankle]))
+    q[active, leg.knee] = new_knee[active]
+    q[active, leg.ankle] = new_ankle[active]
+    q[active, leg.toe] = new_toe[active]
+
+
 def lock_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "humanml3d", *,
               blend_frames: int = 3, floor: float | None = 0.0) -> np.ndarray:
     """Keep the contact joints in place while they are locked, moving the legs by two-bone IK.
@@ -579,34 +632,9 @@ def lock_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "hu
     lock = np.asarray(lock, dtype=bool)
     if lock.shape != (q.shape[0], 4):
         raise ValueError(f"lock must have shape ({q.shape[0]}, 4), got shape {lock.shape}")
-    parents = sk.parents
     for side in (0, 1):
-        ankle, toe = sk.contact_joints[2 * side], sk.contact_joints[2 * side + 1]
-        if parents[toe] != ankle:
-            raise ValueError(f"skeleton {sk.name!r}: contact joint {toe} is not the child of {ankle}")
-        la, lt = lock[:, 2 * side], lock[:, 2 * side + 1]
-        if not (la.any() or lt.any()):
-            continue
-        hip, knee = _leg(sk, ankle)
-        l1 = np.linalg.norm(q[:, knee] - q[:, hip], axis=-1)
-        l2 = np.linalg.norm(q[:, ankle] - q[:, knee], axis=-1)
-        lf = np.linalg.norm(q[:, toe] - q[:, ankle], axis=-1)[:, None]
-        wa, goal_a = _lock_goals(q[:, ankle], la, blend_frames, floor)
-        wt, goal_t = _lock_goals(q[:, toe], lt, blend_frames, floor)
-        # toe planted, heel free: the ankle goes where a foot length reaches the toe's goal
-        heel_free = (wt * (1.0 - wa))[:, None]
-        via_toe = goal_t + lf * _normalize(goal_a - goal_t, fallback=_UP)
-        goal_a = goal_a + heel_free * (via_toe - goal_a)
-        if floor is not None:
-            goal_a[:, 1] = np.maximum(goal_a[:, 1], floor)
-            goal_t[:, 1] = np.maximum(goal_t[:, 1], floor)
-        active = np.maximum(wa, wt) > 0
-        new_knee, new_ankle = two_bone_ik(q[:, hip], q[:, knee], goal_a, l1, l2,
-                                          hint=q[:, toe] - q[:, ankle])
-        new_toe = new_ankle + lf * _normalize(goal_t - new_ankle, fallback=_normalize(q[:, toe] - q[:, ankle]))
-        q[active, knee] = new_knee[active]
-        q[active, ankle] = new_ankle[active]
-        q[active, toe] = new_toe[active]
+        if lock[:, 2 * side:2 * side + 2].any():
+            _solve_leg(q, _leg_goals(q, lock, side, sk, blend_frames, floor))
     return q
 
 
@@ -651,63 +679,46 @@ def plant_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "h
     lock = np.asarray(lock, dtype=bool)
     if lock.shape != (q.shape[0], 4):
         raise ValueError(f"lock must have shape ({q.shape[0]}, 4), got shape {lock.shape}")
-    n = q.shape[0]
-    legs = []
+    legs, reaches = [], []
     for side in (0, 1):
-        ankle, toe = sk.contact_joints[2 * side], sk.contact_joints[2 * side + 1]
-        if sk.parents[toe] != ankle:
-            raise ValueError(f"skeleton {sk.name!r}: contact joint {toe} is not the child of {ankle}")
-        hip, knee = _leg(sk, ankle)
-        l1 = np.linalg.norm(q[:, knee] - q[:, hip], axis=-1)
-        l2 = np.linalg.norm(q[:, ankle] - q[:, knee], axis=-1)
-        lf = np.linalg.norm(q[:, toe] - q[:, ankle], axis=-1)[:, None]
-        wa, goal_a = _lock_goals(q[:, ankle], lock[:, 2 * side], blend_frames, floor, max_foot_shift)
-        wt, goal_t = _lock_goals(q[:, toe], lock[:, 2 * side + 1], blend_frames, floor, max_foot_shift)
-        heel_free = (wt * (1.0 - wa))[:, None]
-        via_toe = goal_t + lf * _normalize(goal_a - goal_t, fallback=_UP)
-        goal_a = goal_a + heel_free * (via_toe - goal_a)
-        weight = np.maximum(wa, wt)
-        if floor is not None:
-            below = (q[:, ankle, 1] < floor) | (q[:, toe, 1] < floor)
-            goal_a[:, 1] = np.maximum(goal_a[:, 1], floor)
-            goal_t[:, 1] = np.maximum(goal_t[:, 1], floor)
-            weight = np.where(below, 1.0, weight)
+        leg = _leg_goals(q, lock, side, sk, blend_frames, floor, max_foot_shift)
+        if floor is not None:           # a foot joint below the floor gets a goal on it, planted or not
+            below = (q[:, leg.ankle, 1] < floor) | (q[:, leg.toe, 1] < floor)
+            leg = leg._replace(weight=np.where(below, 1.0, leg.weight))
+        legs.append(leg)
         # how straight the model made this leg, and how far IK may go beyond that
-        ext = np.linalg.norm(q[:, ankle] - q[:, hip], axis=-1)
-        reach = np.minimum(ext + reach_slack, l1 + l2 - 1e-6)
-        legs.append((ankle, toe, hip, knee, l1, l2, lf, goal_a, goal_t, weight, reach))
-    # the body's share: what the legs cannot reach without straightening beyond ``reach``
-    need = np.zeros((n, 3))
-    count = np.zeros((n, 1))
-    for ankle, toe, hip, knee, l1, l2, lf, goal_a, goal_t, weight, reach in legs:
-        v = goal_a - q[:, hip]
-        # horizontally first (a gliding body catches up with its planted foot); down only when the
-        # foot is lower than the leg reaches even straight below the hip (a body hovering over its feet)
+        ext = np.linalg.norm(q[:, leg.ankle] - q[:, leg.hip], axis=-1)
+        reaches.append(np.minimum(ext + reach_slack, leg.l1 + leg.l2 - 1e-6))
+    if move_root:
+        q += _root_shift(q, legs, reaches, root_sigma)[:, None, :]
+    for leg, reach in zip(legs, reaches):
+        _solve_leg(q, leg, max_reach=reach)
+    return q
+
+
+def _root_shift(q: np.ndarray, legs: list[_Leg], reaches: list[np.ndarray], sigma: float) -> np.ndarray:
+    """``(N, 3)``: the body's share of :func:`plant_feet` (``move_root``): per leg, what its ankle goal is
+    beyond ``reach`` from the hip, horizontally first (a gliding body catches up with its planted foot) and
+    down only when the foot is lower than the leg reaches even straight below the hip (a body hovering over
+    its feet); the legs' shares averaged (double support) and smoothed with a Gaussian of ``sigma`` frames."""
+    need = np.zeros((q.shape[0], 3))
+    count = np.zeros((q.shape[0], 1))
+    for leg, reach in zip(legs, reaches):
+        v = leg.goal_a - q[:, leg.hip]
         horiz = np.linalg.norm(v[:, [0, 2]], axis=-1)
         below = np.maximum(-v[:, 1], 0.0)
         h_reach = np.sqrt(np.maximum(reach ** 2 - below ** 2, 0.0))
-        s_h = np.maximum(horiz - h_reach, 0.0) * (weight > 0)
-        s_v = np.maximum(below - reach, 0.0) * (weight > 0)
+        s_h = np.maximum(horiz - h_reach, 0.0) * (leg.weight > 0)
+        s_v = np.maximum(below - reach, 0.0) * (leg.weight > 0)
         step = np.zeros_like(v)
         step[:, [0, 2]] = (s_h / np.maximum(horiz, _EPS))[:, None] * v[:, [0, 2]]
         step[:, 1] = -s_v
         need += step
         count += ((s_h > 0) | (s_v > 0))[:, None]
-    shift = need / np.maximum(count, 1.0) if move_root else need * 0.0
-    if root_sigma > 0 and n > 1:
-        shift = gaussian_filter1d(shift, root_sigma, axis=0, mode="nearest")
-    q += shift[:, None, :]
-    for ankle, toe, hip, knee, l1, l2, lf, goal_a, goal_t, weight, reach in legs:
-        active = weight > 0
-        if not active.any():
-            continue
-        new_knee, new_ankle = two_bone_ik(q[:, hip], q[:, knee], goal_a, l1, l2,
-                                          hint=q[:, toe] - q[:, ankle], max_reach=reach)
-        new_toe = new_ankle + lf * _normalize(goal_t - new_ankle, fallback=_normalize(q[:, toe] - q[:, ankle]))
-        q[active, knee] = new_knee[active]
-        q[active, ankle] = new_ankle[active]
-        q[active, toe] = new_toe[active]
-    return q
+    shift = need / np.maximum(count, 1.0)
+    if sigma > 0 and q.shape[0] > 1:
+        shift = gaussian_filter1d(shift, sigma, axis=0, mode="nearest")
+    return shift
 
 
 def lift_above_floor(joints: np.ndarray, floor: float = 0.0) -> np.ndarray:

@@ -141,9 +141,10 @@ def side_measure(joints, kind: str, skeleton: str | Skeleton = "humanml3d") -> f
         a, b = _activity(x, left, anchor), _activity(x, right, anchor)
         return float(np.log2((a + 1e-6) / (b + 1e-6)))
     if kind == "turn":
-        return float(np.degrees(np.unwrap(_heading(x, sk))[-1] - _heading(x, sk)[0]))
+        yaw = np.unwrap(_heading(x, sk))
+        return float(np.degrees(yaw[-1] - yaw[0]))
     if kind == "lateral":
-        yaw0 = _heading(x, sk)[0]
+        yaw0 = _heading(x[:1], sk)[0]
         left_axis = np.array([np.cos(yaw0), 0.0, -np.sin(yaw0)])        # forward (sin, 0, cos) turned a quarter left
         return float((x[-1, 0] - x[0, 0]) @ left_axis)
     raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")

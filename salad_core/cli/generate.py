@@ -356,13 +356,7 @@ def _edit_specs(args: argparse.Namespace, required: bool = True) -> list:
     if args.refine:
         specs.append(_spec(f"--refine{in_window}", lambda: Refine(**window)))
     for item in args.reweight or []:
-        word, sep, scale = item.rpartition("=")
-        if not sep or not word:
-            raise UserError(f"--reweight takes WORD=SCALE (e.g. high=-1), got {item!r}")
-        try:
-            value = float(scale)
-        except ValueError:
-            raise UserError(f"--reweight {item!r}: the scale {scale!r} is not a number") from None
+        word, value = _word_value("--reweight", item, float, "WORD=SCALE (e.g. high=-1)", "the scale {!r} is not a number")
         specs.append(_spec(f"--reweight {item}{in_window}", lambda: Reweight(words=word, scale=value, **window)))
     if args.mirror:
         specs.append(_spec(f"--mirror {args.mirror}{in_window}", lambda: Mirror(parts=args.mirror, **window)))
@@ -374,13 +368,8 @@ def _edit_specs(args: argparse.Namespace, required: bool = True) -> list:
     for words in getattr(args, "erase", None) or []:
         specs.append(_spec(f"--erase {words}{in_window}", lambda: Erase(words=words, **window)))
     for item in getattr(args, "shift", None) or []:
-        words, sep, frames = item.rpartition("=")
-        if not sep or not words:
-            raise UserError(f"--shift takes WORDS=FRAMES (e.g. 'waves=20'), got {item!r}")
-        try:
-            n = int(frames)
-        except ValueError:
-            raise UserError(f"--shift {item!r}: FRAMES {frames!r} is not a whole number of frames") from None
+        words, n = _word_value("--shift", item, int, "WORDS=FRAMES (e.g. 'waves=20')",
+                               "FRAMES {!r} is not a whole number of frames")
         specs.append(_spec(f"--shift {item}{in_window}", lambda: Shift(words=words, frames=n, **window)))
     if getattr(args, "example_seed", None) is not None:
         specs.append(_spec(f"--example-seed {args.example_seed}", lambda: ExampleBased(seed=args.example_seed)))
@@ -394,6 +383,17 @@ def _edit_specs(args: argparse.Namespace, required: bool = True) -> list:
         raise UserError("give at least one edit: --swap TAU, --refine, --reweight WORD=SCALE, --mirror PARTS, "
                         "--erase WORDS, --shift WORDS=FRAMES, --example-seed SEED or --inpaint PARTS[@START:END]")
     return specs
+
+
+def _word_value(flag: str, item: str, convert: Callable, form: str, bad: str):
+    """``(words, value)`` of a ``WORDS=VALUE`` flag (the last ``=`` splits), or a one-line error naming the flag."""
+    words, sep, text = item.rpartition("=")
+    if not sep or not words:
+        raise UserError(f"{flag} takes {form}, got {item!r}")
+    try:
+        return words, convert(text)
+    except ValueError:
+        raise UserError(f"{flag} {item!r}: {bad.format(text)}") from None
 
 
 def _check_edit_target(args: argparse.Namespace, source: str) -> None:
