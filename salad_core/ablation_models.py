@@ -11,7 +11,6 @@ print the reading; how the study was run, and what was measured about each pair,
 """
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Any
@@ -29,12 +28,23 @@ def ablations_dir() -> Path:
 
 
 def list_ablations(root: str | os.PathLike | None = None) -> dict[str, dict[str, Any]]:
-    """The shipped ablation models by folder name: ``{kind, label, table, vae, steps, ...}``."""
+    """The shipped ablation models by folder name: ``{kind, label, table, vae, steps, ...}``.
+
+    ``index.json`` is read as a weight folder's JSON (:func:`salad_core.limits.read_json`: size, UTF-8 and
+    nesting checked before parsing); it must hold an object of objects (else ValueError / TypeError naming
+    the file and the entry).
+    """
+    from salad_core import limits
+
     root = Path(root) if root is not None else ablations_dir()
     index = root / "index.json"
     if not index.is_file():
         raise FileNotFoundError(f"no ablation models in {root} (no index.json)")
-    return json.loads(index.read_text())
+    entries = limits.read_json(index, "ablation index")
+    for name, entry in entries.items():
+        if not isinstance(entry, dict):
+            raise TypeError(f"{index}: entry {name!r} must be an object {{...}}, got {limits.short_json(entry)}")
+    return entries
 
 
 def load_ablation_pipeline(name: str, root: str | os.PathLike | None = None, *, text_encoder=None):
@@ -50,23 +60,41 @@ def load_ablation_pipeline(name: str, root: str | os.PathLike | None = None, *, 
     return SaladPipeline.from_pretrained(root / name, text_encoder=text_encoder, allow_outside_paths=root)
 
 
-def load_ablation_vae(name: str, root: str | os.PathLike | None = None):
+def load_ablation_vae(name: str, root: str | os.PathLike | None = None, *,
+                      allow_outside_paths: bool | str | os.PathLike = False):
     """``(vae, mean, std)`` of a VAE variant (``"st"``, ``"pose"``, ``"no_pos"`` ... or ``"vae_st"``).
 
     ``mean``/``std`` are ``(D,)`` float32 numpy arrays: the normalisation the VAE was trained with.
+
+    The statistics file an ``index.json`` entry names (``"stats"``) and the VAE's checkpoint files must lie
+    inside ``root`` after ``..`` and symbolic links are resolved (:func:`salad_core.limits.resolve_inside`);
+    ``allow_outside_paths=True`` accepts any place, a folder that folder too. Otherwise ValueError naming the
+    entry, the key and where it leads.
     """
-    from salad_core.io import load_model, load_tensors
+    from salad_core import limits
+    from salad_core.io import checkpoint_files, load_model, load_tensors
 
     root = Path(root) if root is not None else ablations_dir()
+    index = root / "index.json"
     entries = list_ablations(root)
     folder = name if name.startswith("vae_") else f"vae_{name}"
     if entries.get(folder, {}).get("kind") != "vae":
         raise KeyError(f"{name!r} is not a shipped VAE ablation; choose one of "
-                       f"{sorted(e['variant'] for e in entries.values() if e['kind'] == 'vae')}")
-    vae, _, _ = load_model(root / folder / "vae")
+                       f"{sorted(str(e.get('variant')) for e in entries.values() if e.get('kind') == 'vae')}")
     # identical statistics are stored once: the entry names the file it shares (else the folder's own)
-    stats = load_tensors(root / entries[folder].get("stats", f"{folder}/stats.safetensors"))
-    return vae, stats["mean"].float().numpy(), stats["std"].float().numpy()
+    stats_path = limits.resolve_inside(root, entries[folder].get("stats", f"{folder}/stats.safetensors"), "stats",
+                                       f"{index}: {folder!r}", allow_outside_paths)
+    stem = root / folder / "vae"
+    for file in checkpoint_files(stem):         # a symbolic link may leave the folder
+        limits.check_inside(root, file, "vae", f"{folder}/vae", f"{index}: {folder!r}", allow_outside_paths)
+    vae, _, _ = load_model(stem)
+    stats = load_tensors(stats_path)
+    if "mean" not in stats or "std" not in stats:
+        raise ValueError(f"{stats_path} (named by {index}: {folder!r}) lacks 'mean' or 'std' (it holds "
+                         f"{sorted(stats)})")
+    mean, std = stats["mean"].float().numpy(), stats["std"].float().numpy()
+    limits.check_stats(mean, std, str(stats_path))
+    return vae, mean, std
 
 
 def load_readings(root: str | os.PathLike | None = None) -> dict[str, Any]:
@@ -85,4 +113,6 @@ def load_readings(root: str | os.PathLike | None = None) -> dict[str, Any]:
     path = root / READINGS_FILE
     if not path.is_file():
         raise FileNotFoundError(f"{path} is missing: the ablation models ship with their reading")
-    return json.loads(path.read_text())
+    from salad_core import limits
+
+    return limits.read_json(path, "study reading")      # size, UTF-8 and nesting checked before parsing

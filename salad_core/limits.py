@@ -34,7 +34,8 @@ CHECKPOINT_MAX_BYTES        4 GiB            a ``.safetensors`` weight file
 MODEL_MAX_BYTES             4 GiB            the parameters + buffers a checkpoint's config builds
 PROMPT_MAX_CHARS            10,000           one prompt
 PROMPT_MAX_WORD_CHARS       100              one word of a prompt (whitespace-separated)
-PROMPT_CHUNK                64               prompts above which a call reports its progress
+PROMPT_CHUNK                64               prompts above which a call reports its progress (and
+                                             KeyMotion's chunk of motions denoised together)
 ==========================  ===============  ======================================================
 """
 from __future__ import annotations
@@ -59,7 +60,7 @@ __all__ = [
     "NPY_MAX_BYTES", "NPY_MAX_NDIM", "MAX_JOINT_MAGNITUDE",
     "JSON_MAX_BYTES", "JSON_MAX_DEPTH", "CONFIG_MAX_INT", "CONFIG_MAX_COUNT", "CHECKPOINT_MAX_BYTES", "MODEL_MAX_BYTES",
     "PROMPT_MAX_CHARS", "PROMPT_MAX_WORD_CHARS", "PROMPT_CHUNK",
-    "human_bytes", "file_size_problem", "check_file_size", "read_text_file",
+    "human_bytes", "file_size_problem", "refusal", "check_file_size", "read_text_file",
     "frame_time_problem", "bvh_size_problem", "hierarchy_problem", "resample_problem", "ascii_number_problem",
     "npy_header", "read_npy", "read_npz", "check_array_values",
     "json_depth", "read_json", "unknown_keys_message", "check_known_keys", "config_fields", "check_fields",
@@ -119,7 +120,8 @@ PROMPT_MAX_CHARS = 10_000
 #: WordPiece turns a longer one into a single [UNK]).
 PROMPT_MAX_WORD_CHARS = 100
 #: Prompts in one call above which the pipelines log their progress and, with ``progress=True``, show a
-#: bar over the motions.
+#: bar over the chunks and the motions; also the chunk size of KeyMotion's pipeline (its ``max_batch``
+#: default), and the batch size above which ``salad generate`` says how many motions and roughly how long.
 PROMPT_CHUNK = 64
 
 
@@ -141,13 +143,25 @@ def file_size_problem(size: int, limit: int, what: str) -> str | None:
     return None
 
 
+def refusal(error: Callable[[str], Exception], message: str, reason: str) -> Exception:
+    """``error(message)`` carrying ``reason`` as its ``.reason`` attribute: the problem alone, without the
+    file's name, for a caller that names the file its own way (``salad train --config FILE``)."""
+    exc = error(message)
+    try:
+        exc.reason = reason
+    except AttributeError:      # an error type with __slots__: the message alone
+        pass
+    return exc
+
+
 def check_file_size(path: str | os.PathLike, limit: int, what: str, error: Callable[[str], Exception] = ValueError
                     ) -> int:
-    """The size of ``path`` in bytes, if at most ``limit`` (else ``error`` naming the file and both sizes)."""
+    """The size of ``path`` in bytes, if at most ``limit`` (else ``error`` naming the file and both sizes;
+    its ``.reason`` is the problem alone, see :func:`refusal`)."""
     size = os.path.getsize(path)
     problem = file_size_problem(size, limit, what)
     if problem:
-        raise error(f"{path}: {problem}")
+        raise refusal(error, f"{path}: {problem}", problem)
     return size
 
 
@@ -156,7 +170,8 @@ def read_text_file(path: str | os.PathLike, limit: int, what: str, error: Callab
     """A text file as UTF-8 (a byte-order mark dropped with ``bom``), after :func:`check_file_size`.
 
     A file that is not UTF-8 (a binary file given by mistake) raises ``error`` naming the first bad byte
-    and its offset, unless ``replace`` (then undecodable bytes become U+FFFD).
+    and its offset (its ``.reason``: ``"it is not UTF-8 text"``), unless ``replace`` (then undecodable bytes
+    become U+FFFD).
     """
     check_file_size(path, limit, what, error)
     data = Path(path).read_bytes()
@@ -166,8 +181,8 @@ def read_text_file(path: str | os.PathLike, limit: int, what: str, error: Callab
     try:
         return data.decode(encoding)
     except UnicodeDecodeError as exc:
-        raise error(f"{path}: the {what} is not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start}; "
-                    "a binary file?)") from None
+        raise refusal(error, f"{path}: the {what} is not UTF-8 text (byte 0x{data[exc.start]:02x} at offset "
+                      f"{exc.start}; a binary file?)", "it is not UTF-8 text") from None
 
 
 # ----------------------------------------------------------------------------------------------- BVH checks
@@ -403,7 +418,8 @@ def read_json(path: str | os.PathLike, what: str = "JSON file", *, max_bytes: in
 
     Raises ``error`` (a message naming the file) for a file over ``max_bytes``, not UTF-8, nested deeper
     than ``max_depth``, not valid JSON, or (with ``expect``) whose top level is not of that type;
-    ``FileNotFoundError`` for a missing file.
+    ``FileNotFoundError`` for a missing file. The error's ``.reason`` is the problem without the file's
+    name (``"Expecting value at line 2, column 1"``; :func:`refusal`).
     """
     path = Path(path)
     if not path.is_file():
@@ -411,17 +427,20 @@ def read_json(path: str | os.PathLike, what: str = "JSON file", *, max_bytes: in
     text = read_text_file(path, max_bytes, what, error)
     depth = json_depth(text)
     if depth > max_depth:
-        raise error(f"{path}: the {what} nests {depth} levels deep; at most {max_depth} are read")
+        reason = f"it nests {depth} levels deep; at most {max_depth} are read"
+        raise refusal(error, f"{path}: the {what} nests {depth} levels deep; at most {max_depth} are read", reason)
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise error(f"{path} is not valid JSON ({exc})") from None
+        raise refusal(error, f"{path} is not valid JSON ({exc})",
+                      f"{exc.msg} at line {exc.lineno}, column {exc.colno}") from None
     except RecursionError:      # cannot happen below max_depth; kept as a guard
-        raise error(f"{path}: the {what} nests too deeply to parse") from None
+        raise refusal(error, f"{path}: the {what} nests too deeply to parse", "it nests too deeply to parse") from None
     if expect is not None and not isinstance(doc, expect):
         names = {dict: "an object {...}", list: "an array [...]"}
-        raise error(f"{path}: the {what} must hold {names.get(expect, expect.__name__)}, found "
-                    f"{_json_type(doc)}")
+        wanted = names.get(expect, expect.__name__)
+        raise refusal(error, f"{path}: the {what} must hold {wanted}, found {_json_type(doc)}",
+                      f"it holds {_json_type(doc)}, not {wanted}")
     return doc
 
 
@@ -514,8 +533,8 @@ def _describe(hint: Any) -> str:
     origin = typing.get_origin(hint)
     if origin in (typing.Union, types.UnionType):
         return " or ".join(_describe(h) for h in typing.get_args(hint))
-    return {type(None): "null", bool: "true/false", int: "an integer", float: "a number", str: "a string"}.get(
-        hint, "an array" if origin in (tuple, list) else str(hint))
+    return {type(None): "null", bool: "true/false", int: "an integer", float: "a number", str: "a string",
+            dict: "an object {...}"}.get(hint, "an array" if origin in (tuple, list) else str(hint))
 
 
 def short_json(value: Any, limit: int = 60) -> str:

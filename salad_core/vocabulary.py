@@ -103,13 +103,19 @@ def write_vocabulary(words: Iterable[str], weights_dir: str | Path, **info) -> P
     return atomic_write_text(path, json.dumps(doc, indent=1) + "\n")
 
 
-def vocabulary_info(weights_dir: str | Path) -> dict | None:
-    """The whole ``vocabulary.json`` of a weights folder (words and provenance), or None without one."""
+def vocabulary_info(weights_dir: str | Path, allow_outside_paths: bool | str | Path = False) -> dict | None:
+    """The whole ``vocabulary.json`` of a weights folder (words and provenance), or None without one.
+
+    The file must lie inside ``weights_dir`` after symbolic links are resolved (as every file a weight folder
+    names, :func:`salad_core.limits.check_inside`): a ``vocabulary.json`` that links elsewhere raises
+    ValueError naming where it leads, unless ``allow_outside_paths`` (True: any place; a folder: that one too).
+    """
     from salad_core import limits
 
     path = Path(weights_dir) / VOCABULARY_FILE
     if not path.is_file():
         return None
+    limits.check_inside(weights_dir, path, VOCABULARY_FILE, VOCABULARY_FILE, weights_dir, allow_outside_paths)
     try:    # size, UTF-8 and nesting checked before parsing (salad_core.limits)
         doc = limits.read_json(path, "vocabulary file", expect=None)
     except OSError as err:
@@ -119,18 +125,22 @@ def vocabulary_info(weights_dir: str | Path) -> dict | None:
     return doc
 
 
-def load_vocabulary(weights_dir: str | Path) -> frozenset[str] | None:
-    """The training vocabulary of a weights folder (its ``vocabulary.json``), or None if it has none."""
-    doc = vocabulary_info(weights_dir)
+def load_vocabulary(weights_dir: str | Path, allow_outside_paths: bool | str | Path = False
+                    ) -> frozenset[str] | None:
+    """The training vocabulary of a weights folder (its ``vocabulary.json``), or None if it has none
+    (``allow_outside_paths``: see :func:`vocabulary_info`)."""
+    doc = vocabulary_info(weights_dir, allow_outside_paths)
     return None if doc is None else frozenset(str(w) for w in doc["words"])
 
 
-def vocabulary_and_source(weights_dir: str | Path) -> tuple[frozenset[str] | None, str | None]:
+def vocabulary_and_source(weights_dir: str | Path, allow_outside_paths: bool | str | Path = False
+                          ) -> tuple[frozenset[str] | None, str | None]:
     """``(words, source)`` of a weights folder for the pipelines: the vocabulary and the name of its
-    corpus (e.g. "procedural corpus 2.4"); ``(None, None)`` without a file. An unreadable file is logged
-    and treated as absent (the weights still load)."""
+    corpus (e.g. "procedural corpus 2.4"); ``(None, None)`` without a file. An unreadable file, or one that
+    links outside the folder (without ``allow_outside_paths``, :func:`vocabulary_info`), is logged with the
+    reason and treated as absent (the weights still load; unknown words are not reported)."""
     try:
-        doc = vocabulary_info(weights_dir)
+        doc = vocabulary_info(weights_dir, allow_outside_paths)
     except ValueError as err:
         logging.getLogger(__name__).warning("%s; unknown words will not be reported", err)
         return None, None

@@ -8,8 +8,9 @@ import argparse
 import math
 import os
 import sys
+import time
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 #: Each sub-command's example line (its ``--help`` shows it).
 EXAMPLES: dict[str, str] = {}
@@ -160,6 +161,61 @@ def _check_finite(flag: str, value: float) -> float:
     if not math.isfinite(value):
         raise UserError(f"{flag} must be a finite number, got {value}")
     return value
+
+
+def human_duration(seconds: float) -> str:
+    """A rough duration for a person: ``"40 s"``, ``"2 min"``, ``"1.5 h"`` (``"1 s"`` at least)."""
+    if not math.isfinite(seconds):
+        return "an unknown time"
+    if seconds < 90:
+        return f"{max(seconds, 1):.0f} s"
+    if seconds < 90 * 60:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def batch_estimate(total: int, done: int, seconds: float, what: str = "motions") -> str:
+    """The line said before the rest of a long batch: ``total`` items, ``done`` of them (the first chunk)
+    took ``seconds``: ``"generating 120 motions (about 2 min at 1.1 s each, measured on the first chunk)"``."""
+    each = seconds / max(done, 1)
+    per = f"{each:.2f}" if each < 1 else f"{each:.1f}" if each < 10 else f"{each:.0f}"
+    return (f"generating {total:,} {what} (about {human_duration(each * total)} at {per} s each, measured on "
+            "the first chunk)")
+
+
+def say(text: str) -> None:
+    """Print a line on stdout without breaking a tqdm bar that is being drawn (tqdm.write)."""
+    from tqdm import tqdm
+
+    tqdm.write(text, file=sys.stdout)
+
+
+def batch_chunks(total: int, chunk: int, *, progress: bool, what: str = "motions",
+                 report: Callable[[str], None] = say) -> Iterator[slice]:
+    """The ``slice`` of each consecutive chunk of ``chunk`` items out of ``total``, for a loop that does the
+    work of one chunk per step. With more than one chunk, the time the first chunk took is measured (from
+    the first ``yield`` to the next) and :func:`batch_estimate` is passed to ``report`` before the second
+    chunk starts; with ``progress`` a tqdm bar over the items (on stderr) shows the rest."""
+    if chunk < 1:
+        raise ValueError(f"chunk must be >= 1, got {chunk}")
+    starts = range(0, total, chunk)
+    bar = None
+    if progress and len(starts) > 1:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, desc=f"{what} ({chunk} per chunk)", unit=what.removesuffix("s"), leave=False)
+    try:
+        began = time.perf_counter()
+        for k, start in enumerate(starts):
+            rows = slice(start, min(start + chunk, total))
+            yield rows
+            if k == 0 and len(starts) > 1:
+                report(batch_estimate(total, rows.stop - rows.start, time.perf_counter() - began, what))
+            if bar is not None:
+                bar.update(rows.stop - rows.start)
+    finally:
+        if bar is not None:
+            bar.close()
 
 
 def run_reporting_errors(label: str, debug: bool, call: Callable[[], int]) -> int:

@@ -8,6 +8,12 @@ of the keys ``"train"``, ``"model"`` (the model config), ``"diffusion"`` and ``"
 which is the shape of a run's own ``config.json``. With ``--resume`` and no ``--config`` the run's
 ``config.json`` is used.
 
+The file is read as the weight folders' JSON files are (:func:`salad_core.limits.read_json`: size, UTF-8 and
+nesting checked before parsing) and checked against :func:`config_schema` before anything is built: a
+misspelt key (``"lrr"``) is named with the closest known one (``'lr'``), a value of the wrong JSON type or a
+model size beyond :data:`salad_core.limits.CONFIG_MAX_INT` is refused. Such a file is a :class:`ConfigError`:
+one line ``salad train: error: ...`` and exit status 2, before ``--out`` is created.
+
 ``keymotion`` trains the keyframe VAE, the PST and the MMAE one after the other into
 ``--out/{kf_vae,pst,mmae}`` (:func:`salad_core.keymotion.train.train_keymotion`). Its ``--config``
 is a :class:`~salad_core.keymotion.train.KeyMotionRecipe` document (``configs/keymotion-0.2.json``:
@@ -26,13 +32,18 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
+from salad_core import limits
 from salad_core.io import config_from_dict
 
 from salad_core.train.config import DenoiserTrainConfig, VAETrainConfig
 
 log = logging.getLogger(__name__)
 
-__all__ = ["main", "build_parser", "TRAIN_TARGETS"]
+__all__ = ["main", "build_parser", "TRAIN_TARGETS", "ConfigError", "config_schema", "check_config_doc"]
+
+
+class ConfigError(ValueError):
+    """A ``--config`` file (or a run's ``config.json``) ``salad train`` does not read: one line, exit status 2."""
 
 #: What ``salad train`` can train (the single source of the ``what`` choices).
 TRAIN_TARGETS: tuple[str, ...] = ("vae", "denoiser", "keymotion")
@@ -112,6 +123,117 @@ def _keep_own_optimizer(doc: dict[str, Any], what: str) -> dict[str, Any]:
     return {**doc, "adamw": "loop"}
 
 
+#: The sections of a ``vae`` / ``denoiser`` config document and their JSON types (a run's ``config.json`` also
+#: records ``model_type``, ``task`` and ``runtime``); a bare training config holds the training fields at the
+#: top level instead of a ``"train"`` section.
+DOC_FIELDS: dict[str, Any] = {"train": dict, "model": dict, "diffusion": dict | None, "text_encoder": str,
+                              "model_type": str, "task": dict, "runtime": dict}
+#: The entries of a run's ``task`` record that ``salad train denoiser`` reads (the rest is not read).
+TASK_FIELDS: dict[str, Any] = {"vae": str, "diffusion": dict | None, "text_encoder": str}
+#: The sections of a ``keymotion`` recipe (:class:`~salad_core.keymotion.train.KeyMotionRecipe`), and of each
+#: of its stages.
+KEYMOTION_FIELDS: dict[str, Any] = {"text_encoder": str, "train": dict | None, "kf_vae": dict | None,
+                                    "pst": dict | None, "mmae": dict | None}
+KEYMOTION_STAGE_FIELDS: dict[str, Any] = {"model": dict | None, "train": dict | None}
+
+
+def config_schema(what: str) -> dict[str, tuple[type, type | None]]:
+    """``{section: (training config class, model config class or None)}`` of ``salad train what``'s config
+    document; the keymotion stages by their names, ``"train"`` is the training fields every stage shares."""
+    if what == "keymotion":
+        from salad_core.keymotion.train import _MODEL_CONFIGS, STAGES, KeyMotionTrainConfig
+
+        return {"train": (KeyMotionTrainConfig, None),
+                **{stage: (KeyMotionTrainConfig, _MODEL_CONFIGS[stage]) for stage in STAGES}}
+    if what == "vae":
+        from salad_core.models.vae import VAEConfig
+
+        return {"train": (VAETrainConfig, VAEConfig)}
+    from salad_core.models.denoiser import DenoiserConfig
+
+    return {"train": (DenoiserTrainConfig, DenoiserConfig)}
+
+
+def _check_section(data: Any, config_cls: type, where: str, *, model: bool) -> None:
+    """One section against its config dataclass: known keys, JSON types; a model's integers within
+    :data:`~salad_core.limits.CONFIG_MAX_INT` (a training config's seeds and step counts may be larger)."""
+    if model:
+        limits.check_config_values(config_cls, data, where, ConfigError, ConfigError)
+    else:
+        limits.check_fields(data, limits.config_fields(config_cls), where, ConfigError, ConfigError)
+
+
+def check_config_doc(doc: dict[str, Any], what: str, source: str) -> None:
+    """Check a ``salad train what`` config document (a JSON object) against :func:`config_schema` before
+    anything is built; raises :class:`ConfigError` naming ``source``, the section and the key (a misspelt
+    key with the closest known one). Top-level keys starting with ``_`` are comments (``"_note"``,
+    ``"_command"`` of the shipped configs) and are not read."""
+    doc = {k: v for k, v in doc.items() if not str(k).startswith("_")}
+    if what == "keymotion":
+        _check_keymotion_doc(doc, source)
+    else:
+        _check_model_doc(doc, what, source)
+
+
+def _check_model_doc(doc: dict[str, Any], what: str, source: str) -> None:
+    """:func:`check_config_doc` of a ``vae`` / ``denoiser`` document: :data:`DOC_FIELDS` or a bare training
+    config, the model and diffusion sections, and what ``task`` holds that the trainer reads."""
+    from salad_core.sampling import DiffusionConfig
+
+    train_cls, model_cls = config_schema(what)["train"]
+    if "train" in doc:
+        limits.check_fields(doc, DOC_FIELDS, source, ConfigError, ConfigError)
+        _check_section(doc["train"], train_cls, f"{source}: 'train'", model=False)
+    else:       # a bare training config, perhaps beside the model's sections ("train" named for a misspelt one)
+        limits.check_fields(doc, {**limits.config_fields(train_cls), **DOC_FIELDS}, source, ConfigError, ConfigError)
+    if "model" in doc:
+        _check_section(doc["model"], model_cls, f"{source}: 'model'", model=True)
+    task = doc.get("task") or {}
+    limits.check_fields({k: v for k, v in task.items() if k in TASK_FIELDS}, TASK_FIELDS, f"{source}: 'task'",
+                        ConfigError, ConfigError)
+    for where, diffusion in ((f"{source}: 'diffusion'", doc.get("diffusion")),
+                             (f"{source}: 'task': 'diffusion'", task.get("diffusion"))):
+        if diffusion:
+            _check_section(diffusion, DiffusionConfig, where, model=True)
+
+
+def _check_keymotion_doc(doc: dict[str, Any], source: str) -> None:
+    """:func:`check_config_doc` of a KeyMotion recipe: :data:`KEYMOTION_FIELDS`, the shared training fields and
+    each stage's ``model`` and ``train``."""
+    schema = config_schema("keymotion")
+    limits.check_fields(doc, KEYMOTION_FIELDS, source, ConfigError, ConfigError)
+    if doc.get("train") is not None:
+        _check_section(doc["train"], schema["train"][0], f"{source}: 'train'", model=False)
+    for stage, (train_cls, model_cls) in schema.items():
+        section = doc.get(stage) if stage != "train" else None
+        if section is None:
+            continue
+        where = f"{source}: {stage!r}"
+        limits.check_fields(section, KEYMOTION_STAGE_FIELDS, where, ConfigError, ConfigError)
+        if section.get("train") is not None:
+            _check_section(section["train"], train_cls, f"{where}: 'train'", model=False)
+        if section.get("model"):
+            _check_section(section["model"], model_cls, f"{where}: 'model'", model=True)
+
+
+#: Where each ``salad train`` target's config format is shown.
+_EXAMPLE_CONFIG = {"vae": "configs/salad-0.3/vae.json", "denoiser": "configs/salad-0.3/denoiser.json",
+                   "keymotion": "configs/keymotion-0.2.json"}
+
+
+def _read_config_json(path: Path, label: str, what: str) -> dict[str, Any]:
+    """The JSON object of a config file, read with :func:`salad_core.limits.read_json` (size, UTF-8 and nesting
+    before parsing); ``label`` names the file in the :class:`ConfigError` (``"--config FILE"``)."""
+    if not path.is_file():
+        raise ConfigError(f"{label}: no such file")
+    try:
+        return limits.read_json(path, "training config", error=ConfigError)
+    except ConfigError as exc:
+        reason = getattr(exc, "reason", str(exc))
+        raise ConfigError(f"{label} is not a JSON document ({reason}); see {_EXAMPLE_CONFIG[what]} for the "
+                          "format") from None
+
+
 def _read_doc(args: argparse.Namespace) -> dict[str, Any]:
     path = Path(args.config) if args.config else None
     own = False
@@ -119,9 +241,9 @@ def _read_doc(args: argparse.Namespace) -> dict[str, Any]:
         path, own = Path(args.out) / "config.json", True
     if path is None:
         return {}
-    doc = json.loads(path.read_text())
-    if not isinstance(doc, dict):
-        raise SystemExit(f"--config {path}: expected a JSON object")
+    label = f"--config {path}" if not own else f"{path} (the run's own config, read by --resume)"
+    doc = _read_config_json(path, label, args.what)
+    check_config_doc(doc, args.what, label)
     if own and not _has_train_field(doc, "batching"):
         log.info("%s predates length buckets and the latent cache: resuming with the numerics it started with", path)
         doc = _keep_legacy_numerics(doc, args.what)
@@ -131,7 +253,17 @@ def _read_doc(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the trainer; returns the process exit code (130 when stopped by a signal)."""
+    """Run the trainer; returns the process exit code (130 when stopped by a signal; 2 with one line
+    ``salad train: error: ...`` on stderr for a config file it does not read, :class:`ConfigError`)."""
+    try:
+        return _run(argv)
+    except ConfigError as exc:
+        print(f"salad train: error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _run(argv: Sequence[str] | None) -> int:
+    """:func:`main` itself."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.steps_per_stage is not None and args.what != "keymotion":
@@ -156,7 +288,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.what == "keymotion":
         return _main_keymotion(args, doc)
     cls = VAETrainConfig if args.what == "vae" else DenoiserTrainConfig
-    train_doc = doc.get("train", {k: v for k, v in doc.items() if k not in ("model", "diffusion", "text_encoder", "model_type", "task", "_path")})
+    train_doc = doc.get("train", {k: v for k, v in doc.items() if k not in DOC_FIELDS and not k.startswith("_")})
     overrides = {"max_steps": args.steps, "batch_size": args.batch_size}
     if args.what == "vae":
         overrides.update(general_data=args.general, general_ratio=args.general_ratio,
@@ -217,7 +349,7 @@ def _main_keymotion(args: argparse.Namespace, doc: dict[str, Any]) -> int:
     try:
         recipe = KeyMotionRecipe.from_doc(doc, train_overrides=overrides, stage_overrides=per_stage)
     except (TypeError, ValueError) as exc:
-        raise SystemExit(f"--config {doc.get('_path', '(defaults)')}: {exc}") from None
+        raise ConfigError(f"--config {doc.get('_path', '(defaults)')}: {exc}") from None
     out = Path(args.out)
     if not args.resume and any((out / stage / "train_state.safetensors").exists() for stage in STAGES):
         raise SystemExit(f"{out} already holds a KeyMotion training run; pass --resume to continue it "

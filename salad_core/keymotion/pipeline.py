@@ -63,7 +63,7 @@ from .kf_vae import KeyframeVAE, positions_to_indices
 from .mmae import MotionMaskedAutoencoder
 from .models import NORMALISATION_TOLERANCE, normalisation_gap
 from .pst import PST_DIFFUSION, ParallelSkipTransformer, sample_latents
-from .sides import side_ids_of
+from .sides import mirror_side_words, names_left_first, side_ids_of
 
 __all__ = ["KeyMotionPipeline", "KeyMotionOutput", "decode_keyframes", "DEFAULT_WEIGHTS_DIR", "COMPONENTS",
            "KEYMOTION_JSON_FIELDS"]
@@ -93,6 +93,9 @@ class KeyMotionOutput:
     unknown_words: list[list[str]] = field(default_factory=list)
     #: per sample: replaced by its mirror image by the side check (``KeyMotionPipeline.side_check``)
     mirrored: list[bool] = field(default_factory=list)
+    #: per sample: generated from the prompt's mirror image and mirrored back (a side-canonical PST,
+    #: ``PSTConfig.side_canonical``, for prompts naming the left kind first); ``latents`` are the sampled ones
+    canonical_mirrored: list[bool] = field(default_factory=list)
 
     @property
     def raw_joints(self) -> list[np.ndarray]:
@@ -123,6 +126,14 @@ def decode_keyframes(vae: KeyframeVAE, z: torch.Tensor, lengths: torch.Tensor) -
     keyframes = torch.gather(dec.keyframes, 1, order[..., None].expand(-1, -1, dec.keyframes.shape[-1]))
     positions = torch.gather(dec.positions, 1, order)
     return keyframes, positions_to_indices(positions, lengths)
+
+
+def _join_chunks(parts: Sequence[tuple[torch.Tensor, ...]], n: int) -> tuple[torch.Tensor, ...]:
+    """The chunks of :meth:`KeyMotionPipeline._generate_rows` as one batch: ``z``, keyframes and indices
+    concatenated, the motions ``(b, n_chunk, D)`` zero-padded to ``n`` frames first (``(B, n, D)``)."""
+    z, keyframes, indices, motions = zip(*parts)
+    padded = [torch.nn.functional.pad(m, (0, 0, 0, n - m.shape[1])) for m in motions]
+    return torch.cat(z), torch.cat(keyframes), torch.cat(indices), torch.cat(padded)
 
 
 def _resolve_component(root: Path, name: str, allow_outside_paths: bool | str | os.PathLike = False) -> Path:
@@ -187,6 +198,9 @@ class KeyMotionPipeline:
     vocabulary: frozenset[str] | None = None
     vocabulary_source: str | None = None
     warn_unknown_words: bool = True
+    #: Motions denoised and in-filled together by :meth:`__call__`; larger batches run in consecutive chunks of
+    #: this size (:meth:`chunk_size`). None (default): :data:`salad_core.limits.PROMPT_CHUNK`.
+    max_batch: int | None = None
 
     def __init__(self, kf_vae: KeyframeVAE, pst: ParallelSkipTransformer, mmae: MotionMaskedAutoencoder,
                  text_encoder: TextEncoder, *, diffusion: DiffusionConfig | None = None, solver: str = "ddim",
@@ -287,8 +301,9 @@ class KeyMotionPipeline:
         recovery : str, optional
             Overrides the stored recovery of ``out.joints`` (``keymotion.json`` "recovery"; default "fit").
         allow_outside_paths : bool or path
-            The checkpoints and a ``text_encoder`` folder named in ``keymotion.json`` must lie inside the
-            folder (after symbolic links are resolved); True accepts any place, a folder that folder too.
+            The checkpoints, ``vocabulary.json`` and a ``text_encoder`` folder named in ``keymotion.json`` must
+            lie inside the folder (after symbolic links are resolved); True accepts any place, a folder that
+            folder too.
 
         ``keymotion.json`` is checked before anything loads (:data:`KEYMOTION_JSON_FIELDS`: known keys,
         a misspelt one named with the closest known key, JSON types, the nesting and size limits of
@@ -351,7 +366,7 @@ class KeyMotionPipeline:
                    recovery=recovery if recovery is not None else doc.get("recovery"))
         from salad_core.vocabulary import vocabulary_and_source
 
-        pipe.vocabulary, pipe.vocabulary_source = vocabulary_and_source(root)
+        pipe.vocabulary, pipe.vocabulary_source = vocabulary_and_source(root, allow_outside_paths)
         pipe.side_check = doc.get("side_check", True)          # a bool: checked with the fields above
         return pipe
 
@@ -418,14 +433,23 @@ class KeyMotionPipeline:
         side_check : bool, optional
             Mirror a motion whose measured side contradicts its prompt (default :attr:`side_check`;
             ``out.mirrored`` says which were; their ``latents`` stay the sampled, unmirrored ones).
+            With a side-canonical PST (``PSTConfig.side_canonical``) a prompt naming the left kind first is
+            generated as its mirror image (side words swapped) and the motion mirrored back before the check
+            (``out.canonical_mirrored``), so "left" and "right" give each other's exact mirror images.
         progress : bool
             Show a progress bar over the denoising steps (and, for more than
-            :data:`salad_core.limits.PROMPT_CHUNK` prompts, over the motions' joint recovery).
+            :data:`salad_core.limits.PROMPT_CHUNK` prompts, over the chunks and the motions' joint recovery).
 
         Prompts are checked and normalised as SALAD's are (:func:`salad_core.text.validate_prompts`).
-        A batch is denoised in one piece: the noise of all motions comes from one generator seeded by
-        ``seed`` (and stochastic solvers draw from it at every step), so splitting a batch would change
-        the motions; callers with thousands of prompts split them themselves (each call with its seed).
+        A batch of more than :meth:`chunk_size` motions is denoised and in-filled in consecutive chunks of
+        that size (memory bounded, progress shown). The initial noise of *all* motions is drawn first, from
+        the one generator seeded by ``seed``, in the order one piece draws it, so with a deterministic
+        solver (the default DDIM) every motion equals the one of an unchunked call up to float rounding
+        (the products block differently at another batch size), and a prompt's motion does not depend on
+        the chunk it falls in. Stochastic solvers (``"ddpm"``, ``"euler_ancestral"``) also draw fresh noise
+        from that generator at every step: chunk after chunk, so a batch larger than the chunk size gives
+        other (equally distributed) motions than one piece would, still the same ones for the same call,
+        seed and chunk size.
 
         Returns
         -------
@@ -438,36 +462,47 @@ class KeyMotionPipeline:
         texts = validate_prompts(prompts)        # the prompt checks SALAD's pipeline makes (salad_core.text)
         b = len(texts)
         many = b > limits.PROMPT_CHUNK
+        chunk = self.chunk_size()
         if many:
-            log.info("generating %d motions in one batch (denoising, then %d joint recoveries)", b, b)
+            log.info("generating %d motions in chunks of %d (denoising, then %d joint recoveries)", b, chunk, b)
         lens = self._lengths(lengths, b)
         dev = self.device
         len_t = torch.tensor(lens, dtype=torch.long, device=dev)
         tb = self.text_encoder.encode(texts)
         unknown = self.unknown_words(tb, warn=True, stacklevel=2)
-        text, text_mask = tb.features.to(dev), tb.mask.to(dev)
+        # a side-canonical PST learnt sides from right-first captions only: mirror the others, and the motions back
+        canonical = [self.pst.config.side_canonical and names_left_first(t) for t in texts]
+        if any(canonical):
+            tb = self.text_encoder.encode([mirror_side_words(t) if c else t for t, c in zip(texts, canonical)])
         guidance = self.resolve_guidance(guidance_scale)
-        null_text = null_mask = None
+        null = None
         if guidance.cfg:
             nb = self.text_encoder.encode([""], allow_empty=True)
-            null_text, null_mask = nb.features.to(dev), nb.mask.to(dev)
+            null = (nb.features.to(dev), nb.mask.to(dev))
         gen = torch.Generator().manual_seed(int(seed))
         lz, dz = self.pst.config.latent_size, self.pst.config.latent_dim
         dtype = next(self.pst.parameters()).dtype
-        noise = torch.randn((b, lz, dz), generator=gen).to(device=dev, dtype=dtype)
-        scheduler = make_scheduler(self.diffusion, self.solver)
+        noise = torch.randn((b, lz, dz), generator=gen).to(device=dev, dtype=dtype)   # every motion's, up front
         # a side-cue PST reads which tokens say left/right (salad_core.keymotion.sides)
         sides = side_ids_of(tb).to(dev) if self.pst.config.side_cue else None
-        z = sample_latents(self.pst, scheduler, text, text_mask, null_text, null_mask, noise, lengths=len_t,
-                           guidance_scale=guidance, num_steps=num_steps, progress=progress, generator=gen,
-                           text_sides=sides)
+        text, text_mask = tb.features.to(dev), tb.mask.to(dev)
+        starts = range(0, b, chunk)
+        parts = [self._generate_rows(slice(i, i + chunk), text, text_mask, sides, null, noise, len_t, guidance,
+                                     num_steps, gen, keep_keyframes, progress)
+                 for i in progress_bar(starts, f"motions ({chunk} per chunk)", progress and many, total=len(starts))]
         with torch.inference_mode():
-            keyframes, indices = decode_keyframes(self.kf_vae, z, len_t)
-            motion = self.mmae.infill(keyframes, indices, len_t, text, text_mask, keep_keyframes=keep_keyframes)
+            z, keyframes, indices, motion = _join_chunks(parts, max(lens))
             feats = self.mmae.norm.denormalize(motion)
             valid = (torch.arange(feats.shape[1], device=dev)[None] < len_t[:, None])[..., None]
             feats = (feats * valid.to(feats.dtype)).float().cpu().numpy()
             kf_feats = self.mmae.norm.denormalize(keyframes).float().cpu().numpy()
+        if any(canonical):
+            from salad_core.motion import mirror_features
+
+            for i, n in enumerate(lens):
+                if canonical[i]:
+                    feats[i, :n] = mirror_features(feats[i, :n], self.skeleton)
+                    kf_feats[i] = mirror_features(kf_feats[i], self.skeleton)
         from salad_core.recovery import check_method, recover_joints
 
         method = check_method(self.recovery if recovery is None else recovery)
@@ -490,7 +525,38 @@ class KeyMotionPipeline:
                                keyframe_features=kf_feats, latents=z.float().cpu().numpy(),
                                settings={"recovery": method, "skeleton": self.skeleton.name,
                                          "side_check": bool(self.side_check if side_check is None else side_check)},
-                               unknown_words=unknown, mirrored=mirrored)
+                               unknown_words=unknown, mirrored=mirrored, canonical_mirrored=canonical)
+
+    def chunk_size(self) -> int:
+        """Motions per chunk of :meth:`__call__`: :attr:`max_batch` if set, else
+        :data:`salad_core.limits.PROMPT_CHUNK` (read at call time)."""
+        from salad_core import limits
+
+        if self.max_batch is None:
+            return limits.PROMPT_CHUNK
+        if isinstance(self.max_batch, bool) or not isinstance(self.max_batch, int) or self.max_batch < 1:
+            raise ValueError(f"max_batch must be a positive int or None, got {self.max_batch!r}")
+        return self.max_batch
+
+    def _generate_rows(self, rows: slice, text: torch.Tensor, text_mask: torch.Tensor, sides: torch.Tensor | None,
+                       null: tuple[torch.Tensor, torch.Tensor] | None, noise: torch.Tensor, len_t: torch.Tensor,
+                       guidance: Guidance, num_steps: int, gen: torch.Generator, keep_keyframes: bool,
+                       progress: bool) -> tuple[torch.Tensor, ...]:
+        """One chunk of :meth:`__call__`, the motions ``rows`` of the batch: the PST denoises their noise
+        ``(b, Lz, Dz)`` (a fresh scheduler: multistep solvers keep state), the keyframe VAE decodes, the MMAE
+        in-fills. Returns ``(z (b, Lz, Dz), keyframes (b, K, D) normalised, indices (b, K), motion
+        (b, n, D) normalised)`` with ``n`` the chunk's longest length."""
+        null_text, null_mask = null if null is not None else (None, None)
+        lens = len_t[rows]
+        z = sample_latents(self.pst, make_scheduler(self.diffusion, self.solver), text[rows], text_mask[rows],
+                           null_text, null_mask, noise[rows], lengths=lens, guidance_scale=guidance,
+                           num_steps=num_steps, progress=progress, generator=gen,
+                           text_sides=None if sides is None else sides[rows])
+        with torch.inference_mode():
+            keyframes, indices = decode_keyframes(self.kf_vae, z, lens)
+            motion = self.mmae.infill(keyframes, indices, lens, text[rows], text_mask[rows],
+                                      keep_keyframes=keep_keyframes)
+        return z, keyframes, indices, motion
 
     def unknown_words(self, text, *, warn: bool = False, stacklevel: int = 1) -> list[list[str]]:
         """Per prompt (a list of prompts or a ``TextBatch``): its words outside :attr:`vocabulary` and its
