@@ -20,9 +20,12 @@ from .camera import fixed_camera, follow_camera, shared_follow_framing
 from .raster import caption_band, hstack_images
 from .render import SkeletonRenderer
 
-__all__ = ["LAYOUTS", "render_frames", "animate", "write_video", "show_animation"]
+__all__ = ["LAYOUTS", "COMPARISON_PANEL", "render_frames", "animate", "write_video", "show_animation"]
 
 LAYOUTS = ("side", "overlay")
+#: Panel size (width, height) in pixels of a side-by-side comparison (a source and its edit): large enough
+#: for 20 px captions and key, read on a projector.
+COMPARISON_PANEL = (360, 360)
 _FORMATS = (".gif", ".mp4")
 
 
@@ -63,11 +66,14 @@ def render_frames(
         chain colours, all drawn at one scale (the same camera distance and height, so figures
         of the same size look the same size). ``"overlay"``: all motions in one scene, one colour
         theme each.
-    titles : sequence of str, optional
+    titles : sequence of str (or of sequences of str), optional
         One per motion: panel titles (``"side"``) or a legend in the theme colours (``"overlay"``),
         written in a white band *above* the scene (the scene gets the rest of ``size``, so no caption
-        covers the figure); long titles wrap onto several lines (at most 3, then "..."). Characters
-        the default font lacks (CJK, emoji) come from an installed font that has them, else "?".
+        covers the figure); long titles wrap onto several lines (at most 3, then "..."). A title given
+        as a sequence of strings is written one under the other, the first near black and the rest
+        dark grey (e.g. ``("Mirror(legs)", "a person walks forward")``: an edit's label over its
+        prompt). Characters the default font lacks (CJK, emoji) come from an installed font that has
+        them, else "?".
     size : (width, height)
         Size of one panel in pixels.
     frames : sequence of int, optional
@@ -77,8 +83,9 @@ def render_frames(
         entry per motion.
     side_legend : bool
         Draw a key of the limb colours as drawn ("left: leg arm" in the left leg's and arm's blues,
-        "right: leg arm" in the right's red and orange) in the bottom-left corner, where the motions
-        are drawn in those colours (no ``colors``/``joint_colors``, not an overlay of several motions).
+        "right: leg arm" in the right's red and orange) in the bottom-left corner of every panel, where
+        the motions are drawn in those colours (no ``colors``/``joint_colors``, not an overlay of several
+        motions).
 
     The following camera keeps every joint of every frame in view (hands raised above the head and
     jumps included), at one distance for the whole motion.
@@ -101,6 +108,7 @@ def render_frames(
     side = layout == "side" and len(motions) > 1
     check_frames_memory(len(idx), w * (len(motions) if side else 1) + 4 * (len(motions) - 1) * side, h)
     chain_coloured = colors is None and joint_colors is None and (side or len(motions) == 1)
+    keyed = (lambda scene: _side_key(scene, skel)) if side_legend and chain_coloured else (lambda scene: scene)
     jc = joint_colors
     if jc is not None and not isinstance(jc, (list, tuple)):
         jc = [jc] + [None] * (len(motions) - 1) if len(motions) > 1 else jc
@@ -114,8 +122,8 @@ def render_frames(
     with SkeletonRenderer(skel, size=(w, hs), backend=backend, bone_shape=bone_shape) as r:
         for f in idx:
             if layout == "overlay" or len(motions) == 1:
-                img = r.render(motions, f, view=view, elevation=elevation, follow=follow, colors=colors,
-                               joint_colors=jc, floor=floor, trajectory=trajectory)
+                img = keyed(r.render(motions, f, view=view, elevation=elevation, follow=follow, colors=colors,
+                                     joint_colors=jc, floor=floor, trajectory=trajectory))
                 if bands:
                     img = np.concatenate([bands[0], img], axis=0)
             else:
@@ -125,30 +133,55 @@ def render_frames(
                     # one scale for every panel: the same distance and focal height
                     cam = (follow_camera([m], fk, view=view, elevation=elevation, aspect=w / hs, distance=distance,
                                          height=height) if follow else shared_fixed)
-                    panel = r.render(m, fk, camera=cam, view=view, elevation=elevation, follow=follow,
-                                     colors=None if colors is None else [colors[k]],
-                                     joint_colors=None if jc is None else jc[k], floor=floor,
-                                     trajectory=trajectory)
+                    panel = keyed(r.render(m, fk, camera=cam, view=view, elevation=elevation, follow=follow,
+                                           colors=None if colors is None else [colors[k]],
+                                           joint_colors=None if jc is None else jc[k], floor=floor,
+                                           trajectory=trajectory))
                     if bands:
                         panel = np.concatenate([bands[k], panel], axis=0)
                     panels.append(panel)
                 img = hstack_images(panels, gap=4)
-            if side_legend and chain_coloured:
-                img = _side_key(img, skel)
             out.append(img)
     return np.stack(out)
 
 
-def _title_bands(titles: Sequence[str], w: int, h: int, *, side: bool) -> list[np.ndarray]:
-    """Caption bands of one height: one per panel (``side``) or one with every title (themed colours when
-    several motions share the scene)."""
+#: Colours of a panel caption's lines (:func:`render_frames` ``titles`` given as lines): the first (a label such
+#: as "source" or "Mirror(legs)") near black, the rest (the prompt) dark grey.
+CAPTION_LINE_COLORS = ((0.05, 0.05, 0.05), (0.30, 0.30, 0.30))
+
+
+def _caption_lines(title) -> list[str]:
+    """A panel title as its lines: a string is one caption, a sequence of strings one line each."""
+    if isinstance(title, str):
+        return [title]
+    lines = [str(t) for t in title]
+    if not lines:
+        raise ValueError("a title given as lines needs at least one line")
+    return lines
+
+
+def _title_bands(titles, w: int, h: int, *, side: bool) -> list[np.ndarray]:
+    """Caption bands of one height: one per panel (``side``; a title given as lines writes one line under
+    the other, :data:`CAPTION_LINE_COLORS`) or one with every title (themed colours when several motions
+    share the scene; lines joined by ": ")."""
     if side:
-        bands = [caption_band([t], w, h) for t in titles]
-    elif len(titles) > 1:
+        bands = []
+        for t in titles:
+            lines = _caption_lines(t)
+            colors = [CAPTION_LINE_COLORS[min(i, 1)] for i in range(len(lines))] if len(lines) > 1 else None
+            bands.append(caption_band(lines, w, h, colors=colors))
+        return _pad_bands(bands)
+    titles = [": ".join(_caption_lines(t)) for t in titles]
+    if len(titles) > 1:
         bands = [caption_band(titles, w, h, colors=[_theme_text_color(k) for k in range(len(titles))],
                               max_lines=max(1, 4 // len(titles)))]
     else:
         bands = [caption_band(titles, w, h)]
+    return _pad_bands(bands)
+
+
+def _pad_bands(bands: list[np.ndarray]) -> list[np.ndarray]:
+    """Caption bands ``(B_k, W, 3)`` padded with white at the bottom to the tallest."""
     top = max(b.shape[0] for b in bands)
     return [np.pad(b, ((0, top - b.shape[0]), (0, 0), (0, 0)), constant_values=255) for b in bands]
 
@@ -169,7 +202,7 @@ def _side_key(img: np.ndarray, skeleton: Skeleton | None = None) -> np.ndarray:
 
     skel = get_skeleton("humanml3d" if skeleton is None else skeleton)
     h = img.shape[0]
-    font = _font(min(h, 240))
+    font = _font(h)                    # as large as the captions (caption_size): readable on a projector
     pil = Image.fromarray(np.ascontiguousarray(img))
     draw = ImageDraw.Draw(pil)
     entries = limb_colors(skel)

@@ -42,6 +42,8 @@ __all__ = [
     "joint_attention_colors",
     "plot_word_attention",
     "plot_attention_grid",
+    "plot_attention_rows",
+    "attention_limits",
     "plot_attention_by_layer",
     "plot_attention_by_steps",
     "plot_attention_comparison",
@@ -425,26 +427,68 @@ NORMALIZE = ("global", "shared", "each", "none")
 UNKNOWN_COLOR = "#b2182b"
 
 
-def _normalise(maps: np.ndarray, normalize) -> tuple[np.ndarray, float, float]:
+def attention_limits(*maps) -> tuple[float, float]:
+    """One colour scale ``(vmin, vmax)``, in attention units, for several sets of heatmaps (e.g. the
+    source's and the edit's word maps, so that their figures compare cell by cell).
+
+    Parameters
+    ----------
+    *maps : arrays of any shape
+        E.g. ``(K, P, N')`` word maps of each figure; NaN entries (absent words) are ignored.
+
+    Returns
+    -------
+    (vmin, vmax)
+        ``(0, m)`` when no value is negative, else ``(-m, m)``: symmetric about 0, the centre of the
+        diverging colour map (:data:`DIVERGING_CMAP`); ``m`` is the largest ``|value|`` (1 when all are 0).
+    """
+    if not maps:
+        raise ValueError("attention_limits needs at least one array of maps")
+    arrays = [np.asarray(to_numpy(m, "maps"), dtype=np.float64) for m in maps]
+    values = np.concatenate([a[np.isfinite(a)] for a in arrays])
+    top = float(np.abs(values).max()) if values.size else 0.0
+    top = top if top > 0 else 1.0
+    return (-top if (values < 0).any() else 0.0), top
+
+
+def _check_limits(limits) -> tuple[float, float]:
+    """``(vmin, vmax)`` as :func:`attention_limits` returns them: ``(0, m)`` or ``(-m, m)``, ``m > 0``."""
+    try:
+        vmin, vmax = (float(v) for v in limits)
+    except (TypeError, ValueError):
+        raise TypeError(f"limits must be a (vmin, vmax) pair of numbers, got {limits!r}") from None
+    if not (np.isfinite(vmin) and np.isfinite(vmax) and vmax > 0 and (vmin == 0 or np.isclose(vmin, -vmax))):
+        raise ValueError(f"limits={limits!r} must be (0, m) or (-m, m) with m > 0 (see attention_limits)")
+    return vmin, vmax
+
+
+def _normalise(maps: np.ndarray, normalize, limits=None) -> tuple[np.ndarray, float, float]:
     """Scale ``(K, P, N')`` maps for display: "each" (per map max), "global"/"shared" (common max) or none.
 
     Returns ``(shown, vmin, vmax)``. Maps with negative values (signed, e.g. an edit's negative
     re-weight) keep their sign and get symmetric limits ``vmin = -vmax``, drawn with a diverging
     colour map centred at 0 (:func:`_draw_map`); others are clipped at 0 as the official plots do.
+    ``limits`` (from :func:`attention_limits`, e.g. over two figures) fixes the common maximum and
+    whether the scale is signed, instead of these maps' own.
     """
-    signed = bool((maps < 0).any())
+    if limits is not None:
+        lo, hi = _check_limits(limits)
+        signed, common = lo < 0, hi
+    else:
+        signed = bool((maps < 0).any())
+        common = float(np.abs(maps).max()) if maps.size else 0.0
     low = (lambda x: x) if signed else (lambda x: np.clip(x, 0, None))
     if normalize in (True, "each"):
         top = np.abs(maps).reshape(len(maps), -1).max(axis=1)
         out = np.where(top[:, None, None] > 0, low(maps) / np.where(top > 0, top, 1)[:, None, None], 0.0)
         return out, (-1.0 if signed else 0.0), 1.0
     if normalize in ("global", "shared"):
-        top = float(np.abs(maps).max())
-        return (low(maps) / top if top > 0 else np.zeros_like(maps)), (-1.0 if signed else 0.0), 1.0
+        return (low(maps) / common if common > 0 else np.zeros_like(maps)), (-1.0 if signed else 0.0), 1.0
     if normalize in (False, None, "none"):
+        if limits is not None:
+            return maps, lo, hi
         if signed:
-            lim = float(np.abs(maps).max())
-            return maps, -lim, lim
+            return maps, -common, common
         return maps, float(min(0.0, maps.min())), float(maps.max()) if maps.max() > 0 else 1.0
     raise ValueError(f"normalize must be 'global' ('shared'), 'each' (True) or 'none' (False), got {normalize!r}")
 
@@ -526,7 +570,7 @@ def plot_word_attention(maps, word: str | None = None, *, ax=None, skeleton: str
 
 def _grid(maps: np.ndarray, titles: Sequence[str], *, ncols, fpl, cmap, normalize, suptitle, panel_size,
           colorbar, fps=None, row_titles=None, diverging_cols=(), ncols_fixed=None,
-          diverging_cmap: str = DIVERGING_CMAP, marked: Sequence[int] = ()):
+          diverging_cmap: str = DIVERGING_CMAP, marked: Sequence[int] = (), limits=None):
     k = len(maps)
     ncols = ncols_fixed or (min(k, 4) if ncols is None else int(ncols))
     if ncols < 1:
@@ -534,7 +578,7 @@ def _grid(maps: np.ndarray, titles: Sequence[str], *, ncols, fpl, cmap, normaliz
     nrows = int(np.ceil(k / ncols))
     fig = new_figure((panel_size[0] * ncols + 1.2, panel_size[1] * nrows + 0.6))
     axs = fig.subplots(nrows, ncols, squeeze=False)
-    shown, vmin, vmax = _normalise(maps, normalize)
+    shown, vmin, vmax = _normalise(maps, normalize, limits)
     signed = vmin < 0
     im = None
     for i in range(nrows * ncols):
@@ -588,7 +632,7 @@ def plot_attention_grid(attention, tokens: Sequence[str], word_ids=None, *, ncol
                         frames_per_latent: int = 4, normalize="global", cmap: str = "viridis",
                         panel_size: tuple[float, float] = (3.4, 2.0), colorbar: bool = True,
                         fps: float | None = None, unknown_words: Sequence[str] = (),
-                        diverging_cmap: str = DIVERGING_CMAP):
+                        diverging_cmap: str = DIVERGING_CMAP, limits: tuple[float, float] | None = None):
     """Heatmaps of several words in the layout of the paper's Fig. 6.
 
     One panel per entry of ``word_ids`` (a row of up to 4, wrapping), part labels on the left
@@ -624,6 +668,10 @@ def plot_attention_grid(attention, tokens: Sequence[str], word_ids=None, *, ncol
     diverging_cmap : str
         Colour map used instead of ``cmap`` when a map has negative values (an edit's negative
         re-weight): centred at 0 (white), negative blue, positive red; the scale is symmetric.
+    limits : (vmin, vmax), optional
+        A colour scale shared with other figures (:func:`attention_limits` over all their maps): the
+        common maximum of "global" and whether the scale is signed come from it, not from these maps
+        alone, so a source's figure and its edit's read on one scale.
 
     Panels of a word that occurs more than once are labelled with its index (``forward [3]``: the
     word index for ``word_ids=None`` and for integer ids, else the panel's position).
@@ -645,7 +693,120 @@ def plot_attention_grid(attention, tokens: Sequence[str], word_ids=None, *, ncol
     labels = [f"{lab} (unknown)" if k in marked else lab for k, lab in enumerate(labels)]
     return _grid(maps, labels, ncols=ncols, fpl=_check_fpl(frames_per_latent), cmap=cmap, normalize=normalize,
                  suptitle=prompt, panel_size=panel_size, colorbar=colorbar, fps=fps,
-                 diverging_cmap=diverging_cmap, marked=marked)
+                 diverging_cmap=diverging_cmap, marked=marked, limits=limits)
+
+
+def _block_labels(words: Sequence[str], unknown: Sequence[str]) -> tuple[list[str], list[int]]:
+    """Panel titles of one block (repeated words indexed, unknown words marked) and the marked panels."""
+    labels = _distinct_labels([str(w) for w in words], [str(k) for k in range(len(words))])
+    unknown_set = {w.lower() for w in unknown}
+    marked = [k for k, lab in enumerate(labels) if unknown_set & set(WORD_CHARS.findall(lab.lower()))]
+    return [f"{lab} (unknown)" if k in marked else lab for k, lab in enumerate(labels)], marked
+
+
+def _balanced_columns(k: int, most: int = 6) -> int:
+    """Panels per line for ``k`` panels: as few lines as ``most`` per line allows, filled evenly."""
+    lines = int(np.ceil(k / most))
+    return int(np.ceil(k / lines))
+
+
+def _check_rows(maps, words, titles) -> list[np.ndarray]:
+    """The blocks of :func:`plot_attention_rows` as ``(K_r, P, N'_r)`` float arrays, checked against
+    their words and titles."""
+    if isinstance(titles, str) or len(maps) != len(words) or len(maps) != len(titles) or not len(maps):
+        raise ValueError(f"maps, words and titles need one entry per block; got {len(maps)}, {len(words)} and "
+                         f"{len(titles) if not isinstance(titles, str) else 'a string'}")
+    out = []
+    for r, (m, w) in enumerate(zip(maps, words)):
+        arr = np.asarray(to_numpy(m, f"maps[{r}]"), dtype=np.float64)
+        if arr.ndim != 3 or arr.shape[1] != len(PART_NAMES) or not len(arr):
+            raise ValueError(f"maps[{r}] must be (K, P, N') word maps with K >= 1 and P = {len(PART_NAMES)}, "
+                             f"got shape {arr.shape}")
+        if len(w) != len(arr):
+            raise ValueError(f"words[{r}] has {len(w)} labels for {len(arr)} maps")
+        if not np.isfinite(arr).all():
+            raise ValueError(f"maps[{r}] contains NaN or inf")
+        out.append(arr)
+    return out
+
+
+def plot_attention_rows(maps: Sequence, words: Sequence[Sequence[str]], titles: Sequence[str], *,
+                        normalize="global", limits: tuple[float, float] | None = None, ncols: int | None = None,
+                        frames_per_latent: int = 4, cmap: str = "viridis", diverging_cmap: str = DIVERGING_CMAP,
+                        panel_size: tuple[float, float] = (3.0, 1.8), fps: float | None = None,
+                        unknown_words: Sequence[Sequence[str]] = (), suptitle: str | None = None):
+    """Word heatmaps of several motions, one titled block of panels per motion, on ONE colour scale:
+    the figure that compares a source's attention with its edit's.
+
+    Parameters
+    ----------
+    maps : sequence of arrays ``(K_r, P, N'_r)``
+        Per block (motion) the maps of its ``K_r`` words (e.g. ``AttentionMaps.word_map`` stacked).
+    words : sequence of sequences of str
+        Per block the ``K_r`` panel titles (repeated words get their index, ``forward [3]``).
+    titles : sequence of str
+        Per block its title, e.g. ``"source: a man raises his right hand high"`` and
+        ``"Reweight(high=-1): a man raises his right hand high"``; long titles wrap.
+    normalize : {"global", "each", "none"}
+        As in :func:`plot_attention_grid`; "global" (default) divides every panel of every block by one
+        maximum, so a cell's colour compares across blocks.
+    limits : (vmin, vmax), optional
+        The colour scale (:func:`attention_limits`); default: the one of all the blocks' maps, a
+        diverging map centred at 0 when any value is negative (a negative re-weight).
+    ncols : int, optional
+        Panels per line of a block (default: the most words of a block on one line up to 6, else as few
+        lines as that allows, evenly filled: 7 words are 4 + 3, not 6 + 1).
+    unknown_words : sequence of sequences of str, optional
+        Per block the words the model never saw in training (titled in red, "(unknown)").
+    frames_per_latent, cmap, diverging_cmap, panel_size, fps
+        As in :func:`plot_attention_grid`.
+    suptitle : str, optional
+        A title above all blocks.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Blocks top to bottom (``fig.subfigs[0].subfigs``), one colour bar on the right for all.
+    """
+    arrays = _check_rows(maps, words, titles)
+    fpl = _check_fpl(frames_per_latent)
+    limits = attention_limits(*arrays) if limits is None else _check_limits(limits)
+    ncols = _balanced_columns(max(len(a) for a in arrays)) if ncols is None else int(ncols)
+    if ncols < 1:
+        raise ValueError(f"ncols must be >= 1, got {ncols}")
+    lines = [int(np.ceil(len(a) / ncols)) for a in arrays]
+    title_h = 0.5
+    width = panel_size[0] * ncols + 0.9
+    fig = new_figure((width + 1.0, sum(panel_size[1] * n + title_h for n in lines) + (0.4 if suptitle else 0.0)))
+    body, bar = fig.subfigures(1, 2, width_ratios=[width, 1.0])
+    blocks = body.subfigures(len(arrays), 1, height_ratios=[panel_size[1] * n + title_h for n in lines],
+                             squeeze=False)[:, 0]
+    unknown = list(unknown_words) + [()] * (len(arrays) - len(unknown_words))
+    im = None
+    for block, arr, labels, title, n_lines, unk in zip(blocks, arrays, words, titles, lines, unknown):
+        shown, vmin, vmax = _normalise(arr, normalize, limits)
+        axs = block.subplots(n_lines, ncols, squeeze=False)
+        panel_titles, marked = _block_labels(labels, unk)
+        for i in range(n_lines * ncols):
+            ax = axs[i // ncols][i % ncols]
+            if i >= len(arr):
+                ax.axis("off")
+                continue
+            im = _draw_map(ax, shown[i], fpl=fpl, cmap=diverging_cmap if vmin < 0 else cmap, vmin=vmin, vmax=vmax,
+                           title=panel_titles[i], part_labels=(i % ncols == 0), fps=fps,
+                           xlabel=(i + ncols >= len(arr)))
+            if i in marked:
+                ax.title.set_color(UNKNOWN_COLOR)
+        text, family = figure_text(str(title))
+        block.suptitle(_wrap_title(text, width, 13.0), x=0.01, ha="left", fontsize=13, fontweight="bold",
+                       **({"fontfamily": family} if family else {}))
+    cax = bar.add_axes((0.15, 0.08, 0.22, 0.84))
+    cb = fig.colorbar(im, cax=cax)
+    cb.set_label(colorbar_label(normalize, signed=limits[0] < 0))
+    if suptitle:
+        text, family = figure_text(str(suptitle))
+        fig.suptitle(_wrap_title(text, width + 1.0), **({"fontfamily": family} if family else {}))
+    return fig
 
 
 def plot_attention_by_layer(attention, tokens: Sequence[str], word, *, axes: str = "slhnpw", steps=None,

@@ -1,6 +1,10 @@
 """Every edit class from ``salad edit``: --erase, --shift, --example-seed and --inpaint give exactly the motion
-the same edit gives in Python, and in-painting keeps what it does not regenerate (shipped weights, few steps)."""
+the same edit gives in Python, and in-painting keeps what it does not regenerate (shipped weights, few steps);
+each edit's label, the source's and the edit's attention figures on one colour scale, and the labelled GIF
+(``salad edit`` and ``salad invert``)."""
 from __future__ import annotations
+
+import json
 
 import numpy as np
 import pytest
@@ -8,10 +12,9 @@ import pytest
 from salad_core import cli
 from salad_core.pipeline import default_weights_dir
 
-pytestmark = [
-    pytest.mark.usefixtures("single_thread"),
-    pytest.mark.skipif(not (default_weights_dir() / "pipeline.json").is_file(), reason="needs the shipped weights"),
-]
+needs_weights = pytest.mark.skipif(not (default_weights_dir() / "pipeline.json").is_file(),
+                                   reason="needs the shipped weights")
+pytestmark = [pytest.mark.usefixtures("single_thread")]
 
 SOURCE = "a person walks forward while waving his right hand"
 STEPS, LENGTH, SEED = 5, 40, 3
@@ -32,6 +35,7 @@ def _run(tmp_path, name, *flags, source=SOURCE):
     return np.load(out / "source_features.npy"), np.load(out / "edited_features.npy"), out
 
 
+@needs_weights
 @pytest.mark.parametrize("flags, edits", [
     (["--erase", "waving his right hand"], lambda a: [a.Erase(words="waving his right hand")]),
     (["--shift", "waving=20"], lambda a: [a.Shift(words="waving", frames=20)]),
@@ -50,6 +54,7 @@ def test_each_edit_flag_gives_the_python_edit(tmp_path, pipe, flags, edits):
     assert np.abs(dst - src).max() > 1e-3                           # the edit changed the motion
 
 
+@needs_weights
 def test_inpainting_the_arms_keeps_the_legs(tmp_path):
     from salad_core.skeleton import get_skeleton
 
@@ -64,6 +69,7 @@ def test_inpainting_the_arms_keeps_the_legs(tmp_path):
     assert np.linalg.norm(rel(dst, arms) - rel(src, arms), axis=-1).mean() > 0.05
 
 
+@needs_weights
 @pytest.mark.parametrize("flags, message", [
     (["--shift", "waving=x"], "FRAMES 'x' is not a whole number"),
     (["--shift", "waving"], "--shift takes WORDS=FRAMES"),
@@ -76,3 +82,104 @@ def test_bad_edit_flags_are_one_line_errors(tmp_path, capsys, flags, message):
     assert code == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "x").exists() or not any((tmp_path / "x").iterdir())
+
+
+# ------------------------------------------------------------------ labels, attention figures and GIFs (issue 67)
+@pytest.mark.parametrize("edits, source, target, label", [
+    (lambda a: [a.WordSwap(tau=0.8)], "a person walks forward", "a person jumps forward", "Swap(walks->jumps, 0.8)"),
+    (lambda a: [a.Refine()], "a person walks", "a person walks slowly", "Refine(+slowly)"),
+    (lambda a: [a.Reweight(words="high", scale=-1)], None, None, "Reweight(high=-1)"),
+    (lambda a: [a.Reweight(words="high", scale=0.5, steps=(0, 0.5))], None, None, "Reweight(high=0.5, steps 0:0.5)"),
+    (lambda a: [a.Mirror(parts="legs")], None, None, "Mirror(legs)"),
+    (lambda a: [a.Mirror(parts="all"), a.MirrorSelfAttention(parts="all")], None, None,
+     "Mirror(all) + MirrorSelf(all)"),
+    (lambda a: [a.InjectSelfAttention()], None, None, "InjectSelf(temporal+skeletal)"),
+    (lambda a: [a.Erase(words="slowly")], None, None, "Erase(slowly)"),
+    (lambda a: [a.Erase(words=[(2, 4)], mode="others")], None, None, "Erase(words 2:4, others)"),
+    (lambda a: [a.Shift(words="waving", frames=20)], None, None, "Shift(waving, +20 frames)"),
+    (lambda a: [a.ShiftTemporal(parts=("left arm",), frames=-8)], None, None, "ShiftTemporal(left arm, -8 frames)"),
+    (lambda a: [a.ExampleBased(seed=7)], None, None, "Example(seed=7)"),
+    (lambda a: [a.parse_inpaint("arms@20:60")], None, None, "Inpaint(arms@20:60)"),
+    (lambda a: [a.parse_inpaint("left_arm,head")], None, None, "Inpaint(left_arm,head)"),
+    (lambda a: [a.parse_inpaint("@:40")], None, None, "Inpaint(all@:40)"),
+    (lambda a: [a.Mirror(parts="legs"), a.Reweight(words="high", scale=2)], None, None,
+     "Mirror(legs) + Reweight(high=2)"),
+    (lambda a: [], None, None, "edited"),
+])
+def test_edit_label_names_each_edit(edits, source, target, label):
+    import salad_core.attention as a
+    from salad_core.cli.generate import edit_label
+
+    assert edit_label(edits(a), source, target) == label
+
+
+def test_every_edit_class_has_a_label():
+    import salad_core.attention as a
+    from salad_core.cli.generate import _LABEL_PARTS
+
+    classes = {n for n in a.__all__ if isinstance(getattr(a, n), type) and issubclass(getattr(a, n), a.EditSpec)}
+    assert classes - {"EditSpec"} <= set(_LABEL_PARTS)
+
+
+def _png_limits(path) -> tuple[float, float]:
+    """The colour limits a figure was drawn with (its PNG text chunk ``Attention limits``)."""
+    from PIL import Image
+
+    with Image.open(path) as im:
+        text = im.text["Attention limits"]                      # "vmin=... vmax=..."
+    vmin, vmax = (float(part.split("=")[1]) for part in text.split())
+    return vmin, vmax
+
+
+def _gif_panels(path):
+    """``(frames, panel width)`` of a side-by-side GIF of two panels (4 px apart)."""
+    import imageio.v3 as iio
+
+    frames = iio.imread(path, index=None)
+    return frames, (frames.shape[2] - 4) // 2
+
+
+@needs_weights
+def test_edit_writes_both_attention_figures_on_one_symmetric_scale_and_a_labelled_gif(tmp_path, pipe):
+    import salad_core.attention as a
+    from salad_core.cli.generate import edit_attention_limits
+
+    source = "a man raises his right hand high"
+    _, _, out = _run(tmp_path, "rw", "--reweight", "high=-1", "--attention", source=source)
+    names = ("source_attention.png", "edited_attention.png", "attention_compare.png")
+    limits = [_png_limits(out / n) for n in names]
+    assert limits[0] == limits[1] == limits[2]                          # one scale for the source and the edit
+    vmin, vmax = limits[0]
+    assert vmin < 0 < vmax and vmin == -vmax                           # negative re-weight: diverging, centred at 0
+    # the scale is the largest |value| of the drawn maps of both motions (the same run in Python)
+    want = pipe.edit(source, edits=[a.Reweight(words="high", scale=-1)], lengths=LENGTH, seed=SEED,
+                     num_steps=STEPS, capture_attention=True)
+    expected = edit_attention_limits([("source", want.source), ("edited", want.edited)])
+    assert vmax == pytest.approx(expected[1], rel=1e-5) and expected[0] == -expected[1]
+    high = want.edited.attention.word_map(0, "high")
+    assert high.max() <= 0 and 0 < -high.min() <= vmax                 # the re-weighted word: negative, on the scale
+    frames, w = _gif_panels(out / "source_vs_edited.gif")
+    assert frames.shape[1] >= 360 and w >= 360                          # large enough for a projector
+    # each panel its own caption: the bands above the scenes differ, and each is dark text on white
+    left, right = frames[0, :40, :w].astype(int), frames[0, :40, w + 4:].astype(int)
+    assert np.abs(left - right).mean() > 1 and (left.max(-1) < 90).any() and (right.max(-1) < 90).any()
+
+
+@needs_weights
+def test_invert_writes_the_reconstructions_and_the_edits_attention_and_labels_the_edit(tmp_path, sample_dir):
+    take = tmp_path / "take.npy"
+    np.save(take, np.load(sample_dir / "new_joint_vecs" / "012314.npy")[:40])
+    out = tmp_path / "inv"
+    assert cli.main(["-q", "invert", str(take), "--prompt", "a person walks forward", "--mirror", "legs",
+                     "--attention", "--steps", "3", "--out", str(out)]) == 0
+    names = ("take_reconstruction_attention.png", "take_edited_attention.png", "take_attention_compare.png")
+    limits = [_png_limits(out / n) for n in names]
+    assert limits[0] == limits[1] == limits[2] and limits[0][0] == 0 < limits[0][1] <= 1   # mirroring: no sign
+    assert json.loads((out / "take_inversion.json").read_text())["edit"]["label"] == "Mirror(legs)"
+    frames, w = _gif_panels(out / "take_source_vs_edited.gif")
+    assert frames.shape[1] >= 360 and w >= 360
+    # without an edit flag: the reconstruction's figure alone (maps captured in one more pass)
+    out2 = tmp_path / "inv2"
+    assert cli.main(["-q", "invert", str(take), "--prompt", "a person walks forward", "--attention", "--steps", "3",
+                     "--no-render", "--out", str(out2)]) == 0
+    assert sorted(p.name for p in out2.glob("*.png")) == ["take_reconstruction_attention.png"]

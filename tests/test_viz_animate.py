@@ -237,3 +237,51 @@ def test_captions_in_another_script_use_a_fallback_font_or_question_marks(monkey
     assert font.text.startswith(text) and font.text.endswith("walks")       # CJK and Latin drawn, each by a font
     assert {piece for _, piece in font.runs(font.text)} >= {text, " walks"} or len(font.runs(font.text)) >= 2
     assert not np.array_equal(caption_band([text], 200, 200), caption_band(["??????"], 200, 200))
+
+
+# ----------------------------------------------------------------------------- issue 67: labelled comparison GIFs
+def test_comparison_panels_each_carry_their_caption_and_the_left_right_key(tmp_path, walk):
+    from PIL import Image
+
+    from salad_viz._style import SIDE_COLORS
+    from salad_viz.animate import COMPARISON_PANEL
+    from salad_viz.raster import caption_band
+
+    w, h = COMPARISON_PANEL
+    assert w >= 360 and h >= 360                                           # read on a projector
+    titles = [("source", "a person walks forward"), ("Mirror(legs)", "a person walks forward")]
+    frames = render_frames([walk, walk], SKEL, size=COMPARISON_PANEL, titles=titles, frames=[0], backend="raster")
+    assert frames.shape == (1, h, 2 * w + 4, 3)
+    left, right = frames[0][:, :w], frames[0][:, w + 4:]
+    # each panel its own two-line caption: the label over the prompt, one band height for both
+    bands = [caption_band(list(t), w, h, colors=[(0.05, 0.05, 0.05), (0.30, 0.30, 0.30)]) for t in titles]
+    b = bands[0].shape[0]
+    assert bands[1].shape[0] == b and np.array_equal(left[:b], bands[0]) and np.array_equal(right[:b], bands[1])
+    assert not np.array_equal(bands[0], bands[1])
+    one_line = caption_band(["source"], w, h).shape[0]
+    assert b > 1.5 * one_line                                               # two lines: label, then prompt
+    # the key of the limb colours in the bottom-left corner of BOTH panels
+    bare = render_frames([walk, walk], SKEL, size=COMPARISON_PANEL, titles=titles, frames=[0], backend="raster",
+                         side_legend=False)[0]
+    corner = (slice(h - 60, h), slice(0, 130))
+    for k, panel in enumerate((left, right)):
+        ref = bare[:, k * (w + 4):k * (w + 4) + w]
+        for side in ("left", "right"):
+            for shade in SIDE_COLORS[side]:
+                assert _colour_pixels(panel[corner], shade) > _colour_pixels(ref[corner], shade) + 3
+    # the GIF reads back at that size
+    path = animate([walk[:4], walk[:4]], SKEL, tmp_path / "cmp.gif", titles=titles, size=COMPARISON_PANEL,
+                   backend="raster")
+    with Image.open(path) as im:
+        assert im.size == (2 * w + 4, h)
+
+
+def test_titles_given_as_lines_in_an_overlay_are_joined():
+    from salad_viz.animate import _title_bands
+
+    (band,) = _title_bands([("Mirror(legs)", "a person walks")], 200, 200, side=False)
+    from salad_viz.raster import caption_band
+
+    assert np.array_equal(band, caption_band(["Mirror(legs): a person walks"], 200, 200))
+    with pytest.raises(ValueError, match="at least one line"):
+        _title_bands([()], 200, 200, side=True)

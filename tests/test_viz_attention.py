@@ -11,6 +11,7 @@ import pytest
 
 from salad_core.skeleton import PART_MIRROR, PART_NAMES, get_skeleton
 from salad_viz.attention import (
+    attention_limits,
     joint_attention,
     joint_attention_colors,
     merge_tokens,
@@ -19,6 +20,7 @@ from salad_viz.attention import (
     plot_attention_by_steps,
     plot_attention_comparison,
     plot_attention_grid,
+    plot_attention_rows,
     plot_mirror_comparison,
     plot_word_attention,
     reduce_attention,
@@ -389,3 +391,74 @@ def test_titles_in_another_script_never_draw_boxes(monkeypatch):
         fig = plot_attention_grid(_attention(6)[:, :, :5], tokens, prompt=prompt)
         fig.canvas.draw()
     assert fig._suptitle.get_text() == prompt and len(fig._suptitle.get_fontfamily()) > 1
+
+
+# ----------------------------------------------------------------------------- issue 67: source vs edit, one scale
+def _reweighted(att: np.ndarray, column: int, scale: float) -> np.ndarray:
+    """The maps after a re-weight of one token column (post-softmax, not re-normalised)."""
+    out = att.copy()
+    out[:, :, column] *= scale
+    return out
+
+
+def test_attention_limits_one_scale_symmetric_when_a_map_is_negative():
+    src = _attention()
+    dst = _reweighted(src, 3, -1.5)                                         # --reweight jumps=-1.5
+    vmin, vmax = attention_limits(src, dst)
+    assert vmin < 0 < vmax and vmin == -vmax
+    assert vmax == pytest.approx(max(np.abs(src).max(), np.abs(dst).max()))
+    assert attention_limits(src) == (0.0, pytest.approx(src.max()))         # no negative value: 0..max
+    assert attention_limits(np.zeros((7, 3))) == (0.0, 1.0)
+    assert attention_limits(np.array([np.nan, -0.5, 0.2])) == (-0.5, 0.5)   # an absent word's NaN is ignored
+    with pytest.raises(ValueError, match="at least one"):
+        attention_limits()
+
+
+def test_two_grids_with_shared_limits_draw_the_same_value_in_the_same_colour():
+    from matplotlib.colors import CenteredNorm
+
+    src = _attention()
+    dst = _reweighted(src, 3, -1.5)
+    limits = attention_limits(src, dst)
+    figs = [plot_attention_grid(a, TOKENS, ["jumps", "walks"], limits=limits) for a in (src, dst)]
+    (s_jumps, s_walks), (d_jumps, d_walks) = (_image_of(f) for f in figs)
+    for im in (s_jumps, s_walks, d_jumps, d_walks):                         # all-positive source too: diverging
+        assert isinstance(im.norm, CenteredNorm) and im.norm.vmin == -1 and im.norm.vmax == 1
+        assert im.get_cmap().name == "RdBu_r"
+    # values divided by ONE maximum: the untouched word is drawn identically in both figures
+    np.testing.assert_allclose(s_walks.get_array(), d_walks.get_array())
+    np.testing.assert_allclose(d_jumps.get_array(), -1.5 * np.asarray(s_jumps.get_array()), atol=1e-12)
+    assert np.asarray(d_jumps.get_array()).min() == pytest.approx(-1.0)
+    # without shared limits the source would be drawn on its own 0..1 viridis scale
+    own = _image_of(plot_attention_grid(src, TOKENS, ["jumps", "walks"]))[0]
+    assert own.norm.vmin == 0 and own.get_cmap().name == "viridis"
+    with pytest.raises(ValueError, match="limits"):
+        plot_attention_grid(src, TOKENS, limits=(-0.5, 1.0))
+
+
+def test_attention_rows_one_colour_bar_titled_blocks_and_balanced_lines():
+    from matplotlib.colors import CenteredNorm
+
+    src = select_words(_attention(), TOKENS, ["jumps", "walks", "waving"])[0]     # (3, P, N')
+    dst = src.copy()
+    dst[2] *= -1
+    fig = plot_attention_rows([src, dst], [["jumps", "walks", "waving"]] * 2,
+                              ["source: a man jumps", "Reweight(waving=-1): a man jumps"])
+    images = _image_of(fig)
+    assert len(images) == 6 and len({(im.norm.vmin, im.norm.vmax) for im in images}) == 1
+    assert all(isinstance(im.norm, CenteredNorm) and im.get_cmap().name == "RdBu_r" for im in images)
+    top = max(np.abs(src).max(), np.abs(dst).max())
+    np.testing.assert_allclose(images[5].get_array(), dst[2] / top)        # the edit's negative word, on the scale
+    blocks = fig.subfigs[0].subfigs
+    assert [b._suptitle.get_text() for b in blocks] == ["source: a man jumps", "Reweight(waving=-1): a man jumps"]
+    colour_bars = [ax for ax in fig.axes if not ax.images and ax.get_ylabel()]
+    assert len(colour_bars) == 1 and "over all panels" in colour_bars[0].get_ylabel()
+    # 7 words: two lines of 4 and 3 panels, not 6 and 1; a block with fewer words leaves panels empty
+    many = np.repeat(src[:1], 7, axis=0)
+    fig = plot_attention_rows([many, many[:5]], [list("abcdefg"), list("abcde")], ["source", "edited"])
+    shown = [ax for ax in fig.subfigs[0].subfigs[0].axes if ax.images]
+    assert len(shown) == 7 and len(fig.subfigs[0].subfigs[0].axes) == 8
+    with pytest.raises(ValueError, match="one entry per block"):
+        plot_attention_rows([src], [["a", "b", "c"]], ["x", "y"])
+    with pytest.raises(ValueError, match="labels for 3 maps"):
+        plot_attention_rows([src], [["a"]], ["x"])

@@ -223,21 +223,30 @@ def cmd_generate(args: argparse.Namespace) -> int:
     _note_unknown_words(args, pipe, prompts)
     guidance = _guidance(args, pipe)
     _say_guidance(args, guidance)
-    result = pipe(prompts, lengths=args.length, seed=args.seed, guidance_scale=guidance,
-                  num_steps=args.steps, solver=args.solver, capture_attention=attention and any(figures),
-                  progress=not args.quiet)
-    for b, text in enumerate(result.texts):
-        stem = stems[b]
-        n = result.lengths[b]
-        files = _write_motion_files(out, stem, result.features[b, :n], result.joints[b], pipe.skeleton,
-                                    force=args.force, gif=not args.no_render, bvh=True, title=text)
-        if figures[b]:
-            fig = _attention_figure(out, stem, result, b, args.force, normalize=getattr(args, "normalize", "global"))
-            files += [fig] if fig else []
-            if not fig:
-                _note(args, f"prompt {b} {text!r}: no attention figure ({_no_figure_reason(result, b)})",
-                      kind="warning")
-        print(f"{text!r} ({n} frames): " + ", ".join(str(f) for f in files))
+    # a long batch runs in the pipeline's chunks, each written before the next (prompt b keeps seed SEED + b):
+    # one line with the count and the time the first chunk measured, then a bar over the motions
+    from salad_core import limits
+
+    from ._common import batch_chunks, say
+
+    chunk = pipe.chunk_size() if len(prompts) > limits.PROMPT_CHUNK else len(prompts)
+    for rows in batch_chunks(len(prompts), chunk, progress=not args.quiet,
+                             report=(lambda line: None) if args.quiet else say):
+        result = pipe(prompts[rows], lengths=args.length, seed=args.seed + rows.start, guidance_scale=guidance,
+                      num_steps=args.steps, solver=args.solver, capture_attention=attention and any(figures[rows]),
+                      progress=not args.quiet)
+        for i, text in enumerate(result.texts):
+            b, n = rows.start + i, result.lengths[i]
+            files = _write_motion_files(out, stems[b], result.features[i, :n], result.joints[i], pipe.skeleton,
+                                        force=args.force, gif=not args.no_render, bvh=True, title=text)
+            if figures[b]:
+                fig = _attention_figure(out, stems[b], result, i, args.force,
+                                        normalize=getattr(args, "normalize", "global"))
+                files += [fig] if fig else []
+                if not fig:
+                    _note(args, f"prompt {b} {text!r}: no attention figure ({_no_figure_reason(result, i)})",
+                          kind="warning")
+            say(f"{text!r} ({n} frames): " + ", ".join(str(f) for f in files))
     return 0
 
 
@@ -322,6 +331,19 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--window", default=None, metavar="START:STOP",
                    help="step window of --refine/--reweight/--mirror/--erase/--shift as fractions of the sampling "
                         "steps, 0 <= START < STOP <= 1 (0 = the noisiest step; default 0:1)")
+
+
+def _edit_figure_args(p: argparse.ArgumentParser, prefix: str, source: str = "source") -> None:
+    """``--attention`` and ``--normalize`` of ``salad edit`` / ``salad invert`` (files named ``{prefix}...``)."""
+    p.add_argument("--attention", action="store_true",
+                   help=f"also capture the cross-attention and write its figures, one panel per content word, the "
+                        f"source's and the edit's on ONE colour scale (blue-white-red centred at 0 when a value is "
+                        f"negative, e.g. a negative re-weight): {prefix}{source}_attention.png (the source's maps"
+                        + (", captured while reconstructing the take from its inverted noise; without an edit flag "
+                           "this costs one more sampling pass" if source == "reconstruction" else "")
+                        + f"), {prefix}edited_attention.png and {prefix}attention_compare.png (a source block over an "
+                          "edited block, titled with the edit, e.g. Reweight(high=-1))")
+    _normalize_arg(p)
 
 
 def _parse_window(text: str) -> tuple[float, float]:
@@ -411,6 +433,160 @@ def _check_edit_target(args: argparse.Namespace, source: str) -> None:
                         f"without one the edit gives back the source motion")
 
 
+def _words_text(words) -> str:
+    """An edit's words for its label: phrases as they are, ``(start, stop)`` word spans as ``words 2:4``."""
+    items = (words,) if isinstance(words, str) else tuple(words)
+    return ", ".join(w if isinstance(w, str) else f"words {w[0]}:{w[1]}" for w in items)
+
+
+def _swapped_words(source: str | None, target: str | None) -> str:
+    """``walks->jumps`` for every word position where the target's word differs from the source's."""
+    from salad_core.data.texts import split_words
+
+    pairs = zip(split_words(source or ""), split_words(target or ""))
+    return ", ".join(f"{a}->{b}" for a, b in pairs if a != b)
+
+
+def _added_words(source: str | None, target: str | None) -> str:
+    """``+slowly +forward``: the target's words that the source does not have (a refinement's additions)."""
+    from salad_core.data.texts import split_words
+
+    have = set(split_words(source or ""))
+    return " ".join(f"+{w}" for w in split_words(target or "") if w not in have)
+
+
+def _inpaint_region(spec) -> str:
+    """``arms@20:60``: an Inpaint's ``describe()`` with its parts named by their group when they are exactly one
+    (``INPAINT_GROUPS``: legs, arms, upper, lower)."""
+    from salad_core.attention import INPAINT_GROUPS
+
+    text = spec.describe()
+    if spec.parts is None:
+        return text
+    group = next((g for g, parts in INPAINT_GROUPS.items() if set(parts) == set(spec.parts)), None)
+    _, at, span = text.partition("@")
+    return text if group is None else group + at + span
+
+
+def _window_note(spec) -> str:
+    """``steps 0:0.5`` when an edit's step window is not its class's default, else ``""``."""
+    field = getattr(type(spec), "__dataclass_fields__", {}).get("steps")
+    if field is None or tuple(spec.steps) == tuple(field.default):
+        return ""
+    return f"steps {spec.steps[0]:g}:{spec.steps[1]:g}"
+
+
+#: ``(short name, arguments)`` of each edit class for :func:`edit_label`, by class name: the edit object,
+#: the source prompt and the target prompt in.
+_LABEL_PARTS: dict[str, Callable] = {
+    "WordSwap": lambda e, s, t: ("Swap", [_swapped_words(s, t), f"{e.tau:g}"]),
+    "Refine": lambda e, s, t: ("Refine", [_added_words(s, t)]),
+    "Reweight": lambda e, s, t: ("Reweight", [f"{_words_text(e.words)}={e.scale:g}"]),
+    "Mirror": lambda e, s, t: ("Mirror", [e.parts]),
+    "MirrorSelfAttention": lambda e, s, t: ("MirrorSelf", [e.parts]),
+    "InjectSelfAttention": lambda e, s, t: ("InjectSelf", ["+".join(e.kinds)]),
+    "Erase": lambda e, s, t: ("Erase", [_words_text(e.words), "" if e.mode == "special" else e.mode]),
+    "Shift": lambda e, s, t: ("Shift", [_words_text(e.words), f"{e.frames:+d} frames"]),
+    "ShiftTemporal": lambda e, s, t: ("ShiftTemporal", [", ".join(e.parts), f"{e.frames:+d} frames"]),
+    "ExampleBased": lambda e, s, t: ("Example", [f"seed={e.seed}"]),
+    "Inpaint": lambda e, s, t: ("Inpaint", [_inpaint_region(e)]),
+}
+
+
+def edit_label(edits, source: str | None = None, target: str | None = None) -> str:
+    """A short caption of edits, as figures and GIFs label the edited motion: ``Mirror(legs)``,
+    ``Reweight(high=-1)``, ``Swap(walks->jumps, 0.8)``, ``Inpaint(arms@20:60)``, ``Erase(slowly)``,
+    ``Shift(waving, +20 frames)``, ``Example(seed=7)``; several
+    edits joined by `` + ``; a step window other than the class's default is added (``steps 0:0.5``).
+    ``source`` and ``target`` are the prompts (a word swap names the words it swaps, a refinement the
+    words it adds); with no edit: ``"edited"``."""
+    labels = []
+    for spec in (edits,) if not isinstance(edits, (list, tuple)) else edits:
+        describe = _LABEL_PARTS.get(type(spec).__name__, lambda e, s, t: (type(e).__name__, []))
+        name, parts = describe(spec, source, target)
+        parts = [p for p in [*parts, _window_note(spec)] if p]
+        labels.append(f"{name}({', '.join(parts)})" if parts else name)
+    return " + ".join(labels) or "edited"
+
+
+def _content_word_maps(maps, b: int):
+    """``(maps (K, P, N'), words, positions)`` of prompt ``b``'s content words (function words left out unless
+    the prompt has nothing else; ``positions``: their indices among the prompt's words), or None when the
+    prompt has no a-z word to draw."""
+    import numpy as np
+
+    words = list(maps.words(b))
+    if not words:
+        return None
+    keep = [i for i, w in enumerate(words) if w not in _FUNCTION_WORDS] or list(range(len(words)))
+    stacked = np.stack([maps.word_map(b, i) for i in keep])     # by position: repeated words stay apart
+    return stacked, [words[i] for i in keep], keep
+
+
+def _save_png(fig, path: Path, limits: tuple[float, float]) -> Path:
+    """Save a figure atomically as PNG with its colour limits (attention units) in the PNG text chunk
+    ``Attention limits`` (``vmin=... vmax=...``), so figures meant to share one scale can be checked."""
+    import matplotlib.pyplot as plt
+
+    from salad_core.io import atomic_path
+
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", dpi=90, bbox_inches="tight",
+                        metadata={"Attention limits": f"vmin={limits[0]!r} vmax={limits[1]!r}"})
+    finally:
+        plt.close(fig)
+    return path
+
+
+def _edit_figure_names(prefix: str, source: str, edited: bool) -> list[str]:
+    """The attention figures of an edit command: ``{prefix}{source}_attention.png``, and with an edit
+    ``{prefix}edited_attention.png`` and ``{prefix}attention_compare.png``."""
+    names = [f"{prefix}{source}_attention.png"]
+    return names + ([f"{prefix}edited_attention.png", f"{prefix}attention_compare.png"] if edited else [])
+
+
+def edit_attention_limits(branches) -> tuple[float, float]:
+    """The one colour scale ``(vmin, vmax)`` of an edit's attention figures: :func:`salad_viz.attention.
+    attention_limits` over the content-word maps of every branch (``(title, MotionOutput)`` pairs with captured
+    attention); symmetric about 0 when any map is negative (a negative re-weight)."""
+    from salad_viz.attention import attention_limits
+
+    drawn = [_content_word_maps(out.attention, 0) for _, out in branches]
+    return attention_limits(*[d[0] for d in drawn if d is not None])
+
+
+def _edit_attention_figures(out: Path, names: list[str], branches, force: bool, normalize: str) -> list[Path]:
+    """Write the attention figures of an edit on ONE colour scale (:func:`edit_attention_limits`): one grid per
+    branch (``names[k]``; branches are ``(title, MotionOutput)``, e.g. ``("source", src)`` and
+    ``("Reweight(high=-1)", dst)``, titled ``"<title>: <prompt>"``) and, with two branches, the comparison
+    (``names[2]``): a source block over an edited block, panel for panel. Returns the files written; none
+    when a prompt has no word to draw."""
+    import numpy as np
+
+    from salad_viz import plot_attention_grid
+    from salad_viz.attention import plot_attention_rows
+
+    drawn = [_content_word_maps(o.attention, 0) for _, o in branches]
+    if any(d is None for d in drawn):
+        return []
+    limits = edit_attention_limits(branches)
+    titles = [f"{title}: {o.texts[0]}" for title, o in branches]
+    unknown = [(o.unknown_words[0] if o.unknown_words else ()) for _, o in branches]
+    paths = _outputs(out, names, force)
+    files = []
+    for (maps, words, _), title, unk, path in zip(drawn, titles, unknown, paths):
+        grid = np.moveaxis(maps, 0, -1)                                  # (P, N', K) for plot_attention_grid
+        fig = plot_attention_grid(grid, words, word_ids=list(range(len(words))), prompt=title, normalize=normalize,
+                                  unknown_words=unk, limits=limits)
+        files.append(_save_png(fig, path, limits))
+    if len(branches) > 1:
+        fig = plot_attention_rows([d[0] for d in drawn], [d[1] for d in drawn], titles, normalize=normalize,
+                                  limits=limits, unknown_words=unknown)
+        files.append(_save_png(fig, paths[len(branches)], limits))
+    return files
+
+
 def cmd_edit(args: argparse.Namespace) -> int:
     """Edit a generated motion (same noise) or, with --motion, a given motion through inversion."""
     if not (args.source or "").strip():
@@ -431,7 +607,8 @@ def cmd_edit(args: argparse.Namespace) -> int:
     out = _check_out_dir(args.out, args.force)
     names = [name for b in ("source", "edited") for name in _motion_file_names(b, gif=False)]
     attention = bool(getattr(args, "attention", False))
-    _outputs(out, names + ["source_vs_edited.gif"] + ["edited_attention.png"] * attention, args.force, write=False)
+    figures = _edit_figure_names("", "source", edited=True) if attention else []
+    _outputs(out, names + ["source_vs_edited.gif"] + figures, args.force, write=False)
     pipe = _load_pipeline(args.weights)
     _note_unknown_words(args, pipe, [args.source] + [args.target] * bool(args.target), ["source", "target"])
     guidance = _guidance(args, pipe)
@@ -450,19 +627,27 @@ def cmd_edit(args: argparse.Namespace) -> int:
                                 gif=False, bvh=True)
     files += _write_motion_files(out, "edited", dst.features[0, :n], dst.joints[0], pipe.skeleton, force=args.force,
                                  gif=False, bvh=True)
-    from salad_viz import animate
-
-    (gif,) = _outputs(out, ["source_vs_edited.gif"], args.force)
-    files.append(animate([src.joints[0], dst.joints[0]], pipe.skeleton, gif, layout="side",
-                         titles=[f"source: {src.texts[0]}", f"edited: {dst.texts[0]}"], size=(240, 240), stride=2))
-    if attention:    # the maps the edited motion used (a negative re-weight: negative, on a diverging scale)
-        fig = _attention_figure(out, "edited", dst, 0, args.force, normalize=args.normalize)
-        files += [fig] if fig else []
-        if not fig:
+    label = edit_label(specs, src.texts[0], dst.texts[0])
+    files.append(_comparison_gif(out, "source_vs_edited.gif", [src.joints[0], dst.joints[0]], pipe.skeleton,
+                                 [("source", src.texts[0]), (label, dst.texts[0])], args.force))
+    if attention:    # the source's maps and the edit's (a negative re-weight: a diverging scale), one scale
+        figs = _edit_attention_figures(out, figures, [("source", src), (label, dst)], args.force, args.normalize)
+        files += figs
+        if not figs:
             _note(args, f"no attention figure ({_no_figure_reason(dst, 0)})", kind="warning")
-    print(f"{src.texts[0]!r} -> {dst.texts[0]!r} with {[type(e).__name__ for e in specs]}: "
-          + ", ".join(str(f) for f in files))
+    print(f"{src.texts[0]!r} -> {dst.texts[0]!r} with {label}: " + ", ".join(str(f) for f in files))
     return 0
+
+
+def _comparison_gif(out: Path, name: str, motions: list, skeleton, captions: list[tuple[str, str]],
+                    force: bool) -> Path:
+    """The side-by-side GIF of a source and its edit: motions ``(N, J, 3)``, one panel each of
+    :data:`salad_viz.animate.COMPARISON_PANEL` pixels, captioned ``(label, prompt)`` (e.g. ``("source", ...)``,
+    ``("Mirror(legs)", ...)``), the left/right key in each; every second frame, in real time."""
+    from salad_viz.animate import COMPARISON_PANEL, animate
+
+    (gif,) = _outputs(out, [name], force)
+    return animate(motions, skeleton, gif, layout="side", titles=captions, size=COMPARISON_PANEL, stride=2)
 
 
 def _invert(pipe, features, prompt: str, args: argparse.Namespace, method: str, iterations=None, exact=True,
@@ -535,9 +720,11 @@ def cmd_invert(args: argparse.Namespace) -> int:
     stem = path.stem
     branches = ["reconstruction"] + (["edited"] if specs else [])
     gif_name = f"{stem}_source_vs_{branches[-1]}.gif"
+    attention = bool(getattr(args, "attention", False))
+    figures = _edit_figure_names(f"{stem}_", "reconstruction", edited=bool(specs)) if attention else []
     # refuse before any work: every file this run would write
     _outputs(out, [name for b in branches for name in _motion_file_names(f"{stem}_{b}", gif=False)]
-             + [f"{stem}_inversion.json"] + ([] if args.no_render else [gif_name])
+             + [f"{stem}_inversion.json"] + ([] if args.no_render else [gif_name]) + figures
              + ([f"{stem}_input_features.npy"] if loaded.kind != "features" else []), args.force, write=False)
     if len(features) % sk.unit_length:
         n = len(features) - len(features) % sk.unit_length
@@ -570,27 +757,34 @@ def cmd_invert(args: argparse.Namespace) -> int:
               f"{vs_take['retargeting_mpjpe_global_cm']:.2f} cm global from it")
     files += _write_motion_files(out, f"{stem}_reconstruction", rec.features[0, :n], rec.joints[0], pipe.skeleton,
                                  force=args.force, gif=False, bvh=True)
-    target, shown = None, rec.joints[0]
-    if specs:
-        result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet)
+    target, shown, label = None, rec.joints[0], "reconstruction"
+    figure_branches = []
+    if specs:     # the edit's source branch is the reconstruction: its maps are the source's
+        result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet,
+                           capture_attention=attention)
         dst = result.edited
-        target, shown = dst.texts[0], dst.joints[0]
+        target, shown, label = dst.texts[0], dst.joints[0], edit_label(specs, inv.prompts[0], dst.texts[0])
         files += _write_motion_files(out, f"{stem}_edited", dst.features[0, :n], dst.joints[0], pipe.skeleton,
                                      force=args.force, gif=False, bvh=True)
+        figure_branches = [("source", result.source), (label, dst)]
+    elif attention:   # no edit: the maps of the reconstruction from the inverted noise (one more sampling pass)
+        figure_branches = [("source", pipe.reconstruct(inv, capture_attention=True, progress=not args.quiet))]
     if not args.no_render:
-        from salad_viz import animate
-
-        (gif,) = _outputs(out, [gif_name], args.force)
         from salad_core.recovery import recover_joints
 
         source = recover_joints(inv.features[0][:n], pipe.recovery, pipe.skeleton)   # as the reconstruction's
-        files.append(animate([source, shown], pipe.skeleton, gif, layout="side", titles=["source", branches[-1]],
-                             size=(240, 240), stride=2))
+        files.append(_comparison_gif(out, gif_name, [source, shown], pipe.skeleton,
+                                     [("source", inv.prompts[0]), (label, target or inv.prompts[0])], args.force))
+    if attention:
+        figs = _edit_attention_figures(out, figures, figure_branches, args.force, args.normalize)
+        files += figs
+        if not figs:
+            _note(args, f"no attention figure ({_no_figure_reason(figure_branches[-1][1], 0)})", kind="warning")
     report = {"motion": str(path), "prompt": inv.prompts[0], "frames": n, "input_frames": int(len(features)),
               "method": inv.method, "num_steps": inv.num_steps, "guidance_scale": inv.guidance_scale,
               "iterations": inv.iterations, "exact": inv.exact, "seconds": round(float(inv.seconds), 3),
               "errors": _errors_cm(inv.errors, pipe.skeleton), "weights": pipe.source,
-              "edit": None if not specs else {"target": target, "edits": [repr(e) for e in specs]},
+              "edit": None if not specs else {"target": target, "label": label, "edits": [repr(e) for e in specs]},
               "input": {"kind": loaded.kind, "crop": args.crop}}
     if vs_take is not None:
         report["errors_vs_take"] = vs_take
@@ -683,10 +877,7 @@ def add_parsers(sub) -> None:
     ed.add_argument("--motion", default=None, help="a features .npy (N, 263) to edit instead of a generated one "
                     "(inverted first; see also salad invert)")
     ed.add_argument("--out", required=True, help="output folder (created if missing)")
-    ed.add_argument("--attention", action="store_true",
-                    help="also write edited_attention.png: the cross-attention maps the edited motion used, one panel "
-                         "per content word (a negative re-weight shows on a blue-white-red scale centred at 0)")
-    _normalize_arg(ed)
+    _edit_figure_args(ed, "")
     _generation_args(ed, length=100)
 
     iv = _sub(sub, "invert", "invert a given motion to noise under its prompt: write its reconstruction and the "
@@ -710,6 +901,7 @@ def add_parsers(sub) -> None:
     iv.add_argument("--steps", type=int, default=50, help="DDIM steps (default 50)")
     _bvh_args(iv)
     iv.add_argument("--no-render", action="store_true", help="skip the GIF")
+    _edit_figure_args(iv, "STEM_", source="reconstruction")
     iv.add_argument("--weights", default=None, help="pipeline folder (default: the shipped weights)")
     iv.add_argument("--skeleton", default="humanml3d", help="skeleton of the motion: humanml3d (22 joints, "
                     "default) or kit (21)")
