@@ -459,3 +459,114 @@ def test_fp16_keyframe_vae_statistics_are_not_another_corpus(side_corpus, tmp_pa
     assert warned == {"same_fp16": False, "other": True}
 
 
+
+
+# ------------------------------------------------------------------ side-canonical training
+@pytest.mark.parametrize("text, mirrored, left_first", [
+    ("a man waves his left hand", "a man waves his right hand", True),
+    ("Turns Left, then kicks with the RIGHT foot", "Turns Right, then kicks with the LEFT foot", True),
+    ("kicks with the right leg, then steps leftwards", "kicks with the left leg, then steps rightwards", False),
+    ("walks counterclockwise in a circle", "walks clockwise in a circle", True),
+    ("walks clockwise in a circle", "walks counterclockwise in a circle", False),
+    ("walks counter-clockwise", "walks clockwise", True),
+    ("a left-handed throw", "a right-handed throw", True),
+    ("a man walks forward", "a man walks forward", False),
+    ("leftover lefty bright", "leftover lefty bright", False),
+])
+def test_mirror_side_words_swaps_every_side_word_and_names_left_first_reads_the_first(text, mirrored, left_first):
+    from salad_core.keymotion.sides import mirror_side_words, names_left_first
+
+    assert mirror_side_words(text) == mirrored
+    assert names_left_first(text) is left_first
+    assert names_left_first(mirrored) is (left_first if mirrored == text else not left_first)
+    if "counter-" not in text:
+        assert mirror_side_words(mirrored) == text                  # an involution
+
+
+def test_side_canonical_pst_batch_mirrors_left_first_items_and_keeps_the_rest(side_corpus):
+    """Items whose caption names the left kind first get the posterior of their mirrored keyframes and the
+    swapped caption; right-first, side-free and dropped items are as without the option; the draws agree."""
+    from salad_core.keymotion.kf_vae import gather_keyframes, indices_to_positions
+    from salad_core.keymotion.sides import mirror_side_words, names_left_first
+    from salad_core.keymotion.train import PrefilledCaptions, collate_keyframes, prepare_pst_batch
+    from salad_core.motion import mirror_features
+    from salad_core.train.common import StepContext
+    from salad_core.train.denoiser_trainer import CaptionFeatureCache
+    from salad_core.train.distributed import DistEnv, GlobalBatchRandom
+
+    train, _ = _keyframe_sets(side_corpus)
+    vae = _tiny_kf_vae(train)
+    enc = HashTextEncoder()
+    batch = collate_keyframes([train[i] for i in range(6)])
+    captions = list(batch["caption"])
+    left_first = [names_left_first(c) for c in captions]
+    assert any(left_first) and not all(left_first)
+    env = DistEnv()
+
+    def prepare(canonical: bool, drop: float = 0.0):
+        text = PrefilledCaptions(CaptionFeatureCache(enc, 100), captions + [mirror_side_words(c) for c in captions])
+        ctx = StepContext(GlobalBatchRandom(torch.Generator().manual_seed(2), env), env, train=True, step=0)
+        cfg = KeyMotionTrainConfig(max_length=96, num_threads=1, progress=False, cond_drop_prob=drop)
+        return prepare_pst_batch(batch, ctx, vae=vae, text=text, scheduler=make_scheduler(PST_DIFFUSION, "ddim"),
+                                 config=cfg, latent_shape=vae.latent_shape, side_canonical=canonical)
+
+    plain, canon = prepare(False), prepare(True)
+    assert torch.equal(plain["timesteps"], canon["timesteps"]) and torch.equal(plain["target"], canon["target"])
+    # the mirrored items' clean latents, by hand: eps and the noise are the draws of the step in this order
+    g = GlobalBatchRandom(torch.Generator().manual_seed(2), env)
+    eps, t = g.randn(6, vae.latent_shape), g.randint(6, PST_DIFFUSION.num_train_timesteps)
+    noise = g.randn(6, vae.latent_shape)
+    motion = batch["motion"]
+    kf = gather_keyframes(motion, batch["keyframes"])
+    mirrored = vae.norm.normalize(mirror_features(vae.norm.denormalize(kf), "humanml3d"))
+    sched = make_scheduler(PST_DIFFUSION, "ddim")
+    with torch.no_grad():
+        pos = indices_to_positions(batch["keyframes"], batch["length"])
+        enc_plain = vae.encode(kf, pos, sample=False)
+        enc_mirror = vae.encode(mirrored, pos, sample=False)
+    for b, lf in enumerate(left_first):
+        src = enc_mirror if lf else enc_plain
+        z = src.mu[b] + eps[b] * torch.exp(0.5 * src.logvar[b])
+        want = sched.add_noise(z[None], noise[b][None], t[b: b + 1])[0]
+        torch.testing.assert_close(canon["noisy"][b], want, rtol=0, atol=1e-5)
+        caption = mirror_side_words(captions[b]) if lf else captions[b]
+        feats, mask = enc.encode([caption]).features, enc.encode([caption]).mask
+        n = int(mask.sum())
+        torch.testing.assert_close(canon["text"][b, :n], feats[0, :n].to(canon["text"].dtype))
+        if not lf:
+            assert torch.equal(canon["noisy"][b], plain["noisy"][b])
+        else:
+            assert not torch.allclose(canon["noisy"][b], plain["noisy"][b], atol=1e-3)
+    dropped = prepare(True, drop=1.0)                              # every caption dropped: no item mirrored
+    assert torch.equal(dropped["noisy"], prepare(False, drop=1.0)["noisy"])
+
+
+def test_side_canonical_pipeline_gives_left_prompts_the_exact_mirror_of_the_right_ones(tmp_path):
+    """A side-canonical PST generates a left-first prompt as its mirror image and mirrors the motion back, so a
+    "left" prompt's motion is the exact mirror of its "right" twin's, seed for seed; side-free prompts are as
+    with the same PST without the flag; the flag is saved and loaded with the weights."""
+    from salad_core.motion import mirror_features
+
+    vae, plain, mmae = tiny_components()
+    canon = ParallelSkipTransformer(dataclasses.replace(plain.config, side_canonical=True))
+    canon.load_state_dict(plain.state_dict())
+    canon.eval()
+    enc = HashTextEncoder()
+    pipe = KeyMotionPipeline(vae, canon, mmae, enc, default_length=40)
+    prompts = ["a man waves his left hand", "a man waves his right hand", "a man walks forward",
+               "turns counterclockwise, then kicks with the right leg"]
+    kw = dict(lengths=40, seed=5, guidance_scale=2.5, num_steps=3, side_check=False)
+    out = pipe(prompts, **kw)
+    assert out.canonical_mirrored == [True, False, False, True]
+    right = pipe(["a man waves his right hand", "a man waves his right hand"], **kw)
+    # same seed and row: the left prompt's motion is the mirror image of the right prompt's
+    np.testing.assert_allclose(out.features[0], mirror_features(right.features[0]), rtol=0, atol=1e-5)
+    np.testing.assert_allclose(out.latents[0], right.latents[0], rtol=0, atol=1e-4)   # other batch padding
+    twin = pipe(["turns clockwise, then kicks with the left leg"] * 4, **kw)
+    np.testing.assert_allclose(out.features[3], mirror_features(twin.features[3]), rtol=0, atol=1e-5)
+    ref = KeyMotionPipeline(vae, plain.eval(), mmae, enc, default_length=40)(prompts, **kw)
+    np.testing.assert_array_equal(out.features[1:3], ref.features[1:3])       # nothing else changes
+    assert ref.canonical_mirrored == [False] * 4
+    loaded = KeyMotionPipeline.from_pretrained(pipe.save_pretrained(tmp_path / "km"), text_encoder=enc)
+    assert loaded.pst.config.side_canonical is True
+    np.testing.assert_allclose(loaded(prompts, **kw).features, out.features, rtol=0, atol=1e-6)

@@ -69,7 +69,7 @@ from .mmae import MMAEConfig, MotionMaskedAutoencoder, scatter_keyframes
 from .models import NORMALISATION_TOLERANCE, normalisation_gap
 from .pst import PST_DIFFUSION, ParallelSkipTransformer, PSTConfig
 from .selection import KEYFRAME_METHODS, select_keyframes
-from .sides import side_ids
+from .sides import mirror_side_words, names_left_first, side_ids
 
 __all__ = [
     "KeyMotionTrainConfig",
@@ -455,7 +455,8 @@ def _prepare_vae(batch: dict[str, Any], ctx: StepContext, *, latent_shape: tuple
 def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, text: PrefilledCaptions,
                       scheduler: Any, config: KeyMotionTrainConfig, latent_shape: tuple[int, int],
                       latents: Any = None, side_cue: bool = False,
-                      latent_stats: tuple[torch.Tensor, torch.Tensor] | None = None) -> dict[str, Any]:
+                      latent_stats: tuple[torch.Tensor, torch.Tensor] | None = None,
+                      side_canonical: bool = False) -> dict[str, Any]:
     """The :class:`PSTObjective` inputs of a training batch (eq. 7 with condition dropout).
 
     Draws, in this order from the step's shared generator: the VAE reparameterisation noise, the
@@ -485,6 +486,11 @@ def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeV
         The PST has ``PSTConfig.side_cue``: also return ``text_sides``.
     latent_stats : (Tensor, Tensor), optional
         ``(mean, std)`` ``(Lz, Dz)`` of a ``PSTConfig.latent_norm`` PST: the diffused latent is ``(z - mean) / std``.
+    side_canonical : bool
+        ``PSTConfig.side_canonical``: an item whose (not dropped) caption names the left kind first
+        (:func:`~salad_core.keymotion.sides.names_left_first`) is replaced by its mirror image: its keyframes
+        mirrored (:func:`salad_core.motion.mirror_features`, same frames) and encoded, its caption's side words
+        swapped. The draws from the step's generator are the same either way.
 
     Returns
     -------
@@ -508,11 +514,15 @@ def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeV
         else:
             enc = vae.encode(keyframes, indices_to_positions(idx, length), sample=False)
             mu, logvar = enc.mu, enc.logvar
+        captions = list(batch["caption"])
+        if side_canonical:          # dropped captions keep their items: the unconditional branch learns all data
+            mu, logvar, captions = _side_canonical(vae, keyframes, idx, length, mu, logvar, captions,
+                                                   keep=(~drop).tolist())
         z = mu + eps * torch.exp(0.5 * logvar)
         if latent_stats is not None:
             z = (z - latent_stats[0].to(z)) / latent_stats[1].to(z)
         noisy = scheduler.add_noise(z, noise, t)
-        captions = ["" if d else c for d, c in zip(drop.tolist(), batch["caption"])]
+        captions = ["" if d else c for d, c in zip(drop.tolist(), captions)]
         if side_cue:
             feats, mask, tokens = text.encode_with_tokens(captions)
         else:
@@ -522,6 +532,31 @@ def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeV
     if side_cue:
         out["text_sides"] = side_ids(tokens, feats.shape[1]).to(dev)
     return out
+
+
+def _side_canonical(vae: KeyframeVAE, keyframes: torch.Tensor, idx: torch.Tensor, length: torch.Tensor,
+                    mu: torch.Tensor, logvar: torch.Tensor, captions: list[str], keep: list[bool]
+                    ) -> tuple[torch.Tensor, torch.Tensor, list[str]]:
+    """Items whose caption names the left kind first replaced by their mirror images (``PSTConfig.side_canonical``).
+
+    ``keyframes (B, K, D)`` normalised, ``idx (B, K)``, ``length (B,)``, posteriors ``mu, logvar (B, Lz, Dz)``;
+    returns the posteriors and captions with those items' keyframes mirrored (same frames) and encoded again and
+    their side words swapped; only items with ``keep[i]`` (their caption is not dropped for guidance).
+    """
+    from salad_core.motion import mirror_features
+
+    flip = [i for i, c in enumerate(captions) if keep[i] and names_left_first(c)]
+    if not flip:
+        return mu, logvar, captions
+    rows = torch.tensor(flip, device=keyframes.device)
+    raw = vae.norm.denormalize(keyframes[rows])
+    mirrored = vae.norm.normalize(mirror_features(raw, vae.skeleton))
+    enc = vae.encode(mirrored, indices_to_positions(idx[rows], length[rows]), sample=False)
+    mu, logvar = mu.clone(), logvar.clone()
+    mu[rows], logvar[rows] = enc.mu.to(mu.dtype), enc.logvar.to(logvar.dtype)
+    flipped = set(flip)
+    captions = [mirror_side_words(c) if i in flipped else c for i, c in enumerate(captions)]
+    return mu, logvar, captions
 
 
 def roundtrip_keyframes(vae: KeyframeVAE, keyframes: torch.Tensor, indices: torch.Tensor, lengths: torch.Tensor
@@ -765,7 +800,7 @@ def build_pst_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, mod
                  " (from init_from)" if init_stem is not None else "")
     prepare = partial(prepare_pst_batch, vae=vae, text=text, scheduler=scheduler, config=train_config,
                       latent_shape=vae.latent_shape, latents=latents, side_cue=model_config.side_cue,
-                      latent_stats=latent_stats)
+                      latent_stats=latent_stats, side_canonical=model_config.side_canonical)
     meta = {"diffusion": config_to_dict(diffusion_config), "text_encoder": encoder_name,
             "kf_vae": str(resolve_checkpoint(vae_path)), "data": str(Path(data_dir))}
     extra_config = {"kind": "keymotion_pst", **meta, "data": str(Path(data_dir).resolve())}

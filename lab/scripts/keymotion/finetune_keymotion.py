@@ -22,6 +22,9 @@ VAE's decoded poses halve the flight (-3.30 m/s^2 against -7.66 with the true po
   VAE's latents; ``--kf-vae RUN`` trains it on another keyframe VAE (a run folder, e.g. a wider latent; the
   recipe's PST section must give its latent shape), and ``--export`` then assembles that VAE, the new PST and the
   source's MMAE.
+  ``--side-canonical`` trains on side-canonical data (:attr:`PSTConfig.side_canonical`: an item whose caption
+  names the left kind first is replaced by its mirror image; the pipeline mirrors such prompts and the motions
+  back), fine-tuning the source PST (same architecture).
 * ``--stage mmae --scratch``: a new MMAE of the recipe's architecture (e.g. ``lab/configs/keymotion_mmae_large.json``,
   wider and deeper than the shipped one) trained from its initialisation with the recipe's schedule (``--steps``
   the whole run), keeping ``--lambda-foot`` and ``--roundtrip``; ``--export`` assembles it with the source's keyframe
@@ -63,7 +66,8 @@ REPO = Path(__file__).resolve().parents[3]
 LOSS_FLAGS = {"mmae": ("lambda_foot", "lambda_foot_vel"), "pst": (),
               "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact", "lambda_feet_height")}
 #: per stage: its other flags
-STAGE_FLAGS = {"mmae": ("roundtrip", "scratch", "fixed_keyframes"), "kf_vae": ("parts",), "pst": ("side_cue", "latent_norm", "scratch", "kf_vae")}
+STAGE_FLAGS = {"mmae": ("roundtrip", "scratch", "fixed_keyframes"), "kf_vae": ("parts",), "pst": ("side_cue", "side_canonical", "latent_norm", "scratch",
+                                                                                      "kf_vae")}
 #: the learning rate a stage gets when --lr is not given (the PST's probe of session 20 ran at 2e-4)
 DEFAULT_LR = {"mmae": 1e-4, "kf_vae": 1e-4, "pst": 2e-4}
 #: the weight a flag gets when not given
@@ -92,6 +96,9 @@ def main(argv=None, *, text_encoder=None) -> int:
                          "generation uses: 20 of 80-196 frames), not the recipe's ratio")
     ap.add_argument("--side-cue", action="store_const", const=True, default=None,
                     help="pst: add the side cue (PSTConfig.side_cue) to the source PST")
+    ap.add_argument("--side-canonical", action="store_const", const=True, default=None,
+                    help="pst: train on side-canonical data (PSTConfig.side_canonical: items whose caption names "
+                         "the left kind first are replaced by their mirror images)")
     ap.add_argument("--latent-norm", action="store_const", const=True, default=None,
                     help="pst: latent normalisation (PSTConfig.latent_norm; with a source PST without it, --scratch)")
     ap.add_argument("--scratch", action="store_const", const=True, default=None,
@@ -167,7 +174,8 @@ def main(argv=None, *, text_encoder=None) -> int:
             ap.error(f"--kf-vae {args.kf_vae}: no such run folder")
         train_cfg = replace(recipe.pst_train, **overrides)
         model_cfg = replace(recipe.pst_model, side_cue=bool(args.side_cue) or recipe.pst_model.side_cue,
-                            latent_norm=bool(args.latent_norm) or recipe.pst_model.latent_norm)
+                            latent_norm=bool(args.latent_norm) or recipe.pst_model.latent_norm,
+                            side_canonical=bool(args.side_canonical) or recipe.pst_model.side_canonical)
         vae_path = args.kf_vae if args.kf_vae is not None else source / "kf_vae"
         result = train_pst(args.data, args.out, vae_path, model_cfg, train_cfg, text_encoder=encoder,
                            resume=args.resume)
