@@ -364,7 +364,7 @@ class SaladPipeline:
                                   f"{vae.skeleton.name!r}")
         pipe = cls(vae, denoiser, text_encoder, mean, std, latent_stats=latent_stats, diffusion=diffusion,
                    solver=solver, source=str(root), guidance=guidance, recovery=recovery)
-        pipe.vocabulary, pipe.vocabulary_source = vocabulary_and_source(root)
+        pipe.vocabulary, pipe.vocabulary_source = vocabulary_and_source(root, allow_outside_paths)
         return pipe
 
     def save_pretrained(self, path: str | Path, *, dtype: torch.dtype | None = None, meta: dict | None = None) -> Path:
