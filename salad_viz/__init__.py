@@ -10,6 +10,7 @@ raster      scikit-image 2D rasteriser of the same scenes (no OpenGL needed)
 animate     GIF/MP4 (side by side or overlaid), inline display in Jupyter
 export      BVH, GLB, NPY
 widgets     ipywidgets explorer (words, layers, steps, frames)
+explorer_html  the same explorer as one self-contained HTML file (offline; inline in Jupyter)
 plots       evaluation figures from result tables (the CFG sweep of SALAD Fig. 5)
 diffusion_steps  the denoising process step by step: word share of attention per step, key poses per step
 camera      the pinhole camera both backends share; kinematics: rotations from positions, FK
@@ -36,6 +37,7 @@ from .attention import (
 )
 from .camera import Camera, fixed_camera, follow_camera, project_points
 from .diffusion_steps import denoising_strips, plot_word_share_by_step, word_share_by_step
+from .explorer_html import ExplorerPage, export_explorer
 from .export import export_bvh, export_glb, export_npy
 from .kinematics import forward_kinematics, rest_pose, solve_rotations
 from .plots import plot_cfg_sweep
@@ -69,6 +71,8 @@ __all__ = [
     "fixed_camera",
     "follow_camera",
     "project_points",
+    "ExplorerPage",
+    "export_explorer",
     "export_bvh",
     "export_glb",
     "export_npy",
