@@ -17,6 +17,7 @@ skeleton       the HumanML3D and KIT-ML skeletons: joints, the 7 body parts, the
 motion         joints <-> 263-d features (``recover_from_ric``), mirroring, normalisation
 recovery       joints from decoded features with fixed bone lengths and planted feet (``out.joints``)
 side_check     the sides a prompt names and a motion uses; when mirroring makes them agree
+side_words     the words that name a side, and the caption of a mirror image (left <-> right swapped)
 part_activity  how much each body part moves (part speeds, each in the part's own frame)
 quaternion     quaternion and rotation-matrix helpers for numpy and torch
 retarget       re-pose a motion on another rig's rigid torso (HumanML3D's), every limb kept

@@ -713,7 +713,7 @@ class SaladPipeline:
              guidance_scale: "float | Guidance | None" = None, num_steps: int | None = None,
              solver: str | None = None, noise: torch.Tensor | None = None, inversion: Inversion | None = None,
              capture_attention: bool | CaptureConfig | dict = False,
-             probe: bool = False, progress: bool = False) -> EditOutput:
+             probe: bool = False, progress: bool = False, ground: bool | None = None) -> EditOutput:
         """Zero-shot editing by attention modulation (SALAD supplement B, Algorithm 1).
 
         The source and the edited motion are sampled together from the same noise; per step one
@@ -749,6 +749,11 @@ class SaladPipeline:
             Read the target's own maps from a separate probe row (Algorithm 1's line 7, official)
             instead of from the edited row itself (Prompt-to-Prompt); see
             :class:`~salad_core.attention.EditController`.
+        ground : bool, optional
+            Keep the edited motion's pelvis within 10 cm of the source's height range (and the corpus's) unless
+            the target asks to leave the floor (:func:`salad_core.attention.grounding.ground_edit`: frames above
+            are lowered, the pose kept). Default: on when editing an ``inversion`` (a given take), off for
+            generated sources; ``settings["grounding"]`` records what was lowered.
 
         Returns
         -------
@@ -836,7 +841,12 @@ class SaladPipeline:
         settings.update(probe=bool(probe), forward_rows=run.rows, probe_steps=run.probe_steps,
                         cost_vs_generation=run.rows / generation_rows,
                         inversion=None if inversion is None else inversion.method)
-        return EditOutput(out[0], out[1], noise, edits, settings)
+        result = EditOutput(out[0], out[1], noise, edits, settings)
+        if (inversion is not None) if ground is None else bool(ground):
+            from salad_core.attention.grounding import ground_edit
+
+            result = ground_edit(self, result)
+        return result
 
     def _from_inversion(self, inversion: Inversion, source: str | Sequence[str] | None,
                         lengths: int | Sequence[int] | None, noise: torch.Tensor | None,

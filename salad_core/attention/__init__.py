@@ -32,6 +32,8 @@ from .edits import (ERASE_MODES, MIRROR_GROUPS, REWEIGHT_RANGE, EditSpec, Erase,
                     mirror_permutation, mirror_self_attention, refine_columns, reweight_columns, seeded_noise, shift_columns, shift_temporal,
                     validate_edits)
 from .inpaint import INPAINT_GROUPS, Inpaint, inpaint_parts, parse_inpaint
+from .grounding import ground_edit
+from .mirror_take import MirrorTake, invert_mirror, mirror_take_edits
 from .inversion import INVERSION_METHODS, Inversion, LatentInversion, ddim_step_coefficients, invert_latents
 from .hooks import (ActivationCache, HookContext, HookPoint, hook_point_names, hook_points, select_hook_points,
                     use_hooks)
@@ -43,6 +45,7 @@ __all__ = [
     "EditSpec", "WordSwap", "Refine", "Reweight", "Mirror", "MirrorSelfAttention", "InjectSelfAttention", "validate_edits",
     "Erase", "Shift", "ShiftTemporal", "ExampleBased", "ERASE_MODES", "erase_columns", "shift_columns",
     "shift_temporal", "seeded_noise", "Inpaint", "INPAINT_GROUPS", "inpaint_parts", "parse_inpaint",
+    "MirrorTake", "invert_mirror", "mirror_take_edits", "ground_edit",
     "count_repetitions", "motion_repetitions", "count_peaks", "attention_signal", "motion_signal",
     "MIRROR_GROUPS", "REWEIGHT_RANGE", "mirror_parts", "mirror_self_attention", "mirror_permutation", "reweight_columns", "map_columns",
     "refine_columns", "global_align", "alignment_matrix", "word_swap_matrix",

@@ -34,6 +34,7 @@ from salad_core.sampling import Guidance, StepInfo, as_guidance, denoise
 
 from .controller import EditController, RowLayout
 from .edits import seeded_noise
+from .mirror_take import composite, take_of
 from .processor import HookedProcessor
 
 __all__ = ["EditRun", "EditPrediction", "edit_latents", "pad_context"]
@@ -252,23 +253,49 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
     elif edited_noise is not None and tuple(edited_noise.shape) != tuple(noise.shape):
         raise ValueError(f"edited_noise must have the noise's shape {tuple(noise.shape)}, got "
                          f"{tuple(edited_noise.shape)}")
+    take = take_of(controller.edits) if prediction.edited else None
+    edited_corrections = None
+    if take is not None:
+        # mirroring a take (MirrorTake): the chosen parts start from the mirror image's inverted noise and take
+        # its corrections, the other parts the source's
+        if edited_noise is not None:
+            raise ValueError("MirrorTake gives the edited sample its noise (the mirror's); it cannot be combined "
+                             "with edited_noise or an edit with its own seed (ExampleBased)")
+        take.check(noise, num_steps)
+        take_mask = take.mask(noise.shape[2]).to(noise)
+        mirror_traj = take.mirrored.trajectory
+        edited_noise = composite(take_mask, take.mirrored.noise, noise, noise)
+        edited_corrections = composite(take_mask, take.mirrored.corrections, corrections,
+                                       torch.zeros(num_steps, *noise.shape, dtype=noise.dtype))
     own_noise = edited_noise is not None and prediction.edited
     # both branches start from the same noise (Algorithm 1, line 4) and take the same corrections,
-    # unless the edited sample has its own noise: then the corrections are the source's alone
+    # unless the edited sample has its own noise: then the corrections are the source's alone (a
+    # mirrored take's: the mirror's on the mirrored parts)
     latents = torch.cat([noise, edited_noise.to(noise)]) if own_noise else torch.cat([noise] * k)
-    if corrections is not None:
+    if edited_corrections is not None:
+        corrections = torch.cat([torch.zeros_like(edited_corrections) if corrections is None else corrections,
+                                 edited_corrections], 1)
+    elif corrections is not None:
         corrections = (torch.cat([corrections, torch.zeros_like(corrections)], 1) if own_noise
                        else corrections.repeat(1, k, 1, 1, 1))
     inpaint = next((e for e in controller.edits if e.role == "latent"), None) if prediction.edited else None
     region = hook = None
     if inpaint is not None:
-        # in-painting: after each step the edited latents outside the region are the source's of that step
         region = inpaint.mask(frame_mask, noise.shape[2]).to(noise)
-
+    if inpaint is not None or take is not None:
         def hook(info, z: torch.Tensor) -> torch.Tensor:
-            if not inpaint.active(info.fraction):
-                return z
-            return torch.cat([z[:b], z[b:] * region + z[:b] * (1.0 - region)])
+            src, ed = z[:b], z[b:]
+            if take is not None:
+                # the other parts: the source branch's latents of this step; the mirrored parts: the mirror's
+                # inversion trajectory (the latents after step i are trajectory[i + 1])
+                if take.keeping(info.fraction):
+                    ed = ed * take_mask + src * (1.0 - take_mask)
+                if take.following(info.fraction):
+                    ed = ed * (1.0 - take_mask) + mirror_traj[info.index + 1].to(ed) * take_mask
+            if inpaint is not None and inpaint.active(info.fraction):
+                # in-painting: after each step the edited latents outside the region are the source's of that step
+                ed = ed * region + src * (1.0 - region)
+            return torch.cat([src, ed])
     z = denoise(denoiser, scheduler, latents=latents, frame_mask=frame_mask.repeat(k, 1),
                 num_steps=num_steps, prediction=prediction, progress=progress, generator=generator,
                 corrections=corrections, latent_hook=hook)

@@ -32,7 +32,9 @@ SALAD's 7-part x frame x word maps):
 ==========================  ================================================================
 
 In-painting, :class:`~salad_core.attention.inpaint.Inpaint` (:mod:`.inpaint`), is an edit of the latents, not of
-the maps (role ``"latent"``): it composes with all of the above.
+the maps (role ``"latent"``): it composes with all of the above. So is mirroring a real take through the inversion
+of its mirror image, :class:`~salad_core.attention.mirror_take.MirrorTake` (:mod:`.mirror_take`, role ``"take"``),
+which flips an inverted take's leading limb where :class:`Mirror` alone only damps it.
 
 Specs compose in order, Prompt-to-Prompt style: at most one *replacement* (WordSwap or Refine)
 builds the base map from ``M`` and ``M*``; *modifiers* (Reweight, Mirror, Erase, Shift) change the map in
@@ -330,6 +332,10 @@ class Mirror(EditSpec):
 
     ``parts``: ``"legs"`` (official ``lower``), ``"arms"`` (``upper``) or ``"all"``; counterparts
     come from :data:`salad_core.skeleton.PART_MIRROR`. Root, spine and head map to themselves.
+
+    On an inverted real take this only damps the leading limb: the inverted noise's part tokens carry the
+    take's own sides (:mod:`salad_core.attention.mirror_take`); add
+    :class:`~salad_core.attention.mirror_take.MirrorTake` (``mirror_take_edits``) to flip it.
     """
 
     parts: str = "all"                          # "legs", "arms" or "all"
@@ -599,7 +605,13 @@ def validate_edits(edits: EditSpec | Sequence[EditSpec] | None) -> tuple[EditSpe
     latent = [e for e in out if e.role == "latent"]
     if len(latent) > 1:
         raise ValueError(f"at most one in-painting edit (Inpaint) per edit, got {latent}; name all the parts in one")
+    takes = [e for e in out if e.role == "take"]
+    if len(takes) > 1:
+        raise ValueError(f"at most one MirrorTake per edit, got {takes}")
     seeded = [e for e in out if e.edited_seed is not None]
+    if takes and seeded:
+        raise ValueError(f"MirrorTake starts the edited sample from the mirror's noise; it cannot be combined with "
+                         f"an edit that gives it its own noise ({seeded[0]!r})")
     if len(seeded) > 1:
         raise ValueError(f"at most one edit may give the edited sample its own noise, got {seeded}")
     replacements = [e for e in out if e.role == "replace"]
