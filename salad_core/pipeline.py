@@ -707,6 +707,16 @@ class SaladPipeline:
         return latents
 
     # ------------------------------------------------------------------ edit
+    @staticmethod
+    def edit_namespace() -> dict[str, Any]:
+        """The names a line of ``pipe.edit(...)`` code uses (``WordSwap``, ``Refine``, ``Reweight``, ``Mirror``,
+        ``Erase``, ``Inpaint``, ``MirrorTake``, ``CaptureConfig``): what the Jupyter explorer's editing panel
+        evaluates its printed line with (:func:`salad_viz.widgets.explore_attention` ``editor=pipe``)."""
+        from salad_core import attention
+
+        return {n: getattr(attention, n) for n in ("WordSwap", "Refine", "Reweight", "Mirror", "Erase", "Inpaint",
+                                                   "MirrorTake", "CaptureConfig")}
+
     def edit(self, source: str | Sequence[str] | None = None, target: str | Sequence[str] | None = None,
              edits: EditSpec | Sequence[EditSpec] = (), lengths: int | Sequence[int] | None = None,
              seed: int | Sequence[int] = 0,

@@ -373,7 +373,8 @@ def _json(data: dict, att_texts: Sequence[str]) -> str:
 
 
 def _page(data: dict, att_texts: Sequence[str]) -> str:
-    title = html.escape(f"{data['title']}: {data['prompt']}")
+    named = f"{data['edit']} of {data['prompt']}" if data.get("edit") else data["prompt"]   # a tab names the edit
+    title = html.escape(f"{data['title']}: {named}")
     return (
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n"
         "<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; script-src 'unsafe-inline'; "

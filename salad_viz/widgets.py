@@ -4,6 +4,19 @@ The heatmap of the selected words (summed) and the skeleton, with each joint col
 part's attention at the current frame, update together. Everything is computed from arrays (or
 from the pipeline's :class:`~salad_core.attention.AttentionMaps`); the widget holds no model.
 
+Editing. Given ``editor=pipe`` (the pipeline, or any callable with ``pipe.edit``'s arguments), the
+explorer also edits: a target text box (a word swap when the target has as many words as the source,
+else a refinement; or as chosen), a re-weight slider (-1 to 3, 1 = unchanged) for each selected word,
+mirror toggles for the arms and the legs, and a "Run edit" button. The edit is written as ONE line of
+Python (:attr:`AttentionExplorer.edit_code`), shown under the controls, and that very line is what
+runs, so pasting it into a cell gives the same motion bit for bit. The result shows the source and the
+edit side by side: their skeletons at the current frame and their heatmaps of the selected words (the
+counterparts in the target) on one colour scale, diverging about 0 when a map is negative.
+:meth:`AttentionExplorer.edit_page` exports it as the offline HTML page. ``salad_viz`` imports nothing
+of ``salad_core`` but the skeleton: the edit classes the line names (``WordSwap``, ``Refine``,
+``Reweight``, ``Mirror``, ``CaptureConfig``) come from the editor itself (``SaladPipeline.edit_namespace()``)
+or from ``edit_names=``; without an editor nothing of this is built.
+
 Threads. JupyterLab (4.4 and later) sends widget messages over kernel *subshells* by default
 ("Kernel Comms over subshells"), so ipykernel 7 runs the widget callbacks on ``subshell-...``
 threads, one per comm or per comm target, possibly at the same time. An OpenGL context may only be
@@ -38,14 +51,30 @@ notebook cell displays the explorer:
 {'words': ['jumps', 'walks'], 'layers': [0, 1, 2, 3, 4], 'steps': [0, 9], 'frame': 30}
 >>> ex.close()
 
+Editing: re-weight "jumps" to -1 and run; the line shown is the edit, as Python:
+
+>>> ex = explore_attention(out.attention, None, out.joints[0], editor=pipe, edit_options=dict(seed=0))
+>>> ex.reweight_slider("jumps").value = -1
+>>> ex.run.click()                          # what the "Run edit" button does
+>>> ex.last_code
+'pipe.edit("a man jumps forward and then walks", edits=[Reweight(words="jumps", scale=-1)], lengths=60, seed=0, num_steps=10, capture_attention=CaptureConfig(mode="full"))'
+>>> from salad_core.attention import Reweight
+>>> ed = pipe.edit("a man jumps forward and then walks", edits=[Reweight(words="jumps", scale=-1)], lengths=60,
+...                seed=0, num_steps=10, capture_attention=CaptureConfig(mode="full"))   # the line, pasted
+>>> bool((ed.edited.features == ex.last_edit.edited.features).all())
+True
+>>> ex.close()
+
 An ``AttentionMaps`` from the default capture (``capture_attention=True``, means over 10 step bins)
 gives the layers but not the steps; a plain array needs its axis letters, e.g.
 ``explore_attention(out.attention.full(0), out.attention.tokens(0), out.joints[0], axes="slhnpw")``.
 """
 from __future__ import annotations
 
+import html as _html
 import io
 import queue
+import re
 import threading
 import weakref
 from concurrent.futures import Future
@@ -199,6 +228,36 @@ def _from_attention_maps(maps, b: int) -> tuple[np.ndarray, str]:
     return np.stack(stack).astype(np.float32), "lpnw"
 
 
+#: pipe.edit arguments the explorer's controls set (``edit_options`` may not).
+_EDIT_OWN = frozenset({"source", "target", "edits", "capture_attention", "inversion", "noise"})
+
+
+def _is_literal(value) -> bool:
+    """Whether ``repr(value)`` is Python that gives ``value`` back (the printed edit line must run as written)."""
+    if value is None or isinstance(value, (bool, int, str)):
+        return True
+    if isinstance(value, float):
+        return bool(np.isfinite(value))
+    if isinstance(value, (list, tuple)):
+        return all(_is_literal(v) for v in value)
+    return False
+
+
+def _py_str(text: str) -> str:
+    """A Python string literal of ``text``, in double quotes when that needs no escape."""
+    r = repr(str(text))
+    if r.startswith("'") and '"' not in text and "\\" not in r:
+        return '"' + r[1:-1] + '"'
+    return r
+
+
+def _plain_words(text: str) -> list[str]:
+    """Lower-case words (letters, digits, apostrophes) of a prompt, for naming a word swap or a refinement."""
+    import re
+
+    return re.findall(r"[a-z0-9']+", text.lower())
+
+
 # ----------------------------------------------------------------------------- the explorer
 class AttentionExplorer:
     """Linked heatmap + skeleton view of captured cross-attention (ipywidgets).
@@ -233,6 +292,20 @@ class AttentionExplorer:
         Camera view (see :mod:`salad_viz.camera`).
     cmap : str
         Colormap shared by the heatmap and the joints.
+    editor : pipeline or callable, optional
+        Turns on editing (see the module docstring): the pipeline (``SaladPipeline``, anything with an
+        ``edit`` method taking ``pipe.edit``'s arguments) or a callable with those arguments, returning
+        ``pipe.edit``'s ``EditOutput``.
+    prompt : str, optional
+        The source prompt of an edit (read from an ``AttentionMaps``; needed with an array ``attention``).
+    edit_options : dict, optional
+        More arguments of the edit, plain Python literals (e.g. ``seed=3``, ``guidance_scale=4.5``,
+        ``solver="ddim"``); defaults: ``lengths`` = the motion's frames, ``seed=0``, ``num_steps`` = the
+        maps' steps. Pass the seed the motion was generated with to edit that motion.
+    editor_name : str, optional
+        The editor's name in the printed line (default ``pipe``, or a callable's ``__name__``).
+    edit_names : dict, optional
+        The classes the line names (default: the editor's ``edit_namespace()``, which ``SaladPipeline`` has).
 
     Attributes
     ----------
@@ -245,6 +318,10 @@ class AttentionExplorer:
         PNG views, refreshed on every change.
     status : ipywidgets.Label
         Empty, or why the views were not updated (e.g. an empty selection).
+    target, replace, reweight_box, mirror_arms, mirror_legs, run, code, result, edit_status : ipywidgets
+        The edit controls and views (``None`` without an ``editor``): the target prompt, how a changed
+        target edits ("auto", "swap", "refine"), the re-weight sliders (:meth:`reweight_slider`), the
+        mirror toggles, the run button, the line of Python, the result figure, errors of the last run.
     uid : str
         Identifies this explorer: its widget carries the CSS class ``salad-explorer-id-<uid>`` and
         :meth:`find` returns the explorer from it (tests driving a browser use this).
@@ -255,17 +332,23 @@ class AttentionExplorer:
     def __init__(self, attention, tokens: Sequence[str] | None, joints, skeleton: str | Skeleton = "humanml3d", *,
                  axes: str = "pnw", batch: int | None = None, frames_per_latent: int | None = None,
                  words: str | Sequence[str] | None = None, size: Sequence[int] = (360, 300),
-                 backend: str = "auto", view: str | float = "three_quarter", cmap: str = "viridis"):
+                 backend: str = "auto", view: str | float = "three_quarter", cmap: str = "viridis",
+                 editor=None, prompt: str | None = None, edit_options: dict | None = None,
+                 editor_name: str | None = None, edit_names: dict | None = None):
         import ipywidgets as W
 
         self.skeleton = get_skeleton(skeleton)
         fpl = frames_per_latent
+        num_steps = None
         if _is_attention_maps(attention):
             b = 0 if batch is None else batch
             if tokens is None:
                 tokens = attention.tokens(b)
             if fpl is None:
                 fpl = attention.unit_length
+            if prompt is None and hasattr(attention, "prompts"):
+                prompt = attention.prompts[b]
+            num_steps = getattr(attention, "num_steps", None)
             attention, axes, batch = (*_from_attention_maps(attention, b), None)
         elif tokens is None:
             raise ValueError("tokens is required when attention is an array (pass the prompt's W tokens)")
@@ -336,6 +419,15 @@ class AttentionExplorer:
             W.HBox([self.play, self.frame, self.status]),
             W.HBox([self.heatmap, self.skeleton_view]),
         ])
+        self.prompt = None if prompt is None else str(prompt)
+        self._editor = None
+        self._last_edit = None
+        for name in ("target", "replace", "reweight_box", "mirror_arms", "mirror_legs", "run", "code", "result",
+                     "edit_status"):
+            setattr(self, name, None)
+        self._sliders: dict[str, Any] = {}
+        if editor is not None:
+            self._build_editor(W, editor, num_steps, edit_options, editor_name, edit_names)
         self.widget.add_class("salad-explorer")
         self.widget.add_class(f"salad-explorer-id-{self.uid}")
         AttentionExplorer._live[self.uid] = self
@@ -438,11 +530,349 @@ class AttentionExplorer:
 
     def _on_selection(self, change) -> None:
         self.refresh()
+        if self._editor is not None:
+            self._update_sliders()
+            self._draw_result()
 
     def _on_frame(self, change) -> None:
         with self._lock:
             if self._map is not None:
                 self._draw()
+            self._draw_result()
+
+    # ----------------------------------------------------------------- editing
+    def _build_editor(self, W, editor, num_steps, edit_options, editor_name, edit_names) -> None:
+        """The edit controls (only with an ``editor``): target text, re-weight sliders, mirror toggles, run."""
+        if not (callable(getattr(editor, "edit", None)) or callable(editor)):
+            raise TypeError("editor must be a pipeline (an object with an edit(...) method, e.g. SaladPipeline) or "
+                            f"a callable with pipe.edit's arguments; got {type(editor).__name__}")
+        if self.prompt is None:
+            raise ValueError("editing needs the source prompt: pass prompt=... (it is read from AttentionMaps)")
+        self._editor = editor
+        method = callable(getattr(editor, "edit", None))
+        name = editor_name or ("pipe" if method else getattr(editor, "__name__", "editor"))
+        if not str(name).isidentifier():
+            raise ValueError(f"editor_name must be a Python name, got {name!r}")
+        self.editor_name = str(name)
+        self._call = f"{self.editor_name}.edit" if method else self.editor_name
+        options = {"lengths": len(self.joints), "seed": 0}
+        if num_steps is not None:
+            options["num_steps"] = int(num_steps)
+        for key, value in dict(edit_options or {}).items():
+            if key in _EDIT_OWN:
+                raise ValueError(f"edit_options may not set {key!r}: the explorer's controls set it")
+            if not _is_literal(value):
+                raise ValueError(f"edit_options[{key!r}] = {value!r} is not a plain Python literal (number, string, "
+                                 "bool, None or a list/tuple of them): the printed line must run as written")
+            options[key] = value
+        self.edit_options = options
+        self._edit_names = None if edit_names is None else dict(edit_names)
+        wide = W.Layout(width="min(640px, 95%)")
+        self.target = W.Text(value=self.prompt, description="target", layout=wide, continuous_update=False,
+                             tooltip="change words for a word swap (same number of words) or add words to refine")
+        self.replace = W.Dropdown(options=[("auto", "auto"), ("word swap", "swap"), ("refine", "refine")],
+                                  value="auto", description="as", layout=W.Layout(width="190px"),
+                                  tooltip="auto: a word swap when the target has as many words as the source, "
+                                          "else a refinement")
+        self.reweight_box = W.VBox()
+        self.mirror_arms = W.ToggleButton(value=False, description="mirror arms", icon="exchange",
+                                          tooltip="swap the left and right arm rows of the maps (Mirror)")
+        self.mirror_legs = W.ToggleButton(value=False, description="mirror legs", icon="exchange",
+                                          tooltip="swap the left and right leg rows of the maps (Mirror)")
+        self.run = W.Button(description="Run edit", button_style="primary", icon="play",
+                            tooltip="run the edit with the pipeline; the result appears below")
+        self.edit_status = W.Label()
+        self.code = W.HTML()
+        self.result = W.Image(format="png")
+        self.result.layout.display = "none"          # until an edit has run (an empty image shows as broken)
+        self.run.on_click(self._on_run)
+        # every slider is made here, on the thread that builds the explorer: the callbacks (on JupyterLab's comm
+        # subshells) only choose which are shown, and never open a widget's comm themselves
+        for word in self._content_words():
+            self.reweight_slider(word)
+        for ctl, cls in ((self.target, "target"), (self.replace, "replace"), (self.reweight_box, "reweight"),
+                         (self.mirror_arms, "mirror-arms"), (self.mirror_legs, "mirror-legs"), (self.run, "run"),
+                         (self.edit_status, "edit-status"), (self.code, "code"), (self.result, "result")):
+            ctl.add_class(f"salad-explorer-{cls}")
+        self._update_sliders()
+        head = W.HTML("<b>Edit</b> <small>(zero-shot, through the cross-attention: a target prompt, re-weighted "
+                      "words, mirrored limbs; 1 = a word unchanged, 0 = ignored, negative = the opposite)</small>")
+        self.edit_box = W.VBox([head, W.HBox([self.target, self.replace]), self.reweight_box,
+                                W.HBox([self.mirror_arms, self.mirror_legs, self.run, self.edit_status]),
+                                self.code, self.result])
+        self.edit_box.add_class("salad-explorer-edit")
+        self.widget.children = (*self.widget.children, self.edit_box)
+
+    def _content_words(self) -> list[str]:
+        """The prompt's words that can be re-weighted (letters or digits), in order, each once."""
+        return list(dict.fromkeys(w for w, _ in self._groups if any(ch.isalnum() for ch in w)))
+
+    def reweight_slider(self, word: str):
+        """The re-weight slider of ``word`` (-1 to 3; 1 leaves its attention as it is), made when first asked for
+        and shown while the word is selected or its value is not 1."""
+        import ipywidgets as W
+
+        word = str(word).lower()
+        if word not in self._content_words():
+            raise ValueError(f"{word!r} is not a word of the prompt; its words are {self._content_words()}")
+        if word not in self._sliders:
+            slider = W.FloatSlider(value=1.0, min=-1.0, max=3.0, step=0.1, description=f"re-weight {word}",
+                                   readout_format=".1f", continuous_update=False,
+                                   style={"description_width": "initial"}, layout=W.Layout(width="420px"))
+            slider.add_class("salad-explorer-reweight-slider")
+            slider.add_class("salad-explorer-reweight-" + re.sub(r"[^a-z0-9_-]", "_", word))
+            slider.observe(lambda change: self._update_sliders(), names="value")
+            self._sliders[word] = slider
+        return self._sliders[word]
+
+    def _update_sliders(self) -> None:
+        if self.reweight_box is None:
+            return
+        selected = set(self.selected_words)
+        shown = [self.reweight_slider(w) for w in self._content_words()
+                 if w in selected or (w in self._sliders and round(self._sliders[w].value, 2) != 1.0)]
+        if tuple(shown) != tuple(self.reweight_box.children):
+            self.reweight_box.children = tuple(shown)
+
+    def _edit_parts(self) -> tuple[str | None, list[str], list[str]]:
+        """``(target or None, the edits' source texts, their short labels)`` from the controls."""
+        target = " ".join(str(self.target.value).split())
+        source = " ".join(self.prompt.split())
+        changed = bool(target) and target.lower() != source.lower()
+        codes, labels = [], []
+        if changed:
+            src_words, dst_words = _plain_words(source), _plain_words(target)
+            mode = self.replace.value
+            if mode == "auto":
+                mode = "swap" if len(src_words) == len(dst_words) else "refine"
+            if mode == "swap":
+                codes.append("WordSwap()")
+                pairs = [f"{a}->{b}" for a, b in zip(src_words, dst_words) if a != b]
+                labels.append(f"Swap({', '.join(pairs)})")
+            else:
+                codes.append("Refine()")
+                added = [f"+{w}" for w in dst_words if w not in set(src_words)]
+                labels.append(f"Refine({' '.join(added)})")
+        for word in self._content_words():
+            slider = self._sliders.get(word)
+            if slider is None or slider not in self.reweight_box.children:
+                continue
+            value = round(float(slider.value), 2)
+            if value != 1.0:
+                codes.append(f"Reweight(words={_py_str(word)}, scale={value:g})")
+                labels.append(f"Reweight({word}={value:g})")
+        parts = [name for name, toggle in (("arms", self.mirror_arms), ("legs", self.mirror_legs)) if toggle.value]
+        if parts:
+            which = "all" if len(parts) == 2 else parts[0]
+            codes.append(f"Mirror(parts={_py_str(which)})")
+            labels.append(f"Mirror({which})")
+        return (target if changed else None), codes, labels
+
+    @property
+    def edit_code(self) -> str:
+        """The one line of Python that makes the edit the controls describe (what :meth:`run_edit` runs):
+        ``pipe.edit(source, target=..., edits=[...], lengths=..., seed=..., num_steps=..., capture_attention=...)``
+        with ``WordSwap``, ``Refine``, ``Reweight``, ``Mirror`` and ``CaptureConfig`` of ``salad_core.attention``.
+        Raises ``ValueError`` when the controls describe no edit."""
+        if self._editor is None:
+            raise RuntimeError("this explorer has no editor: pass editor=pipe to explore_attention")
+        target, codes, _ = self._edit_parts()
+        if target is None and not codes:
+            raise ValueError("nothing to edit: change the target prompt, move a re-weight slider away from 1 or "
+                             "toggle a mirror")
+        capture = 'CaptureConfig(mode="full")' if self.steps is not None else "True"
+        args = [_py_str(" ".join(self.prompt.split()))]
+        if target is not None:
+            args.append(f"target={_py_str(target)}")
+        args.append(f"edits=[{', '.join(codes)}]")
+        args += [f"{k}={v!r}" for k, v in self.edit_options.items()]
+        args.append(f"capture_attention={capture}")
+        return f"{self._call}({', '.join(args)})"
+
+    @property
+    def edit_label(self) -> str:
+        """A short name of the edit the controls describe, e.g. ``Swap(walks->runs) + Reweight(high=-1)``."""
+        return " + ".join(self._edit_parts()[2]) or "edited"
+
+    @property
+    def last_edit(self):
+        """The last edit's result (the pipeline's ``EditOutput``: ``.source`` and ``.edited``), or None."""
+        return None if self._last_edit is None else self._last_edit["output"]
+
+    @property
+    def last_code(self) -> str | None:
+        """The line of Python the last edit ran (shown under the controls)."""
+        return None if self._last_edit is None else self._last_edit["code"]
+
+    def _names(self) -> dict:
+        if self._edit_names is not None:
+            return dict(self._edit_names)
+        # salad_viz imports nothing of salad_core but the skeleton (tests/test_module_layout.py): the pipeline the
+        # user handed over brings the edit classes its printed line names
+        names = getattr(self._editor, "edit_namespace", None)
+        if not callable(names):
+            raise TypeError(f"the editor {self.editor_name!r} has no edit_namespace(): pass edit_names={{'WordSwap': "
+                            "..., 'Refine': ..., 'Reweight': ..., 'Mirror': ..., 'CaptureConfig': ...}} (the classes "
+                            "of salad_core.attention)")
+        return dict(names())
+
+    def run_edit(self):
+        """Run the edit the controls describe, exactly as the printed line (:attr:`edit_code`) does: the line is
+        evaluated with the editor under its name; show the result beside the source and return it (the
+        ``EditOutput``). Errors (nothing to edit, a word the target lacks) are raised."""
+        code = self.edit_code
+        label = self.edit_label
+        namespace = {**self._names(), self.editor_name: self._editor}
+        output = eval(compile(code, "<salad explorer edit>", "eval"), namespace)   # the printed line, as printed
+        for branch in ("source", "edited"):
+            if getattr(getattr(output, branch, None), "attention", None) is None:
+                raise TypeError(f"the editor returned no {branch} attention maps: it must return pipe.edit's "
+                                "EditOutput for capture_attention")
+        with self._lock:
+            self._last_edit = {"code": code, "label": label, "output": output}
+            self.code.value = ('<div style="font-size:12px;color:#444">The same edit in Python (<code>WordSwap</code>, '
+                               '<code>Refine</code>, <code>Reweight</code>, <code>Mirror</code>, <code>CaptureConfig'
+                               '</code> from <code>salad_core.attention</code>):</div><pre style="white-space:pre-wrap;'
+                               'margin:2px 0 6px 0;font-size:12px;background:#f4f5f7;padding:4px 6px">'
+                               f"{_html.escape(code)}</pre>")
+            self._draw_result()
+            self.result.layout.display = None
+        return output
+
+    def _on_run(self, button=None) -> None:
+        self.run.disabled = True
+        self.edit_status.value = "running the edit..."
+        try:
+            self.run_edit()
+            self.edit_status.value = ""
+        except Exception as exc:    # a callback has no caller to raise to: say it beside the button
+            self.edit_status.value = f"{type(exc).__name__}: {exc}"
+        finally:
+            self.run.disabled = False
+
+    def _branch_map(self, maps, positions: list[int]) -> np.ndarray | None:
+        """The ``(P, N')`` map of one branch of the edit: the words at ``positions`` (of its word groups) summed,
+        over the explorer's chosen layers and steps where the branch has them (else all)."""
+        if not positions:
+            return None
+        arr, axes = _from_attention_maps(maps, 0)
+        steps = layers = None
+        if self.steps is not None and "s" in axes and arr.shape[axes.index("s")] == self.steps.max + 1:
+            steps = (self.steps.value[0], self.steps.value[1] + 1)
+        if self.layers is not None and arr.shape[axes.index("l")] == len(self.layers.options):
+            layers = list(self.layers.value) or None
+        red = reduce_attention(arr, axes, steps=steps, layers=layers)
+        groups = merge_tokens(maps.tokens(0))
+        ids = sorted({i for k in positions for i in groups[k][1]})
+        return red[:, :, ids].sum(axis=2)
+
+    @property
+    def result_maps(self) -> tuple[np.ndarray, np.ndarray | None] | None:
+        """``(source, edited)`` ``(P, N')`` maps the result shows: the selected words of the edit's source and
+        their counterparts in the edited prompt (None where the target has none), or None before an edit."""
+        if self._last_edit is None:
+            return None
+        from .explorer_html import _align
+
+        out = self._last_edit["output"]
+        src_groups = [w for w, _ in merge_tokens(out.source.attention.tokens(0))]
+        dst_groups = [w for w, _ in merge_tokens(out.edited.attention.tokens(0))]
+        chosen = set(self.selected_words)
+        src_pos = [k for k, w in enumerate(src_groups) if w in chosen]
+        pairs = _align(src_groups, dst_groups)
+        dst_pos = sorted({pairs[k] for k in src_pos if pairs[k] >= 0})
+        return self._branch_map(out.source.attention, src_pos), self._branch_map(out.edited.attention, dst_pos)
+
+    def result_figure(self, frame: int | None = None):
+        """The result as a matplotlib Figure: the source (left) and the edit (right), each its skeleton at
+        ``frame`` (default: the explorer's) with bones coloured by the selected words' attention and its
+        7-part x frame heatmap, both on ONE colour scale (diverging, centred at 0, when a map is negative)."""
+        from matplotlib import colormaps
+
+        from .attention import DIVERGING_CMAP, _draw_map, attention_limits, joint_attention, new_figure
+
+        if self._last_edit is None:
+            raise RuntimeError("no edit has run yet")
+        out, label = self._last_edit["output"], self._last_edit["label"]
+        maps = self.result_maps
+        src_words = self.selected_words
+        branches = [(out.source, maps[0], "source", src_words)]
+        dst_words = [w for w, _ in merge_tokens(out.edited.attention.tokens(0))]
+        if maps[1] is not None:
+            from .explorer_html import _align
+
+            src_groups = [w for w, _ in merge_tokens(out.source.attention.tokens(0))]
+            pairs = _align(src_groups, dst_words)
+            picked = sorted({pairs[k] for k, w in enumerate(src_groups) if w in set(src_words) and pairs[k] >= 0})
+            dst_words = [dst_words[k] for k in picked]
+        else:
+            dst_words = []
+        branches.append((out.edited, maps[1], label, dst_words))
+        limits = attention_limits(*[m for m in maps if m is not None])
+        signed = limits[0] < 0
+        cmap = colormaps[DIVERGING_CMAP if signed else self.cmap]
+        f = int(self.frame.value if frame is None else frame)
+        fig = new_figure((11.0, 6.6))
+        grid = fig.add_gridspec(3, 2, height_ratios=[1.0, 0.6, 0.05])
+        im = None
+        for col, (motion, m, name, words) in enumerate(branches):
+            joints = motion.joints[0]
+            fr = min(f, len(joints) - 1)
+            colors = None
+            if m is not None:
+                vals = joint_attention(m, self.skeleton, len(joints), frames_per_latent=self.fpl)
+                top = limits[1]
+                scaled = (vals / top + 1.0) / 2.0 if signed else vals / top
+                colors = cmap(np.clip(scaled, 0.0, 1.0))[..., :3]
+            image = self._renderer.render(joints, fr, view=self.view, joint_colors=colors)
+            ax = fig.add_subplot(grid[0, col])
+            ax.imshow(image)
+            ax.set_axis_off()
+            ax.set_title(f"{name}\n\u201c{motion.texts[0]}\u201d", fontsize=11, wrap=True)
+            hax = fig.add_subplot(grid[1, col])
+            if m is None:
+                hax.set_axis_off()
+                hax.text(0.5, 0.5, "no counterpart of the selected words\nin this prompt", ha="center",
+                         va="center", transform=hax.transAxes, fontsize=10)
+                continue
+            im = _draw_map(hax, m, fpl=self.fpl, cmap=cmap, vmin=limits[0], vmax=limits[1],
+                           title=" + ".join(words), part_labels=(col == 0))
+            # the current frame, as the HTML page marks it: red on viridis, black on the diverging map
+            hax.axvline(fr + 0.5, color="white", lw=4)
+            hax.axvline(fr + 0.5, color="#111111" if signed else "#ff2d55", lw=2)
+        if im is not None:
+            cax = fig.add_subplot(grid[2, :])
+            bar = fig.colorbar(im, cax=cax, orientation="horizontal")
+            bar.set_label("attention of the selected words, one scale for both"
+                          + (" (negative: blue, after a negative re-weight)" if signed else ""), fontsize=10)
+        fig.suptitle(f"Edit: {label}    \u00b7    frame {f}", fontsize=13, fontweight="bold")
+        return fig
+
+    def _draw_result(self) -> None:
+        if self._last_edit is None or self.result is None:
+            return
+        with self._lock:
+            try:
+                fig = self.result_figure()
+            except ValueError as exc:     # e.g. no layer selected: the explorer's status says so
+                self.edit_status.value = str(exc)
+                return
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", dpi=80)
+            self.result.value = buf.getvalue()
+
+    def edit_page(self, path=None, **kwargs):
+        """The last edit as the offline HTML explorer (:func:`salad_viz.export_explorer`): the source and the edit
+        side by side on one colour scale, the edit named; ``path`` writes it."""
+        from .explorer_html import export_explorer
+
+        if self._last_edit is None:
+            raise RuntimeError("no edit has run yet")
+        out = self._last_edit["output"]
+        kwargs.setdefault("words", [w for w in self.selected_words if any(ch.isalnum() for ch in w)] or None)
+        return export_explorer(out.source.attention, None, out.source.joints[0], self.skeleton, path=path,
+                               compare=dict(attention=out.edited.attention, joints=out.edited.joints[0]),
+                               edit=self._last_edit["label"], **kwargs)
 
     # ----------------------------------------------------------------- display
     def close(self) -> None:

@@ -68,6 +68,53 @@ def _no_figure_reason(result, b: int) -> str:
     return "nothing to draw"
 
 
+def _model_name(weights: str | None) -> str:
+    """How an explorer page names the model: ``SALAD (shipped weights)`` or ``SALAD (<folder>)``."""
+    return "SALAD (shipped weights)" if weights is None else f"SALAD ({weights})"
+
+
+def _full_capture():
+    """The capture an explorer page needs: every step, layer and head (``CaptureConfig(mode="full")``)."""
+    from salad_core.attention import CaptureConfig
+
+    return CaptureConfig(mode="full")
+
+
+def _explorer_page(out: Path, name: str, force: bool, result, b: int, *, model: str, compare=None,
+                   edit: str | None = None, label: str | None = None, words=None) -> Path:
+    """Write the offline attention explorer (:func:`salad_viz.export_explorer`) of sample ``b`` of ``result``
+    (a MotionOutput with a full capture) as ``out/name``; ``compare``: the edited MotionOutput, shown beside it
+    on one colour scale, with ``edit`` (its label) in the header."""
+    from salad_viz import export_explorer
+
+    (path,) = _outputs(out, [name], force)
+    other = None
+    if compare is not None:
+        other = dict(attention=compare.attention, joints=compare.joints[0], label="edited")
+    export_explorer(result.attention, None, result.joints[b], batch=b, path=path, model=model, compare=other,
+                    edit=edit, label=label, words=words)
+    return path
+
+
+def _edit_words(specs, maps, source: str | None, target: str | None) -> list[str] | None:
+    """The words an edit's page opens on: the words its edits name (re-weighted, erased, shifted, or swapped
+    by a word swap) that are words of the source prompt, function words left out; ``None`` (the page's
+    default, the first content word) when there are none."""
+    from salad_core.data.texts import split_words
+
+    have = list(maps.words(0))
+    named: list[str] = []
+    for spec in specs:
+        if type(spec).__name__ == "WordSwap":
+            named += [a for a, b in zip(split_words(source or ""), split_words(target or "")) if a != b]
+        words = getattr(spec, "words", None)
+        if isinstance(words, (str, tuple, list)):
+            items = (words,) if isinstance(words, str) else words
+            named += [w for item in items if isinstance(item, str) for w in split_words(item)]
+    picked = [w for w in dict.fromkeys(named) if w in have]
+    return [w for w in picked if w not in _FUNCTION_WORDS] or picked or None
+
+
 DEMO_PROMPT = "a man jumps forward and then walks forward, while waving his arms"
 
 
@@ -207,6 +254,9 @@ def cmd_generate(args: argparse.Namespace) -> int:
     _check_sampling_args(args, len(prompts))
     out = _check_out_dir(args.out, args.force)
     attention = not args.no_attention
+    html = bool(getattr(args, "html", False))
+    if html and not attention:
+        raise UserError("--html shows the attention maps, --no-attention turns their capture off: give one of them")
     figures = [attention and _has_words(p) for p in prompts]
     for b, p in enumerate(prompts):
         if attention and not figures[b]:
@@ -214,11 +264,13 @@ def cmd_generate(args: argparse.Namespace) -> int:
         elif figures[b] and not split_words(p):     # e.g. another script: the maps are drawn per a-z word
             figures[b] = False
             _note(args, f"prompt {b} {p!r} has no English (a-z) words, the words attention maps are drawn for: "
-                        "no attention figure for it", kind="warning")
+                        "no attention figure for it" + (" and no explorer page" if html else ""), kind="warning")
+    pages = [html and fig for fig in figures]        # --html: one offline explorer page per motion with words
     # every file of the run is checked before anything is written
     stems = _generate_stems(prompts)
     _outputs(out, [name for st in stems for name in _motion_file_names(st, gif=not args.no_render)]
-             + [f"{st}_attention.png" for st, fig in zip(stems, figures) if fig], args.force, write=False)
+             + [f"{st}_attention.png" for st, fig in zip(stems, figures) if fig]
+             + [f"{st}_explorer.html" for st, page in zip(stems, pages) if page], args.force, write=False)
     pipe = _load_pipeline(args.weights)
     _note_unknown_words(args, pipe, prompts)
     guidance = _guidance(args, pipe)
@@ -232,8 +284,10 @@ def cmd_generate(args: argparse.Namespace) -> int:
     chunk = pipe.chunk_size() if len(prompts) > limits.PROMPT_CHUNK else len(prompts)
     for rows in batch_chunks(len(prompts), chunk, progress=not args.quiet,
                              report=(lambda line: None) if args.quiet else say):
+        # a page shows every step and layer (full capture); the figure alone needs the step means
+        capture = _full_capture() if any(pages[rows]) else attention and any(figures[rows])
         result = pipe(prompts[rows], lengths=args.length, seed=args.seed + rows.start, guidance_scale=guidance,
-                      num_steps=args.steps, solver=args.solver, capture_attention=attention and any(figures[rows]),
+                      num_steps=args.steps, solver=args.solver, capture_attention=capture,
                       progress=not args.quiet)
         for i, text in enumerate(result.texts):
             b, n = rows.start + i, result.lengths[i]
@@ -246,6 +300,9 @@ def cmd_generate(args: argparse.Namespace) -> int:
                 if not fig:
                     _note(args, f"prompt {b} {text!r}: no attention figure ({_no_figure_reason(result, i)})",
                           kind="warning")
+            if pages[b] and result.attention is not None and result.attention.words(i):
+                files.append(_explorer_page(out, f"{stems[b]}_explorer.html", args.force, result, i,
+                                            model=_model_name(args.weights)))
             say(f"{text!r} ({n} frames): " + ", ".join(str(f) for f in files))
     return 0
 
@@ -256,6 +313,9 @@ def _generate_keymotion(args: argparse.Namespace, prompts: list[str]) -> int:
     given with it. KeyMotion has no 7-part cross-attention, so no attention figure is drawn."""
     from salad_core.keymotion.pipeline import KeyMotionPipeline
 
+    if getattr(args, "html", False):
+        raise UserError("--html shows SALAD's 7-part cross-attention, which KeyMotion does not have; drop --html or "
+                        "--keymotion")
     if args.weights is not None:
         raise UserError(f"--weights {args.weights} names a SALAD pipeline; with --keymotion give the KeyMotion "
                         "folder as --keymotion DIR (or --keymotion alone for the shipped weights)")
@@ -490,6 +550,7 @@ _LABEL_PARTS: dict[str, Callable] = {
     "ShiftTemporal": lambda e, s, t: ("ShiftTemporal", [", ".join(e.parts), f"{e.frames:+d} frames"]),
     "ExampleBased": lambda e, s, t: ("Example", [f"seed={e.seed}"]),
     "Inpaint": lambda e, s, t: ("Inpaint", [_inpaint_region(e)]),
+    "MirrorTake": lambda e, s, t: ("MirrorTake", [e.parts]),
 }
 
 
@@ -607,8 +668,11 @@ def cmd_edit(args: argparse.Namespace) -> int:
     out = _check_out_dir(args.out, args.force)
     names = [name for b in ("source", "edited") for name in _motion_file_names(b, gif=False)]
     attention = bool(getattr(args, "attention", False))
+    html = bool(getattr(args, "html", False))
     figures = _edit_figure_names("", "source", edited=True) if attention else []
-    _outputs(out, names + ["source_vs_edited.gif"] + figures, args.force, write=False)
+    pages = [EDIT_PAGE] if html else []
+    _outputs(out, names + ["source_vs_edited.gif"] + figures + pages, args.force, write=False)
+    capture = _full_capture() if html else attention
     pipe = _load_pipeline(args.weights)
     _note_unknown_words(args, pipe, [args.source] + [args.target] * bool(args.target), ["source", "target"])
     guidance = _guidance(args, pipe)
@@ -616,11 +680,11 @@ def cmd_edit(args: argparse.Namespace) -> int:
     if features is not None:
         inv = _invert(pipe, features, args.source, args, method="fixed_point", guidance=guidance)
         result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet,
-                           capture_attention=attention)
+                           capture_attention=capture)
     else:
         result = pipe.edit(args.source, args.target, edits=specs, lengths=args.length, seed=args.seed,
                            guidance_scale=guidance, num_steps=args.steps, solver=args.solver,
-                           progress=not args.quiet, capture_attention=attention)
+                           progress=not args.quiet, capture_attention=capture)
     src, dst = result.source, result.edited
     n = src.lengths[0]
     files = _write_motion_files(out, "source", src.features[0, :n], src.joints[0], pipe.skeleton, force=args.force,
@@ -635,8 +699,27 @@ def cmd_edit(args: argparse.Namespace) -> int:
         files += figs
         if not figs:
             _note(args, f"no attention figure ({_no_figure_reason(dst, 0)})", kind="warning")
+    if html:
+        files += _edit_page(args, out, pages[0], src, dst, specs, label)
     print(f"{src.texts[0]!r} -> {dst.texts[0]!r} with {label}: " + ", ".join(str(f) for f in files))
     return 0
+
+
+#: The explorer page of ``salad edit --html``: the source and its edit side by side.
+EDIT_PAGE = "source_vs_edited_explorer.html"
+
+
+def _edit_page(args: argparse.Namespace, out: Path, name: str, src, dst, specs, label: str) -> list[Path]:
+    """``--html`` of an edit: the source (``src``) and the edited motion (``dst``, MotionOutputs with full
+    captures) side by side in one offline explorer page on one colour scale, the edit named (``label``) and
+    the page opening on the words the edit names. ``[]`` (with a warning) when a prompt has no word."""
+    lacking = [o for o in (src, dst) if o.attention is None or not o.attention.words(0)]
+    if lacking:
+        _note(args, f"no explorer page ({_no_figure_reason(lacking[0], 0)})", kind="warning")
+        return []
+    words = _edit_words(specs, src.attention, src.texts[0], dst.texts[0])
+    return [_explorer_page(out, name, args.force, src, 0, model=_model_name(args.weights), compare=dst, edit=label,
+                           label="source", words=words)]
 
 
 def _comparison_gif(out: Path, name: str, motions: list, skeleton, captions: list[tuple[str, str]],
@@ -721,10 +804,14 @@ def cmd_invert(args: argparse.Namespace) -> int:
     branches = ["reconstruction"] + (["edited"] if specs else [])
     gif_name = f"{stem}_source_vs_{branches[-1]}.gif"
     attention = bool(getattr(args, "attention", False))
+    html = bool(getattr(args, "html", False))
     figures = _edit_figure_names(f"{stem}_", "reconstruction", edited=bool(specs)) if attention else []
+    pages = [f"{stem}_source_vs_edited_explorer.html" if specs else f"{stem}_reconstruction_explorer.html"] \
+        if html else []
+    capture = _full_capture() if html else attention
     # refuse before any work: every file this run would write
     _outputs(out, [name for b in branches for name in _motion_file_names(f"{stem}_{b}", gif=False)]
-             + [f"{stem}_inversion.json"] + ([] if args.no_render else [gif_name]) + figures
+             + [f"{stem}_inversion.json"] + ([] if args.no_render else [gif_name]) + figures + pages
              + ([f"{stem}_input_features.npy"] if loaded.kind != "features" else []), args.force, write=False)
     if len(features) % sk.unit_length:
         n = len(features) - len(features) % sk.unit_length
@@ -761,14 +848,14 @@ def cmd_invert(args: argparse.Namespace) -> int:
     figure_branches = []
     if specs:     # the edit's source branch is the reconstruction: its maps are the source's
         result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet,
-                           capture_attention=attention)
+                           capture_attention=capture)
         dst = result.edited
         target, shown, label = dst.texts[0], dst.joints[0], edit_label(specs, inv.prompts[0], dst.texts[0])
         files += _write_motion_files(out, f"{stem}_edited", dst.features[0, :n], dst.joints[0], pipe.skeleton,
                                      force=args.force, gif=False, bvh=True)
         figure_branches = [("source", result.source), (label, dst)]
-    elif attention:   # no edit: the maps of the reconstruction from the inverted noise (one more sampling pass)
-        figure_branches = [("source", pipe.reconstruct(inv, capture_attention=True, progress=not args.quiet))]
+    elif attention or html:   # no edit: the maps of the reconstruction from the inverted noise (one more pass)
+        figure_branches = [("source", pipe.reconstruct(inv, capture_attention=capture, progress=not args.quiet))]
     if not args.no_render:
         from salad_core.recovery import recover_joints
 
@@ -780,6 +867,15 @@ def cmd_invert(args: argparse.Namespace) -> int:
         files += figs
         if not figs:
             _note(args, f"no attention figure ({_no_figure_reason(figure_branches[-1][1], 0)})", kind="warning")
+    if html and specs:
+        files += _edit_page(args, out, pages[0], figure_branches[0][1], figure_branches[1][1], specs, label)
+    elif html:
+        rec_maps = figure_branches[0][1]
+        if rec_maps.attention is not None and rec_maps.attention.words(0):
+            files.append(_explorer_page(out, pages[0], args.force, rec_maps, 0, model=_model_name(args.weights),
+                                        label="reconstruction"))
+        else:
+            _note(args, f"no explorer page ({_no_figure_reason(rec_maps, 0)})", kind="warning")
     report = {"motion": str(path), "prompt": inv.prompts[0], "frames": n, "input_frames": int(len(features)),
               "method": inv.method, "num_steps": inv.num_steps, "guidance_scale": inv.guidance_scale,
               "iterations": inv.iterations, "exact": inv.exact, "seconds": round(float(inv.seconds), 3),
@@ -833,6 +929,16 @@ def _normalize_arg(p: argparse.ArgumentParser) -> None:
                         "not compare across panels)")
 
 
+def _html_arg(p: argparse.ArgumentParser, files: str) -> None:
+    """``--html`` of generate, edit and invert: the offline attention explorer, ``files`` says which."""
+    p.add_argument("--html", action="store_true",
+                   help=f"also write the attention explorer as one self-contained HTML file that opens offline in any "
+                        f"current browser (no kernel, no server, no network): {files}. It plays the 3D skeleton "
+                        "(play, speed, frame scrubber; drag to turn), links the 7-part x frame heatmap of the chosen "
+                        "words to the bones' colours, and filters layers and denoising steps. Captures every step, "
+                        "layer and head (steps are averaged in groups only if the page would pass 8 MB)")
+
+
 def _resolve_sampler(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
     """Fill ``args.solver``/``args.steps`` from ``--preset`` (exclusive with them) or the defaults."""
     if args.preset is not None:
@@ -862,6 +968,7 @@ def add_parsers(sub) -> None:
                    help="do not capture and plot attention maps (by default one NN_<prompt>_attention.png per "
                         "prompt: a 7-part x frame heatmap per content word)")
     g.add_argument("--no-render", action="store_true", help="skip the GIF animation")
+    _html_arg(g, "NN_<prompt>_explorer.html per prompt")
     _normalize_arg(g)
     g.add_argument("--keymotion", nargs="?", const="shipped", default=None, metavar="DIR",
                    help="generate with KeyMotion, the second generator, instead of SALAD: the shipped weights, or "
@@ -878,6 +985,8 @@ def add_parsers(sub) -> None:
                     "(inverted first; see also salad invert)")
     ed.add_argument("--out", required=True, help="output folder (created if missing)")
     _edit_figure_args(ed, "")
+    _html_arg(ed, "source_vs_edited_explorer.html, the source and the edit side by side on one colour scale, the "
+                  "edit named (e.g. Reweight(high=-1)), opening on the words the edit names")
     _generation_args(ed, length=100)
 
     iv = _sub(sub, "invert", "invert a given motion to noise under its prompt: write its reconstruction and the "
@@ -902,6 +1011,8 @@ def add_parsers(sub) -> None:
     _bvh_args(iv)
     iv.add_argument("--no-render", action="store_true", help="skip the GIF")
     _edit_figure_args(iv, "STEM_", source="reconstruction")
+    _html_arg(iv, "STEM_source_vs_edited_explorer.html with an edit flag (the reconstruction and the edit side by "
+                  "side, the edit named), else STEM_reconstruction_explorer.html (one more sampling pass)")
     iv.add_argument("--weights", default=None, help="pipeline folder (default: the shipped weights)")
     iv.add_argument("--skeleton", default="humanml3d", help="skeleton of the motion: humanml3d (22 joints, "
                     "default) or kit (21)")
