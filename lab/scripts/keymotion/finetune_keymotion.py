@@ -67,7 +67,7 @@ LOSS_FLAGS = {"mmae": ("lambda_foot", "lambda_foot_vel"), "pst": (),
               "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact", "lambda_feet_height")}
 #: per stage: its other flags
 STAGE_FLAGS = {"mmae": ("roundtrip", "scratch", "fixed_keyframes"), "kf_vae": ("parts",), "pst": ("side_cue", "side_canonical", "latent_norm", "scratch",
-                                                                                      "kf_vae")}
+                                                                                      "kf_vae", "no_middle_skip")}
 #: the learning rate a stage gets when --lr is not given (the PST's probe of session 20 ran at 2e-4)
 DEFAULT_LR = {"mmae": 1e-4, "kf_vae": 1e-4, "pst": 2e-4}
 #: the weight a flag gets when not given
@@ -99,6 +99,8 @@ def main(argv=None, *, text_encoder=None) -> int:
     ap.add_argument("--side-canonical", action="store_const", const=True, default=None,
                     help="pst: train on side-canonical data (PSTConfig.side_canonical: items whose caption names "
                          "the left kind first are replaced by their mirror images)")
+    ap.add_argument("--no-middle-skip", action="store_const", const=True, default=None,
+                    help="pst, with --scratch: drop the degenerate middle skip pair (PSTConfig.middle_skip=False)")
     ap.add_argument("--latent-norm", action="store_const", const=True, default=None,
                     help="pst: latent normalisation (PSTConfig.latent_norm; with a source PST without it, --scratch)")
     ap.add_argument("--scratch", action="store_const", const=True, default=None,
@@ -175,7 +177,10 @@ def main(argv=None, *, text_encoder=None) -> int:
         train_cfg = replace(recipe.pst_train, **overrides)
         model_cfg = replace(recipe.pst_model, side_cue=bool(args.side_cue) or recipe.pst_model.side_cue,
                             latent_norm=bool(args.latent_norm) or recipe.pst_model.latent_norm,
-                            side_canonical=bool(args.side_canonical) or recipe.pst_model.side_canonical)
+                            side_canonical=bool(args.side_canonical) or recipe.pst_model.side_canonical,
+                            middle_skip=recipe.pst_model.middle_skip and not args.no_middle_skip)
+        if args.no_middle_skip and not args.scratch:
+            ap.error("--no-middle-skip needs --scratch: the source PST's weights have the middle pair's projection")
         vae_path = args.kf_vae if args.kf_vae is not None else source / "kf_vae"
         result = train_pst(args.data, args.out, vae_path, model_cfg, train_cfg, text_encoder=encoder,
                            resume=args.resume)
