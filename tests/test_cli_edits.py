@@ -183,3 +183,30 @@ def test_invert_writes_the_reconstructions_and_the_edits_attention_and_labels_th
     assert cli.main(["-q", "invert", str(take), "--prompt", "a person walks forward", "--attention", "--steps", "3",
                      "--no-render", "--out", str(out2)]) == 0
     assert sorted(p.name for p in out2.glob("*.png")) == ["take_reconstruction_attention.png"]
+
+
+def test_invert_mirror_take_all_gives_the_takes_mirror_image(tmp_path, sample_dir):
+    """``salad invert --mirror-take all``: the edited take is the mirror image of the take (the inversion of its
+    exact mirror image, regenerated), labelled as such; ``--no-ground`` is accepted; ``salad edit`` of a generated
+    motion refuses the flag with one line."""
+    from salad_core.motion import mirror_joints
+
+    take = tmp_path / "take.npy"
+    np.save(take, np.load(sample_dir / "new_joint_vecs" / "012314.npy")[:40])
+    out = tmp_path / "inv"
+    assert cli.main(["-q", "invert", str(take), "--prompt", "a person walks forward", "--mirror-take", "all",
+                     "--no-ground", "--steps", "3", "--no-render", "--out", str(out)]) == 0
+    rec = np.load(out / "take_reconstruction_joints.npy")
+    edited = np.load(out / "take_edited_joints.npy")
+    rel = lambda x: x - x[:, :1]                                    # root-aligned (the two VAE round trips differ)
+    to_mirror = np.linalg.norm(rel(edited) - rel(mirror_joints(rec)), axis=-1).mean()
+    to_take = np.linalg.norm(rel(edited) - rel(rec), axis=-1).mean()
+    assert to_mirror < 0.05 and to_mirror < 0.5 * to_take, (to_mirror, to_take)        # metres
+    assert json.loads((out / "take_inversion.json").read_text())["edit"]["label"] == "MirrorTake(all)"
+
+
+@needs_weights
+def test_mirror_take_of_a_generated_motion_is_a_one_line_error(tmp_path, capsys):
+    code = cli.main(["-q", "edit", SOURCE, "--mirror-take", "legs", "--length", "40", "--steps", "2",
+                     "--out", str(tmp_path / "x")])
+    assert code == 2 and "--mirror-take mirrors a given take" in capsys.readouterr().err

@@ -388,6 +388,13 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
                         "legs@40:80, @40:80, all@:40")
     p.add_argument("--inpaint-blend", type=int, default=1, metavar="N",
                    help="latent frames over which an in-painted span fades into the kept frames (default 1)")
+    p.add_argument("--mirror-take", choices=["legs", "arms", "limbs", "all"], default=None,
+                   help="for a given take (salad invert, salad edit --motion): flip these limbs' side through the "
+                        "inversion of the take's exact mirror image, keeping the other parts (MirrorTake + Mirror; "
+                        "inverts the mirror image too); 'all' gives the exact mirror image")
+    p.add_argument("--no-ground", action="store_true",
+                   help="do not lower an edited take whose pelvis rises more than 10 cm above the take's range "
+                        "(grounding is on for given takes unless the target asks to jump or climb)")
     p.add_argument("--window", default=None, metavar="START:STOP",
                    help="step window of --refine/--reweight/--mirror/--erase/--shift as fractions of the sampling "
                         "steps, 0 <= START < STOP <= 1 (0 = the noisiest step; default 0:1)")
@@ -461,10 +468,26 @@ def _edit_specs(args: argparse.Namespace, required: bool = True) -> list:
                                         or getattr(args, "shift", None)):
         raise UserError("--window applies to --refine, --reweight, --mirror, --erase and --shift; give one of them "
                         "(word swap is timed by TAU alone)")
-    if not specs and required:
+    if not specs and required and getattr(args, "mirror_take", None) is None:
         raise UserError("give at least one edit: --swap TAU, --refine, --reweight WORD=SCALE, --mirror PARTS, "
-                        "--erase WORDS, --shift WORDS=FRAMES, --example-seed SEED or --inpaint PARTS[@START:END]")
+                        "--mirror-take PARTS, --erase WORDS, --shift WORDS=FRAMES, --example-seed SEED or --inpaint "
+                        "PARTS[@START:END]")
     return specs
+
+
+def _take_edits(args: argparse.Namespace, pipe, inv, specs: list, quiet: bool) -> list:
+    """``specs`` plus, with ``--mirror-take PARTS``, :class:`~salad_core.attention.MirrorTake` and ``Mirror`` of those
+    parts built on the inversion of the take's mirror image (one more inversion)."""
+    parts = getattr(args, "mirror_take", None)
+    if parts is None:
+        return specs
+    from salad_core.attention import invert_mirror, mirror_take_edits
+
+    if getattr(args, "example_seed", None) is not None:
+        raise UserError("--mirror-take starts the limbs from the mirror image's noise; it cannot be combined with "
+                        "--example-seed (new noise)")
+    mirrored = invert_mirror(pipe, inv, progress=not quiet)
+    return specs + mirror_take_edits(parts, mirrored)
 
 
 def _word_value(flag: str, item: str, convert: Callable, form: str, bad: str):
@@ -679,9 +702,13 @@ def cmd_edit(args: argparse.Namespace) -> int:
     _say_guidance(args, guidance)
     if features is not None:
         inv = _invert(pipe, features, args.source, args, method="fixed_point", guidance=guidance)
+        specs = _take_edits(args, pipe, inv, specs, args.quiet)
         result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet,
-                           capture_attention=capture)
+                           capture_attention=capture, ground=not args.no_ground)
     else:
+        if args.mirror_take is not None:
+            raise UserError("--mirror-take mirrors a given take's limbs: give the take with --motion (or use "
+                            "salad invert); for a generated motion use --mirror PARTS")
         result = pipe.edit(args.source, args.target, edits=specs, lengths=args.length, seed=args.seed,
                            guidance_scale=guidance, num_steps=args.steps, solver=args.solver,
                            progress=not args.quiet, capture_attention=capture)
@@ -846,9 +873,10 @@ def cmd_invert(args: argparse.Namespace) -> int:
                                  force=args.force, gif=False, bvh=True)
     target, shown, label = None, rec.joints[0], "reconstruction"
     figure_branches = []
+    specs = _take_edits(args, pipe, inv, specs, args.quiet)
     if specs:     # the edit's source branch is the reconstruction: its maps are the source's
         result = pipe.edit(target=args.target, edits=specs, inversion=inv, progress=not args.quiet,
-                           capture_attention=capture)
+                           capture_attention=capture, ground=not args.no_ground)
         dst = result.edited
         target, shown, label = dst.texts[0], dst.joints[0], edit_label(specs, inv.prompts[0], dst.texts[0])
         files += _write_motion_files(out, f"{stem}_edited", dst.features[0, :n], dst.joints[0], pipe.skeleton,
