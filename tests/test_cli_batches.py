@@ -324,3 +324,18 @@ def test_an_ablation_index_of_the_wrong_shape_is_named(ablation_root):
     index.write_text(json.dumps({"vae_x": {"kind": "vae", "variant": "x", "stats": 5}}))
     with pytest.raises(TypeError, match="'stats' must be a non-empty path string relative to the folder"):
         load_ablation_vae("x", ablation_root)
+
+
+def test_a_long_keymotion_generate_says_how_many_and_how_long(tmp_path, capsys, monkeypatch):
+    """``salad generate --keymotion`` with more prompts than ``PROMPT_CHUNK`` says how many motions and roughly how
+    long after the first one, and writes the motions one call per prompt would (seed SEED + b)."""
+    monkeypatch.setattr(limits, "PROMPT_CHUNK", 2)
+    prompts = ["a person walks forward", "a man waves his right hand", "a person jumps"]
+    out = tmp_path / "km"
+    assert cli.main(["generate", *prompts, "--keymotion", "--length", "40", "--steps", "2", "--seed", "4",
+                     "--no-render", "--out", str(out)]) == 0
+    got = capsys.readouterr()
+    estimate = [line for line in got.out.splitlines() if line.startswith("generating")]
+    assert len(estimate) == 1 and re.fullmatch(r"generating 3 motions \(about \d+ (s|min) at [\d.]+ s each, "
+                                               r"measured on the first chunk\)", estimate[0]), got.out
+    assert len(list(out.glob("*_features.npy"))) == 3

@@ -334,9 +334,16 @@ def _generate_keymotion(args: argparse.Namespace, prompts: list[str]) -> int:
         _note(args, "KeyMotion has no cross-attention maps: no attention figure is drawn")
     guidance = _guidance(args, pipe)
     _say_guidance(args, guidance, source="keymotion.json")
-    for b, text in enumerate(prompts):
+    from salad_core import limits
+    from salad_core.cli._common import batch_chunks
+
+    many = len(prompts) > limits.PROMPT_CHUNK       # one motion at a time: say how many and roughly how long
+    order = (rows.start for rows in batch_chunks(len(prompts), 1, progress=not args.quiet)) if many \
+        else range(len(prompts))
+    for b in order:
+        text = prompts[b]
         result = pipe(text, lengths=args.length, seed=args.seed + b, guidance_scale=guidance,
-                      num_steps=args.steps, progress=not args.quiet)
+                      num_steps=args.steps, progress=not args.quiet and not many)
         n = result.lengths[0]
         files = _write_motion_files(out, stems[b], result.features[0, :n], result.joints[0], pipe.skeleton,
                                     force=args.force, gif=not args.no_render, bvh=True, title=f"KeyMotion: {text}")
