@@ -53,6 +53,7 @@ def render_frames(
     backend: str = "auto",
     bone_shape: str = "capsule",
     side_legend: bool = True,
+    supports: bool | None = None,
 ) -> np.ndarray:
     """Render every frame of one or several motions.
 
@@ -86,6 +87,9 @@ def render_frames(
         "right: leg arm" in the right's red and orange) in the bottom-left corner of every panel, where
         the motions are drawn in those colours (no ``colors``/``joint_colors``, not an overlay of several
         motions).
+    supports : bool, optional
+        Draw steps under feet planted above the floor (stairs: :func:`salad_viz.scene.support_boxes`);
+        default: with the floor, when a motion has such plants.
 
     The following camera keeps every joint of every frame in view (hands raised above the head and
     jumps included), at one distance for the whole motion.
@@ -123,7 +127,7 @@ def render_frames(
         for f in idx:
             if layout == "overlay" or len(motions) == 1:
                 img = keyed(r.render(motions, f, view=view, elevation=elevation, follow=follow, colors=colors,
-                                     joint_colors=jc, floor=floor, trajectory=trajectory))
+                                     joint_colors=jc, floor=floor, trajectory=trajectory, supports=supports))
                 if bands:
                     img = np.concatenate([bands[0], img], axis=0)
             else:
@@ -136,7 +140,7 @@ def render_frames(
                     panel = keyed(r.render(m, fk, camera=cam, view=view, elevation=elevation, follow=follow,
                                            colors=None if colors is None else [colors[k]],
                                            joint_colors=None if jc is None else jc[k], floor=floor,
-                                           trajectory=trajectory))
+                                           trajectory=trajectory, supports=supports))
                     if bands:
                         panel = np.concatenate([bands[k], panel], axis=0)
                     panels.append(panel)
@@ -283,6 +287,7 @@ def animate(
     backend: str = "auto",
     bone_shape: str = "capsule",
     side_legend: bool = True,
+    supports: bool | None = None,
 ) -> Path:
     """Animate one or several motions to a GIF or MP4 file.
 
@@ -304,7 +309,7 @@ def animate(
         One panel, in pixels.
     stride : int
         Render every ``stride``-th frame (smaller files, faster).
-    view, elevation, follow, colors, joint_colors, floor, trajectory, backend, bone_shape, side_legend
+    view, elevation, follow, colors, joint_colors, floor, trajectory, backend, bone_shape, side_legend, supports
         As in :func:`render_frames`.
 
     Returns
@@ -325,7 +330,7 @@ def animate(
     frames = render_frames(motions, skel, layout=layout, titles=titles, size=size, frames=range(0, n, stride),
                            view=view, elevation=elevation, follow=follow, colors=colors,
                            joint_colors=joint_colors, floor=floor, trajectory=trajectory, backend=backend,
-                           bone_shape=bone_shape, side_legend=side_legend)
+                           bone_shape=bone_shape, side_legend=side_legend, supports=supports)
     rate = (skel.fps if fps is None else float(fps)) / stride
     return write_video(frames, path, rate)
 

@@ -19,7 +19,7 @@ from salad_core.skeleton import Skeleton
 from ._style import BACKGROUND, FLOOR_DARK, FLOOR_LIGHT, caption_font, to_rgb, to_uint8
 from .camera import Camera, project_points
 from .meshes import FLOOR_TILE as _TILE
-from .scene import FrameScene
+from .scene import STEP_SIDE, STEP_TOP, FrameScene, support_faces
 
 __all__ = ["rasterize_skeleton", "rasterize_scene", "draw_title", "caption_band", "wrap_text", "hstack_images",
            "vstack_images"]
@@ -83,6 +83,32 @@ def _draw_floor(canvas: np.ndarray, cam: Camera, centre_xz, half_extent: float) 
     canvas[inside & ~dark] = FLOOR_LIGHT
 
 
+def _draw_steps(canvas: np.ndarray, cam: Camera, quads, size: tuple[int, int], s: int) -> None:
+    """The faces of the steps that face the camera, far first (top light, sides shaded), outlined."""
+    from skimage.draw import polygon, polygon_perimeter
+
+    eye = np.asarray(cam.position, dtype=np.float64)
+    light = np.array([0.3, 0.8, 0.5]) / np.linalg.norm([0.3, 0.8, 0.5])
+    faces = []
+    for quad in quads:
+        for k, (corners, nrm) in enumerate(support_faces(quad)):
+            if nrm @ (eye - corners.mean(axis=0)) <= 0:
+                continue
+            pix, depth = project_points(corners, cam, size)
+            if (depth <= _NEAR).any():
+                continue
+            base = np.asarray(STEP_TOP if k == 0 else STEP_SIDE)
+            col = base * (0.85 + 0.15 * max(float(nrm @ light), 0.0)) if k else base
+            faces.append((float(depth.mean()), pix, col))
+    faces.sort(key=lambda f: -f[0])
+    for _, pix, col in faces:
+        rr, cc = polygon(pix[:, 1], pix[:, 0], shape=canvas.shape[:2])
+        canvas[rr, cc] = col
+        for _ in range(max(1, s // 2)):
+            rr, cc = polygon_perimeter(pix[:, 1], pix[:, 0], shape=canvas.shape[:2], clip=False)
+            canvas[rr, cc] = col * _OUTLINE
+
+
 def rasterize_scene(scene: FrameScene, skeleton: Skeleton, size: tuple[int, int], *,
                     supersample: int = 2, background=BACKGROUND) -> np.ndarray:
     """Draw a :class:`~salad_viz.scene.FrameScene`.
@@ -114,6 +140,9 @@ def rasterize_scene(scene: FrameScene, skeleton: Skeleton, size: tuple[int, int]
         for a, b, da, db in zip(pix[:-1], pix[1:], depth[:-1], depth[1:]):
             if da > _NEAR and db > _NEAR:
                 _capsule2d(canvas, a, b, width, width, col)
+
+    if scene.supports:
+        _draw_steps(canvas, cam, scene.supports, big, s)
 
     # Painter's algorithm over every bone and joint of every motion (far first).
     prims = []

@@ -22,7 +22,7 @@ import numpy as np
 from salad_core.skeleton import Skeleton, get_skeleton
 
 from ._arrays import as_joints_list, check_frame, check_size
-from ._style import BACKGROUND, to_rgb
+from ._style import BACKGROUND, to_rgb, to_uint8
 from .camera import Camera
 from .meshes import BONE_SHAPES, body_mesh, floor_mesh
 from .raster import caption_band, draw_title, hstack_images, rasterize_scene, vstack_images
@@ -117,6 +117,29 @@ def _to_polydata(mesh):
     return poly
 
 
+def _steps_mesh(quads):
+    """The steps of a scene (:func:`salad_viz.scene.support_faces`) as one trimesh with face colours."""
+    import trimesh
+
+    from .scene import STEP_SIDE, STEP_TOP, support_faces
+
+    verts, faces, cols = [], [], []
+    for quad in quads:
+        for k, (corners, nrm) in enumerate(support_faces(quad)):
+            base = len(verts) * 4
+            verts.append(corners)
+            # wind the two triangles so that they face along the outward normal
+            tri = np.array([[0, 1, 2], [0, 2, 3]])
+            if np.cross(corners[1] - corners[0], corners[2] - corners[0]) @ nrm < 0:
+                tri = tri[:, ::-1]
+            faces.append(tri + base)
+            cols += [STEP_TOP if k == 0 else STEP_SIDE] * 2
+    rgb = to_uint8(np.asarray(cols))
+    rgba = np.concatenate([rgb, np.full((len(rgb), 1), 255, np.uint8)], axis=1)
+    return trimesh.Trimesh(vertices=np.concatenate(verts), faces=np.concatenate(faces), face_colors=rgba,
+                           process=False)
+
+
 class SkeletonRenderer:
     """Renders frames of skeleton scenes, keeping one off-screen pyvista window alive between calls.
 
@@ -181,7 +204,7 @@ class SkeletonRenderer:
     def render(self, joints, frame: int = 0, *, camera: Camera | None = None, view: str | float = "three_quarter",
                elevation: float | None = None, follow: bool = True, colors=None, joint_colors=None,
                floor: bool = True, trajectory: bool = True, bone_radius: float = 0.022,
-               joint_radius: float = 0.032, title: str | None = None) -> np.ndarray:
+               joint_radius: float = 0.032, title: str | None = None, supports: bool | None = None) -> np.ndarray:
         """One frame as an image; arguments as in :func:`render_skeleton`. A ``title`` goes in a white band
         above the scene (the scene gets the rest of the image), so it never covers the figure.
 
@@ -197,7 +220,7 @@ class SkeletonRenderer:
         scene = build_scene(motions, self.skeleton, frame, camera=camera, view=view, elevation=elevation,
                             follow=follow, aspect=w / hs, colors=colors, joint_colors=joint_colors,
                             trajectory=trajectory, floor=floor, bone_radius=bone_radius,
-                            joint_radius=joint_radius)
+                            joint_radius=joint_radius, supports=supports)
         img = self.render_scene(scene, size=(w, hs))
         return img if band is None else np.concatenate([band, img], axis=0)
 
@@ -240,6 +263,10 @@ class SkeletonRenderer:
                 self._floor = (key, _to_polydata(floor_mesh(scene.floor_centre, scene.floor_half_extent)))
             p.add_mesh(self._floor[1], scalars="rgba", rgb=True, lighting=False,
                        show_scalar_bar=False, name="floor", render=False)
+        if scene.supports:
+            p.add_mesh(_to_polydata(_steps_mesh(scene.supports)), scalars="rgba", rgb=True, ambient=0.45,
+                       diffuse=0.6, specular=0.0, smooth_shading=False, show_scalar_bar=False, name="steps",
+                       render=False)
         for k, (path, col) in enumerate(zip(scene.trajectories, scene.trajectory_colors)):
             if len(path) >= 2:
                 pts = path.copy()
@@ -282,6 +309,7 @@ def render_skeleton(
     joint_radius: float = 0.032,
     backend: str = "auto",
     title: str | None = None,
+    supports: bool | None = None,
 ) -> np.ndarray:
     """Render one frame of one or several motions.
 
@@ -313,6 +341,9 @@ def render_skeleton(
     backend : {"auto", "pyvista", "raster"}
         ``"auto"`` uses pyvista when off-screen OpenGL works, the rasteriser otherwise.
     title : str, optional
+    supports : bool, optional
+        Draw steps under feet planted above the floor (stairs, a box stepped onto:
+        :func:`salad_viz.scene.support_boxes`); default: with the floor, when a motion has such plants.
 
     Returns
     -------
@@ -321,7 +352,7 @@ def render_skeleton(
     with SkeletonRenderer(skeleton, size=size, backend=backend, bone_shape=bone_shape) as r:
         return r.render(joints, frame, camera=camera, view=view, elevation=elevation, follow=follow,
                         colors=colors, joint_colors=joint_colors, floor=floor, trajectory=trajectory,
-                        bone_radius=bone_radius, joint_radius=joint_radius, title=title)
+                        bone_radius=bone_radius, joint_radius=joint_radius, title=title, supports=supports)
 
 
 def select_keyframes(n_frames: int, count: int) -> np.ndarray:

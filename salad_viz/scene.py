@@ -1,8 +1,15 @@
 """What to draw for one frame, independent of the backend that draws it.
 
 :func:`build_scene` turns motions, colours and view options into a :class:`FrameScene` (poses,
-colours, trajectories, floor patch, camera). The pyvista renderer and the 2D rasteriser both draw
-a ``FrameScene``, which is why the two backends show the same view.
+colours, trajectories, floor patch, supports, camera). The pyvista renderer and the 2D rasteriser
+both draw a ``FrameScene``, which is why the two backends show the same view.
+
+Supports: a motion that leaves the floor level (climbing stairs, stepping onto a box) plants its
+feet above the floor; drawn over a flat floor it walks on air. :func:`support_boxes` finds the
+plants (a foot still for several frames, its sole more than 5 cm up, lower than the rest of the
+body) and puts a step under each, from the floor up to the sole. They are drawn by default only
+when a motion has such plants (and also touches the floor, so a motion that floats all along is
+not given a platform that hides it).
 """
 from __future__ import annotations
 
@@ -16,7 +23,8 @@ from salad_core.skeleton import Skeleton
 from ._style import TRAJECTORY, THEME_HUES, motion_bone_colors, to_rgb
 from .camera import Camera, fixed_camera, follow_camera
 
-__all__ = ["FrameScene", "build_scene", "frame_joint_colors"]
+__all__ = ["FrameScene", "build_scene", "frame_joint_colors", "support_boxes", "support_faces", "STEP_DEPTH",
+           "STEP_WIDTH", "STEP_TOP", "STEP_SIDE"]
 
 
 @dataclass(frozen=True)
@@ -33,6 +41,7 @@ class FrameScene:
     floor_half_extent: float               # half side of the floor patch in metres
     bone_radius: float                     # metres
     joint_radius: float                    # metres
+    supports: tuple[np.ndarray, ...] = ()  # per step (4, 3) corners of its top face; it reaches down to y = 0
 
 
 def frame_joint_colors(joint_colors, n_motions: int, lengths: Sequence[int], J: int, frame: int) -> list:
@@ -67,6 +76,116 @@ def frame_joint_colors(joint_colors, n_motions: int, lengths: Sequence[int], J: 
     return out
 
 
+#: Size (m) of a drawn step: along the foot and across it.
+STEP_DEPTH, STEP_WIDTH = 0.34, 0.56
+#: Colours of a step's top and of its sides.
+STEP_TOP, STEP_SIDE = (0.80, 0.71, 0.58), (0.60, 0.52, 0.42)
+#: Heights (m) of a foot's joints above the surface it stands on: the sole is this far below them
+#: (HumanML3D's flat foot: ankle 5.8 cm, toes 1.2 cm; a heel-up foot gives a lower ankle estimate).
+_ANKLE_REST, _TOE_REST = 0.058, 0.012
+
+
+def support_boxes(motion: np.ndarray, skeleton: Skeleton, *, fps: float | None = None, min_height: float = 0.05,
+                  max_speed: float = 0.3, min_frames: int = 4, floor_level: float = 0.03) -> list[np.ndarray]:
+    """Steps under the feet a motion plants above the floor.
+
+    A foot is planted where its ankle and toe joints move slower than ``max_speed`` (m/s) for at
+    least ``min_frames`` frames; its sole is the lower of (toe height - 1.2 cm) and (ankle height -
+    5.8 cm). A plant whose sole is more than ``min_height`` up gets a step if the foot carries the
+    body: it is below every joint but the feet (a lying body's raised feet are no plant), the pelvis
+    is more than 0.6 m above it, and the other foot does not stand lower through most of it (a knee
+    held up, a balance on one leg). The step is a box from the floor to the sole, :data:`STEP_DEPTH`
+    along the foot and :data:`STEP_WIDTH` across, centred under the foot. Steps at the same height within 15 cm of one already found are not repeated. A motion
+    whose soles never come within ``floor_level`` of the floor gets none.
+
+    Parameters
+    ----------
+    motion : ndarray (N, J, 3)
+        Joints in metres, +Y up, floor y = 0.
+    skeleton : Skeleton
+        Gives the foot joints (``fid_l``, ``fid_r``: ankle, toe) and the frame rate.
+
+    Returns
+    -------
+    list of ndarray (4, 3): the corners of each step's top face (counter-clockwise seen from above).
+    """
+    m = np.asarray(motion, dtype=np.float64)
+    if m.ndim != 3 or len(m) < min_frames:
+        return []
+    fps = float(fps or skeleton.fps or 20.0)
+    feet = [tuple(skeleton.fid_l), tuple(skeleton.fid_r)]
+    foot_joints = sorted({j for f in feet for j in f})
+    others = [j for j in range(m.shape[1]) if j not in foot_joints]
+    lowest_other = m[:, others, 1].min(axis=1)
+    soles, planted = [], []
+    for ankle, toe in feet:
+        sole = np.minimum(m[:, toe, 1] - _TOE_REST, m[:, ankle, 1] - _ANKLE_REST)
+        speed = np.zeros(len(m))
+        v = np.linalg.norm(np.diff(m[:, [ankle, toe]], axis=0), axis=-1).max(axis=1) * fps
+        speed[1:] = v
+        speed[0] = v[0]
+        soles.append(sole)
+        planted.append(speed < max_speed)
+    if min(float(s.min()) for s in soles) > floor_level:
+        return []                                           # never on the floor: nothing to stand it on
+    found: list[tuple[np.ndarray, float]] = []
+    quads: list[np.ndarray] = []
+    pelvis = m[:, 0, 1]
+    for k, ((ankle, toe), sole, still) in enumerate(zip(feet, soles, planted)):
+        other_sole, other_still = soles[1 - k], planted[1 - k]
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(np.int8), [0]])))
+        for a, b in zip(edges[::2], edges[1::2]):
+            if b - a < min_frames:
+                continue
+            h = float(np.median(sole[a:b]))
+            if h <= min_height:
+                continue
+            # the foot carries the body: below every joint but the feet, the leg under the pelvis, and
+            # the other foot not standing lower all the while (a knee held up, a balance on one leg)
+            below = np.median(m[a:b, [ankle, toe], 1].min(axis=1) - lowest_other[a:b]) < 0.0
+            under = np.median(pelvis[a:b] - sole[a:b]) > 0.6
+            held_up = np.mean(other_still[a:b] & (other_sole[a:b] < sole[a:b] - min_height)) > 0.8
+            if not (below and under) or held_up:
+                continue
+            centre = 0.5 * (m[a:b, ankle] + m[a:b, toe]).mean(axis=0)
+            if any(abs(h - h2) < 0.03 and np.hypot(*(centre - c2)[[0, 2]]) < 0.15 for c2, h2 in found):
+                continue
+            found.append((centre, h))
+            along = (m[a:b, toe] - m[a:b, ankle]).mean(axis=0) * np.array([1.0, 0.0, 1.0])
+            along = along / np.linalg.norm(along) if np.linalg.norm(along) > 1e-6 else np.array([0.0, 0.0, 1.0])
+            across = np.array([along[2], 0.0, -along[0]])
+            c = np.array([centre[0], h, centre[2]])
+            da, dc = 0.5 * STEP_DEPTH * along, 0.5 * STEP_WIDTH * across
+            quad = np.stack([c - da - dc, c + da - dc, c + da + dc, c - da + dc])
+            quads.append(quad if _ccw_from_above(quad) else quad[::-1].copy())
+    return quads
+
+
+def support_faces(quad: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The five faces of a step (its top and four sides down to y = 0) as ``(corners (4, 3), outward
+    normal)``, top first; the backends draw them (the bottom lies on the floor)."""
+    top = np.asarray(quad, dtype=np.float64)
+    bottom = top.copy()
+    bottom[:, 1] = 0.0
+    centre = 0.5 * (top.mean(axis=0) + bottom.mean(axis=0))
+    faces = [(top, np.array([0.0, 1.0, 0.0]))]
+    for i in range(4):
+        j = (i + 1) % 4
+        corners = np.stack([top[i], top[j], bottom[j], bottom[i]])
+        nrm = np.cross(top[j] - top[i], bottom[i] - top[i])
+        nrm /= np.linalg.norm(nrm) + 1e-12
+        if nrm @ (corners.mean(axis=0) - centre) < 0:
+            nrm = -nrm
+        faces.append((corners, nrm))
+    return faces
+
+
+def _ccw_from_above(quad: np.ndarray) -> bool:
+    x, z = quad[:, 0], quad[:, 2]
+    # counter-clockwise seen from +Y (looking down): the signed area in (z, x) is positive
+    return float(np.sum(z * np.roll(x, -1) - np.roll(z, -1) * x)) > 0.0
+
+
 def build_scene(
     motions: Sequence[np.ndarray],
     skeleton: Skeleton,
@@ -83,6 +202,7 @@ def build_scene(
     floor: bool = True,
     bone_radius: float = 0.022,
     joint_radius: float = 0.032,
+    supports: bool | None = None,
 ) -> FrameScene:
     """Assemble one frame of one or more validated motions.
 
@@ -105,6 +225,9 @@ def build_scene(
         parent->j takes joint j's colour too, so the whole limb shows the value.
     trajectory, floor : bool
         Draw the root paths / the checkerboard floor.
+    supports : bool, optional
+        Draw steps under feet planted above the floor (:func:`support_boxes`); default: with the
+        floor, wherever a motion has such plants.
     """
     n = len(motions)
     J = skeleton.num_joints
@@ -142,6 +265,10 @@ def build_scene(
             lo, hi = pts.min(axis=0), pts.max(axis=0)
             floor_centre = (float(0.5 * (lo[0] + hi[0])), float(0.5 * (lo[2] + hi[2])))
             half = float(np.clip(0.5 * max(hi[0] - lo[0], hi[2] - lo[2]) + 1.5, 2.0, 12.0))
+    steps: list[np.ndarray] = []
+    if supports or (supports is None and floor):
+        for m in motions:
+            steps += support_boxes(m, skeleton)
     return FrameScene(
         poses=poses,
         bone_colors=tuple(bone_out),
@@ -153,6 +280,7 @@ def build_scene(
         floor_half_extent=half,
         bone_radius=float(bone_radius),
         joint_radius=float(joint_radius),
+        supports=tuple(steps),
     )
 
 

@@ -13,7 +13,7 @@ def cmd_corpus(args: argparse.Namespace) -> int:
 
     if args.action == "build":
         summary = build_corpus(args.out, size=args.size, seed=args.seed, overwrite=args.force,
-                               progress=not args.quiet)
+                               progress=not args.quiet, general=args.with_general or 0)
         print(f"corpus written to {args.out}: " + ", ".join(f"{k}={v}" for k, v in summary.items()
                                                             if isinstance(v, (int, float, str))))
     else:
@@ -38,6 +38,22 @@ def add_parsers(sub) -> None:
                    help="build: how many motions (default: the full corpus, 4,000 plus mirrors)")
     c.add_argument("--seed", type=int, default=0, help="build: random seed (default 0)")
     c.add_argument("--force", action="store_true", help="write into a non-empty folder")
+    c.add_argument("--with-general", nargs="?", const="auto", default=None, type=_general_count, metavar="N",
+                   help="build: also write N captioned general-motion clips (lying, rolls, cartwheels, handstands, "
+                        "flips, kneeling, crawling, jumps, ...; G<id> and mirrors MG<id>) into the splits: corpus 2.8. "
+                        "Without N: half as many as --size's motions. Off by default (corpus 2.7)")
+
+
+def _general_count(value: str):
+    if value == "auto":
+        return "auto"
+    try:
+        n = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--with-general takes a number of motions (>= 20) or 'auto', got {value!r}")
+    if n < 20:
+        raise argparse.ArgumentTypeError(f"--with-general {n}: use at least 20 motions (the splits need them)")
+    return n
 
 
 COMMANDS: dict[str, Callable] = {"corpus": cmd_corpus}

@@ -12,6 +12,14 @@ Layout written by :func:`build_corpus` (``<id>`` = 6 digits, ``M<id>`` its mirro
 
 Every motion is generated from its own random stream ``(seed, index)``, so the files do not
 depend on the number of workers and two builds with the same seed are byte-identical.
+
+With ``general=N`` (``salad corpus build --with-general [N]``) the build also writes the first ``N``
+motions of the general-motion set (:func:`~.general.generate_general` with the same seed: the clips
+the general VAE set of that seed holds) with captions (:mod:`.general_language`), as ``G<id>`` and
+their mirrors ``MG<id>``, into the same folders and splits (each general motion keeps the split the
+general set gives it). Clips with nothing nameable whole are left out. Such a build is corpus
+:data:`GENERAL_CORPUS_VERSION` (2.8); a build without them stays :data:`GENERATOR_VERSION` (2.7),
+byte for byte.
 """
 from __future__ import annotations
 
@@ -36,8 +44,9 @@ from .language import Caption, mirror_caption, parse_prompt, render_captions
 from .primitives import PRIMITIVES, Action, primitive_parts
 from .parallel import run_jobs
 
-__all__ = ["build_corpus", "corpus_figures", "corpus_digest", "make_motion", "SIZES", "GENERATOR_VERSION", "SPLITS",
-           "npy_bytes", "write_motion", "split_indices", "split_ids"]
+__all__ = ["build_corpus", "corpus_figures", "corpus_digest", "make_motion", "make_general_captioned", "SIZES",
+           "GENERATOR_VERSION", "GENERAL_CORPUS_VERSION", "SPLITS", "npy_bytes", "write_motion", "split_indices",
+           "split_ids", "general_split_ids"]
 
 logger = logging.getLogger(__name__)
 
@@ -47,6 +56,9 @@ logger = logging.getLogger(__name__)
 #: the root height's spread: see :data:`.primitives.PRIMITIVES`), held hands re-solved nearest to
 #: the arm's own controls (:func:`.reach.nearest_controls`).
 GENERATOR_VERSION = "2.7"
+#: The version of a build with the captioned general-motion set (``build_corpus(general=N)``, N > 0):
+#: 2.7's action clips unchanged plus general clips with captions (issue 69).
+GENERAL_CORPUS_VERSION = "2.8"
 #: Motions (before mirroring) of each named size.
 SIZES = {"tiny": 200, "small": 1000, "default": 4000}
 #: Split fractions (HumanML3D's proportions).
@@ -112,6 +124,57 @@ def make_motion(seed: int, index: int) -> dict:
     return out
 
 
+def _general_annotation(name: str, rows: int, mode: str, steps: list, captions: list[Caption], mirrored: bool) -> dict:
+    caps = []
+    for cap in captions:
+        words = split_words(cap.text)
+        phrases = []
+        for st, (i0, i1) in zip(steps, cap.spans):
+            parts = st.parts
+            if mirrored:
+                parts = tuple(PART_NAMES[PART_MIRROR[PART_NAMES.index(p)]] for p in parts)
+            parts = [p for p in PART_NAMES if p in parts]
+            f0, f1 = min(st.frames[0], rows), min(st.frames[1], rows)
+            phrases.append({"text": " ".join(words[i0:i1]), "words": [i0, i1], "parts": parts, "frames": [f0, f1]})
+        caps.append({"caption": cap.text, "phrases": phrases})
+    return {"name": name, "num_frames": rows, "fps": int(FPS), "mode": mode, "captions": caps}
+
+
+def make_general_captioned(seed: int, index: int) -> dict:
+    """General motion ``index`` of ``seed`` (:func:`~.general.generate_general`) with captions, and its mirror.
+
+    Returns the files of ``G<id>`` and ``MG<id>`` as :func:`make_motion` does, plus ``"_meta"``
+    (mode, frames, captions, step actions); only ``"_meta"`` (``captions`` 0) when the clip has
+    nothing nameable (:func:`~.general_language.general_steps` is empty).
+    """
+    from .general import generate_general
+    from .general_language import general_steps, mirror_general_caption, render_general_captions
+
+    clip = generate_general(seed, index)
+    steps = general_steps(clip)
+    meta = {"mode": clip.mode, "frames": int(clip.num_frames - 1), "captions": 0,
+            "actions": [st.action for st in steps]}
+    if not steps:
+        return {"_meta": meta}
+    rng = np.random.default_rng([int(seed), int(index), 0xCA7])
+    n_caps = 4 if rng.random() < 0.3 else 3
+    captions = render_general_captions(steps, rng, n_caps)
+    name = f"G{index:06d}"
+    out = {}
+    for mirrored in (False, True):
+        joints = mirror_joints(clip.joints) if mirrored else clip.joints
+        feats = joints_to_features(joints)
+        rec = features_to_joints(feats).astype(np.float32)
+        caps = [mirror_general_caption(c) for c in captions] if mirrored else captions
+        key = ("M" + name) if mirrored else name
+        ann = _general_annotation(key, feats.shape[0], clip.mode, steps, caps, mirrored)
+        out[key] = {"new_joint_vecs": npy_bytes(feats), "new_joints": npy_bytes(rec), "texts": _texts(caps),
+                    "annotations": json.dumps(ann, separators=(",", ":")) + "\n"}
+    meta["captions"] = len(captions)
+    out["_meta"] = meta
+    return out
+
+
 def write_motion(root: Path, motion: dict) -> None:
     """Write one :func:`make_motion` result (the clip and its mirror) into the corpus layout under ``root``."""
     for key, files in motion.items():
@@ -126,6 +189,13 @@ def write_motion(root: Path, motion: dict) -> None:
 def _job(args: tuple[int, int, str]) -> dict:
     seed, index, root = args
     motion = make_motion(seed, index)
+    write_motion(Path(root), motion)
+    return motion["_meta"]
+
+
+def _general_job(args: tuple[int, int, str]) -> dict:
+    seed, index, root = args
+    motion = make_general_captioned(seed, index)
     write_motion(Path(root), motion)
     return motion["_meta"]
 
@@ -179,8 +249,31 @@ def split_ids(n: int, seed: int) -> dict[str, list[str]]:
             for name, ids in split_indices(n, seed).items()}
 
 
+def general_split_ids(n: int, seed: int, keep=None) -> dict[str, list[str]]:
+    """Ids of the captioned general clips of each split: ``G000123`` with its mirror ``MG000123``, the
+    split the general-motion set of ``seed`` gives motion 123 (salt 104729); ``keep``: the indices
+    with captions (default all)."""
+    keep = None if keep is None else set(keep)
+    return {name: sorted([f"G{i:06d}" for i in ids if keep is None or i in keep]
+                         + [f"MG{i:06d}" for i in ids if keep is None or i in keep])
+            for name, ids in split_indices(n, seed, salt=104729).items()}
+
+
+def _resolve_general(general, n: int) -> int:
+    if general is None or general is False:
+        return 0
+    if general is True or general == "auto":
+        return n // 2
+    if isinstance(general, (int, np.integer)) and not isinstance(general, bool) and general >= 0:
+        if 0 < general < 20:
+            raise ValueError(f"general={general} motions is too small for the splits; use 0 or at least 20")
+        return int(general)
+    raise ValueError(f"general={general!r}; allowed: 0 (none), 'auto' (half the corpus's motions) or an int >= 20")
+
+
 def build_corpus(out_dir: str | os.PathLike, size: str | int = "default", seed: int = 0,
-                 overwrite: bool = False, progress: bool = True, workers: int | None = None) -> dict:
+                 overwrite: bool = False, progress: bool = True, workers: int | None = None,
+                 general: int | str = 0) -> dict:
     """Generate the procedural corpus into ``out_dir`` (HumanML3D layout, see module doc).
 
     Parameters
@@ -197,12 +290,17 @@ def build_corpus(out_dir: str | os.PathLike, size: str | int = "default", seed: 
         Show a tqdm progress bar.
     workers : int, optional
         Processes to generate with (default: 1 for up to 400 motions, else up to 2 CPUs).
+    general : int or "auto"
+        Also write the first ``general`` motions of the general-motion set with captions (``G<id>``,
+        ``MG<id>``; see the module doc); "auto": half as many as ``size``. 0 (default): the action
+        corpus alone, version :data:`GENERATOR_VERSION`; otherwise version :data:`GENERAL_CORPUS_VERSION`.
 
     Returns
     -------
     dict: the summary also written to ``corpus.json``.
     """
     n = _resolve_size(size)
+    n_general = _resolve_general(general, n)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed={seed!r} must be a non-negative int")
     out = Path(out_dir)
@@ -211,8 +309,15 @@ def build_corpus(out_dir: str | os.PathLike, size: str | int = "default", seed: 
         workers = 1 if n <= 400 else max(1, min(2, os.cpu_count() or 1))
     jobs = [(int(seed), i, str(out)) for i in range(n)]
     metas: list[dict] = run_jobs(_job, jobs, workers, desc="procedural corpus", chunksize=8, progress=progress)
-
     splits = split_ids(n, int(seed))
+    general_metas: list[dict] = []
+    if n_general:
+        jobs = [(int(seed), i, str(out)) for i in range(n_general)]
+        general_metas = run_jobs(_general_job, jobs, workers, desc="captioned general motion", chunksize=8,
+                                 progress=progress)
+        kept_idx = [i for i, m in enumerate(general_metas) if m["captions"]]
+        for name, ids in general_split_ids(n_general, int(seed), kept_idx).items():
+            splits[name] = splits[name] + ids
     for name, ids in splits.items():
         (out / f"{name}.txt").write_text("\n".join(ids) + "\n", encoding="utf-8")
     all_ids = sorted(i for ids in splits.values() for i in ids)
@@ -226,7 +331,7 @@ def build_corpus(out_dir: str | os.PathLike, size: str | int = "default", seed: 
     kinds = Counter(k for m in metas for k in m["kinds"])
     summary = {
         "generator": "salad_core.data.procedural",
-        "version": GENERATOR_VERSION,
+        "version": GENERAL_CORPUS_VERSION if n_general else GENERATOR_VERSION,
         "seed": int(seed),
         "size": size if isinstance(size, str) else int(size),
         "skeleton": "humanml3d",
@@ -239,6 +344,22 @@ def build_corpus(out_dir: str | os.PathLike, size: str | int = "default", seed: 
                    "min": int(frames.min()), "max": int(frames.max())},
         "primitives": {k: kinds.get(k, 0) for k in PRIMITIVES},
     }
+    if n_general:
+        from .general_build import GENERAL_VERSION
+
+        kept = [m for m in general_metas if m["captions"]]
+        g_frames = np.array([m["frames"] for m in kept]) if kept else np.zeros(1)
+        summary["general"] = {
+            "generator": "salad_core.data.procedural.general", "version": GENERAL_VERSION,
+            "motions": n_general, "captioned": len(kept), "clips": 2 * len(kept),
+            "captions": int(2 * sum(m["captions"] for m in kept)),
+            "frames": {"total": int(2 * g_frames.sum()), "mean": round(float(g_frames.mean()), 2)},
+            "modes": dict(sorted(Counter(m["mode"] for m in kept).items())),
+            "uncaptioned_modes": dict(sorted(Counter(m["mode"] for m in general_metas if not m["captions"]).items())),
+            "actions": dict(sorted(Counter(a for m in kept for a in m["actions"]).items())),
+        }
+        summary["clips"] += 2 * len(kept)
+        summary["captions"] += summary["general"]["captions"]
     (out / "corpus.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     logger.info("procedural corpus: %d clips (%d motions + mirrors) in %s", 2 * n, n, out)
     return summary
@@ -307,7 +428,12 @@ def corpus_figures(root: str | os.PathLike, reference: str | os.PathLike | None 
         speeds = part_speeds(joints, sk)
         for cap in ann["captions"]:
             n_caps += 1
-            n_parsed += parse_prompt(cap["caption"]) is not None
+            if mid.lstrip("M").startswith("G"):                # a captioned general clip (corpus 2.8)
+                from .general_language import parse_general_prompt
+
+                n_parsed += parse_general_prompt(cap["caption"]) is not None
+            else:
+                n_parsed += parse_prompt(cap["caption"]) is not None
             sec = []
             for ph in cap["phrases"]:
                 if ph["text"] not in secondary_cache:

@@ -22,6 +22,10 @@ the space of poses and root paths instead, for VAE training only (no captions):
 Clips are 20 fps, 41-197 joint frames (40-196 feature rows, HumanML3D's range), on the HumanML3D
 skeleton with its exact target bone lengths, nothing below the floor. :func:`generate_general`
 is a pure function of ``(seed, index)``.
+
+Every clip records the plan it followed (:attr:`GeneralClip.events`, see :data:`EVENTS`): the
+captions of the general set (:mod:`.general_language`) are made from it. Recording takes no random
+draw, so the clips are the same as before it was recorded (general set 1.1).
 """
 from __future__ import annotations
 
@@ -34,12 +38,33 @@ from .general_body import DOF_INDEX, DOFS, forward_kinematics, limits_array, res
 from .general_root import intervals, plant_feet, solve_root
 from .kinematics import FPS
 
-__all__ = ["MODES", "GeneralConfig", "GeneralClip", "generate_general", "sample_general", "smooth_track",
-           "POSTURES"]
+__all__ = ["MODES", "GeneralConfig", "GeneralClip", "GeneralEvent", "generate_general", "sample_general",
+           "smooth_track", "POSTURES", "EVENTS"]
 
 #: Modes and their default shares. Upright movement and locomotion dominate real capture, so
 #: they get half; the rest buys coverage the captioned corpus lacks (floor, inversions, flight).
 MODES: dict[str, float] = {"free": 0.22, "locomotion": 0.26, "jump": 0.14, "floor": 0.24, "acrobatic": 0.14}
+
+#: The events a clip's plan records (:class:`GeneralEvent` actions) and what their ``info`` holds.
+EVENTS: dict[str, str] = {
+    "free": "free mode, the whole plan: postures (the key poses' posture info) and times (their frames)",
+    "walk": "a gait key of locomotion, walking: direction (deg, 0 forwards, +90 to the left, 180 backwards), "
+            "amplitude (deg of leg swing), key (frame)",
+    "run": "a gait key of locomotion, running: as walk",
+    "stand": "a gait key of locomotion with no leg swing (a stop): as walk",
+    "posture": "floor work, the move from one key posture to the next: from, to (posture info: posture name, "
+               "and e.g. knee / front 'l' or 'r', high, twist_sign, lean_back, arms_under)",
+    "crawl_swing": "floor work, frames with swinging limbs on hands and knees: weight, sign, swing (deg)",
+    "jump": "crouch, take-off, flight, landing: flight (frames), air (tuck / star / split / plain), spin (deg, > 0 "
+            "to the left), distance (m), direction (deg, as walk), flip 0",
+    "flip": "a jump with a somersault: as jump, flip (deg, > 0 forwards)",
+    "start": "acrobatics, the posture the plan starts in (an instant)",
+    "roll": "a forward (sign > 0) or backward roll through a tuck",
+    "logroll": "lying down (from lie, a frame) and rolling about the long axis: sign (> 0 to the left), turn (deg)",
+    "cartwheel": "a cartwheel: sign (> 0 towards the left)",
+    "handstand": "down to the hands, up into a handstand (up: first and last handstand key frames), down "
+                 "(walkover: on the other side) and up to standing",
+}
 
 _LO, _HI = limits_array()
 _D = len(DOFS)
@@ -76,14 +101,39 @@ class GeneralConfig:
             raise ValueError(f"GeneralConfig.modes weights must be finite, >= 0 and not all 0, got {self.modes}")
 
 
+@dataclass(frozen=True)
+class GeneralEvent:
+    """One thing the generator made the body do, on the clip's timeline (the plan; see :data:`EVENTS`).
+
+    ``frames`` is the joint-frame interval ``[f0, f1)`` inside the clip; ``planned`` the interval
+    the plan gave it before the clip's window cropped it (it may reach before frame 0 or after the
+    last frame: then the clip shows only part of it, ``whole`` is False). ``info`` holds what the
+    event needs to be named (postures, sides as ``"l"`` / ``"r"``, directions, turns).
+    """
+
+    action: str
+    frames: tuple[int, int]
+    planned: tuple[int, int]
+    info: dict = field(default_factory=dict, hash=False, compare=False)
+
+    @property
+    def whole(self) -> bool:
+        return self.planned == self.frames
+
+
 @dataclass
 class GeneralClip:
-    """A generated motion: joints ``(N, 22, 3)`` metres (+Y up, floor y = 0), 20 fps."""
+    """A generated motion: joints ``(N, 22, 3)`` metres (+Y up, floor y = 0), 20 fps.
+
+    ``events`` is the plan the generator followed (:class:`GeneralEvent` s in time order): the
+    ground truth of :mod:`.general_language`'s captions.
+    """
 
     joints: np.ndarray
     mode: str
     dofs: np.ndarray            # (N, D) joint angles (radians) the joints were built from
     flight: np.ndarray          # (N,) bool, frames in the air
+    events: tuple[GeneralEvent, ...] = ()
 
     @property
     def num_frames(self) -> int:
@@ -164,12 +214,18 @@ def _leg(d, s, thigh_world, knee, abd=None, rot=None):
         _set(d, f"{s}_hip_rot", rot)
 
 
-def _posture(name: str, rng: np.random.Generator, calm: float) -> np.ndarray:
-    """A key pose of a named posture (see :data:`POSTURES`): root pitch/roll/twist and limbs."""
+def _posture(name: str, rng: np.random.Generator, calm: float, info: dict | None = None) -> np.ndarray:
+    """A key pose of a named posture (see :data:`POSTURES`): root pitch/roll/twist and limbs.
+
+    ``info``, if given, receives what the draw chose that a caption may name (which knee is
+    down, which leg kicks, ...; sides as ``"l"`` / ``"r"``). It takes no random draw.
+    """
     u = rng.uniform
     d = _free_pose(rng, calm)
     sides = ("l", "r") if rng.random() < 0.5 else ("r", "l")
     a, b = sides
+    info = {} if info is None else info
+    info["posture"] = name
     if name == "stand":
         d[_I["pitch"]] = _deg(rng, -8, 12)
         d[_I["roll"]] = _deg(rng, -6, 6)
@@ -191,6 +247,7 @@ def _posture(name: str, rng: np.random.Generator, calm: float) -> np.ndarray:
             _leg(d, s, u(0.5, 0.75) * knee, knee + u(-8, 8), u(5, 35), u(10, 40))
             _flat_foot(d, s, u(-5, 15))
     elif name == "lunge":
+        info["front"] = a
         d[_I["pitch"]] = _deg(rng, -5, 20)
         _leg(d, a, u(40, 90), u(50, 110), u(0, 15))
         _leg(d, b, u(-35, -10), u(0, 70), u(0, 15))
@@ -201,6 +258,7 @@ def _posture(name: str, rng: np.random.Generator, calm: float) -> np.ndarray:
         _leg(d, a, u(-8, 10), u(0, 25), u(0, 10))
         _flat_foot(d, a, 0.0)
         kind = rng.integers(3)
+        info["leg"], info["kick"] = b, ("front", "side", "back")[int(kind)]
         if kind == 0:
             _leg(d, b, u(30, 110), u(0, 130), u(-10, 20))
         elif kind == 1:
@@ -219,10 +277,12 @@ def _posture(name: str, rng: np.random.Generator, calm: float) -> np.ndarray:
     elif name == "kneel":                          # upright kneeling or sitting on the heels
         d[_I["pitch"]] = _deg(rng, -10, 30)
         high = rng.random() < 0.5
+        info["high"] = bool(high)
         for s in "lr":
             _leg(d, s, u(-10, 25) if high else u(40, 75), u(80, 110) if high else u(135, 150), u(0, 15))
             _set(d, f"{s}_ankle", u(30, 50))
     elif name == "kneel1":                         # one knee down
+        info["knee"], info["front"] = b, a
         d[_I["pitch"]] = _deg(rng, -5, 25)
         _leg(d, a, u(70, 100), u(80, 110), u(0, 15))
         _flat_foot(d, a, 0.0)
@@ -232,19 +292,24 @@ def _posture(name: str, rng: np.random.Generator, calm: float) -> np.ndarray:
         d[_I["pitch"]] = _deg(rng, -35, 10)
         for s in "lr":
             _leg(d, s, u(55, 100), u(0, 140), u(0, 45), u(-10, 40))
-        if rng.random() < 0.5:                     # leaning back on the hands
+        info["lean_back"] = bool(rng.random() < 0.5)
+        if info["lean_back"]:                      # leaning back on the hands
             for s in "lr":
                 _set(d, f"{s}_sh_flex", u(-60, -35))
                 _set(d, f"{s}_sh_abd", u(5, 30))
                 _set(d, f"{s}_elbow", u(0, 20))
     elif name in ("supine", "prone", "side"):
         d[_I["pitch"]] = _deg(rng, -100, -80)      # on the back; twist turns the body over
-        base = {"supine": 0.0, "side": 90.0 * rng.choice([-1, 1]), "prone": 180.0}[name]
+        sgn = rng.choice([-1, 1])                  # drawn for every lying posture (the draws stay in step)
+        if name == "side":
+            info["twist_sign"] = int(sgn)          # +1: twisted +90 deg from the back
+        base = {"supine": 0.0, "side": 90.0 * sgn, "prone": 180.0}[name]
         d[_I["twist"]] = np.radians(base + u(-15, 15))
         for s in "lr":
             _set(d, f"{s}_hip_flex", u(-15, 90) if name != "prone" else u(-20, 40))
             _set(d, f"{s}_knee", u(0, 120))
         if name == "prone" and rng.random() < 0.4:  # push-up: arms point down from the chest
+            info["arms_under"] = True
             for s in "lr":
                 _set(d, f"{s}_sh_flex", u(60, 90))
                 _set(d, f"{s}_sh_abd", u(0, 25))
@@ -334,11 +399,17 @@ class _Plan:
         self.times: list[float] = []
         self.poses: list[np.ndarray] = []
         self.flights: list[tuple[float, float, np.ndarray]] = []   # (t0, t1, push in the heading frame)
+        self.events: list[tuple[str, float, float, dict]] = []     # (action, t0, t1, info): what is done when
 
-    def key(self, time: float, pose: np.ndarray, spin: tuple[str, ...] = ()) -> None:
+    def event(self, action: str, t0: float, t1: float, **info) -> None:
+        """Record what the body does from ``t0`` to ``t1`` (plan seconds); no random draw."""
+        self.events.append((action, float(t0), float(t1), info))
+
+    def key(self, time: float, pose: np.ndarray, spin: tuple[str, ...] = ()) -> float:
         """Add a key pose. Its pitch, roll and twist move by whole turns to the nearest equivalent
         of the previous key's, so a body that has rolled or flipped stays wound up instead of
-        spinning back; the angles named in ``spin`` are being turned on purpose and are kept."""
+        spinning back; the angles named in ``spin`` are being turned on purpose and are kept.
+        Returns the key's time (moved 0.05 s past the previous key if it was not after it)."""
         pose = np.asarray(pose, dtype=np.float64).copy()
         if self.times and time <= self.times[-1] + 1e-3:
             time = self.times[-1] + 0.05
@@ -348,6 +419,7 @@ class _Plan:
                 pose[i] += 2 * np.pi * np.round((self.poses[-1][i] - pose[i]) / (2 * np.pi))
         self.times.append(float(time))
         self.poses.append(pose)
+        return float(time)
 
     @property
     def last(self) -> np.ndarray:
@@ -368,14 +440,21 @@ def _mode_free(p: _Plan) -> None:
     names, w = list(weights), np.array(list(weights.values()))
     p.key(0.0, _posture("stand", rng, calm))
     tempo = rng.uniform(0.5, 1.6)
+    postures: list[dict] = [{"posture": "stand"}]
     while t < p.duration:
         t += rng.uniform(0.25, 1.3) * tempo
         name = names[rng.choice(len(names), p=w / w.sum())]
-        p.key(t, p.heading_walk(_posture(name, rng, calm), 100.0 if rng.random() < 0.3 else 25.0))
+        postures.append({})
+        p.key(t, p.heading_walk(_posture(name, rng, calm, postures[-1]), 100.0 if rng.random() < 0.3 else 25.0))
+    p.event("free", 0.0, p.times[-1], postures=postures, times=list(p.times))
 
 
-def _gait_overlay(t: np.ndarray, dofs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Legs (and arm swing) of walking / running over ``dofs``; returns the flight mask."""
+def _gait_overlay(t: np.ndarray, dofs: np.ndarray, rng: np.random.Generator, record: list | None = None) -> np.ndarray:
+    """Legs (and arm swing) of walking / running over ``dofs``; returns the flight mask.
+
+    ``record`` (a list) receives one ``("walk" | "run" | "stand", t0, t1, info)`` per gait key, over
+    the clip seconds nearest that key (``info``: ``direction`` in degrees, 0 forwards, +90 to the
+    left, 180 backwards; ``amplitude`` of the leg swing in degrees; ``key`` the key's time)."""
     n = len(t)
     dur = t[-1] + 1e-9
     kt = np.linspace(0.0, dur, int(rng.integers(2, 6)))
@@ -388,6 +467,12 @@ def _gait_overlay(t: np.ndarray, dofs: np.ndarray, rng: np.random.Generator) -> 
     dirs = rng.choice([0.0, 0.0, 0.0, 180.0, 90.0, -90.0, 45.0, -45.0, 135.0, -135.0], len(kt))
     if rng.random() < 0.5:
         dirs[:] = dirs[0]
+    if record is not None:
+        bounds = np.concatenate([[0.0], 0.5 * (kt[1:] + kt[:-1]), [dur]])
+        for k in range(len(kt)):
+            gait = "stand" if amp[k] == 0.0 else ("run" if run[k] else "walk")
+            record.append((gait, float(bounds[k]), float(bounds[k + 1]),
+                           {"direction": float(dirs[k]), "amplitude": float(amp[k]), "key": float(kt[k])}))
     c = smooth_track(t, kt, cadence)
     a = np.radians(smooth_track(t, kt, amp))
     sf = smooth_track(t, kt, stance)
@@ -459,8 +544,11 @@ def _mode_locomotion(p: _Plan) -> None:
 
 
 def _jump(p: _Plan, t: float, calm: float, flip: float = 0.0) -> float:
-    """Crouch, take off, fly, land, recover from time ``t``; returns the end time."""
+    """Crouch, take off, fly, land, recover from time ``t``; returns the end time.
+
+    Records a ``"jump"`` event (or ``"flip"`` with ``flip``) from the crouch to the recovery."""
     rng, u = p.rng, p.rng.uniform
+    t_start = t
     crouch = _posture("squat", rng, calm)
     crouch[_I["pitch"]] = np.radians(u(15, 40))
     knee = u(60, 110)
@@ -501,6 +589,10 @@ def _jump(p: _Plan, t: float, calm: float, flip: float = 0.0) -> float:
     dist = u(0.0, 1.8) if not flip else u(0.0, 0.5)
     ang = np.radians(rng.choice([0.0, 0.0, 180.0, 90.0, -90.0, 45.0, -45.0]))
     p.flights.append((t, t + t_fly, np.array([np.sin(ang), np.cos(ang)]) * dist / t_fly))
+    air_name = "tuck" if (flip or air_kind == 0) else ("star" if air_kind == 1 else ("split" if air_kind == 2 else
+                                                                                     "plain"))
+    jump_info = {"flight": (float(t), float(t + t_fly)), "air": air_name, "spin": float(np.degrees(spin)),
+                 "distance": float(dist), "direction": float(np.degrees(ang)), "flip": float(np.degrees(flip))}
     t += t_fly
     absorb = _posture("squat", rng, calm)
     absorb[_I["heading"]] = land[_I["heading"]]
@@ -516,6 +608,7 @@ def _jump(p: _Plan, t: float, calm: float, flip: float = 0.0) -> float:
     rest[_I["pitch"]] = absorb[_I["pitch"]] - np.radians(u(15, 45))
     t += u(0.3, 0.7)
     p.key(t, rest)
+    p.event("flip" if flip else "jump", t_start, t, **jump_info)
     return t
 
 
@@ -530,14 +623,22 @@ def _mode_jump(p: _Plan) -> None:
         t += rng.uniform(0.0, 0.6)
 
 
-def _crawl_overlay(t: np.ndarray, dofs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Alternating diagonal limb swings wherever the body is on hands and knees."""
+def _crawl_overlay(t: np.ndarray, dofs: np.ndarray, rng: np.random.Generator, record: list | None = None) -> np.ndarray:
+    """Alternating diagonal limb swings wherever the body is on hands and knees.
+
+    ``record`` (a list) receives ``("crawl_swing", t0, t1, info)`` per run of frames with swinging
+    limbs (``info``: ``weight`` the largest share of the full swing, ``sign`` of the swing)."""
     horizontal = np.clip((np.cos(dofs[:, _I["pitch"]] - np.pi / 2) - 0.85) / 0.15, 0.0, 1.0)
     horizontal *= (dofs[:, _I["l_knee"]] > np.radians(60)) & (np.abs(np.cos(dofs[:, _I["twist"]])) > 0.9)
     if not horizontal.any():
         return np.zeros(len(t), dtype=bool)
     phase = 2 * np.pi * (rng.uniform(0.5, 1.2) * t + rng.random())
-    amp = np.radians(rng.uniform(8, 20)) * horizontal * rng.choice([1.0, -1.0])
+    swing, sign = rng.uniform(8, 20), rng.choice([1.0, -1.0])
+    amp = np.radians(swing) * horizontal * sign
+    if record is not None:
+        for i0, i1 in intervals(horizontal > 0):
+            record.append(("crawl_swing", float(t[i0]), float(t[i1 - 1]) + 1.0 / FPS,
+                           {"weight": float(horizontal[i0:i1].max()), "sign": float(sign), "swing": float(swing)}))
     for k, s in enumerate("lr"):
         ph = phase + np.pi * k
         dofs[:, _I[f"{s}_hip_flex"]] += amp * np.sin(ph)
@@ -551,25 +652,32 @@ def _mode_floor(p: _Plan) -> None:
     rng = p.rng
     calm = rng.uniform(0.2, 0.9)
     name = rng.choice(list(_FLOOR_NEXT)) if rng.random() < 0.6 else "stand"
-    p.key(0.0, _posture(str(name), rng, calm))
+    info: dict = {}
+    t_prev = p.key(0.0, _posture(str(name), rng, calm, info))
     t = 0.0
     while t < p.duration:
         if rng.random() < 0.55:
             name = rng.choice(_FLOOR_NEXT[str(name)])
         t += rng.uniform(0.6, 1.8)
-        pose = p.heading_walk(_posture(str(name), rng, calm), 40.0)
-        p.key(t, _closest_turn(p.last, pose))
+        nxt: dict = {}
+        pose = p.heading_walk(_posture(str(name), rng, calm, nxt), 40.0)
+        t_key = p.key(t, _closest_turn(p.last, pose))
+        p.event("posture", t_prev, t_key, **{"from": info, "to": nxt})   # the move from one key posture to the next
+        info, t_prev = nxt, t_key
     p.overlay = _crawl_overlay
 
 
 def _mode_acrobatic(p: _Plan) -> None:
     rng, u = p.rng, p.rng.uniform
     calm = rng.uniform(0.3, 0.9)
-    p.key(0.0, _posture(str(rng.choice(["stand", "squat", "supine", "stand"])), rng, calm))
+    first = str(rng.choice(["stand", "squat", "supine", "stand"]))
+    p.key(0.0, _posture(first, rng, calm))
+    p.event("start", 0.0, 0.0, posture=first)
     t = 0.0
     while t < p.duration:
         kind = rng.choice(["roll", "logroll", "cartwheel", "handstand", "flip"], p=[0.28, 0.14, 0.26, 0.2, 0.12])
         h = p.last[_I["heading"]]
+        t_start = t
         if kind == "flip":
             t = _jump(p, t, calm, np.radians(rng.choice([-360.0, 360.0])))
             continue
@@ -590,7 +698,8 @@ def _mode_acrobatic(p: _Plan) -> None:
             end[_I["heading"]] = h
             end[_I["pitch"]] = pitch0 + sgn * 2 * np.pi
             t += u(0.3, 0.5)
-            p.key(t, end, spin=("pitch",))
+            t = p.key(t, end, spin=("pitch",))
+            p.event("roll", t_start, t, sign=float(sgn))               # sign > 0: forwards (pitch tips forwards)
         elif kind == "logroll":                          # lying, turning over about the long axis
             sgn = rng.choice([-1.0, 1.0])
             lie = _posture("supine", rng, 0.8)
@@ -598,12 +707,16 @@ def _mode_acrobatic(p: _Plan) -> None:
             lie = _closest_turn(p.last, lie)
             t += u(0.6, 1.2)
             p.key(t, lie)
+            t_lie = t
+            twist0 = p.last[_I["twist"]]
             for _ in range(int(rng.integers(2, 5))):
                 nxt = _posture("supine", rng, 0.8)
                 nxt[_I["heading"]] = h
                 nxt[_I["twist"]] = p.last[_I["twist"]] + sgn * np.radians(u(80, 120))
                 t += u(0.25, 0.5)
-                p.key(t, nxt)
+                t = p.key(t, nxt)
+            p.event("logroll", t_start, t, sign=float(sgn), lie=float(t_lie),
+                    turn=float(np.degrees(p.last[_I["twist"]] - twist0)))
         elif kind == "cartwheel":                        # sideways over the hands: roll 360 in a star
             sgn = rng.choice([-1.0, 1.0])
             roll0 = p.last[_I["roll"]]
@@ -617,21 +730,25 @@ def _mode_acrobatic(p: _Plan) -> None:
             end[_I["heading"]] = h
             end[_I["roll"]] = roll0 + sgn * 2 * np.pi
             t += u(0.3, 0.6)
-            p.key(t, end, spin=("roll",))
+            t = p.key(t, end, spin=("roll",))
+            p.event("cartwheel", t_start, t, sign=float(sgn))          # sign > 0: towards the left (roll leans left)
         else:                                            # kick up to a handstand, hold, come down
             bend = _posture("allfours", rng, calm)
             bend[_I["heading"]] = h
             t += u(0.3, 0.6)
             p.key(t, bend)
-            for _ in range(int(rng.integers(1, 4))):
+            holds = int(rng.integers(1, 4))
+            up_t = []
+            for _ in range(holds):
                 hs = _posture("handstand", rng, calm)
                 hs[_I["heading"]] = h
                 t += u(0.3, 0.7)
-                p.key(t, hs)
+                up_t.append(p.key(t, hs))
             down = _posture("allfours" if rng.random() < 0.5 else "bend", rng, calm)
             down[_I["heading"]] = h
             turns = 2 * np.pi * np.round((p.last[_I["pitch"]] - np.pi) / (2 * np.pi))
-            if rng.random() < 0.4:                       # walk-over: come down on the other side
+            walkover = bool(rng.random() < 0.4)
+            if walkover:                                 # walk-over: come down on the other side
                 down[_I["pitch"]] = turns + 2 * np.pi - down[_I["pitch"]]
             else:
                 down[_I["pitch"]] += turns
@@ -640,7 +757,8 @@ def _mode_acrobatic(p: _Plan) -> None:
             up = _posture("stand", rng, calm)
             up[_I["heading"]] = h
             t += u(0.4, 0.8)
-            p.key(t, up)
+            t = p.key(t, up)
+            p.event("handstand", t_start, t, up=(up_t[0], up_t[-1]), walkover=walkover)
 
 
 _BUILDERS = {"free": _mode_free, "locomotion": _mode_locomotion, "jump": _mode_jump, "floor": _mode_floor,
@@ -700,8 +818,9 @@ def _realise(rng: np.random.Generator, mode: str, n: int) -> GeneralClip:
     poses[:, _I["heading"]] += rng.uniform(-np.pi, np.pi)      # a random world heading
     dofs = smooth_track(t, times, poses)
     flight = np.zeros(n, dtype=bool)
+    overlay_events: list = []
     if plan.overlay is not None:
-        flight |= plan.overlay(t, dofs, rng)
+        flight |= plan.overlay(t, dofs, rng, overlay_events)
     # overlays add to the tracks: clip them back into the joint ranges, then smooth the kinks away
     dofs = np.clip(dofs, _LO, _HI)
     dofs[:, 4:] = np.clip(smooth(dofs[:, 4:], 0.8), _LO[4:], _HI[4:])
@@ -716,7 +835,45 @@ def _realise(rng: np.random.Generator, mode: str, n: int) -> GeneralClip:
     rel = forward_kinematics(dofs)
     root = solve_root(rel, flight, push)
     joints = plant_feet(rel + root[:, None, :], flight)
-    return GeneralClip(joints.astype(np.float64), mode, dofs, flight)
+    events = [(a, t0 - lead, t1 - lead, _shift_times(info, -lead)) for a, t0, t1, info in plan.events]
+    events += overlay_events                              # already on the clip's clock
+    return GeneralClip(joints.astype(np.float64), mode, dofs, flight, _clip_events(events, n))
+
+
+#: Keys of an event's ``info`` that hold times (seconds on the plan's clock, frames in a GeneralEvent).
+_TIME_KEYS = ("flight", "up", "lie", "key", "times")
+
+
+def _shift_times(info: dict, dt: float) -> dict:
+    out = dict(info)
+    for k in _TIME_KEYS:
+        if k in out:
+            v = out[k]
+            out[k] = type(v)(x + dt for x in v) if isinstance(v, (tuple, list)) else v + dt
+    return out
+
+
+def _clip_events(events: list, n: int) -> tuple[GeneralEvent, ...]:
+    """Events ``(action, t0, t1, info)`` in clip seconds as :class:`GeneralEvent` s in joint frames
+    (also the times in ``info``), in time order; events wholly outside the clip are dropped."""
+    def frame(x: float) -> int:
+        return int(round(x * FPS))
+
+    out = []
+    for action, t0, t1, info in events:
+        planned = (frame(t0), max(frame(t0), frame(t1)))
+        frames = (min(max(planned[0], 0), n), min(max(planned[1], 0), n))
+        instant = planned[0] == planned[1]
+        if planned[0] >= n or (not instant and (planned[1] < 0 or frames[0] == frames[1])):
+            continue                                      # (an instant before the clip is kept at frame 0)
+        info = dict(info)
+        for k in _TIME_KEYS:
+            if k in info:
+                v = info[k]
+                info[k] = type(v)(frame(x) for x in v) if isinstance(v, (tuple, list)) else frame(v)
+        out.append(GeneralEvent(action, frames, planned, info))
+    out.sort(key=lambda e: (e.planned[0], e.planned[1]))
+    return tuple(out)
 
 
 def generate_general(seed: int, index: int, config: GeneralConfig | None = None) -> GeneralClip:

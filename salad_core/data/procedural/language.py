@@ -899,6 +899,31 @@ RULES["crawl"] = _rules(_R("V:crawl forward"), _R("V:crawl"), _RS("V:crawl on [a
                         _RS("V:crawl [across|along] the floor"), _R("V:move forward on all/DET fours/NOUN"),
                         _R("V:move forward on {poss} hands and knees"), _R("V:crawl ahead on the floor"))
 
+# corpus 2.8: the words of the general-motion set's captions (salad_core.data.procedural.general_language);
+# they only add entries, so the captions of the action corpus are unchanged
+_GENERAL_VERBS = {"roll": ("rolls", "rolling"), "flip": ("flips", "flipping"), "cartwheel": ("cartwheels", "cartwheeling"),
+                  "somersault": ("somersaults", "somersaulting"), "tumble": ("tumbles", "tumbling"),
+                  "push": ("pushes", "pushing"), "pull": ("pulls", "pulling"), "straighten": ("straightens", "straightening"),
+                  "stay": ("stays", "staying"), "land": ("lands", "landing"), "tuck": ("tucks", "tucking"),
+                  "pause": ("pauses", "pausing"), "shift": ("shifts", "shifting"), "flop": ("flops", "flopping"),
+                  "roam": ("roams", "roaming"), "curl": ("curls", "curling")}
+for _lemma, _forms in _GENERAL_VERBS.items():
+    VERBS.setdefault(_lemma, _forms)
+    for _f in _forms:
+        LEXICON.setdefault(_f, (_lemma, "VERB"))
+    LEXICON.setdefault(_lemma, (_lemma, "VERB"))
+# (a plural like "cartwheels" reads as the verb by default; templates tag the noun reading "cartwheels/NOUN")
+_lex("NOUN", "handstand handstands backflip backflips walkover stomach belly tummy heels curve movements limbs series "
+             "acrobat acrobatics gymnastics split splits",
+     {"handstands": "handstand", "backflips": "backflip", "heels": "heel", "movements": "movement", "limbs": "limb",
+      "splits": "split"})
+_lex("ADJ", "random several other upright unusual acrobatic gymnastic tight")
+_lex("ADV", "diagonally freely randomly still upside apart aimlessly")
+_lex("NOUN", "weight")
+_lex("ADJ", "long")
+for _w in ("crouch", "leap", "lie", "sit", "spin", "spread", "stop"):
+    LEXICON.setdefault(_w, (_w, "VERB"))       # bare forms ("to lie face down"; tagged nouns: "a spin/NOUN")
+
 
 def _style_options(kind: str) -> list[tuple[str, bool]]:
     """(words, before the verb?) of the manner and intent words that fit ``kind``."""
