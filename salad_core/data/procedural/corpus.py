@@ -57,7 +57,7 @@ logger = logging.getLogger(__name__)
 #: the arm's own controls (:func:`.reach.nearest_controls`).
 GENERATOR_VERSION = "2.7"
 #: The version of a build with the captioned general-motion set (``build_corpus(general=N)``, N > 0):
-#: 2.7's action clips unchanged plus general clips with captions (issue 69).
+#: 2.7's action clips unchanged plus general clips with captions.
 GENERAL_CORPUS_VERSION = "2.8"
 #: Motions (before mirroring) of each named size.
 SIZES = {"tiny": 200, "small": 1000, "default": 4000}
