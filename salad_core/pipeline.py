@@ -852,6 +852,11 @@ class SaladPipeline:
                         cost_vs_generation=run.rows / generation_rows,
                         inversion=None if inversion is None else inversion.method)
         result = EditOutput(out[0], out[1], noise, edits, settings)
+        # edits that keep parts or frames (MirrorTake, Inpaint with composite=True) take them from the source's
+        # decoded features: the decoder's convolutions would otherwise let the edited tokens move them
+        from salad_core.attention.composite import composite_output
+
+        result = composite_output(self, result)
         if (inversion is not None) if ground is None else bool(ground):
             from salad_core.attention.grounding import ground_edit
 

@@ -173,3 +173,159 @@ def test_inpaint_an_inverted_motion(pipe, sample_features):
     jt = np.array(get_skeleton().joint_to_part)
     kept_j = ~np.isin(jt, [PART_NAMES.index("left arm"), PART_NAMES.index("right arm")])
     assert _dist_cm(arms.source.joints[0], arms.edited.joints[0], joints=kept_j) < 2.0
+
+
+# --------------------------------------------------------------------- the feature-space composite
+def _edited_like(f: np.ndarray, seed: int = 0) -> np.ndarray:
+    """A different motion of the same length: the features shifted in time plus noise on every channel but the
+    contacts, and a turn of 0.05 (half-angle) per frame added to the root."""
+    rng = np.random.default_rng(seed)
+    g = np.roll(f, 7, axis=0).astype(np.float64)
+    g[:, :-4] += rng.normal(scale=0.02, size=g[:, :-4].shape)
+    g[:, 0] += 0.05
+    return g
+
+
+def test_composite_keeps_kept_parts_exactly_and_hangs_limbs_from_the_source(sample_features):
+    from salad_core.attention.composite import composite_features, part_joint_weights
+    from salad_core.motion import features_to_joints
+
+    sk = get_skeleton()
+    f = sample_features[:60].astype(np.float64)
+    g = _edited_like(f)
+    w = part_joint_weights(("left arm", "right arm"), sk)
+    out = composite_features(f, g, w)
+    jf, jg, jo = features_to_joints(f), features_to_joints(g), features_to_joints(out)
+    arms = w > 0
+    kept = ~arms
+    # the kept joints are the source's to float precision (root included: heading and path)
+    np.testing.assert_allclose(jo[:, kept], jf[:, kept], atol=1e-9)
+    # the arms keep the edit's pose relative to their attachment (spine3), hung from the source's spine3
+    chest = sk.joint_names.index("spine3")
+    rel_g = (jg[:, arms] - jg[:, chest:chest + 1])
+    rel_o = (jo[:, arms] - jo[:, chest:chest + 1])
+    # compare in each motion's heading frame (the source's heading differs from the edit's)
+    from salad_core.attention.composite import _ric
+
+    ric = sk.feature_slices["ric"].start
+    for j in np.flatnonzero(arms):
+        np.testing.assert_allclose(out[:, ric + 3 * (j - 1): ric + 3 * j] - _ric(out, sk, chest),
+                                   g[:, ric + 3 * (j - 1): ric + 3 * j] - _ric(g, sk, chest), atol=1e-9)
+    assert np.abs(rel_o - rel_g).max() > 0.01          # ... which are not the same world offsets (other heading)
+    # without re-joining the arms keep the edit's root-relative positions instead
+    loose = composite_features(f, g, w, rejoin=False)
+    assert np.abs(loose - out).max() > 1e-3
+
+
+def test_composite_of_a_frame_span_keeps_the_kept_frames_in_place(sample_features):
+    from salad_core.attention.composite import composite_features, frame_weights
+    from salad_core.motion import features_to_joints
+
+    f = sample_features[:80].astype(np.float64)
+    g = _edited_like(f, 1)                              # the edit turns 0.05 rad (half-angle) a frame more
+    fw = frame_weights(80, (24, 56), fade=4)
+    np.testing.assert_allclose(fw[24:29], [0.2, 0.4, 0.6, 0.8, 1.0])
+    np.testing.assert_allclose(fw[51:56], [1.0, 0.8, 0.6, 0.4, 0.2])
+    assert fw[:24].sum() == 0 and fw[56:].sum() == 0
+    w = np.repeat(fw[:, None], 22, 1)
+    jf = features_to_joints(f)
+    held = features_to_joints(composite_features(f, g, w, root="source"))
+    free = features_to_joints(composite_features(f, g, w, root="edit"))
+    # the kept frames: exactly the source's, before the span and (root="source") after it, in global position
+    np.testing.assert_allclose(held[:24], jf[:24], atol=1e-9)
+    np.testing.assert_allclose(held[57:], jf[57:], atol=1e-6)
+    assert np.abs(held[30:50] - features_to_joints(g)[30:50]).max() > 0.05     # the span is the edit's
+    # root="edit": after the span the kept poses follow the span's turn (root-aligned they differ)
+    rel = lambda j: j - j[:, :1]
+    assert np.linalg.norm(rel(free[57:]) - rel(jf[57:]), axis=-1).mean() > 0.05
+    assert np.linalg.norm(rel(held[57:]) - rel(jf[57:]), axis=-1).mean() < 1e-6
+    # a suffix span has nothing after it: both root modes agree
+    sw = np.repeat(frame_weights(80, (56, 80), fade=4)[:, None], 22, 1)
+    np.testing.assert_allclose(composite_features(f, g, sw, root="source"), composite_features(f, g, sw, root="edit"))
+
+
+def test_composite_seam_is_smoother_with_a_fade(sample_features):
+    """Cross-fading a span's seams in feature space: the largest jerk near the seams falls as the fade widens."""
+    from salad_core.attention.composite import composite_features, frame_weights
+    from salad_core.motion import features_to_joints
+
+    f = sample_features[:80].astype(np.float64)
+    g = f.copy()
+    g[:, 4:] = np.roll(f[:, 4:], 20, axis=0)            # another pose at every frame, the same root
+    seam_jerk = []
+    for fade in (0, 4, 8):
+        w = np.repeat(frame_weights(80, (24, 56), fade)[:, None], 22, 1)
+        j = features_to_joints(composite_features(f, g, w))
+        d3 = j[3:] - 3 * j[2:-1] + 3 * j[1:-2] - j[:-3]
+        seam_jerk.append(np.linalg.norm(d3, axis=-1).mean(-1)[18:30].max())
+    assert seam_jerk[0] > seam_jerk[1] > seam_jerk[2]
+    assert seam_jerk[0] > 3 * seam_jerk[2]
+
+
+def test_inpaint_composite_options():
+    sk = get_skeleton()
+    w = Inpaint(parts="arms", frames=(8, 24), fade=2).joint_weights(40, sk)
+    arms = [j for j, p in enumerate(sk.joint_to_part) if PART_NAMES[p] in ("left arm", "right arm")]
+    assert w.shape == (40, 22) and w[:, [j for j in range(22) if j not in arms]].sum() == 0
+    np.testing.assert_allclose(w[8:11, arms[0]], [1 / 3, 2 / 3, 1.0])
+    legs = Inpaint(parts="legs").joint_weights(12, sk)
+    assert (legs.sum(1) == 8).all()                      # every frame: the 8 leg joints (hips to feet)
+    with pytest.raises(ValueError, match="Inpaint.noise"):
+        Inpaint(parts="arms", noise="white")
+    with pytest.raises(ValueError, match="Inpaint.root"):
+        Inpaint(parts="arms", root="world")
+    with pytest.raises(ValueError, match="Inpaint.fade"):
+        Inpaint(parts="arms", fade=-1)
+    assert Inpaint(parts="arms").fresh_noise(True) and not Inpaint(parts="arms").fresh_noise(False)
+    assert not Inpaint(parts="arms", noise="source").fresh_noise(True)
+    assert Inpaint(parts="arms", noise="fresh").fresh_noise(False)
+
+
+@needs_weights
+def test_inverted_take_regions_start_from_fresh_noise_and_kept_parts_are_composited(pipe, sample_features):
+    """Editing an inversion, the regenerated region starts from white noise (the inverted noise holds the take's own
+    motion there) and the kept parts are the source's decoding: root-aligned they move less than 1 cm (the skeleton
+    fit), and less than with the latent in-painting alone."""
+    inv = pipe.invert(sample_features[:FRAMES], "a person walks forward and turns around", num_steps=STEPS)
+    target = "a man waves his right hand"
+    out = pipe.edit(inversion=inv, target=target, edits=[Inpaint(parts="arms")], ground=False)
+    old = pipe.edit(inversion=inv, target=target, edits=[Inpaint(parts="arms", noise="source", composite=False)],
+                    ground=False)
+    arms = [PART_NAMES.index("left arm"), PART_NAMES.index("right arm")]
+    kept = [p for p in range(7) if p not in arms]
+    z, z_old = out.edited.noise, old.edited.noise
+    torch.testing.assert_close(z[:, :, kept], inv.noise[:, :, kept], atol=0, rtol=0)
+    assert (z[:, :, arms] - inv.noise[:, :, arms]).abs().min() > 0          # fresh noise on every arm token
+    assert 0.8 < float(z[:, :, arms].std()) < 1.2
+    torch.testing.assert_close(z_old, inv.noise, atol=0, rtol=0)
+    torch.testing.assert_close(out.edited.latents[:, :, kept], out.source.latents[:, :, kept], atol=1e-5, rtol=0)
+    jt = np.array(get_skeleton().joint_to_part)
+    kept_j = ~np.isin(jt, arms)
+    moved = _dist_cm(out.source.joints[0], out.edited.joints[0], joints=kept_j)
+    moved_old = _dist_cm(old.source.joints[0], old.edited.joints[0], joints=kept_j)
+    assert moved < 1.0 and moved < moved_old
+    # what is left is the pipeline's skeleton fit (fixed bone lengths): the features' own joints are the source's
+    from salad_core.motion import features_to_joints
+
+    n = out.edited.lengths[0]
+    a, b = (features_to_joints(o.features[0, :n]) for o in (out.source, out.edited))
+    assert _dist_cm(a, b, joints=kept_j) < 1e-3
+    assert _dist_cm(out.source.joints[0], out.edited.joints[0], joints=~kept_j) > 5.0
+
+
+@needs_weights
+def test_inverted_take_span_keeps_the_frames_after_it_in_place(pipe, sample_features):
+    """A regenerated middle span of a take that turns: with ``root="source"`` (default) the frames after the span
+    keep their global place and facing; the seams are cross-faded; the edited branch's guidance is settable."""
+    inv = pipe.invert(sample_features[:FRAMES], "a person walks forward and turns around", num_steps=STEPS)
+    out = pipe.edit(inversion=inv, target="a person jumps", edits=[Inpaint(frames=(16, 32), guidance=7.5)],
+                    ground=False)
+    free = pipe.edit(inversion=inv, target="a person jumps", edits=[Inpaint(frames=(16, 32), guidance=7.5,
+                                                                            root="edit")], ground=False)
+    src, ed = out.source.joints[0], out.edited.joints[0]
+    glob = lambda a, b, fr: float(np.linalg.norm(a[fr] - b[fr], axis=-1).mean() * 100)
+    assert glob(src, ed, slice(0, 16)) < 1.0 and glob(src, ed, slice(33, None)) < 1.0      # global, not aligned
+    assert _dist_cm(src, ed, frames=slice(20, 28)) > 3.0
+    assert glob(src, free.edited.joints[0], slice(33, None)) > glob(src, ed, slice(33, None))
+    with pytest.raises(ValueError, match="Inpaint.guidance"):
+        Inpaint(frames=(16, 32), guidance=0.5)

@@ -100,6 +100,37 @@ def test_kept_parts_are_the_sources_and_mirrored_parts_the_mirrors(pipe, inversi
     torch.testing.assert_close(both.edited.latents[:, :, rest], inv.latents[:, :, rest], atol=1e-4, rtol=0)
 
 
+def test_composite_takes_the_kept_parts_from_the_source_decoding(pipe, inversions):
+    """MirrorTake's feature-space composite (default on): every feature column of the joints outside the legs is
+    the source's decoding (root included), the legs' are the edit's hung from the source's pelvis; without it the
+    decoder's mixing moves them; ``"all"`` composites nothing."""
+    inv, mirrored = inversions
+    sk = get_skeleton()
+    n = inv.lengths[0]
+    plain = pipe.edit(inversion=inv, edits=mirror_take_edits("legs", mirrored, composite=False), ground=False)
+    out = pipe.edit(inversion=inv, edits=mirror_take_edits("legs", mirrored), ground=False)
+    assert "composite" in out.settings and "composite" not in plain.settings
+    torch.testing.assert_close(out.edited.latents, plain.edited.latents, atol=0, rtol=0)   # latents as sampled
+    legs = {PART_NAMES.index("left leg"), PART_NAMES.index("right leg")}
+    kept = [j for j, p in enumerate(sk.joint_to_part) if p not in legs]
+    cols = [c for j in kept for c in sk.joint_feature_index[j]]
+    src, ed, raw = out.source.features[0, :n], out.edited.features[0, :n], plain.edited.features[0, :n]
+    np.testing.assert_allclose(ed[:, cols], src[:, cols], atol=1e-6)
+    assert np.abs(raw[:, cols] - src[:, cols]).max() > 1e-3         # the tiny decoder mixes parts too
+    # the legs: the edit's, shifted by the pelvis height difference
+    leg_j = sorted(set(range(sk.num_joints)) - set(kept))
+    ric = sk.feature_slices["ric"].start
+    dy = src[:, 3] - raw[:, 3]
+    for j in leg_j:
+        np.testing.assert_allclose(ed[:, ric + 3 * (j - 1) + 1], raw[:, ric + 3 * (j - 1) + 1] + dy, atol=1e-5)
+    # root-aligned, the kept joints are the source's (up to the skeleton fit)
+    a, b = out.source.joints[0], out.edited.joints[0]
+    moved = lambda x: np.linalg.norm((x - x[:, :1])[:, kept[1:]] - (a - a[:, :1])[:, kept[1:]], axis=-1).mean()
+    assert moved(b) < moved(plain.edited.joints[0])
+    every = pipe.edit(inversion=inv, edits=mirror_take_edits("all", mirrored), ground=False)
+    assert "composite" not in every.settings
+
+
 def test_a_mismatched_mirror_is_refused(pipe, inversions, sample_features):
     inv, _ = inversions
     other = pipe.invert(sample_features[:32].astype(np.float32), PROMPT, num_steps=STEPS, reconstruct=False)

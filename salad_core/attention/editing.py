@@ -20,6 +20,7 @@ reconstructs an inverted motion (``edited=False``: source rows only) with per-st
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -119,6 +120,11 @@ class EditPrediction:
         self.keep = frame_mask[:, :, None, None]
         self._contexts: dict[tuple, TextContext] = {}
         self._num_train = 0
+        # in-painting may guide the edited branch with its own weight (Inpaint.guidance)
+        inpaint = next((e for e in controller.edits if e.role == "latent"), None) if self.edited else None
+        scale = getattr(inpaint, "guidance", None)
+        self.edited_guidance = (None if scale is None or not self.guidance.cfg
+                                else dataclasses.replace(self.guidance, scale=float(scale)))
 
     @contextmanager
     def session(self, timesteps: torch.Tensor, num_train_timesteps: int) -> Iterator[None]:
@@ -184,10 +190,11 @@ class EditPrediction:
         active = self.guidance.active(float(t), self._num_train)
         keep = self.keep.to(out.dtype)
         preds = []
-        for u_rows, c_rows in pairs:
+        for k, (u_rows, c_rows) in enumerate(pairs):
             cond = out[c_rows]
             if lay.cfg:
-                cond = self.guidance.combine(out[u_rows], cond, keep=keep, active=active)   # eq. 9
+                guidance = self.edited_guidance if (k == 1 and self.edited_guidance is not None) else self.guidance
+                cond = guidance.combine(out[u_rows], cond, keep=keep, active=active)   # eq. 9
             preds.append(cond)
         return torch.cat(preds)
 
@@ -267,6 +274,19 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
         edited_noise = composite(take_mask, take.mirrored.noise, noise, noise)
         edited_corrections = composite(take_mask, take.mirrored.corrections, corrections,
                                        torch.zeros(num_steps, *noise.shape, dtype=noise.dtype))
+    inpaint = next((e for e in controller.edits if e.role == "latent"), None) if prediction.edited else None
+    region = hook = None
+    if inpaint is not None:
+        region = inpaint.mask(frame_mask, noise.shape[2]).to(noise)
+        if inpaint.fresh_noise(corrections is not None):
+            # the regenerated region starts from white noise (an inverted take's own noise holds its motion there)
+            # and without the inversion's corrections (they belong to the source's trajectory)
+            fresh = (region > 0).to(noise)
+            base = noise if edited_noise is None else edited_noise.to(noise)
+            edited_noise = fresh * seeded_noise(inpaint.seed, noise.shape).to(noise) + (1.0 - fresh) * base
+            if corrections is not None or edited_corrections is not None:
+                base_c = edited_corrections if edited_corrections is not None else corrections
+                edited_corrections = base_c * (1.0 - fresh)
     own_noise = edited_noise is not None and prediction.edited
     # both branches start from the same noise (Algorithm 1, line 4) and take the same corrections,
     # unless the edited sample has its own noise: then the corrections are the source's alone (a
@@ -278,10 +298,6 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
     elif corrections is not None:
         corrections = (torch.cat([corrections, torch.zeros_like(corrections)], 1) if own_noise
                        else corrections.repeat(1, k, 1, 1, 1))
-    inpaint = next((e for e in controller.edits if e.role == "latent"), None) if prediction.edited else None
-    region = hook = None
-    if inpaint is not None:
-        region = inpaint.mask(frame_mask, noise.shape[2]).to(noise)
     if inpaint is not None or take is not None:
         def hook(info, z: torch.Tensor) -> torch.Tensor:
             src, ed = z[:b], z[b:]

@@ -19,13 +19,21 @@ frames of the region next to a kept frame ramp up, ``d / (k + 1)`` at distance `
 those frames start from the source and the seam is denoised softly; the kept frames themselves are
 always the source's. Body parts have no seam (``m`` is 0 or 1 along the part axis).
 
+Three more levers, chosen on procedural validation clips (``measure_inpaint.py --tuning 8``) and on by
+default: editing an inversion, the region starts from fresh white noise (``noise="auto"``: the inverted noise is
+not white and holds the take's own motion there, so the region tended to regenerate the take: a real take's arms
+waved in 2 of 8 cases); after decoding, the kept parts / frames are taken from the source's decoded features and
+the seams cross-faded over ``fade`` frames in feature space, with the root of a span corrected so that the frames
+after it keep their global place and facing (``composite=True``, :mod:`salad_core.attention.composite`: the VAE
+decoder's convolutions mix neighbouring parts and frames, and the features integrate the root's velocities).
+
 :func:`parse_inpaint` reads the command line's ``PARTS[@START:END]`` notation.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import ClassVar, Optional, Sequence, Union
+from typing import TYPE_CHECKING, ClassVar, Optional, Sequence, Union
 
 import torch
 
@@ -33,7 +41,13 @@ from salad_core.skeleton import PART_NAMES
 
 from .edits import EditKernel, EditSpec, _window
 
-__all__ = ["Inpaint", "INPAINT_GROUPS", "inpaint_parts", "parse_inpaint"]
+if TYPE_CHECKING:  # pragma: no cover
+    import numpy as np
+
+__all__ = ["Inpaint", "INPAINT_GROUPS", "NOISE_MODES", "inpaint_parts", "parse_inpaint"]
+
+#: What :class:`Inpaint`'s regenerated region starts from (see :attr:`Inpaint.noise`).
+NOISE_MODES = ("auto", "fresh", "source")
 
 #: Group names :class:`Inpaint` accepts besides the part names. "legs" / "arms" as :class:`Mirror`;
 #: "upper" / "lower" are the upper body (spine, arms, head) and the lower body (root, legs) -- the
@@ -122,6 +136,25 @@ class Inpaint(EditSpec):
     steps : (start, stop)
         Window of step fractions in which the kept region is replaced (default all steps, the last
         included, so the kept latents end exactly as the source's).
+    noise : ``"auto"``, ``"fresh"`` or ``"source"``
+        What the regenerated region starts from. ``"source"``: the source's noise (for an inverted take its
+        inverted noise, which is not white and holds the take's own motion of that region: the region then tends
+        to regenerate the take); ``"fresh"``: white noise drawn from ``seed`` (the exact inversion's corrections
+        are dropped there); ``"auto"`` (default): fresh when editing an inversion, the source's otherwise.
+    seed : int
+        Seed of the fresh noise.
+    composite : bool
+        After decoding, take the kept parts / frames from the source's decoded features, hang regenerated limbs
+        from the source's kept joints and cross-fade a frame span's seams over ``fade`` frames in feature space
+        (:mod:`salad_core.attention.composite`). Default on.
+    fade : int
+        Motion frames of a regenerated span, next to each kept frame, over which the composite cross-fades.
+    guidance : float, optional
+        Classifier-free guidance weight of the edited branch (the regenerated region follows the target prompt more
+        strongly with a larger one); None: the motion's (the inversion's). The kept region is the source's anyway.
+    root : ``"source"`` or ``"edit"``
+        With ``composite``: ``"source"`` corrects a regenerated span's root velocities so that the kept frames
+        after it keep their global position and facing; ``"edit"`` lets them follow the span's turn and travel.
     """
 
     role: ClassVar[str] = "latent"
@@ -131,8 +164,28 @@ class Inpaint(EditSpec):
     unit_length: int = 4
     blend: int = 1
     steps: tuple[float, float] = (0.0, 1.0)
+    noise: str = "auto"
+    seed: int = 0
+    composite: bool = True
+    fade: int = 8
+    root: str = "source"
+    guidance: Optional[float] = None
 
     def __post_init__(self) -> None:
+        if self.noise not in NOISE_MODES:
+            raise ValueError(f"Inpaint.noise={self.noise!r}; allowed: {NOISE_MODES}")
+        from .composite import ROOT_MODES
+
+        if self.root not in ROOT_MODES:
+            raise ValueError(f"Inpaint.root={self.root!r}; allowed: {ROOT_MODES}")
+        if self.guidance is not None:
+            if isinstance(self.guidance, bool) or not isinstance(self.guidance, (int, float)) or not self.guidance >= 1:
+                raise ValueError(f"Inpaint.guidance={self.guidance!r} must be a number >= 1 (or None)")
+            object.__setattr__(self, "guidance", float(self.guidance))
+        for name in ("fade", "seed"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"Inpaint.{name}={v!r} must be an int >= 0")
         if self.parts is None and self.frames is None:
             raise ValueError("Inpaint needs parts=... (body parts to regenerate) and/or frames=(start, end) "
                              "(a motion-frame span to regenerate)")
@@ -210,6 +263,26 @@ class Inpaint(EditSpec):
         part_w = torch.tensor([1.0 if p in parts else 0.0 for p in PART_NAMES])
         m = frame_w[:, :, None] * part_w[None, None, :]
         return (m * frame_mask[:, :, None].to(m))[..., None].to(frame_mask.device)
+
+    def fresh_noise(self, inverted: bool) -> bool:
+        """Whether the regenerated region starts from fresh white noise (:attr:`noise`; ``inverted``: the edit is of
+        an inversion)."""
+        return self.noise == "fresh" or (self.noise == "auto" and inverted)
+
+    def frame_span(self, num_frames: int) -> tuple[int, int] | None:
+        """The regenerated motion frames ``[s, e)`` (whole latent frames), None when every frame is."""
+        if self.frames is None:
+            return None
+        s, e = self.latent_span(num_frames)
+        return s * self.unit_length, min(num_frames, e * self.unit_length)
+
+    def joint_weights(self, num_frames: int, skeleton="humanml3d") -> "np.ndarray":
+        """``(N, J)`` composite weights (:mod:`~salad_core.attention.composite`): the regenerated parts' joints
+        over the regenerated frames, ramping over :attr:`fade` frames at a span's seams."""
+        from .composite import frame_weights, part_joint_weights
+
+        fw = frame_weights(num_frames, self.frame_span(num_frames), self.fade)
+        return fw[:, None] * part_joint_weights(self.parts or PART_NAMES, skeleton)[None]
 
     def describe(self) -> str:
         """``arms@40:80`` (the :func:`parse_inpaint` notation)."""

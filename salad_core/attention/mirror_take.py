@@ -95,6 +95,11 @@ class MirrorTake(EditSpec):
     keep : (start, stop)
         Step fractions during which every other part's latent is the source branch's. ``None``: never (the
         other parts are denoised freely next to the mirrored ones).
+    composite : bool
+        After decoding, take the other parts' features from the source's decoding and hang the mirrored limbs
+        from the source's pelvis / chest (:mod:`salad_core.attention.composite`): the VAE decoder's convolutions
+        otherwise let the mirrored legs' tokens move the torso and arms (held-out kicks and spins: 3-3.9 cm
+        root-aligned). Default on.
     """
 
     role: ClassVar[str] = "take"
@@ -103,6 +108,7 @@ class MirrorTake(EditSpec):
     mirrored: Any = field(default=None, compare=False, repr=False)
     follow: tuple[float, float] | None = (0.0, 0.2)
     keep: tuple[float, float] | None = (0.0, 1.0)
+    composite: bool = True
 
     def __post_init__(self) -> None:
         parts = _ALIASES.get(self.parts, self.parts) if isinstance(self.parts, str) else self.parts
@@ -135,6 +141,12 @@ class MirrorTake(EditSpec):
     def mask(self, num_parts: int) -> torch.Tensor:
         """``(1, 1, P, 1)``: 1 on the parts taken from the mirror image."""
         return mirror_take_mask(self.parts, num_parts)
+
+    def joint_weights(self, num_frames: int, skeleton="humanml3d") -> np.ndarray:
+        """``(N, J)`` composite weights (:mod:`~salad_core.attention.composite`): 1 on the mirrored parts' joints."""
+        from .composite import part_joint_weights
+
+        return np.repeat(part_joint_weights(MIRROR_TAKE_GROUPS[self.parts], skeleton)[None], int(num_frames), 0)
 
     def check(self, noise: torch.Tensor, num_steps: int) -> None:
         """Refuse a mirror inversion that does not match the edited one's noise shape and steps."""

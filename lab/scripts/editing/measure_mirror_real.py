@@ -17,7 +17,8 @@ Sections:
 - ``mirror``: every take whose arms or legs are one-sided (log left/right activity ratio beyond log 1.5; the 8 of
   issue 21: jump, kick, spin, spinkick and their mirrors) and the kneel (its side: which knee is down), edited with
   ``Mirror`` of that limb pair, ``Mirror`` + ``MirrorSelfAttention``, and ``MirrorTake`` (``mirror_take_edits``:
-  ``Mirror`` + the latents of the inverted mirror image). ``swapped``: the leading side changed; ``kept_cm``:
+  ``Mirror`` + the latents of the inverted mirror image, with its feature-space composite, the default, and without
+  it: "latent only"). ``swapped``: the leading side changed; ``kept_cm``:
   root-aligned MPJPE between source reconstruction and edit over the joints outside the mirrored limbs.
 - ``turn``: the walk-and-turn takes (DeepMimic walker turns, left and right) edited with ``Mirror("all")`` and
   ``MirrorTake("all")``: the heading change (degrees, from the hips) before and after; ``reversed``: its sign flips.
@@ -144,6 +145,7 @@ def mirror_variants(limb: str, mirrored) -> dict[str, list]:
     pair = "legs" if limb == "kneel" else limb
     return {"Mirror": [Mirror(pair)],
             "Mirror+MirrorSelfAttention": [Mirror(pair), MirrorSelfAttention(pair)],
+            "MirrorTake (latent only)": mirror_take_edits(pair, mirrored, composite=False),
             "MirrorTake": mirror_take_edits(pair, mirrored)}
 
 
@@ -170,7 +172,7 @@ def measure_mirror(pipe, items: list[dict], *, steps: int, sided: float, diagnos
                          "swapped": bool(before * after < 0), "kept_cm": parts_mpjpe_cm(src, ed, LIMBS[pair], inside=False),
                          "closeness": mirror_closeness(src, ed, pair)["ratio"]})
     summary = {}
-    for name in ("Mirror", "Mirror+MirrorSelfAttention", "MirrorTake"):
+    for name in ("Mirror", "Mirror+MirrorSelfAttention", "MirrorTake (latent only)", "MirrorTake"):
         sel = [r for r in rows if r["edit"] == name]
         summary[name] = {"takes": float(len(sel)), "swapped": float(sum(r["swapped"] for r in sel)),
                          "kept_cm": mean(r["kept_cm"] for r in sel),
@@ -263,6 +265,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--margin", type=float, default=0.10, help="grounding: metres above the source's highest pelvis")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--update", action="store_true",
+                    help="keep the sections of an existing --json record that this run does not measure")
     args = ap.parse_args(argv)
     from salad_core.data import deepmimic
 
@@ -309,6 +313,14 @@ def main(argv=None) -> dict:
                              diagnose=False)
         results["tuning_procedural_val"] = res
         print_summary("Tuning set: one-sided procedural validation clips", res["summary"], width=28, nested_digits=3)
+    if args.update and args.json is not None and args.json.is_file():
+        import json
+
+        old = json.loads(args.json.read_text())
+        kept = {k: v for k, v in old.items() if k not in results and k != "seconds"}
+        if "mirror" in results and "diagnosis" not in results["mirror"] and "diagnosis" in old.get("mirror", {}):
+            results["mirror"]["diagnosis"] = old["mirror"]["diagnosis"]      # not measured again: unchanged
+        results = {**kept, **results, "updated_sections": sorted(set(results) - {"settings"})}
     return finish_run(results, start, args.json)
 
 

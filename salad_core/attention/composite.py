@@ -1,0 +1,253 @@
+"""Feature-space composite of an edit: what the edit keeps is taken from the source's decoded features.
+
+Why. :class:`~salad_core.attention.mirror_take.MirrorTake` and :class:`~salad_core.attention.inpaint.Inpaint`
+keep the latents of the untouched parts (or frames) exactly the source branch's, but the VAE decoder's skeletal and
+temporal convolutions mix neighbouring tokens: the mirrored legs' tokens move the decoded torso and arms (2-4 cm on
+the held-out kicks and spins), a regenerated span moves the decoded frames next to it, and a span that turns
+differently from the source turns every kept frame after it (the features store root *velocities*).
+``lab/scripts/editing/measure_mirror_real.py`` and ``measure_inpaint.py`` measure it.
+
+What. After decoding both branches, the edited motion's features are re-assembled per frame and joint
+(:func:`composite_features`) from a weight ``w (N, J)`` in ``[0, 1]`` (1: the edit's, 0: the source's):
+
+* every feature column of joint ``j`` (its root-relative position, 6D rotation, velocity, foot contact; for the
+  root its heading and linear velocity and its height) is ``(1 - w) * source + w * edit``;
+* **re-joining**: a regenerated limb whose parent is kept is moved rigidly, per frame, so that it hangs from the
+  source's parent joint instead of the edit's (its positions shifted by the difference, its velocities by that
+  shift's change), so a mirrored leg starts at the source's pelvis height and a waving arm at the source's
+  shoulder girdle;
+* **root** (frame spans): with ``root="source"`` the root velocities of a regenerated span that has kept frames after
+  it are corrected by a smooth (Hann-window) offset so that the span ends at the source's heading and position;
+  every kept frame then keeps its global position and facing (a span that turns keeps the turn inside the span and
+  turns back before the kept frames; ``root="edit"`` lets the kept frames follow the span's turn instead);
+* the seams of a frame span are cross-faded over ``fade`` frames inside the span (``w`` ramps
+  ``d / (fade + 1)`` with the distance ``d`` to the kept frame), kept frames are exactly the source's.
+
+Kept joints then decode to the source's own joints (up to the pipeline's skeleton fit), whatever the decoder does
+with the edited tokens. :func:`composite_output` applies it to an :class:`~salad_core.pipeline.EditOutput`; the
+edited latents are left as sampled (``settings["composite"]`` records what was composited).
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Sequence
+
+import numpy as np
+
+from salad_core.skeleton import PART_NAMES, get_skeleton
+
+__all__ = ["ROOT_MODES", "part_joint_weights", "frame_weights", "composite_features", "composite_output",
+           "composite_specs"]
+
+#: How the root of a regenerated frame span is handled (see the module docstring).
+ROOT_MODES = ("source", "edit")
+
+
+def part_joint_weights(parts: Sequence[str], skeleton="humanml3d") -> np.ndarray:
+    """``(J,)`` float: 1 on the joints drawn in body ``parts`` (names of :data:`PART_NAMES`), 0 elsewhere."""
+    sk = get_skeleton(skeleton)
+    unknown = [p for p in parts if p not in PART_NAMES]
+    if unknown:
+        raise ValueError(f"unknown body parts {unknown}; the parts are {', '.join(PART_NAMES)}")
+    return np.array([1.0 if PART_NAMES[p] in parts else 0.0 for p in sk.joint_to_part])
+
+
+def frame_weights(num_frames: int, span: tuple[int, int] | None, fade: int) -> np.ndarray:
+    """``(N,)`` float: 1 inside the motion-frame span ``[s, e)`` (None: every frame), 0 outside, ramping
+    ``d / (fade + 1)`` over the ``fade`` frames of the span next to a kept frame."""
+    n = int(num_frames)
+    if span is None:
+        return np.ones(n)
+    s, e = max(0, int(span[0])), min(n, int(span[1]))
+    w = np.zeros(n)
+    for f in range(s, e):
+        d = min(f - s + 1 if s > 0 else np.inf, e - f if e < n else np.inf)
+        w[f] = min(1.0, d / (fade + 1))
+    return w
+
+
+def _column_weights(w: np.ndarray, sk) -> np.ndarray:
+    """Per-joint weights ``(N, J)`` -> per-column weights ``(N, D)`` by the VAE's joint split."""
+    cols = np.zeros((w.shape[0], sk.feature_dim))
+    for j, idx in enumerate(sk.joint_feature_index):
+        cols[:, list(idx)] = w[:, j:j + 1]
+    return cols
+
+
+def _attachment(sk, regenerated: np.ndarray) -> dict[int, int]:
+    """For each regenerated joint, its nearest kept ancestor (the joint its limb hangs from); joints whose chain to
+    the root is regenerated throughout are left out."""
+    out = {}
+    for j in range(sk.num_joints):
+        if not regenerated[j]:
+            continue
+        a = sk.parents[j]
+        while a >= 0 and regenerated[a]:
+            a = sk.parents[a]
+        if a >= 0:
+            out[j] = a
+    return out
+
+
+def _ric(f: np.ndarray, sk, j: int) -> np.ndarray:
+    """Root-relative (heading-frame) position ``(N, 3)`` of joint ``j``: the root's is ``(0, height, 0)``."""
+    if j == 0:
+        out = np.zeros((len(f), 3))
+        out[:, 1] = f[:, sk.feature_slices["root_y"]][:, 0]
+        return out
+    r = sk.feature_slices["ric"].start + 3 * (j - 1)
+    return f[:, r:r + 3]
+
+
+def _rejoin(edited: np.ndarray, source: np.ndarray, w: np.ndarray, sk) -> np.ndarray:
+    """The edited features with each regenerated limb shifted onto the source's attachment joint (per frame, by the
+    weight of the frames where the attachment is kept)."""
+    out = edited.copy()
+    kept_somewhere = (w < 1).any(0)
+    # joint j hangs from its nearest ancestor a that is never regenerated (a frame span regenerates every joint:
+    # nothing to re-join there)
+    att = _attachment(sk, (w > 0).any(0))
+    ric0, vel0 = sk.feature_slices["ric"].start, sk.feature_slices["local_vel"].start
+    for j, a in att.items():
+        if not kept_somewhere[a]:
+            continue
+        delta = _ric(source, sk, a) - _ric(edited, sk, a)
+        out[:, ric0 + 3 * (j - 1): ric0 + 3 * j] += delta
+        if len(out) > 1:
+            out[:-1, vel0 + 3 * j: vel0 + 3 * j + 3] += delta[1:] - delta[:-1]
+    return out
+
+
+def _root_state(f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Integrated half-angle heading ``(N,)`` and root x, z ``(N, 2)`` of features (HumanML3D's recovery)."""
+    half = np.concatenate([[0.0], np.cumsum(f[:-1, 0])])
+    c, s = np.cos(2 * half), np.sin(2 * half)
+    vx, vz = np.concatenate([[0.0], f[:-1, 1]]), np.concatenate([[0.0], f[:-1, 2]])
+    # world step = inverse heading rotation of the local step (a y rotation by the full angle 2 * half)
+    wx = c * vx - s * vz
+    wz = s * vx + c * vz
+    return half, np.stack([np.cumsum(wx), np.cumsum(wz)], -1)
+
+
+def _world_to_local(half: np.ndarray, wx: np.ndarray, wz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    c, s = np.cos(2 * half), np.sin(2 * half)
+    return c * wx + s * wz, -s * wx + c * wz
+
+
+def _fix_root(out: np.ndarray, source: np.ndarray, w_root: np.ndarray) -> np.ndarray:
+    """Correct the root velocities of each regenerated run of frames that has kept frames after it, so that the
+    first kept frame after it has the source's heading and position (a Hann-window offset over the run's rows)."""
+    f = out.copy()
+    n = len(f)
+    regen = w_root > 0
+    runs, t = [], 0
+    while t < n:
+        if regen[t]:
+            s = t
+            while t < n and regen[t]:
+                t += 1
+            if t < n:                     # a kept frame follows
+                runs.append((s, t))
+        else:
+            t += 1
+    src_half, src_xz = _root_state(source)
+    for s, e in runs:
+        # rows s-1 .. e-1 move the root into frames s .. e; the offsets go on rows s .. e-1 (frame s keeps its place)
+        rows = np.arange(s, e)
+        if len(rows) == 0:
+            continue
+        win = np.sin(np.pi * (np.arange(len(rows)) + 0.5) / len(rows)) ** 2
+        half, _ = _root_state(f)
+        f[rows, 0] += (src_half[e] - half[e]) * win / win.sum()
+        half, xz = _root_state(f)
+        d = src_xz[e] - xz[e]
+        # world offsets per row, turned into the heading frame of the frame each row moves into
+        wx, wz = d[0] * win / win.sum(), d[1] * win / win.sum()
+        lx, lz = _world_to_local(half[rows + 1], wx, wz)
+        f[rows, 1] += lx
+        f[rows, 2] += lz
+    return f
+
+
+def composite_features(source: np.ndarray, edited: np.ndarray, weights: np.ndarray, skeleton="humanml3d", *,
+                       rejoin: bool = True, root: str = "source") -> np.ndarray:
+    """The edited motion re-assembled from the source's features where ``weights`` is 0.
+
+    Parameters
+    ----------
+    source, edited : ndarray ``(N, D)``
+        De-normalised features of the source (its decoding) and of the edit, the same length.
+    weights : ndarray ``(N, J)`` or ``(J,)``
+        Per frame and joint, 1 where the edit's features are used, 0 where the source's are, in between a blend.
+    rejoin : bool
+        Hang each regenerated limb from the source's kept parent joint (see the module docstring).
+    root : ``"source"`` or ``"edit"``
+        ``"source"``: a regenerated span followed by kept frames ends at the source's root heading and position.
+
+    Returns
+    -------
+    ndarray ``(N, D)``, the dtype of ``edited``.
+    """
+    sk = get_skeleton(skeleton)
+    if root not in ROOT_MODES:
+        raise ValueError(f"root={root!r}; allowed: {ROOT_MODES}")
+    src, ed = np.asarray(source, np.float64), np.asarray(edited, np.float64)
+    if src.shape != ed.shape or src.ndim != 2 or src.shape[1] != sk.feature_dim:
+        raise ValueError(f"source and edited must both be (N, {sk.feature_dim}); got {src.shape} and {ed.shape}")
+    w = np.asarray(weights, np.float64)
+    if w.ndim == 1:
+        w = np.broadcast_to(w, (len(src), sk.num_joints))
+    if w.shape != (len(src), sk.num_joints):
+        raise ValueError(f"weights must be (N, J) = {(len(src), sk.num_joints)} or (J,), got {w.shape}")
+    w = np.clip(w, 0.0, 1.0)
+    if rejoin:
+        ed = _rejoin(ed, src, w, sk)
+    cw = _column_weights(w, sk)
+    out = (1.0 - cw) * src + cw * ed
+    if root == "source" and (w[:, 0] < 1).any() and (w[:, 0] > 0).any():
+        out = _fix_root(out, src, w[:, 0])
+    return out.astype(np.asarray(edited).dtype, copy=False)
+
+
+def composite_specs(edits) -> list:
+    """The edits that ask for a composite (``composite=True`` and a :meth:`joint_weights` method)."""
+    return [e for e in edits if getattr(e, "composite", False) and hasattr(e, "joint_weights")]
+
+
+def composite_output(pipe, output, edits=None):
+    """``output`` (an :class:`~salad_core.pipeline.EditOutput`) with each edited motion composited
+    (:func:`composite_features`) by the product of the weights of the edits that ask for it (a copy; ``output`` is not
+    changed). The joints are recovered again with the pipeline's recovery; the latents are left as sampled.
+    ``settings["composite"]`` names the edits. No such edit, or nothing kept: ``output`` itself."""
+    from salad_core.recovery import recover_joints
+
+    specs = composite_specs(output.edits if edits is None else edits)
+    if not specs:
+        return output
+    sk = pipe.skeleton
+    src, ed = output.source, output.edited
+    feats = np.array(ed.features, copy=True)
+    joints = list(ed.joints)
+    changed = False
+    for b, n in enumerate(ed.lengths):
+        w = np.ones((n, sk.num_joints))
+        roots = set()
+        for spec in specs:
+            w = w * spec.joint_weights(n, sk)
+            roots.add(getattr(spec, "root", "source"))
+        if (w >= 1).all():
+            continue
+        f = composite_features(np.asarray(src.features[b, :n]), np.asarray(ed.features[b, :n]), w, sk,
+                               root="edit" if "edit" in roots else "source")
+        feats[b, :n] = f
+        joints[b] = recover_joints(f, pipe.recovery, sk).astype(np.float32)
+        changed = True
+    if not changed:          # every weight 1 (MirrorTake("all"), Inpaint(parts="all") ...): nothing is kept
+        return output
+    record = {"edits": [type(s).__name__ for s in specs]}
+    settings = dict(ed.settings)
+    settings["composite"] = record
+    composited = dataclasses.replace(ed, features=feats, joints=joints, settings=settings)
+    out_settings = dict(output.settings)
+    out_settings["composite"] = record
+    return dataclasses.replace(output, edited=composited, settings=out_settings)
