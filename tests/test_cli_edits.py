@@ -4,6 +4,8 @@ each edit's label, the source's and the edit's attention figures on one colour s
 (``salad edit`` and ``salad invert``)."""
 from __future__ import annotations
 
+import dataclasses
+
 import json
 
 import numpy as np
@@ -42,6 +44,10 @@ def _run(tmp_path, name, *flags, source=SOURCE):
     (["--example-seed", "7"], lambda a: [a.ExampleBased(seed=7)]),
     (["--target", "a person walks forward while raising both arms", "--inpaint", "arms"],
      lambda a: [a.parse_inpaint("arms", blend=1)]),
+    (["--target", "a person walks forward while raising both arms", "--inpaint", "arms", "--no-composite"],
+     lambda a: [dataclasses.replace(a.parse_inpaint("arms", blend=1), composite=False)]),
+    (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-root", "edit", "--inpaint-fade", "4"],
+     lambda a: [dataclasses.replace(a.parse_inpaint("@12:28", blend=1), root="edit", fade=4)]),
 ])
 def test_each_edit_flag_gives_the_python_edit(tmp_path, pipe, flags, edits):
     import salad_core.attention as a

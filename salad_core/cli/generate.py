@@ -3,6 +3,7 @@ figures, edits through the cross-attention, and the inversion of a given motion.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from pathlib import Path
 from typing import Callable
@@ -395,6 +396,14 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
                         "legs@40:80, @40:80, all@:40")
     p.add_argument("--inpaint-blend", type=int, default=1, metavar="N",
                    help="latent frames over which an in-painted span fades into the kept frames (default 1)")
+    p.add_argument("--inpaint-root", choices=["source", "edit"], default="source",
+                   help="after an in-painted span: 'source' (default) keeps the later frames where the take has "
+                        "them (a turn in the span is turned back), 'edit' lets them follow the span's path")
+    p.add_argument("--inpaint-fade", type=int, default=8, metavar="N",
+                   help="frames over which an in-painted span's seams are cross-faded in the features (default 8)")
+    p.add_argument("--no-composite", action="store_true",
+                   help="keep what the decoder makes of the kept parts instead of taking them from the source's "
+                        "decoding (--inpaint, --mirror-take; the decoder lets edited parts move kept ones a few cm)")
     p.add_argument("--mirror-take", choices=["legs", "arms", "limbs", "all"], default=None,
                    help="for a given take (salad invert, salad edit --motion): flip these limbs' side through the "
                         "inversion of the take's exact mirror image, keeping the other parts (MirrorTake + Mirror; "
@@ -470,7 +479,9 @@ def _edit_specs(args: argparse.Namespace, required: bool = True) -> list:
     if getattr(args, "example_seed", None) is not None:
         specs.append(_spec(f"--example-seed {args.example_seed}", lambda: ExampleBased(seed=args.example_seed)))
     if getattr(args, "inpaint", None) is not None:
-        specs.append(_spec(f"--inpaint {args.inpaint}", lambda: parse_inpaint(args.inpaint, blend=args.inpaint_blend)))
+        specs.append(_spec(f"--inpaint {args.inpaint}", lambda: dataclasses.replace(
+            parse_inpaint(args.inpaint, blend=args.inpaint_blend), root=args.inpaint_root, fade=args.inpaint_fade,
+            composite=not args.no_composite)))
     if args.window is not None and not (args.refine or args.reweight or args.mirror or getattr(args, "erase", None)
                                         or getattr(args, "shift", None)):
         raise UserError("--window applies to --refine, --reweight, --mirror, --erase and --shift; give one of them "
@@ -494,7 +505,7 @@ def _take_edits(args: argparse.Namespace, pipe, inv, specs: list, quiet: bool) -
         raise UserError("--mirror-take starts the limbs from the mirror image's noise; it cannot be combined with "
                         "--example-seed (new noise)")
     mirrored = invert_mirror(pipe, inv, progress=not quiet)
-    return specs + mirror_take_edits(parts, mirrored)
+    return specs + mirror_take_edits(parts, mirrored, composite=not getattr(args, "no_composite", False))
 
 
 def _word_value(flag: str, item: str, convert: Callable, form: str, bad: str):
