@@ -100,6 +100,16 @@ Measures of the field, beside the ones above:
 * **p99** of the reference bone-length error (over frames x bones) and of the per-frame penetration
   depth, beside their max (one wild frame decides a max; the benchmark also pools the p99 over all
   frames of all motions, :func:`pooled_bone_percentile`, :func:`pooled_penetration_percentile`).
+* **General motions** (the benchmark's general-motion prompts; heights of joint centres above ``config.floor``):
+  :func:`trunk_axes` (up: pelvis to neck; right: across the hips and shoulders; front: the way the chest faces),
+  :func:`inverted_frames` (the head below the pelvis), :func:`on_hands_frames` (inverted with a wrist or elbow
+  the lowest joint), :func:`pitch_rotation` (degrees the trunk turns head over heels, summed frame to frame about
+  the body's left axis: > 0 forwards), :func:`kneel_frames` (the named knee within 0.15 m of the floor, the other
+  knee 0.1 m higher and the other foot within 0.12 m: kneeling on one knee, the corpus's posture definition),
+  :func:`hands_down_frames` (both wrists within 0.2 m of the floor) and :func:`foot_plants` /
+  :func:`planted_rise` (a toe still, slower than 0.25 m/s, for at least ``stance_min_frames`` frames at any
+  height is a plant; the rise is the height of the last plant less the lower toe's at the start: a stair climb
+  plants the feet higher step by step, a figure rising with nothing under it plants none up there).
 * **Shown vs raw** (:func:`recovery_deviation`): the distance (cm) between the joints a recovery shows
   and the raw position read of the same features, per joint (p95, max) and over all frames x joints
   (p95, p99, max), and the travel ratio (the shown pelvis's ground path over the raw one's).
@@ -122,7 +132,8 @@ __all__ = [
     "seed_diversity", "GRAVITY", "report_table", "joints_reader",
     "CONTACT_REFERENCES", "gmd_skating_ratio", "physdiff_measures", "stance_analysis", "flight_fit_accelerations",
     "pooled_bone_percentile", "pooled_penetration_percentile", "recovery_deviation", "travel_ratio",
-    "FIELD_TABLE_COLUMNS",
+    "FIELD_TABLE_COLUMNS", "trunk_axes", "inverted_frames", "on_hands_frames", "pitch_rotation", "kneel_frames",
+    "hands_down_frames", "foot_plants", "planted_rise", "KNEE_DOWN_M", "FOOT_DOWN_M", "KNEE_GAP_M", "HAND_DOWN_M",
 ]
 
 #: Standard gravity (m/s^2), what the pelvis's acceleration in flight should be near (negative: down).
@@ -771,6 +782,108 @@ def recovery_deviation(shown, raw, skeleton: str | Skeleton | None = "humanml3d"
             "worst_joint": names[worst] if names is not None and len(names) == d.shape[1] else worst,
             "travel_ratio": s_path / r_path if r_path > 0 else float("nan"),
             "shown_path_m": s_path, "raw_path_m": r_path, "frames": int(d.shape[0])}
+
+
+# ------------------------------------------------------------------------------------ general motions
+#: Heights (m, joint centres above ``config.floor``) of the postures of the general-motion measures, as the
+#: corpus's captions name them (``salad_core.data.procedural.general_language.measured_postures``): a knee
+#: resting on the floor is about 0.05 up, a flat foot's ankle 0.08, a hand on the floor's wrist 0.03-0.06.
+KNEE_DOWN_M, FOOT_DOWN_M, KNEE_GAP_M, HAND_DOWN_M = 0.15, 0.12, 0.10, 0.20
+
+
+def trunk_axes(joints, skeleton: str | Skeleton = "humanml3d") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per frame unit vectors of the trunk, ``(N, 3)`` each: ``up`` (pelvis to neck), ``right`` (left to
+    right hip plus left to right shoulder, square to ``up``) and ``front`` (``up x right``: the way the
+    chest faces; its height component is 1 lying on the back, -1 on the front)."""
+    x, sk = _prepare(joints, skeleton)
+    up = _unit(x[:, _idx(sk, "neck")] - x[:, 0])
+    right = (x[:, _idx(sk, "right_hip")] - x[:, _idx(sk, "left_hip")]) + \
+        (x[:, _idx(sk, "right_shoulder")] - x[:, _idx(sk, "left_shoulder")])
+    right = _unit(right - (right * up).sum(-1, keepdims=True) * up)
+    return up, right, np.cross(up, right)
+
+
+def inverted_frames(joints, skeleton: str | Skeleton = "humanml3d") -> np.ndarray:
+    """``(N,)`` bool: the head joint below the pelvis (a cartwheel, handstand, roll or flip)."""
+    x, sk = _prepare(joints, skeleton)
+    return x[:, _idx(sk, "head"), 1] < x[:, 0, 1]
+
+
+def on_hands_frames(joints, skeleton: str | Skeleton = "humanml3d") -> np.ndarray:
+    """``(N,)`` bool: upside down on the hands: the head below the pelvis and the lowest joint a wrist or an
+    elbow (the skeleton has no hand joints)."""
+    x, sk = _prepare(joints, skeleton)
+    arms = [_idx(sk, n) for n in ("left_elbow", "right_elbow", "left_wrist", "right_wrist")]
+    return inverted_frames(x, sk) & np.isin(x[..., 1].argmin(axis=1), arms)
+
+
+def pitch_rotation(joints, skeleton: str | Skeleton = "humanml3d") -> float:
+    """Degrees the trunk turned head over heels, summed frame to frame about the body's left axis
+    (> 0: forwards, a forward roll or front flip; < 0: backwards, a backflip)."""
+    up, right, _ = trunk_axes(joints, skeleton)
+    axis = -right[:-1]
+    cross = np.cross(up[:-1], up[1:])
+    return float(np.degrees(np.arctan2((cross * axis).sum(-1), (up[:-1] * up[1:]).sum(-1)).sum()))
+
+
+def kneel_frames(joints, side: str, skeleton: str | Skeleton = "humanml3d",
+                 config: PhysicsConfig = PhysicsConfig()) -> np.ndarray:
+    """``(N,)`` bool: kneeling on the ``side`` ("left" / "right") knee: that knee within ``KNEE_DOWN_M`` of the
+    floor, the other knee at least ``KNEE_GAP_M`` higher and the other foot planted (the lower of its ankle and
+    toe within ``FOOT_DOWN_M`` of the floor)."""
+    if side not in ("left", "right"):
+        raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+    x, sk = _prepare(joints, skeleton)
+    other = "right" if side == "left" else "left"
+    y = x[..., 1] - config.floor
+    knee, o_knee = y[:, _idx(sk, f"{side}_knee")], y[:, _idx(sk, f"{other}_knee")]
+    o_foot = np.minimum(y[:, _idx(sk, f"{other}_ankle")], y[:, _idx(sk, f"{other}_foot")])
+    return (knee < KNEE_DOWN_M) & (o_knee > knee + KNEE_GAP_M) & (o_foot < FOOT_DOWN_M)
+
+
+def hands_down_frames(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfig = PhysicsConfig(),
+                      height: float = HAND_DOWN_M) -> np.ndarray:
+    """``(N,)`` bool: both wrists within ``height`` of the floor (on all fours, while crawling)."""
+    x, sk = _prepare(joints, skeleton)
+    y = x[..., 1] - config.floor
+    return np.maximum(y[:, _idx(sk, "left_wrist")], y[:, _idx(sk, "right_wrist")]) < height
+
+
+def foot_plants(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfig = PhysicsConfig(),
+                max_speed: float = 0.25) -> list[tuple[str, int, int, float]]:
+    """Where the feet stand still, at any height (a step of a stair is a plant above the floor).
+
+    A toe joint (``left_foot`` / ``right_foot``) is planted over a run of at least ``config.stance_min_frames``
+    frames in which it moves slower than ``max_speed`` (m/s, 3-D) from frame to frame. Returns per plant
+    ``(foot, first frame, last frame + 1, height)``, the height (m above ``config.floor``) the median of the
+    toe's over the run; in time order.
+    """
+    x, sk = _prepare(joints, skeleton)
+    fps = _fps(sk, config)
+    out = []
+    for foot in ("left", "right"):
+        toe = x[:, _idx(sk, f"{foot}_foot")]
+        slow = np.linalg.norm(np.diff(toe, axis=0), axis=-1) * fps < max_speed       # (N-1,) frame pairs
+        runs = _long_runs(slow, config.stance_min_frames - 1)
+        m = np.concatenate([[False], runs, [False]])
+        edges = np.flatnonzero(m[1:] != m[:-1])
+        for a, b in zip(edges[::2], edges[1::2]):                                    # pairs a..b-1: frames a..b
+            out.append((foot, int(a), int(b + 1), float(np.median(toe[a:b + 1, 1]) - config.floor)))
+    return sorted(out, key=lambda p: (p[1], p[0]))
+
+
+def planted_rise(joints, skeleton: str | Skeleton = "humanml3d", config: PhysicsConfig = PhysicsConfig()) -> float:
+    """How much higher (m) the feet end up standing than they start: the height of the last :func:`foot_plants`
+    plant less the lower toe's over the first ``config.stance_min_frames`` frames (0 without a plant). A stair climb
+    plants the feet step by step higher; a figure that rises with nothing under it plants none up there."""
+    x, sk = _prepare(joints, skeleton)
+    plants = foot_plants(x, sk, config)
+    if not plants:
+        return 0.0
+    toes = [_idx(sk, "left_foot"), _idx(sk, "right_foot")]
+    start = float(x[:config.stance_min_frames, toes, 1].min(axis=1).mean()) - config.floor
+    last_start = max(p[1] for p in plants)
+    return float(np.mean([p[3] for p in plants if p[1] == last_start]) - start)
 
 
 # ------------------------------------------------------------------------------------ one motion

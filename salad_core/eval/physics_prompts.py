@@ -17,6 +17,26 @@ values in the comments are the minimum over those clips), below that minimum (mo
 two thirds of it), since generated motions are 6 s long and need not look like one corpus clip;
 ``tests/test_physics.py`` checks that the corpus's own clips pass them.
 
+A second set, :data:`GENERAL_PROMPTS` (13), asks for the general-motion set's actions, said in the
+words of its captions (``salad_core.data.procedural.general_language``: ``GENERAL_ACTIONS``' example prompts and
+the phrase rules) or of the action corpus's (kneeling on a knee, lying down, crawling, climbing stairs): a
+cartwheel (and one to the left), a handstand, a forward roll (two wordings), a backflip, lying down on the back,
+kneeling on the left and on the right knee, crawling forward on all fours, climbing stairs (two wordings) and
+getting up from the floor. Their checks use measures of :mod:`salad_core.eval.physics` written for them: the head
+below the pelvis, upside down on the hands, the trunk's head-over-heels turn, every joint off the floor, the
+pelvis height at the end, the chest facing up, the named knee on the floor with the other foot planted, both hands
+near the floor and forward travel, and the pelvis rise with the feet planted higher step by step
+(:func:`~salad_core.eval.physics.planted_rise`: a figure that rises with nothing to stand on plants no foot up
+there). Their thresholds come the same way from the corpus's single-action clips of those actions
+(:func:`corpus_windows`, :func:`corpus_check_values`: a general clip on its phrase's frames and 0.5 s after, since
+the general set's windows carry unsaid movement around the step), on the seed-0 corpus built with
+``salad corpus build --size default --seed 0 --with-general 2000`` at commit ``d4fdbe1`` (its action clips are
+those of corpus 2.7); ``tests/test_physics_general.py`` checks that the clips which set them pass. The general
+prompts are a set of their own (``salad eval --physics --prompt-set general``; "core", the default, is
+:data:`PROMPTS` alone, so every record stays comparable), and the report adds the seeds whose motion passed every
+check of its prompt (:func:`general_pass_rows`) and the general-motion target: each prompt of cartwheel, roll, lie
+down, kneel, crawl and climb stairs in at least 80 % of its seeds.
+
 The jump-height ranges are measured, not chosen: :data:`REFERENCE_RANGES` holds the range of the pelvis
 rise (:func:`salad_core.eval.physics.measure_motion`'s ``jump_rise_m``) over the corpus's clips whose
 every caption is a single jump phrase (and over its jumping-jacks clips), measured with
@@ -52,7 +72,9 @@ import numpy as np
 from ..skeleton import Skeleton, get_skeleton
 from . import physics as ph
 
-__all__ = ["Check", "CheckResult", "BenchmarkPrompt", "PROMPTS", "MEASURES", "REFERENCE_RANGES",
+__all__ = ["Check", "CheckResult", "BenchmarkPrompt", "PROMPTS", "GENERAL_PROMPTS", "PROMPT_SETS", "PROMPT_SET_GROUPS",
+           "prompt_set", "corpus_windows", "corpus_check_values", "general_pass_rows", "GENERAL_TARGET_ACTIONS",
+           "GENERAL_PASS_SHARE", "MEASURES", "REFERENCE_RANGES",
            "BenchSettings", "Generator", "corpus_reference_ranges", "corpus_reference_rises", "rise_ranges",
            "load_joints", "measure_clips",
            "caption_diversity", "reference_rows", "run_benchmark", "benchmark_markdown", "targets",
@@ -152,6 +174,32 @@ def _knee_rise(x, sk, side):
     return float(rel.max() - rel[0])
 
 
+# general-motion measures (GENERAL_PROMPTS): heights are above the floor (y = 0, where HumanML3D and the corpus put it)
+def _end(sk) -> slice:
+    return slice(-_seconds(sk, 0.5), None)
+
+
+def _start(sk) -> slice:
+    return slice(None, _seconds(sk, 0.5))
+
+
+def _pelvis_rise(x, sk, side):
+    return float(x[_end(sk), 0, 1].mean() - x[_start(sk), 0, 1].mean())
+
+
+def _chest_up_end(x, sk, side):
+    return float(ph.trunk_axes(x, sk)[2][_end(sk), 1].mean())
+
+
+def _kneel_frames(x, sk, side):
+    return float(ph.kneel_frames(x, _need_side(side, "kneel_frames"), sk).sum())
+
+
+#: The lowest joint's height (m) above which the whole body is off the floor: 3 cm above the lowest a joint
+#: rests (a flat foot's toe joint, 1.2 cm), as the corpus's captions measure it (``general_language.airborne``).
+AIRBORNE_M = 0.042
+
+
 #: Per-prompt measures: name -> (function(joints, skeleton, side) -> float, unit, what it is).
 MEASURES: dict[str, tuple[Callable, str, str]] = {
     "forward_m": (lambda x, sk, s: ph.root_travel(x, sk)["forward"], "m",
@@ -160,6 +208,8 @@ MEASURES: dict[str, tuple[Callable, str, str]] = {
                "pelvis displacement to the frame-0 left"),
     "displacement_m": (lambda x, sk, s: ph.root_travel(x, sk)["displacement"], "m",
                        "pelvis ground displacement, start to end"),
+    "sideways_m": (lambda x, sk, s: abs(ph.root_travel(x, sk)["left"]), "m",
+                   "pelvis displacement across the frame-0 heading, either way"),
     "turn_deg": (_turn, "deg", "heading change of the hips, start to end (positive = to the left)"),
     "abs_turn_deg": (lambda x, sk, s: abs(_turn(x, sk, s)), "deg", "absolute heading change of the hips"),
     "jump_rise_m": (lambda x, sk, s: float(x[:, 0, 1].max()) - ph.standing_height(x, sk), "m",
@@ -179,6 +229,28 @@ MEASURES: dict[str, tuple[Callable, str, str]] = {
     "head_ms": (lambda x, sk, s: ph.limb_activity(x, sk)["head"], "m/s", "head activity relative to the neck"),
     "stride_m": (lambda x, sk, s: float(np.median(v)) if (v := ph.strides(x, sk)).size else 0.0, "m",
                  "median distance a foot travels from lift-off to touch-down (0: the feet never step)"),
+    # ---- general motions (GENERAL_PROMPTS)
+    "inverted_frames": (lambda x, sk, s: float(ph.inverted_frames(x, sk).sum()), "frames",
+                        "frames with the head below the pelvis"),
+    "on_hands_frames": (lambda x, sk, s: float(ph.on_hands_frames(x, sk).sum()), "frames",
+                        "frames upside down on the hands (head below the pelvis, a wrist or elbow the lowest joint)"),
+    "pitch_deg": (lambda x, sk, s: ph.pitch_rotation(x, sk), "deg",
+                  "head-over-heels turn of the trunk, summed frame to frame (positive = forwards)"),
+    "airborne_frames": (lambda x, sk, s: float((x[..., 1].min(axis=1) > AIRBORNE_M).sum()), "frames",
+                        f"frames with every joint off the floor (the lowest above {AIRBORNE_M} m)"),
+    "pelvis_min_m": (lambda x, sk, s: float(x[:, 0, 1].min()), "m", "lowest pelvis height above the floor"),
+    "pelvis_end_m": (lambda x, sk, s: float(x[_end(sk), 0, 1].mean()), "m",
+                     "pelvis height above the floor, mean over the last 0.5 s"),
+    "pelvis_rise_m": (_pelvis_rise, "m", "pelvis height over the last 0.5 s minus over the first 0.5 s"),
+    "chest_up_end": (_chest_up_end, "x", "height component of the chest's facing over the last 0.5 s "
+                                         "(1: lying on the back, -1: face down)"),
+    "kneel_frames": (_kneel_frames, "frames", "frames kneeling on the named knee (it within 0.15 m of the floor, "
+                                              "the other knee 0.1 m higher, the other foot within 0.12 m)"),
+    "hands_down_share": (lambda x, sk, s: float(ph.hands_down_frames(x, sk).mean()), "x",
+                         "share of frames with both wrists within 0.2 m of the floor"),
+    "planted_rise_m": (lambda x, sk, s: ph.planted_rise(x, sk), "m",
+                       "height of the feet's last plant minus the lower toe's at the start (a plant: a toe still "
+                       "for >= 3 frames, at any height)"),
 }
 
 #: Ranges (m) of the pelvis rise measured on the corpus (see the module docstring):
@@ -268,12 +340,23 @@ class BenchmarkPrompt:
     action: str                      # corpus primitive(s), for grouping
     checks: tuple[Check, ...]
     length: int = 120                # frames (6 s at 20 fps)
+    group: str = "core"              # the prompt set: "core" (PROMPTS) or "general" (GENERAL_PROMPTS)
+    #: the corpus captions that say what the prompt says (:func:`corpus_windows`): alternatives, each one tuple per
+    #: phrase of the names it may have: general-motion step actions (``general_language.GENERAL_RULES``) and
+    #: action-corpus primitives
+    corpus: tuple[tuple[tuple[str, ...], ...], ...] = ()
 
     def __post_init__(self) -> None:
         if not self.text.strip():
             raise ValueError("a benchmark prompt needs text")
         if not self.checks:
             raise ValueError(f"prompt {self.text!r} has no checks")
+        if self.group not in PROMPT_SET_GROUPS:
+            raise ValueError(f"prompt {self.text!r}: group must be one of {PROMPT_SET_GROUPS}, got {self.group!r}")
+
+
+#: The groups a benchmark prompt belongs to (``BenchmarkPrompt.group``).
+PROMPT_SET_GROUPS = ("core", "general")
 
 
 def _P(text: str, action: str, *checks: Check, length: int = 120) -> BenchmarkPrompt:
@@ -339,6 +422,175 @@ PROMPTS: tuple[BenchmarkPrompt, ...] = (
     _P("a person walks forward while waving his right hand", "walk+wave", _C("forward_m", lo=1.0),
        _C("wrist_lead_m", lo=0.3, side="right")),
 )
+
+
+def _G(text: str, action: str, corpus: tuple[tuple[tuple[str, ...], ...], ...], *checks: Check, length: int = 120
+       ) -> BenchmarkPrompt:
+    return BenchmarkPrompt(text, action, tuple(checks), length, group="general", corpus=corpus)
+
+
+_CARTWHEEL = (("cartwheel",),)
+_ROLL = (("forward_roll",),)
+_KNEEL_ONE = (("kneel_one", "kneeling_one", "kneel"),)
+_CRAWL = (("crawl_forward", "crawl_forward_knees", "crawl"),)
+_STAIRS = (("climb_stairs",),)
+_LIE_GET_UP = (("lying_back", "lie_down_back"), ("get_up", "stand_up"))
+
+#: The general-motion prompts (13: cartwheel, roll, lie down, kneel, crawl, climb stairs, and a
+#: handstand, a backflip, getting up). Words from ``general_language.GENERAL_ACTIONS``' example prompts and the
+#: corpus's phrase rules (each prompt says one of the corpus's captions' phrases). Thresholds from the corpus's
+#: own single-action clips, ``corpus_check_values(root, prompt)`` (the module docstring has the corpus; clips:
+#: cartwheel 42, to the left 4, handstand 34, forward roll 24, backflip 12, lying down 18, kneeling 15 a side,
+#: crawling 18, stairs 6, lying and getting up 14); the minima (maxima for upper bounds) over those clips in the
+#: comments, the thresholds mostly at a half to two thirds of them.
+GENERAL_PROMPTS: tuple[BenchmarkPrompt, ...] = (
+    # corpus cartwheels come with a run-up and travel 3.9-11 m sideways; a standing cartwheel covers about 1.5 m
+    _G("a person does a cartwheel", "cartwheel", (_CARTWHEEL,),
+       _C("inverted_frames", lo=4), _C("on_hands_frames", lo=3), _C("sideways_m", lo=1.0)),   # 7; 6 frames; 3.91 m
+    _G("someone does a cartwheel to the left", "cartwheel", (_CARTWHEEL,),
+       _C("inverted_frames", lo=4), _C("on_hands_frames", lo=3), _C("left_m", lo=1.0)),        # 12; 8; 3.97 m
+    _G("a person does a handstand", "handstand", ((("handstand",),),), _C("on_hands_frames", lo=10)),   # 17 frames
+    _G("a person does a forward roll", "forward_roll", (_ROLL,),
+       _C("pitch_deg", lo=180.0), _C("inverted_frames", lo=4)),                                  # 272 deg; 6 frames
+    _G("someone rolls forward on the floor", "forward_roll", (_ROLL,),
+       _C("pitch_deg", lo=180.0), _C("inverted_frames", lo=4)),
+    _G("a person does a backflip", "flip", ((("back_flip",),),),
+       _C("pitch_deg", hi=-180.0), _C("airborne_frames", lo=6)),                                # -331 deg; 13 frames
+    # lying: the corpus's posture names call a pelvis below 0.35 m lying (general_language.measured_postures)
+    _G("a person lies down on their back", "lie_down", ((("lie_down_back", "lie_down"),),),
+       _C("pelvis_end_m", hi=0.35), _C("chest_up_end", lo=0.5)),                                 # 0.31 m; 0.77
+    _G("a man kneels on his left knee", "kneel", (_KNEEL_ONE,), _C("kneel_frames", lo=4, side="left")),     # 6 frames
+    _G("a woman kneels down on her right knee", "kneel", (_KNEEL_ONE,), _C("kneel_frames", lo=4, side="right")),
+    _G("a woman crawls forward on all fours", "crawl", (_CRAWL,),
+       _C("hands_down_share", lo=0.5), _C("forward_m", lo=0.2)),                                 # 1.0; 0.39 m
+    _G("a person climbs the stairs", "climb_stairs", (_STAIRS,),
+       _C("pelvis_rise_m", lo=0.3), _C("planted_rise_m", lo=0.3)),                               # 0.48 m; 0.51 m
+    _G("a man walks up a flight of stairs", "climb_stairs", (_STAIRS,),
+       _C("pelvis_rise_m", lo=0.3), _C("planted_rise_m", lo=0.3)),
+    _G("a person lies on the floor and gets up", "get_up", (_LIE_GET_UP, (("lie_down_get_up",),)),
+       _C("pelvis_min_m", hi=0.35), _C("pelvis_end_m", lo=0.6)),                                 # 0.15 m; 0.89 m
+)
+
+#: The prompt sets of ``salad eval --physics --prompt-set``: "core" (the 41 of :data:`PROMPTS`, the default, so
+#: records stay comparable), "general" (:data:`GENERAL_PROMPTS`) and "all" (both, core first).
+PROMPT_SETS: dict[str, tuple[BenchmarkPrompt, ...]] = {
+    "core": PROMPTS, "general": GENERAL_PROMPTS, "all": PROMPTS + GENERAL_PROMPTS}
+
+
+def prompt_set(name: str) -> tuple[BenchmarkPrompt, ...]:
+    """The prompts of a set of :data:`PROMPT_SETS` ("core", "general" or "all")."""
+    if name not in PROMPT_SETS:
+        raise ValueError(f"unknown prompt set {name!r}; choose one of {', '.join(PROMPT_SETS)}")
+    return PROMPT_SETS[name]
+
+
+# ------------------------------------------------------------------------------------ corpus references
+def _prompt_sides(prompt: BenchmarkPrompt, n: int) -> list[str | None]:
+    """The side each phrase of ``prompt`` names (None: none), read with whichever of the corpus's parsers
+    reads it in ``n`` phrases (no sides when neither does)."""
+    from ..data.procedural.general_language import parse_general_prompt
+    from ..data.procedural.language import parse_prompt
+
+    for parsed in (parse_general_prompt(prompt.text), parse_prompt(prompt.text)):
+        if parsed is not None and len(parsed) == n:
+            return [p.side for p in parsed]
+    return [None] * n
+
+
+def _clip_phrases(root: Path, clip_id: str) -> list[tuple[set[str], str | None, tuple[int, int]]] | None:
+    """The phrases of a clip's first caption in time order: (what they name: general step actions or the
+    primitive, the side they name, frames); None when the caption does not parse phrase for phrase."""
+    from ..data.procedural.general_language import parse_general_prompt
+    from ..data.procedural.language import parse_prompt
+
+    path = root / "annotations" / f"{clip_id}.json"
+    if not path.is_file():
+        return None
+    caps = json.loads(path.read_text(encoding="utf-8")).get("captions") or []
+    if not caps or not caps[0].get("phrases"):
+        return None
+    cap = caps[0]
+    general = clip_id.lstrip("M").startswith("G")
+    parsed = (parse_general_prompt if general else parse_prompt)(cap["caption"])
+    if parsed is None or len(parsed) != len(cap["phrases"]):
+        return None
+    out = []
+    for ann in cap["phrases"]:
+        i0, i1 = ann["words"]
+        best = max(parsed, key=lambda q: min(i1, q.words[1]) - max(i0, q.words[0]))
+        if min(i1, best.words[1]) <= max(i0, best.words[0]):
+            return None
+        names = set(best.actions) if general else {best.kind}
+        out.append((names, best.side, (int(ann["frames"][0]), int(ann["frames"][1]))))
+    return sorted(out, key=lambda t: t[2])
+
+
+def corpus_windows(root: str | Path, prompt: BenchmarkPrompt, splits: Sequence[str] = ("train", "val", "test"),
+                   skeleton: str | Skeleton = "humanml3d", mode: str = "single", hold: int = 10,
+                   min_frames: int = 8) -> list[tuple[str, np.ndarray]]:
+    """The corpus's own motions of a general prompt: ``(clip id, joints)`` per clip of a procedural corpus
+    (with its ``annotations/``) whose first caption says what the prompt says.
+
+    The caption's phrases are read with the corpus's parsers (a general clip's, ``G<id>`` / ``MG<id>``, with
+    ``parse_general_prompt``; an action clip's with ``parse_prompt``) and must name, phrase for phrase and in
+    time order, one of the actions of an alternative of ``prompt.corpus``, with the prompt's side where it
+    names one.
+
+    ``mode`` "single" (the single-action clips the thresholds come from): the caption says nothing else.
+    An action clip is measured whole, as the core prompts' clips are; a general clip on its phrases' frames
+    and up to ``hold`` frames after them (0.5 s: a posture reached at a phrase's last frame is held), because
+    the general set's windows carry unnamed movement around the step (parts of other acrobatics cut by the
+    window) that its captions leave unsaid. ``mode`` "phrase": any clip with such phrases among others,
+    measured on those phrases' frames and up to ``hold`` frames after them, until the next phrase begins.
+    """
+    if not prompt.corpus:
+        raise ValueError(f"prompt {prompt.text!r} names no corpus phrases (BenchmarkPrompt.corpus)")
+    if mode not in ("single", "phrase"):
+        raise ValueError(f"mode must be 'single' or 'phrase', got {mode!r}")
+    root = Path(root)
+    alts = [([set(c) for c in alt], _prompt_sides(prompt, len(alt))) for alt in prompt.corpus]
+    out = []
+    for split in splits:
+        if not (root / f"{split}.txt").is_file():
+            continue
+        for cid in _split_ids(root, split):
+            phrases = _clip_phrases(root, cid)
+            found = None
+            for want, sides in ([] if phrases is None else alts):
+                m = len(want)
+                starts = [0] if mode == "single" and len(phrases) == m else \
+                    range(len(phrases) - m + 1) if mode == "phrase" else []
+                for k in starts:
+                    seq = phrases[k:k + m]
+                    if all(names & w and (s is None or side == s) for (names, side, _), w, s in zip(seq, want, sides)):
+                        found = (k, m)
+                        break
+                if found:
+                    break
+            if found is None:
+                continue
+            k, m = found
+            x = load_joints(root, cid, skeleton)
+            n = x.shape[0]
+            if mode == "single" and not cid.lstrip("M").startswith("G"):
+                f0, f1 = 0, n
+            else:
+                last_end = phrases[k + m - 1][2][1]
+                nxt = phrases[k + m][2][0] if k + m < len(phrases) else n
+                f0, f1 = phrases[k][2][0], min(last_end + hold, max(nxt, last_end), n)
+            if f1 - f0 >= min_frames:
+                out.append((cid, x[f0:f1]))
+    return out
+
+
+def corpus_check_values(root: str | Path, prompt: BenchmarkPrompt, mode: str = "single",
+                        skeleton: str | Skeleton = "humanml3d") -> dict[str, list[tuple[str, float]]]:
+    """Each check's measure on the corpus's own motions of a general prompt (:func:`corpus_windows`):
+    check name -> ``[(clip id, value), ...]``; their minimum (maximum for an upper bound) is what the
+    threshold was set from."""
+    sk = get_skeleton(skeleton)
+    windows = corpus_windows(root, prompt, mode=mode, skeleton=sk)
+    return {c.name: [(cid, float(MEASURES[c.measure][0](x, sk, c.side))) for cid, x in windows] for c in prompt.checks}
 
 
 # ------------------------------------------------------------------------------------ real motions
@@ -726,7 +978,8 @@ def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings =
     ``reference_source``, and per generator its ``aggregate`` (with ``seed_diversity_cm`` and the pooled
     p95 / p99 columns), ``deviation`` (:func:`~salad_core.eval.physics.recovery_deviation` pooled over
     all its motions, or None without raw joints), ``checks_passed`` / ``checks_total``, ``seconds`` and
-    per prompt the per-seed reports, deviations and check results, the seed diversity and ``summary``
+    per prompt its ``group`` ("core" / "general"), the per-seed reports, deviations and check results,
+    ``seeds_passed`` (seeds whose motion passed every check of the prompt), the seed diversity and ``summary``
     (:data:`PROMPT_SUMMARY` averaged over the seeds).
     """
     say = log or (lambda s: None)
@@ -790,8 +1043,10 @@ def run_benchmark(generators: Mapping[str, Generator], settings: BenchSettings =
                 summary.update(deviation_p95_cm=_mean_of(v["p95_cm"] for v in devs),
                                deviation_p99_cm=_mean_of(v["p99_cm"] for v in devs),
                                travel_ratio=_mean_of(v["travel_ratio"] for v in devs))
-            per_prompt.append({"text": p.text, "action": p.action, "length": p.length,
-                               "seeds": list(settings.seeds), "diversity_cm": d, "summary": summary,
+            per_prompt.append({"text": p.text, "action": p.action, "length": p.length, "group": p.group,
+                               "seeds": list(settings.seeds),
+                               "seeds_passed": sum(all(r.passed for r in row) for row in checks),
+                               "diversity_cm": d, "summary": summary,
                                "reports": rows, "deviations": devs,
                                "checks": [[asdict(r) for r in row] for row in checks]})
         agg = ph.aggregate_reports(reports)
@@ -890,7 +1145,40 @@ def targets(result: Mapping) -> list[dict]:
     add("[field] travel within 20 % of raw (shown / raw pelvis ground path)", _travel_cell)
     add("[field] jumps near-ballistic: median per-segment flight fit on the jump prompts within 25 % of "
         "-9.81 m/s^2", lambda a, g: _ballistic(_segments_median(g, ("jump", "jumping_jacks"))))
+    if any(p.get("group") == "general" and p["action"] in GENERAL_TARGET_ACTIONS
+           for g in gens.values() for p in g["prompts"]):
+        add(f"[general] general-motion prompts ({', '.join(GENERAL_TARGET_ACTIONS)}): each passes every check in "
+            f">= {GENERAL_PASS_SHARE * 100:.0f} % of its seeds", lambda a, g: _general_cell(g))
     return rows
+
+
+#: The actions of the general-motion target (cartwheel, roll, lie down, kneel, crawl, climb stairs): the target row
+#: "[general]" asks that each of their :data:`GENERAL_PROMPTS` passes every check in :data:`GENERAL_PASS_SHARE`
+#: of its seeds.
+GENERAL_TARGET_ACTIONS = ("cartwheel", "forward_roll", "lie_down", "kneel", "crawl", "climb_stairs")
+GENERAL_PASS_SHARE = 0.8
+
+
+def general_pass_rows(gen: Mapping) -> list[dict]:
+    """Per general-motion prompt of one generator's result: ``text``, ``action``, ``seeds_passed`` (seeds
+    whose motion passed every check), ``seeds``, ``share`` and ``passed`` (share >= :data:`GENERAL_PASS_SHARE`)."""
+    out = []
+    for p in gen["prompts"]:
+        if p.get("group") != "general":
+            continue
+        k = p.get("seeds_passed")
+        if k is None:
+            k = sum(all(r["passed"] for r in row) for row in p["checks"])
+        n = len(p["checks"])
+        out.append({"text": p["text"], "action": p["action"], "seeds_passed": int(k), "seeds": n,
+                    "share": k / n if n else float("nan"), "passed": bool(n and k / n >= GENERAL_PASS_SHARE)})
+    return out
+
+
+def _general_cell(gen: Mapping):
+    rows = [r for r in general_pass_rows(gen) if r["action"] in GENERAL_TARGET_ACTIONS]
+    ok = sum(r["passed"] for r in rows)
+    return (f"{ok}/{len(rows)} prompts", (ok == len(rows)) if rows else None)
 
 
 def _mean_over(gen: Mapping, actions: Sequence[str], key: str) -> float | None:
@@ -1099,7 +1387,9 @@ def benchmark_markdown(result: Mapping) -> str:
             text = p["text"] if c == 0 else ""
             lines.append(f"| {text} | {p['checks'][0][c]['check']} | " + " | ".join(cells) + " |")
     passed = "; ".join(f"{n} {g['checks_passed']}/{g['checks_total']}" for n, g in gens.items())
-    lines += ["", "Checks passed: " + passed, "", "## Per prompt", "",
+    lines += ["", "Checks passed: " + passed, ""]
+    lines += _general_section(gens, names)
+    lines += ["## Per prompt", "",
               "Every value is the mean over the prompt's seeds (nan ignored); diversity = mean joint distance "
               "between the seeds' motions (cm).", ""]
     for n in names:
@@ -1111,6 +1401,35 @@ def benchmark_markdown(result: Mapping) -> str:
                          + " |")
         lines.append("")
     return "\n".join(lines)
+
+
+def _general_section(gens: Mapping, names: Sequence[str]) -> list[str]:
+    """The report's section on the general-motion prompts (none without them)."""
+    per = {n: general_pass_rows(gens[n]) for n in names}
+    first = per[names[0]]
+    if not first:
+        return []
+    lines = ["## General-motion prompts", "",
+             "Each cell: seeds whose motion passed every check of the prompt / seeds (share). The target asks for "
+             f">= {GENERAL_PASS_SHARE * 100:.0f} % on the prompts of {', '.join(GENERAL_TARGET_ACTIONS)} "
+             "(marked *).", "",
+             "| prompt | action | checks | " + " | ".join(names) + " |", "|---|---|---|" + "---|" * len(names)]
+    checks = {p["text"]: "; ".join(r["check"] for r in p["checks"][0]) for p in gens[names[0]]["prompts"]
+              if p.get("group") == "general" and p["checks"]}
+    for i, row in enumerate(first):
+        star = " *" if row["action"] in GENERAL_TARGET_ACTIONS else ""
+        cells = [f"{r['seeds_passed']}/{r['seeds']} ({r['share'] * 100:.0f} %)" for r in (per[n][i] for n in names)]
+        lines.append(f"| {row['text']}{star} | {row['action']} | {checks.get(row['text'], '')} | "
+                     + " | ".join(cells) + " |")
+    summary = []
+    for n in names:
+        k = sum(r["seeds_passed"] for r in per[n])
+        m = sum(r["seeds"] for r in per[n])
+        marked = [r for r in per[n] if r["action"] in GENERAL_TARGET_ACTIONS]
+        summary.append(f"{n} {k}/{m} seeds ({k / m * 100:.0f} %), marked prompts at >= "
+                       f"{GENERAL_PASS_SHARE * 100:.0f} %: {sum(r['passed'] for r in marked)}/{len(marked)}"
+                       if m else f"{n} -")
+    return lines + ["", "Seeds passing every check of their prompt: " + "; ".join(summary) + ".", ""]
 
 
 #: Columns of the real-capture per-clip table.
