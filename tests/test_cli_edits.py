@@ -201,7 +201,9 @@ def test_invert_mirror_take_all_gives_the_takes_mirror_image(tmp_path, sample_di
     np.save(take, np.load(sample_dir / "new_joint_vecs" / "012314.npy")[:40])
     out = tmp_path / "inv"
     assert cli.main(["-q", "invert", str(take), "--prompt", "a person walks forward", "--mirror-take", "all",
-                     "--no-ground", "--steps", "3", "--no-render", "--out", str(out)]) == 0
+                     "--no-ground", "--steps", "3", "--out", str(out)]) == 0
+    assert (out / "take_source_vs_edited.gif").is_file()                 # named as an edit's, not a reconstruction's
+    assert not (out / "take_source_vs_reconstruction.gif").exists()
     rec = np.load(out / "take_reconstruction_joints.npy")
     edited = np.load(out / "take_edited_joints.npy")
     rel = lambda x: x - x[:, :1]                                    # root-aligned (the two VAE round trips differ)

@@ -846,12 +846,13 @@ def cmd_invert(args: argparse.Namespace) -> int:
     path = loaded.path
     out = _check_out_dir(args.out, args.force)
     stem = path.stem
-    branches = ["reconstruction"] + (["edited"] if specs else [])
+    edited = bool(specs) or args.mirror_take is not None      # --mirror-take's edits are built after the inversion
+    branches = ["reconstruction"] + (["edited"] if edited else [])
     gif_name = f"{stem}_source_vs_{branches[-1]}.gif"
     attention = bool(getattr(args, "attention", False))
     html = bool(getattr(args, "html", False))
-    figures = _edit_figure_names(f"{stem}_", "reconstruction", edited=bool(specs)) if attention else []
-    pages = [f"{stem}_source_vs_edited_explorer.html" if specs else f"{stem}_reconstruction_explorer.html"] \
+    figures = _edit_figure_names(f"{stem}_", "reconstruction", edited=edited) if attention else []
+    pages = [f"{stem}_source_vs_edited_explorer.html" if edited else f"{stem}_reconstruction_explorer.html"] \
         if html else []
     capture = _full_capture() if html else attention
     # refuse before any work: every file this run would write
