@@ -598,6 +598,18 @@ def _solve_leg(q: np.ndarray, leg: _Leg, max_reach=None) -> None:
     q[active, leg.toe] = new_toe[active]
 
 
+def _motion_and_lock(joints: np.ndarray, lock: np.ndarray, sk: Skeleton) -> tuple[np.ndarray, np.ndarray]:
+    """A float64 copy of one motion's ``joints`` ``(N, J, 3)`` and ``lock`` as ``(N, 4)`` bool; ``ValueError``
+    naming the array whose shape is not that."""
+    q = np.array(joints, dtype=np.float64)
+    if q.ndim != 3 or q.shape[1:] != (sk.num_joints, 3):
+        raise ValueError(f"joints must have shape (N, {sk.num_joints}, 3), got shape {q.shape}")
+    lock = np.asarray(lock, dtype=bool)
+    if lock.shape != (q.shape[0], 4):
+        raise ValueError(f"lock must have shape ({q.shape[0]}, 4), got shape {lock.shape}")
+    return q, lock
+
+
 def lock_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "humanml3d", *,
               blend_frames: int = 3, floor: float | None = 0.0) -> np.ndarray:
     """Keep the contact joints in place while they are locked, moving the legs by two-bone IK.
@@ -626,12 +638,7 @@ def lock_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "hu
     ndarray ``(N, J, 3)`` float64
     """
     sk = get_skeleton(skeleton)
-    q = np.array(joints, dtype=np.float64)
-    if q.ndim != 3 or q.shape[1:] != (sk.num_joints, 3):
-        raise ValueError(f"joints must have shape (N, {sk.num_joints}, 3), got shape {q.shape}")
-    lock = np.asarray(lock, dtype=bool)
-    if lock.shape != (q.shape[0], 4):
-        raise ValueError(f"lock must have shape ({q.shape[0]}, 4), got shape {lock.shape}")
+    q, lock = _motion_and_lock(joints, lock, sk)
     for side in (0, 1):
         if lock[:, 2 * side:2 * side + 2].any():
             _solve_leg(q, _leg_goals(q, lock, side, sk, blend_frames, floor))
@@ -673,12 +680,7 @@ def plant_feet(joints: np.ndarray, lock: np.ndarray, skeleton: SkeletonLike = "h
     ndarray ``(N, J, 3)`` float64, bone lengths unchanged.
     """
     sk = get_skeleton(skeleton)
-    q = np.array(joints, dtype=np.float64)
-    if q.ndim != 3 or q.shape[1:] != (sk.num_joints, 3):
-        raise ValueError(f"joints must have shape (N, {sk.num_joints}, 3), got shape {q.shape}")
-    lock = np.asarray(lock, dtype=bool)
-    if lock.shape != (q.shape[0], 4):
-        raise ValueError(f"lock must have shape ({q.shape[0]}, 4), got shape {lock.shape}")
+    q, lock = _motion_and_lock(joints, lock, sk)
     legs, reaches = [], []
     for side in (0, 1):
         leg = _leg_goals(q, lock, side, sk, blend_frames, floor, max_foot_shift)

@@ -61,6 +61,7 @@ from salad_core.skeleton import PART_NAMES, Skeleton, get_skeleton
 from ._arrays import as_joints, atomic_output, to_numpy
 from .attention import DIVERGING_CMAP, merge_tokens, reduce_attention
 from .camera import VIEWS
+from .widgets import _attention_maps_inputs, _is_attention_maps   # read as the Jupyter explorer reads them
 
 __all__ = ["export_explorer", "ExplorerPage", "explorer_data", "MAX_BYTES", "FORMAT"]
 
@@ -78,11 +79,6 @@ _COMPARE_KEYS = {"attention", "joints", "tokens", "axes", "batch", "frames_per_l
 
 
 # ----------------------------------------------------------------------------- inputs
-def _is_attention_maps(obj) -> bool:
-    # duck-typed like the Jupyter explorer: salad_viz reads salad_core.skeleton only
-    return all(hasattr(obj, name) for name in ("cross_map", "select", "tokens", "captured_layers", "mode"))
-
-
 def _first_content_word(words: Sequence[str]) -> int:
     from .widgets import first_content_word   # the Jupyter explorer's rule (no ipywidgets needed)
 
@@ -122,13 +118,7 @@ class _Panel:
         self.total_steps: int | None = None
         self.layer_labels: list[str] | None = None
         if _is_attention_maps(attention):
-            b = 0 if batch is None else batch
-            if tokens is None:
-                tokens = attention.tokens(b)
-            if fpl is None:
-                fpl = attention.unit_length
-            if prompt is None and hasattr(attention, "prompts"):
-                prompt = attention.prompts[b]
+            b, tokens, fpl, prompt = _attention_maps_inputs(attention, batch, tokens, fpl, prompt)
             self.heads = len(attention.captured_heads)
             self.layer_labels = [str(layer) for layer in attention.captured_layers]
             if attention.mode == "full":

@@ -218,6 +218,20 @@ def _is_attention_maps(obj) -> bool:
     return all(hasattr(obj, name) for name in ("cross_map", "select", "tokens", "captured_layers", "mode"))
 
 
+def _attention_maps_inputs(maps, batch: int | None, tokens, frames_per_latent, prompt) -> tuple[int, Any, Any, Any]:
+    """What an ``AttentionMaps`` gives where the caller gave nothing: ``(b, tokens, frames_per_latent,
+    prompt)``, with ``b`` the sample (``batch``, default 0) and each other value the given one or the maps':
+    the sample's tokens, ``unit_length``, and its prompt if the maps hold prompts."""
+    b = 0 if batch is None else batch
+    if tokens is None:
+        tokens = maps.tokens(b)
+    if frames_per_latent is None:
+        frames_per_latent = maps.unit_length
+    if prompt is None and hasattr(maps, "prompts"):
+        prompt = maps.prompts[b]
+    return b, tokens, frames_per_latent, prompt
+
+
 def _from_attention_maps(maps, b: int) -> tuple[np.ndarray, str]:
     """An ``AttentionMaps`` sample as ``(array, axes)``: every step, layer and head of a full
     capture (``"slhnpw"``), or the per-layer means of a mean capture (``"lpnw"``)."""
@@ -341,13 +355,7 @@ class AttentionExplorer:
         fpl = frames_per_latent
         num_steps = None
         if _is_attention_maps(attention):
-            b = 0 if batch is None else batch
-            if tokens is None:
-                tokens = attention.tokens(b)
-            if fpl is None:
-                fpl = attention.unit_length
-            if prompt is None and hasattr(attention, "prompts"):
-                prompt = attention.prompts[b]
+            b, tokens, fpl, prompt = _attention_maps_inputs(attention, batch, tokens, fpl, prompt)
             num_steps = getattr(attention, "num_steps", None)
             attention, axes, batch = (*_from_attention_maps(attention, b), None)
         elif tokens is None:

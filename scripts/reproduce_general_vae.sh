@@ -13,23 +13,9 @@
 # generator 1.0 (commit 197e7fc): scripts/reproduce_salad.sh's header says how to build that data.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-DRY=0
-if [ "${1:-}" = "--dry-run" ]; then DRY=1; shift; fi
-OUT=${1:-runs/reproduce/general_vae}
-PY=${PYTHON:-.venv/bin/python}
-RESUME=${RESUME:+--resume}
-case "$(realpath -m "$OUT")/" in "$(realpath -m salad_core/weights)"/*)
-  echo "refusing to write into the shipped weights ($OUT): give a folder outside salad_core/weights" >&2; exit 2;; esac
-run() { if [ "$DRY" = 1 ]; then printf "%q " "$@"; echo; else echo "+ $*"; "$@"; fi; }
-[ "$DRY" = 1 ] || mkdir -p "$OUT"
-if [ -z "${CORPUS:-}" ]; then    # a given CORPUS is used as it is
-  CORPUS=$OUT/corpus
-  [ -f "$CORPUS/corpus.json" ] || run "$PY" -m salad_core.cli corpus build --out "$CORPUS" --size default --seed 0
-fi
-if [ -z "${GENERAL:-}" ]; then   # a given GENERAL is used as it is
-  GENERAL=$OUT/general
-  [ -f "$GENERAL/general.json" ] || run "$PY" scripts/build_general_motion.py --out "$GENERAL" --n 4000 --seed 0
-fi
+source scripts/_reproduce_common.sh runs/reproduce/general_vae "$@"
+corpus_data
+general_data
 run "$PY" -m salad_core.train vae --data "$CORPUS" --general "$GENERAL" --out "$OUT/vae" \
     --config configs/general-vae.json --no-progress $RESUME
 # the VAE folder, float32 (a denoiser trained on it sees exactly the run's latents)

@@ -13,19 +13,8 @@
 # 4736db4); this checkout's generator is also 2.7, so the corpus it builds is that one.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-DRY=0
-if [ "${1:-}" = "--dry-run" ]; then DRY=1; shift; fi
-OUT=${1:-runs/reproduce/keymotion}
-PY=${PYTHON:-.venv/bin/python}
-RESUME=${RESUME:+--resume}
-case "$(realpath -m "$OUT")/" in "$(realpath -m salad_core/weights)"/*)
-  echo "refusing to write into the shipped weights ($OUT): give a folder outside salad_core/weights" >&2; exit 2;; esac
-run() { if [ "$DRY" = 1 ]; then printf "%q " "$@"; echo; else echo "+ $*"; "$@"; fi; }
-[ "$DRY" = 1 ] || mkdir -p "$OUT"
-if [ -z "${CORPUS:-}" ]; then    # a given CORPUS is used as it is
-  CORPUS=$OUT/corpus
-  [ -f "$CORPUS/corpus.json" ] || run "$PY" -m salad_core.cli corpus build --out "$CORPUS" --size default --seed 0
-fi
+source scripts/_reproduce_common.sh runs/reproduce/keymotion "$@"
+corpus_data
 run "$PY" -m salad_core.train keymotion --data "$CORPUS" --out "$OUT/keymotion" \
     --config configs/keymotion-0.2.json --no-progress $RESUME
 # the pipeline folder: each stage's best checkpoint, fp16, with runs.json

@@ -23,24 +23,10 @@
 # then run this script with CORPUS=DIR/corpus GENERAL=DIR/general.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-DRY=0
-if [ "${1:-}" = "--dry-run" ]; then DRY=1; shift; fi
-OUT=${1:-runs/reproduce/salad}
-PY=${PYTHON:-.venv/bin/python}
-RESUME=${RESUME:+--resume}
-case "$(realpath -m "$OUT")/" in "$(realpath -m salad_core/weights)"/*)
-  echo "refusing to write into the shipped weights ($OUT): give a folder outside salad_core/weights" >&2; exit 2;; esac
-run() { if [ "$DRY" = 1 ]; then printf "%q " "$@"; echo; else echo "+ $*"; "$@"; fi; }
-[ "$DRY" = 1 ] || mkdir -p "$OUT"
+source scripts/_reproduce_common.sh runs/reproduce/salad "$@"
 # 1. data (deterministic: the same commit and seed give byte-identical files)
-if [ -z "${CORPUS:-}" ]; then    # a given CORPUS is used as it is
-  CORPUS=$OUT/corpus
-  [ -f "$CORPUS/corpus.json" ] || run "$PY" -m salad_core.cli corpus build --out "$CORPUS" --size default --seed 0
-fi
-if [ -z "${GENERAL:-}" ]; then   # a given GENERAL is used as it is
-  GENERAL=$OUT/general
-  [ -n "${VAE:-}" ] || [ -f "$GENERAL/general.json" ] || run "$PY" scripts/build_general_motion.py --out "$GENERAL" --n 4000 --seed 0
-fi
+corpus_data
+[ -n "${VAE:-}" ] || general_data     # a given VAE needs no general motions
 # 2. the VAE on corpus + general motion
 if [ -z "${VAE:-}" ]; then
   run "$PY" -m salad_core.train vae --data "$CORPUS" --general "$GENERAL" --out "$OUT/vae" \

@@ -22,6 +22,8 @@ import sys
 import time
 import urllib.error
 import urllib.request
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +57,24 @@ def unavailable_reason() -> str | None:
         except ImportError:
             return f"the Python package {package!r} is not installed (bash scripts/setup.sh installs it)"
     return None
+
+
+@contextmanager
+def launch_chromium() -> Iterator:
+    """The system Chromium (:func:`chromium_path`) launched headless by Playwright; on leaving, the browser
+    is closed and Playwright stopped."""
+    from playwright.sync_api import sync_playwright
+
+    pw = sync_playwright().start()
+    try:
+        chromium = pw.chromium.launch(executable_path=chromium_path(), headless=True,
+                                      args=[f for f in CHROMIUM_FLAGS if f != "--headless"])
+        try:
+            yield chromium
+        finally:
+            chromium.close()
+    finally:
+        pw.stop()
 
 
 def free_port() -> int:

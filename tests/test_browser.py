@@ -25,8 +25,8 @@ from pathlib import Path
 
 import pytest
 
-from _browser import (CHROMIUM_FLAGS, JS_IMAGE_B64, JS_NOTEBOOK_READY, JS_RUN_ALL, SUBSHELL_MODES, SUBSHELL_PLUGIN,
-                      LabServer, b64png, chromium_path, decode_png, pixel_agreement, unavailable_reason)
+from _browser import (JS_IMAGE_B64, JS_NOTEBOOK_READY, JS_RUN_ALL, SUBSHELL_MODES, SUBSHELL_PLUGIN, LabServer, b64png,
+                      decode_png, launch_chromium, pixel_agreement, unavailable_reason)
 
 REASON = unavailable_reason()
 if REASON:
@@ -138,18 +138,8 @@ def lab(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def browser():
-    from playwright.sync_api import sync_playwright
-
-    pw = sync_playwright().start()
-    try:
-        chromium = pw.chromium.launch(executable_path=chromium_path(), headless=True,
-                                      args=[f for f in CHROMIUM_FLAGS if f != "--headless"])
-        try:
-            yield chromium
-        finally:
-            chromium.close()
-    finally:
-        pw.stop()
+    with launch_chromium() as chromium:
+        yield chromium
 
 
 @pytest.fixture

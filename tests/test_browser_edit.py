@@ -16,8 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from _browser import (CHROMIUM_FLAGS, JS_IMAGE_B64, JS_NOTEBOOK_READY, JS_RUN_ALL, LabServer, chromium_path,
-                      unavailable_reason)
+from _browser import JS_IMAGE_B64, JS_NOTEBOOK_READY, JS_RUN_ALL, LabServer, launch_chromium, unavailable_reason
 
 REASON = unavailable_reason()
 if REASON:
@@ -59,18 +58,8 @@ print(json.dumps({"code": ex.last_code, "status": ex.edit_status.value,
 
 @pytest.fixture(scope="module")
 def browser():
-    from playwright.sync_api import sync_playwright
-
-    pw = sync_playwright().start()
-    try:
-        chromium = pw.chromium.launch(executable_path=chromium_path(), headless=True,
-                                      args=[f for f in CHROMIUM_FLAGS if f != "--headless"])
-        try:
-            yield chromium
-        finally:
-            chromium.close()
-    finally:
-        pw.stop()
+    with launch_chromium() as chromium:
+        yield chromium
 
 
 def _shot(page, label: str) -> None:

@@ -205,20 +205,10 @@ def shipped():
 
 @pytest.fixture(scope="module")
 def chromium():
-    from playwright.sync_api import sync_playwright
+    from _browser import launch_chromium
 
-    from _browser import CHROMIUM_FLAGS, chromium_path
-
-    pw = sync_playwright().start()
-    try:
-        browser = pw.chromium.launch(executable_path=chromium_path(), headless=True,
-                                     args=[f for f in CHROMIUM_FLAGS if f != "--headless"])
-        try:
-            yield browser
-        finally:
-            browser.close()
-    finally:
-        pw.stop()
+    with launch_chromium() as browser:
+        yield browser
 
 
 class OfflinePage:

@@ -70,17 +70,18 @@ from torch import nn
 from salad_core.io import register_model
 from salad_core.models.gemm import Linear
 from salad_core.models.layers import ACTIVATIONS
-from salad_core.skeleton import Skeleton, available_skeletons, get_skeleton
+from salad_core.skeleton import Skeleton, get_skeleton
 
 from .models import (
-    Normalizer,
-    TransformerBlock,
+    FeatureModel,
     bone_length_loss,
     check_non_negative,
     check_positive_int,
+    check_skeleton_name,
     check_unit_interval,
     pose_joints,
     position_sinusoid,
+    transformer_blocks,
 )
 
 __all__ = [
@@ -124,10 +125,7 @@ class KeyframeVAEConfig:
 
     def __post_init__(self) -> None:
         name = type(self).__name__
-        if not isinstance(self.skeleton, str):
-            raise TypeError(f"{name}.skeleton must be a skeleton name {available_skeletons()}, "
-                            f"got {type(self.skeleton).__name__}")
-        object.__setattr__(self, "skeleton", get_skeleton(self.skeleton).name)
+        check_skeleton_name(self)
         for f in ("num_keyframes", "max_length", "frame_dim", "index_dim", "latent_size", "latent_dim",
                   "num_layers", "num_heads", "ff_dim"):
             check_positive_int(name, f, getattr(self, f))
@@ -234,7 +232,7 @@ def group_channels(skeleton: str | Skeleton, group: str) -> list[int]:
 
 
 # ---------------------------------------------------------------------------------- model
-class KeyframeVAE(nn.Module):
+class KeyframeVAE(FeatureModel):
     """Keyframes and their positions <-> a small latent ``(B, Lz, Dz)`` (paper §III-B).
 
     Parameters
@@ -243,25 +241,17 @@ class KeyframeVAE(nn.Module):
     """
 
     def __init__(self, config: KeyframeVAEConfig | None = None) -> None:
-        super().__init__()
-        self.config = cfg = config or KeyframeVAEConfig()
-        self.skeleton = get_skeleton(cfg.skeleton)
-        d, w = self.skeleton.feature_dim, cfg.width
-        self.feature_dim = d
-        self.norm = Normalizer(d)
+        super().__init__(config or KeyframeVAEConfig())
+        cfg = self.config
+        d, w = self.feature_dim, cfg.width
         self.frame_embed = Linear(d, cfg.frame_dim)
         self.index_embed = Linear(cfg.index_dim + 1, cfg.index_dim)
         self.latent_tokens = nn.Parameter(torch.randn(cfg.latent_size, w) * 0.02)
-        self.encoder = nn.ModuleList(
-            TransformerBlock(w, cfg.num_heads, cfg.ff_dim, cfg.dropout, activation=cfg.activation)
-            for _ in range(cfg.num_layers))
+        self.encoder = transformer_blocks(cfg, w)
         self.encoder_norm = nn.LayerNorm(w)
         self.to_dist = Linear(w, 2 * cfg.latent_dim)
         self.latent_in = Linear(cfg.latent_dim, w)
-        self.decoder = nn.ModuleList(
-            TransformerBlock(w, cfg.num_heads, cfg.ff_dim, cfg.dropout, cross_attention=True,
-                             activation=cfg.activation)
-            for _ in range(cfg.num_layers))
+        self.decoder = transformer_blocks(cfg, w, cross_attention=True)
         self.decoder_norm = nn.LayerNorm(w)
         self.to_keyframes = Linear(w, d)
         self.to_positions = Linear(w, 1)

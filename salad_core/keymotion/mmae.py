@@ -44,19 +44,19 @@ from salad_core.io import register_model
 from salad_core.models.gemm import Linear
 from salad_core.models.layers import ACTIVATIONS
 from salad_core.motion import features_to_joints
-from salad_core.skeleton import available_skeletons, get_skeleton
 
 from .models import (
-    Normalizer,
-    TransformerBlock,
+    FeatureModel,
     bone_length_loss,
     check_non_negative,
     check_positive_int,
+    check_skeleton_name,
     check_unit_interval,
     foot_contact_loss,
     masked_mean,
     planted_foot_velocity_loss,
     position_sinusoid,
+    transformer_blocks,
     velocity_loss,
 )
 
@@ -88,10 +88,7 @@ class MMAEConfig:
 
     def __post_init__(self) -> None:
         name = type(self).__name__
-        if not isinstance(self.skeleton, str):
-            raise TypeError(f"{name}.skeleton must be a skeleton name {available_skeletons()}, "
-                            f"got {type(self.skeleton).__name__}")
-        object.__setattr__(self, "skeleton", get_skeleton(self.skeleton).name)
+        check_skeleton_name(self)
         for f in ("max_length", "text_dim", "width", "num_layers", "num_heads", "ff_dim", "max_text_tokens"):
             check_positive_int(name, f, getattr(self, f))
         if self.width % self.num_heads or self.width % 2:
@@ -159,7 +156,7 @@ def keyframe_lerp(motion: torch.Tensor, keyframe_mask: torch.Tensor) -> torch.Te
     return a + alpha * (c - a)
 
 
-class MotionMaskedAutoencoder(nn.Module):
+class MotionMaskedAutoencoder(FeatureModel):
     """Fills the frames between keyframes, conditioned on text (paper §III-D).
 
     Parameters
@@ -168,17 +165,12 @@ class MotionMaskedAutoencoder(nn.Module):
     """
 
     def __init__(self, config: MMAEConfig | None = None) -> None:
-        super().__init__()
-        self.config = cfg = config or MMAEConfig()
-        self.skeleton = get_skeleton(cfg.skeleton)
-        d, w = self.skeleton.feature_dim, cfg.width
-        self.feature_dim = d
-        self.norm = Normalizer(d)
+        super().__init__(config or MMAEConfig())
+        cfg = self.config
+        d, w = self.feature_dim, cfg.width
         self.motion_in = Linear(d + 1, w)
         self.text_in = nn.ModuleList(Linear(cfg.text_dim, w) for _ in range(cfg.num_layers))
-        self.layers = nn.ModuleList(
-            TransformerBlock(w, cfg.num_heads, cfg.ff_dim, cfg.dropout, activation=cfg.activation)
-            for _ in range(cfg.num_layers))
+        self.layers = transformer_blocks(cfg, w)
         self.out_norm = nn.LayerNorm(w)
         self.out = Linear(w, d)
         if cfg.lerp_residual:

@@ -27,7 +27,7 @@ from torch import nn
 from salad_core.models.gemm import Linear
 from salad_core.models.layers import get_activation
 from salad_core.motion import features_to_joints
-from salad_core.skeleton import Skeleton, get_skeleton
+from salad_core.skeleton import Skeleton, available_skeletons, get_skeleton
 
 __all__ = [
     "position_sinusoid",
@@ -44,6 +44,9 @@ __all__ = [
     "check_positive_int",
     "check_unit_interval",
     "check_non_negative",
+    "check_skeleton_name",
+    "FeatureModel",
+    "transformer_blocks",
 ]
 
 
@@ -64,6 +67,15 @@ def check_non_negative(owner: str, name: str, value: object) -> None:
     """Raise unless ``value`` is a finite float >= 0."""
     if not isinstance(value, (int, float)) or not math.isfinite(float(value)) or float(value) < 0:
         raise ValueError(f"{owner}.{name}={value!r} is invalid; use a finite float >= 0")
+
+
+def check_skeleton_name(config: object) -> None:
+    """Raise ``TypeError`` naming the config's class unless ``config.skeleton`` is a string; store the
+    skeleton's registered name in it (the config is a frozen dataclass; an unknown name raises ``ValueError``)."""
+    if not isinstance(config.skeleton, str):
+        raise TypeError(f"{type(config).__name__}.skeleton must be a skeleton name {available_skeletons()}, "
+                        f"got {type(config.skeleton).__name__}")
+    object.__setattr__(config, "skeleton", get_skeleton(config.skeleton).name)
 
 
 # ------------------------------------------------------------------------------- encodings
@@ -166,6 +178,15 @@ class TransformerBlock(nn.Module):
         return x + self.drop(self.ff(self.norm_ff(x)))
 
 
+def transformer_blocks(config: object, width: int, *, cross_attention: bool = False) -> nn.ModuleList:
+    """``config.num_layers`` :class:`TransformerBlock` of ``width`` channels with the config's
+    ``num_heads``, ``ff_dim``, ``dropout`` and ``activation`` (self-attention, and cross-attention if asked)."""
+    return nn.ModuleList(
+        TransformerBlock(width, config.num_heads, config.ff_dim, config.dropout, cross_attention=cross_attention,
+                         activation=config.activation)
+        for _ in range(config.num_layers))
+
+
 # ---------------------------------------------------------------------------- normaliser
 #: Normalisation statistics closer than this (in units of the channel's std) count as the same: two
 #: builds of one corpus differ by float rounding (about 4e-3 between two machines' builds of corpus 2.7),
@@ -214,6 +235,18 @@ class Normalizer(nn.Module):
     def normalize(self, x: torch.Tensor) -> torch.Tensor:
         """``(x - mean) / std`` over the last axis ``(..., D)``."""
         return (x - self.mean) / self.std
+
+
+class FeatureModel(nn.Module):
+    """A KeyMotion model of one skeleton's motion features: its ``config``, ``skeleton``, feature width
+    ``feature_dim`` (D) and the dataset statistics ``norm`` (:class:`Normalizer`, ``(D,)``)."""
+
+    def __init__(self, config: object) -> None:
+        super().__init__()
+        self.config = config
+        self.skeleton = get_skeleton(config.skeleton)
+        self.feature_dim = self.skeleton.feature_dim
+        self.norm = Normalizer(self.feature_dim)
 
 
 # --------------------------------------------------------------------------- kinematics

@@ -8,6 +8,8 @@ the shoulder (x outwards, y up, z forward), see :mod:`.poses`.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from .footwork import Persona
@@ -106,16 +108,13 @@ def jab_cross(persona: Persona, body: BodyModel, rng: np.random.Generator, side:
 def hook(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str, *,
          mods: tuple[str, ...] = (), reps: int = 1, duration: float | None = None) -> Gesture:
     """A hook with one arm: the fist swings out, then across in front at shoulder height."""
-    u = rng.uniform
-    (k,) = SIDES[side]
-    sgn = 1.0 if k == 0 else -1.0
-    strikes = []
-    for _ in range(reps):
+    def draw(u: Callable[[float, float], float]) -> tuple[list[np.ndarray], float]:
         out = np.array([u(0.12, 0.18), u(-0.02, 0.03), u(0.22, 0.28)])
         mid = np.array([-u(0.02, 0.06), u(0.0, 0.04), u(0.4, 0.44)])
         through = np.array([-u(0.24, 0.3), u(0.0, 0.04), u(0.33, 0.38)])
-        strikes.append((k, [out, mid, through], -sgn * u(0.45, 0.6)))
-    g = _strike(persona, body, rng, mods, strikes)
+        return [out, mid, through], u(0.45, 0.6)
+
+    g = _one_arm_strikes(persona, body, rng, side, mods, reps, draw)
     g.info = dict(hooks=reps)
     return g
 
@@ -123,14 +122,25 @@ def hook(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str,
 def uppercut(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str, *,
              mods: tuple[str, ...] = (), reps: int = 1, duration: float | None = None) -> Gesture:
     """An uppercut with one arm: the fist drops below the chest, then drives up in front of the chin."""
-    u = rng.uniform
+    def draw(u: Callable[[float, float], float]) -> tuple[list[np.ndarray], float]:
+        low = np.array([-u(0.0, 0.04), -u(0.26, 0.32), u(0.2, 0.26)])
+        top = np.array([-u(0.1, 0.14), u(0.08, 0.13), u(0.3, 0.35)])
+        return [low, top], u(0.25, 0.35)
+
+    g = _one_arm_strikes(persona, body, rng, side, mods, reps, draw)
+    g.info = dict(uppercuts=reps)
+    return g
+
+
+def _one_arm_strikes(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str, mods: tuple[str, ...],
+                     reps: int, draw: Callable[[Callable[[float, float], float]], tuple[list[np.ndarray], float]]
+                     ) -> Gesture:
+    """``reps`` strikes with the arm of ``side`` (see :func:`_strike`): each ``draw(rng.uniform)`` gives
+    the strike's wrist keys (3,) each and how far (rad) the chest turns away from the striking arm."""
     (k,) = SIDES[side]
     sgn = 1.0 if k == 0 else -1.0
     strikes = []
     for _ in range(reps):
-        low = np.array([-u(0.0, 0.04), -u(0.26, 0.32), u(0.2, 0.26)])
-        top = np.array([-u(0.1, 0.14), u(0.08, 0.13), u(0.3, 0.35)])
-        strikes.append((k, [low, top], -sgn * u(0.25, 0.35)))
-    g = _strike(persona, body, rng, mods, strikes)
-    g.info = dict(uppercuts=reps)
-    return g
+        path, turn = draw(rng.uniform)
+        strikes.append((k, path, -sgn * turn))
+    return _strike(persona, body, rng, mods, strikes)

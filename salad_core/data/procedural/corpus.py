@@ -30,6 +30,7 @@ import logging
 import os
 import shutil
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -97,6 +98,24 @@ def _texts(captions: list[Caption]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _clip_files(name: str, joints: np.ndarray, captions: list[Caption], mirror: Callable[[Caption], Caption],
+               annotation: Callable[[str, int, list[Caption], bool], dict]) -> dict:
+    """The files of clip ``name`` (joints ``(frames, J, 3)``) and of its mirror ``M<name>``: features,
+    recovered joints, texts and ``annotation(key, rows, captions, mirrored)``; the mirror's captions are
+    ``mirror(caption)`` of each."""
+    out = {}
+    for mirrored in (False, True):
+        clip_joints = mirror_joints(joints) if mirrored else joints
+        feats = joints_to_features(clip_joints)
+        rec = features_to_joints(feats).astype(np.float32)
+        caps = [mirror(c) for c in captions] if mirrored else captions
+        key = ("M" + name) if mirrored else name
+        ann = annotation(key, feats.shape[0], caps, mirrored)
+        out[key] = {"new_joint_vecs": npy_bytes(feats), "new_joints": npy_bytes(rec), "texts": _texts(caps),
+                    "annotations": json.dumps(ann, separators=(",", ":")) + "\n"}
+    return out
+
+
 def make_motion(seed: int, index: int) -> dict:
     """Generate motion ``index`` of a corpus with ``seed`` and its mirror.
 
@@ -108,17 +127,8 @@ def make_motion(seed: int, index: int) -> dict:
     clip = generate_clip(rng, body)
     n_caps = 4 if rng.random() < 0.3 else 3
     captions = render_captions(clip.plan, rng, n_caps)
-    name = f"{index:06d}"
-    out = {}
-    for mirrored in (False, True):
-        joints = mirror_joints(clip.joints) if mirrored else clip.joints
-        feats = joints_to_features(joints)
-        rec = features_to_joints(feats).astype(np.float32)
-        caps = [mirror_caption(c) for c in captions] if mirrored else captions
-        key = ("M" + name) if mirrored else name
-        ann = _annotation(key, feats.shape[0], clip, caps, mirrored)
-        out[key] = {"new_joint_vecs": npy_bytes(feats), "new_joints": npy_bytes(rec), "texts": _texts(caps),
-                    "annotations": json.dumps(ann, separators=(",", ":")) + "\n"}
+    out = _clip_files(f"{index:06d}", clip.joints, captions, mirror_caption,
+                      lambda key, rows, caps, mirrored: _annotation(key, rows, clip, caps, mirrored))
     out["_meta"] = {"frames": int(clip.num_frames - 1), "captions": len(captions),
                     "kinds": [e.action.kind for e in clip.events]}
     return out
@@ -159,17 +169,8 @@ def make_general_captioned(seed: int, index: int) -> dict:
     rng = np.random.default_rng([int(seed), int(index), 0xCA7])
     n_caps = 4 if rng.random() < 0.3 else 3
     captions = render_general_captions(steps, rng, n_caps)
-    name = f"G{index:06d}"
-    out = {}
-    for mirrored in (False, True):
-        joints = mirror_joints(clip.joints) if mirrored else clip.joints
-        feats = joints_to_features(joints)
-        rec = features_to_joints(feats).astype(np.float32)
-        caps = [mirror_general_caption(c) for c in captions] if mirrored else captions
-        key = ("M" + name) if mirrored else name
-        ann = _general_annotation(key, feats.shape[0], clip.mode, steps, caps, mirrored)
-        out[key] = {"new_joint_vecs": npy_bytes(feats), "new_joints": npy_bytes(rec), "texts": _texts(caps),
-                    "annotations": json.dumps(ann, separators=(",", ":")) + "\n"}
+    out = _clip_files(f"G{index:06d}", clip.joints, captions, mirror_general_caption,
+                      lambda key, rows, caps, mirrored: _general_annotation(key, rows, clip.mode, steps, caps, mirrored))
     meta["captions"] = len(captions)
     out["_meta"] = meta
     return out

@@ -55,8 +55,8 @@ from ...side_words import mirror_side_words
 from ...skeleton import PART_NAMES
 from ..texts import split_words
 from .general import GeneralClip, GeneralEvent
-from .language import (EXTRA_SUBJECTS, FRAMES, MOOD_STYLE, SUBJECTS, Caption, Item, _Builder, _choose, _fill, _items,
-                       _opened, _word)
+from .language import (EXTRA_SUBJECTS, FRAMES, MOOD_STYLE, SUBJECTS, Caption, Item, _Builder, _choose, _cover,
+                       _distinct_captions, _fill, _items, _open_frame, _styled_phrases, _units, _word, _write_frame)
 
 __all__ = ["GeneralStep", "GeneralAction", "GENERAL_ACTIONS", "GENERAL_RULES", "MEASURED_POSTURES", "general_steps",
            "measured_postures", "body_axes", "facing", "pitch_rotation", "yaw_rotation", "travel", "airborne", "inverted",
@@ -857,35 +857,16 @@ def render_general_caption(steps: list[GeneralStep], rng: np.random.Generator, m
         frame = "{S} " + " , then ".join(f"{{A{i}}}" for i in range(k - 1)) + " , and then {A%d}" % (k - 1)
         if rng.random() < 0.5:
             frame = "{S} " + " , then ".join(f"{{A{i}}}" for i in range(k))
-    opened = _opened(frame)
-    if len(opened) > 1 and rng.random() < 0.25:
-        frame = _choose(rng, opened[1:])
-    for tok in frame.split():
-        if tok in (",", ".", ";"):
-            b.punct(tok)
-        elif tok == "{S}":
-            b.words(subj)
-        elif tok == "{P}":
-            b.words(pron)
-        elif tok[:2] in ("{A", "{G") and tok[2:-1].isdigit():
-            say(int(tok[2:-1]), "pres" if tok[1] == "A" else "ger")
-        else:
-            b.words(tok)
+    _write_frame(b, _open_frame(frame, rng), subj, pron, say)
     return b.caption(k, period=bool(rng.random() < 0.5))
 
 
 def render_general_captions(steps: list[GeneralStep], rng: np.random.Generator, n: int = 3,
                             tries: int = 40) -> list[Caption]:
     """``n`` distinct captions of ``steps`` (fewer only if the language has fewer; none without steps)."""
-    out: dict[str, Caption] = {}
     if not steps:
         return []
-    for _ in range(tries):
-        c = render_general_caption(steps, rng)
-        out.setdefault(c.text, c)
-        if len(out) == n:
-            break
-    return list(out.values())
+    return _distinct_captions(lambda: render_general_caption(steps, rng), n, tries)
 
 
 def mirror_general_caption(caption: Caption) -> Caption:
@@ -957,58 +938,24 @@ def parse_general_prompt(prompt: str) -> list[GeneralPhrase] | None:
     """The general-motion phrases of a prompt said in the general captions' language (subjects,
     sentence frames and manner words of the corpus; phrases of :data:`GENERAL_RULES`), in order; None
     if some words are neither (the action corpus's phrases are :func:`.language.parse_prompt`'s)."""
-    from .language import _units
-
     words = split_words(prompt)
     if not words:
         return None
     table, tails, longest = _general_table()
     _, glue, pre, post, glue_longest = _units()
     glue = glue | {tuple(sub[0].split()) for sub in _ACRO_SUBJECTS}
-    longest = max(longest, glue_longest)
-    n = len(words)
-    best: list[tuple[int, tuple] | None] = [None] * (n + 1)
-    best[0] = (0, ())
-    for i in range(n):
-        if best[i] is None:
-            continue
-        last = best[i][1][-1][0] if best[i][1] else None
-        for j in range(i + 1, min(n, i + longest) + 1):
-            key = tuple(words[i:j])
-            kinds = []
-            if key in table:
-                kinds.append("phrase")
-            if key in glue:
-                kinds.append("glue")
-            if (key in tails or key in post) and last in ("phrase", "post"):
-                kinds.append("post")
-            elif key in pre and last != "pre":
-                kinds.append("pre")
-            for kind in kinds:
-                cand = (best[i][0] + (kind in ("phrase", "glue")), best[i][1] + ((kind, i, j),))
-                if best[j] is None or cand[0] < best[j][0]:
-                    best[j] = cand
-    if best[n] is None:
+    units = _cover(words, table, glue, pre, tails | post.keys(), max(longest, glue_longest))
+    if units is None:
         return None
-    units = list(best[n][1])
     out = []
-    for k, (kind, i, j) in enumerate(units):
-        if kind == "pre" and (k + 1 >= len(units) or units[k + 1][0] != "phrase"):
-            return None
-        if kind != "phrase":
-            continue
+    for (i, j), (i0, i1), _, after in _styled_phrases(units):
         options = sorted(table[tuple(words[i:j])], key=lambda o: (o[0], str(o[1])))
         sides = {o[1] for o in options}
-        i0, i1 = i, j
-        if k > 0 and units[k - 1][0] == "pre":
-            i0 = units[k - 1][1]
-        q, turn = k + 1, None
-        while q < len(units) and units[q][0] == "post":
-            tail = tuple(words[units[q][1]:units[q][2]])
+        turn = None
+        for a, b in after:
+            tail = tuple(words[a:b])
             if tail in tails:
                 turn = "around" if "around" in tail else next((w for w in tail if w in _LR), None)
-            i1 = units[q][2]
-            q += 1
         out.append(GeneralPhrase((i0, i1), " ".join(words[i0:i1]), options[0][0],
                                  sides.pop() if len(sides) == 1 else None, tuple(sorted({o[0] for o in options})),
                                  turn))

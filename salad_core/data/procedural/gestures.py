@@ -8,6 +8,7 @@ the law of cosines. Every gesture starts and ends in the performer's resting arm
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -126,9 +127,6 @@ def wave(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str,
 def raise_arm(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str, *,
               mods: tuple[str, ...] = (), duration: float | None = None) -> Gesture:
     """Raise one or both arms and hold them up; "high" straight overhead, "low" to shoulder height."""
-    u = rng.uniform
-    pace = _pace(mods)
-    arms = SIDES[side]
     # each raised arm draws its own pose (2.1: both arms of "both" moved as one, and the ranges
     # were narrow; the corpus's arm poses varied less, and less independently, than real ones)
     if "high" in mods:
@@ -137,19 +135,9 @@ def raise_arm(persona: Persona, body: BodyModel, rng: np.random.Generator, side:
         ranges = ((1.25, 1.6), (0.05, 0.5), (0.05, 0.3))
     else:
         ranges = ((2.15, 2.6), (-0.35, 0.1), (0.1, 0.4))
-    poses = np.array([[u(lo, hi) for lo, hi in ranges] for _ in range(2)])
-    pose = poses[arms[0]]
-    rise, lower = u(0.45, 0.7) * pace, u(0.45, 0.7) * pace
-    hold = _hold_time(duration, rise + lower, u(0.5, 1.4) * pace)
-    total = rise + hold + lower
-    n = num_frames(total)
-    t = frame_times(n, FPS)
-    g = _empty(n, persona)
-    rest = np.asarray(persona.arm_rest, dtype=np.float64)
-    angles = np.stack([keyframes(t, [0.0, rise, rise + hold, total], np.stack([rest, p, p, rest])) for p in poses], 1)
-    angles[:, :, 0] += (0.03 * np.sin(2 * np.pi * 0.7 * t) * envelope(t, rise, rise + hold, 0.2))[:, None]
-    _set_arms(g, arms, angles, np.array([1.0, 0.0, -0.4]), t)
-    g.info = dict(flex=float(pose[0]))
+    g, poses = _hold_arm_pose(persona, rng, side, mods, duration, ranges, (1.0, 0.0, -0.4), move=(0.45, 0.7),
+                              hold=(0.5, 1.4), sway=0.03)
+    g.info = dict(flex=float(poses[SIDES[side][0]][0]))
     return g
 
 
@@ -189,29 +177,36 @@ def punch(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str
 
 
 def _hold_arm_pose(persona: Persona, rng: np.random.Generator, side: str, mods: tuple[str, ...],
-                   duration: float | None, pose_ranges: tuple[tuple[float, float], ...], swivel) -> Gesture:
-    """Raise the arms of ``side`` to a pose drawn from ``pose_ranges`` (3 joint-angle ranges), hold, lower."""
+                   duration: float | None, pose_ranges: tuple[tuple[float, float], ...], swivel, *,
+                   move: tuple[float, float] = (0.45, 0.65), hold: tuple[float, float] = (0.8, 1.8),
+                   sway: float = 0.0) -> tuple[Gesture, np.ndarray]:
+    """Raise the arms of ``side`` to a pose drawn from ``pose_ranges`` (3 joint-angle ranges, each arm its
+    own), hold, lower. Rising and lowering each take a draw from ``move`` (s, times the pace), the hold one
+    from ``hold`` or what ``duration`` leaves; ``sway`` (rad) adds a 0.7 Hz flex sway while held.
+    Returns the gesture and the two arms' drawn poses ``(2, 3)``."""
     u = rng.uniform
     pace = _pace(mods)
     arms = SIDES[side]
     poses = np.array([[u(lo, hi) for lo, hi in pose_ranges] for _ in range(2)])     # each arm its own
-    rise, lower = u(0.45, 0.65) * pace, u(0.45, 0.65) * pace
-    hold = _hold_time(duration, rise + lower, u(0.8, 1.8) * pace)
-    total = rise + hold + lower
+    rise, lower = u(*move) * pace, u(*move) * pace
+    held = _hold_time(duration, rise + lower, u(*hold) * pace)
+    total = rise + held + lower
     n = num_frames(total)
     t = frame_times(n, FPS)
     g = _empty(n, persona)
     rest = np.asarray(persona.arm_rest, dtype=np.float64)
-    angles = np.stack([keyframes(t, [0.0, rise, rise + hold, total], np.stack([rest, p, p, rest])) for p in poses], 1)
+    angles = np.stack([keyframes(t, [0.0, rise, rise + held, total], np.stack([rest, p, p, rest])) for p in poses], 1)
+    if sway:
+        angles[:, :, 0] += (sway * np.sin(2 * np.pi * 0.7 * t) * envelope(t, rise, rise + held, 0.2))[:, None]
     _set_arms(g, arms, angles, np.asarray(swivel, dtype=np.float64), t)
-    return g
+    return g, poses
 
 
 def stretch_forward(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str = "both", *,
                     mods: tuple[str, ...] = (), duration: float | None = None) -> Gesture:
     """Stretch the arms straight forward at shoulder height and hold."""
     return _hold_arm_pose(persona, rng, side, mods, duration, ((1.35, 1.75), (-0.1, 0.2), (0.02, 0.2)),
-                          (0.5, -1.0, 0.0))
+                          (0.5, -1.0, 0.0))[0]
 
 
 def clap(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str = "both", *,
@@ -251,24 +246,15 @@ def arms_out(persona: Persona, body: BodyModel, rng: np.random.Generator, side: 
              mods: tuple[str, ...] = (), duration: float | None = None) -> Gesture:
     """Hold the arms straight out to the sides at shoulder height."""
     return _hold_arm_pose(persona, rng, side, mods, duration, ((-0.15, 0.35), (1.3, 1.75), (0.02, 0.25)),
-                          (0.0, -1.0, -0.4))
+                          (0.0, -1.0, -0.4))[0]
 
 
 # ----------------------------------------------------------------------------- head
 def nod(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str | None = None, *,
         mods: tuple[str, ...] = (), reps: int = 2, duration: float | None = None) -> Gesture:
     """Nod ``reps`` times (pitch the head down and back up)."""
-    u = rng.uniform
-    period = u(0.45, 0.6) * _pace(mods)
-    if duration is not None:
-        reps = max(2, int(round((duration - 0.2) / period)))
-    amp = u(0.35, 0.5)
-    total = reps * period + 0.2
-    n = num_frames(total)
-    t = frame_times(n, FPS)
-    g = _empty(n, persona)
-    phase = np.clip((t - 0.1) / period, 0.0, reps)
-    g.neck[:, 1] = amp * 0.5 * (1.0 - np.cos(2 * np.pi * phase))
+    g, reps = _head_cycles(persona, rng, mods, reps, duration, (0.35, 0.5), 0.2, 1,
+                           lambda t, phase, amp, total: amp * 0.5 * (1.0 - np.cos(2 * np.pi * phase)))
     g.info = dict(nods=reps)
     return g
 
@@ -276,19 +262,33 @@ def nod(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str |
 def shake_head(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str | None = None, *,
                mods: tuple[str, ...] = (), reps: int = 2, duration: float | None = None) -> Gesture:
     """Shake the head (yaw left and right) ``reps`` times."""
+    g, reps = _head_cycles(persona, rng, mods, reps, duration, (0.45, 0.65), 0.3, 0,
+                           lambda t, phase, amp, total: amp * np.sin(2 * np.pi * phase)
+                           * envelope(t, 0.05, total - 0.05, 0.15))
+    g.info = dict(shakes=reps)
+    return g
+
+
+def _head_cycles(persona: Persona, rng: np.random.Generator, mods: tuple[str, ...], reps: int,
+                 duration: float | None, amp_range: tuple[float, float], margin: float, axis: int,
+                 curve: Callable[[np.ndarray, np.ndarray, float, float], np.ndarray]) -> tuple[Gesture, int]:
+    """A head movement repeated ``reps`` times: a period drawn from 0.45-0.6 s (times the pace), an
+    amplitude from ``amp_range``, and ``margin`` s of stillness split before and after the cycles; a
+    ``duration`` sets the count instead (at least 2). Head rotation ``axis`` (0 yaw, 1 pitch) takes
+    ``curve(t, phase, amp, total)``, with frame times ``t`` ``(n,)``, the cycles done ``phase`` ``(n,)``
+    in [0, reps] and the gesture's length ``total`` (s). Returns the gesture and the count."""
     u = rng.uniform
     period = u(0.45, 0.6) * _pace(mods)
     if duration is not None:
-        reps = max(2, int(round((duration - 0.3) / period)))
-    amp = u(0.45, 0.65)
-    total = reps * period + 0.3
+        reps = max(2, int(round((duration - margin) / period)))
+    amp = u(*amp_range)
+    total = reps * period + margin
     n = num_frames(total)
     t = frame_times(n, FPS)
     g = _empty(n, persona)
-    phase = np.clip((t - 0.15) / period, 0.0, reps)
-    g.neck[:, 0] = amp * np.sin(2 * np.pi * phase) * envelope(t, 0.05, total - 0.05, 0.15)
-    g.info = dict(shakes=reps)
-    return g
+    phase = np.clip((t - margin / 2) / period, 0.0, reps)
+    g.neck[:, axis] = curve(t, phase, amp, total)
+    return g, reps
 
 
 def look(persona: Persona, body: BodyModel, rng: np.random.Generator, side: str, *,

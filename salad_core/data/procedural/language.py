@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import itertools
 import re
+from collections.abc import Callable, Container, Iterator
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
@@ -1269,9 +1270,28 @@ def render_caption(plan: Plan, rng: np.random.Generator) -> Caption:
     frame = _choose(rng, frames)
     if len(plan.steps) > 3 and shape != "overlay":
         frame = "{S} " + " , then ".join(f"{{A{i}}}" for i in range(len(plan.steps)))
+    slots = {"{M}": lambda: say("main", 0, "pres"), "{MG}": lambda: say("main", 0, "ger"),
+             "{L}": lambda: say("layer", 0, "pres"), "{LG}": lambda: say("layer", 0, "ger"),
+             "{O}": lambda: say("overlay", -1, "pres"), "{OG}": lambda: say("overlay", -1, "ger"),
+             "{SEQ}": lambda: seq("pres"), "{SEQG}": lambda: seq("ger")}
+    _write_frame(b, _open_frame(frame, rng), subj, pron, step, slots)
+    return b.caption(len(acts), period=bool(rng.random() < 0.5))
+
+
+def _open_frame(frame: str, rng: np.random.Generator) -> str:
+    """``frame``, or (with chance :data:`_OPEN_P`, when it has openings) one of its openings at random."""
     opened = _opened(frame)
     if len(opened) > 1 and rng.random() < _OPEN_P:
-        frame = _choose(rng, opened[1:])
+        return _choose(rng, opened[1:])
+    return frame
+
+
+def _write_frame(b: _Builder, frame: str, subj: str, pron: str | None, phrase: Callable[[int, str], None],
+                 slots: dict[str, Callable[[], None]] | None = None) -> None:
+    """Write the tokens of a sentence frame into ``b``: punctuation, the subject ``{S}``, the pronoun
+    ``{P}``, the numbered phrase slots ``{A<i>}`` / ``{G<i>}`` (``phrase(i, "pres" | "ger")``), the other
+    named ``slots`` (token -> writer) and plain words."""
+    slots = slots or {}
     for tok in frame.split():
         if tok in (",", ".", ";"):
             b.punct(tok)
@@ -1280,29 +1300,27 @@ def render_caption(plan: Plan, rng: np.random.Generator) -> Caption:
         elif tok == "{P}":
             b.words(pron)
         elif tok[:2] in ("{A", "{G") and tok[2:-1].isdigit():
-            step(int(tok[2:-1]), "pres" if tok[1] == "A" else "ger")
-        elif tok in ("{M}", "{MG}"):
-            say("main", 0, "pres" if tok == "{M}" else "ger")
-        elif tok in ("{L}", "{LG}"):
-            say("layer", 0, "pres" if tok == "{L}" else "ger")
-        elif tok in ("{O}", "{OG}"):
-            say("overlay", -1, "pres" if tok == "{O}" else "ger")
-        elif tok in ("{SEQ}", "{SEQG}"):
-            seq("pres" if tok == "{SEQ}" else "ger")
+            phrase(int(tok[2:-1]), "pres" if tok[1] == "A" else "ger")
+        elif tok in slots:
+            slots[tok]()
         else:
             b.words(tok)
-    return b.caption(len(acts), period=bool(rng.random() < 0.5))
 
 
-def render_captions(plan: Plan, rng: np.random.Generator, n: int = 3, tries: int = 40) -> list[Caption]:
-    """``n`` distinct captions of ``plan`` (fewer only if the language has fewer)."""
+def _distinct_captions(render: Callable[[], Caption], n: int, tries: int) -> list[Caption]:
+    """Up to ``n`` captions of distinct text from at most ``tries`` calls of ``render``, in first-seen order."""
     out: dict[str, Caption] = {}
     for _ in range(tries):
-        c = render_caption(plan, rng)
+        c = render()
         out.setdefault(c.text, c)
         if len(out) == n:
             break
     return list(out.values())
+
+
+def render_captions(plan: Plan, rng: np.random.Generator, n: int = 3, tries: int = 40) -> list[Caption]:
+    """``n`` distinct captions of ``plan`` (fewer only if the language has fewer)."""
+    return _distinct_captions(lambda: render_caption(plan, rng), n, tries)
 
 
 def mirror_words(text: str) -> str:
@@ -1440,8 +1458,30 @@ def parse_prompt(prompt: str) -> list[ParsedPhrase] | None:
     if not words:
         return None
     table, glue, pre, post, longest = _units()
+    units = _cover(words, table, glue, pre, post, longest, late_ends=True)
+    if units is None:
+        return None
+    out = []
+    for (i, j), (i0, i1), before, after in _styled_phrases(units):
+        kind, side, mods, reps, variant = _common(table[tuple(words[i:j])])
+        mods = set(mods)
+        if before is not None:
+            mods |= {pre[tuple(words[before[0]:i])]} - {None}
+        for a, b in after:
+            mods |= {post[tuple(words[a:b])]} - {None}
+        out.append(ParsedPhrase((i0, i1), " ".join(words[i0:i1]), kind, side, tuple(sorted(mods)), reps, variant))
+    return out or None
+
+
+def _cover(words: list[str], table: Container, glue: Container, pre: Container, post: Container, longest: int,
+           late_ends: bool = False) -> list[tuple[str, int, int]] | None:
+    """Read ``words`` as a run of units ``(kind, i, j)`` (``words[i:j]``), kind "phrase" (a key of
+    ``table``), "glue", "pre" (a style word before a phrase) or "post" (one after a phrase or another
+    "post"), with the fewest phrase and glue units (style words are free); units are at most ``longest``
+    words. ``late_ends``: ties go to the reading whose earlier units are longer. None when no reading
+    covers the words, or a "pre" unit is not followed by a phrase."""
     n = len(words)
-    # best[i]: (number of phrase and glue units, units) covering words[:i]; style words are free
+    # best[i]: (number of phrase and glue units, units) covering words[:i]
     best: list[tuple[int, tuple] | None] = [None] * (n + 1)
     best[0] = (0, ())
     for i in range(n):
@@ -1450,44 +1490,45 @@ def parse_prompt(prompt: str) -> list[ParsedPhrase] | None:
         last = best[i][1][-1][0] if best[i][1] else None
         for j in range(i + 1, min(n, i + longest) + 1):
             key = tuple(words[i:j])
-            units = []
+            kinds = []
             if key in table:
-                units.append("phrase")
+                kinds.append("phrase")
             if key in glue:
-                units.append("glue")
+                kinds.append("glue")
             if key in post and last in ("phrase", "post"):
-                units.append("post")        # before "pre": a word that can be either follows its phrase
+                kinds.append("post")        # before "pre": a word that can be either follows its phrase
             elif key in pre and last != "pre":
-                units.append("pre")
-            for kind_ in units:
-                cand = (best[i][0] + (kind_ in ("phrase", "glue")), best[i][1] + ((kind_, i, j),))
-                # ties go to the reading whose earlier units are longer: a speed word between two
-                # phrases ("... quickly, shaking ...") ends the first one, as the renderer writes it
-                if best[j] is None or cand[0] < best[j][0] or (cand[0] == best[j][0] and kind_ != "pre"
-                                                                             and i > best[j][1][-1][1]):
+                kinds.append("pre")
+            for kind in kinds:
+                cand = (best[i][0] + (kind in ("phrase", "glue")), best[i][1] + ((kind, i, j),))
+                # with late_ends, a speed word between two phrases ("... quickly, shaking ...") ends
+                # the first one, as the renderer writes it
+                if best[j] is None or cand[0] < best[j][0] or (late_ends and cand[0] == best[j][0] and kind != "pre"
+                                                               and i > best[j][1][-1][1]):
                     best[j] = cand
     if best[n] is None:
         return None
     units = list(best[n][1])
-    out = []
-    for k, (kind_, i, j) in enumerate(units):
-        if kind_ == "pre" and (k + 1 >= len(units) or units[k + 1][0] != "phrase"):
+    for k, (kind, _, _) in enumerate(units):
+        if kind == "pre" and (k + 1 >= len(units) or units[k + 1][0] != "phrase"):
             return None                     # a style word must lead into a phrase
-        if kind_ != "phrase":
+    return units
+
+
+def _styled_phrases(units: list[tuple[str, int, int]]) -> Iterator[tuple[tuple[int, int], tuple[int, int],
+                                                                         tuple[int, int] | None, list[tuple[int, int]]]]:
+    """For each phrase unit of a :func:`_cover` reading, in order: its words ``(i, j)``, its span with
+    its style words ``(i0, i1)``, the words of the style word before it (or None) and of those after it."""
+    for k, (kind, i, j) in enumerate(units):
+        if kind != "phrase":
             continue
-        kind, side, mods, reps, variant = _common(table[tuple(words[i:j])])
-        mods = set(mods)
-        i0, i1 = i, j
-        if k > 0 and units[k - 1][0] == "pre":
-            i0 = units[k - 1][1]
-            mods |= {pre[tuple(words[units[k - 1][1]:i])]} - {None}
+        before = units[k - 1][1:] if k > 0 and units[k - 1][0] == "pre" else None
+        after = []
         q = k + 1
         while q < len(units) and units[q][0] == "post":
-            mods |= {post[tuple(words[units[q][1]:units[q][2]])]} - {None}
-            i1 = units[q][2]
+            after.append(units[q][1:])
             q += 1
-        out.append(ParsedPhrase((i0, i1), " ".join(words[i0:i1]), kind, side, tuple(sorted(mods)), reps, variant))
-    return out or None
+        yield (i, j), (before[0] if before else i, after[-1][1] if after else j), before, after
 
 
 def in_language(prompt: str) -> bool:

@@ -26,18 +26,21 @@ def _tempo(mods: tuple[str, ...]) -> float:
     return 1.35 if "slowly" in mods else (0.75 if "quickly" in mods else 1.0)
 
 
-def _there_and_back(rng: np.random.Generator, tempo: float, reps: int) -> tuple[list[float], list[float], float, float]:
-    """Key times and weights (0 -> 1 -> hold -> 0, ``reps`` times), the onset and the end (s)."""
+def _there_and_back(rng: np.random.Generator, tempo: float, reps: int, go: tuple[float, float] = (0.6, 0.9),
+                    hold: tuple[float, float] = (0.25, 0.7), back: tuple[float, float] = (0.55, 0.8)
+                    ) -> tuple[list[float], list[float], float, float]:
+    """Key times and weights (0 -> 1 -> hold -> 0, ``reps`` times), the onset and the end (s); the
+    going, holding and coming back last a draw from ``go``, ``hold`` and ``back`` (s) times ``tempo``."""
     u = rng.uniform
     t = u(0.2, 0.3)
     t0 = t
     times, w = [0.0, t], [0.0, 0.0]
     for _ in range(reps):
-        t += u(0.6, 0.9) * tempo
+        t += u(*go) * tempo
         times.append(t); w.append(1.0)
-        t += u(0.25, 0.7) * tempo
+        t += u(*hold) * tempo
         times.append(t); w.append(1.0)
-        t += u(0.55, 0.8) * tempo
+        t += u(*back) * tempo
         times.append(t); w.append(0.0)
     return times, w, t0, t
 
@@ -127,16 +130,7 @@ def touch_toes(start: Stance, persona: Persona, body: BodyModel, rng: np.random.
     fwd, left = heading_vectors(start.yaw)
     up = np.array([0.0, 1.0, 0.0])
     one = len(hands) == 1
-    t = u(0.2, 0.3)
-    t0 = t
-    times, keys = [0.0, t], [0.0, 0.0]
-    for _ in range(reps):
-        t += u(0.85, 1.15) * tempo
-        times.append(t); keys.append(1.0)
-        t += u(0.3, 0.6) * tempo
-        times.append(t); keys.append(1.0)
-        t += u(0.8, 1.05) * tempo
-        times.append(t); keys.append(0.0)
+    times, keys, t0, t = _there_and_back(rng, tempo, reps, go=(0.85, 1.15), hold=(0.3, 0.6), back=(0.8, 1.05))
     total = t + u(0.3, 0.4)
     n = num_frames(total)
     tt = frame_times(n, FPS)
