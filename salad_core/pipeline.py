@@ -25,7 +25,7 @@ import json
 import logging
 import math
 import warnings
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -381,7 +381,7 @@ class SaladPipeline:
         doc = {"vae": "vae", "denoiser": "denoiser", "stats": "stats.safetensors",
                "text_encoder": getattr(self.text_encoder, "source", "minilm"),
                "diffusion": config_to_dict(self.diffusion), "solver": self.solver,
-               "guidance": asdict(self.guidance), "recovery": self.recovery, "skeleton": self.skeleton.name}
+               "guidance": self.guidance.to_json_dict(), "recovery": self.recovery, "skeleton": self.skeleton.name}
         atomic_write_text(root / "pipeline.json", json.dumps(doc, indent=2) + "\n")
         if self.vocabulary is not None:     # what the weights can read travels with them
             write_vocabulary(self.vocabulary, root, source=self.vocabulary_source)
@@ -801,6 +801,7 @@ class SaladPipeline:
             n_lat = max(lengths) // self.skeleton.unit_length
             noise = (self.make_noise(seeds, n_lat) if noise is None
                      else _check_noise(noise, (len(prompts), n_lat, *self.latent_shape)))
+        _check_plain_guidance(guidance, "edit")
         targets = prompts if target is None else validate_prompts(target)
         if len(targets) == 1 and len(prompts) > 1:
             targets = targets * len(prompts)
@@ -933,6 +934,7 @@ class SaladPipeline:
         if len(feats) != len(prompts):
             raise ValueError(f"got {len(feats)} motions and {len(prompts)} prompts; give one prompt per motion")
         guidance = self.resolve_guidance(guidance_scale)
+        _check_plain_guidance(guidance, "invert")
         num_steps = _check_steps(num_steps)
         unit = self.skeleton.unit_length
         lengths = [f.shape[0] for f in feats]
@@ -1027,8 +1029,20 @@ def _check_recovery(method: Any) -> str:
 
 
 def _guidance_settings(guidance: Guidance) -> dict[str, Any]:
-    """The guidance entries of an output's ``settings``."""
-    return dict(guidance_scale=guidance.scale, guidance_rescale=guidance.rescale, guidance_interval=guidance.interval)
+    """The guidance entries of an output's ``settings``: weight, rescale and interval, and the refinements
+    (threshold, projection, ...) that differ from their defaults as ``guidance_<field>``."""
+    refinements = {f"guidance_{k}": v for k, v in guidance.to_json_dict().items()
+                   if k not in ("scale", "rescale", "interval")}
+    return dict(guidance_scale=guidance.scale, guidance_rescale=guidance.rescale, guidance_interval=guidance.interval,
+                **refinements)
+
+
+def _check_plain_guidance(guidance: Guidance, what: str) -> None:
+    """Raise ``ValueError`` if ``guidance`` uses a refinement on the clean-sample prediction (threshold,
+    projection): the editing and inversion loops run the source and edited rows stacked and do not support them."""
+    if guidance.on_clean_sample:
+        raise ValueError(f"pipe.{what} does not support guidance threshold or projection ({guidance.describe()}); "
+                         "give guidance_scale=Guidance(scale, rescale=..., interval=...) without them")
 
 
 def _inversion_guidance(inversion: Inversion) -> Guidance:

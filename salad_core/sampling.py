@@ -7,7 +7,8 @@ sampling; :func:`denoise` is the one reverse-diffusion loop of salad, joining th
 2. a *guided prediction strategy* (:class:`Prediction`) asks the model for the prediction:
    :class:`GuidedPrediction` runs both classifier-free-guidance branches in **one** batched
    forward, unconditional half first, and combines them, ``pred = uncond + w * (cond - uncond)``
-   (eq. 9; :class:`Guidance` adds rescale and a guidance interval). Editing
+   (eq. 9; :class:`Guidance` adds rescale, a guidance interval, projected guidance and dynamic
+   thresholding, the last two on the clean-sample prediction of the step, :class:`GuidanceStep`). Editing
    (:class:`salad_core.attention.editing.EditPrediction`, Algorithm 1) and KeyMotion's PST
    (:class:`salad_core.keymotion.pst.PSTPrediction`, its eq. 8) are the other strategies;
 3. ``scheduler.step``, per-step corrections (exact inversion) and re-masking of padded frames;
@@ -20,12 +21,13 @@ with the same :class:`StepInfo` and the new latents after each step).
 """
 from __future__ import annotations
 
+import contextvars
 import inspect
 import logging
 import math
 import warnings
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any, Callable, ContextManager, Iterable, Iterator, Protocol, Sequence, Union, runtime_checkable
 
 import numpy as np
@@ -41,6 +43,10 @@ __all__ = [
     "sampler_preset",
     "StepInfo",
     "Guidance",
+    "GuidanceStep",
+    "guidance_step",
+    "project_onto",
+    "dynamic_threshold",
     "as_guidance",
     "parse_guidance_setting",
     "MAX_GUIDANCE",
@@ -144,7 +150,7 @@ def make_scheduler(config: DiffusionConfig | None = None, solver: str = "ddim", 
 
 @dataclass(frozen=True)
 class Guidance:
-    """Classifier-free guidance (eq. 9) and two published refinements of it.
+    """Classifier-free guidance (eq. 9) and four published refinements of it.
 
     ``pred = uncond + scale * (cond - uncond)``, then optionally:
 
@@ -156,7 +162,29 @@ class Guidance:
     * **interval** ``(lo, hi)`` (Kynkaenniemi et al., "Applying guidance in a limited interval
       improves sample and distribution quality", NeurIPS 2024): guidance applies only at steps
       whose timestep ``t`` satisfies ``lo <= t / T <= hi`` (``T`` the training timesteps); elsewhere
-      the conditional prediction is used alone (and :func:`denoise` skips the unconditional rows).
+      the conditional prediction is used alone (and :func:`denoise` skips the unconditional rows);
+    * **projection** ``eta`` (Sadat et al., "Eliminating oversaturation and artifacts of high guidance
+      scales in diffusion models", ICLR 2025: adaptive projected guidance, APG): eq. 9's update is taken
+      on the predicted clean samples, ``d = x0(cond) - x0(uncond)``, optionally averaged with a
+      **momentum** ``beta`` over the guided steps (``d <- d + beta * d_previous``; the paper uses
+      ``beta < 0``) and capped in norm at **norm_cap** ``r`` (``d <- d * min(1, r / |d|)``), split into
+      the part parallel to ``x0(cond)`` and the part orthogonal to it, and the parallel part is
+      down-weighted: ``x0 = x0(cond) + (w - 1) * (d_orth + eta * d_par)``. ``eta = 1`` without cap and
+      momentum is eq. 9 (up to float rounding); ``eta = 0`` keeps only the orthogonal part;
+    * **threshold** ``p`` (Saharia et al., "Photorealistic text-to-image diffusion models with deep
+      language understanding", NeurIPS 2022 (Imagen), dynamic thresholding): per sample, ``s`` = the
+      ``p``-quantile of ``|x0|`` of the guided prediction, ``s <- max(s, b)``, and
+      ``x0 <- clamp(x0, -s, s) * b / s``, with ``b`` = **threshold_bound** (Imagen's ``b = 1``: pixels in
+      ``[-1, 1]``; a latent space whose data reach further needs its own ``b``, e.g. the data's
+      ``p``-quantile of ``|x0|``).
+
+    Projection and threshold act on the clean-sample prediction ``x0``, converted from the model's
+    output (v, epsilon or sample) with the scheduler's ``alphas_cumprod`` at the step and back; inside
+    :func:`denoise` the step's noisy sample and noise level are known (:func:`guidance_step`), elsewhere
+    :meth:`combine` needs ``step=`` (so does a strategy that combines only some of the step's rows, such as
+    editing's stacked source and edit, which otherwise gets an error). All statistics (std, quantile, dot products, norms) are per sample over
+    the valid frames, parts and channels. Order: the combination (eq. 9 or APG), then rescale, then
+    threshold. Steps without guidance (outside the interval, ``w = 1``) use the conditional prediction as is.
 
     ``Guidance(7.5)`` is the paper's sampler.
     """
@@ -164,12 +192,15 @@ class Guidance:
     scale: float = 7.5                               # w of eq. 9; 1 = conditional only
     rescale: float = 0.0                             # phi in [0, 1]; 0 = plain eq. 9
     interval: tuple[float, float] | None = None      # (lo, hi) in [0, 1] of t / T; None = every step
+    threshold: float | None = None                   # p in (0, 1], quantile of |x0| (Imagen); None = off
+    threshold_bound: float = 1.0                     # b > 0: the threshold maps s to b (Imagen: 1)
+    projection: float | None = None                  # APG's eta in [0, 1]; None = off (plain eq. 9)
+    norm_cap: float | None = None                    # APG's r > 0 (needs projection); None = no cap
+    momentum: float = 0.0                            # APG's beta in (-1, 1) (needs projection); 0 = none
 
     def __post_init__(self) -> None:
-        for name in ("scale", "rescale"):
-            val = getattr(self, name)
-            if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
-                raise ValueError(f"Guidance.{name} must be a finite number, got {val!r}")
+        for name in ("scale", "rescale", "threshold_bound", "momentum"):
+            _check_finite(self, name)
         if not 0.0 <= self.rescale <= 1.0:
             raise ValueError(f"Guidance.rescale must be in [0, 1], got {self.rescale!r}")
         if self.interval is not None:
@@ -181,19 +212,72 @@ class Guidance:
             if not 0.0 <= lo < hi <= 1.0:
                 raise ValueError(f"Guidance.interval must satisfy 0 <= lo < hi <= 1, got {self.interval!r}")
             object.__setattr__(self, "interval", (lo, hi))
-        object.__setattr__(self, "scale", float(self.scale))
-        object.__setattr__(self, "rescale", float(self.rescale))
+        self._check_threshold()
+        self._check_projection()
+        for name in ("scale", "rescale", "threshold_bound", "momentum"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+
+    def _check_threshold(self) -> None:
+        if self.threshold is not None:
+            _check_finite(self, "threshold", "None or ")
+            if not 0.0 < self.threshold <= 1.0:
+                raise ValueError(f"Guidance.threshold must be None or a quantile p in (0, 1] (e.g. 0.995), "
+                                 f"got {self.threshold!r}")
+            object.__setattr__(self, "threshold", float(self.threshold))
+        if not self.threshold_bound > 0:
+            raise ValueError(f"Guidance.threshold_bound must be > 0, got {self.threshold_bound!r}")
+        if self.threshold is None and self.threshold_bound != 1.0:
+            raise ValueError(f"Guidance.threshold_bound={self.threshold_bound!r} is set but threshold is None; "
+                             "give threshold=p too")
+
+    def _check_projection(self) -> None:
+        if self.projection is not None:
+            _check_finite(self, "projection", "None or ")
+            if not 0.0 <= self.projection <= 1.0:
+                raise ValueError(f"Guidance.projection must be None or APG's eta in [0, 1], got {self.projection!r}")
+            object.__setattr__(self, "projection", float(self.projection))
+        if self.norm_cap is not None:
+            _check_finite(self, "norm_cap", "None or ")
+            if not self.norm_cap > 0:
+                raise ValueError(f"Guidance.norm_cap must be None or > 0, got {self.norm_cap!r}")
+            object.__setattr__(self, "norm_cap", float(self.norm_cap))
+        if not -1.0 < self.momentum < 1.0:
+            raise ValueError(f"Guidance.momentum must be in (-1, 1), got {self.momentum!r}")
+        for name, off in (("norm_cap", None), ("momentum", 0.0)):
+            if self.projection is None and getattr(self, name) != off:
+                raise ValueError(f"Guidance.{name}={getattr(self, name)!r} belongs to projected guidance; give "
+                                 "projection=eta too (1 = eq. 9's update)")
 
     def describe(self) -> str:
-        """``7.5``, or ``7.5 (rescale 0.7, interval (0.1, 0.9))`` when refined."""
+        """``7.5``, or e.g. ``7.5 (rescale 0.7, interval (0.1, 0.9))``, ``7.5 (projection 0 cap 5, threshold 0.995
+        bound 4)`` when refined."""
         extra = [f"rescale {self.rescale:g}"] * (self.rescale > 0)
         extra += [f"interval {self.interval}"] * (self.interval is not None)
+        if self.projection is not None:
+            cap = "" if self.norm_cap is None else f" cap {self.norm_cap:g}"
+            extra.append(f"projection {self.projection:g}{cap}" + f" momentum {self.momentum:g}" * (self.momentum != 0))
+        if self.threshold is not None:
+            extra.append(f"threshold {self.threshold:g}" + f" bound {self.threshold_bound:g}"
+                         * (self.threshold_bound != 1.0))
         return f"{self.scale:g}" + (f" ({', '.join(extra)})" if extra else "")
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The weight folders' ``"guidance"`` entry: ``scale``, ``rescale``, ``interval`` always, the threshold and
+        projection fields only when they differ from their defaults (so an unrefined guidance is written as
+        before and read by versions that do not know them)."""
+        entry = asdict(self)
+        defaults = {f.name: f.default for f in fields(self) if f.name not in ("scale", "rescale", "interval")}
+        return {k: v for k, v in entry.items() if k not in defaults or v != defaults[k]}
 
     @property
     def cfg(self) -> bool:
         """Whether an unconditional branch is ever needed."""
         return self.scale != 1.0
+
+    @property
+    def on_clean_sample(self) -> bool:
+        """Whether :meth:`combine` works on the clean-sample prediction (projection or threshold)."""
+        return self.projection is not None or self.threshold is not None
 
     def active(self, timestep: float, num_train_timesteps: int) -> bool:
         """Whether guidance applies at ``timestep`` (always, without an interval)."""
@@ -205,19 +289,100 @@ class Guidance:
         return lo <= float(timestep) / num_train_timesteps <= hi
 
     def combine(self, uncond: torch.Tensor, cond: torch.Tensor, keep: torch.Tensor | None = None,
-                active: bool = True) -> torch.Tensor:
+                active: bool = True, *, step: "GuidanceStep | None" = None) -> torch.Tensor:
         """The guided prediction ``(B, N', P, Dz)`` from the two branches' outputs.
 
-        ``keep`` ``(B, N', 1, 1)`` marks valid frames (the rescale's statistics ignore padding);
-        ``active=False`` (outside the interval) returns ``cond``.
+        ``keep`` ``(B, N', 1, 1)`` marks valid frames (the statistics ignore padding);
+        ``active=False`` (outside the interval) returns ``cond``. ``step`` is the step's noisy sample and
+        noise level, needed by projection and threshold (default: the step :func:`denoise` is at,
+        :func:`guidance_step`).
         """
         if not active or not self.cfg:
             return cond
-        pred = uncond + self.scale * (cond - uncond)                   # eq. 9
+        step = self._step_for(cond, step)
+        if self.projection is None:
+            pred = uncond + self.scale * (cond - uncond)                 # eq. 9
+        else:
+            pred = step.from_x0(self._projected(step.to_x0(uncond), step.to_x0(cond), keep, step))
         if self.rescale > 0:
             pred = self.rescale * pred * (_masked_std(cond, keep) / _masked_std(pred, keep).clamp_min(1e-8)) \
                 + (1.0 - self.rescale) * pred
+        if self.threshold is not None:
+            pred = step.from_x0(dynamic_threshold(step.to_x0(pred), self.threshold, self.threshold_bound, keep))
         return pred
+
+    def _step_for(self, pred: torch.Tensor, step: "GuidanceStep | None") -> "GuidanceStep | None":
+        """The step to convert predictions with (None when no refinement needs one)."""
+        if not self.on_clean_sample:
+            return None
+        step = step if step is not None else guidance_step()
+        if step is None:
+            raise RuntimeError(f"Guidance {self.describe()}: projection and threshold act on the clean-sample "
+                               "prediction, which needs the step's noisy sample and noise level; call inside "
+                               "denoise() or pass step=GuidanceStep(...)")
+        return step.shaped_as(pred)
+
+    def _projected(self, x0_uncond: torch.Tensor, x0_cond: torch.Tensor, keep: torch.Tensor | None,
+                   step: "GuidanceStep") -> torch.Tensor:
+        """APG's guided clean sample ``(B, ...)`` (Sadat et al., ICLR 2025) from both branches' ``(B, ...)``."""
+        diff = x0_cond - x0_uncond
+        if self.momentum != 0:
+            diff = step.momentum_average(diff, self.momentum)
+        if self.norm_cap is not None:
+            norm = _masked_norm(diff, keep)
+            diff = diff * torch.clamp(self.norm_cap / norm.clamp_min(1e-12), max=1.0)
+        parallel, orthogonal = project_onto(diff, x0_cond, keep)
+        return x0_cond + (self.scale - 1.0) * (orthogonal + self.projection * parallel)
+
+
+def _check_finite(g: Guidance, name: str, allowed: str = "") -> None:
+    val = getattr(g, name)
+    if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
+        raise ValueError(f"Guidance.{name} must be {allowed}a finite number, got {val!r}")
+
+
+def _sample_weights(x: torch.Tensor, keep: torch.Tensor | None) -> torch.Tensor:
+    """``keep`` ``(B, N', 1, 1)`` broadcast to ``x`` ``(B, ...)`` as 0/1 weights (all ones without it)."""
+    return torch.ones_like(x) if keep is None else keep.to(x.dtype).expand_as(x)
+
+
+def _masked_norm(x: torch.Tensor, keep: torch.Tensor | None) -> torch.Tensor:
+    """Per-sample L2 norm ``(B, 1, ...)`` of ``x (B, ...)`` over valid entries."""
+    w = _sample_weights(x, keep)
+    return (x * x * w).flatten(1).sum(1).sqrt().view(-1, *(1,) * (x.dim() - 1))
+
+
+def project_onto(v: torch.Tensor, u: torch.Tensor, keep: torch.Tensor | None = None
+                 ) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(v_par, v_orth)``: ``v (B, ...)`` split per sample into its part parallel to ``u (B, ...)`` and the rest.
+
+    Dot products and norms run over the valid entries (``keep`` ``(B, N', 1, 1)``) in float64, as APG's
+    reference code; padded entries of ``v`` stay in ``v_orth``. A sample with ``u = 0`` has ``v_par = 0``.
+    """
+    w = _sample_weights(v, keep).double()
+    vd, ud = v.double(), u.double() * w
+    shape = (-1, *(1,) * (v.dim() - 1))
+    unit = ud / ud.flatten(1).norm(dim=1).clamp_min(1e-12).view(shape)
+    parallel = (vd * unit).flatten(1).sum(1).view(shape) * unit
+    return parallel.to(v.dtype), (vd - parallel).to(v.dtype)
+
+
+def dynamic_threshold(x0: torch.Tensor, quantile: float, bound: float = 1.0,
+                      keep: torch.Tensor | None = None) -> torch.Tensor:
+    """Imagen's dynamic thresholding (Saharia et al. 2022) of a clean-sample prediction ``x0 (B, ...)``.
+
+    Per sample: ``s`` = the ``quantile`` of ``|x0|`` over the valid entries (``keep`` ``(B, N', 1, 1)``),
+    ``s <- max(s, bound)``; returns ``clamp(x0, -s, s) * bound / s`` (same shape). ``bound = 1`` is Imagen's.
+    """
+    a = x0.abs().flatten(1)
+    if keep is None:
+        s = torch.quantile(a.float(), quantile, dim=1)
+    else:
+        valid = _sample_weights(x0, keep).flatten(1) > 0
+        s = torch.stack([torch.quantile(a[i][valid[i]].float(), quantile) if valid[i].any() else a.new_zeros(())
+                         for i in range(a.shape[0])])
+    s = s.to(x0.dtype).clamp_min(bound).view(-1, *(1,) * (x0.dim() - 1))
+    return torch.maximum(torch.minimum(x0, s), -s) * (bound / s)
 
 
 def parse_guidance_setting(text: str) -> Guidance:
@@ -251,6 +416,103 @@ def _masked_std(x: torch.Tensor, keep: torch.Tensor | None) -> torch.Tensor:
     mean = (x * w).flatten(1).sum(1) / count
     var = (((x - mean.view(-1, 1, 1, 1)) ** 2) * w).flatten(1).sum(1) / (count - 1)
     return var.sqrt().view(-1, 1, 1, 1)
+
+
+@dataclass(frozen=True)
+class GuidanceStep:
+    """One denoising step's noisy sample and noise level: what converting a model output to the
+    clean-sample prediction ``x0`` and back needs (variance preserving, ``x_t = sqrt(a) x0 + sqrt(1 - a) eps``;
+    ``v = sqrt(a) eps - sqrt(1 - a) x0``). :func:`denoise` publishes one per step (:func:`guidance_step`) for
+    :meth:`Guidance.combine`'s projection and threshold.
+    """
+
+    sample: torch.Tensor          # (R, ...) x_t as the model sees it (scheduler.scale_model_input's output)
+    alpha_bar: float              # a = alphas_cumprod at the step's timestep, in (0, 1]
+    prediction_type: str          # what the model predicts: one of PREDICTION_TYPES
+    memory: dict = field(default_factory=dict, compare=False)   # per-loop state (APG's momentum), shared by its steps
+
+    def __post_init__(self) -> None:
+        if self.prediction_type not in PREDICTION_TYPES:
+            raise ValueError(f"GuidanceStep.prediction_type must be one of {PREDICTION_TYPES}, "
+                             f"got {self.prediction_type!r}")
+        if not 0.0 < float(self.alpha_bar) <= 1.0:
+            raise ValueError(f"GuidanceStep.alpha_bar must be in (0, 1], got {self.alpha_bar!r}")
+
+    def shaped_as(self, pred: torch.Tensor) -> "GuidanceStep":
+        """This step with ``sample`` viewed in the shape of ``pred`` (e.g. KeyMotion's ``(B, Lz, Dz)`` latents
+        combined as ``(B, 1, Lz, Dz)``); the two must hold the same number of values."""
+        if tuple(self.sample.shape) == tuple(pred.shape):
+            return self
+        if self.sample.numel() != pred.numel():
+            raise ValueError(f"the prediction {tuple(pred.shape)} is not the step's sample {tuple(self.sample.shape)}: "
+                             "projection and threshold need the noisy sample of the same rows")
+        return replace(self, sample=self.sample.reshape(pred.shape))
+
+    def _coefficients(self) -> tuple[float, float]:
+        a = float(self.alpha_bar)
+        return math.sqrt(a), max(math.sqrt(max(1.0 - a, 0.0)), 1e-12)
+
+    def to_x0(self, pred: torch.Tensor) -> torch.Tensor:
+        """The clean-sample prediction implied by a model output ``pred`` (shape of ``sample``)."""
+        sa, sb = self._coefficients()
+        if self.prediction_type == "epsilon":
+            return (self.sample - sb * pred) / sa
+        if self.prediction_type == "v_prediction":
+            return sa * self.sample - sb * pred
+        return pred
+
+    def from_x0(self, x0: torch.Tensor) -> torch.Tensor:
+        """The model output (of ``prediction_type``) that implies the clean sample ``x0`` at this step."""
+        sa, sb = self._coefficients()
+        if self.prediction_type == "epsilon":
+            return (self.sample - sa * x0) / sb
+        if self.prediction_type == "v_prediction":
+            return (sa * self.sample - x0) / sb
+        return x0
+
+    def momentum_average(self, update: torch.Tensor, beta: float) -> torch.Tensor:
+        """APG's running average ``m <- update + beta * m`` over the guided steps of one loop (returns ``m``)."""
+        previous = self.memory.get("apg_average")
+        if previous is not None and previous.shape != update.shape:
+            raise ValueError(f"APG momentum: the update changed shape within one loop ({tuple(previous.shape)} -> "
+                             f"{tuple(update.shape)})")
+        average = update if previous is None else update + beta * previous
+        self.memory["apg_average"] = average
+        return average
+
+
+_CURRENT_STEP: contextvars.ContextVar["GuidanceStep | None"] = contextvars.ContextVar("salad_guidance_step",
+                                                                                      default=None)
+
+
+def guidance_step() -> GuidanceStep | None:
+    """The :class:`GuidanceStep` of the step :func:`denoise` is predicting (None outside its loop, or when its
+    scheduler has no ``alphas_cumprod``)."""
+    return _CURRENT_STEP.get()
+
+
+def _alpha_bar(scheduler, timestep: torch.Tensor | float) -> float | None:
+    """``alphas_cumprod`` at ``timestep``; a fractional timestep (Euler's) interpolates the noise level
+    ``sigma = sqrt((1 - a) / a)`` linearly in ``t``, as those schedulers do."""
+    acp = getattr(scheduler, "alphas_cumprod", None)
+    if acp is None:
+        return None
+    acp = torch.as_tensor(acp, dtype=torch.float64).cpu()
+    t = float(timestep)
+    if t == int(t) and 0 <= int(t) < len(acp):
+        return float(acp[int(t)])
+    sigmas = ((1.0 - acp) / acp).sqrt().numpy()
+    sigma = float(np.interp(t, np.arange(len(sigmas)), sigmas))
+    return 1.0 / (1.0 + sigma * sigma)
+
+
+def _step_of(scheduler, sample: torch.Tensor, timestep, memory: dict) -> GuidanceStep | None:
+    """The loop's :class:`GuidanceStep` at ``timestep`` (None without ``alphas_cumprod``)."""
+    a = _alpha_bar(scheduler, timestep)
+    kind = getattr(getattr(scheduler, "config", None), "prediction_type", None)
+    if a is None or kind not in PREDICTION_TYPES:
+        return None
+    return GuidanceStep(sample, a, kind, memory)
 
 
 def as_guidance(guidance: "float | Guidance") -> Guidance:
@@ -380,8 +642,8 @@ class GuidedPrediction:
     """Classifier-free guidance (eq. 9) of the SALAD denoiser as a :class:`Prediction`.
 
     Both branches run in **one** batched forward, unconditional rows first, then
-    ``Guidance.combine`` (eq. 9, optional rescale); steps outside a guidance interval (and
-    ``w = 1``) run the conditional rows alone. Also used directly, outside the loop, by inversion
+    ``Guidance.combine`` (eq. 9 or projected guidance, optional rescale and threshold); steps outside a
+    guidance interval (and ``w = 1``) run the conditional rows alone. Also used directly, outside the loop, by inversion
     (:mod:`salad_core.attention.inversion`), where ``num_train_timesteps`` must be given.
 
     Parameters
@@ -453,7 +715,7 @@ class GuidedPrediction:
             return self.model(z, t, frame_mask=self.frame_mask, text_context=self.cond)
         out = self.model(torch.cat([z, z]), t, frame_mask=self._both_masks, text_context=self.both)
         keep = None if self._keep is None else self._keep.to(out.dtype)
-        return self.guidance.combine(*out.chunk(2), keep=keep)                # eq. 9 (+ rescale)
+        return self.guidance.combine(*out.chunk(2), keep=keep)      # eq. 9 (+ its refinements)
 
 
 # ======================================================================= the loop's helpers
@@ -518,8 +780,10 @@ def denoise(denoiser: torch.nn.Module, scheduler, cond: TextInput | None = None,
         every step.
     guidance_scale : float or Guidance, optional
         With texts: CFG weight ``w`` (eq. 9; 1 runs the conditional branch only; default 7.5, the
-        paper's), or a :class:`Guidance` with rescale and/or a guidance interval (steps outside it run
-        the conditional rows only).
+        paper's), or a :class:`Guidance` with rescale, a guidance interval (steps outside it run
+        the conditional rows only), projection or threshold (which use the step's :class:`GuidanceStep`,
+        published by this loop: the scaled model input, ``alphas_cumprod`` at ``t`` and the scheduler's
+        ``prediction_type``).
     num_steps : int
         Inference steps passed to ``scheduler.set_timesteps``.
     prediction : Prediction, optional
@@ -577,7 +841,8 @@ def denoise(denoiser: torch.nn.Module, scheduler, cond: TextInput | None = None,
     num_train = int(scheduler.config.num_train_timesteps)
     log.debug("denoise: %s, %d steps, %s, batch %d", type(scheduler).__name__, len(timesteps),
               type(prediction).__name__, prediction.batch_size)
-    with eval_mode(denoiser), torch.inference_mode(), prediction.session(timesteps, num_train):
+    with eval_mode(denoiser), torch.inference_mode(), prediction.session(timesteps, num_train), \
+            _publishing_steps() as memory:
         z = latents * scheduler.init_noise_sigma
         if keep is not None:
             z = z * keep
@@ -585,7 +850,9 @@ def denoise(denoiser: torch.nn.Module, scheduler, cond: TextInput | None = None,
             info = StepInfo(i, len(timesteps), float(t), prediction.guided(float(t)), prediction.batch_size)
             for hook in hooks:
                 hook(info)
-            out = prediction(scheduler.scale_model_input(z, t), t, info)
+            model_input = scheduler.scale_model_input(z, t)
+            _CURRENT_STEP.set(_step_of(scheduler, model_input, t, memory))   # for Guidance.combine
+            out = prediction(model_input, t, info)
             z = scheduler.step(out, t, z, **step_kwargs).prev_sample
             if corrections is not None:
                 z = z + corrections[i]
@@ -596,6 +863,17 @@ def denoise(denoiser: torch.nn.Module, scheduler, cond: TextInput | None = None,
             if callback is not None:
                 callback(info, z)
     return z
+
+
+@contextmanager
+def _publishing_steps() -> Iterator[dict]:
+    """Around :func:`denoise`'s loop: the loop publishes each step's :class:`GuidanceStep` (for
+    :func:`guidance_step`); yields the loop's guidance memory (APG's momentum), the previous step restored on exit."""
+    token = _CURRENT_STEP.set(None)
+    try:
+        yield {}
+    finally:
+        _CURRENT_STEP.reset(token)
 
 
 def _check_frame_mask(frame_mask: torch.Tensor, latents: torch.Tensor) -> torch.Tensor:

@@ -218,3 +218,41 @@ def test_the_shipped_sweep_record_chose_the_shipped_guidance():
     chosen = record["rows"][record["chosen"]["index"]]["guidance"]
     assert chosen == json.loads((root / "pipeline.json").read_text())["guidance"]
     assert gs.choose(record["rows"])[0] == record["chosen"]["index"]          # the rule gives the same choice
+
+
+def test_grid_spells_thresholds_and_projections_with_distinct_labels():
+    grid = gs.guidance_grid([7.5], thresholds=[None, (0.995, 1.0), (0.99, 4.0)], projections=[None, (0.0, None),
+                                                                                             (0.5, 5.0)])
+    assert len(grid) == 9
+    assert grid[0] == Guidance(7.5) and grid[1] == Guidance(7.5, projection=0.0)
+    assert grid[-1] == Guidance(7.5, threshold=0.99, threshold_bound=4.0, projection=0.5, norm_cap=5.0)
+    assert [gs.guidance_label(g) for g in grid[:3]] == ["w=7.5", "w=7.5 eta=0", "w=7.5 eta=0.5 cap=5"]
+    assert gs.guidance_label(grid[3]) == "w=7.5 thr=0.995" and gs.guidance_label(grid[-1]) == \
+        "w=7.5 thr=0.99 b=4 eta=0.5 cap=5"
+    assert gs.guidance_grid([2.0, 3.0]) == [Guidance(2.0), Guidance(3.0)]          # off by default
+    with pytest.raises(ValueError, match="repeats a candidate"):
+        gs.guidance_grid([2.0], projections=[(0.5, None), (0.5, None)])
+    with pytest.raises(ValueError, match="Guidance.threshold must be"):
+        gs.guidance_grid([2.0], thresholds=[(1.5, 1.0)])
+
+
+def test_cli_sweep_takes_thresholds_and_projections(tiny_procedural_corpus, tmp_path, capsys):
+    from salad_core.cli.eval import main
+
+    out = tmp_path / "sweep"
+    common = ["--guidance-sweep", "--data", str(tiny_procedural_corpus), "--scales", "5", "--replications", "1",
+              "--no-mm", "--prompts", "1", "--seeds", "1", "--steps", "3", "--sample", "none"]
+    assert main(common + ["--thresholds", "off,0.9:0.5", "--projections", "0", "--out", str(out)]) == 0
+    doc = json.loads((out / "guidance_sweep.json").read_text())
+    assert [r["label"] for r in doc["rows"]] == ["w=5 eta=0", "w=5 thr=0.9 b=0.5 eta=0"]
+    g = doc["rows"][1]["guidance"]
+    assert (g["threshold"], g["threshold_bound"], g["projection"], g.get("norm_cap")) == (0.9, 0.5, 0.0, None)
+    assert Guidance(**g) == Guidance(5, threshold=0.9, threshold_bound=0.5, projection=0.0)
+    assert list(gs.sweep_frame(doc, "toy")["name"][:2]) == ["toy projection 0 w=5", "toy threshold 0.9 projection 0 w=5"]
+    # the two candidates generated different motions: the threshold reached the sampler
+    assert doc["rows"][0]["t2m"]["fid"]["mean"] != doc["rows"][1]["t2m"]["fid"]["mean"]
+    capsys.readouterr()
+    assert main(common + ["--projections", "0.5:x"]) == 2
+    assert "--projections: '0.5:x' is neither 'off' nor ETA or ETA:CAP" in capsys.readouterr().err
+    assert main(common + ["--thresholds", "1.5"]) == 2
+    assert "Guidance.threshold must be None or a quantile" in capsys.readouterr().err

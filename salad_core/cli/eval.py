@@ -138,7 +138,8 @@ def build_parser() -> argparse.ArgumentParser:
                            "humanml3d_sample of a source checkout if present; 'none' to leave it out)")
     sweep = p.add_argument_group("choosing the default guidance (--guidance-sweep)")
     sweep.add_argument("--guidance-sweep", action="store_true",
-                       help="evaluate every guidance of --scales x --rescales x --intervals with the T2M protocol "
+                       help="evaluate every guidance of --scales x --rescales x --intervals x --thresholds x "
+                            "--projections with the T2M protocol "
                             "AND the physics benchmark (--seeds, --prompts, --recovery) and choose the default by "
                             "the rule of salad_core.eval.guidance_sweep (default --scales 1,2,3,4.5,6,7.5); with --out, "
                             "each finished candidate is kept in OUT/candidates/ and a sweep run again with the same "
@@ -147,6 +148,13 @@ def build_parser() -> argparse.ArgumentParser:
                                                         "(default 0)")
     sweep.add_argument("--intervals", default="full",
                        help="comma-separated guidance intervals of t/T: 'full' or 'lo-hi', e.g. full,0-0.5")
+    sweep.add_argument("--thresholds", default="off",
+                       help="comma-separated dynamic thresholds (Imagen): 'off' or 'P[:BOUND]', P the quantile of "
+                            "|x0| in (0, 1], BOUND what it maps to (default 1), e.g. off,0.995,0.99:4")
+    sweep.add_argument("--projections", default="off",
+                       help="comma-separated projected guidance (APG): 'off' or 'ETA[:CAP]', ETA in [0, 1] the "
+                            "weight of the update's part parallel to the conditional x0 (1 = plain CFG), CAP the "
+                            "update's norm cap, e.g. off,0,0.5:5")
     p.add_argument("--out", default=None, help="folder for results.{csv,md,tex,json,png} (with --physics: "
                                                "physics.{md,json} and physics_motions.npz; with --guidance-sweep: "
                                                "guidance_sweep.{md,json})")
@@ -351,6 +359,36 @@ def _intervals(text: str) -> list[tuple[float, float] | None]:
     return out
 
 
+def _pairs(flag: str, text: str, example: str) -> list[tuple[float, float | None] | None]:
+    """``"off,0.5,0.5:4"`` -> ``[None, (0.5, None), (0.5, 4.0)]``: the ``--thresholds`` / ``--projections`` syntax."""
+    out: list[tuple[float, float | None] | None] = []
+    for part in (s.strip() for s in text.split(",") if s.strip()):
+        if part == "off":
+            out.append(None)
+            continue
+        try:
+            values = [float(v) for v in part.split(":")]
+        except ValueError:
+            values = []
+        if len(values) not in (1, 2):
+            raise ValueError(f"{flag}: {part!r} is neither 'off' nor {example}")
+        out.append((values[0], values[1] if len(values) == 2 else None))
+    if not out:
+        raise ValueError(f"{flag} is empty; use 'off' or {example}")
+    return out
+
+
+def _thresholds(text: str) -> list[tuple[float, float] | None]:
+    """``--thresholds``: ``(p, bound)`` per entry (bound 1, Imagen's, when not given), None for 'off'."""
+    return [None if t is None else (t[0], 1.0 if t[1] is None else t[1])
+            for t in _pairs("--thresholds", text, "P or P:BOUND (e.g. 0.995:4)")]
+
+
+def _projections(text: str) -> list[tuple[float, float | None] | None]:
+    """``--projections``: ``(eta, norm_cap)`` per entry (no cap when not given), None for 'off'."""
+    return _pairs("--projections", text, "ETA or ETA:CAP (e.g. 0.5:5)")
+
+
 def _weights_digest(folder) -> str | None:
     """SHA-256 over the ``*.json`` and ``*.safetensors`` files of a weights folder (None when there is no such
     folder): a kept sweep result is reused only for the same weights."""
@@ -370,8 +408,6 @@ def _weights_digest(folder) -> str | None:
 def run_guidance_sweep(args) -> int:
     """``salad eval --guidance-sweep``: T2M protocol + physics benchmark per candidate guidance, and the
     default chosen by :func:`salad_core.eval.guidance_sweep.choose`."""
-    from dataclasses import asdict
-
     from salad_core.pipeline import SaladPipeline
 
     from salad_core.eval.guidance_sweep import choose, guidance_grid, run_sweep, sweep_markdown
@@ -392,7 +428,7 @@ def run_guidance_sweep(args) -> int:
         raise FileNotFoundError(f"--data {data} has no {args.split}.txt; give a corpus folder "
                                 "(salad corpus build --out DIR)")
     grid = guidance_grid(_scales(args.scales or "1,2,3,4.5,6,7.5"), comma_floats("--rescales", args.rescales),
-                         _intervals(args.intervals))
+                         _intervals(args.intervals), _thresholds(args.thresholds), _projections(args.projections))
     settings = _settings(args)
     bench = BenchSettings(steps=args.steps, seeds=tuple(range(args.seed, args.seed + args.seeds)),
                           num_prompts=args.prompts)
@@ -412,12 +448,12 @@ def run_guidance_sweep(args) -> int:
     if reused:
         print(f"{reused} of {len(grid)} candidates reused from {store} (measured before with the same settings)")
     pick, why = choose(result["rows"])
-    result["chosen"] = {"index": pick, "why": why, "guidance": asdict(grid[pick])}
+    result["chosen"] = {"index": pick, "why": why, "guidance": grid[pick].to_json_dict()}
     result["settings"].update(weights=pipe.source, data=str(data), recovery=recovery,
                               seconds=round(time.perf_counter() - t0, 1), identity=identity)
     md = sweep_markdown(result, pick) + f"\n\nChosen: {why}.\n"
     print(md)
-    print('pipeline.json entry: "guidance": ' + json.dumps(asdict(grid[pick])))
+    print('pipeline.json entry: "guidance": ' + json.dumps(grid[pick].to_json_dict()))
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)

@@ -5,7 +5,8 @@ a sweep over FID, R-precision and the physical-plausibility benchmark, not taken
 w = 7.5 was chosen for its own model). This module runs that sweep and applies one fixed, documented
 rule (:func:`choose`), so the choice is reproducible and printed with its reasons:
 
-* :func:`guidance_grid` spells the candidates (every combination of weights, rescales and intervals);
+* :func:`guidance_grid` spells the candidates (every combination of weights, rescales, intervals,
+  thresholds and projections);
 * :func:`run_sweep` evaluates each candidate with the T2M protocol (:mod:`.protocol`: R-precision,
   FID with their 95 % intervals over replications) and the physics benchmark (:mod:`.physics_prompts`:
   bone error, foot skating, floor penetration, the jump checks, seed diversity) on the same weights;
@@ -48,28 +49,48 @@ PHYSICS_TARGETS = ("bone error p95", "bone error max", "foot skating <=", "groun
 
 
 def guidance_grid(scales: Iterable[float], rescales: Iterable[float] = (0.0,),
-                  intervals: Iterable[tuple[float, float] | None] = (None,)) -> list[Guidance]:
-    """Every combination of weight ``w``, rescale ``phi`` and interval, in that nesting order.
+                  intervals: Iterable[tuple[float, float] | None] = (None,),
+                  thresholds: Iterable[tuple[float, float] | None] = (None,),
+                  projections: Iterable[tuple[float, float | None] | None] = (None,)) -> list[Guidance]:
+    """Every combination of weight ``w``, rescale ``phi``, interval, threshold ``(p, bound)`` and
+    projection ``(eta, norm_cap)`` (None: that refinement off), in that nesting order.
 
     Returns
     -------
-    list of Guidance, ``len(scales) * len(rescales) * len(intervals)`` long (each validated).
+    list of Guidance, the product of the lengths long (each validated).
     """
-    grid = [Guidance(float(w), float(phi), iv) for w, phi, iv in itertools.product(scales, rescales, intervals)]
+    grid = [Guidance(float(w), float(phi), iv, **_threshold_kwargs(th), **_projection_kwargs(pr))
+            for w, phi, iv, th, pr in itertools.product(scales, rescales, intervals, thresholds, projections)]
     if not grid:
         raise ValueError("the guidance grid is empty: give at least one scale, rescale and interval")
     if len({guidance_label(g) for g in grid}) != len(grid):
-        raise ValueError("the guidance grid repeats a candidate; give distinct scales, rescales and intervals")
+        raise ValueError("the guidance grid repeats a candidate; give distinct scales, rescales, intervals, "
+                         "thresholds and projections")
     return grid
 
 
+def _threshold_kwargs(item: tuple[float, float] | None) -> dict[str, float]:
+    return {} if item is None else {"threshold": float(item[0]), "threshold_bound": float(item[1])}
+
+
+def _projection_kwargs(item: tuple[float, float | None] | None) -> dict[str, float | None]:
+    return {} if item is None else {"projection": float(item[0]),
+                                    "norm_cap": None if item[1] is None else float(item[1])}
+
+
 def guidance_label(g: Guidance) -> str:
-    """Short row label, e.g. ``"w=4"``, ``"w=7.5 phi=0.7"``, ``"w=4 t/T in [0,0.5]"``."""
+    """Short row label, e.g. ``"w=4"``, ``"w=7.5 phi=0.7"``, ``"w=4 t/T in [0,0.5]"``,
+    ``"w=7.5 thr=0.995 b=4"``, ``"w=7.5 eta=0 cap=5"``."""
     label = f"w={g.scale:g}"
     if g.rescale:
         label += f" phi={g.rescale:g}"
     if g.interval is not None:
         label += f" t/T in [{g.interval[0]:g},{g.interval[1]:g}]"
+    if g.threshold is not None:
+        label += f" thr={g.threshold:g}" + (f" b={g.threshold_bound:g}" if g.threshold_bound != 1.0 else "")
+    if g.projection is not None:
+        label += f" eta={g.projection:g}" + (f" cap={g.norm_cap:g}" if g.norm_cap is not None else "")
+        label += f" beta={g.momentum:g}" if g.momentum else ""
     return label
 
 
@@ -177,7 +198,7 @@ def run_sweep(pipe: Callable[..., Any], guidances: Sequence[Guidance], dataset_r
         say(f"{label}: T2M protocol done ({seconds:.0f} s)")
         bench = run_benchmark({label: physics_gen(gen)}, bench_settings, data_root=dataset_root,
                               sample_dir=sample_dir, log=say)
-        row = {"label": label, "guidance": asdict(g), "t2m": _t2m_row(t2m), "physics": _physics_row(bench, label),
+        row = {"label": label, "guidance": g.to_json_dict(), "t2m": _t2m_row(t2m), "physics": _physics_row(bench, label),
                "seconds": round(seconds + bench["generators"][label]["seconds"], 1)}
         references = bench["references"]
         keep.save(label, g, {"row": row, "references": references})
@@ -190,7 +211,7 @@ def sweep_fingerprint(eval_settings: EvalSettings, bench_settings: BenchSettings
                       guidance: Guidance | None, identity: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """What a kept sweep result must have been measured with to be reused (JSON-ready)."""
     doc = {"t2m": eval_settings.describe(), "bench": asdict(bench_settings), "data": str(Path(dataset_root).resolve()),
-           "guidance": None if guidance is None else asdict(guidance), "identity": dict(identity or {})}
+           "guidance": None if guidance is None else guidance.to_json_dict(), "identity": dict(identity or {})}
     return json.loads(json.dumps(doc, default=str))                 # as kept on disk (tuples become lists)
 
 
@@ -286,8 +307,9 @@ def sweep_frame(result: Mapping[str, Any], name: str = "SALAD"):
     """A :func:`run_sweep` result (or its saved ``guidance_sweep.json``) as a pandas DataFrame that
     :func:`salad_viz.plots.plot_cfg_sweep` draws.
 
-    One row per candidate: ``name`` (``"<name> w=<scale>"``, with ``" rescale <phi>"`` / ``" interval"``
-    in the stem when set, so that each rescale / interval setting is its own line), ``kind``
+    One row per candidate: ``name`` (``"<name> w=<scale>"``, with ``" rescale <phi>"`` / ``" interval"`` /
+    ``" threshold <p>"`` / ``" projection <eta>"`` in the stem when set, so that each such setting is its own
+    line), ``kind``
     ("generated"), ``guidance_scale``, ``rescale``, the T2M means with their half-widths in
     ``"<column> ±"`` (``R-precision top-1``, ``R-precision top-3``, ``FID``, ``MM-Dist``, ``Diversity``),
     the physics columns ``bone p95 (cm)``, ``bone max (cm)``, ``skating (m/s)``, ``penetration (cm)``,
@@ -310,7 +332,9 @@ def sweep_frame(result: Mapping[str, Any], name: str = "SALAD"):
     for i, r in enumerate(result["rows"]):
         g, p = r["guidance"], r["physics"]
         stem = name + (f" rescale {g['rescale']:g}" if g.get("rescale") else "") + (
-            " interval" if g.get("interval") else "")
+            " interval" if g.get("interval") else "") + (
+            f" threshold {g['threshold']:g}" if g.get("threshold") is not None else "") + (
+            f" projection {g['projection']:g}" if g.get("projection") is not None else "")
         rows.append({"name": f"{stem} w={g['scale']:g}", "kind": "generated", "guidance_scale": float(g["scale"]),
                      "rescale": float(g.get("rescale") or 0.0), **t2m(r["t2m"]),
                      "bone p95 (cm)": p.get("bone_p95_cm"), "bone max (cm)": p.get("bone_max_cm"),

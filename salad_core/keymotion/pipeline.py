@@ -47,7 +47,7 @@ import json
 import logging
 import os
 import warnings
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -381,7 +381,7 @@ class KeyMotionPipeline:
             save_checkpoint(root / name, model, model_type=COMPONENTS[name], config=model.config, dtype=dtype)
         doc = {"format": _FORMAT, "version": 1, "text_encoder": self.text_encoder_name,
                "diffusion": config_to_dict(self.diffusion), "default_length": self.default_length,
-               "guidance": asdict(self.guidance), "recovery": self.recovery, "side_check": self.side_check}
+               "guidance": self.guidance.to_json_dict(), "recovery": self.recovery, "side_check": self.side_check}
         atomic_write_text(root / "keymotion.json", json.dumps(doc, indent=2) + "\n")
         if self.vocabulary is not None:     # what the weights can read travels with them
             from salad_core.vocabulary import write_vocabulary
