@@ -48,6 +48,12 @@ def _run(tmp_path, name, *flags, source=SOURCE):
      lambda a: [dataclasses.replace(a.parse_inpaint("arms", blend=1), composite=False)]),
     (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-root", "edit", "--inpaint-fade", "4"],
      lambda a: [dataclasses.replace(a.parse_inpaint("@12:28", blend=1), root="edit", fade=4)]),
+    (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-smooth", "50", "--inpaint-smooth-window", "6",
+      "--inpaint-resample", "2", "--inpaint-jump", "2", "--inpaint-guidance", "6"],
+     lambda a: [dataclasses.replace(a.parse_inpaint("@12:28", blend=1), smooth=50.0, smooth_window=6, resample=2,
+                                    jump=2, guidance=6.0)]),
+    (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-guidance", "motion", "--inpaint-smooth", "0"],
+     lambda a: [dataclasses.replace(a.parse_inpaint("@12:28", blend=1), guidance=None, smooth=0.0)]),
 ])
 def test_each_edit_flag_gives_the_python_edit(tmp_path, pipe, flags, edits):
     import salad_core.attention as a
@@ -82,6 +88,10 @@ def test_inpainting_the_arms_keeps_the_legs(tmp_path):
     (["--inpaint", "arms"], "--inpaint needs --target"),
     (["--target", "a person runs", "--inpaint", "wings"], "--inpaint wings"),
     (["--example-seed", "-1"], "--example-seed -1"),
+    (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-resample", "0"], "Inpaint.resample=0"),
+    (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-guidance", "lots"],
+     "--inpaint-guidance lots: give a number, 'auto' or 'motion'"),
+    (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-smooth", "-1"], "Inpaint.smooth=-1.0"),
 ])
 def test_bad_edit_flags_are_one_line_errors(tmp_path, capsys, flags, message):
     code = cli.main(["-q", "edit", SOURCE, *flags, "--length", "40", "--steps", "2", "--out", str(tmp_path / "x")])

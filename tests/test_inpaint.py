@@ -329,3 +329,177 @@ def test_inverted_take_span_keeps_the_frames_after_it_in_place(pipe, sample_feat
     assert glob(src, free.edited.joints[0], slice(33, None)) > glob(src, ed, slice(33, None))
     with pytest.raises(ValueError, match="Inpaint.guidance"):
         Inpaint(frames=(16, 32), guidance=0.5)
+
+
+# --------------------------------------------------------------------- seam smoothing, resampling, span guidance
+def _third_difference(x: np.ndarray) -> np.ndarray:
+    return x[3:] - 3 * x[2:-1] + 3 * x[1:-2] - x[:-3]
+
+
+def test_smooth_columns_lowers_the_seam_jerk_of_a_step_and_keeps_fixed_frames():
+    from salad_core.attention.composite import smooth_columns
+
+    n = 40
+    y = np.zeros((n, 2))
+    y[20:, 0] = 1.0                                     # a step at the seam 19 | 20
+    y[20:, 1] = np.linspace(1.0, 2.0, n - 20)           # a step and a slope
+    free = np.zeros(n, bool)
+    free[20:28] = True                                  # the regenerated frames next to the seam
+    out = smooth_columns(y, free, order=3, strength=100.0)
+    np.testing.assert_array_equal(out[~free], y[~free])                 # every fixed frame exactly
+    before, after = np.abs(_third_difference(y)[14:26]).max(0), np.abs(_third_difference(out)[14:26]).max(0)
+    assert (after < 0.25 * before).all()
+    # a stronger penalty smooths more; none leaves the signal as it is
+    strong = smooth_columns(y, free, order=3, strength=1000.0)
+    assert np.abs(_third_difference(strong)[14:26]).max() < np.abs(_third_difference(out)[14:26]).max()
+    np.testing.assert_array_equal(smooth_columns(y, free, order=3, strength=0.0), y)
+    # a smooth signal (a cubic, third difference constant) is left almost as it is
+    t = np.arange(n, dtype=float)[:, None] / n
+    cubic = t ** 3
+    np.testing.assert_allclose(smooth_columns(cubic, free, order=3, strength=100.0), cubic, atol=1e-3)
+
+
+def test_seams():
+    from salad_core.attention.composite import seams
+
+    assert seams(np.array([0, 0, 1, 1, 1, 0], bool)) == [2, 5]
+    assert seams(np.array([1, 1, 0, 0], bool)) == [2]
+    assert seams(np.ones(5, bool)) == [] and seams(np.zeros(5, bool)) == []
+
+
+def test_seam_smoothing_of_a_composite_lowers_the_seam_jerk_and_keeps_the_rest(sample_features):
+    """A regenerated span (another pose at every frame, the same root): smoothing moves only the span's frames within
+    the window of each seam, keeps the kept frames (global place too) and lowers the seam's jerk."""
+    from salad_core.attention.composite import composite_features, frame_weights, smooth_seam_features
+    from salad_core.motion import features_to_joints
+
+    f = sample_features[:80].astype(np.float64)
+    g = f.copy()
+    g[:, 4:] = np.roll(f[:, 4:], 20, axis=0)
+    w = np.repeat(frame_weights(80, (24, 56), 4)[:, None], 22, 1)
+    plain = composite_features(f, g, w)
+    smooth = smooth_seam_features(plain, w, window=8, strength=100.0)
+    moved = np.abs(smooth - plain).max(1) > 0
+    assert moved[24:32].all() and moved[48:56].all()                # the span's frames next to the seams
+    assert not moved[:24].any() and not moved[32:48].any() and not moved[56:].any()
+    contacts = get_skeleton().feature_slices["contacts"]
+    np.testing.assert_array_equal(smooth[:, contacts], plain[:, contacts])
+    seam_jerk = lambda x: np.linalg.norm(_third_difference(features_to_joints(x)), axis=-1).mean(-1)
+    for b in (24, 56):
+        assert seam_jerk(smooth)[b - 5:b + 3].max() < 0.7 * seam_jerk(plain)[b - 5:b + 3].max()
+    # through composite_features, with a span that also turns: the kept frames keep their global place
+    g2 = _edited_like(f, 1)
+    held = composite_features(f, g2, w, smooth=100.0, smooth_window=8)
+    jf, jh = features_to_joints(f), features_to_joints(held)
+    np.testing.assert_allclose(jh[:24], jf[:24], atol=1e-9)
+    np.testing.assert_allclose(jh[57:], jf[57:], atol=1e-6)
+    assert np.abs(held - composite_features(f, g2, w)).max() > 1e-3
+    # parts without a span have no seam: nothing to smooth
+    from salad_core.attention.composite import part_joint_weights
+
+    pw = np.repeat(part_joint_weights(("left arm", "right arm"))[None], 80, 0)
+    np.testing.assert_array_equal(composite_features(f, g, pw, smooth=100.0, smooth_window=8),
+                                  composite_features(f, g, pw))
+
+
+def test_inpaint_new_options():
+    from salad_core.attention.inpaint import SPAN_GUIDANCE
+
+    assert Inpaint(frames=(8, 24), guidance="auto").edited_guidance == SPAN_GUIDANCE
+    assert Inpaint(frames=(8, 24)).edited_guidance == SPAN_GUIDANCE and Inpaint(parts="arms").edited_guidance is None
+    assert Inpaint(parts="arms", guidance="auto").edited_guidance is None
+    assert Inpaint(parts="arms", frames=(8, 24), guidance="auto").edited_guidance == SPAN_GUIDANCE
+    assert Inpaint(parts="arms", guidance=6).edited_guidance == 6.0
+    assert Inpaint(frames=(8, 24), guidance=None).edited_guidance is None
+    for kwargs, match in [(dict(guidance="strong"), "Inpaint.guidance"), (dict(smooth=-1.0), "Inpaint.smooth"),
+                          (dict(smooth=float("nan")), "Inpaint.smooth"), (dict(smooth_window=-2), "smooth_window"),
+                          (dict(resample=0), "Inpaint.resample"), (dict(jump=0), "Inpaint.jump"),
+                          (dict(resample=1.5), "Inpaint.resample")]:
+        with pytest.raises(ValueError, match=match):
+            Inpaint(frames=(8, 24), **kwargs)
+    # resampling after the steps that end a jump, never after the last step, only in the replacement's window
+    r = Inpaint(frames=(8, 24), resample=2, jump=3)
+    assert [i for i in range(10) if r.resampling(i / 10, i, 10)] == [2, 5, 8]
+    every = Inpaint(frames=(8, 24), resample=2, jump=1)
+    assert [i for i in range(10) if every.resampling(i / 10, i, 10)] == list(range(9))
+    # resample="auto" (default): PARTS_RESAMPLE passes of jumps of 5 steps for body parts alone, none for a span
+    from salad_core.attention.inpaint import PARTS_RESAMPLE
+
+    assert Inpaint(parts="arms").passes == PARTS_RESAMPLE > 1 and Inpaint(frames=(8, 24)).passes == 1
+    assert Inpaint(parts="arms", frames=(8, 24)).passes == 1 and Inpaint(parts="arms", resample=1).passes == 1
+    assert [i for i in range(10) if Inpaint(parts="arms").resampling(i / 10, i, 10)] == [4]
+    assert not any(Inpaint(frames=(8, 24)).resampling(i / 10, i, 10) for i in range(10))
+    late = Inpaint(frames=(8, 24), resample=2, jump=1, steps=(0.0, 0.5))
+    assert [i for i in range(10) if late.resampling(i / 10, i, 10)] == [0, 1, 2, 3, 4]
+
+
+@needs_weights
+def test_resampling_changes_the_region_and_not_the_kept_latents(pipe):
+    kw = dict(target="a person jumps", lengths=FRAMES, seed=0, num_steps=6)
+    plain = pipe.edit(SOURCE, edits=[Inpaint(frames=(16, 32), composite=False, guidance=None)], **kw)
+    again = pipe.edit(SOURCE, edits=[Inpaint(frames=(16, 32), composite=False, guidance=None, resample=2, jump=1)],
+                      **kw)
+    jumps = pipe.edit(SOURCE, edits=[Inpaint(frames=(16, 32), composite=False, guidance=None, resample=3,
+                                             jump=2)], **kw)
+    region = plain.edited.latents.new_zeros(plain.edited.latents.shape[:2], dtype=torch.bool)
+    region[:, 4:8] = True
+    for out in (again, jumps):
+        # the source branch is never touched; the kept latents are the source's exactly
+        torch.testing.assert_close(out.source.latents, plain.source.latents, atol=0, rtol=0)
+        torch.testing.assert_close(out.edited.latents[~region], out.source.latents[~region], atol=0, rtol=0)
+        assert (out.edited.latents[region] - plain.edited.latents[region]).abs().mean() > 0.05
+    # the extra passes are counted, 4 forward rows each (two branches, each with its unconditional row):
+    # resample=2 runs steps 0..4 once more (never the last), resample=3 jump=2 the jumps 0-1 and 2-3 twice more
+    rows = plain.settings["forward_rows"]
+    assert again.settings["forward_rows"] - rows == 5 * 4
+    assert jumps.settings["forward_rows"] - rows == 2 * 2 * 2 * 4
+    with pytest.raises(ValueError, match="needs the DDIM sampler"):
+        pipe.edit(SOURCE, edits=[Inpaint(frames=(16, 32), resample=2)], solver="dpm++", **kw)
+    # resample="auto" on body parts resamples with DDIM and leaves other solvers as they are
+    arms = dict(target="a man waves his right hand", lengths=FRAMES, seed=0, num_steps=6)
+    auto = pipe.edit(SOURCE, edits=[Inpaint(parts="arms", composite=False)], **arms)
+    once = pipe.edit(SOURCE, edits=[Inpaint(parts="arms", composite=False, resample=1)], **arms)
+    assert auto.settings["forward_rows"] > once.settings["forward_rows"]
+    fast = pipe.edit(SOURCE, edits=[Inpaint(parts="arms", composite=False)], solver="dpm++", **arms)
+    fast_once = pipe.edit(SOURCE, edits=[Inpaint(parts="arms", composite=False, resample=1)], solver="dpm++", **arms)
+    np.testing.assert_array_equal(fast.edited.features, fast_once.edited.features)
+
+
+@needs_weights
+def test_span_guidance_and_smoothing_reach_the_edit(pipe):
+    """``guidance="auto"`` guides a span's edited branch with SPAN_GUIDANCE (the same edit as giving it), and the
+    seam smoothing changes only the span's frames next to the seams of the decoded edit."""
+    from salad_core.attention.inpaint import SPAN_GUIDANCE
+
+    kw = dict(target="a person jumps", lengths=FRAMES, seed=0, num_steps=5)
+    auto = pipe.edit(SOURCE, edits=[Inpaint(frames=(16, 32), guidance="auto", smooth=0.0)], **kw)
+    given = pipe.edit(SOURCE, edits=[Inpaint(frames=(16, 32), guidance=SPAN_GUIDANCE, smooth=0.0)], **kw)
+    motion = pipe.edit(SOURCE, edits=[Inpaint(frames=(16, 32), guidance=None, smooth=0.0)], **kw)
+    np.testing.assert_array_equal(auto.edited.features, given.edited.features)
+    assert np.abs(auto.edited.features - motion.edited.features).max() > 1e-3
+    smooth = pipe.edit(SOURCE, edits=[Inpaint(frames=(16, 32), guidance="auto", smooth=100.0, smooth_window=4)],
+                       **kw)
+    d = np.abs(smooth.edited.features[0, :FRAMES] - auto.edited.features[0, :FRAMES]).max(1)
+    assert smooth.settings["composite"]["seam_smoothing"] == ["smoothed"]
+    assert d[16:20].max() > 1e-4 and d[28:32].max() > 1e-4
+    assert d[:16].max() == 0 and d[32:].max() == 0          # the kept frames are the source's
+
+
+@needs_weights
+def test_seam_smoothing_is_dropped_where_it_would_raise_the_seams_jerk(pipe, monkeypatch):
+    """The composite keeps the smoothed seams only if the recovered joints' seam jerk does not rise: a smoothing that
+    shakes the frames next to the seams is dropped (the edit is the plain composite)."""
+    from salad_core.attention import composite
+
+    def shaky(features, weights, window, strength, skeleton="humanml3d"):
+        out = np.array(features, np.float64)
+        out[16:20, 4:67] += 0.05 * np.array([1.0, -1.0, 1.0, -1.0])[:, None]        # positions jump every frame
+        return out
+
+    kw = dict(target="a person jumps", lengths=FRAMES, seed=0, num_steps=5)
+    plain = pipe.edit(SOURCE, edits=[Inpaint(frames=(16, 32), smooth=0.0)], **kw)
+    monkeypatch.setattr(composite, "smooth_seam_features", shaky)
+    shaken = pipe.edit(SOURCE, edits=[Inpaint(frames=(16, 32), smooth=100.0)], **kw)
+    assert shaken.settings["composite"]["seam_smoothing"] == ["plain"]
+    np.testing.assert_array_equal(shaken.edited.features, plain.edited.features)
+    assert "seam_smoothing" not in plain.settings["composite"]

@@ -21,7 +21,12 @@ What. After decoding both branches, the edited motion's features are re-assemble
   every kept frame then keeps its global position and facing (a span that turns keeps the turn inside the span and
   turns back before the kept frames; ``root="edit"`` lets the kept frames follow the span's turn instead);
 * the seams of a frame span are cross-faded over ``fade`` frames inside the span (``w`` ramps
-  ``d / (fade + 1)`` with the distance ``d`` to the kept frame), kept frames are exactly the source's.
+  ``d / (fade + 1)`` with the distance ``d`` to the kept frame), kept frames are exactly the source's;
+* **seam smoothing** (``smooth > 0``, :func:`smooth_seam_features`): a linear cross-fade of two different motions
+  still kinks where the ramp starts, and the regenerated frames next to a seam may move abruptly; per feature
+  column, the regenerated frames within ``smooth_window`` frames of an inner seam are replaced by the least-squares
+  compromise between the cross-faded values and a small jerk (third difference of positions and rotations, second
+  of velocities), the kept frames held fixed as the boundary, so the span continues the kept motion smoothly.
 
 Kept joints then decode to the source's own joints (up to the pipeline's skeleton fit), whatever the decoder does
 with the edited tokens. :func:`composite_output` applies it to an :class:`~salad_core.pipeline.EditOutput`; the
@@ -36,8 +41,8 @@ import numpy as np
 
 from salad_core.skeleton import PART_NAMES, get_skeleton
 
-__all__ = ["ROOT_MODES", "part_joint_weights", "frame_weights", "composite_features", "composite_output",
-           "composite_specs"]
+__all__ = ["ROOT_MODES", "part_joint_weights", "frame_weights", "seams", "smooth_columns", "smooth_seam_features",
+           "seam_jerk", "composite_features", "composite_output", "composite_specs"]
 
 #: How the root of a regenerated frame span is handled (see the module docstring).
 ROOT_MODES = ("source", "edit")
@@ -64,6 +69,103 @@ def frame_weights(num_frames: int, span: tuple[int, int] | None, fade: int) -> n
         d = min(f - s + 1 if s > 0 else np.inf, e - f if e < n else np.inf)
         w[f] = min(1.0, d / (fade + 1))
     return w
+
+
+def seams(regenerated: np.ndarray) -> list[int]:
+    """Inner seams of a per-frame ``(N,)`` bool: the frames ``b`` (``0 < b < N``) where kept and regenerated
+    frames meet (frame ``b - 1`` is one, frame ``b`` the other)."""
+    r = np.asarray(regenerated, bool)
+    return [int(b) for b in np.flatnonzero(r[1:] != r[:-1]) + 1]
+
+
+def _difference_matrix(n: int, order: int) -> np.ndarray:
+    """``(n - order, n)``: row ``r`` takes the ``order``-th forward difference of frames ``r .. r + order``."""
+    d = np.eye(n)
+    for _ in range(order):
+        d = d[1:] - d[:-1]
+    return d
+
+
+def smooth_columns(y: np.ndarray, free: np.ndarray, order: int, strength: float) -> np.ndarray:
+    """Least-squares smoothing of columns ``y (N, C)`` on the ``free`` frames ``(N,)`` bool, the others fixed:
+    per column ``argmin_x ||x_F - y_F||^2 + strength * ||D x||^2`` over the free frames ``F``, with ``D`` the
+    ``order``-th difference over every window of ``order + 1`` frames that holds a free frame. Returns
+    ``(N, C)``: the fixed frames are ``y``'s exactly."""
+    y = np.asarray(y, np.float64)
+    free = np.asarray(free, bool)
+    out = y.copy()
+    if not free.any() or strength <= 0 or len(y) <= order:
+        return out
+    d = _difference_matrix(len(y), order)
+    d = d[np.abs(d[:, free]).sum(1) > 0]                       # the differences that touch a free frame
+    df, dc = d[:, free], d[:, ~free]
+    a = np.eye(int(free.sum())) + strength * df.T @ df
+    rhs = y[free] - strength * df.T @ (dc @ y[~free])
+    out[free] = np.linalg.solve(a, rhs)
+    return out
+
+
+def _column_orders(sk) -> list[tuple[slice, int]]:
+    """Feature columns smoothed by :func:`smooth_seam_features` and the difference order that is the jerk of
+    each: the third of positions and rotations (root height, ``ric``, ``rot``), the second of velocities (root
+    turn and step, ``local_vel``); the foot contacts are left alone."""
+    fs = sk.feature_slices
+    return [(fs["root_rot_vel"], 2), (fs["root_lin_vel"], 2), (fs["root_y"], 3), (fs["ric"], 3), (fs["rot"], 3),
+            (fs["local_vel"], 2)]
+
+
+def smooth_seam_features(features: np.ndarray, weights: np.ndarray, window: int, strength: float,
+                         skeleton="humanml3d") -> np.ndarray:
+    """The composited features with the regenerated frames next to each inner seam smoothed (jerk-penalised).
+
+    Per feature column of each regenerated joint, the frames that joint regenerates within ``window`` frames of
+    an inner seam (:func:`seams` of the frames where any joint is regenerated) are the least-squares
+    :func:`smooth_columns` of the cross-faded values, penalising the column's jerk (see :func:`_column_orders`)
+    with weight ``strength``; every other frame, and every kept frame, is left exactly as it is, so the
+    regenerated frames continue the kept ones without a kink.
+
+    Parameters
+    ----------
+    features : ndarray ``(N, D)``
+        Composited (de-normalised) features.
+    weights : ndarray ``(N, J)``
+        The composite's weights (> 0: the joint is regenerated at that frame).
+    window : int
+        Regenerated frames next to a seam that may move.
+    strength : float
+        Weight of the jerk penalty (0: unchanged).
+
+    Returns
+    -------
+    ndarray ``(N, D)`` float64.
+    """
+    sk = get_skeleton(skeleton)
+    f = np.asarray(features, np.float64).copy()
+    w = np.asarray(weights, np.float64)
+    if w.shape != (len(f), sk.num_joints):
+        raise ValueError(f"weights must be (N, J) = {(len(f), sk.num_joints)}, got {w.shape}")
+    regen = w > 0
+    cuts = seams(regen.any(1))
+    if window <= 0 or strength <= 0 or not cuts:
+        return f
+    idx = np.arange(len(f))
+    near = np.zeros(len(f), bool)
+    for b in cuts:
+        near |= np.abs(idx - b + 0.5) < window           # the window frames on either side of the seam b - 1 | b
+    col_joint = np.zeros(sk.feature_dim, int)
+    for j, cols in enumerate(sk.joint_feature_index):
+        col_joint[list(cols)] = j
+    for sl, order in _column_orders(sk):
+        cols = np.arange(sl.start, sl.stop)
+        groups: dict[bytes, list[int]] = {}
+        for c in cols:
+            free = near & regen[:, col_joint[c]]
+            if free.any():
+                groups.setdefault(free.tobytes(), []).append(int(c))
+        for key, cs in groups.items():
+            free = np.frombuffer(key, bool)
+            f[:, cs] = smooth_columns(f[:, cs], free, order, strength)
+    return f
 
 
 def _column_weights(w: np.ndarray, sk) -> np.ndarray:
@@ -170,7 +272,8 @@ def _fix_root(out: np.ndarray, source: np.ndarray, w_root: np.ndarray) -> np.nda
 
 
 def composite_features(source: np.ndarray, edited: np.ndarray, weights: np.ndarray, skeleton="humanml3d", *,
-                       rejoin: bool = True, root: str = "source") -> np.ndarray:
+                       rejoin: bool = True, root: str = "source", smooth: float = 0.0,
+                       smooth_window: int = 0) -> np.ndarray:
     """The edited motion re-assembled from the source's features where ``weights`` is 0.
 
     Parameters
@@ -183,6 +286,9 @@ def composite_features(source: np.ndarray, edited: np.ndarray, weights: np.ndarr
         Hang each regenerated limb from the source's kept parent joint (see the module docstring).
     root : ``"source"`` or ``"edit"``
         ``"source"``: a regenerated span followed by kept frames ends at the source's root heading and position.
+    smooth, smooth_window : float, int
+        Jerk penalty and window (regenerated frames next to each inner seam) of :func:`smooth_seam_features`,
+        applied after the cross-fade and before the root correction (0: off).
 
     Returns
     -------
@@ -204,6 +310,8 @@ def composite_features(source: np.ndarray, edited: np.ndarray, weights: np.ndarr
         ed = _rejoin(ed, src, w, sk)
     cw = _column_weights(w, sk)
     out = (1.0 - cw) * src + cw * ed
+    if smooth > 0 and smooth_window > 0:
+        out = smooth_seam_features(out, w, smooth_window, smooth, sk)
     if root == "source" and (w[:, 0] < 1).any() and (w[:, 0] > 0).any():
         out = _fix_root(out, src, w[:, 0])
     return out.astype(np.asarray(edited).dtype, copy=False)
@@ -214,11 +322,36 @@ def composite_specs(edits) -> list:
     return [e for e in edits if getattr(e, "composite", False) and hasattr(e, "joint_weights")]
 
 
+def seam_jerk(joints: np.ndarray, cuts: Sequence[int]) -> float:
+    """The largest jerk (norm of the third difference of the joints ``(N, J, 3)``, mean over joints, per frame^3) in
+    the third differences that touch a frame within 4 of an inner seam of ``cuts`` (:func:`seams`); 0 without one."""
+    j = np.asarray(joints, np.float64)
+    if len(j) < 4 or not cuts:
+        return 0.0
+    d3 = np.linalg.norm(j[3:] - 3 * j[2:-1] + 3 * j[1:-2] - j[:-3], axis=-1).mean(-1)
+    idx = sorted({i for b in cuts for i in range(max(0, b - 5), min(len(d3), b + 3))})
+    return float(d3[idx].max()) if idx else 0.0
+
+
+def _smoothing(specs) -> tuple[float, int]:
+    """The seam smoothing ``(strength, window)`` the edits ask for (the largest of each; ``(0, 0)``: none)."""
+    smooth = max((float(getattr(spec, "smooth", 0.0)) for spec in specs), default=0.0)
+    window = max((int(getattr(spec, "smooth_window", 0)) for spec in specs), default=0)
+    return smooth, window
+
+
 def composite_output(pipe, output, edits=None):
     """``output`` (an :class:`~salad_core.pipeline.EditOutput`) with each edited motion composited
     (:func:`composite_features`) by the product of the weights of the edits that ask for it (a copy; ``output`` is not
     changed). The joints are recovered again with the pipeline's recovery; the latents are left as sampled.
-    ``settings["composite"]`` names the edits. No such edit, or nothing kept: ``output`` itself."""
+    ``settings["composite"]`` names the edits. No such edit, or nothing kept: ``output`` itself.
+
+    With seam smoothing (an edit's ``smooth > 0``), the smoothed composite is kept only where the recovered joints'
+    :func:`seam_jerk` is not larger than without it (the pipeline's skeleton fit turns each fixed-length bone
+    towards the smoothed positions, and where a limb swings fast next to a seam the smoothing shortens its bone
+    vectors so that the fitted bone can turn abruptly); ``settings["composite"]["seam_smoothing"]`` records per
+    motion ``"smoothed"``, ``"plain"`` (smoothing would have raised the seam's jerk) or None (no seam or no
+    smoothing)."""
     from salad_core.recovery import recover_joints
 
     specs = composite_specs(output.edits if edits is None else edits)
@@ -229,6 +362,8 @@ def composite_output(pipe, output, edits=None):
     feats = np.array(ed.features, copy=True)
     joints = list(ed.joints)
     changed = False
+    smooth, window = _smoothing(specs)
+    smoothed: list[str | None] = []
     for b, n in enumerate(ed.lengths):
         w = np.ones((n, sk.num_joints))
         roots = set()
@@ -236,15 +371,29 @@ def composite_output(pipe, output, edits=None):
             w = w * spec.joint_weights(n, sk)
             roots.add(getattr(spec, "root", "source"))
         if (w >= 1).all():
+            smoothed.append(None)
             continue
-        f = composite_features(np.asarray(src.features[b, :n]), np.asarray(ed.features[b, :n]), w, sk,
-                               root="edit" if "edit" in roots else "source")
+        args = (np.asarray(src.features[b, :n]), np.asarray(ed.features[b, :n]), w, sk)
+        root = "edit" if "edit" in roots else "source"
+        f = composite_features(*args, root=root)
+        j = recover_joints(f, pipe.recovery, sk)
+        cuts = seams((w > 0).any(1))
+        state = None
+        if smooth > 0 and window > 0 and cuts:
+            fs = composite_features(*args, root=root, smooth=smooth, smooth_window=window)
+            js = recover_joints(fs, pipe.recovery, sk)
+            state = "plain"
+            if seam_jerk(js, cuts) <= seam_jerk(j, cuts):
+                f, j, state = fs, js, "smoothed"
+        smoothed.append(state)
         feats[b, :n] = f
-        joints[b] = recover_joints(f, pipe.recovery, sk).astype(np.float32)
+        joints[b] = j.astype(np.float32)
         changed = True
     if not changed:          # every weight 1 (MirrorTake("all"), Inpaint(parts="all") ...): nothing is kept
         return output
     record = {"edits": [type(s).__name__ for s in specs]}
+    if smooth > 0:
+        record["seam_smoothing"] = smoothed
     settings = dict(ed.settings)
     settings["composite"] = record
     composited = dataclasses.replace(ed, features=feats, joints=joints, settings=settings)

@@ -38,7 +38,7 @@ from .edits import seeded_noise
 from .mirror_take import composite, take_of
 from .processor import HookedProcessor
 
-__all__ = ["EditRun", "EditPrediction", "edit_latents", "pad_context"]
+__all__ = ["EditRun", "EditPrediction", "Resampler", "edit_latents", "pad_context"]
 
 log = logging.getLogger(__name__)
 
@@ -122,7 +122,7 @@ class EditPrediction:
         self._num_train = 0
         # in-painting may guide the edited branch with its own weight (Inpaint.guidance)
         inpaint = next((e for e in controller.edits if e.role == "latent"), None) if self.edited else None
-        scale = getattr(inpaint, "guidance", None)
+        scale = getattr(inpaint, "edited_guidance", None)
         self.edited_guidance = (None if scale is None or not self.guidance.cfg
                                 else dataclasses.replace(self.guidance, scale=float(scale)))
 
@@ -197,6 +197,94 @@ class EditPrediction:
                 cond = guidance.combine(out[u_rows], cond, keep=keep, active=active)   # eq. 9
             preds.append(cond)
         return torch.cat(preds)
+
+
+class Resampler:
+    """RePaint's resampling (Lugmayr et al., CVPR 2022) as the edit loop's latent hook.
+
+    After step ``i`` the stacked latents ``[z (B); z* (B)]`` are merged as the plain hook does (``merge``: the kept
+    region of ``z*`` is the source's). When :meth:`Inpaint.resampling <salad_core.attention.inpaint.Inpaint.
+    resampling>` says so, the edited latents are noised back ``jump`` steps by the forward process
+    (``z*_k = sqrt(a_k / a_{i+1}) z*_{i+1} + sqrt(1 - a_k / a_{i+1}) eps``, ``a`` the scheduler's cumulative
+    alphas, ``k = i + 1 - jump``), their kept region set to the source's latents of that level, and steps
+    ``k .. i`` run again (the same rows, text and attention edits; the source rows keep their recorded latents),
+    ``passes - 1`` times (:attr:`Inpaint.passes <salad_core.attention.inpaint.Inpaint.passes>`). The source
+    branch is never changed. Attention stores are not fed during the extra
+    passes (they would count a step twice).
+
+    Parameters
+    ----------
+    merge : callable
+        ``merge(step_info, z) -> z`` on ``(2B, N', P, Dz)``: the per-step replacement of the kept region.
+    prediction : EditPrediction
+    scheduler
+        A DDIM scheduler (stateless steps; the loop has called ``set_timesteps``).
+    inpaint : Inpaint
+    region : torch.Tensor
+        ``(B, N', P, 1)`` the in-painting mask (1 = regenerated).
+    start : torch.Tensor
+        ``(2B, N', P, Dz)`` the loop's initial latents (scaled by ``init_noise_sigma``, padding zeroed).
+    corrections : torch.Tensor, optional
+        ``(S, 2B, N', P, Dz)`` the per-step corrections the loop adds.
+    keep : torch.Tensor
+        ``(2B, N', 1, 1)`` 1 on valid latent frames.
+    """
+
+    def __init__(self, merge, prediction: EditPrediction, scheduler, inpaint, region: torch.Tensor,
+                 start: torch.Tensor, corrections: torch.Tensor | None, keep: torch.Tensor) -> None:
+        if not self.supports(scheduler):
+            raise ValueError(f"Inpaint(resample={inpaint.resample!r}) needs the DDIM sampler (solver='ddim'), got "
+                             f"{type(scheduler).__name__}")
+        self.merge, self.prediction, self.scheduler, self.inpaint = merge, prediction, scheduler, inpaint
+        self.b = prediction.batch_size
+        self.region, self.corrections, self.keep = region, corrections, keep
+        self.history = [start[:self.b]]          # the source's latents before each step
+        self.generator = torch.Generator().manual_seed(int(inpaint.seed) + 1_000_003)
+        self.extra_steps = 0                     # sampler steps run again
+
+    @staticmethod
+    def supports(scheduler) -> bool:
+        """Whether ``scheduler`` steps without state (DDIM), so that steps can be run again."""
+        return type(scheduler).__name__ == "DDIMScheduler"
+
+    def _alpha(self, t) -> torch.Tensor:
+        return self.scheduler.alphas_cumprod[int(t)].to(torch.float64)
+
+    def renoise(self, ed: torch.Tensor, t_from, t_to) -> torch.Tensor:
+        """``ed`` ``(B, N', P, Dz)`` at the noise level of timestep ``t_from`` noised to that of ``t_to``."""
+        ratio = self._alpha(t_to) / self._alpha(t_from)
+        eps = torch.randn(ed.shape, generator=self.generator, dtype=torch.float32).to(ed)
+        return float(ratio.sqrt()) * ed + float((1 - ratio).sqrt()) * eps
+
+    def __call__(self, info: StepInfo, z: torch.Tensor) -> torch.Tensor:
+        b = self.b
+        z = self.merge(info, z)
+        self.history.append(z[:b] * self.keep[:b])
+        i, steps = info.index, info.num_steps
+        if not self.inpaint.resampling(info.fraction, i, steps):
+            return z
+        k0 = max(0, i + 1 - self.inpaint.jump)
+        ts = self.scheduler.timesteps
+        controller = self.prediction.controller
+        stores, controller.stores = controller.stores, {}
+        try:
+            for _ in range(self.inpaint.passes - 1):
+                ed = self.renoise(z[b:], ts[i + 1], ts[k0])
+                ed = self.region * ed + (1.0 - self.region) * self.history[k0]
+                zz = torch.cat([self.history[k0], ed]) * self.keep
+                for k in range(k0, i + 1):
+                    t = ts[k]
+                    step = StepInfo(k, steps, float(t), self.prediction.guided(float(t)), b)
+                    out = self.prediction(self.scheduler.scale_model_input(zz, t), t, step)
+                    zz = self.scheduler.step(out, t, zz).prev_sample
+                    if self.corrections is not None:
+                        zz = zz + self.corrections[k]
+                    zz = self.merge(step, torch.cat([self.history[k + 1], zz[b:]])) * self.keep
+                    self.extra_steps += 1
+                z = zz
+        finally:
+            controller.stores = stores
+        return z
 
 
 def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, source: TextContext,
@@ -312,6 +400,12 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
                 # in-painting: after each step the edited latents outside the region are the source's of that step
                 ed = ed * region + src * (1.0 - region)
             return torch.cat([src, ed])
+        # resample="auto" resamples with the DDIM sampler only; an explicit resample > 1 refuses other solvers
+        if inpaint is not None and inpaint.passes > 1 and (inpaint.resample != "auto"
+                                                           or Resampler.supports(scheduler)):
+            keep = frame_mask.repeat(k, 1)[:, :, None, None].to(noise)
+            hook = Resampler(hook, prediction, scheduler, inpaint, region,
+                             latents * scheduler.init_noise_sigma * keep, corrections, keep)
     z = denoise(denoiser, scheduler, latents=latents, frame_mask=frame_mask.repeat(k, 1),
                 num_steps=num_steps, prediction=prediction, progress=progress, generator=generator,
                 corrections=corrections, latent_hook=hook)

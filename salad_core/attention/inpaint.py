@@ -13,19 +13,23 @@ the *source branch's* latent of the same step::
 The source branch is the generated source motion, or, for ``pipe.edit(inversion=inv, ...)``, the
 inverted motion's own reconstruction (its inversion trajectory, with the exact corrections): both
 sit at the same noise level as the edited latent, so the regenerated region is denoised in the
-context of the kept one (the "replacement" of RePaint / blended latent diffusion, without RePaint's
-resampling jumps). ``m`` is 1 in the region and 0 outside it; with ``blend = k`` the ``k`` latent
+context of the kept one (the "replacement" of RePaint / blended latent diffusion; RePaint's resampling jumps
+with ``resample``). ``m`` is 1 in the region and 0 outside it; with ``blend = k`` the ``k`` latent
 frames of the region next to a kept frame ramp up, ``d / (k + 1)`` at distance ``d`` from it, so
 those frames start from the source and the seam is denoised softly; the kept frames themselves are
 always the source's. Body parts have no seam (``m`` is 0 or 1 along the part axis).
 
-Three more levers, chosen on procedural validation clips (``measure_inpaint.py --tuning 8``) and on by
+More levers, chosen on procedural validation clips (``measure_inpaint.py --tuning 8``) and on by
 default: editing an inversion, the region starts from fresh white noise (``noise="auto"``: the inverted noise is
 not white and holds the take's own motion there, so the region tended to regenerate the take: a real take's arms
 waved in 2 of 8 cases); after decoding, the kept parts / frames are taken from the source's decoded features and
 the seams cross-faded over ``fade`` frames in feature space, with the root of a span corrected so that the frames
 after it keep their global place and facing (``composite=True``, :mod:`salad_core.attention.composite`: the VAE
-decoder's convolutions mix neighbouring parts and frames, and the features integrate the root's velocities).
+decoder's convolutions mix neighbouring parts and frames, and the features integrate the root's velocities); the
+span's frames next to each seam are then smoothed by a small least-squares jerk penalty (``smooth``); a frame span's
+edited branch is guided with :data:`SPAN_GUIDANCE` (``guidance="auto"``: a short span otherwise tended not to do
+what the prompt says); body parts alone are sampled with RePaint's resampling (``resample="auto"``: each ``jump`` of
+5 steps denoised 3 times, re-noising the region in between, so that the region harmonises with the kept parts).
 
 :func:`parse_inpaint` reads the command line's ``PARTS[@START:END]`` notation.
 """
@@ -44,10 +48,17 @@ from .edits import EditKernel, EditSpec, _window
 if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
 
-__all__ = ["Inpaint", "INPAINT_GROUPS", "NOISE_MODES", "inpaint_parts", "parse_inpaint"]
+__all__ = ["Inpaint", "INPAINT_GROUPS", "NOISE_MODES", "PARTS_RESAMPLE", "SPAN_GUIDANCE", "inpaint_parts",
+           "parse_inpaint"]
 
 #: What :class:`Inpaint`'s regenerated region starts from (see :attr:`Inpaint.noise`).
 NOISE_MODES = ("auto", "fresh", "source")
+
+#: The edited branch's guidance weight of ``Inpaint(guidance="auto")`` when a frame span is regenerated.
+SPAN_GUIDANCE = 7.5
+
+#: The resampling passes of ``Inpaint(resample="auto")`` when body parts alone are regenerated.
+PARTS_RESAMPLE = 3
 
 #: Group names :class:`Inpaint` accepts besides the part names. "legs" / "arms" as :class:`Mirror`;
 #: "upper" / "lower" are the upper body (spine, arms, head) and the lower body (root, legs) -- the
@@ -149,12 +160,32 @@ class Inpaint(EditSpec):
         (:mod:`salad_core.attention.composite`). Default on.
     fade : int
         Motion frames of a regenerated span, next to each kept frame, over which the composite cross-fades.
-    guidance : float, optional
+    guidance : float, ``"auto"`` or None
         Classifier-free guidance weight of the edited branch (the regenerated region follows the target prompt more
-        strongly with a larger one); None: the motion's (the inversion's). The kept region is the source's anyway.
+        strongly with a larger one); None: the motion's (the inversion's); ``"auto"`` (default): :data:`SPAN_GUIDANCE`
+        when a frame span is regenerated, the motion's for body parts alone (:attr:`edited_guidance`). The kept region
+        is the source's anyway.
     root : ``"source"`` or ``"edit"``
         With ``composite``: ``"source"`` corrects a regenerated span's root velocities so that the kept frames
         after it keep their global position and facing; ``"edit"`` lets them follow the span's turn and travel.
+    smooth : float
+        With ``composite``: weight of the jerk penalty of the least-squares seam smoothing
+        (:func:`~salad_core.attention.composite.smooth_seam_features`) of a frame span (default 100; 0: off). It is
+        kept only where it lowers the seams' jerk of the recovered joints
+        (:func:`~salad_core.attention.composite.composite_output`).
+    smooth_window : int
+        Motion frames of a regenerated span, next to each kept frame, that the seam smoothing may move (default 8;
+        a wider window smooths the seams more and damps more of the span's own motion).
+    resample : int or ``"auto"``
+        RePaint's resampling (Lugmayr et al., CVPR 2022): each ``jump`` of sampler steps is denoised ``resample``
+        times; between the passes the merged latents are noised back by the forward process (the kept region
+        from the source's trajectory, the region with fresh noise), so that the region is denoised again in
+        the context of the kept one it has already met. 1: off (one pass); ``"auto"`` (default):
+        :data:`PARTS_RESAMPLE` passes when body parts alone are regenerated, off for a frame span
+        (:attr:`passes`). Costs about ``resample`` times the forward passes; needs the DDIM sampler (``"auto"``
+        resamples with DDIM only, a number refuses other solvers).
+    jump : int
+        Sampler steps per resampling jump (default 5).
     """
 
     role: ClassVar[str] = "latent"
@@ -169,7 +200,11 @@ class Inpaint(EditSpec):
     composite: bool = True
     fade: int = 8
     root: str = "source"
-    guidance: Optional[float] = None
+    guidance: Union[float, str, None] = "auto"
+    smooth: float = 100.0
+    smooth_window: int = 8
+    resample: Union[int, str] = "auto"
+    jump: int = 5
 
     def __post_init__(self) -> None:
         if self.noise not in NOISE_MODES:
@@ -178,14 +213,25 @@ class Inpaint(EditSpec):
 
         if self.root not in ROOT_MODES:
             raise ValueError(f"Inpaint.root={self.root!r}; allowed: {ROOT_MODES}")
-        if self.guidance is not None:
+        if self.guidance is not None and self.guidance != "auto":
             if isinstance(self.guidance, bool) or not isinstance(self.guidance, (int, float)) or not self.guidance >= 1:
-                raise ValueError(f"Inpaint.guidance={self.guidance!r} must be a number >= 1 (or None)")
+                raise ValueError(f"Inpaint.guidance={self.guidance!r} must be a number >= 1, 'auto' or None")
             object.__setattr__(self, "guidance", float(self.guidance))
-        for name in ("fade", "seed"):
+        for name in ("fade", "seed", "smooth_window"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"Inpaint.{name}={v!r} must be an int >= 0")
+        for name in ("resample", "jump"):
+            v = getattr(self, name)
+            if name == "resample" and v == "auto":
+                continue
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"Inpaint.{name}={v!r} must be an int >= 1" + (" or 'auto'" if name == "resample"
+                                                                                else ""))
+        if (isinstance(self.smooth, bool) or not isinstance(self.smooth, (int, float)) or not math.isfinite(self.smooth)
+                or self.smooth < 0):
+            raise ValueError(f"Inpaint.smooth={self.smooth!r} must be a finite number >= 0 (the seams' jerk penalty)")
+        object.__setattr__(self, "smooth", float(self.smooth))
         if self.parts is None and self.frames is None:
             raise ValueError("Inpaint needs parts=... (body parts to regenerate) and/or frames=(start, end) "
                              "(a motion-frame span to regenerate)")
@@ -263,6 +309,27 @@ class Inpaint(EditSpec):
         part_w = torch.tensor([1.0 if p in parts else 0.0 for p in PART_NAMES])
         m = frame_w[:, :, None] * part_w[None, None, :]
         return (m * frame_mask[:, :, None].to(m))[..., None].to(frame_mask.device)
+
+    @property
+    def edited_guidance(self) -> Optional[float]:
+        """The edited branch's guidance weight (:attr:`guidance`; ``"auto"`` resolved), None: the motion's."""
+        if self.guidance == "auto":
+            return SPAN_GUIDANCE if self.frames is not None else None
+        return self.guidance
+
+    @property
+    def passes(self) -> int:
+        """Times each :attr:`jump` of steps is denoised (:attr:`resample`; ``"auto"`` resolved: :data:`PARTS_RESAMPLE`
+        for body parts alone, 1 for a frame span)."""
+        if self.resample == "auto":
+            return PARTS_RESAMPLE if self.frames is None else 1
+        return int(self.resample)
+
+    def resampling(self, fraction: float, index: int, num_steps: int) -> bool:
+        """Whether the sampler resamples after step ``index`` (of ``num_steps``; ``fraction`` = index / num_steps):
+        :attr:`passes` > 1, the step ends a :attr:`jump`, it is not the last step and the replacement is active."""
+        return (self.passes > 1 and (index + 1) % self.jump == 0 and index + 1 < num_steps
+                and self.active(fraction))
 
     def fresh_noise(self, inverted: bool) -> bool:
         """Whether the regenerated region starts from fresh white noise (:attr:`noise`; ``inverted``: the edit is of

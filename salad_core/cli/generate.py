@@ -401,6 +401,19 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
                         "them (a turn in the span is turned back), 'edit' lets them follow the span's path")
     p.add_argument("--inpaint-fade", type=int, default=8, metavar="N",
                    help="frames over which an in-painted span's seams are cross-faded in the features (default 8)")
+    p.add_argument("--inpaint-smooth", type=float, default=None, metavar="LAMBDA",
+                   help="jerk penalty of the least-squares smoothing of an in-painted span's frames next to its seams "
+                        "(default 100; 0: off)")
+    p.add_argument("--inpaint-smooth-window", type=int, default=None, metavar="N",
+                   help="frames of an in-painted span next to each seam that the smoothing may move (default 8)")
+    p.add_argument("--inpaint-resample", type=int, default=None, metavar="U",
+                   help="RePaint resampling: denoise each jump of steps U times, re-noising the in-painted region in "
+                        "between (1: off; about U times the cost; default: 3 for body parts alone, off for a span)")
+    p.add_argument("--inpaint-jump", type=int, default=None, metavar="J",
+                   help="sampler steps per resampling jump (default 5)")
+    p.add_argument("--inpaint-guidance", default=None, metavar="W|auto|motion",
+                   help="guidance weight of the in-painted region's branch: a number, 'auto' (default: 7.5 for a "
+                        "frame span, the motion's own for body parts alone) or 'motion' (the motion's own)")
     p.add_argument("--no-composite", action="store_true",
                    help="keep what the decoder makes of the kept parts instead of taking them from the source's "
                         "decoding (--inpaint, --mirror-take; the decoder lets edited parts move kept ones a few cm)")
@@ -437,6 +450,26 @@ def _parse_window(text: str) -> tuple[float, float]:
         return float(parts[0]), float(parts[1])
     except ValueError:
         raise UserError(f"--window {text!r}: START and STOP must be numbers in [0, 1] (e.g. 0:0.5)") from None
+
+
+def _inpaint_guidance(text: str):
+    """``--inpaint-guidance``: a number, ``auto`` or ``motion`` (None: the motion's weight)."""
+    word = text.strip().lower()
+    if word in ("auto", "motion"):
+        return None if word == "motion" else "auto"
+    try:
+        return float(word)
+    except ValueError:
+        raise UserError(f"--inpaint-guidance {text}: give a number, 'auto' or 'motion'") from None
+
+
+def _inpaint_options(args: argparse.Namespace) -> dict:
+    """The ``--inpaint-*`` options that were given (the others keep :class:`Inpaint`'s defaults)."""
+    out = {name: getattr(args, f"inpaint_{name}") for name in ("smooth", "smooth_window", "resample", "jump")
+           if getattr(args, f"inpaint_{name}", None) is not None}
+    if getattr(args, "inpaint_guidance", None) is not None:
+        out["guidance"] = _inpaint_guidance(args.inpaint_guidance)
+    return out
 
 
 def _spec(flag: str, build: Callable):
@@ -481,7 +514,7 @@ def _edit_specs(args: argparse.Namespace, required: bool = True) -> list:
     if getattr(args, "inpaint", None) is not None:
         specs.append(_spec(f"--inpaint {args.inpaint}", lambda: dataclasses.replace(
             parse_inpaint(args.inpaint, blend=args.inpaint_blend), root=args.inpaint_root, fade=args.inpaint_fade,
-            composite=not args.no_composite)))
+            composite=not args.no_composite, **_inpaint_options(args))))
     if args.window is not None and not (args.refine or args.reweight or args.mirror or getattr(args, "erase", None)
                                         or getattr(args, "shift", None)):
         raise UserError("--window applies to --refine, --reweight, --mirror, --erase and --shift; give one of them "
