@@ -124,14 +124,14 @@ def test_bad_edit_flags_are_one_line_errors(tmp_path, capsys, flags, message):
 ])
 def test_edit_label_names_each_edit(edits, source, target, label):
     import salad_core.attention as a
-    from salad_core.cli.generate import edit_label
+    from salad_core.attention import edit_label
 
     assert edit_label(edits(a), source, target) == label
 
 
 def test_every_edit_class_has_a_label():
     import salad_core.attention as a
-    from salad_core.cli.generate import _LABEL_PARTS
+    from salad_core.attention.labels import _LABEL_PARTS
 
     classes = {n for n in a.__all__ if isinstance(getattr(a, n), type) and issubclass(getattr(a, n), a.EditSpec)}
     assert classes - {"EditSpec"} <= set(_LABEL_PARTS)

@@ -13,6 +13,8 @@
   :class:`Erase`, :class:`Shift`, :class:`ShiftTemporal`, :class:`ExampleBased`) and their pure kernels.
 * :mod:`.inpaint`: :class:`Inpaint`, regenerate chosen body parts / a frame span and keep the rest
   (a latent-space step of the edit loop), and :func:`parse_inpaint` for ``PARTS[@START:END]``.
+* :mod:`.labels`: :func:`edit_label`, the short caption of edits that figures and GIFs show (``Mirror(legs)``,
+  ``Inpaint(arms@20:60)``).
 * :mod:`.composite`: what :class:`Inpaint` and :class:`MirrorTake` keep, taken from the source's decoded
   features after decoding (:func:`composite_features`; the VAE decoder mixes neighbouring parts and frames).
 * :mod:`.counting`: counting an action's repetitions from its attention over frames
@@ -37,6 +39,7 @@ from .inpaint import INPAINT_GROUPS, Inpaint, inpaint_parts, parse_inpaint
 from .grounding import ground_edit
 from .mirror_take import MirrorTake, invert_mirror, mirror_take_edits
 from .composite import composite_features, composite_output
+from .labels import edit_label
 from .inversion import INVERSION_METHODS, Inversion, LatentInversion, ddim_step_coefficients, invert_latents
 from .hooks import (ActivationCache, HookContext, HookPoint, hook_point_names, hook_points, select_hook_points,
                     use_hooks)
@@ -48,7 +51,7 @@ __all__ = [
     "EditSpec", "WordSwap", "Refine", "Reweight", "Mirror", "MirrorSelfAttention", "InjectSelfAttention", "validate_edits",
     "Erase", "Shift", "ShiftTemporal", "ExampleBased", "ERASE_MODES", "erase_columns", "shift_columns",
     "shift_temporal", "seeded_noise", "Inpaint", "INPAINT_GROUPS", "inpaint_parts", "parse_inpaint",
-    "MirrorTake", "invert_mirror", "mirror_take_edits", "ground_edit", "composite_features", "composite_output",
+    "MirrorTake", "invert_mirror", "mirror_take_edits", "ground_edit", "composite_features", "composite_output", "edit_label",
     "count_repetitions", "motion_repetitions", "count_peaks", "attention_signal", "motion_signal",
     "MIRROR_GROUPS", "REWEIGHT_RANGE", "mirror_parts", "mirror_self_attention", "mirror_permutation", "reweight_columns", "map_columns",
     "refine_columns", "global_align", "alignment_matrix", "word_swap_matrix",
