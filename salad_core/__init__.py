@@ -31,6 +31,7 @@ bench          ``salad bench``: speed, roofline fraction, overheads, memory, tra
 io             safe, atomic checkpoint and output files (safetensors with their configs)
 limits         what is accepted from outside (files, weight folders, prompts): named limits, their checks
 allocator      keep freed memory for reuse (glibc ``mallopt``), as the ``salad`` command does
+lazy           packages whose exports are imported on first use (no torch on import)
 openmp         how OpenMP worker threads wait between parallel regions (the command line sets it)
 cli            the ``salad`` command, on top: a module per command group; draws (salad_viz), tunes the process
 weights        the shipped weights and model cards (data, not code)

@@ -71,7 +71,7 @@ One job per module:
 The command line (``salad bench``, ``python -m salad_core.bench``) is :mod:`salad_core.cli.bench`.
 """
 
-import importlib
+from salad_core.lazy import lazy_exports
 
 #: The public names and the module each comes from.
 _EXPORTS: dict[str, str] = {
@@ -102,15 +102,5 @@ __all__ = ["Row", "Case", "Plan", "SECTIONS", "OPTIONAL_SECTIONS", "compile_rows
            "SWAPPED"]
 
 
-def __getattr__(name: str):
-    # imported on first use: importing the package loads no torch (python -m tunes the process first)
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+# imported on first use: importing the package loads no torch (python -m tunes the process first)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -6,7 +6,7 @@ out-folder layout are described in :mod:`salad_core.train.common`; length-bucket
 :mod:`salad_core.train.batching`, the cache of frozen-VAE posteriors in :mod:`salad_core.train.latent_cache`,
 and the per-part step profile (``salad bench --sections train``) in :mod:`salad_core.train.profile`.
 """
-import importlib
+from salad_core.lazy import lazy_exports
 
 #: The public names and the module each comes from.
 _EXPORTS: dict[str, str] = {
@@ -33,15 +33,5 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    # imported on first use: importing the package loads no torch (python -m tunes the process first)
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+# imported on first use: importing the package loads no torch (python -m tunes the process first)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
