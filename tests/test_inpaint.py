@@ -419,18 +419,21 @@ def test_inpaint_new_options():
             Inpaint(frames=(8, 24), **kwargs)
     # resampling after the steps that end a jump, never after the last step, only in the replacement's window
     r = Inpaint(frames=(8, 24), resample=2, jump=3)
-    assert [i for i in range(10) if r.resampling(i / 10, i, 10)] == [2, 5, 8]
+    assert [i for i in range(10) if r.resampling(i / 10, i, 10, r.passes_for(False))] == [2, 5, 8]
     every = Inpaint(frames=(8, 24), resample=2, jump=1)
-    assert [i for i in range(10) if every.resampling(i / 10, i, 10)] == list(range(9))
-    # resample="auto" (default): PARTS_RESAMPLE passes of jumps of 5 steps for body parts alone, none for a span
+    assert [i for i in range(10) if every.resampling(i / 10, i, 10, 2)] == list(range(9))
+    # resample="auto" (default): PARTS_RESAMPLE passes of jumps of 5 steps for body parts alone of an inverted
+    # motion; none for a span or a generated source; a number is used as it is
     from salad_core.attention.inpaint import PARTS_RESAMPLE
 
-    assert Inpaint(parts="arms").passes == PARTS_RESAMPLE > 1 and Inpaint(frames=(8, 24)).passes == 1
-    assert Inpaint(parts="arms", frames=(8, 24)).passes == 1 and Inpaint(parts="arms", resample=1).passes == 1
-    assert [i for i in range(10) if Inpaint(parts="arms").resampling(i / 10, i, 10)] == [4]
-    assert not any(Inpaint(frames=(8, 24)).resampling(i / 10, i, 10) for i in range(10))
+    arms = Inpaint(parts="arms")
+    assert arms.passes_for(True) == PARTS_RESAMPLE > 1 and arms.passes_for(False) == 1
+    assert Inpaint(frames=(8, 24)).passes_for(True) == 1 and Inpaint(parts="arms", frames=(8, 24)).passes_for(True) == 1
+    assert Inpaint(parts="arms", resample=1).passes_for(True) == 1 and r.passes_for(True) == r.passes_for(False) == 2
+    assert [i for i in range(10) if arms.resampling(i / 10, i, 10, arms.passes_for(True))] == [4]
+    assert not any(arms.resampling(i / 10, i, 10, arms.passes_for(False)) for i in range(10))
     late = Inpaint(frames=(8, 24), resample=2, jump=1, steps=(0.0, 0.5))
-    assert [i for i in range(10) if late.resampling(i / 10, i, 10)] == [0, 1, 2, 3, 4]
+    assert [i for i in range(10) if late.resampling(i / 10, i, 10, 2)] == [0, 1, 2, 3, 4]
 
 
 @needs_weights
@@ -455,14 +458,23 @@ def test_resampling_changes_the_region_and_not_the_kept_latents(pipe):
     assert jumps.settings["forward_rows"] - rows == 2 * 2 * 2 * 4
     with pytest.raises(ValueError, match="needs the DDIM sampler"):
         pipe.edit(SOURCE, edits=[Inpaint(frames=(16, 32), resample=2)], solver="dpm++", **kw)
-    # resample="auto" on body parts resamples with DDIM and leaves other solvers as they are
+    # resample="auto" on body parts: a generated source is sampled once (with DDIM too, and with other solvers);
+    # an inverted motion is resampled
     arms = dict(target="a man waves his right hand", lengths=FRAMES, seed=0, num_steps=6)
     auto = pipe.edit(SOURCE, edits=[Inpaint(parts="arms", composite=False)], **arms)
     once = pipe.edit(SOURCE, edits=[Inpaint(parts="arms", composite=False, resample=1)], **arms)
-    assert auto.settings["forward_rows"] > once.settings["forward_rows"]
+    assert auto.settings["forward_rows"] == once.settings["forward_rows"]
+    np.testing.assert_array_equal(auto.edited.features, once.edited.features)
     fast = pipe.edit(SOURCE, edits=[Inpaint(parts="arms", composite=False)], solver="dpm++", **arms)
     fast_once = pipe.edit(SOURCE, edits=[Inpaint(parts="arms", composite=False, resample=1)], solver="dpm++", **arms)
     np.testing.assert_array_equal(fast.edited.features, fast_once.edited.features)
+    from salad_core.attention.inpaint import PARTS_RESAMPLE
+
+    inv = pipe.invert(plain.source.features[0, :FRAMES], SOURCE, num_steps=6)
+    take = dict(target="a man waves his right hand", inversion=inv, ground=False)
+    auto = pipe.edit(edits=[Inpaint(parts="arms", composite=False)], **take)
+    once = pipe.edit(edits=[Inpaint(parts="arms", composite=False, resample=1)], **take)
+    assert auto.settings["forward_rows"] == once.settings["forward_rows"] + 4 * (PARTS_RESAMPLE - 1) * 5
 
 
 @needs_weights

@@ -208,7 +208,7 @@ class Resampler:
     (``z*_k = sqrt(a_k / a_{i+1}) z*_{i+1} + sqrt(1 - a_k / a_{i+1}) eps``, ``a`` the scheduler's cumulative
     alphas, ``k = i + 1 - jump``), their kept region set to the source's latents of that level, and steps
     ``k .. i`` run again (the same rows, text and attention edits; the source rows keep their recorded latents),
-    ``passes - 1`` times (:attr:`Inpaint.passes <salad_core.attention.inpaint.Inpaint.passes>`). The source
+    ``passes - 1`` times (:meth:`Inpaint.passes_for <salad_core.attention.inpaint.Inpaint.passes_for>`). The source
     branch is never changed. Attention stores are not fed during the extra
     passes (they would count a step twice).
 
@@ -220,6 +220,8 @@ class Resampler:
     scheduler
         A DDIM scheduler (stateless steps; the loop has called ``set_timesteps``).
     inpaint : Inpaint
+    passes : int
+        Times each jump of steps is denoised (> 1).
     region : torch.Tensor
         ``(B, N', P, 1)`` the in-painting mask (1 = regenerated).
     start : torch.Tensor
@@ -230,12 +232,13 @@ class Resampler:
         ``(2B, N', 1, 1)`` 1 on valid latent frames.
     """
 
-    def __init__(self, merge, prediction: EditPrediction, scheduler, inpaint, region: torch.Tensor,
+    def __init__(self, merge, prediction: EditPrediction, scheduler, inpaint, passes: int, region: torch.Tensor,
                  start: torch.Tensor, corrections: torch.Tensor | None, keep: torch.Tensor) -> None:
         if not self.supports(scheduler):
             raise ValueError(f"Inpaint(resample={inpaint.resample!r}) needs the DDIM sampler (solver='ddim'), got "
                              f"{type(scheduler).__name__}")
         self.merge, self.prediction, self.scheduler, self.inpaint = merge, prediction, scheduler, inpaint
+        self.passes = int(passes)
         self.b = prediction.batch_size
         self.region, self.corrections, self.keep = region, corrections, keep
         self.history = [start[:self.b]]          # the source's latents before each step
@@ -261,14 +264,14 @@ class Resampler:
         z = self.merge(info, z)
         self.history.append(z[:b] * self.keep[:b])
         i, steps = info.index, info.num_steps
-        if not self.inpaint.resampling(info.fraction, i, steps):
+        if not self.inpaint.resampling(info.fraction, i, steps, self.passes):
             return z
         k0 = max(0, i + 1 - self.inpaint.jump)
         ts = self.scheduler.timesteps
         controller = self.prediction.controller
         stores, controller.stores = controller.stores, {}
         try:
-            for _ in range(self.inpaint.passes - 1):
+            for _ in range(self.passes - 1):
                 ed = self.renoise(z[b:], ts[i + 1], ts[k0])
                 ed = self.region * ed + (1.0 - self.region) * self.history[k0]
                 zz = torch.cat([self.history[k0], ed]) * self.keep
@@ -401,10 +404,10 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
                 ed = ed * region + src * (1.0 - region)
             return torch.cat([src, ed])
         # resample="auto" resamples with the DDIM sampler only; an explicit resample > 1 refuses other solvers
-        if inpaint is not None and inpaint.passes > 1 and (inpaint.resample != "auto"
-                                                           or Resampler.supports(scheduler)):
+        passes = 1 if inpaint is None else inpaint.passes_for(corrections is not None)
+        if passes > 1 and (inpaint.resample != "auto" or Resampler.supports(scheduler)):
             keep = frame_mask.repeat(k, 1)[:, :, None, None].to(noise)
-            hook = Resampler(hook, prediction, scheduler, inpaint, region,
+            hook = Resampler(hook, prediction, scheduler, inpaint, passes, region,
                              latents * scheduler.init_noise_sigma * keep, corrections, keep)
     z = denoise(denoiser, scheduler, latents=latents, frame_mask=frame_mask.repeat(k, 1),
                 num_steps=num_steps, prediction=prediction, progress=progress, generator=generator,

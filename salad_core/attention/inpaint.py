@@ -28,8 +28,9 @@ after it keep their global place and facing (``composite=True``, :mod:`salad_cor
 decoder's convolutions mix neighbouring parts and frames, and the features integrate the root's velocities); the
 span's frames next to each seam are then smoothed by a small least-squares jerk penalty (``smooth``); a frame span's
 edited branch is guided with :data:`SPAN_GUIDANCE` (``guidance="auto"``: a short span otherwise tended not to do
-what the prompt says); body parts alone are sampled with RePaint's resampling (``resample="auto"``: each ``jump`` of
-5 steps denoised 3 times, re-noising the region in between, so that the region harmonises with the kept parts).
+what the prompt says); body parts alone of an inverted take are sampled with RePaint's resampling (``resample="auto"``:
+each ``jump`` of 5 steps denoised 3 times, re-noising the region in between, so that the region harmonises with the
+kept parts; generated sources were not measured for it and are sampled once).
 
 :func:`parse_inpaint` reads the command line's ``PARTS[@START:END]`` notation.
 """
@@ -57,7 +58,7 @@ NOISE_MODES = ("auto", "fresh", "source")
 #: The edited branch's guidance weight of ``Inpaint(guidance="auto")`` when a frame span is regenerated.
 SPAN_GUIDANCE = 7.5
 
-#: The resampling passes of ``Inpaint(resample="auto")`` when body parts alone are regenerated.
+#: The resampling passes of ``Inpaint(resample="auto")`` when body parts alone of an inverted motion are regenerated.
 PARTS_RESAMPLE = 3
 
 #: Group names :class:`Inpaint` accepts besides the part names. "legs" / "arms" as :class:`Mirror`;
@@ -181,8 +182,9 @@ class Inpaint(EditSpec):
         times; between the passes the merged latents are noised back by the forward process (the kept region
         from the source's trajectory, the region with fresh noise), so that the region is denoised again in
         the context of the kept one it has already met. 1: off (one pass); ``"auto"`` (default):
-        :data:`PARTS_RESAMPLE` passes when body parts alone are regenerated, off for a frame span
-        (:attr:`passes`). Costs about ``resample`` times the forward passes; needs the DDIM sampler (``"auto"``
+        :data:`PARTS_RESAMPLE` passes when body parts alone of an inverted motion are regenerated, off for a frame
+        span and for a generated source (:meth:`passes_for`). Costs about ``resample`` times the forward passes;
+        needs the DDIM sampler (``"auto"``
         resamples with DDIM only, a number refuses other solvers).
     jump : int
         Sampler steps per resampling jump (default 5).
@@ -317,18 +319,19 @@ class Inpaint(EditSpec):
             return SPAN_GUIDANCE if self.frames is not None else None
         return self.guidance
 
-    @property
-    def passes(self) -> int:
+    def passes_for(self, inverted: bool) -> int:
         """Times each :attr:`jump` of steps is denoised (:attr:`resample`; ``"auto"`` resolved: :data:`PARTS_RESAMPLE`
-        for body parts alone, 1 for a frame span)."""
+        when body parts alone of an inverted motion are regenerated, where it was chosen; 1 for a frame span and for
+        a generated source). ``inverted``: the edit is of an inversion."""
         if self.resample == "auto":
-            return PARTS_RESAMPLE if self.frames is None else 1
+            return PARTS_RESAMPLE if (self.frames is None and inverted) else 1
         return int(self.resample)
 
-    def resampling(self, fraction: float, index: int, num_steps: int) -> bool:
-        """Whether the sampler resamples after step ``index`` (of ``num_steps``; ``fraction`` = index / num_steps):
-        :attr:`passes` > 1, the step ends a :attr:`jump`, it is not the last step and the replacement is active."""
-        return (self.passes > 1 and (index + 1) % self.jump == 0 and index + 1 < num_steps
+    def resampling(self, fraction: float, index: int, num_steps: int, passes: int) -> bool:
+        """Whether the sampler resamples after step ``index`` (of ``num_steps``; ``fraction`` = index / num_steps)
+        with ``passes`` (:meth:`passes_for`): ``passes`` > 1, the step ends a :attr:`jump`, it is not the last step
+        and the replacement is active."""
+        return (passes > 1 and (index + 1) % self.jump == 0 and index + 1 < num_steps
                 and self.active(fraction))
 
     def fresh_noise(self, inverted: bool) -> bool:

@@ -203,9 +203,9 @@ def tuning_takes(n: int, frames: int) -> list[dict]:
     return _cut(out, frames)
 
 
-#: Settings compared on the held-out cases: the latent in-painting alone (SALAD 0.3, before issue 67's composite)
-#: and :class:`Inpaint`'s defaults.
-CONFIGS = {"latent": dict(noise="source", composite=False), "default": {}}
+#: Settings compared on the held-out cases: the latent in-painting alone (SALAD 0.3, before issue 67's levers: every
+#: option that changed since spelled out) and :class:`Inpaint`'s defaults.
+CONFIGS = {"latent": dict(noise="source", composite=False, guidance=None, resample=1, smooth=0.0), "default": {}}
 
 #: Inpaint options that act after decoding only (the composite): settings that differ only in these share one
 #: sampling run per case.
@@ -222,6 +222,7 @@ def tuning_grid() -> dict[str, dict]:
     sampling = {"source noise": dict(base, noise="source"),
                 "fresh": dict(base),
                 "fresh g7.5": dict(base, guidance=7.5),
+                "source noise g7.5": dict(base, noise="source", guidance=7.5),
                 "fresh resample 2": dict(base, resample=2),
                 "fresh resample 3 jump 5": dict(base, resample=3, jump=5),
                 "fresh g7.5 resample 2": dict(base, guidance=7.5, resample=2),
@@ -262,6 +263,12 @@ def main() -> None:
     ap.add_argument("--skip-generated", action="store_true")
     ap.add_argument("--tuning", type=int, default=0,
                     help="instead: the real-take protocol on N procedural validation clips over tuning_grid()")
+    ap.add_argument("--grid", default=None,
+                    help="with --tuning: comma-separated tuning_grid() names to run (default: all of them)")
+    ap.add_argument("--offset", type=int, default=0,
+                    help="with --tuning: skip the first N validation clips (a check on clips the grid was not chosen on)")
+    ap.add_argument("--only", choices=("parts", "frames"), default=None,
+                    help="with --tuning: only the body-part or only the frame-span cases")
     ap.add_argument("--json", type=Path, default=ROOT / "lab/records/editing/inpaint.json")
     args = ap.parse_args()
     t0 = start_run(args.threads)
@@ -300,20 +307,29 @@ def main() -> None:
                     out = ground_edit(pipe, out)
                 record(kind, name, blend, config, inp, target, out, seconds)
 
-    def real_cases(kind, takes, configs, blends):
+    def real_cases(kind, takes, configs, blends, only=None):
         for it in takes:
             inv = pipe.invert(it["features"], it["prompt"], num_steps=args.steps)
             print(f"inverted {it['id']}: {inv.errors['inversion_mpjpe'] * 100:.2f} cm", flush=True)
-            run(f"{kind}/parts", it["id"], 0, part_configs(configs), lambda **k: Inpaint(parts="arms", **k),
-                "a man waves his right hand", inversion=inv)
+            if only != "frames":
+                run(f"{kind}/parts", it["id"], 0, part_configs(configs), lambda **k: Inpaint(parts="arms", **k),
+                    "a man waves his right hand", inversion=inv)
             m = len(it["features"])         # the middle third of the take (whole latent frames)
             span = (4 * round(m / 12), 4 * round(m / 6))
-            for blend in blends:
+            for blend in blends if only != "parts" else ():
                 run(f"{kind}/frames", it["id"], blend, configs,
                     lambda **k: Inpaint(frames=span, blend=blend, **k), "a person jumps", inversion=inv)
 
     if args.tuning:
-        real_cases("tuning", tuning_takes(args.tuning, n), tuning_grid(), blends)
+        grid = tuning_grid()
+        if args.grid:
+            names = [g.strip() for g in args.grid.split(",") if g.strip()]
+            unknown = [g for g in names if g not in grid]
+            if unknown:
+                ap.error(f"--grid: unknown settings {unknown}; choose from {list(grid)}")
+            grid = {g: grid[g] for g in names}
+        takes = tuning_takes(args.offset + args.tuning, n)[args.offset:]
+        real_cases("tuning", takes, grid, blends, only=args.only)
     else:
         if not args.skip_generated:
             for seed in range(args.seeds):
