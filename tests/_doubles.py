@@ -127,3 +127,22 @@ def run_stage_script(script: Path, out: Path, *stages: str, python: str, timeout
     full = {**os.environ, "PYTHON": python, **env}
     return subprocess.run(["bash", str(script), str(out), *stages], capture_output=True, text=True, env=full,
                           timeout=timeout)
+
+
+def tiny_keymotion(seed: int = 0, **pipeline_kwargs):
+    """A seeded KeyMotion pipeline of tiny random models (8 keyframes, 2 x 16 latent, 16-d :class:`HashTextEncoder`,
+    default length 40) for tests of the sampling and the command line; ``pipeline_kwargs`` go to
+    :class:`~salad_core.keymotion.pipeline.KeyMotionPipeline` (``solver``, ``recovery``, ...)."""
+    from salad_core.keymotion.kf_vae import KeyframeVAE, KeyframeVAEConfig
+    from salad_core.keymotion.mmae import MMAEConfig, MotionMaskedAutoencoder
+    from salad_core.keymotion.pipeline import KeyMotionPipeline
+    from salad_core.keymotion.pst import ParallelSkipTransformer, PSTConfig
+
+    torch.manual_seed(seed)
+    vae = KeyframeVAE(KeyframeVAEConfig(num_keyframes=8, frame_dim=56, index_dim=8, latent_size=2, latent_dim=16,
+                                        num_layers=1, num_heads=4, ff_dim=64, dropout=0.0))
+    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=16, width=32, num_heads=4,
+                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
+    mmae = MotionMaskedAutoencoder(MMAEConfig(text_dim=16, width=32, num_layers=1, num_heads=4, ff_dim=64,
+                                              dropout=0.0))
+    return KeyMotionPipeline(vae, pst, mmae, HashTextEncoder(16), default_length=40, **pipeline_kwargs)

@@ -105,22 +105,9 @@ def test_quiet_long_generate_prints_no_estimate_and_no_bar(tiny_weights, tmp_pat
 
 # =============================================================================================== KeyMotion
 def _tiny_keymotion(seed: int = 0, solver: str = "ddim"):
-    from _doubles import HashTextEncoder
+    from _doubles import tiny_keymotion
 
-    from salad_core.keymotion.kf_vae import KeyframeVAE, KeyframeVAEConfig
-    from salad_core.keymotion.mmae import MMAEConfig, MotionMaskedAutoencoder
-    from salad_core.keymotion.pipeline import KeyMotionPipeline
-    from salad_core.keymotion.pst import ParallelSkipTransformer, PSTConfig
-
-    torch.manual_seed(seed)
-    vae = KeyframeVAE(KeyframeVAEConfig(num_keyframes=8, frame_dim=56, index_dim=8, latent_size=2, latent_dim=16,
-                                        num_layers=1, num_heads=4, ff_dim=64, dropout=0.0))
-    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=16, width=32, num_heads=4,
-                                            ff_dim=64, num_cond_layers=1, num_cross_layers=2, dropout=0.0))
-    mmae = MotionMaskedAutoencoder(MMAEConfig(text_dim=16, width=32, num_layers=1, num_heads=4, ff_dim=64,
-                                              dropout=0.0))
-    pipe = KeyMotionPipeline(vae, pst, mmae, HashTextEncoder(16), default_length=40, solver=solver,
-                             recovery="positions")
+    pipe = tiny_keymotion(seed, solver=solver, recovery="positions")
     pipe.side_check = False             # the comparison is about the sampler, not the mirror check
     return pipe
 

@@ -21,7 +21,7 @@ from salad_core.sampling import (
     project_onto,
     training_target,
 )
-from _doubles import HashTextEncoder
+from _doubles import HashTextEncoder, tiny_keymotion
 
 CFG = DenoiserConfig(latent_dim=4, width=32, heads=4, ff_dim=48, layers=3, text_dim=12, max_len=256)
 
@@ -242,27 +242,11 @@ def test_tiny_salad_denoiser_threshold_bounds_its_samples_and_projection_changes
                                               guidance_scale=7.5, num_steps=6), atol=1e-4, rtol=1e-4)
 
 
-def _tiny_keymotion(seed=0):
-    from salad_core.keymotion.kf_vae import KeyframeVAE, KeyframeVAEConfig
-    from salad_core.keymotion.mmae import MMAEConfig, MotionMaskedAutoencoder
-    from salad_core.keymotion.pipeline import KeyMotionPipeline
-    from salad_core.keymotion.pst import ParallelSkipTransformer, PSTConfig
-
-    torch.manual_seed(seed)
-    vae = KeyframeVAE(KeyframeVAEConfig(num_keyframes=8, frame_dim=56, index_dim=8, latent_size=2, latent_dim=16,
-                                        num_layers=1, num_heads=4, ff_dim=128, dropout=0.0))
-    pst = ParallelSkipTransformer(PSTConfig(latent_size=2, latent_dim=16, text_dim=16, width=32, num_heads=4,
-                                            ff_dim=64, num_cond_layers=1, num_cross_layers=4, dropout=0.0))
-    mmae = MotionMaskedAutoencoder(MMAEConfig(text_dim=16, width=64, num_layers=2, num_heads=4, ff_dim=128,
-                                              dropout=0.0))
-    return KeyMotionPipeline(vae, pst, mmae, HashTextEncoder(), default_length=40)
-
-
 def test_tiny_keymotion_run_changes_with_the_refinements_and_a_folder_entry_loads_them(tmp_path):
     from salad_core.keymotion.pipeline import KeyMotionPipeline
     from salad_core.pipeline import guidance_from_json
 
-    pipe = _tiny_keymotion()
+    pipe = tiny_keymotion()
     kw = dict(lengths=[40, 48], seed=3, num_steps=5)
     prompts = ["a person jumps", "a person walks forward"]
     plain = pipe(prompts, **kw).latents
