@@ -22,6 +22,7 @@ with the same :class:`StepInfo` and the new latents after each step).
 from __future__ import annotations
 
 import contextvars
+import functools
 import inspect
 import logging
 import math
@@ -481,14 +482,17 @@ class GuidanceStep:
         return average
 
 
-_CURRENT_STEP: contextvars.ContextVar["GuidanceStep | None"] = contextvars.ContextVar("salad_guidance_step",
-                                                                                      default=None)
+#: What :func:`denoise` publishes per step: a maker of the step's :class:`GuidanceStep`, called only when a guidance
+#: refinement asks (:func:`guidance_step`), so that plain guidance does no work for it.
+_CURRENT_STEP: contextvars.ContextVar["Callable[[], GuidanceStep | None] | None"] = contextvars.ContextVar(
+    "salad_guidance_step", default=None)
 
 
 def guidance_step() -> GuidanceStep | None:
     """The :class:`GuidanceStep` of the step :func:`denoise` is predicting (None outside its loop, or when its
     scheduler has no ``alphas_cumprod``)."""
-    return _CURRENT_STEP.get()
+    make = _CURRENT_STEP.get()
+    return None if make is None else make()
 
 
 def _alpha_bar(scheduler, timestep: torch.Tensor | float) -> float | None:
@@ -851,7 +855,7 @@ def denoise(denoiser: torch.nn.Module, scheduler, cond: TextInput | None = None,
             for hook in hooks:
                 hook(info)
             model_input = scheduler.scale_model_input(z, t)
-            _CURRENT_STEP.set(_step_of(scheduler, model_input, t, memory))   # for Guidance.combine
+            _CURRENT_STEP.set(functools.partial(_step_of, scheduler, model_input, t, memory))   # for Guidance.combine
             out = prediction(model_input, t, info)
             z = scheduler.step(out, t, z, **step_kwargs).prev_sample
             if corrections is not None:
