@@ -121,8 +121,7 @@ class EditPrediction:
         self._contexts: dict[tuple, TextContext] = {}
         self._num_train = 0
         # in-painting may guide the edited branch with its own weight (Inpaint.guidance)
-        inpaint = next((e for e in controller.edits if e.role == "latent"), None) if self.edited else None
-        scale = getattr(inpaint, "edited_guidance", None)
+        scale = getattr(latent_edit(controller) if self.edited else None, "edited_guidance", None)
         self.edited_guidance = (None if scale is None or not self.guidance.cfg
                                 else dataclasses.replace(self.guidance, scale=float(scale)))
 
@@ -197,6 +196,11 @@ class EditPrediction:
                 cond = guidance.combine(out[u_rows], cond, keep=keep, active=active)   # eq. 9
             preds.append(cond)
         return torch.cat(preds)
+
+
+def latent_edit(controller: EditController):
+    """The controller's latent-space edit (an :class:`~salad_core.attention.inpaint.Inpaint`; at most one), or None."""
+    return next((e for e in controller.edits if e.role == "latent"), None)
 
 
 class Resampler:
@@ -365,7 +369,7 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
         edited_noise = composite(take_mask, take.mirrored.noise, noise, noise)
         edited_corrections = composite(take_mask, take.mirrored.corrections, corrections,
                                        torch.zeros(num_steps, *noise.shape, dtype=noise.dtype))
-    inpaint = next((e for e in controller.edits if e.role == "latent"), None) if prediction.edited else None
+    inpaint = latent_edit(controller) if prediction.edited else None
     region = hook = None
     if inpaint is not None:
         region = inpaint.mask(frame_mask, noise.shape[2]).to(noise)
