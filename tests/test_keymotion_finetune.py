@@ -176,6 +176,29 @@ def test_kf_vae_decoder_finetuning_keeps_the_encoder_and_its_posteriors():
         KeyMotionTrainConfig(train_parts="encoder", init_from="x")
 
 
+def test_kf_vae_latent_noise_moves_only_the_decoders_input_by_its_scale():
+    """``latent_noise`` S: the decoder reads mu + sigma * eps + S * noise (the KL term still sees the posterior);
+    0 or no noise tensor gives exactly the plain objective; a negative scale is refused."""
+    torch.manual_seed(3)
+    keyframes, positions = torch.randn(3, 8, SK.feature_dim), torch.linspace(0, 1, 8).expand(3, -1)
+    eps, noise = torch.randn(3, 2, 16), torch.randn(3, 2, 16)
+    noisy = KeyframeVAE(tiny_kf_vae_config(latent_noise=0.5)).eval()
+    plain = KeyframeVAE(tiny_kf_vae_config()).eval()
+    plain.load_state_dict(noisy.state_dict())
+    with torch.no_grad():
+        base = KeyframeVAEObjective(plain)(keyframes, positions, eps)
+        assert torch.equal(KeyframeVAEObjective(plain)(keyframes, positions, eps, noise)["loss"], base["loss"])
+        assert torch.equal(KeyframeVAEObjective(noisy)(keyframes, positions, eps)["loss"], base["loss"])
+        out = KeyframeVAEObjective(noisy)(keyframes, positions, eps, noise)
+        enc = noisy.encode(keyframes, positions, sample=False)
+        expect = noisy.loss(keyframes, positions, noisy.decode(enc.mu + eps * torch.exp(0.5 * enc.logvar) + 0.5 * noise),
+                            enc.mu, enc.logvar)
+    assert torch.allclose(out["loss"], expect["loss"]) and not torch.allclose(out["loss"], base["loss"])
+    assert torch.equal(out["kl"], base["kl"])
+    with pytest.raises(ValueError, match="latent_noise"):
+        tiny_kf_vae_config(latent_noise=-0.1)
+
+
 def test_load_kf_vae_init_takes_a_pipelines_vae_and_refuses_another_architecture(tmp_path):
     torch.manual_seed(1)
     trained = KeyframeVAE(tiny_kf_vae_config())

@@ -122,6 +122,8 @@ class KeyframeVAEConfig:
     lambda_local_vel: float = 0.0  # extra MSE weight of the joint-velocity channels
     lambda_contact: float = 0.0   # extra MSE weight of the four foot-contact channels
     lambda_feet_height: float = 0.0  # extra MSE weight of the four contact joints' height channels
+    latent_noise: float = 0.0     # training only: std (latent units) of Gaussian noise added to the latent the
+                                  # decoder reads, so it also decodes latents near the posteriors (0: off)
 
     def __post_init__(self) -> None:
         name = type(self).__name__
@@ -144,7 +146,7 @@ class KeyframeVAEConfig:
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"{name}.activation={self.activation!r} is invalid; choose one of {ACTIVATIONS}")
         for f in ("lambda_kl", "lambda_bone", "lambda_index", "lambda_root", "lambda_local_vel", "lambda_contact",
-                  "lambda_feet_height"):
+                  "lambda_feet_height", "latent_noise"):
             check_non_negative(name, f, getattr(self, f))
 
     @property

@@ -395,14 +395,21 @@ class KeyframeVAEObjective(nn.Module):
                 part.eval()
         return self
 
-    def forward(self, keyframes: torch.Tensor, positions: torch.Tensor, eps: torch.Tensor) -> dict[str, torch.Tensor]:
-        """``keyframes (B, K, D)``, ``positions (B, K)``, ``eps (B, Lz, Dz)`` standard normal."""
+    def forward(self, keyframes: torch.Tensor, positions: torch.Tensor, eps: torch.Tensor,
+                latent_noise: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """``keyframes (B, K, D)``, ``positions (B, K)``, ``eps (B, Lz, Dz)`` standard normal (the
+        reparameterisation); ``latent_noise (B, Lz, Dz)`` standard normal, scaled by the config's
+        :attr:`~salad_core.keymotion.kf_vae.KeyframeVAEConfig.latent_noise` and added to the latent the
+        decoder reads (the KL term still sees the posterior)."""
+        scale = self.vae.config.latent_noise
+        extra = 0.0 if latent_noise is None or scale == 0 else scale * latent_noise
         if self.freeze_encoder:
             with torch.no_grad():
                 enc = self.vae.encode(keyframes, positions, sample=False)
-            decoding = self.vae.decode(enc.mu + eps * torch.exp(0.5 * enc.logvar))
-            return self.vae.loss(keyframes, positions, decoding, enc.mu, enc.logvar)
-        decoding, mu, logvar = self.vae(keyframes, positions, eps)
+            mu, logvar = enc.mu, enc.logvar
+        else:
+            mu, logvar = self.vae.encode(keyframes, positions, sample=False)[1:]
+        decoding = self.vae.decode(mu + eps * torch.exp(0.5 * logvar) + extra)
         return self.vae.loss(keyframes, positions, decoding, mu, logvar)
 
 
@@ -446,10 +453,16 @@ class MMAEObjective(nn.Module):
 
 
 # ------------------------------------------------------------------------------- prepare
-def _prepare_vae(batch: dict[str, Any], ctx: StepContext, *, latent_shape: tuple[int, int]) -> dict[str, torch.Tensor]:
+def _prepare_vae(batch: dict[str, Any], ctx: StepContext, *, latent_shape: tuple[int, int],
+                 latent_noise: bool = False) -> dict[str, torch.Tensor]:
+    """``latent_noise``: also draw the decoder's extra latent noise (after ``eps``; without it the random
+    stream is the one of a run without the option)."""
     _, length, idx, keyframes = _keyframe_inputs(batch, ctx.env.device)
-    return {"keyframes": keyframes, "positions": indices_to_positions(idx, length),
-            "eps": ctx.rand.randn(keyframes.shape[0], latent_shape)}
+    out = {"keyframes": keyframes, "positions": indices_to_positions(idx, length),
+           "eps": ctx.rand.randn(keyframes.shape[0], latent_shape)}
+    if latent_noise:
+        out["latent_noise"] = ctx.rand.randn(keyframes.shape[0], latent_shape)
+    return out
 
 
 def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeVAE, text: PrefilledCaptions,
@@ -628,7 +641,8 @@ def build_kf_vae_task(data_dir: str | os.PathLike, model_config: KeyframeVAEConf
     return TrainTask(
         model=vae, model_type="keymotion_kf_vae", model_config=model_config, objective=objective,
         train_set=train_set, val_set=val_set, collate=collate_keyframes,
-        prepare=partial(_prepare_vae, latent_shape=vae.latent_shape), meta=meta,
+        prepare=partial(_prepare_vae, latent_shape=vae.latent_shape,
+                        latent_noise=vae.config.latent_noise > 0), meta=meta,
         extra_config={"kind": "keymotion_kf_vae", **meta, "data": str(Path(data_dir).resolve())},
         extra_files={"mean_std.safetensors": _mean_std_file(train_set)},
     )

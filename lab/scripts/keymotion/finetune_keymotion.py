@@ -31,7 +31,10 @@ VAE's decoded poses halve the flight (-3.30 m/s^2 against -7.66 with the true po
   VAE and PST (the MMAE is trained on the corpus's motion, independent of both).
 * ``--stage kf_vae``: :attr:`KeyframeVAEConfig.lambda_root`, ``lambda_local_vel``, ``lambda_contact`` and
   ``lambda_feet_height`` (the root, joint-velocity, foot-contact and foot-height channels weighed again), by default with the encoder frozen
-  (``--parts decoder``) so the source's PST, trained on its latents, still fits.
+  (``--parts decoder``) so the source's PST, trained on its latents, still fits. ``--latent-noise S`` adds
+  Gaussian noise of std ``S`` to the latent the decoder reads (:attr:`KeyframeVAEConfig.latent_noise`): the
+  decoder learns to decode latents near the posteriors too, as a PST's samples are (give ``--source`` the
+  pipeline whose PST will read it).
 
 Either starts from the source pipeline's model of that stage (default: the shipped ``salad_core/weights/
 keymotion``; same architecture, its normalisation kept) at a constant learning rate after a 200-step warm-up
@@ -64,7 +67,8 @@ REPO = Path(__file__).resolve().parents[3]
 
 #: per stage: the flags (and model config fields) of its extra loss weights
 LOSS_FLAGS = {"mmae": ("lambda_foot", "lambda_foot_vel"), "pst": (),
-              "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact", "lambda_feet_height")}
+              "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact", "lambda_feet_height",
+                         "latent_noise")}
 #: per stage: its other flags
 STAGE_FLAGS = {"mmae": ("roundtrip", "scratch", "fixed_keyframes"), "kf_vae": ("parts",), "pst": ("side_cue", "side_canonical", "latent_norm", "scratch",
                                                                                       "kf_vae", "no_middle_skip")}
@@ -72,7 +76,7 @@ STAGE_FLAGS = {"mmae": ("roundtrip", "scratch", "fixed_keyframes"), "kf_vae": ("
 DEFAULT_LR = {"mmae": 1e-4, "kf_vae": 1e-4, "pst": 2e-4}
 #: the weight a flag gets when not given
 DEFAULT_WEIGHTS = {"lambda_foot": 5.0, "lambda_foot_vel": 0.0, "lambda_root": 0.0, "lambda_local_vel": 0.0, "lambda_contact": 0.0,
-                   "lambda_feet_height": 0.0}
+                   "lambda_feet_height": 0.0, "latent_noise": 0.0}
 
 
 def main(argv=None, *, text_encoder=None) -> int:
@@ -118,6 +122,9 @@ def main(argv=None, *, text_encoder=None) -> int:
                     help="kf_vae: extra weight of the foot-contact channels (0)")
     ap.add_argument("--lambda-feet-height", type=float, default=None,
                     help="kf_vae: extra weight of the contact joints' height channels (0)")
+    ap.add_argument("--latent-noise", type=float, default=None,
+                    help="kf_vae: std of the noise added to the latent the decoder reads (0; "
+                         "KeyframeVAEConfig.latent_noise)")
     ap.add_argument("--parts", choices=("decoder", "all"), default=None,
                     help="kf_vae: 'decoder' (default) freezes the encoder so the source's PST still fits")
     ap.add_argument("--threads", type=int, default=None, help="torch threads (default: the recipe's)")
