@@ -23,7 +23,7 @@ quaternion     quaternion and rotation-matrix helpers for numpy and torch
 retarget       re-pose a motion on another rig's rigid torso (HumanML3D's), every limb kept
 bvh            BVH motion-capture import: read a take, map its rig, convert to features
 data           the HumanML3D layout and loaders; ``data.procedural``: the embedded motion-language corpus
-train          trainers of the VAE and the denoiser (one ``fit`` loop), configs, batching, latent cache
+train          VAE and denoiser trainers (one ``fit`` loop), consistency distillation, configs, batching, latent cache
 keymotion      KeyMotion: keyframe selection, keyframe VAE, Parallel Skip Transformer, MMAE, pipeline
 eval           T2M evaluator and metrics, the protocol, tables, the paper's numbers, physics benchmark
 ablation_models the shipped ablation models (Tables 2-3, supplement Tables 2-4) and the study's reading

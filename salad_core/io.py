@@ -221,7 +221,8 @@ def register_model(model_type: str, config_cls: type, builder: Callable[[Any], t
 
 
 _REGISTRY_MODULES = ("salad_core.models", "salad_core.eval.t2m", "salad_core.keymotion.kf_vae",
-                     "salad_core.keymotion.pst", "salad_core.keymotion.mmae", "salad_core.eval.train_evaluator")
+                     "salad_core.keymotion.pst", "salad_core.keymotion.mmae", "salad_core.eval.train_evaluator",
+                     "salad_core.train.consistency")
 
 
 def _import_model_registries() -> None:

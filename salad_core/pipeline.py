@@ -14,10 +14,11 @@ edited motion side by side from the same noise in one batched forward per step; 
 edited after :meth:`SaladPipeline.invert` (DDIM inversion, faithful under guidance), see
 :mod:`salad_core.attention`.
 
-A pretrained folder holds ``pipeline.json`` (text encoder, diffusion config, skeleton, solver),
-``vae.{safetensors,json}``, ``denoiser.{safetensors,json}`` and ``stats.safetensors`` (Mean/Std).
-``SaladPipeline.from_pretrained()`` with no path loads the shipped default from
-``salad_core/weights/salad``.
+A pretrained folder holds ``pipeline.json`` (text encoder, diffusion config, skeleton, solver and,
+when not 50, the sampler steps), ``vae.{safetensors,json}``, ``denoiser.{safetensors,json}`` and
+``stats.safetensors`` (Mean/Std). ``SaladPipeline.from_pretrained()`` with no path loads the shipped
+default from ``salad_core/weights/salad``; ``preset="realtime"`` the few-step student distilled from it
+(:mod:`salad_core.train.consistency`), ``salad_core/weights/salad_realtime``.
 """
 from __future__ import annotations
 
@@ -49,8 +50,9 @@ if TYPE_CHECKING:  # pragma: no cover - annotations only: salad_core.attention i
     from salad_core.attention import AttentionMaps, CaptureConfig, EditController, EditSpec, Inversion
     from salad_core.attention.hooks import ActivationCache, HookFn, NameFilter
 
-__all__ = ["SaladPipeline", "MotionOutput", "EditOutput", "default_weights_dir", "validate_prompts",
-           "validate_lengths", "PIPELINE_JSON_FIELDS", "guidance_from_json"]
+__all__ = ["SaladPipeline", "MotionOutput", "EditOutput", "default_weights_dir", "realtime_weights_dir",
+           "validate_prompts", "validate_lengths", "PIPELINE_JSON_FIELDS", "PIPELINE_PRESETS", "DEFAULT_NUM_STEPS",
+           "guidance_from_json"]
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +60,24 @@ log = logging.getLogger(__name__)
 def default_weights_dir() -> Path:
     """Folder of the shipped default SALAD weights (package data)."""
     return Path(__file__).resolve().parent / "weights" / "salad"
+
+
+def realtime_weights_dir() -> Path:
+    """Folder of the few-step ("realtime") SALAD weights, a consistency-distilled student of the default weights
+    (:mod:`salad_core.train.consistency`); absent until they are distilled."""
+    return Path(__file__).resolve().parent / "weights" / "salad_realtime"
+
+
+#: Named weight folders of :meth:`SaladPipeline.from_pretrained` ``preset=``: the folder it loads (unless a path
+#: is given) and the command that makes the folder when it is missing.
+PIPELINE_PRESETS: dict[str, tuple[Any, str]] = {
+    "realtime": (realtime_weights_dir,
+                 "python lab/scripts/salad/distill_realtime.py --data CORPUS --out RUN --export "
+                 "salad_core/weights/salad_realtime (in the salad repository; CORPUS: the teacher's corpus)"),
+}
+
+#: Sampler steps of a weight folder whose ``pipeline.json`` names none (the official DDIM-50 sampler).
+DEFAULT_NUM_STEPS = 50
 
 
 @dataclass
@@ -185,7 +205,7 @@ def validate_lengths(lengths: int | Sequence[int] | None, n: int, skeleton: Skel
 #: :meth:`SaladPipeline.from_pretrained` with :func:`salad_core.limits.check_fields`).
 PIPELINE_JSON_FIELDS: dict[str, Any] = {
     "vae": str, "denoiser": str, "stats": str, "text_encoder": str, "diffusion": dict, "solver": str,
-    "guidance": dict | None, "recovery": str | None, "skeleton": str,
+    "guidance": dict | None, "recovery": str | None, "skeleton": str, "num_steps": int,
 }
 
 
@@ -221,6 +241,9 @@ class SaladPipeline:
     diffusion : DiffusionConfig
     solver : str
         Default scheduler name (``"ddim"``; see :data:`salad_core.sampling.SOLVERS`).
+    num_steps : int, optional
+        Default sampler steps (``pipeline.json`` "num_steps"; :data:`DEFAULT_NUM_STEPS`, 50, when absent), e.g. 4
+        for a consistency-distilled folder sampled with ``solver="lcm"``.
     """
 
     #: Motions denoised together in one forward by :meth:`__call__` (without attention capture);
@@ -242,7 +265,7 @@ class SaladPipeline:
     def __init__(self, vae: MotionVAE, denoiser: Denoiser, text_encoder: TextEncoder, mean: np.ndarray,
                  std: np.ndarray, diffusion: DiffusionConfig | None = None, solver: str = "ddim",
                  source: str | None = None, guidance: Guidance | None = None, recovery: str | None = None,
-                 latent_stats: tuple[Any, Any] | None = None) -> None:
+                 latent_stats: tuple[Any, Any] | None = None, num_steps: int | None = None) -> None:
         if not isinstance(text_encoder, TextEncoder):
             raise TypeError(f"text_encoder must follow salad_core.text.TextEncoder (name, dim, max_tokens, encode, "
                             f"encode_null), e.g. load_text_encoder('minilm'); got {type(text_encoder).__name__}")
@@ -252,6 +275,9 @@ class SaladPipeline:
         self.diffusion = diffusion or DiffusionConfig()
         self.solver = solver
         self.source = source
+        #: Sampler steps of a call that gives none (``pipeline.json`` "num_steps"; 50 when absent).
+        self.num_steps = _check_solver_steps(DEFAULT_NUM_STEPS if num_steps is None else num_steps, solver,
+                                              self.diffusion)
         #: Default guidance of these weights (``pipeline.json`` "guidance"; the paper's w 7.5 when absent).
         #: A number passed as ``guidance_scale`` replaces only its weight; a Guidance replaces it all.
         self.skeleton: Skeleton = vae.skeleton
@@ -290,8 +316,13 @@ class SaladPipeline:
     # ------------------------------------------------------------------ loading
     @classmethod
     def from_pretrained(cls, path: str | Path | None = None, *, text_encoder: TextEncoder | None = None,
-                        allow_outside_paths: bool | str | Path = False) -> "SaladPipeline":
+                        allow_outside_paths: bool | str | Path = False, preset: str | None = None) -> "SaladPipeline":
         """Load a pipeline folder (``None``: the shipped default weights).
+
+        ``preset="realtime"`` loads the few-step student (:data:`PIPELINE_PRESETS`:
+        ``salad_core/weights/salad_realtime``, or ``path`` when given); a missing folder raises a
+        :class:`~salad_core.io.CheckpointError` naming it and the command that makes it. The folder's
+        ``pipeline.json`` names its solver, steps and guidance, so calls sample it correctly by default.
 
         ``pipeline.json`` is checked before anything loads (:data:`PIPELINE_JSON_FIELDS`: known keys
         only, a misspelt one named with the closest known key; JSON types; nesting and size limits of
@@ -309,7 +340,10 @@ class SaladPipeline:
             Naming the file, the key and the problem (:class:`~salad_core.io.CheckpointTypeError`, also a
             TypeError, for a value of the wrong JSON type).
         """
-        root = Path(path) if path is not None else default_weights_dir()
+        if preset is not None:
+            root = _preset_folder(preset, path)
+        else:
+            root = Path(path) if path is not None else default_weights_dir()
         cfg_path = root / "pipeline.json"
         if not cfg_path.is_file():
             hint = (" (the shipped weights are missing from this installation: reinstall salad, or train "
@@ -355,6 +389,11 @@ class SaladPipeline:
         if solver not in SOLVERS:
             raise CheckpointError(f"{cfg_path}: 'solver' {solver!r} is unknown; known: {', '.join(SOLVERS)}")
         guidance = guidance_from_json(cfg.get("guidance"), cfg_path)
+        num_steps = cfg.get("num_steps", DEFAULT_NUM_STEPS)
+        try:
+            _check_solver_steps(num_steps, solver, diffusion)
+        except ValueError as err:
+            raise CheckpointError(f"{cfg_path}: 'num_steps': {err}") from None
         try:
             recovery = _check_recovery(cfg.get("recovery")) if cfg.get("recovery") is not None else None
         except ValueError as err:
@@ -363,7 +402,7 @@ class SaladPipeline:
             raise CheckpointError(f"{cfg_path}: 'skeleton' is {cfg['skeleton']!r} but the VAE is built for "
                                   f"{vae.skeleton.name!r}")
         pipe = cls(vae, denoiser, text_encoder, mean, std, latent_stats=latent_stats, diffusion=diffusion,
-                   solver=solver, source=str(root), guidance=guidance, recovery=recovery)
+                   solver=solver, source=str(root), guidance=guidance, recovery=recovery, num_steps=num_steps)
         pipe.vocabulary, pipe.vocabulary_source = vocabulary_and_source(root, allow_outside_paths)
         return pipe
 
@@ -382,6 +421,8 @@ class SaladPipeline:
                "text_encoder": getattr(self.text_encoder, "source", "minilm"),
                "diffusion": config_to_dict(self.diffusion), "solver": self.solver,
                "guidance": self.guidance.to_json_dict(), "recovery": self.recovery, "skeleton": self.skeleton.name}
+        if self.num_steps != DEFAULT_NUM_STEPS:     # written only when set: folders read by versions without it
+            doc["num_steps"] = self.num_steps
         atomic_write_text(root / "pipeline.json", json.dumps(doc, indent=2) + "\n")
         if self.vocabulary is not None:     # what the weights can read travels with them
             write_vocabulary(self.vocabulary, root, source=self.vocabulary_source)
@@ -500,7 +541,7 @@ class SaladPipeline:
     # ------------------------------------------------------------------ generate
     def __call__(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None = None,
                  seed: int | Sequence[int] = 0, guidance_scale: "float | Guidance | None" = None,
-                 num_steps: int = 50, solver: str | None = None,
+                 num_steps: int | None = None, solver: str | None = None,
                  capture_attention: bool | CaptureConfig | dict = False,
                  noise: torch.Tensor | None = None, progress: bool = False,
                  hooks: Sequence[tuple[str, HookFn]] | None = None) -> MotionOutput:
@@ -513,7 +554,8 @@ class SaladPipeline:
             Frames per motion (default 120 = 6 s at 20 fps), multiples of 4, at most 196.
         seed : int or list of int
             Sample ``b`` uses noise seed ``seed + b`` (or ``seed[b]`` for a list); seeds must lie in
-            :data:`SEED_RANGE` (what ``torch.Generator`` accepts).
+            :data:`SEED_RANGE` (what ``torch.Generator`` accepts). With the ``"lcm"`` solver the noise it
+            adds between steps comes from the same seed.
         guidance_scale : float or Guidance, optional
             Classifier-free guidance (:func:`~salad_core.sampling.resolve_guidance`): None uses the
             weights' default (:attr:`guidance`); a number (not a string) in
@@ -521,8 +563,9 @@ class SaladPipeline:
             disables guidance; a negative weight steers away from the prompt and is warned about); a
             :class:`~salad_core.sampling.Guidance` (weight, rescale, interval) is used as given
             (``Guidance(7.5)`` is the paper's sampler).
-        num_steps : int
-            Sampler steps (50 DDIM steps by default), at most the diffusion's training timesteps.
+        num_steps : int, optional
+            Sampler steps, at most the diffusion's training timesteps (None: the weights' :attr:`num_steps`, 50
+            DDIM steps for the shipped weights).
         solver : str, optional
             Scheduler name of :data:`salad_core.sampling.SOLVERS` (default: the pipeline's, "ddim");
             e.g. "dpm++". Anything else (``""``, a number) is refused.
@@ -548,7 +591,7 @@ class SaladPipeline:
                        names: NameFilter = None, layers: int | Sequence[int] | None = None,
                        steps: tuple[float, float] = (0.0, 1.0), store: str | Sequence[str] = "probs",
                        hooks: Sequence[tuple[str, HookFn]] | None = None, seed: int | Sequence[int] = 0,
-                       guidance_scale: "float | Guidance | None" = None, num_steps: int = 50,
+                       guidance_scale: "float | Guidance | None" = None, num_steps: int | None = None,
                        solver: str | None = None, capture_attention: bool | CaptureConfig | dict = False,
                        noise: torch.Tensor | None = None, progress: bool = False
                        ) -> tuple[MotionOutput, ActivationCache]:
@@ -595,7 +638,7 @@ class SaladPipeline:
         return out, cache
 
     def _generate(self, prompts: str | Sequence[str], lengths: int | Sequence[int] | None, seed: int | Sequence[int],
-                  guidance_scale: "float | Guidance | None", num_steps: int, solver: str | None,
+                  guidance_scale: "float | Guidance | None", num_steps: int | None, solver: str | None,
                   capture_attention: bool | CaptureConfig | dict, noise: torch.Tensor | None, progress: bool,
                   hooks: Sequence[tuple[str, HookFn]] | None, rows: str = "all", caller_depth: int = 1
                   ) -> tuple[MotionOutput, TextBatch]:
@@ -607,9 +650,11 @@ class SaladPipeline:
             log.info("generating %d motions in chunks of %d (progress=True shows a bar)", len(prompts),
                      self.chunk_size())
         guidance = self.resolve_guidance(guidance_scale)
-        num_steps = _check_steps(num_steps, self.diffusion.num_train_timesteps)
         solver = _check_solver(solver)
+        num_steps = _check_solver_steps(self.num_steps if num_steps is None else num_steps, solver or self.solver,
+                                        self.diffusion)
         seeds = _seeds(seed, len(prompts))
+        step_noise = _step_generators(seeds, solver or self.solver, self)
         n_lat = max(lengths) // self.skeleton.unit_length
         if noise is None:
             noise = self.make_noise(seeds, n_lat)
@@ -623,7 +668,8 @@ class SaladPipeline:
         attention = None
         if hooks:
             latents, attention = self._denoise_hooked(text, uncond, noise, lengths, guidance, int(num_steps),
-                                                      solver or self.solver, progress, capture_attention, hooks, rows)
+                                                      solver or self.solver, progress, capture_attention, hooks, rows,
+                                                      step_noise)
         elif capture_attention:
             from salad_core.attention.capture import capture_cross_attention
 
@@ -632,19 +678,19 @@ class SaladPipeline:
             with capture_cross_attention(self.denoiser, text, lengths, capture_attention) as store:
                 latents = denoise(self.denoiser, make_scheduler(self.diffusion, solver or self.solver), cond, uncond,
                                   noise, mask, guidance_scale=guidance, num_steps=int(num_steps),
-                                  controller_hooks=[store.on_step], progress=progress)
+                                  controller_hooks=[store.on_step], progress=progress, generator=step_noise)
             attention = store.result()
         else:
             latents = self._denoise_in_chunks(text, uncond, noise, lengths, guidance, int(num_steps),
-                                              solver or self.solver, progress)
+                                              solver or self.solver, progress, step_noise)
         feats, joints = self.decode(latents, lengths, progress=progress and len(lengths) > limits.PROMPT_CHUNK)
         return MotionOutput(feats, joints, prompts, lengths, latents, noise, seeds, attention, settings,
                             unknown_words=unknown), text
 
     def _denoise_hooked(self, text: TextBatch, uncond: TextContext, noise: torch.Tensor, lengths: Sequence[int],
                         guidance: Guidance, num_steps: int, solver: str, progress: bool,
-                        capture: bool | CaptureConfig | dict, hooks: Sequence[tuple[str, HookFn]], rows: str
-                        ) -> tuple[torch.Tensor, AttentionMaps | None]:
+                        capture: bool | CaptureConfig | dict, hooks: Sequence[tuple[str, HookFn]], rows: str,
+                        step_noise: list[torch.Generator] | None = None) -> tuple[torch.Tensor, AttentionMaps | None]:
         """One batched denoising with the hooks installed (and the attention store, if capturing,
         served by the same processors after the hooks); the hooks are removed on exit."""
         from salad_core.attention.capture import attention_store, store_sites
@@ -657,7 +703,8 @@ class SaladPipeline:
         with use_hooks(self.denoiser, hooks, rows=rows, observer=store, observer_sites=observed) as session:
             steps = [session.on_step] if store is None else [store.on_step, session.on_step]
             latents = denoise(self.denoiser, make_scheduler(self.diffusion, solver), cond, uncond, noise, mask,
-                              guidance_scale=guidance, num_steps=num_steps, controller_hooks=steps, progress=progress)
+                              guidance_scale=guidance, num_steps=num_steps, controller_hooks=steps, progress=progress,
+                              generator=step_noise)
         return latents, None if store is None else store.result()
 
     def _output_settings(self) -> dict[str, str]:
@@ -682,7 +729,8 @@ class SaladPipeline:
         return 32 if allocator_tuned() else 8
 
     def _denoise_in_chunks(self, text: TextBatch, uncond: TextContext, noise: torch.Tensor, lengths: Sequence[int],
-                           guidance: Guidance, num_steps: int, solver: str, progress: bool) -> torch.Tensor:
+                           guidance: Guidance, num_steps: int, solver: str, progress: bool,
+                           step_noise: list[torch.Generator] | None = None) -> torch.Tensor:
         """Denoise the ``B`` motions in consecutive chunks of at most :meth:`chunk_size` motions (one
         chunk when ``B`` is not larger), each at its own longest length; returns latents ``(B, N', P, Dz)`` as one
         call would (zero past each length).
@@ -703,7 +751,8 @@ class SaladPipeline:
             cond = self.denoiser.prepare_text(text.features[rows], text.mask[rows])
             latents[rows, :n_lat] = denoise(self.denoiser, make_scheduler(self.diffusion, solver), cond, uncond,
                                             noise[rows, :n_lat], self.frame_mask(lengths[rows], n_lat),
-                                            guidance_scale=guidance, num_steps=num_steps, progress=progress)
+                                            guidance_scale=guidance, num_steps=num_steps, progress=progress,
+                                            generator=None if step_noise is None else step_noise[rows])
         return latents
 
     # ------------------------------------------------------------------ edit
@@ -1074,6 +1123,53 @@ def _check_solver(solver: Any) -> str | None:
     if solver.lower() not in SOLVERS:
         raise ValueError(f"solver={solver!r} is unknown; allowed: {', '.join(SOLVERS)} (None: the pipeline's default)")
     return solver
+
+
+def _preset_folder(preset: Any, path: str | Path | None) -> Path:
+    """The folder of a :data:`PIPELINE_PRESETS` preset (``path`` when given); CheckpointError when it is missing."""
+    if not isinstance(preset, str) or preset not in PIPELINE_PRESETS:
+        raise ValueError(f"preset={preset!r} is unknown; known: {', '.join(PIPELINE_PRESETS)} (None: the folder "
+                         "given, or the shipped weights)")
+    folder_of, command = PIPELINE_PRESETS[preset]
+    root = Path(path) if path is not None else folder_of()
+    if not (root / "pipeline.json").is_file():
+        raise CheckpointError(f"the {preset!r} weights are missing: no pipeline.json in {root}; make them with "
+                              f"{command}")
+    return root
+
+
+#: Solvers whose steps draw fresh noise that :meth:`SaladPipeline.__call__` seeds per sample (multistep consistency
+#: sampling re-noises its clean estimate between steps).
+_SEEDED_STEP_NOISE = ("lcm",)
+
+
+def _step_generators(seeds: Sequence[int], solver: str, pipe: "SaladPipeline") -> list[torch.Generator] | None:
+    """Per sample, the generator of a stochastic solver's step noise (None for the other solvers): the generator of
+    the sample's initial noise (seeded by its seed) continued after that noise, so a motion is a function of its
+    seed. The noise of step 2 onwards is drawn at the batch's latent length (a diffusers draw per row), so it
+    depends on the longest motion of the batch (chunk) too."""
+    if solver.lower() not in _SEEDED_STEP_NOISE:
+        return None
+    p, dz = pipe.latent_shape
+    full = pipe.skeleton.max_length // pipe.skeleton.unit_length
+    out = []
+    for s in seeds:
+        g = torch.Generator().manual_seed(int(s))
+        torch.randn(full, p, dz, generator=g)             # the initial noise (make_noise) comes first
+        out.append(g)
+    return out
+
+
+def _check_solver_steps(num_steps: Any, solver: str, diffusion: DiffusionConfig) -> int:
+    """Sampler steps for ``solver`` (a call's, or a weight folder's default): a positive int within the training
+    timesteps and, for the ``"lcm"`` solver, within the grid it samples on (``ValueError`` naming the bound)."""
+    steps = _check_steps(num_steps, diffusion.num_train_timesteps)
+    if isinstance(solver, str) and solver.lower() == "lcm":
+        grid = make_scheduler(diffusion, "lcm").config.original_inference_steps
+        if steps > grid:
+            raise ValueError(f"num_steps={steps} is more than the {grid}-step grid the 'lcm' solver samples on "
+                             f"(consistency-distilled weights take 1-{grid}, typically 1-4)")
+    return steps
 
 
 def _check_steps(num_steps: Any, max_steps: int | None = None) -> int:

@@ -101,6 +101,10 @@ def _solver_table() -> dict[str, tuple[str, dict[str, Any]]]:
         "euler": ("EulerDiscreteScheduler", {}),
         "euler_ancestral": ("EulerAncestralDiscreteScheduler", {}),
         "unipc": ("UniPCMultistepScheduler", {}),
+        # multistep consistency sampling, for consistency-distilled weights (salad_core.train.consistency) with
+        # guidance off: each step's estimate c_skip(t) z + c_out(t) x0 (sigma_data 0.5, timestep scaling 10),
+        # re-noised with fresh noise to the next of the S timesteps picked from the 50-step grid 999, 979, ..., 19
+        "lcm": ("LCMScheduler", dict(original_inference_steps=50, timestep_scaling=10.0, clip_sample=False)),
     }
 
 

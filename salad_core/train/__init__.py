@@ -5,6 +5,8 @@ line is :mod:`salad_core.cli.train` (also ``python -m salad_core.train``). The s
 out-folder layout are described in :mod:`salad_core.train.common`; length-bucketed batches in
 :mod:`salad_core.train.batching`, the cache of frozen-VAE posteriors in :mod:`salad_core.train.latent_cache`,
 and the per-part step profile (``salad bench --sections train``) in :mod:`salad_core.train.profile`.
+:mod:`salad_core.train.consistency` distils a trained pipeline into a few-step student (latent consistency
+distillation: ``train_consistency``, ``export_realtime``), on the same loop, datasets and latent cache.
 """
 from salad_core.lazy import lazy_exports
 
