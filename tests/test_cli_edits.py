@@ -54,6 +54,8 @@ def _run(tmp_path, name, *flags, source=SOURCE):
                                     jump=2, guidance=6.0)]),
     (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-guidance", "motion", "--inpaint-smooth", "0"],
      lambda a: [dataclasses.replace(a.parse_inpaint("@12:28", blend=1), guidance=None, smooth=0.0)]),
+    (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-noise", "matched"],
+     lambda a: [dataclasses.replace(a.parse_inpaint("@12:28", blend=1), noise="matched")]),
 ])
 def test_each_edit_flag_gives_the_python_edit(tmp_path, pipe, flags, edits):
     import salad_core.attention as a
@@ -199,6 +201,36 @@ def test_invert_writes_the_reconstructions_and_the_edits_attention_and_labels_th
     assert cli.main(["-q", "invert", str(take), "--prompt", "a person walks forward", "--attention", "--steps", "3",
                      "--no-render", "--out", str(out2)]) == 0
     assert sorted(p.name for p in out2.glob("*.png")) == ["take_reconstruction_attention.png"]
+
+
+def test_inpaint_noise_flag_offers_every_noise_mode():
+    from salad_core.attention.inpaint import NOISE_MODES
+    from salad_core.cli.generate import INPAINT_NOISE
+
+    assert INPAINT_NOISE == NOISE_MODES
+
+
+def test_unknown_inpaint_noise_is_refused_by_the_parser(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["-q", "edit", SOURCE, "--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-noise",
+                  "white", "--out", str(tmp_path / "x")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--inpaint-noise: invalid choice: 'white'" in err and "'matched'" in err
+    assert not (tmp_path / "x").exists()
+
+
+@needs_weights
+def test_invert_records_the_inpaint_noise_mode(tmp_path, sample_dir):
+    """``salad invert --inpaint ... --inpaint-noise matched``: the report's edit names the noise mode."""
+    take = tmp_path / "take.npy"
+    np.save(take, np.load(sample_dir / "new_joint_vecs" / "012314.npy")[:40])
+    out = tmp_path / "inv"
+    assert cli.main(["-q", "invert", str(take), "--prompt", "a person walks forward", "--target", "a person jumps",
+                     "--inpaint", "@12:28", "--inpaint-noise", "matched", "--steps", "3", "--no-render",
+                     "--out", str(out)]) == 0
+    edits = json.loads((out / "take_inversion.json").read_text())["edit"]["edits"]
+    assert len(edits) == 1 and "noise='matched'" in edits[0] and edits[0].startswith("Inpaint(")
 
 
 def test_invert_mirror_take_all_gives_the_takes_mirror_image(tmp_path, sample_dir):

@@ -7,7 +7,8 @@ import pytest
 import torch
 
 from salad_core.attention import Inpaint, Refine, Reweight, parse_inpaint
-from salad_core.attention.edits import validate_edits
+from salad_core.attention.edits import seeded_noise, validate_edits
+from salad_core.attention.inpaint import MATCHED_MAX_RHO, NOISE_MODES, matched_noise, noise_statistics
 from salad_core.pipeline import default_weights_dir
 from salad_core.skeleton import PART_NAMES, get_skeleton
 
@@ -515,3 +516,132 @@ def test_seam_smoothing_is_dropped_where_it_would_raise_the_seams_jerk(pipe, mon
     assert shaken.settings["composite"]["seam_smoothing"] == ["plain"]
     np.testing.assert_array_equal(shaken.edited.features, plain.edited.features)
     assert "seam_smoothing" not in plain.settings["composite"]
+
+
+# --------------------------------------------------------------------- matched region noise
+def _lag1_and_std(x: np.ndarray) -> tuple[float, float]:
+    """``(N', P, Dz)`` -> (correlation of neighbouring frames pooled over parts and channels, std), computed here."""
+    x = np.asarray(x, np.float64)
+    return float(np.corrcoef(x[1:].ravel(), x[:-1].ravel())[0, 1]), float(x.std())
+
+
+def _ar1_reference(rho: float, std: float, n: int, seed: int) -> torch.Tensor:
+    """``(n, 7, 32)`` a stationary AR(1) sequence along the frames with lag-1 correlation ``rho`` and std ``std``."""
+    e = np.random.default_rng(seed).standard_normal((n, 7, 32))
+    x = np.empty_like(e)
+    x[0] = e[0]
+    for t in range(1, n):
+        x[t] = rho * x[t - 1] + np.sqrt(1 - rho ** 2) * e[t]
+    return torch.from_numpy(std * x).float()
+
+
+def _corr(a: torch.Tensor, b: torch.Tensor) -> float:
+    return float(np.corrcoef(a.flatten().numpy(), b.flatten().numpy())[0, 1])
+
+
+def test_matched_noise_takes_the_references_frame_correlation_and_std():
+    n = 1500
+    ref = torch.stack([_ar1_reference(0.6, 1.3, n, 1), _ar1_reference(0.3, 0.6, n, 2)])
+    white = torch.randn(2, n, 7, 32, generator=torch.Generator().manual_seed(3))
+    out = matched_noise(white, ref, torch.ones(2, n, dtype=torch.bool))
+    assert out.shape == white.shape and out.dtype == white.dtype
+    for i, (rho, std) in enumerate([(0.6, 1.3), (0.3, 0.6)]):
+        lag1, s = _lag1_and_std(out[i].numpy())
+        assert abs(lag1 - rho) < 0.02 and abs(s / std - 1) < 0.02
+        assert abs(_corr(out[i], ref[i])) < 0.01                       # new noise, not the reference
+    # the correlation is clipped to [0, MATCHED_MAX_RHO]: an anti-correlated reference gives white noise of its std
+    anti = _ar1_reference(-0.5, 0.7, n, 4)[None]
+    std, rho = noise_statistics(anti, torch.ones(1, n, dtype=torch.bool))
+    assert rho.item() < -0.45
+    torch.testing.assert_close(matched_noise(white[:1], anti, torch.ones(1, n, dtype=torch.bool)),
+                               white[:1] * float(std), atol=1e-5, rtol=0)
+    hot = _ar1_reference(0.99, 1.0, n, 5)[None]
+    lag1, _ = _lag1_and_std(matched_noise(white[:1], hot, torch.ones(1, n, dtype=torch.bool))[0].numpy())
+    assert abs(lag1 - MATCHED_MAX_RHO) < 0.01
+
+
+def test_matched_noise_ignores_frames_past_each_motions_length():
+    n, valid = 40, 25
+    ref = torch.stack([_ar1_reference(0.5, 0.8, n, 6)] * 2)
+    ref[1, valid:] = 50.0 * torch.randn(n - valid, 7, 32, generator=torch.Generator().manual_seed(7))
+    fm = torch.ones(2, n, dtype=torch.bool)
+    fm[1, valid:] = False
+    std, rho = noise_statistics(ref, fm)
+    lag1, s = _lag1_and_std(ref[1, :valid].numpy())                     # the valid frames alone
+    assert abs(rho[1].item() - lag1) < 1e-6 and abs(std[1].item() - s) < 1e-6
+    lag1_all, s_all = _lag1_and_std(ref[0].numpy())                    # motion 0: all its frames are valid
+    assert abs(rho[0].item() - lag1_all) < 1e-6 and abs(std[0].item() - s_all) < 1e-6
+    white = torch.randn(2, n, 7, 32, generator=torch.Generator().manual_seed(8))
+    other = ref.clone()
+    other[1, valid:] = -7.0                                            # other padding: the same noise
+    torch.testing.assert_close(matched_noise(white, ref, fm), matched_noise(white, other, fm), atol=0, rtol=0)
+    counted = matched_noise(white, ref, torch.ones(2, n, dtype=torch.bool))
+    assert counted[1].std() > 5 * matched_noise(white, ref, fm)[1].std()   # counted, the padding would dominate
+
+
+def test_matched_noise_bad_input():
+    fm = torch.ones(1, 12, dtype=torch.bool)
+    with pytest.raises(ValueError, match="same shape"):
+        matched_noise(torch.randn(1, 12, 7, 32), torch.randn(1, 10, 7, 32), fm)
+    with pytest.raises(ValueError, match="frame_mask must be"):
+        noise_statistics(torch.randn(1, 12, 7, 32), torch.ones(1, 10, dtype=torch.bool))
+    with pytest.raises(ValueError, match=r"\(B, N', P, Dz\)"):
+        noise_statistics(torch.randn(12, 7, 32), fm)
+    with pytest.raises(ValueError, match="motion 0 of the batch has no valid latent frame"):
+        noise_statistics(torch.randn(1, 12, 7, 32), torch.zeros(1, 12, dtype=torch.bool))
+    with pytest.raises(ValueError, match="Inpaint.noise='white'; allowed: .*'matched'"):
+        Inpaint(parts="arms", noise="white")
+    assert "matched" in NOISE_MODES
+
+
+def test_matched_region_noise_is_seeded_and_about_fresh_for_white_source_noise():
+    shape = (2, 12, 7, 32)
+    src, fm = seeded_noise(5, shape), torch.ones(2, 12, dtype=torch.bool)
+    matched = Inpaint(parts="arms", noise="matched", seed=3)
+    assert matched.fresh_noise(True) and matched.fresh_noise(False)
+    a, b = matched.region_noise(src, fm), matched.region_noise(src, fm)
+    torch.testing.assert_close(a, b, atol=0, rtol=0)                    # deterministic for a seed
+    other = Inpaint(parts="arms", noise="matched", seed=4).region_noise(src, fm)
+    assert _corr(a, other) < 0.1
+    fresh = Inpaint(parts="arms", noise="fresh", seed=3).region_noise(src, fm)
+    torch.testing.assert_close(fresh, seeded_noise(3, shape), atol=0, rtol=0)
+    assert _corr(a, fresh) > 0.99 and 0.95 < float(a.std() / fresh.std()) < 1.05
+    # a hotter, frame-correlated source (as an inverted real take's): the same draw, shaped
+    take = torch.stack([_ar1_reference(0.5, 1.3, 12, 9), _ar1_reference(0.5, 1.3, 12, 10)])
+    shaped = matched.region_noise(take, fm)
+    assert 0.5 < _corr(shaped, fresh) < 0.95 and 1.1 < float(shaped.std()) < 1.5
+
+
+@needs_weights
+def test_matched_noise_on_a_generated_source_changes_only_the_region(pipe):
+    kw = dict(target="a man waves his right hand", lengths=FRAMES, seed=0, num_steps=STEPS)
+    out = pipe.edit(SOURCE, edits=[Inpaint(parts="arms", noise="matched", composite=False)], **kw)
+    fresh = pipe.edit(SOURCE, edits=[Inpaint(parts="arms", noise="fresh", composite=False)], **kw)
+    arms = [PART_NAMES.index("left arm"), PART_NAMES.index("right arm")]
+    kept = [p for p in range(7) if p not in arms]
+    z, z_src = out.edited.noise, out.source.noise
+    torch.testing.assert_close(z[:, :, kept], z_src[:, :, kept], atol=0, rtol=0)
+    torch.testing.assert_close(out.edited.latents[:, :, kept], out.source.latents[:, :, kept], atol=0, rtol=0)
+    fm = torch.ones(1, FRAMES // 4, dtype=torch.bool)
+    want = Inpaint(parts="arms", noise="matched").region_noise(z_src, fm)
+    torch.testing.assert_close(z[:, :, arms], want[:, :, arms], atol=0, rtol=0)
+    assert (z[:, :, arms] - z_src[:, :, arms]).abs().min() > 0          # new noise on every arm token
+    assert _corr(z[:, :, arms], fresh.edited.noise[:, :, arms]) > 0.95   # white source noise: about "fresh"
+    assert (out.edited.latents[:, :, arms] - out.source.latents[:, :, arms]).abs().mean() > 0.05
+
+
+@needs_weights
+def test_matched_noise_of_an_inverted_take_follows_the_takes_noise(pipe, sample_features):
+    inv = pipe.invert(sample_features[:FRAMES], "a person walks forward and turns around", num_steps=STEPS)
+    out = pipe.edit(inversion=inv, target="a man waves his right hand",
+                    edits=[Inpaint(parts="arms", noise="matched", resample=1)], ground=False)
+    arms = [PART_NAMES.index("left arm"), PART_NAMES.index("right arm")]
+    kept = [p for p in range(7) if p not in arms]
+    z = out.edited.noise
+    torch.testing.assert_close(z[:, :, kept], inv.noise[:, :, kept], atol=0, rtol=0)
+    fm = torch.ones(1, FRAMES // 4, dtype=torch.bool)
+    want = matched_noise(seeded_noise(0, z.shape), inv.noise, fm)
+    torch.testing.assert_close(z[:, :, arms], want[:, :, arms], atol=0, rtol=0)
+    std, _ = noise_statistics(inv.noise, fm)
+    assert 0.8 < float(z[:, :, arms].std()) / std.item() < 1.25
+    torch.testing.assert_close(out.edited.latents[:, :, kept], out.source.latents[:, :, kept], atol=1e-5, rtol=0)

@@ -374,11 +374,12 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
     if inpaint is not None:
         region = inpaint.mask(frame_mask, noise.shape[2]).to(noise)
         if inpaint.fresh_noise(corrections is not None):
-            # the regenerated region starts from white noise (an inverted take's own noise holds its motion there)
-            # and without the inversion's corrections (they belong to the source's trajectory)
+            # the regenerated region starts from new noise drawn from the seed (an inverted take's own noise holds
+            # its motion there; "matched": shaped to the source noise's statistics) and without the inversion's
+            # corrections (they belong to the source's trajectory)
             fresh = (region > 0).to(noise)
             base = noise if edited_noise is None else edited_noise.to(noise)
-            edited_noise = fresh * seeded_noise(inpaint.seed, noise.shape).to(noise) + (1.0 - fresh) * base
+            edited_noise = fresh * inpaint.region_noise(noise, frame_mask) + (1.0 - fresh) * base
             if corrections is not None or edited_corrections is not None:
                 base_c = edited_corrections if edited_corrections is not None else corrections
                 edited_corrections = base_c * (1.0 - fresh)

@@ -44,16 +44,19 @@ import torch
 
 from salad_core.skeleton import PART_NAMES
 
-from .edits import EditKernel, EditSpec, _window
+from .edits import EditKernel, EditSpec, _window, seeded_noise
 
 if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
 
-__all__ = ["Inpaint", "INPAINT_GROUPS", "NOISE_MODES", "PARTS_RESAMPLE", "SPAN_GUIDANCE", "inpaint_parts",
-           "parse_inpaint"]
+__all__ = ["Inpaint", "INPAINT_GROUPS", "MATCHED_MAX_RHO", "NOISE_MODES", "PARTS_RESAMPLE", "SPAN_GUIDANCE",
+           "ar1_noise", "inpaint_parts", "matched_noise", "noise_statistics", "parse_inpaint"]
 
 #: What :class:`Inpaint`'s regenerated region starts from (see :attr:`Inpaint.noise`).
-NOISE_MODES = ("auto", "fresh", "source")
+NOISE_MODES = ("auto", "fresh", "source", "matched")
+
+#: The largest lag-1 frame correlation :func:`matched_noise` gives the region's noise.
+MATCHED_MAX_RHO = 0.95
 
 #: The edited branch's guidance weight of ``Inpaint(guidance="auto")`` when a frame span is regenerated.
 SPAN_GUIDANCE = 7.5
@@ -110,6 +113,82 @@ def inpaint_parts(value: Union[str, Sequence[str]]) -> tuple[str, ...]:
     return tuple(p for p in PART_NAMES if p in chosen)
 
 
+def _check_noise(noise: torch.Tensor, frame_mask: torch.Tensor) -> None:
+    if noise.dim() != 4:
+        raise ValueError(f"the noise must be (B, N', P, Dz), got shape {tuple(noise.shape)}")
+    if tuple(frame_mask.shape) != tuple(noise.shape[:2]):
+        raise ValueError(f"frame_mask must be (B, N') = {tuple(noise.shape[:2])}, got {tuple(frame_mask.shape)}")
+
+
+def _correlation(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Pearson correlation of two flat tensors of the same length (0 when either is constant or too short)."""
+    if a.numel() < 2:
+        return a.new_zeros(())
+    a, b = a - a.mean(), b - b.mean()
+    den = torch.sqrt((a * a).sum() * (b * b).sum())
+    return (a * b).sum() / den if den > 0 else a.new_zeros(())
+
+
+def noise_statistics(noise: torch.Tensor, frame_mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per motion, over its valid latent frames only: the std of ``noise`` ``(B, N', P, Dz)`` (pooled over frames,
+    parts and channels) and the lag-1 correlation of neighbouring valid latent frames (pooled over parts and
+    channels; 0 with fewer than two valid frames).
+
+    Parameters
+    ----------
+    noise : torch.Tensor
+        ``(B, N', P, Dz)``, e.g. an inverted motion's noise.
+    frame_mask : torch.Tensor
+        ``(B, N')`` bool, True = valid latent frame (frames past a motion's length do not count).
+
+    Returns
+    -------
+    std, rho : torch.Tensor
+        ``(B,)`` float64 each.
+
+    Raises
+    ------
+    ValueError
+        Wrong shapes, or a motion without a valid frame.
+    """
+    _check_noise(noise, frame_mask)
+    stds, rhos = [], []
+    for i, (z, valid) in enumerate(zip(noise.detach().double(), frame_mask.bool())):
+        if not valid.any():
+            raise ValueError(f"motion {i} of the batch has no valid latent frame: no noise statistics")
+        stds.append(z[valid].std(unbiased=False))
+        pair = valid[1:] & valid[:-1]
+        rhos.append(_correlation(z[1:][pair].flatten(), z[:-1][pair].flatten()))
+    return torch.stack(stds), torch.stack(rhos)
+
+
+def ar1_noise(white: torch.Tensor, rho: torch.Tensor) -> torch.Tensor:
+    """White noise ``(B, N', P, Dz)`` -> the stationary AR(1) process along the latent-frame axis with lag-1
+    correlation ``rho`` ``(B,)`` (one per motion, in ``(-1, 1)``): ``x_0 = e_0``, ``x_t = rho x_{t-1} +
+    sqrt(1 - rho^2) e_t``, so every frame keeps the white noise's variance. ``rho = 0`` returns ``white``."""
+    rho = torch.as_tensor(rho, dtype=white.dtype, device=white.device).reshape(-1, 1, 1)
+    if rho.shape[0] != white.shape[0]:
+        raise ValueError(f"rho must have one value per motion ({white.shape[0]}), got {rho.shape[0]}")
+    gain = torch.sqrt(1.0 - rho * rho)
+    frames = [white[:, 0]]
+    for t in range(1, white.shape[1]):
+        frames.append(rho * frames[-1] + gain * white[:, t])
+    return torch.stack(frames, 1)
+
+
+def matched_noise(white: torch.Tensor, reference: torch.Tensor, frame_mask: torch.Tensor) -> torch.Tensor:
+    """White noise ``(B, N', P, Dz)`` shaped to the statistics of ``reference`` (same shape; the source's noise) over
+    each motion's valid latent frames (:func:`noise_statistics`): :func:`ar1_noise` with the reference's lag-1
+    correlation clipped to ``[0, MATCHED_MAX_RHO]``, scaled to the reference's std. A white reference gives about
+    ``white`` itself. ``frame_mask`` ``(B, N')`` bool marks the valid frames. Returns ``white``'s shape and dtype."""
+    if tuple(white.shape) != tuple(reference.shape):
+        raise ValueError(f"the white noise {tuple(white.shape)} and the reference noise {tuple(reference.shape)} "
+                         "must have the same shape")
+    std, rho = noise_statistics(reference, frame_mask)
+    shaped = ar1_noise(white.double(), rho.clamp(0.0, MATCHED_MAX_RHO).to(white.device))
+    return (shaped * std.to(white.device)[:, None, None, None]).to(white.dtype)
+
+
 def _frame_bound(v, name: str) -> Optional[int]:
     if v is None:
         return None
@@ -148,13 +227,18 @@ class Inpaint(EditSpec):
     steps : (start, stop)
         Window of step fractions in which the kept region is replaced (default all steps, the last
         included, so the kept latents end exactly as the source's).
-    noise : ``"auto"``, ``"fresh"`` or ``"source"``
+    noise : ``"auto"``, ``"fresh"``, ``"source"`` or ``"matched"``
         What the regenerated region starts from. ``"source"``: the source's noise (for an inverted take its
         inverted noise, which is not white and holds the take's own motion of that region: the region then tends
         to regenerate the take); ``"fresh"``: white noise drawn from ``seed`` (the exact inversion's corrections
-        are dropped there); ``"auto"`` (default): fresh when editing an inversion, the source's otherwise.
+        are dropped there); ``"matched"``: the same white noise shaped to the source noise's own statistics over
+        each motion's valid frames, its lag-1 frame correlation (an AR(1) filter along the latent frames) and its
+        std (:func:`matched_noise`; corrections dropped as with ``"fresh"``; for a generated source, whose noise
+        is white, about ``"fresh"``; only the starting noise is shaped: :attr:`resample`'s re-noising between
+        passes is white, so with resampling the region largely forgets it); ``"auto"`` (default): fresh when
+        editing an inversion, the source's otherwise.
     seed : int
-        Seed of the fresh noise.
+        Seed of the fresh (or matched) noise.
     composite : bool
         After decoding, take the kept parts / frames from the source's decoded features, hang regenerated limbs
         from the source's kept joints and cross-fade a frame span's seams over ``fade`` frames in feature space
@@ -335,9 +419,17 @@ class Inpaint(EditSpec):
                 and self.active(fraction))
 
     def fresh_noise(self, inverted: bool) -> bool:
-        """Whether the regenerated region starts from fresh white noise (:attr:`noise`; ``inverted``: the edit is of
-        an inversion)."""
-        return self.noise == "fresh" or (self.noise == "auto" and inverted)
+        """Whether the regenerated region starts from new noise drawn from :attr:`seed` (:meth:`region_noise`), not
+        the source's (:attr:`noise`; ``inverted``: the edit is of an inversion)."""
+        return self.noise in ("fresh", "matched") or (self.noise == "auto" and inverted)
+
+    def region_noise(self, source_noise: torch.Tensor, frame_mask: torch.Tensor) -> torch.Tensor:
+        """``(B, N', P, Dz)`` new noise for the regenerated region (:meth:`fresh_noise`): white noise of
+        :func:`~salad_core.attention.edits.seeded_noise` from :attr:`seed`; with ``noise="matched"`` shaped by
+        :func:`matched_noise` to ``source_noise``'s statistics (``(B, N', P, Dz)``) over ``frame_mask``'s
+        ``(B, N')`` valid frames."""
+        white = seeded_noise(self.seed, source_noise.shape).to(source_noise)
+        return matched_noise(white, source_noise, frame_mask) if self.noise == "matched" else white
 
     def frame_span(self, num_frames: int) -> tuple[int, int] | None:
         """The regenerated motion frames ``[s, e)`` (whole latent frames), None when every frame is."""

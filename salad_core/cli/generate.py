@@ -372,6 +372,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return cmd_generate(args)
 
 
+#: ``--inpaint-noise`` choices: :data:`salad_core.attention.inpaint.NOISE_MODES` (spelled out to keep the parser light).
+INPAINT_NOISE = ("auto", "fresh", "source", "matched")
+
+
 def _edit_args(p: argparse.ArgumentParser) -> None:
     """The edit flags shared by ``salad edit`` and ``salad invert`` (parsed by :func:`_edit_specs`)."""
     p.add_argument("--target", default=None,
@@ -411,6 +415,11 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
                         "between (1: off; about U times the cost; default: 3 for body parts alone, off for a span)")
     p.add_argument("--inpaint-jump", type=int, default=None, metavar="J",
                    help="sampler steps per resampling jump (default 5)")
+    p.add_argument("--inpaint-noise", choices=INPAINT_NOISE, default=None,
+                   help="what the in-painted region starts from: 'fresh' white noise from the seed, 'source' the "
+                        "source's noise (a given take's inverted noise), 'matched' fresh noise shaped to the source "
+                        "noise's std and frame-to-frame correlation; default 'auto': fresh for a given take, the "
+                        "source's for a generated motion")
     p.add_argument("--inpaint-guidance", default=None, metavar="W|auto|motion",
                    help="guidance weight of the in-painted region's branch: a number, 'auto' (default: 7.5 for a "
                         "frame span, the motion's own for body parts alone) or 'motion' (the motion's own)")
@@ -465,7 +474,7 @@ def _inpaint_guidance(text: str):
 
 def _inpaint_options(args: argparse.Namespace) -> dict:
     """The ``--inpaint-*`` options that were given (the others keep :class:`Inpaint`'s defaults)."""
-    out = {name: getattr(args, f"inpaint_{name}") for name in ("smooth", "smooth_window", "resample", "jump")
+    out = {name: getattr(args, f"inpaint_{name}") for name in ("smooth", "smooth_window", "resample", "jump", "noise")
            if getattr(args, f"inpaint_{name}", None) is not None}
     if getattr(args, "inpaint_guidance", None) is not None:
         out["guidance"] = _inpaint_guidance(args.inpaint_guidance)

@@ -3,6 +3,8 @@
 Usage:
     python lab/scripts/editing/measure_inpaint.py [--steps 50] [--frames 120] [--threads 1]
         [--blends 0,1,2] [--json lab/records/editing/inpaint.json]
+    python lab/scripts/editing/measure_inpaint.py --tuning N [--offset M] [--only parts|frames] [--grid NAMES] ...
+        (procedural validation clips over tuning_grid(); --grid without --tuning: those settings on the held-out cases)
 
 Cases (held out: nothing here is trained; the only choice made on them is ``Inpaint.blend``):
 
@@ -217,7 +219,8 @@ SPAN_ONLY_KEYS = ("fade", "root", "smooth", "smooth_window")
 def tuning_grid() -> dict[str, dict]:
     """Settings tried on the tuning clips (every option spelled out, so the grid does not move with the defaults):
     the sampling (the region's noise, the edited branch's guidance, RePaint resampling) crossed with the composite
-    (off; fade 8; fade 8 plus the least-squares seam smoothing with strength / window)."""
+    (off; fade 8; fade 8 plus the least-squares seam smoothing with strength / window); and the region's noise
+    matched to the source's inverted noise (``noise="matched"``) with the chosen composite only."""
     base = dict(noise="fresh", guidance=None, resample=1, jump=1)
     sampling = {"source noise": dict(base, noise="source"),
                 "fresh": dict(base),
@@ -233,7 +236,23 @@ def tuning_grid() -> dict[str, dict]:
             "fade 8 smooth 100/8": dict(comp, smooth=100.0, smooth_window=8),
             "fade 8 smooth 100/16": dict(comp, smooth=100.0, smooth_window=16),
             "fade 8 smooth 1000/16": dict(comp, smooth=1000.0, smooth_window=16)}
-    return {f"{s} | {p}": dict(skw, **pkw) for s, skw in sampling.items() for p, pkw in post.items()}
+    grid = {f"{s} | {p}": dict(skw, **pkw) for s, skw in sampling.items() for p, pkw in post.items()}
+    matched = {"matched": dict(base, noise="matched"),
+               "matched g7.5": dict(base, noise="matched", guidance=7.5),
+               "matched resample 3 jump 5": dict(base, noise="matched", resample=3, jump=5)}
+    chosen = "fade 8 smooth 100/8"
+    grid.update({f"{s} | {chosen}": dict(skw, **post[chosen]) for s, skw in matched.items()})
+    return grid
+
+
+def select_grid(text: str, error) -> dict[str, dict]:
+    """``--grid``'s comma-separated :func:`tuning_grid` names -> those settings (``error``: the parser's)."""
+    grid = tuning_grid()
+    names = [g.strip() for g in text.split(",") if g.strip()]
+    unknown = [g for g in names if g not in grid]
+    if unknown:
+        error(f"--grid: unknown settings {unknown}; choose from {list(grid)}")
+    return {g: grid[g] for g in names}
 
 
 def split_config(kw: dict) -> tuple[dict, dict]:
@@ -264,7 +283,8 @@ def main() -> None:
     ap.add_argument("--tuning", type=int, default=0,
                     help="instead: the real-take protocol on N procedural validation clips over tuning_grid()")
     ap.add_argument("--grid", default=None,
-                    help="with --tuning: comma-separated tuning_grid() names to run (default: all of them)")
+                    help="comma-separated tuning_grid() names to run: with --tuning instead of all of them, on the "
+                         "held-out cases instead of CONFIGS (latent, default)")
     ap.add_argument("--offset", type=int, default=0,
                     help="with --tuning: skip the first N validation clips (a check on clips the grid was not chosen on)")
     ap.add_argument("--only", choices=("parts", "frames"), default=None,
@@ -321,32 +341,27 @@ def main() -> None:
                     lambda **k: Inpaint(frames=span, blend=blend, **k), "a person jumps", inversion=inv)
 
     if args.tuning:
-        grid = tuning_grid()
-        if args.grid:
-            names = [g.strip() for g in args.grid.split(",") if g.strip()]
-            unknown = [g for g in names if g not in grid]
-            if unknown:
-                ap.error(f"--grid: unknown settings {unknown}; choose from {list(grid)}")
-            grid = {g: grid[g] for g in names}
+        grid = select_grid(args.grid, ap.error) if args.grid else tuning_grid()
         takes = tuning_takes(args.offset + args.tuning, n)[args.offset:]
         real_cases("tuning", takes, grid, blends, only=args.only)
     else:
+        configs = select_grid(args.grid, ap.error) if args.grid else CONFIGS
         if not args.skip_generated:
             for seed in range(args.seeds):
                 for src in SOURCES:
                     for parts, target in PART_TARGETS:
-                        run("gen/parts", f"{src} s{seed}", 0, part_configs(CONFIGS),
+                        run("gen/parts", f"{src} s{seed}", 0, part_configs(configs),
                             lambda parts=parts, **k: Inpaint(parts=parts, **k), target, source=src, lengths=n,
                             seed=seed)
                 for src in SPAN_SOURCES:
                     for target in SPAN_TARGETS:
                         for span in ((40, 80), (80, None)):
                             for blend in blends:
-                                run("gen/frames", f"{src} s{seed}", blend, CONFIGS,
+                                run("gen/frames", f"{src} s{seed}", blend, configs,
                                     lambda span=span, blend=blend, **k: Inpaint(frames=span, blend=blend, **k),
                                     target, source=src, lengths=n, seed=seed)
         if not args.skip_real:
-            real_cases("real", real_takes(sk, n), CONFIGS, blends)
+            real_cases("real", real_takes(sk, n), configs, blends)
 
     summary = {}
     for kind in sorted({r["kind"] for r in rows}):
