@@ -1032,7 +1032,7 @@ MMAE_FREE_FIELDS = ("lambda_bone", "lambda_vel", "lambda_foot", "lambda_foot_vel
 #: KeyframeVAEConfig fields that may differ between a fine-tuned keyframe VAE and the one it starts from (loss
 #: weights and dropout).
 KF_VAE_FREE_FIELDS = ("lambda_kl", "lambda_bone", "lambda_index", "lambda_root", "lambda_local_vel",
-                      "lambda_contact", "lambda_feet_height", "dropout")
+                      "lambda_contact", "lambda_feet_height", "latent_noise", "dropout")
 
 
 def _load_stage_init(model: nn.Module, path: str | os.PathLike, stage: str, config_class: type,
