@@ -62,6 +62,42 @@ def test_sampler_preset_sets_solver_and_steps(tiny_weights, tmp_path, capsys, mo
         sampler_preset("turbo")
 
 
+def test_realtime_preset_samples_as_its_folder_says_and_names_a_missing_one(tiny_weights, tmp_path, capsys,
+                                                                          monkeypatch):
+    import json
+    import shutil
+
+    from salad_core.pipeline import SaladPipeline
+
+    folder = tmp_path / "realtime"
+    shutil.copytree(tiny_weights, folder)
+    doc = json.loads((folder / "pipeline.json").read_text())
+    doc.update(solver="lcm", num_steps=2, guidance={"scale": 1.0, "rescale": 0.0, "interval": None})
+    (folder / "pipeline.json").write_text(json.dumps(doc))
+    seen = []
+    original = SaladPipeline.__call__
+
+    def spy(self, *a, **kw):
+        seen.append((kw["solver"], kw["num_steps"], self.solver, self.num_steps))
+        return original(self, *a, **kw)
+
+    monkeypatch.setattr(SaladPipeline, "__call__", spy)
+    base = ["-q", "generate", "a person walks", "--length", "16", "--no-render", "--no-attention", "--preset",
+            "realtime"]
+    assert cli.main([*base, "--weights", str(folder), "--out", str(tmp_path / "a")]) == 0
+    assert seen == [(None, None, "lcm", 2)]              # the call leaves solver and steps to the folder
+    assert cli.main([*base, "--weights", str(tmp_path / "none"), "--out", str(tmp_path / "b")]) != 0
+    err = capsys.readouterr().err
+    assert "'realtime' weights are missing" in err and "distill_realtime.py" in err
+    with pytest.raises(SystemExit) as exc:
+        cli.main([*base, "--weights", str(folder), "--out", str(tmp_path / "c"), "--steps", "4"])
+    assert exc.value.code == 2 and "not both" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["-q", "edit", "a person walks", "--target", "a person runs", "--preset", "realtime", "--out",
+                  str(tmp_path / "d")])
+    assert exc.value.code == 2 and "50-step weights" in capsys.readouterr().err
+
+
 def test_generate_and_edit_sample_at_the_weights_own_guidance(make_tiny_pipeline, tmp_path, capsys, monkeypatch):
     # the shipped weights choose their guidance (pipeline.json); the CLI used to override it with 7.5
     from salad_core.pipeline import SaladPipeline

@@ -13,10 +13,12 @@ from ._common import (UserError, _check_finite, _check_out_dir, _motion_file_nam
 from .files import _bvh_args, _load_features, _motion_input
 
 
-def _load_pipeline(weights: str | None):
+def _load_pipeline(weights: str | None, preset: str | None = None):
+    """The SALAD pipeline of ``--weights`` (``preset="realtime"``: the distilled weights; ``weights`` their folder)."""
     from salad_core.pipeline import SaladPipeline
 
-    return SaladPipeline.from_pretrained(weights)   # a missing or corrupt folder raises CheckpointError
+    # a missing or corrupt folder raises CheckpointError (a missing realtime folder names the command that makes it)
+    return SaladPipeline.from_pretrained(weights, preset=preset)
 
 
 _FUNCTION_WORDS = frozenset("a an the and then while his her their its is are to of in on up with as".split())
@@ -272,7 +274,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     _outputs(out, [name for st in stems for name in _motion_file_names(st, gif=not args.no_render)]
              + [f"{st}_attention.png" for st, fig in zip(stems, figures) if fig]
              + [f"{st}_explorer.html" for st, page in zip(stems, pages) if page], args.force, write=False)
-    pipe = _load_pipeline(args.weights)
+    pipe = _load_pipeline(args.weights, getattr(args, "weights_preset", None))
     _note_unknown_words(args, pipe, prompts)
     guidance = _guidance(args, pipe)
     _say_guidance(args, guidance)
@@ -932,8 +934,10 @@ def _generation_args(p: argparse.ArgumentParser, length: int) -> None:
     p.add_argument("--steps", type=int, default=None, help="sampler steps, 1..1000 (default 50)")
     p.add_argument("--solver", default=None,
                    help="scheduler: ddim (default), ddpm, dpm++, euler, euler_ancestral, unipc")
-    p.add_argument("--preset", default=None, choices=("paper", "fast"),
-                   help="sampler preset instead of --solver/--steps: paper = DDIM 50 steps, fast = DPM-Solver++ 20 steps")
+    p.add_argument("--preset", default=None, choices=("paper", "fast", "realtime"),
+                   help="sampler preset instead of --solver/--steps: paper = DDIM 50 steps, fast = DPM-Solver++ 20 "
+                        "steps, realtime = the few-step distilled weights (salad_core/weights/salad_realtime, or "
+                        "--weights) sampled as their folder says (generate and demo only)")
     p.add_argument("--weights", default=None, help="pipeline folder (default: the shipped weights)")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
 
@@ -956,7 +960,20 @@ def _html_arg(p: argparse.ArgumentParser, files: str) -> None:
 
 
 def _resolve_sampler(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
-    """Fill ``args.solver``/``args.steps`` from ``--preset`` (exclusive with them) or the defaults."""
+    """Fill ``args.solver``/``args.steps`` from ``--preset`` (exclusive with them) or the defaults.
+
+    ``--preset realtime`` selects the distilled weights instead (``args.weights_preset``; ``--weights`` then names
+    their folder): the solver and steps stay None, so the folder's ``pipeline.json`` decides them."""
+    args.weights_preset = None
+    if args.preset == "realtime":
+        if args.solver is not None or args.steps is not None:
+            parser.error("--preset realtime samples as its weights folder says; give --preset or --solver/--steps, "
+                         "not both")
+        if args.command not in ("generate", "demo") or getattr(args, "keymotion", None) is not None:
+            parser.error("--preset realtime is for SALAD's generate and demo; editing and inversion need the "
+                         "50-step weights (leave --preset out)")
+        args.weights_preset = "realtime"
+        return
     if args.preset is not None:
         if args.solver is not None or args.steps is not None:
             parser.error("--preset sets the solver and the steps; give --preset or --solver/--steps, not both")
