@@ -448,7 +448,7 @@ def build_consistency_task(data_dir: str | os.PathLike, config: ConsistencyTrain
     :func:`~salad_core.train.denoiser_trainer.build_denoiser_task`)."""
     from salad_core.data.dataset import MotionTextDataset, collate_motion_text
 
-    from .denoiser_trainer import CaptionFeatureCache, denoiser_latent_cache
+    from .denoiser_trainer import CaptionFeatureCache, cached_latents
 
     pipe = _teacher_pipeline(config.teacher, text_encoder)
     vae = pipe.vae.to(env.device).eval()
@@ -481,17 +481,7 @@ def build_consistency_task(data_dir: str | os.PathLike, config: ConsistencyTrain
     text_cache = CaptionFeatureCache(pipe.text_encoder, config.text_cache_size)
     captions = [line.caption for ds in (train_set, val_set) if ds is not None for line in ds.all_captions()]
     text_cache.prefill([*captions, ""])
-    latents = None
-    if config.latent_cache:
-        own = config.latent_cache_dir is None and cache_dir is not None
-        where = config.latent_cache_dir or cache_dir
-        if where is None:
-            import tempfile
-
-            where = tempfile.mkdtemp(prefix="salad_latent_cache_")
-            log.warning("no latent cache folder given: using %s (removed by nobody; pass cache_dir)", where)
-        latents = denoiser_latent_cache(vae, [d for d in (train_set, val_set) if d is not None], config, where, env,
-                                        prune=own)
+    latents = cached_latents(vae, train_set, val_set, config, cache_dir, env)
     latent_shape = (config.max_length // vae.downsample, vae.num_parts, vae.latent_dim)
     prepare = partial(prepare_consistency_batch, vae=vae, text=text_cache, scheduler=scheduler, config=config,
                       latent_shape=latent_shape, grid=grid, latents=latents, latent_stats=pipe.latent_stats)

@@ -52,7 +52,7 @@ from .config import DenoiserTrainConfig
 from .distributed import DistEnv, all_reduce_sum, init_distributed
 
 __all__ = ["DenoiserObjective", "CaptionFeatureCache", "train_denoiser", "build_denoiser_task", "load_frozen_vae",
-           "resolve_checkpoint", "denoiser_latent_cache", "denoiser_latent_stats", "prepare_denoiser_batch",
+           "resolve_checkpoint", "cached_latents", "denoiser_latent_cache", "denoiser_latent_stats", "prepare_denoiser_batch",
            "split_denoiser_inputs", "vae_statistics"]
 
 log = logging.getLogger(__name__)
@@ -320,6 +320,24 @@ def denoiser_latent_cache(vae: nn.Module, datasets: Sequence[Any], config: Denoi
     return open_or_build_shared(cache_dir, signature, build, env, prune=prune)
 
 
+def cached_latents(vae, train_set, val_set, config, cache_dir, env):
+    """The frozen VAE's posteriors of every training window of ``train_set`` and ``val_set``
+    (:func:`denoiser_latent_cache`), or None when ``config.latent_cache`` is off. The cache lives in
+    ``config.latent_cache_dir`` (kept) or else ``cache_dir`` (the run's, pruned of stale entries), or else a
+    temporary folder nobody removes (warned)."""
+    if not config.latent_cache:
+        return None
+    own = config.latent_cache_dir is None and cache_dir is not None
+    where = config.latent_cache_dir or cache_dir
+    if where is None:
+        import tempfile
+
+        where = tempfile.mkdtemp(prefix="salad_latent_cache_")
+        log.warning("no latent cache folder given: using %s (removed by nobody; pass cache_dir)", where)
+    return denoiser_latent_cache(vae, [d for d in (train_set, val_set) if d is not None], config, where, env,
+                                 prune=own)
+
+
 def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike, model_config: Any,
                         train_config: DenoiserTrainConfig, env: DistEnv, text_encoder: Any = "minilm",
                         diffusion_config: Any = None, *, cache_dir: str | os.PathLike | None = None) -> TrainTask:
@@ -373,17 +391,7 @@ def build_denoiser_task(data_dir: str | os.PathLike, vae_path: str | os.PathLike
     captions = [line.caption for ds in (train_set, val_set) if ds is not None for line in ds.all_captions()]
     if text_cache.prefill(captions):
         log.info("text features of %d captions computed up front", len(text_cache._store))
-    latents = None
-    if train_config.latent_cache:
-        own = train_config.latent_cache_dir is None and cache_dir is not None
-        where = train_config.latent_cache_dir or cache_dir
-        if where is None:
-            import tempfile
-
-            where = tempfile.mkdtemp(prefix="salad_latent_cache_")
-            log.warning("no latent cache folder given: using %s (removed by nobody; pass cache_dir)", where)
-        latents = denoiser_latent_cache(vae, [d for d in (train_set, val_set) if d is not None], train_config,
-                                        where, env, prune=own)
+    latents = cached_latents(vae, train_set, val_set, train_config, cache_dir, env)
     latent_stats = denoiser_latent_stats(vae, train_set) if train_config.latent_norm else None
     bucketing = train_config.batching in ("buckets", "frames")
     frames_norm = expected_latent_frames(train_set.lengths, vae.downsample) if bucketing else None
