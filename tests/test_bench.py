@@ -386,3 +386,33 @@ def test_interleaved_medians_alternates_order_and_takes_medians():
     assert "".join(calls) == "ab" + "ab" + "ba" + "ab" + "ba"
     with pytest.raises(ValueError, match="rounds"):
         interleaved_medians(first, second, rounds=0)
+
+
+def test_realtime_rows_time_both_pipelines_and_say_which_realtime(tiny_pipe, tmp_path, monkeypatch):
+    """Without realtime weights the section times a stand-in (lcm, the export's steps, no guidance) sharing the
+    default's models and says so; given a pipeline it times that one; ratios are the measured quotients."""
+    from salad_core.bench import realtime as rt
+    from salad_core.train.consistency import DEFAULT_SAMPLE_STEPS
+
+    monkeypatch.setattr("salad_core.pipeline.realtime_weights_dir", lambda: tmp_path / "missing")
+    stand_in, what = rt.realtime_pipelines(tiny_pipe)
+    assert what.startswith("stand-in") and str(tmp_path / "missing") in what
+    assert (stand_in.solver, stand_in.num_steps, stand_in.guidance.scale) == ("lcm", DEFAULT_SAMPLE_STEPS, 1.0)
+    assert stand_in.denoiser is tiny_pipe.denoiser and stand_in.vae is tiny_pipe.vae
+    calls = []
+    original = type(tiny_pipe).__call__
+
+    def spy(self, *a, **kw):
+        calls.append((self.solver, kw["num_steps"]))
+        return original(self, *a, **kw)
+
+    monkeypatch.setattr(type(tiny_pipe), "__call__", spy)
+    rows, note = rt.realtime_rows(tiny_pipe, stand_in, frames=16, rounds=1, default_steps=3)
+    assert sorted(set(calls)) == [("ddim", 3), ("lcm", None)] and len(calls) == 4   # warm-up + 1 round each
+    slow, fast, target = rows
+    assert slow.value > 0 and fast.value > 0 and fast.reference == slow.value
+    assert fast.ratio == pytest.approx(fast.value / slow.value)
+    assert target.ratio == pytest.approx(fast.value / rt.REALTIME_TARGET_S) and f"lcm {DEFAULT_SAMPLE_STEPS} steps" in fast.measure
+    assert "interleaved" in note
+    with pytest.raises(Exception, match="realtime"):
+        rt.realtime_pipelines(tiny_pipe, tmp_path / "nowhere")       # a named folder must exist

@@ -1,6 +1,6 @@
 """``salad bench``: how fast salad runs on this machine, as one table measured in one run.
 
-Six sections, each a function returning rows of the table (:class:`Row`), run in this order:
+Seven sections, each a function returning rows of the table (:class:`Row`), run in this order:
 
 * ``memory``: peak memory of one generation with streaming attention capture (the default
   ``capture_attention=True``, a running mean per step bin) at 50 and at 200 DDIM steps: the peak
@@ -38,6 +38,12 @@ Six sections, each a function returning rows of the table (:class:`Row`), run in
   process; ``ratio`` = before / after (a speed-up). Shipped VAE and MiniLM, the shipped recipe's
   denoiser and batch size.
 
+* ``realtime`` (opt-in): a whole 196-frame generation at batch 1 with the few-step weights distilled from the
+  default ones (``--realtime DIR``, else the shipped ``salad_realtime`` folder, else a stand-in of the same cost:
+  the default weights sampled with the ``lcm`` solver, its steps, no guidance; the notes say which), side by side
+  with the default's 50 guided DDIM steps in interleaved rounds; ratio = realtime / default, and the realtime time
+  against the 0.1 s target.
+
 * ``compile`` (opt-in, not part of the default run: compiling takes about a minute): one guided
   forward of the shipped default denoiser (196 frames, batch 1) eager against ``torch.compile``
   (inductor), the compile time and the number of 50-step generations after which compiling pays
@@ -65,6 +71,7 @@ One job per module:
 ``memory``            the ``memory`` section (peak RSS)
 ``training``          the ``training`` and ``train`` sections
 ``compile_trial``     the opt-in ``compile`` section
+``realtime``          the opt-in ``realtime`` section
 ``run``               :func:`run_benchmarks`: every section into one table
 ``table``             the table as Markdown
 
@@ -84,7 +91,8 @@ _EXPORTS: dict[str, str] = {
     "SAMPLING_STEPS": "plan", "SECTIONS": "plan", "SHORT_FRAMES": "plan", "SKELETON": "plan", "SOURCE": "plan",
     "SWAPPED": "plan", "Case": "plan", "Plan": "plan", "Row": "plan", "best_rates": "roofline",
     "matmul_rates": "roofline", "matmul_rates_by_backend": "roofline", "paired_step_times": "roofline",
-    "roofline_seconds": "roofline", "step_products": "roofline", "run_benchmarks": "run",
+    "roofline_seconds": "roofline", "step_products": "roofline", "REALTIME_TARGET_S": "realtime",
+    "realtime_pipelines": "realtime", "realtime_rows": "realtime", "run_benchmarks": "run",
     "forward_variant_rows": "speed", "speed_rows": "speed", "time_denoiser_steps": "speed",
     "format_table": "table", "machine_header": "table", "TrainRecipe": "training",
     "train_profile_rows": "training", "train_recipe": "training", "training_rows": "training",

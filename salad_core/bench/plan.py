@@ -25,7 +25,7 @@ PROMPT_TOKENS = (8, 24)
 BATCHES = (1, 32)
 SECTIONS = ("memory", "overheads", "speed", "training")
 #: Sections run only when asked for by name.
-OPTIONAL_SECTIONS = ("compile", "train")
+OPTIONAL_SECTIONS = ("compile", "train", "realtime")
 COLUMNS = ["section", "measure", "setting", "value", "unit", "reference", "ratio", "note"]
 
 SOURCE = "a man walks forward and waves his right hand"

@@ -17,6 +17,7 @@ from .memory import memory_rows
 from .overheads import batching_rows, bench_pipeline, overhead_rows
 from .plan import (BATCHES, COLUMNS, GUIDANCE, MOTION_FRAMES, OPTIONAL_SECTIONS, PROMPT_TOKENS, SAMPLING_STEPS,
                    SECTIONS, SHORT_FRAMES, Plan, Row)
+from .realtime import realtime_rows
 from .speed import forward_variant_rows, speed_rows
 from .table import machine_header
 from .training import train_profile_rows, train_recipe, training_rows
@@ -27,7 +28,8 @@ log = logging.getLogger(__name__)
 
 
 def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None = None,
-                   weights: str | Path | None = None, train_data: str | Path | None = None) -> "Any":
+                   weights: str | Path | None = None, train_data: str | Path | None = None,
+                   realtime: str | Path | None = None) -> "Any":
     """Measure everything (or ``sections``) in this process and return the table.
 
     Parameters
@@ -43,6 +45,9 @@ def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None 
         Pipeline folder for the memory and overhead sections (default: the shipped weights).
     train_data : path, optional
         HumanML3D-layout folder of the ``train`` section (default: a small procedural corpus).
+    realtime : path, optional
+        Few-step weights folder of the ``realtime`` section (default: the shipped ``salad_realtime`` if present,
+        else a stand-in, said in the notes; :mod:`salad_core.bench.realtime`).
 
     Returns
     -------
@@ -126,6 +131,14 @@ def run_benchmarks(quick: bool, threads: int, *, sections: Sequence[str] | None 
                                                          1 if plan.quick else 2, data=train_data, weights=weights)
             rows += train_rows
             notes += train_notes
+        if "realtime" in sections:
+            pipe, _ = bench_pipeline(weights)
+            log.info("realtime: the default and the few-step pipeline, %d rounds", 2 if plan.quick else 5)
+            rt_rows, rt_note = realtime_rows(pipe, realtime, rounds=2 if plan.quick else 5)
+            rows += rt_rows
+            notes.append(rt_note)
+            del pipe
+            gc.collect()
         if "compile" in sections:
             log.info("compile: torch.compile of the default denoiser")
             rows += compile_rows(denoiser_cases(weights)[1], reps=3 if plan.quick else 10)

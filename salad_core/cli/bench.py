@@ -29,6 +29,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sections", default=None, help=f"comma-separated subset of {','.join(SECTIONS)} (default: "
                    f"all of them), or the opt-in {','.join(OPTIONAL_SECTIONS)}")
     p.add_argument("--weights", default=None, help="pipeline folder for memory/overheads (default: shipped)")
+    p.add_argument("--realtime", default=None, help="realtime section: few-step weights folder (default: the shipped "
+                   "salad_realtime if installed, else a stand-in of the same cost, said in the notes)")
     p.add_argument("--train-data", default=None, help="train section: HumanML3D-layout corpus (default: a small "
                    "procedural corpus built in a temporary folder)")
     return p
@@ -50,7 +52,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from salad_core.allocator import tune_from_environment
 
     tune_from_environment()   # as the salad command does (also for the bench/ scripts that call this)
-    df = run_benchmarks(args.quick, threads, sections=sections, weights=args.weights, train_data=args.train_data)
+    df = run_benchmarks(args.quick, threads, sections=sections, weights=args.weights, train_data=args.train_data,
+                        realtime=args.realtime)
     text = format_table(df)
     print(text, end="")
     if out is not None:
