@@ -830,6 +830,14 @@ class SaladPipeline:
         if inversion is not None and not isinstance(inversion, Inversion):
             raise TypeError(f"inversion must be the Inversion that pipe.invert(motion, prompt) returns, got "
                             f"{type(inversion).__name__} {inversion!r:.60}")
+        from salad_core.attention.ranking import ranked_edit, ranked_inpaint
+
+        motions = 1 if inversion is None else len(inversion.prompts)
+        if ranked_inpaint(edits, inversion is not None, motions) is not None:   # Inpaint.candidates: K edits, the best
+            return ranked_edit(lambda specs: self.edit(source, target, specs, lengths, seed, guidance_scale, num_steps,
+                                                       solver, noise, inversion, capture_attention, probe, progress,
+                                                       ground), edits, inverted=inversion is not None, motions=motions,
+                               skeleton=self.skeleton.name)
         solver = _check_solver(solver)
         null_schedule = corrections = None
         if inversion is not None:

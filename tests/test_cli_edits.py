@@ -56,6 +56,8 @@ def _run(tmp_path, name, *flags, source=SOURCE):
      lambda a: [dataclasses.replace(a.parse_inpaint("@12:28", blend=1), guidance=None, smooth=0.0)]),
     (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-noise", "matched"],
      lambda a: [dataclasses.replace(a.parse_inpaint("@12:28", blend=1), noise="matched")]),
+    (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-noise", "fresh", "--inpaint-candidates", "2"],
+     lambda a: [dataclasses.replace(a.parse_inpaint("@12:28", blend=1), noise="fresh", candidates=2)]),
 ])
 def test_each_edit_flag_gives_the_python_edit(tmp_path, pipe, flags, edits):
     import salad_core.attention as a
@@ -94,6 +96,9 @@ def test_inpainting_the_arms_keeps_the_legs(tmp_path):
     (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-guidance", "lots"],
      "--inpaint-guidance lots: give a number, 'auto' or 'motion'"),
     (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-smooth", "-1"], "Inpaint.smooth=-1.0"),
+    (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-candidates", "0"], "Inpaint.candidates=0"),
+    (["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-candidates", "2"],
+     "candidates would be alike; give noise='fresh'"),
 ])
 def test_bad_edit_flags_are_one_line_errors(tmp_path, capsys, flags, message):
     code = cli.main(["-q", "edit", SOURCE, *flags, "--length", "40", "--steps", "2", "--out", str(tmp_path / "x")])
@@ -260,3 +265,13 @@ def test_mirror_take_of_a_generated_motion_is_a_one_line_error(tmp_path, capsys)
     code = cli.main(["-q", "edit", SOURCE, "--mirror-take", "legs", "--length", "40", "--steps", "2",
                      "--out", str(tmp_path / "x")])
     assert code == 2 and "--mirror-take mirrors a given take" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", [["edit", SOURCE], ["invert", "take.npy", "--prompt", SOURCE]])
+def test_inpaint_candidates_flag_reaches_the_spec(command):
+    from salad_core.cli.generate import _edit_specs
+
+    flags = ["--target", "a person jumps", "--inpaint", "@12:28", "--out", "x"]
+    args = cli.build_parser().parse_args(command + flags + ["--inpaint-candidates", "3"])
+    assert _edit_specs(args)[0].candidates == 3
+    assert _edit_specs(cli.build_parser().parse_args(command + flags))[0].candidates == "auto"

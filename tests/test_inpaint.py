@@ -319,10 +319,10 @@ def test_inverted_take_span_keeps_the_frames_after_it_in_place(pipe, sample_feat
     """A regenerated middle span of a take that turns: with ``root="source"`` (default) the frames after the span
     keep their global place and facing; the seams are cross-faded; the edited branch's guidance is settable."""
     inv = pipe.invert(sample_features[:FRAMES], "a person walks forward and turns around", num_steps=STEPS)
-    out = pipe.edit(inversion=inv, target="a person jumps", edits=[Inpaint(frames=(16, 32), guidance=7.5)],
-                    ground=False)
-    free = pipe.edit(inversion=inv, target="a person jumps", edits=[Inpaint(frames=(16, 32), guidance=7.5,
-                                                                            root="edit")], ground=False)
+    out = pipe.edit(inversion=inv, target="a person jumps", ground=False,
+                    edits=[Inpaint(frames=(16, 32), guidance=7.5, candidates=1)])
+    free = pipe.edit(inversion=inv, target="a person jumps", ground=False,
+                     edits=[Inpaint(frames=(16, 32), guidance=7.5, root="edit", candidates=1)])
     src, ed = out.source.joints[0], out.edited.joints[0]
     glob = lambda a, b, fr: float(np.linalg.norm(a[fr] - b[fr], axis=-1).mean() * 100)
     assert glob(src, ed, slice(0, 16)) < 1.0 and glob(src, ed, slice(33, None)) < 1.0      # global, not aligned

@@ -13,6 +13,8 @@
   :class:`Erase`, :class:`Shift`, :class:`ShiftTemporal`, :class:`ExampleBased`) and their pure kernels.
 * :mod:`.inpaint`: :class:`Inpaint`, regenerate chosen body parts / a frame span and keep the rest
   (a latent-space step of the edit loop), and :func:`parse_inpaint` for ``PARTS[@START:END]``.
+* :mod:`.ranking`: ``Inpaint(candidates=K)``, the best of ``K`` fresh-noise seeds by the T2M evaluator's
+  text-motion distance to the target prompt over the regenerated frames (:class:`TextMotionScorer`).
 * :mod:`.labels`: :func:`edit_label`, the short caption of edits that figures and GIFs show (``Mirror(legs)``,
   ``Inpaint(arms@20:60)``).
 * :mod:`.composite`: what :class:`Inpaint` and :class:`MirrorTake` keep, taken from the source's decoded
@@ -37,6 +39,7 @@ from .edits import (ERASE_MODES, MIRROR_GROUPS, REWEIGHT_RANGE, EditSpec, Erase,
                     validate_edits)
 from .inpaint import INPAINT_GROUPS, Inpaint, inpaint_parts, parse_inpaint
 from .grounding import ground_edit
+from .ranking import TextMotionScorer
 from .mirror_take import MirrorTake, invert_mirror, mirror_take_edits
 from .composite import composite_features, composite_output
 from .labels import edit_label
@@ -50,7 +53,7 @@ __all__ = [
     "capture_cross_attention", "CaptureConfig", "AttentionStore", "AttentionMaps", "TokenInfo", "as_capture_config",
     "EditSpec", "WordSwap", "Refine", "Reweight", "Mirror", "MirrorSelfAttention", "InjectSelfAttention", "validate_edits",
     "Erase", "Shift", "ShiftTemporal", "ExampleBased", "ERASE_MODES", "erase_columns", "shift_columns",
-    "shift_temporal", "seeded_noise", "Inpaint", "INPAINT_GROUPS", "inpaint_parts", "parse_inpaint",
+    "shift_temporal", "seeded_noise", "Inpaint", "INPAINT_GROUPS", "inpaint_parts", "parse_inpaint", "TextMotionScorer",
     "MirrorTake", "invert_mirror", "mirror_take_edits", "ground_edit", "composite_features", "composite_output", "edit_label",
     "count_repetitions", "motion_repetitions", "count_peaks", "attention_signal", "motion_signal",
     "MIRROR_GROUPS", "REWEIGHT_RANGE", "mirror_parts", "mirror_self_attention", "mirror_permutation", "reweight_columns", "map_columns",

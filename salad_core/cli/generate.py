@@ -425,6 +425,12 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inpaint-guidance", default=None, metavar="W|auto|motion",
                    help="guidance weight of the in-painted region's branch: a number, 'auto' (default: 7.5 for a "
                         "frame span, the motion's own for body parts alone) or 'motion' (the motion's own)")
+    p.add_argument("--inpaint-candidates", type=int, default=None, metavar="K",
+                   help="run the in-painting K times, the region's noise from K seeds (0 .. K-1), and keep the edit "
+                        "the text-motion evaluator finds closest to --target (K times the cost; 1: one edit; default: "
+                        "4 for a frame span of a given take, 1 otherwise). Needs fresh noise in the region: the "
+                        "default for a given take (--motion, salad invert), --inpaint-noise fresh for a generated "
+                        "motion")
     p.add_argument("--no-composite", action="store_true",
                    help="keep what the decoder makes of the kept parts instead of taking them from the source's "
                         "decoding (--inpaint, --mirror-take; the decoder lets edited parts move kept ones a few cm)")
@@ -476,7 +482,8 @@ def _inpaint_guidance(text: str):
 
 def _inpaint_options(args: argparse.Namespace) -> dict:
     """The ``--inpaint-*`` options that were given (the others keep :class:`Inpaint`'s defaults)."""
-    out = {name: getattr(args, f"inpaint_{name}") for name in ("smooth", "smooth_window", "resample", "jump", "noise")
+    out = {name: getattr(args, f"inpaint_{name}") for name in ("smooth", "smooth_window", "resample", "jump", "noise",
+                                                               "candidates")
            if getattr(args, f"inpaint_{name}", None) is not None}
     if getattr(args, "inpaint_guidance", None) is not None:
         out["guidance"] = _inpaint_guidance(args.inpaint_guidance)

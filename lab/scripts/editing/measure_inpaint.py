@@ -38,6 +38,12 @@ printed).
 Settings that differ only after decoding (:data:`POST_KEYS`: the composite, its fade, root handling and seam
 smoothing) share one sampling run per case: the edit is sampled with ``composite=False, ground=False`` and each
 setting's composite and grounding applied to it, as ``pipe.edit`` does.
+
+``best of K`` settings (``Inpaint.candidates``): the case is sampled from the region seeds 0 .. K-1 (seed 0 is the
+run the same setting without candidates has), each composited and grounded as above, and the one closest to the
+target by the evaluator's text-motion distance kept (``salad_core.attention.ranking.choose_candidate``, as
+``pipe.edit`` does); the row records every candidate's distance and target check (``candidate_checks``), and the
+summary the check of any candidate (an oracle), of a random one (expected) and of the first.
 """
 from __future__ import annotations
 
@@ -51,6 +57,7 @@ import numpy as np
 from salad_core.attention import Inpaint
 from salad_core.attention.composite import composite_output
 from salad_core.attention.grounding import ground_edit
+from salad_core.attention.ranking import TextMotionScorer, choose_candidate
 from salad_core.eval.physics_prompts import PROMPTS
 from salad_core.pipeline import SaladPipeline
 from salad_core.skeleton import PART_NAMES, get_skeleton
@@ -166,6 +173,12 @@ def summarize(rows: list[dict]) -> dict:
     if any("seam_jerk_ratio" in r for r in rows):
         out["seam_jerk_ratio"] = mean(r.get("seam_jerk_ratio") for r in rows)
         out["seam_within_1.5x"] = mean(float(r["seam_jerk_ratio"] <= 1.5) for r in rows if "seam_jerk_ratio" in r)
+    ranked = [r for r in rows if "candidate_checks" in r]
+    if ranked:      # the best of K by the evaluator against any of the K (an oracle) and a random one (expected)
+        out["any_candidate_pass"] = mean(float(any(r["candidate_checks"])) for r in ranked)
+        out["random_candidate_pass"] = mean(float(np.mean(r["candidate_checks"])) for r in ranked)
+        out["first_candidate_pass"] = mean(float(r["candidate_checks"][0]) for r in ranked)
+        out["chosen_not_first"] = mean(float(r["chosen"] != 0) for r in ranked)
     return out
 
 
@@ -221,7 +234,7 @@ def tuning_grid() -> dict[str, dict]:
     the sampling (the region's noise, the edited branch's guidance, RePaint resampling) crossed with the composite
     (off; fade 8; fade 8 plus the least-squares seam smoothing with strength / window); and the region's noise
     matched to the source's inverted noise (``noise="matched"``) with the chosen composite only."""
-    base = dict(noise="fresh", guidance=None, resample=1, jump=1)
+    base = dict(noise="fresh", guidance=None, resample=1, jump=1, candidates=1)
     sampling = {"source noise": dict(base, noise="source"),
                 "fresh": dict(base),
                 "fresh g7.5": dict(base, guidance=7.5),
@@ -240,8 +253,13 @@ def tuning_grid() -> dict[str, dict]:
     matched = {"matched": dict(base, noise="matched"),
                "matched g7.5": dict(base, noise="matched", guidance=7.5),
                "matched resample 3 jump 5": dict(base, noise="matched", resample=3, jump=5)}
+    # the best of 4 fresh-noise seeds by the evaluator's text-motion distance (Inpaint.candidates)
+    ranked = {"fresh best of 4": dict(base, candidates=4),
+              "fresh g7.5 best of 4": dict(base, guidance=7.5, candidates=4),
+              "fresh resample 3 jump 5 best of 4": dict(base, resample=3, jump=5, candidates=4),
+              "fresh g7.5 resample 3 jump 5 best of 4": dict(base, guidance=7.5, resample=3, jump=5, candidates=4)}
     chosen = "fade 8 smooth 100/8"
-    grid.update({f"{s} | {chosen}": dict(skw, **post[chosen]) for s, skw in matched.items()})
+    grid.update({f"{s} | {chosen}": dict(skw, **post[chosen]) for s, skw in {**matched, **ranked}.items()})
     return grid
 
 
@@ -255,9 +273,12 @@ def select_grid(text: str, error) -> dict[str, dict]:
     return {g: grid[g] for g in names}
 
 
-def split_config(kw: dict) -> tuple[dict, dict]:
-    """Inpaint options -> (sampling options, post-decoding options of :data:`POST_KEYS`)."""
-    return ({k: v for k, v in kw.items() if k not in POST_KEYS}, {k: v for k, v in kw.items() if k in POST_KEYS})
+def split_config(kw: dict) -> tuple[dict, dict, object]:
+    """Inpaint options -> (sampling options, post-decoding options of :data:`POST_KEYS`, candidates): the candidates
+    (``Inpaint.candidates``, ranked after the composite; None: the default's, resolved per case) are run as that many
+    single edits from seeds 0, 1, ..., shared by the settings that differ only in them."""
+    samp = {k: v for k, v in kw.items() if k not in POST_KEYS and k != "candidates"}
+    return samp, {k: v for k, v in kw.items() if k in POST_KEYS}, kw.get("candidates")
 
 
 def part_configs(configs: dict[str, dict]) -> dict[str, dict]:
@@ -293,14 +314,15 @@ def main() -> None:
     args = ap.parse_args()
     t0 = start_run(args.threads)
     pipe = SaladPipeline.from_pretrained()
+    scorer = TextMotionScorer()
     sk = get_skeleton()
     blends = [int(b) for b in args.blends.split(",")]
     n = args.frames
     rows: list[dict] = []
 
-    def record(kind, name, blend, config, inp, target, out, seconds):
+    def record(kind, name, blend, config, inp, target, out, seconds, ranking=None):
         row = dict(kind=kind, case=name, target=target, inpaint=inp.describe(), blend=blend, config=config,
-                   seconds=seconds, **measure(pipe, out, inp, target, sk))
+                   seconds=seconds, **measure(pipe, out, inp, target, sk), **(ranking or {}))
         rows.append(row)
         print(f"{kind:14s} {name[:24]:24s} {inp.describe():10s} b{blend} {config[:40]:40s} kept {row['kept_cm']:5.2f} "
               f"pose {row['kept_pose_cm']:5.2f} edited {row['edited_cm']:5.1f} "
@@ -308,24 +330,40 @@ def main() -> None:
               f"span {row.get('check_span', '-')!s:5s} (src {row['source_check']})", flush=True)
 
     def run(kind, name, blend, configs, make, target, **kw):
-        """Every config (name -> Inpaint options) on one case: one sampling per distinct sampling setting, then
-        each config's composite of it (as pipe.edit makes it: composite, then grounding when editing a take)."""
+        """Every config (name -> Inpaint options) on one case: one sampling per distinct sampling setting and
+        candidate seed, then each config's composite of it (as pipe.edit makes it: composite, then grounding when
+        editing a take); a config with candidates keeps the best of its seeds' composites as pipe.edit does
+        (choose_candidate), and records every candidate's distance and check."""
         groups: dict[tuple, list] = {}
         for config, ckw in configs.items():
-            samp, post = split_config(ckw)
-            groups.setdefault(tuple(sorted(samp.items())), []).append((config, post))
+            samp, post, k = split_config(ckw)
+            groups.setdefault(tuple(sorted(samp.items())), []).append((config, post, k))
         for samp, members in groups.items():
             base = make(**dict(samp), composite=False)
-            t = time.perf_counter()
-            raw = pipe.edit(target=target, edits=[base], num_steps=None if "inversion" in kw else args.steps,
-                            ground=False, **kw)
-            seconds = time.perf_counter() - t
-            for config, post in members:
+            # the candidates of each config ("auto" resolved as pipe.edit does), sampled one by one
+            members = [(config, post, dataclasses.replace(base, **({} if k is None else {"candidates": k}))
+                        .candidates_for("inversion" in kw)) for config, post, k in members]
+            base = dataclasses.replace(base, candidates=1)
+            raws, seconds = [], []
+            for seed in range(max(k for _, _, k in members)):
+                t = time.perf_counter()
+                raws.append(pipe.edit(target=target, edits=[dataclasses.replace(base, seed=base.seed + seed)],
+                                      num_steps=None if "inversion" in kw else args.steps, ground=False, **kw))
+                seconds.append(time.perf_counter() - t)
+            for config, post, k in members:
                 inp = dataclasses.replace(base, **{"composite": True, **post})
-                out = composite_output(pipe, raw, [inp]) if inp.composite else raw
-                if "inversion" in kw:
-                    out = ground_edit(pipe, out)
-                record(kind, name, blend, config, inp, target, out, seconds)
+                outs = []
+                for raw in raws[:k]:
+                    out = composite_output(pipe, raw, [inp]) if inp.composite else raw
+                    outs.append(ground_edit(pipe, out) if "inversion" in kw else out)
+                ranking = None
+                if k > 1:
+                    best, dists, window = choose_candidate(outs, dataclasses.replace(inp, candidates=k), scorer)
+                    checks = [target_check(measure(pipe, o, inp, target, sk)) for o in outs]
+                    ranking = dict(candidates=k, chosen=best, distances=dists, scored_frames=list(window),
+                                   candidate_checks=checks)
+                    outs = [outs[best]]
+                record(kind, name, blend, config, inp, target, outs[0], sum(seconds[:k]), ranking)
 
     def real_cases(kind, takes, configs, blends, only=None):
         for it in takes:
@@ -376,10 +414,11 @@ def main() -> None:
                             summary[f"{kind} {config} blend={blend} ({tag})"] = summarize(sub)
     cols = ("cases", "kept_cm", "kept_cm_max", "kept_pose_cm", "kept_within_2cm", "edited_cm", "seam_jerk_ratio",
             "seam_within_1.5x", "target_check_pass", "check_pass", "check_span_pass", "check_pass_fresh", "fresh_cases",
-            "seconds")
+            "seconds", "any_candidate_pass", "random_candidate_pass", "first_candidate_pass", "chosen_not_first")
     print("\ntarget_check_pass is the target's check: over the regenerated span for frame spans (check_span_pass), "
           "over the whole motion for body parts (check_pass); seconds: one sampling run (shared by the settings "
-          "that differ only after decoding)")
+          "that differ only after decoding; with candidates: the K runs); *_candidate_pass (best of K): the target "
+          "check of any of the K candidates, of a random one (expected), of the first (seed 0)")
     print("\n| setting | " + " | ".join(cols) + " |")
     print("|---" * (len(cols) + 1) + "|")
     for k, v in summary.items():

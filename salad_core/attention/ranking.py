@@ -1,0 +1,256 @@
+"""Ranking in-painting candidates by the text-motion evaluator: the best of ``K`` fresh-noise seeds.
+
+:class:`~salad_core.attention.inpaint.Inpaint` with ``candidates=K`` (K > 1; by default 4 for a frame span of an
+inverted motion) runs the whole edit ``K`` times, the region's fresh noise drawn from the seeds ``seed, seed + 1, ...,
+seed + K - 1`` (everything else the same), and keeps the candidate whose edited motion lies closest to the target
+prompt in the T2M evaluator's embedding space (:class:`TextMotionScorer`: the Euclidean text-motion distance of
+MM-Dist; lower is better). It costs ``K`` edits.
+
+What is scored (:func:`scoring_window`): the edited motion's final features (after the composite and grounding, as the
+edit returns them) over the regenerated motion frames: every frame for body parts alone; for a frame span, the span
+widened by whole latent frames of kept context, alternately on the left and the right, until it reaches the
+evaluator's minimum length (:data:`MIN_FRAMES`, the shortest clip the evaluator was trained on), clipped to the
+motion (a motion shorter than that is scored whole).
+
+The evaluator's text side takes ``word/POS`` tokens (HumanML3D's format); :func:`caption_tokens` tags a free prompt
+with the procedural corpus's own lexicon (:data:`salad_core.data.procedural.language.LEXICON`: the lemma for nouns
+and verbs, the word otherwise; an inflected verb form that the lexicon lists as a noun reads as a verb unless a
+determiner, number or adjective precedes it), so the corpus's captions get the corpus's tokens. Words the
+evaluator's vocabulary lacks become ``unk``, as in the evaluator's own protocol.
+
+The default evaluator is the shipped one for the procedural corpus (``salad_core/weights/evaluator``), HumanML3D
+features only.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import TYPE_CHECKING, Callable, Optional, Sequence
+
+import numpy as np
+import torch
+
+if TYPE_CHECKING:  # pragma: no cover
+    from salad_core.pipeline import EditOutput
+
+    from .inpaint import Inpaint
+
+__all__ = ["MIN_FRAMES", "TextMotionScorer", "caption_tokens", "scoring_window", "candidate_specs",
+           "ranked_inpaint", "choose_candidate", "ranked_edit"]
+
+#: The shortest window the scorer embeds (motion frames): the evaluator's training clips are at least this long
+#: (HumanML3D's ``min_length``).
+MIN_FRAMES = 40
+
+#: Coarse tags after which an inflected verb form reads as a noun ("two punches", "a few steps").
+_NOUN_CONTEXT = ("DET", "NUM", "ADJ")
+
+
+@functools.lru_cache(maxsize=1)
+def _verb_forms() -> dict[str, str]:
+    """Inflected verb form (third person, gerund) -> the verb's lemma, over the corpus's verbs."""
+    from salad_core.data.procedural.language import VERBS
+
+    return {form: lemma for lemma, forms in VERBS.items() for form in forms}
+
+
+def caption_tokens(text: str) -> list[str]:
+    """A free prompt -> ``word/POS`` tokens for the evaluator, one per word of
+    :func:`~salad_core.data.texts.split_words` (lower-cased alphabetic words); see the module docstring.
+
+    Raises
+    ------
+    ValueError
+        ``text`` has no word.
+    """
+    from salad_core.data.procedural.language import LEXICON
+    from salad_core.data.texts import split_words
+
+    words = split_words(text) if isinstance(text, str) else []
+    if not words:
+        raise ValueError(f"prompt {text!r} has no word to score")
+    forms = _verb_forms()
+    out, prev = [], None
+    for w in words:
+        lemma, pos = LEXICON.get(w, (w, "OTHER"))
+        if w in forms and pos == "NOUN" and prev not in _NOUN_CONTEXT:
+            lemma, pos = forms[w], "VERB"
+        out.append(f"{lemma if pos in ('NOUN', 'VERB') else w}/{pos}")
+        prev = pos
+    return out
+
+
+def scoring_window(num_frames: int, span: Optional[tuple[int, int]], min_frames: int = MIN_FRAMES,
+                   unit: int = 4) -> tuple[int, int]:
+    """Motion frames ``[a, b)`` scored for a motion of ``num_frames`` frames whose frames ``span`` ``(s, e)`` were
+    regenerated (None: all of them): the span grown by ``unit`` frames at a time, alternately at its start and its
+    end (where the motion has frames), until it holds ``min_frames``; the whole motion when it is shorter.
+
+    Raises
+    ------
+    ValueError
+        The span does not lie inside the motion.
+    """
+    if span is None:
+        return 0, int(num_frames)
+    a, b = int(span[0]), int(span[1])
+    if not 0 <= a < b <= num_frames:
+        raise ValueError(f"the regenerated span {span} does not lie inside the motion of {num_frames} frames")
+    left = True
+    while b - a < min_frames and (a > 0 or b < num_frames):
+        if (left and a > 0) or b >= num_frames:
+            a = max(0, a - unit)
+        else:
+            b = min(num_frames, b + unit)
+        left = not left
+    return a, b
+
+
+class TextMotionScorer:
+    """The T2M evaluator's text-motion distance of a motion to a prompt (lower: the motion matches it better).
+
+    Parameters
+    ----------
+    evaluator : T2MEvaluator, optional
+        With bundled word vectors; default: the shipped evaluator (:func:`salad_core.eval.train_evaluator.
+        load_packaged_evaluator`), loaded once per process.
+    min_frames : int
+        :func:`scoring_window`'s minimum window (motion frames).
+    """
+
+    def __init__(self, evaluator=None, min_frames: int = MIN_FRAMES) -> None:
+        self.evaluator = _shipped_evaluator() if evaluator is None else evaluator
+        self.unit = int(self.evaluator.config.unit_length)
+        if isinstance(min_frames, bool) or not isinstance(min_frames, int) or min_frames < self.unit:
+            raise ValueError(f"min_frames={min_frames!r} must be an int >= the evaluator's {self.unit} frames per code")
+        self.min_frames = min_frames
+
+    @property
+    def source(self) -> str:
+        """Where the evaluator came from (its folder), for the record."""
+        return str(getattr(self.evaluator, "source", type(self.evaluator).__name__))
+
+    def text_embedding(self, text: str) -> np.ndarray:
+        """``(C,)`` float64 embedding of a prompt (:func:`caption_tokens`)."""
+        return self.evaluator.caption_embeddings([caption_tokens(text)])[0].double().cpu().numpy()
+
+    def motion_embedding(self, features: np.ndarray, span: Optional[tuple[int, int]] = None) -> np.ndarray:
+        """``(C,)`` float64 embedding of ``features`` ``(N, D)`` (de-normalised HumanML3D features) over
+        :func:`scoring_window` of ``span``."""
+        x = np.asarray(features, dtype=np.float32)
+        d = self.evaluator.config.dim_pose
+        if x.ndim != 2 or x.shape[1] != d:
+            raise ValueError(f"features must be (N, {d}) de-normalised motion features, got shape {x.shape}")
+        if len(x) < self.unit:
+            raise ValueError(f"a motion of {len(x)} frames is too short to score (the evaluator needs {self.unit})")
+        a, b = self.window(len(x), span)
+        n = (b - a) // self.unit * self.unit
+        with torch.no_grad():
+            z = self.evaluator.normalize(x[a:a + n][None])                 # the evaluator's own statistics
+            emb = self.evaluator.motion_embeddings(z, torch.tensor([n]), mask_padding=True)
+        return emb[0].double().cpu().numpy()
+
+    def window(self, num_frames: int, span: Optional[tuple[int, int]]) -> tuple[int, int]:
+        """:func:`scoring_window` with this scorer's minimum and the evaluator's frames per code."""
+        return scoring_window(num_frames, span, self.min_frames, self.unit)
+
+    def distance(self, features: np.ndarray, text: str, span: Optional[tuple[int, int]] = None) -> float:
+        """Euclidean distance between the embeddings of ``text`` and of ``features`` ``(N, D)`` over ``span``'s
+        window (MM-Dist's distance of one pair)."""
+        return float(np.linalg.norm(self.text_embedding(text) - self.motion_embedding(features, span)))
+
+
+@functools.lru_cache(maxsize=1)
+def _shipped_evaluator():
+    from salad_core.eval.train_evaluator import load_packaged_evaluator
+
+    return load_packaged_evaluator()[0]
+
+
+# ------------------------------------------------------------------------------------------- the candidates
+def ranked_inpaint(edits: Sequence, inverted: bool, motions: int = 1) -> Optional["Inpaint"]:
+    """The edits' :class:`~salad_core.attention.inpaint.Inpaint` if it runs more than one candidate
+    (:meth:`~salad_core.attention.inpaint.Inpaint.candidates_for`; ``inverted``: the edit is of an inversion of
+    ``motions`` motions), else None."""
+    return next((e for e in edits if hasattr(e, "candidates_for") and e.candidates_for(inverted, motions) > 1), None)
+
+
+def candidate_specs(edits: Sequence, inpaint: "Inpaint", k: int) -> list[tuple]:
+    """The ``k`` edit lists of the candidates: ``edits`` with ``inpaint`` replaced by one candidate each (``seed + i``,
+    ``candidates=1``), in seed order."""
+    return [tuple(dataclasses.replace(e, seed=inpaint.seed + i, candidates=1) if e is inpaint else e for e in edits)
+            for i in range(k)]
+
+
+def choose_candidate(outputs: Sequence["EditOutput"], inpaint: "Inpaint",
+                     scorer: TextMotionScorer) -> tuple[int, list[float], tuple[int, int]]:
+    """The best of the candidate edits ``outputs`` (one motion each) by ``scorer``: ``(index, distances, window)``,
+    the distances of every candidate's edited motion to its target prompt over the scored ``window`` (motion frames,
+    :func:`scoring_window` of ``inpaint``'s regenerated span); the first of equal ones wins."""
+    scores, window = [], None
+    for out in outputs:
+        ed = out.edited
+        n = int(ed.lengths[0])
+        span = inpaint.frame_span(n)
+        window = scorer.window(n, span)
+        scores.append(scorer.distance(np.asarray(ed.features[0, :n]), ed.texts[0], span))
+    return int(np.argmin(scores)), scores, window
+
+
+def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, inverted: bool, skeleton: str,
+                motions: int = 1, scorer: Optional[TextMotionScorer] = None) -> "EditOutput":
+    """Run an edit whose :class:`~salad_core.attention.inpaint.Inpaint` runs ``K`` > 1 candidates
+    (:func:`ranked_inpaint`): ``run(specs)`` (the edit with those specs, e.g. ``pipe.edit`` with everything else
+    unchanged) for each of :func:`candidate_specs`, and return the best by ``scorer`` (:func:`choose_candidate`;
+    default: the shipped evaluator). Its ``edits`` are the chosen candidate's (run again they give the same motion); ``settings`` and
+    ``edited.settings`` record ``"inpaint_candidates"``: the seeds, the distances, the chosen index and seed, the
+    scored motion frames and the evaluator.
+
+    Parameters
+    ----------
+    inverted : bool
+        The edit is of an inversion (where ``noise="auto"`` draws the region's noise from the seed).
+    motions : int
+        Motions of the inversion (``candidates="auto"`` ranks one motion only).
+    skeleton : str
+        The pipeline's skeleton name (the evaluator reads HumanML3D features).
+
+    Raises
+    ------
+    ValueError
+        A region that does not start from the seed's noise (all candidates would be alike); an evaluator for other
+        features than the pipeline's; more than one motion in the edit (for a generated source: found after the first
+        candidate).
+    """
+    inpaint = ranked_inpaint(edits, inverted, motions)
+    if inpaint is None:
+        raise ValueError("ranked_edit needs an Inpaint with candidates > 1 among the edits")
+    k = inpaint.candidates_for(inverted, motions)
+    if motions != 1:
+        raise ValueError(f"Inpaint(candidates={k}) ranks the candidates of one motion; the edit has {motions}: edit "
+                         "them one at a time")
+    if not inpaint.fresh_noise(inverted):
+        raise ValueError(f"Inpaint(candidates={k}) draws the region's noise from {k} seeds, but with "
+                         f"noise={inpaint.noise!r} the region of a {'given' if inverted else 'generated'} motion starts "
+                         "from the source's own noise, so the candidates would be alike; give noise='fresh' (or "
+                         "'matched')")
+    scorer = TextMotionScorer() if scorer is None else scorer
+    dim = scorer.evaluator.config.dim_pose
+    from salad_core.skeleton import get_skeleton
+
+    if get_skeleton(skeleton).feature_dim != dim:
+        raise ValueError(f"the evaluator reads {dim}-d features; the pipeline's {skeleton} motions cannot be ranked "
+                         "with it")
+    specs = candidate_specs(edits, inpaint, k)
+    outputs = [run(specs[0])]
+    if len(outputs[0].edited) != 1:
+        raise ValueError(f"Inpaint(candidates={k}) ranks the candidates of one motion; the edit has "
+                         f"{len(outputs[0].edited)}: edit them one at a time")
+    outputs += [run(s) for s in specs[1:]]
+    best, scores, window = choose_candidate(outputs, inpaint, scorer)
+    record = {"seeds": [inpaint.seed + i for i in range(k)], "distances": scores, "chosen": best,
+              "seed": inpaint.seed + best, "frames": list(window), "evaluator": scorer.source}
+    out = outputs[best]
+    edited = dataclasses.replace(out.edited, settings={**out.edited.settings, "inpaint_candidates": record})
+    return dataclasses.replace(out, edited=edited, edits=specs[best],
+                               settings={**out.settings, "inpaint_candidates": record})
