@@ -234,8 +234,14 @@ def test_invert_records_the_inpaint_noise_mode(tmp_path, sample_dir):
     assert cli.main(["-q", "invert", str(take), "--prompt", "a person walks forward", "--target", "a person jumps",
                      "--inpaint", "@12:28", "--inpaint-noise", "matched", "--steps", "3", "--no-render",
                      "--out", str(out)]) == 0
-    edits = json.loads((out / "take_inversion.json").read_text())["edit"]["edits"]
+    edit = json.loads((out / "take_inversion.json").read_text())["edit"]
+    edits = edit["edits"]
     assert len(edits) == 1 and "noise='matched'" in edits[0] and edits[0].startswith("Inpaint(")
+    # a span of a given take is ranked over 4 seeds by default: the report keeps every score and the chosen seed
+    ranked = edit["inpaint_candidates"]
+    assert len(ranked["seeds"]) == len(ranked["distances"]) == 4
+    assert ranked["distances"][ranked["chosen"]] == min(ranked["distances"])
+    assert f"seed={ranked['seed']}," in edits[0] and ranked["seed"] == ranked["seeds"][ranked["chosen"]]
 
 
 def test_invert_mirror_take_all_gives_the_takes_mirror_image(tmp_path, sample_dir):

@@ -907,6 +907,9 @@ def cmd_invert(args: argparse.Namespace) -> int:
               "errors": _errors_cm(inv.errors, pipe.skeleton), "weights": pipe.source,
               "edit": None if not specs else {"target": target, "label": label, "edits": [repr(e) for e in specs]},
               "input": {"kind": loaded.kind, "crop": args.crop}}
+    if specs and "inpaint_candidates" in result.settings:    # Inpaint(candidates=K): every candidate's score
+        report["edit"]["inpaint_candidates"] = result.settings["inpaint_candidates"]
+        report["edit"]["edits"] = [repr(e) for e in result.edits]       # the chosen candidate's (its seed)
     if vs_take is not None:
         report["errors_vs_take"] = vs_take
     if loaded.bvh is not None:
