@@ -188,10 +188,16 @@ def test_edit_writes_both_attention_figures_on_one_symmetric_scale_and_a_labelle
     assert np.abs(left - right).mean() > 1 and (left.max(-1) < 90).any() and (right.max(-1) < 90).any()
 
 
-@needs_weights
-def test_invert_writes_the_reconstructions_and_the_edits_attention_and_labels_the_edit(tmp_path, sample_dir):
+def _sample_take(tmp_path, sample_dir):
+    """The first 40 frames of the HumanML3D sample's features, saved as ``tmp_path / "take.npy"``."""
     take = tmp_path / "take.npy"
     np.save(take, np.load(sample_dir / "new_joint_vecs" / "012314.npy")[:40])
+    return take
+
+
+@needs_weights
+def test_invert_writes_the_reconstructions_and_the_edits_attention_and_labels_the_edit(tmp_path, sample_dir):
+    take = _sample_take(tmp_path, sample_dir)
     out = tmp_path / "inv"
     assert cli.main(["-q", "invert", str(take), "--prompt", "a person walks forward", "--mirror", "legs",
                      "--attention", "--steps", "3", "--out", str(out)]) == 0
@@ -228,8 +234,7 @@ def test_unknown_inpaint_noise_is_refused_by_the_parser(tmp_path, capsys):
 @needs_weights
 def test_invert_records_the_inpaint_noise_mode(tmp_path, sample_dir):
     """``salad invert --inpaint ... --inpaint-noise matched``: the report's edit names the noise mode."""
-    take = tmp_path / "take.npy"
-    np.save(take, np.load(sample_dir / "new_joint_vecs" / "012314.npy")[:40])
+    take = _sample_take(tmp_path, sample_dir)
     out = tmp_path / "inv"
     assert cli.main(["-q", "invert", str(take), "--prompt", "a person walks forward", "--target", "a person jumps",
                      "--inpaint", "@12:28", "--inpaint-noise", "matched", "--steps", "3", "--no-render",
@@ -250,8 +255,7 @@ def test_invert_mirror_take_all_gives_the_takes_mirror_image(tmp_path, sample_di
     motion refuses the flag with one line."""
     from salad_core.motion import mirror_joints
 
-    take = tmp_path / "take.npy"
-    np.save(take, np.load(sample_dir / "new_joint_vecs" / "012314.npy")[:40])
+    take = _sample_take(tmp_path, sample_dir)
     out = tmp_path / "inv"
     assert cli.main(["-q", "invert", str(take), "--prompt", "a person walks forward", "--mirror-take", "all",
                      "--no-ground", "--steps", "3", "--out", str(out)]) == 0

@@ -39,8 +39,9 @@ RULE = ("reference = first folder at --reference-scale; eligible: fitted slide a
 def eligible(row: dict, ref: dict) -> bool:
     """``row`` / ``ref``: the fitted summaries of :func:`summarise` (``["fit"]``)."""
     slide_ok = row["slide_ms"] <= ref["slide_ci"][1]
-    fit_ok = abs(row["flight_fit_ms2"] - GRAVITY) <= abs(ref["flight_fit_ci"][0] - GRAVITY) or \
-        row["flight_fit_ms2"] <= ref["flight_fit_ci"][1]
+    lo, hi = ref["flight_fit_ci"]
+    fit = row["flight_fit_ms2"]
+    fit_ok = lo <= fit <= hi or abs(fit - GRAVITY) <= abs(ref["flight_fit_ms2"] - GRAVITY)
     return bool(slide_ok and fit_ok and row["stride_m"] >= 0.8 * ref["stride_m"]
                 and row["rise_m"] >= 0.8 * ref["rise_m"])
 
