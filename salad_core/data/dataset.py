@@ -380,6 +380,19 @@ class MotionTextDataset(Dataset):
         """Motion files that contribute at least one item."""
         return len(self._motions)
 
+    def entry(self, index: int) -> tuple[str, int, int]:
+        """``(motion_id, start, length)`` of item ``index``'s entry: its clip, first frame and frames (before any
+        cropping)."""
+        e = self._entries[index]
+        return e.motion_id, e.start, e.length
+
+    def clip_length(self, motion_id: str) -> int:
+        """Frames of a loaded clip (``new_joint_vecs/<motion_id>.npy``)."""
+        motion = self._motions.get(motion_id)
+        if motion is None:
+            raise KeyError(f"motion_id {motion_id!r} is not a clip of this dataset ({self.root}/{self.split})")
+        return len(motion)
+
     def _rng(self, index: int) -> np.random.Generator:
         if self.seed is None:
             return np.random.default_rng()

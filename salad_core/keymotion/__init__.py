@@ -16,7 +16,7 @@ _LAZY = {
     "ParallelSkipTransformer": "pst", "PSTConfig": "pst", "PST_DIFFUSION": "pst", "sample_latents": "pst", "PSTPrediction": "pst",
     "MotionMaskedAutoencoder": "mmae", "MMAEConfig": "mmae", "keyframe_lerp": "mmae", "scatter_keyframes": "mmae",
     "KeyMotionPipeline": "pipeline", "KeyMotionOutput": "pipeline",
-    "side_ids": "sides", "side_ids_of": "sides",
+    "side_ids": "sides", "side_ids_of": "sides", "RestPaddedDataset": "rest_padding", "hold_features": "rest_padding",
     "KeyMotionTrainConfig": "train", "train_keymotion": "train", "train_kf_vae": "train", "train_pst": "train",
     "train_mmae": "train", "KeyMotionRecipe": "train", "load_keymotion_recipe": "train",
 }

@@ -138,6 +138,9 @@ class KeyMotionTrainConfig(TrainConfig):
                                                # gives them; needs keyframe_ratio 0 (the VAE's fixed K)
     roundtrip_vae: str | None = None           # MMAE: the keyframe VAE of keyframe_roundtrip (a KeyMotion pipeline
                                                # folder or training root, a keyframe-VAE run folder or stem)
+    rest_padding: float = 0.0                  # share of the training items that are whole clips held still
+                                               # before and after, at a longer length (rest_padding.py: a one-action
+                                               # caption asked for longer does the action and stands, not slower)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -168,6 +171,10 @@ class KeyMotionTrainConfig(TrainConfig):
         if self.keyframe_roundtrip > 0 and self.keyframe_ratio:
             raise ValueError(f"{name}.keyframe_roundtrip needs keyframe_ratio=0: the keyframe VAE reconstructs its "
                              f"fixed number of keyframes, not {self.keyframe_ratio:.0%} of the frames")
+        if isinstance(self.rest_padding, bool) or not isinstance(self.rest_padding, (int, float)) \
+                or not 0.0 <= self.rest_padding <= 0.9:
+            raise ValueError(f"{name}.rest_padding={self.rest_padding!r} is invalid; use a share in [0, 0.9] "
+                             "(0: no padded windows)")
         if self.train_parts not in ("all", "decoder"):
             raise ValueError(f"{name}.train_parts={self.train_parts!r} is invalid; use 'all' or 'decoder'")
         if self.train_parts == "decoder" and self.init_from is None:
@@ -285,7 +292,14 @@ def _datasets(data_dir: str | os.PathLike, skeleton: str, num_keyframes: int, co
 
     train = MotionTextDataset(data_dir, "train", skeleton=skeleton, max_length=config.max_length,
                               random_crop=True, seed=config.seed)
-    train_set = KeyframeDataset(train, num_keyframes, config.keyframe_method, ratio=ratio)
+    padded = train
+    if config.rest_padding > 0:
+        from salad_core.keymotion.rest_padding import RestPaddedDataset
+
+        padded = RestPaddedDataset(train, config.rest_padding, seed=config.seed)
+        log.info("rest padding: %d held-still windows of whole clips among %d training items", padded.num_padded,
+                 len(padded))
+    train_set = KeyframeDataset(padded, num_keyframes, config.keyframe_method, ratio=ratio)
     try:
         val = MotionTextDataset(data_dir, "val", skeleton=skeleton, max_length=config.max_length,
                                 mean=train.mean, std=train.std, random_crop=False)

@@ -127,6 +127,9 @@ def main(argv=None, *, text_encoder=None) -> int:
                          "KeyframeVAEConfig.latent_noise)")
     ap.add_argument("--parts", choices=("decoder", "all"), default=None,
                     help="kf_vae: 'decoder' (default) freezes the encoder so the source's PST still fits")
+    ap.add_argument("--rest-padding", type=float, default=None,
+                    help="share of the training items that are whole clips held still before and after at a longer "
+                         "length (KeyMotionTrainConfig.rest_padding; any stage)")
     ap.add_argument("--threads", type=int, default=None, help="torch threads (default: the recipe's)")
     ap.add_argument("--resume", action="store_true")
     ap.add_argument("--export", type=Path, default=None, help="write the pipeline with the new model here (fp16)")
@@ -165,10 +168,15 @@ def main(argv=None, *, text_encoder=None) -> int:
                  "init_from": str(source), "progress": False}
     if args.threads is not None:
         overrides["num_threads"] = args.threads
+    if args.rest_padding is not None:
+        if not 0.0 <= args.rest_padding <= 0.9:
+            ap.error(f"--rest-padding {args.rest_padding}: use a share in [0, 0.9]")
     if args.scratch:                        # a new model: the recipe's schedule; --steps counts the whole run
         overrides = {k: v for k, v in overrides.items() if k in ("max_steps", "progress", "num_threads")}
         if args.lr is not None:
             overrides["lr"] = args.lr
+    if args.rest_padding is not None:
+        overrides["rest_padding"] = args.rest_padding
     if args.stage == "kf_vae":
         train_cfg = replace(recipe.kf_vae_train, train_parts=args.parts or "decoder", **overrides)
         model_cfg = replace(recipe.kf_vae_model or KeyframeVAEConfig(), **weights)
@@ -182,11 +190,15 @@ def main(argv=None, *, text_encoder=None) -> int:
         if args.kf_vae is not None and not args.kf_vae.is_dir():
             ap.error(f"--kf-vae {args.kf_vae}: no such run folder")
         train_cfg = replace(recipe.pst_train, **overrides)
+        # fine-tuning keeps the source PST's skip layout (a scratch PST side-canonical and without the middle pair,
+        # e.g., fine-tuned again); a new one takes the recipe's unless --no-middle-skip
+        source_skip = json.loads((source / "pst.json").read_text())["config"].get("middle_skip", True)
+        base_skip = recipe.pst_model.middle_skip if args.scratch else source_skip
         model_cfg = replace(recipe.pst_model, side_cue=bool(args.side_cue) or recipe.pst_model.side_cue,
                             latent_norm=bool(args.latent_norm) or recipe.pst_model.latent_norm,
                             side_canonical=bool(args.side_canonical) or recipe.pst_model.side_canonical,
-                            middle_skip=recipe.pst_model.middle_skip and not args.no_middle_skip)
-        if args.no_middle_skip and not args.scratch:
+                            middle_skip=base_skip and not args.no_middle_skip)
+        if args.no_middle_skip and not args.scratch and source_skip:
             ap.error("--no-middle-skip needs --scratch: the source PST's weights have the middle pair's projection")
         vae_path = args.kf_vae if args.kf_vae is not None else source / "kf_vae"
         result = train_pst(args.data, args.out, vae_path, model_cfg, train_cfg, text_encoder=encoder,
