@@ -14,9 +14,9 @@ import torch
 from salad_core.attention import Inpaint
 from salad_core.attention import ranking
 from salad_core.attention.edits import seeded_noise
-from salad_core.attention.inpaint import SPAN_CANDIDATES
-from salad_core.attention.ranking import (MIN_FRAMES, TextMotionScorer, candidate_specs, caption_tokens, ranked_edit,
-                                          scoring_window)
+from salad_core.attention.inpaint import SCORE_MODES, SPAN_CANDIDATES
+from salad_core.attention.ranking import (MIN_FRAMES, TextMotionScorer, candidate_specs, caption_tokens, isolate_parts,
+                                          ranked_edit, scoring_window)
 from salad_core.eval.train_evaluator import default_evaluator_dir
 from salad_core.pipeline import EditOutput, MotionOutput, default_weights_dir
 
@@ -180,7 +180,7 @@ def test_ranked_edit_keeps_the_candidate_the_scorer_prefers_and_records_every_sc
     rec = out.settings["inpaint_candidates"]
     assert rec == out.edited.settings["inpaint_candidates"]
     assert rec["seeds"] == [10, 11, 12, 13] and rec["chosen"] == 2 and rec["seed"] == 12
-    assert rec["distances"] == [2.0, 1.0, 0.0, 1.0] and rec["frames"] == [0, 40]
+    assert rec["distances"] == [2.0, 1.0, 0.0, 1.0] and rec["frames"] == [0, 40] and rec["score"] == "whole"
 
 
 def test_ranked_edit_refusals():
@@ -200,6 +200,169 @@ def test_ranked_edit_refusals():
                     scorer=_StubScorer())
     with pytest.raises(ValueError, match="needs an Inpaint with candidates > 1"):
         ranked_edit(lambda s: None, [Inpaint(parts="arms")], inverted=True, skeleton="humanml3d")
+
+
+# ------------------------------------------------------------------------------ scoring the regenerated parts alone
+@pytest.mark.parametrize("score", ["best", "PARTS", 1, None])
+def test_bad_score_modes_are_refused(score):
+    with pytest.raises(ValueError, match=r"Inpaint.score=.*; allowed: \('auto', 'whole', 'parts'\)"):
+        Inpaint(parts="arms", score=score)
+
+
+def test_parts_scoring_needs_kept_parts_and_auto_scores_the_whole_motion():
+    with pytest.raises(ValueError, match="regenerates every part; name the parts"):
+        Inpaint(frames=(8, 24), score="parts")
+    with pytest.raises(ValueError, match="regenerates every part; name the parts"):
+        Inpaint(parts="all", frames=(8, 24), score="parts")
+    assert Inpaint(parts="arms", score="parts").score_for(True) == "parts"
+    assert Inpaint(parts="legs", frames=(8, 24), score="parts").score_for(False) == "parts"
+    assert Inpaint(parts="arms", score="whole").score_for(True) == "whole"
+    for spec in (Inpaint(parts="arms"), Inpaint(frames=(8, 24)), Inpaint(parts="arms", frames=(8, 24))):
+        assert spec.score == "auto" and spec.score_for(True) == spec.score_for(False) == "whole"
+    # the candidates of a ranked edit keep the scoring mode
+    spec = Inpaint(parts="arms", candidates=2, score="parts")
+    assert [s[0].score for s in candidate_specs([spec], spec, 2)] == ["parts", "parts"]
+
+
+def _part_columns(sk, parts):
+    """Feature columns ``(D,)`` bool of the joints drawn in ``parts``."""
+    from salad_core.attention.composite import part_joint_weights
+
+    cols = np.zeros(sk.feature_dim, bool)
+    for j in np.flatnonzero(part_joint_weights(parts, sk)):
+        cols[list(sk.joint_feature_index[j])] = True
+    return cols
+
+
+def test_isolate_parts_keeps_the_regenerated_joints_and_holds_the_rest_still(sample_features):
+    from salad_core.recovery import recover_joints
+    from salad_core.skeleton import get_skeleton
+
+    sk = get_skeleton("humanml3d")
+    fs = sk.feature_slices
+    f = sample_features.astype(np.float32)
+    iso = isolate_parts(f, "arms")
+    assert iso.shape == f.shape and iso.dtype == f.dtype
+    arms = _part_columns(sk, ("left arm", "right arm"))
+    assert arms.sum() == 8 * 12                                         # 2 x (collar, shoulder, elbow, wrist)
+    np.testing.assert_array_equal(iso[:, arms], f[:, arms])            # the regenerated joints exactly
+    kept = ~arms
+    np.testing.assert_array_equal(iso[:, kept], np.broadcast_to(iso[:1, kept], iso[:, kept].shape))  # constant
+    pose = np.zeros(sk.feature_dim, bool)
+    for name in ("root_y", "ric", "rot"):
+        pose[fs[name]] = True
+    np.testing.assert_allclose(iso[0, kept & pose], np.median(f[:, kept & pose], axis=0))      # the median pose
+    assert (iso[:, fs["root_rot_vel"]] == 0).all() and (iso[:, fs["root_lin_vel"]] == 0).all()
+    vel = np.zeros(sk.feature_dim, bool)
+    vel[fs["local_vel"]] = True
+    assert (iso[:, kept & vel] == 0).all() and (iso[:, fs["contacts"]] == 1).all()
+    # recovered: the kept joints stand still in the world, the arms still move
+    joints = recover_joints(iso, "positions", sk)
+    arm_joints = [j for j in range(sk.num_joints) if sk.part_names[sk.joint_to_part[j]] in ("left arm", "right arm")]
+    still = [j for j in range(sk.num_joints) if j not in arm_joints]
+    assert np.ptp(joints[:, still], axis=0).max() < 1e-5
+    wrists = [sk.joint_names.index("left_wrist"), sk.joint_names.index("right_wrist")]
+    assert np.ptp(joints[:, wrists], axis=0).max() > 0.1                # metres
+
+
+def test_isolate_parts_of_a_leg_keeps_its_contacts_and_of_the_lower_body_its_root(sample_features):
+    from salad_core.skeleton import get_skeleton
+
+    sk = get_skeleton("humanml3d")
+    fs = sk.feature_slices
+    f = sample_features
+    con = f[:, fs["contacts"]]
+    assert 0 < con.mean() < 1                                           # the take steps: contacts change
+    left = isolate_parts(f, "left_leg")[:, fs["contacts"]]             # left ankle, left toe, right ankle, right toe
+    np.testing.assert_array_equal(left[:, :2], con[:, :2])
+    assert (left[:, 2:] == 1).all()
+    lower = isolate_parts(f, "lower")                                   # root and legs move
+    np.testing.assert_array_equal(lower[:, fs["root"]], f[:, fs["root"]])
+    np.testing.assert_array_equal(lower[:, _part_columns(sk, ("root", "left leg", "right leg"))],
+                                  f[:, _part_columns(sk, ("root", "left leg", "right leg"))])
+    arms = _part_columns(sk, ("left arm", "right arm"))
+    assert np.ptp(lower[:, arms], axis=0).max() == 0
+
+
+def test_isolate_parts_refusals(sample_features):
+    with pytest.raises(ValueError, match=r"must be \(N, 263\) de-normalised humanml3d features"):
+        isolate_parts(sample_features[:, :100], "arms")
+    with pytest.raises(ValueError, match=r"got shape \(0, 263\)"):
+        isolate_parts(sample_features[:0], "arms")
+    with pytest.raises(ValueError, match="unknown body part 'wings'"):
+        isolate_parts(sample_features, "wings")
+
+
+class _SpeedScorer:
+    """Distance = |speed - 1|, speed = the mean over frames of the summed absolute velocity columns (root turn and
+    step, joints' local velocities): a prompt that asks for one unit of motion."""
+
+    evaluator = SimpleNamespace(config=SimpleNamespace(dim_pose=263))
+    source = "speed"
+
+    def window(self, n, span):
+        return scoring_window(n, span)
+
+    def distance(self, features, text, span=None):
+        from salad_core.skeleton import get_skeleton
+
+        fs = get_skeleton("humanml3d").feature_slices
+        vel = np.concatenate([features[:, fs["root_rot_vel"]], features[:, fs["root_lin_vel"]],
+                              features[:, fs["local_vel"]]], axis=1)
+        return abs(float(np.abs(vel).sum(1).mean()) - 1.0)
+
+
+@pytest.mark.parametrize("score, chosen", [("whole", 1), ("auto", 1), ("parts", 0)])
+def test_the_scoring_mode_changes_the_chosen_candidate(score, chosen):
+    """Two candidates of an arms edit share the kept body, which walks forward at one unit of speed; candidate 0's
+    right wrist moves at one unit, candidate 1's arms are still. Scored whole, the walk alone already gives the
+    motion the prompt asks for and the still arms win; scored on the arms alone, the moving arm wins."""
+    from salad_core.skeleton import get_skeleton
+
+    sk = get_skeleton("humanml3d")
+    wrist = sk.feature_slices["local_vel"].start + 3 * sk.joint_names.index("right_wrist")
+
+    def run(specs):
+        f = np.zeros((40, 263), np.float32)
+        f[:, 2] = 1.0                                                   # the kept root's forward step
+        f[:, wrist] = 1.0 if specs[0].seed == 0 else 0.0
+        out = _fake_output(0.0)
+        return dataclasses.replace(out, edited=dataclasses.replace(out.edited, features=f[None]))
+
+    spec = Inpaint(parts="arms", candidates=2, score=score)
+    out = ranked_edit(run, [spec], inverted=True, skeleton="humanml3d", scorer=_SpeedScorer())
+    rec = out.settings["inpaint_candidates"]
+    assert rec["chosen"] == chosen and out.edits[0].seed == chosen
+    assert rec["score"] == ("parts" if score == "parts" else "whole")
+    assert rec["distances"] == ([0.0, 1.0] if score == "parts" else [1.0, 0.0])
+    assert out.edited.features[0, 0, wrist] == (1.0 if chosen == 0 else 0.0)
+
+
+@needs_evaluator
+def test_isolated_arms_of_a_walk_no_longer_read_as_the_walk(sample_features):
+    """The HumanML3D sample walks and turns: with everything but the arms held still, its embedding moves away from
+    its own caption and towards arm prompts (what the whole motion's embedding cannot see)."""
+    scorer = TextMotionScorer()
+    iso = isolate_parts(sample_features, "arms")
+    own = "a person walks forward and turns around"
+    assert scorer.distance(iso, own) > scorer.distance(sample_features, own)
+    for arm_prompt in (WAVE, "a person raises both arms"):
+        assert scorer.distance(iso, arm_prompt) < scorer.distance(sample_features, arm_prompt)
+
+
+@pytest.mark.parametrize("command", [["edit", SOURCE], ["invert", "take.npy", "--prompt", SOURCE]])
+def test_inpaint_score_flag_reaches_the_spec(command):
+    from salad_core import cli
+    from salad_core.cli._common import UserError
+    from salad_core.cli.generate import INPAINT_SCORE, _edit_specs
+
+    assert INPAINT_SCORE == SCORE_MODES
+    flags = ["--target", WAVE, "--inpaint", "arms", "--out", "x"]
+    assert _edit_specs(cli.build_parser().parse_args(command + flags + ["--inpaint-score", "parts"]))[0].score == "parts"
+    assert _edit_specs(cli.build_parser().parse_args(command + flags))[0].score == "auto"
+    span = ["--target", "a person jumps", "--inpaint", "@12:28", "--inpaint-score", "parts", "--out", "x"]
+    with pytest.raises(UserError, match="--inpaint @12:28: Inpaint\\(score='parts'\\)"):
+        _edit_specs(cli.build_parser().parse_args(command + span))
 
 
 # ------------------------------------------------------------------------------ with the shipped weights
@@ -247,10 +410,13 @@ def test_one_candidate_is_one_edit_from_the_seed_and_never_ranks(pipe, inversion
 
 @needs_weights
 @needs_evaluator
-@pytest.mark.parametrize("case", ["generated parts, K=3", "generated span, K=3", "inverted span, auto"])
+@pytest.mark.parametrize("case", ["generated parts, K=3", "generated parts, K=3, scored on parts",
+                                  "generated span, K=3", "inverted span, auto"])
 def test_best_of_k_is_the_best_of_the_k_seeds_run_one_by_one(pipe, inversion, case):
     spec, target, kw = {
         "generated parts, K=3": (Inpaint(parts="arms", noise="fresh", seed=3, candidates=3), WAVE, {}),
+        "generated parts, K=3, scored on parts": (Inpaint(parts="arms", noise="fresh", seed=3, candidates=3,
+                                                          score="parts"), WAVE, {}),
         "generated span, K=3": (Inpaint(frames=(16, 32), noise="fresh", candidates=3), "a person jumps", {}),
         "inverted span, auto": (Inpaint(frames=(16, 32)), "a person jumps", {"inversion": inversion}),
     }[case]
@@ -263,7 +429,11 @@ def test_best_of_k_is_the_best_of_the_k_seeds_run_one_by_one(pipe, inversion, ca
     singles = [pipe.edit(target=target, edits=[dataclasses.replace(spec, seed=spec.seed + i, candidates=1)],
                          **source, **kw) for i in range(k)]
     span = spec.frame_span(FRAMES)
-    mine = [scorer.distance(s.edited.features[0, :FRAMES], target, span) for s in singles]
+    scored = [s.edited.features[0, :FRAMES] for s in singles]
+    if spec.score == "parts":                                          # the arms alone, the rest held still
+        scored = [isolate_parts(f, spec.parts) for f in scored]
+    assert rec["score"] == spec.score_for(bool(kw))
+    mine = [scorer.distance(f, target, span) for f in scored]
     assert len(set(mine)) == k                                         # the seeds give different motions
     np.testing.assert_allclose(rec["distances"], mine, rtol=1e-6)
     best = int(np.argmin(mine))

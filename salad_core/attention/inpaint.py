@@ -35,7 +35,8 @@ kept parts; generated sources were not measured for it and are sampled once).
 A frame span of an inverted take is regenerated :data:`SPAN_CANDIDATES` times, from that many seeds of the region's
 fresh noise, and the candidate the T2M evaluator finds closest to the target prompt kept (``candidates="auto"``,
 :mod:`salad_core.attention.ranking`: the span's check rose from 11 to 17 of 24 validation clips at 4 times the cost;
-body parts alone are sampled once: ranking their resampled edits lowered the check, 18 -> 12 of 24).
+body parts alone are sampled once: ranking their resampled edits lowered the check, 18 -> 12 of 24, and scoring the
+regenerated parts alone, the kept ones held still (``score="parts"``), ranked them no better: 10 of 24).
 
 :func:`parse_inpaint` reads the command line's ``PARTS[@START:END]`` notation.
 """
@@ -54,8 +55,8 @@ from .edits import EditKernel, EditSpec, _window, seeded_noise
 if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
 
-__all__ = ["Inpaint", "INPAINT_GROUPS", "MATCHED_MAX_RHO", "NOISE_MODES", "PARTS_RESAMPLE", "SPAN_CANDIDATES",
-           "SPAN_GUIDANCE",
+__all__ = ["Inpaint", "INPAINT_GROUPS", "MATCHED_MAX_RHO", "NOISE_MODES", "PARTS_RESAMPLE", "SCORE_MODES",
+           "SPAN_CANDIDATES", "SPAN_GUIDANCE",
            "ar1_noise", "inpaint_parts", "matched_noise", "noise_statistics", "parse_inpaint"]
 
 #: What :class:`Inpaint`'s regenerated region starts from (see :attr:`Inpaint.noise`).
@@ -72,6 +73,9 @@ PARTS_RESAMPLE = 3
 
 #: The candidates of ``Inpaint(candidates="auto")`` when a frame span of an inverted motion is regenerated.
 SPAN_CANDIDATES = 4
+
+#: How :class:`Inpaint`'s candidates are scored (see :attr:`Inpaint.score`).
+SCORE_MODES = ("auto", "whole", "parts")
 
 #: Group names :class:`Inpaint` accepts besides the part names. "legs" / "arms" as :class:`Mirror`;
 #: "upper" / "lower" are the upper body (spine, arms, head) and the lower body (root, legs) -- the
@@ -289,6 +293,13 @@ class Inpaint(EditSpec):
         that starts from the seed's noise (:meth:`fresh_noise`) and one motion per edit. ``"auto"`` (default):
         :data:`SPAN_CANDIDATES` when a frame span of one inverted motion is regenerated from fresh noise, where it
         was chosen; 1 otherwise (:meth:`candidates_for`).
+    score : ``"auto"``, ``"whole"`` or ``"parts"``
+        What the evaluator scores of each candidate (with ``candidates`` > 1). ``"whole"``: the edited motion as it
+        is (over the regenerated frames, see :func:`~salad_core.attention.ranking.scoring_window`); ``"parts"``: the
+        edited motion with the kept body parts held still, so that only the regenerated :attr:`parts` move
+        (:func:`~salad_core.attention.ranking.isolate_parts`; needs ``parts`` that keep some part); ``"auto"``
+        (default): ``"whole"`` for every edit (:meth:`score_for`; on procedural validation clips the parts alone
+        did not rank an arms edit's candidates better than the whole motion).
     """
 
     role: ClassVar[str] = "latent"
@@ -309,6 +320,7 @@ class Inpaint(EditSpec):
     resample: Union[int, str] = "auto"
     jump: int = 5
     candidates: Union[int, str] = "auto"
+    score: str = "auto"
 
     def __post_init__(self) -> None:
         if self.noise not in NOISE_MODES:
@@ -329,6 +341,8 @@ class Inpaint(EditSpec):
                                           or self.candidates < 1):
             raise ValueError(f"Inpaint.candidates={self.candidates!r} must be an int >= 1 (edits to run and rank; 1: one "
                              "edit) or 'auto'")
+        if not isinstance(self.score, str) or self.score not in SCORE_MODES:
+            raise ValueError(f"Inpaint.score={self.score!r}; allowed: {SCORE_MODES}")
         for name in ("resample", "jump"):
             v = getattr(self, name)
             if name == "resample" and v == "auto":
@@ -364,6 +378,10 @@ class Inpaint(EditSpec):
         if self.parts == PART_NAMES and self.frames is None:
             raise ValueError("Inpaint(parts='all') without frames keeps nothing: that is a plain generation of the "
                              "target; name fewer parts or a frame span")
+        if self.score == "parts" and self.parts in (None, PART_NAMES):
+            raise ValueError("Inpaint(score='parts') scores the regenerated body parts with the kept ones held still, "
+                             "but this Inpaint regenerates every part; name the parts (e.g. parts='arms') or give "
+                             "score='whole'")
         if isinstance(self.blend, bool) or not isinstance(self.blend, int) or self.blend < 0:
             raise ValueError(f"Inpaint.blend={self.blend!r} must be an int >= 0 (latent frames of the soft seam)")
         object.__setattr__(self, "steps", _window(self.steps, "Inpaint.steps"))
@@ -441,6 +459,15 @@ class Inpaint(EditSpec):
             ranked = self.frames is not None and inverted and self.fresh_noise(inverted) and motions == 1
             return SPAN_CANDIDATES if ranked else 1
         return int(self.candidates)
+
+    def score_for(self, inverted: bool) -> str:
+        """What the candidates' scorer reads (:attr:`score`; ``"auto"`` resolved, ``"whole"`` for every edit):
+        ``"whole"`` (the edited motion) or ``"parts"`` (the regenerated parts alone,
+        :func:`~salad_core.attention.ranking.isolate_parts`). ``inverted``: the edit is of an inversion (as for
+        :meth:`candidates_for`)."""
+        if self.score == "auto":
+            return "whole"
+        return self.score
 
     def resampling(self, fraction: float, index: int, num_steps: int, passes: int) -> bool:
         """Whether the sampler resamples after step ``index`` (of ``num_steps``; ``fraction`` = index / num_steps)

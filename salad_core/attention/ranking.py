@@ -10,7 +10,9 @@ What is scored (:func:`scoring_window`): the edited motion's final features (aft
 edit returns them) over the regenerated motion frames: every frame for body parts alone; for a frame span, the span
 widened by whole latent frames of kept context, alternately on the left and the right, until it reaches the
 evaluator's minimum length (:data:`MIN_FRAMES`, the shortest clip the evaluator was trained on), clipped to the
-motion (a motion shorter than that is scored whole).
+motion (a motion shorter than that is scored whole). With ``Inpaint(score="parts")`` the scored motion is
+:func:`isolate_parts`'s: the kept body parts held still, so that only the regenerated ones move (for a parts edit the
+kept body, e.g. a walk, otherwise dominates the evaluator's embedding).
 
 The evaluator's text side takes ``word/POS`` tokens (HumanML3D's format); :func:`caption_tokens` tags a free prompt
 with the procedural corpus's own lexicon (:data:`salad_core.data.procedural.language.LEXICON`: the lemma for nouns
@@ -35,7 +37,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from .inpaint import Inpaint
 
-__all__ = ["MIN_FRAMES", "TextMotionScorer", "caption_tokens", "scoring_window", "candidate_specs",
+__all__ = ["MIN_FRAMES", "TextMotionScorer", "caption_tokens", "scoring_window", "isolate_parts", "candidate_specs",
            "ranked_inpaint", "choose_candidate", "ranked_edit"]
 
 #: The shortest window the scorer embeds (motion frames): the evaluator's training clips are at least this long
@@ -167,6 +169,65 @@ def _shipped_evaluator():
     return load_packaged_evaluator()[0]
 
 
+# ------------------------------------------------------------------------------------------- the scored motion
+def _held_columns(sk, moving: np.ndarray) -> dict[str, np.ndarray]:
+    """The feature columns ``(D,)`` bool of the joints not ``moving`` (``(J,)`` bool) by how :func:`isolate_parts`
+    holds them: ``"median"`` (root height, root-relative positions, 6D rotations), ``"zero"`` (root turn and step,
+    local velocities), ``"one"`` (foot contacts)."""
+    held = np.zeros(sk.feature_dim, bool)
+    for j in np.flatnonzero(~moving):
+        held[list(sk.joint_feature_index[j])] = True
+    fs = sk.feature_slices
+
+    def kind(*names):
+        cols = np.zeros(sk.feature_dim, bool)
+        for name in names:
+            cols[fs[name]] = True
+        return held & cols
+
+    return {"median": kind("root_y", "ric", "rot"), "zero": kind("root_rot_vel", "root_lin_vel", "local_vel"),
+            "one": kind("contacts")}
+
+
+def isolate_parts(features: np.ndarray, parts, skeleton="humanml3d") -> np.ndarray:
+    """``features`` ``(N, D)`` (de-normalised HumanML3D-style features of one motion) with every joint outside the
+    body ``parts`` held still, so that only those parts move: ``(N, D)``, ``features``' dtype.
+
+    A held joint's columns (the skeleton's joint split, ``Skeleton.joint_feature_index``) become: root-relative
+    position and 6D rotation their median over the motion's frames, local velocity 0, foot contact 1; a held root:
+    turn and planar step 0 (the body stays in place, facing one way), height its median. The moving joints' columns
+    are left exactly as they are (their positions are in the root's heading frame, so they keep their meaning).
+
+    Parameters
+    ----------
+    parts : str or sequence of str
+        The moving body parts (:func:`~salad_core.attention.inpaint.inpaint_parts` names: ``"arms"``,
+        ``("left arm", "head")``, ...).
+
+    Raises
+    ------
+    ValueError
+        Features of the wrong shape, an empty motion, or an unknown part.
+    """
+    from salad_core.skeleton import get_skeleton
+
+    from .composite import part_joint_weights
+    from .inpaint import inpaint_parts
+
+    sk = get_skeleton(skeleton)
+    f = np.asarray(features)
+    if f.ndim != 2 or f.shape[1] != sk.feature_dim or len(f) == 0:
+        raise ValueError(f"features must be (N, {sk.feature_dim}) de-normalised {sk.name} features of at least one "
+                         f"frame, got shape {f.shape}")
+    moving = part_joint_weights(inpaint_parts(parts), sk) > 0
+    cols = _held_columns(sk, moving)
+    out = f.copy()
+    out[:, cols["median"]] = np.median(f[:, cols["median"]], axis=0)
+    out[:, cols["zero"]] = 0.0
+    out[:, cols["one"]] = 1.0
+    return out
+
+
 # ------------------------------------------------------------------------------------------- the candidates
 def ranked_inpaint(edits: Sequence, inverted: bool, motions: int = 1) -> Optional["Inpaint"]:
     """The edits' :class:`~salad_core.attention.inpaint.Inpaint` if it runs more than one candidate
@@ -182,18 +243,24 @@ def candidate_specs(edits: Sequence, inpaint: "Inpaint", k: int) -> list[tuple]:
             for i in range(k)]
 
 
-def choose_candidate(outputs: Sequence["EditOutput"], inpaint: "Inpaint",
-                     scorer: TextMotionScorer) -> tuple[int, list[float], tuple[int, int]]:
+def choose_candidate(outputs: Sequence["EditOutput"], inpaint: "Inpaint", scorer: TextMotionScorer, *,
+                     inverted: bool = True, skeleton="humanml3d") -> tuple[int, list[float], tuple[int, int]]:
     """The best of the candidate edits ``outputs`` (one motion each) by ``scorer``: ``(index, distances, window)``,
     the distances of every candidate's edited motion to its target prompt over the scored ``window`` (motion frames,
-    :func:`scoring_window` of ``inpaint``'s regenerated span); the first of equal ones wins."""
+    :func:`scoring_window` of ``inpaint``'s regenerated span); the first of equal ones wins. What is scored:
+    ``inpaint.score_for(inverted)``, the edited motion (``"whole"``) or :func:`isolate_parts` of it with
+    ``inpaint``'s regenerated parts (``"parts"``; ``skeleton``: the features' skeleton)."""
+    isolated = inpaint.score_for(inverted) == "parts"
     scores, window = [], None
     for out in outputs:
         ed = out.edited
         n = int(ed.lengths[0])
         span = inpaint.frame_span(n)
         window = scorer.window(n, span)
-        scores.append(scorer.distance(np.asarray(ed.features[0, :n]), ed.texts[0], span))
+        feats = np.asarray(ed.features[0, :n])
+        if isolated:
+            feats = isolate_parts(feats, inpaint.parts, skeleton)
+        scores.append(scorer.distance(feats, ed.texts[0], span))
     return int(np.argmin(scores)), scores, window
 
 
@@ -202,9 +269,10 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
     """Run an edit whose :class:`~salad_core.attention.inpaint.Inpaint` runs ``K`` > 1 candidates
     (:func:`ranked_inpaint`): ``run(specs)`` (the edit with those specs, e.g. ``pipe.edit`` with everything else
     unchanged) for each of :func:`candidate_specs`, and return the best by ``scorer`` (:func:`choose_candidate`;
-    default: the shipped evaluator). Its ``edits`` are the chosen candidate's (run again they give the same motion); ``settings`` and
-    ``edited.settings`` record ``"inpaint_candidates"``: the seeds, the distances, the chosen index and seed, the
-    scored motion frames and the evaluator.
+    default: the shipped evaluator). Its ``edits`` are the chosen candidate's (run again they give the same motion);
+    ``settings`` and ``edited.settings`` record ``"inpaint_candidates"``: the seeds, the distances, the chosen index
+    and seed, the scored motion frames, what was scored (``"score"``: ``"whole"`` or ``"parts"``,
+    :meth:`~salad_core.attention.inpaint.Inpaint.score_for`) and the evaluator.
 
     Parameters
     ----------
@@ -247,9 +315,10 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
         raise ValueError(f"Inpaint(candidates={k}) ranks the candidates of one motion; the edit has "
                          f"{len(outputs[0].edited)}: edit them one at a time")
     outputs += [run(s) for s in specs[1:]]
-    best, scores, window = choose_candidate(outputs, inpaint, scorer)
+    best, scores, window = choose_candidate(outputs, inpaint, scorer, inverted=inverted, skeleton=skeleton)
     record = {"seeds": [inpaint.seed + i for i in range(k)], "distances": scores, "chosen": best,
-              "seed": inpaint.seed + best, "frames": list(window), "evaluator": scorer.source}
+              "seed": inpaint.seed + best, "frames": list(window), "score": inpaint.score_for(inverted),
+              "evaluator": scorer.source}
     out = outputs[best]
     edited = dataclasses.replace(out.edited, settings={**out.edited.settings, "inpaint_candidates": record})
     return dataclasses.replace(out, edited=edited, edits=specs[best],

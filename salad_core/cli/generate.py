@@ -376,6 +376,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 #: ``--inpaint-noise`` choices: :data:`salad_core.attention.inpaint.NOISE_MODES` (spelled out to keep the parser light).
 INPAINT_NOISE = ("auto", "fresh", "source", "matched")
+#: ``--inpaint-score`` choices: :data:`salad_core.attention.inpaint.SCORE_MODES` (spelled out likewise).
+INPAINT_SCORE = ("auto", "whole", "parts")
 
 
 def _edit_args(p: argparse.ArgumentParser) -> None:
@@ -431,6 +433,10 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
                         "4 for a frame span of a given take, 1 otherwise). Needs fresh noise in the region: the "
                         "default for a given take (--motion, salad invert), --inpaint-noise fresh for a generated "
                         "motion")
+    p.add_argument("--inpaint-score", choices=INPAINT_SCORE, default=None,
+                   help="what the evaluator scores of each in-painting candidate: 'whole' the edited motion, 'parts' "
+                        "the regenerated body parts with the kept ones held still (needs --inpaint PARTS); default "
+                        "'auto': the whole motion")
     p.add_argument("--no-composite", action="store_true",
                    help="keep what the decoder makes of the kept parts instead of taking them from the source's "
                         "decoding (--inpaint, --mirror-take; the decoder lets edited parts move kept ones a few cm)")
@@ -483,7 +489,7 @@ def _inpaint_guidance(text: str):
 def _inpaint_options(args: argparse.Namespace) -> dict:
     """The ``--inpaint-*`` options that were given (the others keep :class:`Inpaint`'s defaults)."""
     out = {name: getattr(args, f"inpaint_{name}") for name in ("smooth", "smooth_window", "resample", "jump", "noise",
-                                                               "candidates")
+                                                               "candidates", "score")
            if getattr(args, f"inpaint_{name}", None) is not None}
     if getattr(args, "inpaint_guidance", None) is not None:
         out["guidance"] = _inpaint_guidance(args.inpaint_guidance)

@@ -43,7 +43,10 @@ setting's composite and grounding applied to it, as ``pipe.edit`` does.
 run the same setting without candidates has), each composited and grounded as above, and the one closest to the
 target by the evaluator's text-motion distance kept (``salad_core.attention.ranking.choose_candidate``, as
 ``pipe.edit`` does); the row records every candidate's distance and target check (``candidate_checks``), and the
-summary the check of any candidate (an oracle), of a random one (expected) and of the first.
+summary the check of any candidate (an oracle), of a random one (expected) and of the first. ``scored on parts``
+settings rank the candidates with ``Inpaint(score="parts")`` (the kept body parts held still in the scored motion,
+``salad_core.attention.ranking.isolate_parts``); they share the sampling runs of the same setting scored whole, and
+are body-part settings only (a frame span skips them).
 """
 from __future__ import annotations
 
@@ -234,7 +237,7 @@ def tuning_grid() -> dict[str, dict]:
     the sampling (the region's noise, the edited branch's guidance, RePaint resampling) crossed with the composite
     (off; fade 8; fade 8 plus the least-squares seam smoothing with strength / window); and the region's noise
     matched to the source's inverted noise (``noise="matched"``) with the chosen composite only."""
-    base = dict(noise="fresh", guidance=None, resample=1, jump=1, candidates=1)
+    base = dict(noise="fresh", guidance=None, resample=1, jump=1, candidates=1, score="whole")
     sampling = {"source noise": dict(base, noise="source"),
                 "fresh": dict(base),
                 "fresh g7.5": dict(base, guidance=7.5),
@@ -257,7 +260,11 @@ def tuning_grid() -> dict[str, dict]:
     ranked = {"fresh best of 4": dict(base, candidates=4),
               "fresh g7.5 best of 4": dict(base, guidance=7.5, candidates=4),
               "fresh resample 3 jump 5 best of 4": dict(base, resample=3, jump=5, candidates=4),
-              "fresh g7.5 resample 3 jump 5 best of 4": dict(base, guidance=7.5, resample=3, jump=5, candidates=4)}
+              "fresh g7.5 resample 3 jump 5 best of 4": dict(base, guidance=7.5, resample=3, jump=5, candidates=4),
+              # body parts: the candidates scored with the kept parts held still (Inpaint.score="parts")
+              "fresh best of 4 scored on parts": dict(base, candidates=4, score="parts"),
+              "fresh resample 3 jump 5 best of 4 scored on parts": dict(base, resample=3, jump=5, candidates=4,
+                                                                         score="parts")}
     chosen = "fade 8 smooth 100/8"
     grid.update({f"{s} | {chosen}": dict(skw, **post[chosen]) for s, skw in {**matched, **ranked}.items()})
     return grid
@@ -273,12 +280,24 @@ def select_grid(text: str, error) -> dict[str, dict]:
     return {g: grid[g] for g in names}
 
 
-def split_config(kw: dict) -> tuple[dict, dict, object]:
-    """Inpaint options -> (sampling options, post-decoding options of :data:`POST_KEYS`, candidates): the candidates
-    (``Inpaint.candidates``, ranked after the composite; None: the default's, resolved per case) are run as that many
-    single edits from seeds 0, 1, ..., shared by the settings that differ only in them."""
-    samp = {k: v for k, v in kw.items() if k not in POST_KEYS and k != "candidates"}
-    return samp, {k: v for k, v in kw.items() if k in POST_KEYS}, kw.get("candidates")
+#: Inpaint options of the ranking of candidates (after the composite): settings that differ only in these share
+#: the sampling runs.
+RANK_KEYS = ("candidates", "score")
+
+
+def split_config(kw: dict) -> tuple[dict, dict, dict]:
+    """Inpaint options -> (sampling options, post-decoding options of :data:`POST_KEYS`, ranking options of
+    :data:`RANK_KEYS`): the candidates (``Inpaint.candidates``, ranked after the composite; absent: the default's,
+    resolved per case) are run as that many single edits from seeds 0, 1, ..., shared by the settings that differ
+    only in the ranking."""
+    samp = {k: v for k, v in kw.items() if k not in POST_KEYS and k not in RANK_KEYS}
+    return (samp, {k: v for k, v in kw.items() if k in POST_KEYS},
+            {k: v for k, v in kw.items() if k in RANK_KEYS})
+
+
+def span_configs(configs: dict[str, dict]) -> dict[str, dict]:
+    """The configs that apply to a frame span of every part: all but those scored on the body parts alone."""
+    return {name: kw for name, kw in configs.items() if kw.get("score") != "parts"}
 
 
 def part_configs(configs: dict[str, dict]) -> dict[str, dict]:
@@ -335,22 +354,23 @@ def main() -> None:
         editing a take); a config with candidates keeps the best of its seeds' composites as pipe.edit does
         (choose_candidate), and records every candidate's distance and check."""
         groups: dict[tuple, list] = {}
+        inverted = "inversion" in kw
         for config, ckw in configs.items():
-            samp, post, k = split_config(ckw)
-            groups.setdefault(tuple(sorted(samp.items())), []).append((config, post, k))
+            samp, post, rank = split_config(ckw)
+            groups.setdefault(tuple(sorted(samp.items())), []).append((config, post, rank))
         for samp, members in groups.items():
             base = make(**dict(samp), composite=False)
-            # the candidates of each config ("auto" resolved as pipe.edit does), sampled one by one
-            members = [(config, post, dataclasses.replace(base, **({} if k is None else {"candidates": k}))
-                        .candidates_for("inversion" in kw)) for config, post, k in members]
+            # each config's ranking (candidates "auto" resolved as pipe.edit does); the candidates sampled one by one
+            members = [(config, post, dataclasses.replace(base, **rank)) for config, post, rank in members]
+            members = [(config, post, spec.candidates_for(inverted), spec.score) for config, post, spec in members]
             base = dataclasses.replace(base, candidates=1)
             raws, seconds = [], []
-            for seed in range(max(k for _, _, k in members)):
+            for seed in range(max(k for _, _, k, _ in members)):
                 t = time.perf_counter()
                 raws.append(pipe.edit(target=target, edits=[dataclasses.replace(base, seed=base.seed + seed)],
                                       num_steps=None if "inversion" in kw else args.steps, ground=False, **kw))
                 seconds.append(time.perf_counter() - t)
-            for config, post, k in members:
+            for config, post, k, score in members:
                 inp = dataclasses.replace(base, **{"composite": True, **post})
                 outs = []
                 for raw in raws[:k]:
@@ -358,10 +378,11 @@ def main() -> None:
                     outs.append(ground_edit(pipe, out) if "inversion" in kw else out)
                 ranking = None
                 if k > 1:
-                    best, dists, window = choose_candidate(outs, dataclasses.replace(inp, candidates=k), scorer)
+                    ranked = dataclasses.replace(inp, candidates=k, score=score)
+                    best, dists, window = choose_candidate(outs, ranked, scorer, inverted=inverted, skeleton=sk.name)
                     checks = [target_check(measure(pipe, o, inp, target, sk)) for o in outs]
                     ranking = dict(candidates=k, chosen=best, distances=dists, scored_frames=list(window),
-                                   candidate_checks=checks)
+                                   score=ranked.score_for(inverted), candidate_checks=checks)
                     outs = [outs[best]]
                 record(kind, name, blend, config, inp, target, outs[0], sum(seconds[:k]), ranking)
 
@@ -375,7 +396,7 @@ def main() -> None:
             m = len(it["features"])         # the middle third of the take (whole latent frames)
             span = (4 * round(m / 12), 4 * round(m / 6))
             for blend in blends if only != "parts" else ():
-                run(f"{kind}/frames", it["id"], blend, configs,
+                run(f"{kind}/frames", it["id"], blend, span_configs(configs),
                     lambda **k: Inpaint(frames=span, blend=blend, **k), "a person jumps", inversion=inv)
 
     if args.tuning:
@@ -395,7 +416,7 @@ def main() -> None:
                     for target in SPAN_TARGETS:
                         for span in ((40, 80), (80, None)):
                             for blend in blends:
-                                run("gen/frames", f"{src} s{seed}", blend, configs,
+                                run("gen/frames", f"{src} s{seed}", blend, span_configs(configs),
                                     lambda span=span, blend=blend, **k: Inpaint(frames=span, blend=blend, **k),
                                     target, source=src, lengths=n, seed=seed)
         if not args.skip_real:
