@@ -5,6 +5,8 @@ Usage:
         [--blends 0,1,2] [--json lab/records/editing/inpaint.json]
     python lab/scripts/editing/measure_inpaint.py --tuning N [--offset M] [--only parts|frames] [--grid NAMES] ...
         (procedural validation clips over tuning_grid(); --grid without --tuning: those settings on the held-out cases)
+    python lab/scripts/editing/measure_inpaint.py --tuning-generated [--grid NAMES] ...
+        (the validation set of generated frame spans: TUNING_SPAN_SOURCES at TUNING_SEED, over GENERATED_SPAN_ROWS)
 
 Cases (held out: nothing here is trained; the only choice made on them is ``Inpaint.blend``):
 
@@ -47,6 +49,12 @@ summary the check of any candidate (an oracle), of a random one (expected) and o
 settings rank the candidates with ``Inpaint(score="parts")`` (the kept body parts held still in the scored motion,
 ``salad_core.attention.ranking.isolate_parts``); they share the sampling runs of the same setting scored whole, and
 are body-part settings only (a frame span skips them).
+
+``--tuning-generated``: a *validation* set of generated frame spans, apart from the held-out ones: the sources
+:data:`TUNING_SPAN_SOURCES` (none of :data:`SOURCES` / :data:`SPAN_SOURCES`) generated at :data:`TUNING_SEED` (the
+held-out ones at seeds 0 ..), with the held-out cases' span prompts and spans (:data:`SPAN_TARGETS` x :data:`SPANS`):
+24 cases, run over :data:`GENERATED_SPAN_ROWS` (or ``--grid``). Where the settings of a generated source's span are
+chosen.
 """
 from __future__ import annotations
 
@@ -75,6 +83,13 @@ PART_TARGETS = (("arms", "a man waves his right hand"), ("arms", "a woman waves 
                 ("head", "a man nods his head"))
 SPAN_SOURCES = ("a person walks forward", "a person stands still")
 SPAN_TARGETS = ("a person jumps", "a person squats down", "a person turns left")
+#: The regenerated motion frames of a generated source's span: in-between and suffix (None: the end).
+SPANS = ((40, 80), (80, None))
+#: Validation (not held out) generated sources for the span settings of a generated source (``--tuning-generated``):
+#: fixed before measuring, none of SOURCES / SPAN_SOURCES, generated at TUNING_SEED.
+TUNING_SPAN_SOURCES = ("a man walks slowly", "a woman stands and looks around", "a person walks in a circle",
+                       "a man stands with his arms crossed")
+TUNING_SEED = 100
 DEEPMIMIC = ("walk", "run", "punch", "dance_a", "kick", "walker/0walk_forward", "walker/turn_left0", "spin")
 BY_TEXT = {p.text: p for p in PROMPTS}
 
@@ -259,6 +274,7 @@ def tuning_grid() -> dict[str, dict]:
     # the best of 4 fresh-noise seeds by the evaluator's text-motion distance (Inpaint.candidates)
     ranked = {"fresh best of 4": dict(base, candidates=4),
               "fresh g7.5 best of 4": dict(base, guidance=7.5, candidates=4),
+              "fresh g7.5 best of 8": dict(base, guidance=7.5, candidates=8),
               "fresh resample 3 jump 5 best of 4": dict(base, resample=3, jump=5, candidates=4),
               "fresh g7.5 resample 3 jump 5 best of 4": dict(base, guidance=7.5, resample=3, jump=5, candidates=4),
               # body parts: the candidates scored with the kept parts held still (Inpaint.score="parts")
@@ -268,6 +284,12 @@ def tuning_grid() -> dict[str, dict]:
     chosen = "fade 8 smooth 100/8"
     grid.update({f"{s} | {chosen}": dict(skw, **post[chosen]) for s, skw in {**matched, **ranked}.items()})
     return grid
+
+
+#: ``--tuning-generated``'s rows: (i) a generated source's span as ``Inpaint()``'s defaults make it today (the
+#: source's noise, guidance 7.5, one candidate: spelled out), (ii) fresh noise, (iii) the best of 4 fresh seeds.
+GENERATED_SPAN_ROWS = ("source noise g7.5 | fade 8 smooth 100/8", "fresh g7.5 | fade 8 smooth 100/8",
+                       "fresh g7.5 best of 4 | fade 8 smooth 100/8")
 
 
 def select_grid(text: str, error) -> dict[str, dict]:
@@ -322,15 +344,21 @@ def main() -> None:
     ap.add_argument("--skip-generated", action="store_true")
     ap.add_argument("--tuning", type=int, default=0,
                     help="instead: the real-take protocol on N procedural validation clips over tuning_grid()")
+    ap.add_argument("--tuning-generated", action="store_true",
+                    help="instead: the validation set of generated frame spans (TUNING_SPAN_SOURCES at TUNING_SEED, "
+                         "the held-out span prompts and spans) over GENERATED_SPAN_ROWS")
     ap.add_argument("--grid", default=None,
-                    help="comma-separated tuning_grid() names to run: with --tuning instead of all of them, on the "
-                         "held-out cases instead of CONFIGS (latent, default)")
+                    help="comma-separated tuning_grid() names to run: with --tuning instead of all of them, with "
+                         "--tuning-generated instead of GENERATED_SPAN_ROWS, on the held-out cases instead of CONFIGS "
+                         "(latent, default)")
     ap.add_argument("--offset", type=int, default=0,
                     help="with --tuning: skip the first N validation clips (a check on clips the grid was not chosen on)")
     ap.add_argument("--only", choices=("parts", "frames"), default=None,
                     help="with --tuning: only the body-part or only the frame-span cases")
     ap.add_argument("--json", type=Path, default=ROOT / "lab/records/editing/inpaint.json")
     args = ap.parse_args()
+    if args.tuning and args.tuning_generated:
+        ap.error("--tuning and --tuning-generated are two validation sets: give one")
     t0 = start_run(args.threads)
     pipe = SaladPipeline.from_pretrained()
     scorer = TextMotionScorer()
@@ -399,10 +427,24 @@ def main() -> None:
                 run(f"{kind}/frames", it["id"], blend, span_configs(configs),
                     lambda **k: Inpaint(frames=span, blend=blend, **k), "a person jumps", inversion=inv)
 
+    def generated_spans(kind, sources, seeds, configs):
+        """Each source generated from each seed, its SPANS regenerated from each of SPAN_TARGETS."""
+        for seed in seeds:
+            for src in sources:
+                for target in SPAN_TARGETS:
+                    for span in SPANS:
+                        for blend in blends:
+                            run(kind, f"{src} s{seed}", blend, span_configs(configs),
+                                lambda span=span, blend=blend, **k: Inpaint(frames=span, blend=blend, **k),
+                                target, source=src, lengths=n, seed=seed)
+
     if args.tuning:
         grid = select_grid(args.grid, ap.error) if args.grid else tuning_grid()
         takes = tuning_takes(args.offset + args.tuning, n)[args.offset:]
         real_cases("tuning", takes, grid, blends, only=args.only)
+    elif args.tuning_generated:
+        grid = select_grid(args.grid or ",".join(GENERATED_SPAN_ROWS), ap.error)
+        generated_spans("tuning-gen/frames", TUNING_SPAN_SOURCES, (TUNING_SEED,), grid)
     else:
         configs = select_grid(args.grid, ap.error) if args.grid else CONFIGS
         if not args.skip_generated:
@@ -412,13 +454,7 @@ def main() -> None:
                         run("gen/parts", f"{src} s{seed}", 0, part_configs(configs),
                             lambda parts=parts, **k: Inpaint(parts=parts, **k), target, source=src, lengths=n,
                             seed=seed)
-                for src in SPAN_SOURCES:
-                    for target in SPAN_TARGETS:
-                        for span in ((40, 80), (80, None)):
-                            for blend in blends:
-                                run("gen/frames", f"{src} s{seed}", blend, span_configs(configs),
-                                    lambda span=span, blend=blend, **k: Inpaint(frames=span, blend=blend, **k),
-                                    target, source=src, lengths=n, seed=seed)
+                generated_spans("gen/frames", SPAN_SOURCES, (seed,), configs)
         if not args.skip_real:
             real_cases("real", real_takes(sk, n), configs, blends)
 
