@@ -95,14 +95,14 @@ def keyframe_roundtrip(pipe: "KeyMotionPipeline", features: np.ndarray, method: 
         Keyframe selection (KeyMotion §III-A; the models were trained on MDO keyframes).
     """
     from salad_core.eval.metrics import mpjpe
-    from salad_core.keymotion.kf_vae import gather_keyframes, indices_to_positions
+    from salad_core.keymotion.kf_vae import gather_keyframes
     from salad_core.keymotion.models import pose_joints
     from salad_core.keymotion.pipeline import decode_keyframes
 
     x, xn, idx = _keyframe_inputs(pipe, features, method, None)
     length = torch.tensor([len(x)])
     kf = gather_keyframes(xn, idx)                                        # (1, K, D) normalised
-    enc = pipe.kf_vae.encode(kf, indices_to_positions(idx, length), sample=False)
+    enc = pipe.kf_vae.encode(kf, pipe.kf_vae.positions_of(idx, length), sample=False)
     dec, dec_idx = decode_keyframes(pipe.kf_vae, enc.mu, length)
     norm = pipe.mmae.norm
     true_kf = norm.denormalize(kf)[0]
@@ -200,7 +200,7 @@ def generation_chain(pipe: "KeyMotionPipeline", features: np.ndarray, caption: s
         in-filling of those keyframes after the keyframe VAE (posterior mean, decoded poses and frames);
         ``"generated"`` the pipeline's motion of ``N`` frames for ``caption`` (PST, VAE decoder, MMAE).
     """
-    from salad_core.keymotion.kf_vae import gather_keyframes, indices_to_positions
+    from salad_core.keymotion.kf_vae import gather_keyframes
     from salad_core.keymotion.pipeline import decode_keyframes
     from salad_core.motion import features_to_joints
     from salad_core.recovery import recover_joints
@@ -213,7 +213,7 @@ def generation_chain(pipe: "KeyMotionPipeline", features: np.ndarray, caption: s
     kf = gather_keyframes(xn, idx).to(dev)
     idx = idx.to(dev)
     own = pipe.mmae.infill(kf, idx, length, text, mask)
-    enc = pipe.kf_vae.encode(kf, indices_to_positions(idx, length), sample=False)
+    enc = pipe.kf_vae.encode(kf, pipe.kf_vae.positions_of(idx, length), sample=False)
     dec, dec_idx = decode_keyframes(pipe.kf_vae, enc.mu, length)
     through_vae = pipe.mmae.infill(dec, dec_idx, length, text, mask)
     sk, norm = pipe.skeleton, pipe.mmae.norm

@@ -30,6 +30,14 @@ Choices where the paper is silent (its equations were lost in our copy) or that 
   :func:`positions_to_indices` turns positions into frames: ``round(u (L - 1))``, sort, clamp to
   ``[0, L - 1]``, make strictly increasing, and force the first and last keyframes to frames
   ``0`` and ``L - 1``.
+* **Timing** (:attr:`KeyframeVAEConfig.timing`): ``"relative"`` (above; KeyMotion 0.2) makes a latent
+  length-free, so the same latent decoded at a longer length plays its motion slower: asked for a
+  one-action caption at three times its corpus length, such a model moves at a third to a half of
+  its speed. ``"absolute"`` encodes ``u_k = i_k / (max_length - 1)`` (a frame index, as the paper's
+  "position index"), query 0's logit takes the share after the last keyframe (so ``u_K-1 <= 1``
+  and says how long the motion is), and :func:`positions_to_indices` reads ``round(u (max_length
+  - 1))``: a latent keeps its pace at any length, only the last keyframe moving to ``L - 1``.
+  Use :meth:`KeyframeVAE.positions_of` / :meth:`KeyframeVAE.indices_of`, which follow the model.
 * **Losses** (eq. 2): ``L = L_rec + λ_kl L_kl + λ_bone L_bone + λ_index L_index`` with
   ``L_rec`` the MSE of the normalised keyframe features (eq. 3), ``L_kl`` the mean over latent
   elements of ``0.5 (mu^2 + sigma^2 - log sigma^2 - 1)`` (eq. 4), ``L_bone`` the mean absolute
@@ -91,12 +99,16 @@ __all__ = [
     "KeyframeVAE",
     "indices_to_positions",
     "positions_to_indices",
+    "KEYFRAME_TIMINGS",
     "gather_keyframes",
     "GROUP_TERMS",
     "group_channels",
 ]
 
 log = logging.getLogger(__name__)
+
+#: How keyframe positions are normalised (:attr:`KeyframeVAEConfig.timing`).
+KEYFRAME_TIMINGS = ("relative", "absolute")
 
 
 @dataclass(frozen=True)
@@ -124,6 +136,8 @@ class KeyframeVAEConfig:
     lambda_feet_height: float = 0.0  # extra MSE weight of the four contact joints' height channels
     latent_noise: float = 0.0     # training only: std (latent units) of Gaussian noise added to the latent the
                                   # decoder reads, so it also decodes latents near the posteriors (0: off)
+    timing: str = "relative"      # keyframe positions: "relative" u = i / (L - 1) (shipped 0.2); "absolute"
+                                  # u = i / (max_length - 1), a frame index (the paper's), so a latent has a pace
 
     def __post_init__(self) -> None:
         name = type(self).__name__
@@ -148,6 +162,8 @@ class KeyframeVAEConfig:
         for f in ("lambda_kl", "lambda_bone", "lambda_index", "lambda_root", "lambda_local_vel", "lambda_contact",
                   "lambda_feet_height", "latent_noise"):
             check_non_negative(name, f, getattr(self, f))
+        if self.timing not in KEYFRAME_TIMINGS:
+            raise ValueError(f"{name}.timing={self.timing!r} is invalid; choose one of {KEYFRAME_TIMINGS}")
 
     @property
     def width(self) -> int:
@@ -178,17 +194,32 @@ def _check_lengths(lengths: torch.Tensor, minimum: int, why: str) -> torch.Tenso
     return lengths
 
 
-def indices_to_positions(indices: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
-    """Normalised positions ``u = i / (L - 1)``: ``indices (B, K)`` long, ``lengths (B,)`` -> ``(B, K)`` float."""
+def _span(lengths: torch.Tensor, span: int | None) -> torch.Tensor:
+    """``(B, 1)`` float frames that ``u = 1`` stands for: ``L - 1`` per motion, or ``span`` for all."""
+    if span is None:
+        return (lengths[:, None] - 1).float()
+    if isinstance(span, bool) or not isinstance(span, int) or span < 1:
+        raise ValueError(f"span={span!r} must be a positive int (frames u = 1 stands for) or None (L - 1)")
+    if bool((lengths - 1 > span).any()):
+        raise ValueError(f"lengths {lengths.tolist()} exceed span + 1 = {span + 1} frames")
+    return torch.full((len(lengths), 1), float(span), device=lengths.device)
+
+
+def indices_to_positions(indices: torch.Tensor, lengths: torch.Tensor, span: int | None = None) -> torch.Tensor:
+    """Normalised positions ``u = i / (L - 1)`` (``span`` None: relative to each motion's length) or ``u = i /
+    span`` (absolute, e.g. ``span = max_length - 1``): ``indices (B, K)`` long, ``lengths (B,)`` -> ``(B, K)``
+    float."""
     lengths = _check_lengths(lengths, 2, "a first and a last frame").to(indices.device)
-    return indices.float() / (lengths[:, None] - 1).float()
+    return indices.float() / _span(lengths, span)
 
 
-def positions_to_indices(positions: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+def positions_to_indices(positions: torch.Tensor, lengths: torch.Tensor, span: int | None = None) -> torch.Tensor:
     """Frame indices from decoded positions: ``(B, K)`` float, ``lengths (B,)`` -> ``(B, K)`` long.
 
-    ``round(u (L - 1))``, sorted, then made strictly increasing inside ``[0, L - 1]`` with the
-    first keyframe at frame 0 and the last at ``L - 1``. Requires ``L >= K``.
+    ``round(u (L - 1))`` (``span`` None) or ``round(u span)``, clamped to ``[0, L - 1]``, sorted, then made
+    strictly increasing inside ``[0, L - 1]`` with the first keyframe at frame 0 and the last at ``L - 1``.
+    Requires ``L >= K``. With absolute positions a latent decoded for another length than its own keeps its
+    keyframes' frames (its pace) and only the last keyframe moves to ``L - 1``.
 
     Strictness is solved on ``c_k = i_k - k``: the indices are strictly increasing in ``[0, L-1]``
     exactly when ``c`` is non-decreasing in ``[0, L - K]``, which a running maximum and a clamp
@@ -201,7 +232,7 @@ def positions_to_indices(positions: torch.Tensor, lengths: torch.Tensor) -> torc
     if lengths.shape[0] != b:
         raise ValueError(f"lengths has {lengths.shape[0]} entries for a batch of {b}")
     last = (lengths - 1)[:, None].float()
-    idx = torch.round(positions.detach().float() * last).clamp(min=0).minimum(last).long()
+    idx = torch.round(positions.detach().float() * _span(lengths, span)).clamp(min=0).minimum(last).long()
     idx, _ = torch.sort(idx, dim=1)
     ramp = torch.arange(k, device=positions.device)[None]
     c = torch.cummax(idx - ramp, dim=1).values
@@ -274,6 +305,22 @@ class KeyframeVAE(FeatureModel):
         """``(Lz, Dz)``."""
         return (self.config.latent_size, self.config.latent_dim)
 
+    @property
+    def position_span(self) -> int | None:
+        """Frames a position of 1 stands for: None for relative timing (each motion's ``L - 1``), ``max_length - 1``
+        for absolute timing (:attr:`KeyframeVAEConfig.timing`)."""
+        return None if self.config.timing == "relative" else self.config.max_length - 1
+
+    def positions_of(self, indices: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+        """The positions this model encodes for keyframe ``indices (B, K)`` of motions of ``lengths (B,)``
+        (:func:`indices_to_positions` with :attr:`position_span`)."""
+        return indices_to_positions(indices, lengths, self.position_span)
+
+    def indices_of(self, positions: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+        """Frame indices ``(B, K)`` of decoded ``positions`` for motions of ``lengths (B,)``
+        (:func:`positions_to_indices` with :attr:`position_span`)."""
+        return positions_to_indices(positions, lengths, self.position_span)
+
     def set_normalization(self, mean, std) -> None:
         """Store the dataset statistics ``(D,)`` the model's inputs are normalised with."""
         self.norm.set(mean, std)
@@ -309,7 +356,8 @@ class KeyframeVAE(FeatureModel):
         keyframes : Tensor ``(B, K, D)``
             Normalised keyframe features, in time order.
         positions : Tensor ``(B, K)``
-            Normalised positions ``u = i / (L - 1)`` (:func:`indices_to_positions`).
+            Normalised positions (:meth:`positions_of`: ``u = i / (L - 1)``, or ``i / (max_length - 1)`` for
+            absolute timing).
         sample : bool
             Return ``z = mu + eps sigma`` (else ``z = mu``).
         generator : torch.Generator, optional
@@ -343,8 +391,12 @@ class KeyframeVAE(FeatureModel):
         for block in self.decoder:
             h = block(h, context=memory)
         h = self.decoder_norm(h)
-        # positions as cumulated softmax gaps: increasing, first exactly 0 and last 1 by construction
-        gaps = torch.softmax(self.to_positions(h[:, 1:])[..., 0], dim=-1)            # (B, K-1)
+        # positions as cumulated softmax gaps: increasing, first exactly 0; relative timing: the K-1 gaps sum to 1
+        # (last exactly 1); absolute: query 0's logit is the share left after the last keyframe (last <= 1)
+        if self.config.timing == "relative":
+            gaps = torch.softmax(self.to_positions(h[:, 1:])[..., 0], dim=-1)        # (B, K-1)
+        else:
+            gaps = torch.softmax(self.to_positions(h)[..., 0], dim=-1)[:, 1:]        # (B, K-1), sum < 1
         positions = torch.cat([gaps.new_zeros(b, 1), torch.cumsum(gaps, -1)], -1)   # (B, K)
         return KeyframeDecoding(self.to_keyframes(h), positions)
 

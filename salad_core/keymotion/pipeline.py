@@ -59,7 +59,7 @@ from salad_core.motion import features_to_joints
 from salad_core.sampling import DiffusionConfig, Guidance, make_scheduler, resolve_guidance
 from salad_core.text import TextEncoder
 
-from .kf_vae import KeyframeVAE, positions_to_indices
+from .kf_vae import KeyframeVAE
 from .mmae import MotionMaskedAutoencoder
 from .models import NORMALISATION_TOLERANCE, normalisation_gap
 from .pst import PST_DIFFUSION, ParallelSkipTransformer, sample_latents
@@ -125,7 +125,7 @@ def decode_keyframes(vae: KeyframeVAE, z: torch.Tensor, lengths: torch.Tensor) -
     order = torch.argsort(dec.positions, dim=1, stable=True)          # keep features with their positions
     keyframes = torch.gather(dec.keyframes, 1, order[..., None].expand(-1, -1, dec.keyframes.shape[-1]))
     positions = torch.gather(dec.positions, 1, order)
-    return keyframes, positions_to_indices(positions, lengths)
+    return keyframes, vae.indices_of(positions, lengths)
 
 
 def _join_chunks(parts: Sequence[tuple[torch.Tensor, ...]], n: int) -> tuple[torch.Tensor, ...]:

@@ -468,11 +468,12 @@ class MMAEObjective(nn.Module):
 
 # ------------------------------------------------------------------------------- prepare
 def _prepare_vae(batch: dict[str, Any], ctx: StepContext, *, latent_shape: tuple[int, int],
-                 latent_noise: bool = False) -> dict[str, torch.Tensor]:
+                 latent_noise: bool = False, position_span: int | None = None) -> dict[str, torch.Tensor]:
     """``latent_noise``: also draw the decoder's extra latent noise (after ``eps``; without it the random
-    stream is the one of a run without the option)."""
+    stream is the one of a run without the option). ``position_span``: the model's
+    :attr:`~salad_core.keymotion.kf_vae.KeyframeVAE.position_span` (None: relative timing)."""
     _, length, idx, keyframes = _keyframe_inputs(batch, ctx.env.device)
-    out = {"keyframes": keyframes, "positions": indices_to_positions(idx, length),
+    out = {"keyframes": keyframes, "positions": indices_to_positions(idx, length, position_span),
            "eps": ctx.rand.randn(keyframes.shape[0], latent_shape)}
     if latent_noise:
         out["latent_noise"] = ctx.rand.randn(keyframes.shape[0], latent_shape)
@@ -539,7 +540,7 @@ def prepare_pst_batch(batch: dict[str, Any], ctx: StepContext, *, vae: KeyframeV
             keys = list(zip(batch["motion_id"], (int(o) for o in batch["offset"]), length.tolist()))
             mu, logvar = (t_.to(dev) for t_ in latents.lookup(keys))      # (B, Lz, Dz)
         else:
-            enc = vae.encode(keyframes, indices_to_positions(idx, length), sample=False)
+            enc = vae.encode(keyframes, vae.positions_of(idx, length), sample=False)
             mu, logvar = enc.mu, enc.logvar
         captions = list(batch["caption"])
         if side_canonical:          # dropped captions keep their items: the unconditional branch learns all data
@@ -578,7 +579,7 @@ def _side_canonical(vae: KeyframeVAE, keyframes: torch.Tensor, idx: torch.Tensor
     rows = torch.tensor(flip, device=keyframes.device)
     raw = vae.norm.denormalize(keyframes[rows])
     mirrored = vae.norm.normalize(mirror_features(raw, vae.skeleton))
-    enc = vae.encode(mirrored, indices_to_positions(idx[rows], length[rows]), sample=False)
+    enc = vae.encode(mirrored, vae.positions_of(idx[rows], length[rows]), sample=False)
     mu, logvar = mu.clone(), logvar.clone()
     mu[rows], logvar[rows] = enc.mu.to(mu.dtype), enc.logvar.to(logvar.dtype)
     flipped = set(flip)
@@ -597,7 +598,7 @@ def roundtrip_keyframes(vae: KeyframeVAE, keyframes: torch.Tensor, indices: torc
     from .pipeline import decode_keyframes
 
     with torch.no_grad():
-        enc = vae.encode(keyframes, indices_to_positions(indices, lengths), sample=False)
+        enc = vae.encode(keyframes, vae.positions_of(indices, lengths), sample=False)
         return decode_keyframes(vae, enc.mu, lengths)
 
 
@@ -656,7 +657,7 @@ def build_kf_vae_task(data_dir: str | os.PathLike, model_config: KeyframeVAEConf
         model=vae, model_type="keymotion_kf_vae", model_config=model_config, objective=objective,
         train_set=train_set, val_set=val_set, collate=collate_keyframes,
         prepare=partial(_prepare_vae, latent_shape=vae.latent_shape,
-                        latent_noise=vae.config.latent_noise > 0), meta=meta,
+                        latent_noise=vae.config.latent_noise > 0, position_span=vae.position_span), meta=meta,
         extra_config={"kind": "keymotion_kf_vae", **meta, "data": str(Path(data_dir).resolve())},
         extra_files={"mean_std.safetensors": _mean_std_file(train_set)},
     )
@@ -686,7 +687,7 @@ def _encode_windows(vae: KeyframeVAE, source: Mapping[tuple, KeyframeDataset], k
         idx = np.stack([source[k].keyframes_of(k) for k in chunk])                 # (B, K)
         frames = np.stack([source[k].base.crop_features(*k)[i] for k, i in zip(chunk, idx)])   # (B, K, D)
         lengths = torch.tensor([k[2] for k in chunk])
-        positions = indices_to_positions(torch.from_numpy(idx), lengths)
+        positions = vae.positions_of(torch.from_numpy(idx), lengths)
         with torch.no_grad():
             enc = vae.encode(torch.from_numpy(frames).to(device), positions.to(device), sample=False)
         yield b0, enc.mu, enc.logvar

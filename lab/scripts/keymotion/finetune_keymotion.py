@@ -29,6 +29,9 @@ VAE's decoded poses halve the flight (-3.30 m/s^2 against -7.66 with the true po
   wider and deeper than the shipped one) trained from its initialisation with the recipe's schedule (``--steps``
   the whole run), keeping ``--lambda-foot`` and ``--roundtrip``; ``--export`` assembles it with the source's keyframe
   VAE and PST (the MMAE is trained on the corpus's motion, independent of both).
+* ``--stage kf_vae --scratch``: a new keyframe VAE of the recipe's architecture (e.g. ``lab/configs/keymotion-v4-absolute.json``:
+  absolute keyframe timing) trained whole from its initialisation with the recipe's schedule (``--steps`` the whole
+  run); a PST for it then comes from ``--stage pst --scratch --kf-vae RUN``.
 * ``--stage kf_vae``: :attr:`KeyframeVAEConfig.lambda_root`, ``lambda_local_vel``, ``lambda_contact`` and
   ``lambda_feet_height`` (the root, joint-velocity, foot-contact and foot-height channels weighed again), by default with the encoder frozen
   (``--parts decoder``) so the source's PST, trained on its latents, still fits. ``--latent-noise S`` adds
@@ -70,7 +73,7 @@ LOSS_FLAGS = {"mmae": ("lambda_foot", "lambda_foot_vel"), "pst": (),
               "kf_vae": ("lambda_root", "lambda_local_vel", "lambda_contact", "lambda_feet_height",
                          "latent_noise")}
 #: per stage: its other flags
-STAGE_FLAGS = {"mmae": ("roundtrip", "scratch", "fixed_keyframes"), "kf_vae": ("parts",), "pst": ("side_cue", "side_canonical", "latent_norm", "scratch",
+STAGE_FLAGS = {"mmae": ("roundtrip", "scratch", "fixed_keyframes"), "kf_vae": ("parts", "scratch"), "pst": ("side_cue", "side_canonical", "latent_norm", "scratch",
                                                                                       "kf_vae", "no_middle_skip")}
 #: the learning rate a stage gets when --lr is not given (the PST's probe of session 20 ran at 2e-4)
 DEFAULT_LR = {"mmae": 1e-4, "kf_vae": 1e-4, "pst": 2e-4}
@@ -178,7 +181,10 @@ def main(argv=None, *, text_encoder=None) -> int:
     if args.rest_padding is not None:
         overrides["rest_padding"] = args.rest_padding
     if args.stage == "kf_vae":
-        train_cfg = replace(recipe.kf_vae_train, train_parts=args.parts or "decoder", **overrides)
+        if args.scratch and args.parts == "decoder":
+            ap.error("--parts decoder needs a trained keyframe VAE to start from; --scratch trains all of a new one")
+        parts = args.parts or ("all" if args.scratch else "decoder")
+        train_cfg = replace(recipe.kf_vae_train, train_parts=parts, **overrides)
         model_cfg = replace(recipe.kf_vae_model or KeyframeVAEConfig(), **weights)
         result = train_kf_vae(args.data, args.out, model_cfg, train_cfg, resume=args.resume)
     elif args.stage == "pst":

@@ -27,7 +27,7 @@ from salad_core.attention.measure import left_right_ratio
 from salad_core.data.dataset import read_texts
 from salad_core.data.procedural import part_activity
 from salad_core.eval.metrics import mpjpe
-from salad_core.keymotion.kf_vae import indices_to_positions
+
 from salad_core.keymotion.mmae import keyframe_lerp, scatter_keyframes
 from salad_core.keymotion.models import pose_joints
 from salad_core.keymotion.pipeline import KeyMotionPipeline, decode_keyframes
@@ -52,7 +52,7 @@ def reconstruction(pipe: KeyMotionPipeline, data: Path, clips: int, method: str)
         idx = torch.from_numpy(select_keyframes(x[0].numpy(), k, method).astype(np.int64))[None]
         kf = torch.gather(x, 1, idx[..., None].expand(-1, -1, x.shape[-1]))
         length = torch.tensor([n])
-        enc = pipe.kf_vae.encode(kf, indices_to_positions(idx, length), sample=False)
+        enc = pipe.kf_vae.encode(kf, pipe.kf_vae.positions_of(idx, length), sample=False)
         dec_kf, dec_idx = decode_keyframes(pipe.kf_vae, enc.mu, length)
         pj = pose_joints(norm.denormalize(dec_kf), pipe.skeleton)[0].numpy()
         tj = pose_joints(norm.denormalize(kf), pipe.skeleton)[0].numpy()

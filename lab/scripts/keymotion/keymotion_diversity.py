@@ -41,7 +41,7 @@ import numpy as np
 import torch
 
 from salad_core.eval.physics import seed_diversity
-from salad_core.keymotion.kf_vae import gather_keyframes, indices_to_positions
+from salad_core.keymotion.kf_vae import gather_keyframes
 from salad_core.keymotion.mmae import keyframe_lerp, scatter_keyframes
 from salad_core.keymotion.models import pose_joints
 from salad_core.keymotion.pipeline import KeyMotionPipeline, decode_keyframes
@@ -132,7 +132,7 @@ def data_latents(pipe: KeyMotionPipeline, data: Path, split: str, limit: int, rn
         idx = torch.from_numpy(select_keyframes(x[0].numpy(), k, "mdo"))[None]
         kfs = gather_keyframes(x, idx)
         with torch.no_grad():
-            enc = vae.encode(kfs, indices_to_positions(idx, torch.tensor([n])), sample=False)
+            enc = vae.encode(kfs, vae.positions_of(idx, torch.tensor([n])), sample=False)
             dec = vae.decode(enc.mu)
         mus.append(enc.mu[0].numpy())
         sig.append(torch.exp(0.5 * enc.logvar[0]).numpy())

@@ -89,7 +89,7 @@ def encoded_latents(pipe, data: Path, clips: list[str]):
     import torch
 
     from salad_core.keymotion import select_keyframes
-    from salad_core.keymotion.kf_vae import gather_keyframes, indices_to_positions
+    from salad_core.keymotion.kf_vae import gather_keyframes
 
     out = []
     with torch.inference_mode():
@@ -100,7 +100,7 @@ def encoded_latents(pipe, data: Path, clips: list[str]):
             xn = pipe.mmae.norm.normalize(torch.from_numpy(x))
             idx = torch.from_numpy(select_keyframes(xn.numpy(), pipe.num_keyframes, "mdo").astype(np.int64))[None]
             kf = gather_keyframes(xn[None], idx)
-            enc = pipe.kf_vae.encode(kf, indices_to_positions(idx, torch.tensor([len(x)])), sample=False)
+            enc = pipe.kf_vae.encode(kf, pipe.kf_vae.positions_of(idx, torch.tensor([len(x)])), sample=False)
             out.append(enc.mu[0].float().numpy())
     return np.stack(out)
 

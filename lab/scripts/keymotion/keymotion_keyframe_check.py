@@ -34,7 +34,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from salad_core.keymotion.kf_vae import indices_to_positions, positions_to_indices
 from salad_core.keymotion.models import pose_joints
 from salad_core.keymotion.selection import select_keyframes
 
@@ -72,10 +71,10 @@ def check_window(vae, x: np.ndarray) -> dict:
     idx = torch.from_numpy(select_keyframes(x, k, "mdo").astype(np.int64))[None]         # (1, K)
     true = torch.from_numpy(x)[None].gather(1, idx[..., None].expand(-1, -1, x.shape[-1]))  # (1, K, D)
     lengths = torch.tensor([n])
-    enc = vae.encode(vae.norm.normalize(true), indices_to_positions(idx, lengths), sample=False)
+    enc = vae.encode(vae.norm.normalize(true), vae.positions_of(idx, lengths), sample=False)
     dec = vae.decode(enc.mu)
     rec = vae.norm.denormalize(dec.keyframes)
-    rec_idx = positions_to_indices(dec.positions, lengths)
+    rec_idx = vae.indices_of(dec.positions, lengths)
     pt, pr = pose_joints(true, vae.skeleton)[0], pose_joints(rec, vae.skeleton)[0]            # (K, J, 3)
     pose = ((pr - pr[:, :1]) - (pt - pt[:, :1])).norm(dim=-1).mean().item()
     s_true, s_rec = np.ptp(forward_separation(true[0].numpy())), np.ptp(forward_separation(rec[0].numpy()))

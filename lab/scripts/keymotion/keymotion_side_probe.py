@@ -76,7 +76,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     sys.path.insert(0, str(REPO))
     from salad_core.keymotion import KeyMotionPipeline
-    from salad_core.keymotion.kf_vae import gather_keyframes, indices_to_positions
+    from salad_core.keymotion.kf_vae import gather_keyframes
     from salad_core.keymotion.selection import select_keyframes
     from salad_core.keymotion.sides import names_left_first, side_ids_of
     from salad_core.keymotion.pst import PST_DIFFUSION
@@ -95,7 +95,7 @@ def main(argv=None) -> int:
         idx = torch.from_numpy(select_keyframes(x[0].numpy(), k, "mdo").astype(np.int64))[None]
         lens = torch.tensor([x.shape[1]])
         with torch.no_grad():
-            enc = vae.encode(gather_keyframes(x, idx), indices_to_positions(idx, lens), sample=False)
+            enc = vae.encode(gather_keyframes(x, idx), vae.positions_of(idx, lens), sample=False)
         return pst.normalize_latents(enc.mu)[0], x.shape[1]
 
     z, zm, lens = [], [], []
