@@ -242,10 +242,15 @@ def test_invert_records_the_inpaint_noise_mode(tmp_path, sample_dir):
     edit = json.loads((out / "take_inversion.json").read_text())["edit"]
     edits = edit["edits"]
     assert len(edits) == 1 and "noise='matched'" in edits[0] and edits[0].startswith("Inpaint(")
-    # a span of a given take is ranked over 4 seeds by default: the report keeps every score and the chosen seed
+    # a span of a given take is ranked over 8 seeds by default, the closest among those whose seams are within 1.5x:
+    # the report keeps every score and seam ratio and the chosen seed
+    from salad_core.attention.inpaint import SEAM_BOUND, SPAN_CANDIDATES
+    from salad_core.attention.ranking import pick_candidate
+
     ranked = edit["inpaint_candidates"]
-    assert len(ranked["seeds"]) == len(ranked["distances"]) == 4
-    assert ranked["distances"][ranked["chosen"]] == min(ranked["distances"])
+    assert len(ranked["seeds"]) == len(ranked["distances"]) == len(ranked["seam_ratios"]) == SPAN_CANDIDATES
+    assert ranked["seam_bound"] == SEAM_BOUND
+    assert ranked["chosen"] == pick_candidate(ranked["distances"], ranked["seam_ratios"], SEAM_BOUND)
     assert f"seed={ranked['seed']}," in edits[0] and ranked["seed"] == ranked["seeds"][ranked["chosen"]]
 
 

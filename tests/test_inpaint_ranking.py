@@ -14,9 +14,10 @@ import torch
 from salad_core.attention import Inpaint
 from salad_core.attention import ranking
 from salad_core.attention.edits import seeded_noise
-from salad_core.attention.inpaint import SCORE_MODES, SPAN_CANDIDATES
-from salad_core.attention.ranking import (MIN_FRAMES, TextMotionScorer, candidate_specs, caption_tokens, isolate_parts,
-                                          ranked_edit, scoring_window)
+from salad_core.attention.composite import seam_jerk_ratio
+from salad_core.attention.inpaint import SCORE_MODES, SEAM_BOUND, SPAN_CANDIDATES
+from salad_core.attention.ranking import (MIN_FRAMES, TextMotionScorer, candidate_seam_ratios, candidate_specs,
+                                          caption_tokens, isolate_parts, pick_candidate, ranked_edit, scoring_window)
 from salad_core.eval.train_evaluator import default_evaluator_dir
 from salad_core.pipeline import EditOutput, MotionOutput, default_weights_dir
 
@@ -40,7 +41,7 @@ def test_bad_candidates_are_refused(k):
 
 def test_auto_candidates_rank_a_span_of_one_inverted_motion_only():
     span = Inpaint(frames=(8, 24))
-    assert span.candidates == "auto" and span.candidates_for(True) == SPAN_CANDIDATES == 4
+    assert span.candidates == "auto" and span.candidates_for(True) == SPAN_CANDIDATES == 8
     assert span.candidates_for(False) == 1                              # a generated source: its own noise
     assert span.candidates_for(True, motions=2) == 1                    # a batch: one edit each
     assert Inpaint(frames=(8, 24), noise="source").candidates_for(True) == 1
@@ -365,6 +366,171 @@ def test_inpaint_score_flag_reaches_the_spec(command):
         _edit_specs(cli.build_parser().parse_args(command + span))
 
 
+# ------------------------------------------------------------------------------ seam-aware ranking of a span
+#: The source of the seam tests: joint 0 moves along x as c t^3 / 6 (third difference c per frame^3 at every frame),
+#: joint 1 stands still; jerk mean over joints c / 2 at every frame, so its 95th percentile is c / 2 too.
+_C = 1e-3
+
+
+def _smooth_source(n: int = 60) -> np.ndarray:
+    t = np.arange(n, dtype=np.float64)
+    joints = np.zeros((n, 2, 3))
+    joints[:, 0, 0] = _C * t ** 3 / 6
+    return joints
+
+
+def _stepped(source: np.ndarray, at: int, height: float) -> np.ndarray:
+    """``source`` with both joints lifted by ``height`` (along y) from frame ``at`` on: a jump in jerk there."""
+    out = source.copy()
+    out[at:, :, 1] += height
+    return out
+
+
+def test_seam_jerk_ratio_of_a_known_step_next_to_the_seam():
+    src = _smooth_source()
+    h = 0.01
+    # a step of h at frame 20: the third differences that end on it hold h, -2h, h; the largest is |-2h| (per joint,
+    # joint 0 adds its own c along x)
+    expected = (np.hypot(_C, 2 * h) + 2 * h) / 2 / (_C / 2)
+    assert seam_jerk_ratio(src, _stepped(src, 20, h), [20]) == pytest.approx(expected, rel=1e-9)
+    assert seam_jerk_ratio(src, _stepped(src, 20, h), [20, 40]) == pytest.approx(expected, rel=1e-9)
+    assert seam_jerk_ratio(src, src, [20]) == pytest.approx(1.0, rel=1e-9)       # the source's own jerk: 1x
+    # a step 6 frames after the seam is no longer within 4 frames of it: the seam sees the source's jerk
+    assert seam_jerk_ratio(src, _stepped(src, 26, h), [20]) == pytest.approx(1.0, rel=1e-9)
+    assert seam_jerk_ratio(src, _stepped(src, 20, h), []) == 0.0                 # no seam
+    # the reference is the source's percentile: a source twice as jerky halves the ratio
+    assert seam_jerk_ratio(2 * src, _stepped(src, 20, h), [20]) == pytest.approx(expected / 2, rel=1e-9)
+
+
+def test_seam_jerk_ratio_refusals():
+    src = _smooth_source()
+    with pytest.raises(ValueError, match=r"source must be joint positions \(N, J, 3\), got shape \(60, 6\)"):
+        seam_jerk_ratio(src.reshape(60, 6), src, [20])
+    with pytest.raises(ValueError, match=r"edited must be joint positions"):
+        seam_jerk_ratio(src, src[..., :2], [20])
+    with pytest.raises(ValueError, match="the source has 3 frames"):
+        seam_jerk_ratio(src[:3], src, [20])
+    with pytest.raises(ValueError, match="percentile=120"):
+        seam_jerk_ratio(src, src, [20], percentile=120)
+
+
+def test_pick_candidate_keeps_the_closest_smooth_candidate_and_falls_back_to_the_smoothest():
+    dist = [3.0, 1.0, 2.0, 0.5]
+    assert pick_candidate(dist) == 3                                             # no bound: the closest
+    assert pick_candidate(dist, [1.2, 2.0, 1.4, 3.0], None) == 3
+    assert pick_candidate(dist, [1.2, 2.0, 1.4, 3.0], 1.5) == 2                  # closest of the smooth 0 and 2
+    assert pick_candidate(dist, [1.2, 2.0, 1.5, 3.0], 1.5) == 2                  # the bound itself is within
+    assert pick_candidate(dist, [1.2, 2.0, 1.6, 3.0], 1.5) == 0
+    assert pick_candidate(dist, [2.0, 1.8, 3.0, 1.6], 1.5) == 3                  # none within: the smoothest
+    assert pick_candidate(dist, [2.0, 1.6, 3.0, 1.6], 1.5) == 1                  # ... the first of equal ones
+    with pytest.raises(ValueError, match="3 seam ratios for 4 candidates"):
+        pick_candidate(dist, [1.0, 1.0, 1.0], 1.5)
+    with pytest.raises(ValueError, match="one distance per candidate"):
+        pick_candidate([], [], 1.5)
+
+
+@pytest.mark.parametrize("bound", [0, -1.5, True, "1.5", float("nan"), float("inf")])
+def test_bad_seam_bounds_are_refused(bound):
+    with pytest.raises(ValueError, match=r"Inpaint.seam_bound=.* must be a finite number > 0"):
+        Inpaint(frames=(8, 24), seam_bound=bound)
+
+
+def test_seam_bound_resolves_for_spans_only():
+    span = Inpaint(frames=(8, 24))
+    assert span.seam_bound == "auto" and span.seam_bound_for(True) == SEAM_BOUND == 1.5   # a take's span
+    assert span.seam_bound_for(False) is None                          # a generated source: not where it was chosen
+    assert Inpaint(frames=(8, 24), seam_bound=2).seam_bound_for(False) == 2.0
+    assert isinstance(Inpaint(frames=(8, 24), seam_bound=2).seam_bound, float)
+    assert Inpaint(frames=(8, 24), seam_bound=None).seam_bound_for(True) is None
+    for bound in ("auto", 1.5, None):                                   # body parts have no seam
+        parts = Inpaint(parts="arms", seam_bound=bound)
+        assert parts.seam_bound_for(True) is None and parts.seam_bound_for(False) is None
+    spec = Inpaint(frames=(20, 40), candidates=2, seam_bound=1.5)               # the candidates keep the bound
+    assert [s[0].seam_bound for s in candidate_specs([spec], spec, 2)] == [1.5, 1.5]
+
+
+def _span_output(value: float, step: float, n: int = 60) -> EditOutput:
+    """One motion of ``n`` frames: features all ``value`` (the stub scorer's distance is ``|value - 2|``), the source's
+    joints :func:`_smooth_source`, the edit's the same with a step of ``step`` at frame 20."""
+    src_j = _smooth_source(n)
+    feats = np.full((1, n, 263), value, dtype=np.float32)
+    z = torch.zeros(1, n // 4, 7, 4)
+    source = MotionOutput(feats, [src_j], [WAVE], [n], z, z, [0])
+    edited = MotionOutput(feats, [_stepped(src_j, 20, step)], [WAVE], [n], z, z, [0])
+    return EditOutput(source, edited, z, (), {})
+
+
+#: Candidates of the seam tests, by seed: (features -> distance |value - 2|, seam step). Seed 0 is the closest with a
+#: sharp seam, seed 1 the closest of the smooth ones, seed 2 smooth but farther, seed 3 the smoothest.
+_CANDIDATES = {0: (2.0, 0.01), 1: (2.5, 0.0002), 2: (3.0, 0.0001), 3: (0.0, 0.0)}
+
+
+def _run_candidates(table):
+    seen = []
+
+    def run(specs):
+        seen.append(specs[0].seed)
+        return _span_output(*table[specs[0].seed])
+
+    return run, seen
+
+
+def _ratio(step: float) -> float:
+    src = _smooth_source()
+    return seam_jerk_ratio(src, _stepped(src, 20, step), [20, 40])
+
+
+@pytest.mark.parametrize("bound, chosen", [(1.5, 1), (None, 0), ("auto", 1), (1e-9, 3)])
+def test_ranked_edit_of_a_span_keeps_the_closest_smooth_candidate_and_records_the_seams(bound, chosen):
+    ratios = [_ratio(step) for _, step in _CANDIDATES.values()]
+    assert ratios[0] > 1.5 >= ratios[1] > ratios[2] > ratios[3] == pytest.approx(1.0)  # what the table means
+    spec = Inpaint(frames=(20, 40), candidates=4, seam_bound=bound)
+    run, seen = _run_candidates(_CANDIDATES)
+    out = ranked_edit(run, [spec], inverted=True, skeleton="humanml3d", scorer=_StubScorer())
+    rec = out.settings["inpaint_candidates"]
+    assert seen == [0, 1, 2, 3] and rec["distances"] == [0.0, 0.5, 1.0, 2.0]
+    np.testing.assert_allclose(rec["seam_ratios"], ratios, rtol=1e-12)
+    assert rec["seam_bound"] == {"auto": SEAM_BOUND, None: None}.get(bound, bound)
+    assert rec["chosen"] == chosen and out.edits[0].seed == chosen
+    np.testing.assert_array_equal(out.edited.joints[0], _span_output(*_CANDIDATES[chosen]).edited.joints[0])
+
+
+def test_a_seam_bound_does_not_change_a_body_part_ranking():
+    """Body parts have no seam: the same candidates (whose joints would give the span's seam ratios) rank the same
+    with any bound, and no seam ratio is recorded."""
+    outs = {}
+    for bound in (None, "auto", 1.5, 1e-9):
+        run, _ = _run_candidates(_CANDIDATES)
+        out = ranked_edit(run, [Inpaint(parts="arms", candidates=4, seam_bound=bound)], inverted=True,
+                          skeleton="humanml3d", scorer=_StubScorer())
+        rec = out.settings["inpaint_candidates"]
+        assert rec["seam_ratios"] is None and rec["seam_bound"] is None
+        outs[bound] = rec["chosen"]
+    assert outs == {None: 0, "auto": 0, 1.5: 0, 1e-9: 0}
+    assert candidate_seam_ratios([_span_output(2.0, 0.01)], Inpaint(parts="arms")) is None
+
+
+@pytest.mark.parametrize("command", [["edit", SOURCE], ["invert", "take.npy", "--prompt", SOURCE]])
+def test_inpaint_seam_bound_flag_reaches_the_spec(command):
+    from salad_core import cli
+    from salad_core.cli._common import UserError
+    from salad_core.cli.generate import _edit_specs
+
+    flags = ["--target", "a person jumps", "--inpaint", "@12:28", "--out", "x"]
+
+    def spec(*extra):
+        return _edit_specs(cli.build_parser().parse_args(command + flags + list(extra)))[0]
+
+    assert spec().seam_bound == "auto"
+    assert spec("--inpaint-seam-bound", "1.5").seam_bound == 1.5
+    assert spec("--inpaint-seam-bound", "off").seam_bound is None
+    assert spec("--inpaint-seam-bound", "auto").seam_bound == "auto"
+    with pytest.raises(UserError, match="--inpaint-seam-bound lots: give a number"):
+        spec("--inpaint-seam-bound", "lots")
+    with pytest.raises(UserError, match=r"--inpaint @12:28: Inpaint.seam_bound=0.0 must be a finite number > 0"):
+        spec("--inpaint-seam-bound", "0")
+
+
 # ------------------------------------------------------------------------------ with the shipped weights
 @pytest.fixture(scope="module")
 def pipe(single_thread):
@@ -411,7 +577,7 @@ def test_one_candidate_is_one_edit_from_the_seed_and_never_ranks(pipe, inversion
 @needs_weights
 @needs_evaluator
 @pytest.mark.parametrize("case", ["generated parts, K=3", "generated parts, K=3, scored on parts",
-                                  "generated span, K=3", "inverted span, auto"])
+                                  "generated span, K=3", "inverted span, auto", "inverted span, seam bound 1.2"])
 def test_best_of_k_is_the_best_of_the_k_seeds_run_one_by_one(pipe, inversion, case):
     spec, target, kw = {
         "generated parts, K=3": (Inpaint(parts="arms", noise="fresh", seed=3, candidates=3), WAVE, {}),
@@ -419,6 +585,8 @@ def test_best_of_k_is_the_best_of_the_k_seeds_run_one_by_one(pipe, inversion, ca
                                                           score="parts"), WAVE, {}),
         "generated span, K=3": (Inpaint(frames=(16, 32), noise="fresh", candidates=3), "a person jumps", {}),
         "inverted span, auto": (Inpaint(frames=(16, 32)), "a person jumps", {"inversion": inversion}),
+        "inverted span, seam bound 1.2": (Inpaint(frames=(16, 32), seam_bound=1.2), "a person jumps",
+                                          {"inversion": inversion}),
     }[case]
     source = {} if kw else dict(source=SOURCE, lengths=FRAMES, seed=0, num_steps=STEPS)
     out = pipe.edit(target=target, edits=[spec], **source, **kw)
@@ -436,7 +604,15 @@ def test_best_of_k_is_the_best_of_the_k_seeds_run_one_by_one(pipe, inversion, ca
     mine = [scorer.distance(f, target, span) for f in scored]
     assert len(set(mine)) == k                                         # the seeds give different motions
     np.testing.assert_allclose(rec["distances"], mine, rtol=1e-6)
-    best = int(np.argmin(mine))
+    if spec.frames is None:
+        assert rec["seam_ratios"] is None
+    else:                                                               # each candidate's seams, as measured
+        cuts = [b for b in span if 0 < b < FRAMES]
+        seams = [seam_jerk_ratio(s.source.joints[0], s.edited.joints[0], cuts) for s in singles]
+        np.testing.assert_allclose(rec["seam_ratios"], seams, rtol=1e-9)
+    bound = spec.seam_bound_for(bool(kw))
+    assert rec["seam_bound"] == bound
+    best = pick_candidate(mine, rec["seam_ratios"], bound)
     assert rec["chosen"] == best and rec["seed"] == spec.seed + best and out.edits[0].seed == spec.seed + best
     np.testing.assert_array_equal(out.edited.features, singles[best].edited.features)
     np.testing.assert_array_equal(out.source.features, singles[0].source.features)

@@ -42,7 +42,7 @@ import numpy as np
 from salad_core.skeleton import PART_NAMES, get_skeleton
 
 __all__ = ["ROOT_MODES", "part_joint_weights", "frame_weights", "seams", "smooth_columns", "smooth_seam_features",
-           "seam_jerk", "composite_features", "composite_output", "composite_specs"]
+           "frame_jerk", "seam_jerk", "seam_jerk_ratio", "composite_features", "composite_output", "composite_specs"]
 
 #: How the root of a regenerated frame span is handled (see the module docstring).
 ROOT_MODES = ("source", "edit")
@@ -322,15 +322,55 @@ def composite_specs(edits) -> list:
     return [e for e in edits if getattr(e, "composite", False) and hasattr(e, "joint_weights")]
 
 
-def seam_jerk(joints: np.ndarray, cuts: Sequence[int]) -> float:
-    """The largest jerk (norm of the third difference of the joints ``(N, J, 3)``, mean over joints, per frame^3) in
-    the third differences that touch a frame within 4 of an inner seam of ``cuts`` (:func:`seams`); 0 without one."""
+def _joints(joints: np.ndarray, name: str) -> np.ndarray:
     j = np.asarray(joints, np.float64)
-    if len(j) < 4 or not cuts:
+    if j.ndim != 3 or j.shape[-1] != 3:
+        raise ValueError(f"{name} must be joint positions (N, J, 3), got shape {j.shape}")
+    return j
+
+
+def frame_jerk(joints: np.ndarray) -> np.ndarray:
+    """``(N - 3,)`` jerk of joint positions ``(N, J, 3)``: the norm of each joint's third difference, mean over
+    joints (per frame^3: multiply by ``fps ** 3`` for m/s^3 when the positions are metres); entry ``i`` spans frames
+    ``i .. i + 3``. Fewer than 4 frames: empty."""
+    j = _joints(joints, "joints")
+    if len(j) < 4:
+        return np.zeros(0)
+    return np.linalg.norm(j[3:] - 3 * j[2:-1] + 3 * j[1:-2] - j[:-3], axis=-1).mean(-1)
+
+
+def seam_jerk(joints: np.ndarray, cuts: Sequence[int]) -> float:
+    """The largest :func:`frame_jerk` of the joints ``(N, J, 3)`` (per frame^3) in the third differences that touch a
+    frame within 4 of an inner seam of ``cuts`` (:func:`seams`); 0 without one."""
+    d3 = frame_jerk(joints)
+    if not len(d3) or not cuts:
         return 0.0
-    d3 = np.linalg.norm(j[3:] - 3 * j[2:-1] + 3 * j[1:-2] - j[:-3], axis=-1).mean(-1)
     idx = sorted({i for b in cuts for i in range(max(0, b - 5), min(len(d3), b + 3))})
     return float(d3[idx].max()) if idx else 0.0
+
+
+#: Floor of the source's jerk percentile in :func:`seam_jerk_ratio` (per frame^3; a source that never moves).
+_MIN_SOURCE_JERK = 1e-12
+
+
+def seam_jerk_ratio(source: np.ndarray, edited: np.ndarray, cuts: Sequence[int], percentile: float = 95.0) -> float:
+    """How sharp an edit's seams are against the source's own motion: the edit's :func:`seam_jerk` at the inner seams
+    ``cuts`` over the ``percentile``-th percentile of the source's :func:`frame_jerk` (1: a seam as jerky as the
+    source's 95th-percentile frame). ``source`` and ``edited``: joint positions ``(N, J, 3)`` (the same joints; the
+    lengths may differ). No seam: 0.
+
+    Raises
+    ------
+    ValueError
+        Joints of the wrong shape, a source of fewer than 4 frames, a percentile outside [0, 100].
+    """
+    src = _joints(source, "source")
+    if len(src) < 4:
+        raise ValueError(f"the source has {len(src)} frames: its jerk needs at least 4")
+    if not 0 <= percentile <= 100:
+        raise ValueError(f"percentile={percentile!r} must lie in [0, 100]")
+    ref = float(np.percentile(frame_jerk(src), percentile))
+    return seam_jerk(_joints(edited, "edited"), cuts) / max(ref, _MIN_SOURCE_JERK)
 
 
 def _smoothing(specs) -> tuple[float, int]:

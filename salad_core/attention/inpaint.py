@@ -33,10 +33,13 @@ each ``jump`` of 5 steps denoised 3 times, re-noising the region in between, so 
 kept parts; generated sources were not measured for it and are sampled once).
 
 A frame span of an inverted take is regenerated :data:`SPAN_CANDIDATES` times, from that many seeds of the region's
-fresh noise, and the candidate the T2M evaluator finds closest to the target prompt kept (``candidates="auto"``,
-:mod:`salad_core.attention.ranking`: the span's check rose from 11 to 17 of 24 validation clips at 4 times the cost;
-body parts alone are sampled once: ranking their resampled edits lowered the check, 18 -> 12 of 24, and scoring the
-regenerated parts alone, the kept ones held still (``score="parts"``), ranked them no better: 10 of 24).
+fresh noise, and among the candidates whose seams are smooth (``seam_bound="auto"``: seam jerk within
+:data:`SEAM_BOUND` times the source's own 95th percentile; none: the smoothest) the one the T2M evaluator finds closest
+to the target prompt is kept (``candidates="auto"``, :mod:`salad_core.attention.ranking`: on 24 validation clips the
+span's check rose from 11 of 24 with one candidate to 20, with the seams within 1.5x in 22, at 8 times the cost; the
+best of 8 by the evaluator alone passed 21 but its seams only 18, the evaluator's distance not seeing seams). Body
+parts alone are sampled once: ranking their resampled edits lowered the check, 18 -> 12 of 24, and scoring the
+regenerated parts alone, the kept ones held still (``score="parts"``), ranked them no better: 10 of 24.
 
 :func:`parse_inpaint` reads the command line's ``PARTS[@START:END]`` notation.
 """
@@ -56,7 +59,7 @@ if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
 
 __all__ = ["Inpaint", "INPAINT_GROUPS", "MATCHED_MAX_RHO", "NOISE_MODES", "PARTS_RESAMPLE", "SCORE_MODES",
-           "SPAN_CANDIDATES", "SPAN_GUIDANCE",
+           "SEAM_BOUND", "SPAN_CANDIDATES", "SPAN_GUIDANCE",
            "ar1_noise", "inpaint_parts", "matched_noise", "noise_statistics", "parse_inpaint"]
 
 #: What :class:`Inpaint`'s regenerated region starts from (see :attr:`Inpaint.noise`).
@@ -72,10 +75,14 @@ SPAN_GUIDANCE = 7.5
 PARTS_RESAMPLE = 3
 
 #: The candidates of ``Inpaint(candidates="auto")`` when a frame span of an inverted motion is regenerated.
-SPAN_CANDIDATES = 4
+SPAN_CANDIDATES = 8
 
 #: How :class:`Inpaint`'s candidates are scored (see :attr:`Inpaint.score`).
 SCORE_MODES = ("auto", "whole", "parts")
+
+#: The seam bound of ``Inpaint(seam_bound="auto")`` when a frame span of an inverted motion is regenerated: a seam's
+#: jerk at most 1.5 times the source's own 95th percentile (:func:`~salad_core.attention.composite.seam_jerk_ratio`).
+SEAM_BOUND = 1.5
 
 #: Group names :class:`Inpaint` accepts besides the part names. "legs" / "arms" as :class:`Mirror`;
 #: "upper" / "lower" are the upper body (spine, arms, head) and the lower body (root, legs) -- the
@@ -301,6 +308,14 @@ class Inpaint(EditSpec):
         (:func:`~salad_core.attention.ranking.isolate_parts`; needs ``parts`` that keep some part); ``"auto"``
         (default): ``"whole"`` for every edit (:meth:`score_for`; on procedural validation clips the parts alone
         did not rank an arms edit's candidates better than the whole motion).
+    seam_bound : float, ``"auto"`` or None
+        With ``candidates`` > 1 and a frame span: rank by the evaluator's distance only the candidates whose seams
+        are smooth, those whose :func:`~salad_core.attention.composite.seam_jerk_ratio` (the largest jerk of the
+        edit's joints within 4 frames of an inner seam over the source's own 95th percentile of jerk) is at most
+        ``seam_bound``; when none is, keep the one with the smallest ratio
+        (:func:`~salad_core.attention.ranking.pick_candidate`). None: by distance alone. Body parts alone have no
+        seam: their ranking is by distance whatever the bound. ``"auto"`` (default): :data:`SEAM_BOUND` (1.5) when a
+        frame span of an inverted motion is regenerated, where it was chosen; None otherwise (:meth:`seam_bound_for`).
     """
 
     role: ClassVar[str] = "latent"
@@ -322,6 +337,7 @@ class Inpaint(EditSpec):
     jump: int = 5
     candidates: Union[int, str] = "auto"
     score: str = "auto"
+    seam_bound: Union[float, str, None] = "auto"
 
     def __post_init__(self) -> None:
         if self.noise not in NOISE_MODES:
@@ -344,6 +360,13 @@ class Inpaint(EditSpec):
                              "edit) or 'auto'")
         if not isinstance(self.score, str) or self.score not in SCORE_MODES:
             raise ValueError(f"Inpaint.score={self.score!r}; allowed: {SCORE_MODES}")
+        if self.seam_bound is not None and self.seam_bound != "auto":
+            b = self.seam_bound
+            if isinstance(b, bool) or not isinstance(b, (int, float)) or not math.isfinite(b) or b <= 0:
+                raise ValueError(f"Inpaint.seam_bound={b!r} must be a finite number > 0 (the largest seam jerk over "
+                                 "the source's 95th percentile a candidate may have to be ranked by distance), "
+                                 "'auto' or None")
+            object.__setattr__(self, "seam_bound", float(b))
         for name in ("resample", "jump"):
             v = getattr(self, name)
             if name == "resample" and v == "auto":
@@ -469,6 +492,17 @@ class Inpaint(EditSpec):
         if self.score == "auto":
             return "whole"
         return self.score
+
+    def seam_bound_for(self, inverted: bool) -> Optional[float]:
+        """The seam bound the candidates are ranked with (:attr:`seam_bound`; ``"auto"`` resolved: :data:`SEAM_BOUND`
+        for a frame span of an inverted motion, where it was chosen, None for a generated source), None for body
+        parts alone (no seam) and for no bound (by distance alone). ``inverted``: the edit is of an inversion (as
+        for :meth:`candidates_for`)."""
+        if self.frames is None:
+            return None
+        if self.seam_bound == "auto":
+            return SEAM_BOUND if inverted else None
+        return self.seam_bound
 
     def resampling(self, fraction: float, index: int, num_steps: int, passes: int) -> bool:
         """Whether the sampler resamples after step ``index`` (of ``num_steps``; ``fraction`` = index / num_steps)

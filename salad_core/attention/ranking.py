@@ -1,6 +1,6 @@
 """Ranking in-painting candidates by the text-motion evaluator: the best of ``K`` fresh-noise seeds.
 
-:class:`~salad_core.attention.inpaint.Inpaint` with ``candidates=K`` (K > 1; by default 4 for a frame span of an
+:class:`~salad_core.attention.inpaint.Inpaint` with ``candidates=K`` (K > 1; by default 8 for a frame span of an
 inverted motion) runs the whole edit ``K`` times, the region's fresh noise drawn from the seeds ``seed, seed + 1, ...,
 seed + K - 1`` (everything else the same), and keeps the candidate whose edited motion lies closest to the target
 prompt in the T2M evaluator's embedding space (:class:`TextMotionScorer`: the Euclidean text-motion distance of
@@ -13,6 +13,12 @@ evaluator's minimum length (:data:`MIN_FRAMES`, the shortest clip the evaluator 
 motion (a motion shorter than that is scored whole). With ``Inpaint(score="parts")`` the scored motion is
 :func:`isolate_parts`'s: the kept body parts held still, so that only the regenerated ones move (for a parts edit the
 kept body, e.g. a walk, otherwise dominates the evaluator's embedding).
+
+With ``Inpaint(seam_bound=B)`` (by default 1.5 for a frame span of an inverted motion) a frame span's candidates are
+ranked among the smooth ones only (:func:`pick_candidate`): each candidate's
+:func:`~salad_core.attention.composite.seam_jerk_ratio` (its seams' jerk over the source's own 95th percentile,
+:func:`candidate_seam_ratios`) is known before choosing, and the closest candidate whose ratio is at most ``B`` is
+kept (none: the smoothest). The evaluator's distance does not see seams.
 
 The evaluator's text side takes ``word/POS`` tokens (HumanML3D's format); :func:`caption_tokens` tags a free prompt
 with the procedural corpus's own lexicon (:data:`salad_core.data.procedural.language.LEXICON`: the lemma for nouns
@@ -38,7 +44,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .inpaint import Inpaint
 
 __all__ = ["MIN_FRAMES", "TextMotionScorer", "caption_tokens", "scoring_window", "isolate_parts", "candidate_specs",
-           "ranked_inpaint", "choose_candidate", "ranked_edit"]
+           "ranked_inpaint", "candidate_seam_ratios", "pick_candidate", "choose_candidate", "ranked_edit"]
 
 #: The shortest window the scorer embeds (motion frames): the evaluator's training clips are at least this long
 #: (HumanML3D's ``min_length``).
@@ -243,13 +249,59 @@ def candidate_specs(edits: Sequence, inpaint: "Inpaint", k: int) -> list[tuple]:
             for i in range(k)]
 
 
+def candidate_seam_ratios(outputs: Sequence["EditOutput"], inpaint: "Inpaint") -> Optional[list[float]]:
+    """Each candidate edit's (one motion each) :func:`~salad_core.attention.composite.seam_jerk_ratio`: its edited
+    joints' jerk at the inner seams of ``inpaint``'s regenerated span over its source's own 95th percentile of jerk.
+    None when ``inpaint`` regenerates body parts alone (no seam)."""
+    from .composite import seam_jerk_ratio
+
+    ratios = []
+    for out in outputs:
+        n = int(out.edited.lengths[0])
+        span = inpaint.frame_span(n)
+        if span is None:
+            return None
+        cuts = [b for b in span if 0 < b < n]
+        src = np.asarray(out.source.joints[0])[:int(out.source.lengths[0])]
+        ratios.append(seam_jerk_ratio(src, np.asarray(out.edited.joints[0])[:n], cuts))
+    return ratios
+
+
+def pick_candidate(distances: Sequence[float], seam_ratios: Optional[Sequence[float]] = None,
+                   bound: Optional[float] = None) -> int:
+    """The index of the candidate to keep: the smallest of ``distances`` among the candidates whose ``seam_ratios``
+    are at most ``bound``; when none is, the smallest seam ratio; ``bound`` or ``seam_ratios`` None: the smallest
+    distance. The first of equal ones wins.
+
+    Raises
+    ------
+    ValueError
+        No candidate, or ``seam_ratios`` of another length than ``distances``.
+    """
+    d = np.asarray(distances, np.float64)
+    if d.ndim != 1 or len(d) == 0:
+        raise ValueError(f"pick_candidate needs one distance per candidate, got {list(distances)!r}")
+    if bound is None or seam_ratios is None:
+        return int(np.argmin(d))
+    r = np.asarray(seam_ratios, np.float64)
+    if r.shape != d.shape:
+        raise ValueError(f"{len(r)} seam ratios for {len(d)} candidates: give one per candidate")
+    smooth = r <= bound
+    if not smooth.any():
+        return int(np.argmin(r))
+    return int(np.argmin(np.where(smooth, d, np.inf)))
+
+
 def choose_candidate(outputs: Sequence["EditOutput"], inpaint: "Inpaint", scorer: TextMotionScorer, *,
-                     inverted: bool = True, skeleton="humanml3d") -> tuple[int, list[float], tuple[int, int]]:
+                     inverted: bool = True, skeleton="humanml3d",
+                     seam_ratios: Optional[Sequence[float]] = None) -> tuple[int, list[float], tuple[int, int]]:
     """The best of the candidate edits ``outputs`` (one motion each) by ``scorer``: ``(index, distances, window)``,
     the distances of every candidate's edited motion to its target prompt over the scored ``window`` (motion frames,
     :func:`scoring_window` of ``inpaint``'s regenerated span); the first of equal ones wins. What is scored:
     ``inpaint.score_for(inverted)``, the edited motion (``"whole"``) or :func:`isolate_parts` of it with
-    ``inpaint``'s regenerated parts (``"parts"``; ``skeleton``: the features' skeleton)."""
+    ``inpaint``'s regenerated parts (``"parts"``; ``skeleton``: the features' skeleton). With a seam bound
+    (``inpaint.seam_bound_for(inverted)``, frame spans only) the index is :func:`pick_candidate`'s among the
+    candidates' ``seam_ratios`` (default: :func:`candidate_seam_ratios` of ``outputs``)."""
     isolated = inpaint.score_for(inverted) == "parts"
     scores, window = [], None
     for out in outputs:
@@ -261,7 +313,10 @@ def choose_candidate(outputs: Sequence["EditOutput"], inpaint: "Inpaint", scorer
         if isolated:
             feats = isolate_parts(feats, inpaint.parts, skeleton)
         scores.append(scorer.distance(feats, ed.texts[0], span))
-    return int(np.argmin(scores)), scores, window
+    bound = inpaint.seam_bound_for(inverted)
+    if bound is not None and seam_ratios is None:
+        seam_ratios = candidate_seam_ratios(outputs, inpaint)
+    return pick_candidate(scores, seam_ratios, bound), scores, window
 
 
 def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, inverted: bool, skeleton: str,
@@ -272,7 +327,9 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
     default: the shipped evaluator). Its ``edits`` are the chosen candidate's (run again they give the same motion);
     ``settings`` and ``edited.settings`` record ``"inpaint_candidates"``: the seeds, the distances, the chosen index
     and seed, the scored motion frames, what was scored (``"score"``: ``"whole"`` or ``"parts"``,
-    :meth:`~salad_core.attention.inpaint.Inpaint.score_for`) and the evaluator.
+    :meth:`~salad_core.attention.inpaint.Inpaint.score_for`), the evaluator, each candidate's seam ratio
+    (``"seam_ratios"``, :func:`candidate_seam_ratios`; None for body parts alone) and the seam bound the ranking used
+    (``"seam_bound"``, :meth:`~salad_core.attention.inpaint.Inpaint.seam_bound_for`; None: by distance alone).
 
     Parameters
     ----------
@@ -315,10 +372,12 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
         raise ValueError(f"Inpaint(candidates={k}) ranks the candidates of one motion; the edit has "
                          f"{len(outputs[0].edited)}: edit them one at a time")
     outputs += [run(s) for s in specs[1:]]
-    best, scores, window = choose_candidate(outputs, inpaint, scorer, inverted=inverted, skeleton=skeleton)
+    ratios = candidate_seam_ratios(outputs, inpaint)
+    best, scores, window = choose_candidate(outputs, inpaint, scorer, inverted=inverted, skeleton=skeleton,
+                                            seam_ratios=ratios)
     record = {"seeds": [inpaint.seed + i for i in range(k)], "distances": scores, "chosen": best,
               "seed": inpaint.seed + best, "frames": list(window), "score": inpaint.score_for(inverted),
-              "evaluator": scorer.source}
+              "evaluator": scorer.source, "seam_ratios": ratios, "seam_bound": inpaint.seam_bound_for(inverted)}
     out = outputs[best]
     edited = dataclasses.replace(out.edited, settings={**out.edited.settings, "inpaint_candidates": record})
     return dataclasses.replace(out, edited=edited, edits=specs[best],

@@ -430,13 +430,18 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inpaint-candidates", type=int, default=None, metavar="K",
                    help="run the in-painting K times, the region's noise from K seeds (0 .. K-1), and keep the edit "
                         "the text-motion evaluator finds closest to --target (K times the cost; 1: one edit; default: "
-                        "4 for a frame span of a given take, 1 otherwise). Needs fresh noise in the region: the "
+                        "8 for a frame span of a given take, 1 otherwise). Needs fresh noise in the region: the "
                         "default for a given take (--motion, salad invert), --inpaint-noise fresh for a generated "
                         "motion")
     p.add_argument("--inpaint-score", choices=INPAINT_SCORE, default=None,
                    help="what the evaluator scores of each in-painting candidate: 'whole' the edited motion, 'parts' "
                         "the regenerated body parts with the kept ones held still (needs --inpaint PARTS); default "
                         "'auto': the whole motion")
+    p.add_argument("--inpaint-seam-bound", default=None, metavar="B|auto|off",
+                   help="rank a frame span's in-painting candidates by the evaluator only among those whose seam jerk "
+                        "is at most B times the source's own 95th percentile (none within: the smoothest; e.g. 1.5); "
+                        "'off': by the evaluator alone; default 'auto': 1.5 for a frame span of a given take, off "
+                        "otherwise. Body parts alone have no seam")
     p.add_argument("--no-composite", action="store_true",
                    help="keep what the decoder makes of the kept parts instead of taking them from the source's "
                         "decoding (--inpaint, --mirror-take; the decoder lets edited parts move kept ones a few cm)")
@@ -486,6 +491,17 @@ def _inpaint_guidance(text: str):
         raise UserError(f"--inpaint-guidance {text}: give a number, 'auto' or 'motion'") from None
 
 
+def _inpaint_seam_bound(text: str):
+    """``--inpaint-seam-bound``: a number, ``auto`` or ``off`` (None: no bound)."""
+    word = text.strip().lower()
+    if word in ("auto", "off"):
+        return None if word == "off" else "auto"
+    try:
+        return float(word)
+    except ValueError:
+        raise UserError(f"--inpaint-seam-bound {text}: give a number (e.g. 1.5), 'auto' or 'off'") from None
+
+
 def _inpaint_options(args: argparse.Namespace) -> dict:
     """The ``--inpaint-*`` options that were given (the others keep :class:`Inpaint`'s defaults)."""
     out = {name: getattr(args, f"inpaint_{name}") for name in ("smooth", "smooth_window", "resample", "jump", "noise",
@@ -493,6 +509,8 @@ def _inpaint_options(args: argparse.Namespace) -> dict:
            if getattr(args, f"inpaint_{name}", None) is not None}
     if getattr(args, "inpaint_guidance", None) is not None:
         out["guidance"] = _inpaint_guidance(args.inpaint_guidance)
+    if getattr(args, "inpaint_seam_bound", None) is not None:
+        out["seam_bound"] = _inpaint_seam_bound(args.inpaint_seam_bound)
     return out
 
 

@@ -27,7 +27,8 @@ Measured per case (joints: the pipeline's ``out.joints``, metres -> cm):
   relative-feature motion integrates it);
 - ``edited_cm``: the same over the regenerated joints / frames (it must be far from 0);
 - ``seam_jerk_ratio`` (frame spans): the largest jerk (third difference of the joint positions, mean
-  over joints, m/s^3) within 4 frames of an inner seam over the source's own 95th percentile of jerk;
+  over joints, m/s^3) within 4 frames of an inner seam over the source's own 95th percentile of jerk
+  (``salad_core.attention.composite.seam_jerk_ratio``, which ``Inpaint(seam_bound=...)`` ranks with);
 - ``check``: the prompt's checks on the edit (the whole motion; a turn over the regenerated span), and
   whether the source passed them already (``fresh``: it did not, so the pass is the edit's doing);
   ``check_span`` (frame spans): every check over the regenerated span alone.
@@ -48,7 +49,11 @@ target by the evaluator's text-motion distance kept (``salad_core.attention.rank
 summary the check of any candidate (an oracle), of a random one (expected) and of the first. ``scored on parts``
 settings rank the candidates with ``Inpaint(score="parts")`` (the kept body parts held still in the scored motion,
 ``salad_core.attention.ranking.isolate_parts``); they share the sampling runs of the same setting scored whole, and
-are body-part settings only (a frame span skips them).
+are body-part settings only (a frame span skips them). ``seam-aware`` settings (``Inpaint(seam_bound=1.5)``) rank a
+frame span's candidates by the distance among those whose seam jerk ratio is within 1.5x only (none: the smoothest,
+``salad_core.attention.ranking.pick_candidate``); they share the sampling runs too, and their rows record every
+candidate's seam ratio (``seam_ratios``; the summary's ``seam_fallback``: the share of cases where no candidate was
+within the bound).
 
 ``--tuning-generated``: a *validation* set of generated frame spans, apart from the held-out ones: the sources
 :data:`TUNING_SPAN_SOURCES` (none of :data:`SOURCES` / :data:`SPAN_SOURCES`) generated at :data:`TUNING_SEED` (the
@@ -66,9 +71,9 @@ from pathlib import Path
 import numpy as np
 
 from salad_core.attention import Inpaint
-from salad_core.attention.composite import composite_output
+from salad_core.attention.composite import composite_output, frame_jerk, seam_jerk, seam_jerk_ratio
 from salad_core.attention.grounding import ground_edit
-from salad_core.attention.ranking import TextMotionScorer, choose_candidate
+from salad_core.attention.ranking import TextMotionScorer, candidate_seam_ratios, choose_candidate
 from salad_core.eval.physics_prompts import PROMPTS
 from salad_core.pipeline import SaladPipeline
 from salad_core.skeleton import PART_NAMES, get_skeleton
@@ -114,12 +119,6 @@ def dist_cm(a: np.ndarray, b: np.ndarray, frames, joints) -> float:
     return float(d.mean() * 100)
 
 
-def jerk(joints: np.ndarray, fps: float) -> np.ndarray:
-    """Per-frame jerk (N - 3,), mean over joints, m/s^3; entry i spans frames i..i+3."""
-    d3 = joints[3:] - 3 * joints[2:-1] + 3 * joints[1:-2] - joints[:-3]
-    return np.linalg.norm(d3, axis=-1).mean(-1) * fps ** 3
-
-
 def evaluate(prompt: str, joints: np.ndarray, span: tuple[int, int] | None) -> bool:
     results = []
     for c in BY_TEXT[prompt].checks:
@@ -151,14 +150,11 @@ def measure(pipe, out, inp: Inpaint, target: str, sk) -> dict:
         allj = list(range(len(jt)))
         kept, kept_pose = dist_cm(ra_s, ra_e, kept_f, allj), dist_cm(fa_s, fa_e, kept_f, allj)
     row = {"kept_cm": kept, "kept_pose_cm": kept_pose, "edited_cm": dist_cm(fa_s, fa_e, regen_f, regen_j)}
-    if span is not None:
-        js, je = jerk(src, sk.fps), jerk(ed, sk.fps)
-        p95 = float(np.percentile(js, 95))
-        seams = [b for b in span if 0 < b < n]
-        idx = sorted({i for b in seams for i in range(max(0, b - 5), min(len(je), b + 3))})
-        row["seam_jerk"] = float(je[idx].max()) if idx else float("nan")
-        row["source_jerk_p95"] = p95
-        row["seam_jerk_ratio"] = row["seam_jerk"] / max(p95, 1e-9)
+    if span is not None:        # the product's seam measure (m/s^3 for the record: per frame^3 times fps^3)
+        cuts = [b for b in span if 0 < b < n]
+        row["seam_jerk"] = seam_jerk(ed, cuts) * sk.fps ** 3
+        row["source_jerk_p95"] = float(np.percentile(frame_jerk(src), 95)) * sk.fps ** 3
+        row["seam_jerk_ratio"] = seam_jerk_ratio(src, ed, cuts)
     row["check"] = evaluate(target, ed, span)
     row["source_check"] = evaluate(target, src, span)
     if span is not None:        # every check over the regenerated span alone (the rest of the take is the source's)
@@ -197,6 +193,9 @@ def summarize(rows: list[dict]) -> dict:
         out["random_candidate_pass"] = mean(float(np.mean(r["candidate_checks"])) for r in ranked)
         out["first_candidate_pass"] = mean(float(r["candidate_checks"][0]) for r in ranked)
         out["chosen_not_first"] = mean(float(r["chosen"] != 0) for r in ranked)
+        bounded = [r for r in ranked if r.get("seam_bound") is not None and r.get("seam_ratios") is not None]
+        if bounded:     # seam-aware ranking: no candidate within the bound (the smoothest kept instead)
+            out["seam_fallback"] = mean(float(min(r["seam_ratios"]) > r["seam_bound"]) for r in bounded)
     return out
 
 
@@ -252,7 +251,7 @@ def tuning_grid() -> dict[str, dict]:
     the sampling (the region's noise, the edited branch's guidance, RePaint resampling) crossed with the composite
     (off; fade 8; fade 8 plus the least-squares seam smoothing with strength / window); and the region's noise
     matched to the source's inverted noise (``noise="matched"``) with the chosen composite only."""
-    base = dict(noise="fresh", guidance=None, resample=1, jump=1, candidates=1, score="whole")
+    base = dict(noise="fresh", guidance=None, resample=1, jump=1, candidates=1, score="whole", seam_bound=None)
     sampling = {"source noise": dict(base, noise="source"),
                 "fresh": dict(base),
                 "fresh g7.5": dict(base, guidance=7.5),
@@ -280,7 +279,10 @@ def tuning_grid() -> dict[str, dict]:
               # body parts: the candidates scored with the kept parts held still (Inpaint.score="parts")
               "fresh best of 4 scored on parts": dict(base, candidates=4, score="parts"),
               "fresh resample 3 jump 5 best of 4 scored on parts": dict(base, resample=3, jump=5, candidates=4,
-                                                                         score="parts")}
+                                                                         score="parts"),
+              # frame spans: ranked by distance among the candidates whose seams are within 1.5x (Inpaint.seam_bound)
+              "fresh g7.5 best of 4 seam-aware": dict(base, guidance=7.5, candidates=4, seam_bound=1.5),
+              "fresh g7.5 best of 8 seam-aware": dict(base, guidance=7.5, candidates=8, seam_bound=1.5)}
     chosen = "fade 8 smooth 100/8"
     grid.update({f"{s} | {chosen}": dict(skw, **post[chosen]) for s, skw in {**matched, **ranked}.items()})
     return grid
@@ -304,7 +306,7 @@ def select_grid(text: str, error) -> dict[str, dict]:
 
 #: Inpaint options of the ranking of candidates (after the composite): settings that differ only in these share
 #: the sampling runs.
-RANK_KEYS = ("candidates", "score")
+RANK_KEYS = ("candidates", "score", "seam_bound")
 
 
 def split_config(kw: dict) -> tuple[dict, dict, dict]:
@@ -390,15 +392,16 @@ def main() -> None:
             base = make(**dict(samp), composite=False)
             # each config's ranking (candidates "auto" resolved as pipe.edit does); the candidates sampled one by one
             members = [(config, post, dataclasses.replace(base, **rank)) for config, post, rank in members]
-            members = [(config, post, spec.candidates_for(inverted), spec.score) for config, post, spec in members]
+            members = [(config, post, spec.candidates_for(inverted), spec.score, spec.seam_bound)
+                       for config, post, spec in members]
             base = dataclasses.replace(base, candidates=1)
             raws, seconds = [], []
-            for seed in range(max(k for _, _, k, _ in members)):
+            for seed in range(max(m[2] for m in members)):
                 t = time.perf_counter()
                 raws.append(pipe.edit(target=target, edits=[dataclasses.replace(base, seed=base.seed + seed)],
                                       num_steps=None if "inversion" in kw else args.steps, ground=False, **kw))
                 seconds.append(time.perf_counter() - t)
-            for config, post, k, score in members:
+            for config, post, k, score, bound in members:
                 inp = dataclasses.replace(base, **{"composite": True, **post})
                 outs = []
                 for raw in raws[:k]:
@@ -406,11 +409,14 @@ def main() -> None:
                     outs.append(ground_edit(pipe, out) if "inversion" in kw else out)
                 ranking = None
                 if k > 1:
-                    ranked = dataclasses.replace(inp, candidates=k, score=score)
-                    best, dists, window = choose_candidate(outs, ranked, scorer, inverted=inverted, skeleton=sk.name)
+                    ranked = dataclasses.replace(inp, candidates=k, score=score, seam_bound=bound)
+                    ratios = candidate_seam_ratios(outs, ranked)
+                    best, dists, window = choose_candidate(outs, ranked, scorer, inverted=inverted, skeleton=sk.name,
+                                                           seam_ratios=ratios)
                     checks = [target_check(measure(pipe, o, inp, target, sk)) for o in outs]
                     ranking = dict(candidates=k, chosen=best, distances=dists, scored_frames=list(window),
-                                   score=ranked.score_for(inverted), candidate_checks=checks)
+                                   score=ranked.score_for(inverted), candidate_checks=checks, seam_ratios=ratios,
+                                   seam_bound=ranked.seam_bound_for(inverted))
                     outs = [outs[best]]
                 record(kind, name, blend, config, inp, target, outs[0], sum(seconds[:k]), ranking)
 
@@ -471,7 +477,8 @@ def main() -> None:
                             summary[f"{kind} {config} blend={blend} ({tag})"] = summarize(sub)
     cols = ("cases", "kept_cm", "kept_cm_max", "kept_pose_cm", "kept_within_2cm", "edited_cm", "seam_jerk_ratio",
             "seam_within_1.5x", "target_check_pass", "check_pass", "check_span_pass", "check_pass_fresh", "fresh_cases",
-            "seconds", "any_candidate_pass", "random_candidate_pass", "first_candidate_pass", "chosen_not_first")
+            "seconds", "any_candidate_pass", "random_candidate_pass", "first_candidate_pass", "chosen_not_first",
+            "seam_fallback")
     print("\ntarget_check_pass is the target's check: over the regenerated span for frame spans (check_span_pass), "
           "over the whole motion for body parts (check_pass); seconds: one sampling run (shared by the settings "
           "that differ only after decoding; with candidates: the K runs); *_candidate_pass (best of K): the target "
