@@ -480,26 +480,25 @@ def _parse_window(text: str) -> tuple[float, float]:
         raise UserError(f"--window {text!r}: START and STOP must be numbers in [0, 1] (e.g. 0:0.5)") from None
 
 
-def _inpaint_guidance(text: str):
-    """``--inpaint-guidance``: a number, ``auto`` or ``motion`` (None: the motion's weight)."""
+def _number_or_word(flag: str, text: str, off_word: str, example: str):
+    """A number, ``auto``, or ``off_word`` (None) for ``flag``."""
     word = text.strip().lower()
-    if word in ("auto", "motion"):
-        return None if word == "motion" else "auto"
+    if word in ("auto", off_word):
+        return None if word == off_word else "auto"
     try:
         return float(word)
     except ValueError:
-        raise UserError(f"--inpaint-guidance {text}: give a number, 'auto' or 'motion'") from None
+        raise UserError(f"{flag} {text}: give a number{example}, 'auto' or '{off_word}'") from None
+
+
+def _inpaint_guidance(text: str):
+    """``--inpaint-guidance``: a number, ``auto`` or ``motion`` (None: the motion's weight)."""
+    return _number_or_word("--inpaint-guidance", text, "motion", "")
 
 
 def _inpaint_seam_bound(text: str):
     """``--inpaint-seam-bound``: a number, ``auto`` or ``off`` (None: no bound)."""
-    word = text.strip().lower()
-    if word in ("auto", "off"):
-        return None if word == "off" else "auto"
-    try:
-        return float(word)
-    except ValueError:
-        raise UserError(f"--inpaint-seam-bound {text}: give a number (e.g. 1.5), 'auto' or 'off'") from None
+    return _number_or_word("--inpaint-seam-bound", text, "off", " (e.g. 1.5)")
 
 
 def _inpaint_options(args: argparse.Namespace) -> dict:
