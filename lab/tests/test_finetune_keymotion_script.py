@@ -79,8 +79,25 @@ def test_finetune_script_trains_a_new_mmae_of_the_recipes_architecture_with_scra
         a, _, _ = load_model(source / name)
         b, _, _ = load_model(tmp_path / "out" / name)
         assert all(torch.equal(x.half(), y.half()) for x, y in zip(a.state_dict().values(), b.state_dict().values()))
-    with pytest.raises(SystemExit):                                 # --scratch is not the keyframe VAE's
-        script.main(["--stage", "kf_vae", "--scratch", "--data", str(data), "--out", str(tmp_path / "x")])
+    with pytest.raises(SystemExit):                                 # a new keyframe VAE has no encoder to freeze
+        script.main(["--stage", "kf_vae", "--scratch", "--parts", "decoder", "--data", str(data), "--out",
+                     str(tmp_path / "x")])
+
+
+def test_finetune_script_trains_a_new_kf_vae_of_the_recipes_architecture_with_scratch(tmp_path):
+    """--stage kf_vae --scratch: a keyframe VAE of the recipe's architecture (here absolute keyframe timing, which a
+    fine-tuning of the relative source could not load) from its initialisation, every part trained."""
+    script = load_script("finetune_keymotion")
+    model = dataclasses.asdict(tiny_kf_vae_config(timing="absolute"))
+    data, source = finetune_inputs(tmp_path, {"kf_vae": {"model": model, "train": {"lr": 1e-3}}})
+    argv = ["--stage", "kf_vae", "--scratch", "--data", str(data), "--source", str(source), "--recipe",
+            str(tmp_path / "recipe.json"), "--steps", "2", "--out", str(tmp_path / "run")]
+    assert script.main(argv, text_encoder=HashTextEncoder()) == 0
+    doc = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert doc["train"]["init_from"] is None and doc["train"]["train_parts"] == "all"
+    assert doc["model"]["timing"] == "absolute" and doc["train"]["lr"] == 1e-3 and doc["train"]["max_steps"] == 2
+    vae, _, _ = load_model(tmp_path / "run" / "latest")
+    assert vae.position_span == vae.config.max_length - 1
 
 
 def test_finetune_script_fine_tunes_the_kf_vae_decoder_and_exports_a_pipeline_whose_pst_still_fits(tmp_path):

@@ -45,6 +45,16 @@ class _FakeVAE:
         self.skeleton = "humanml3d"
         self.norm = SimpleNamespace(normalize=lambda t: t, denormalize=lambda t: t)
 
+    def positions_of(self, indices, lengths):
+        from salad_core.keymotion.kf_vae import indices_to_positions
+
+        return indices_to_positions(indices, lengths)
+
+    def indices_of(self, positions, lengths):
+        from salad_core.keymotion.kf_vae import positions_to_indices
+
+        return positions_to_indices(positions, lengths)
+
     def encode(self, keyframes, positions, sample=False):
         self._positions = positions
         return SimpleNamespace(mu=keyframes)
