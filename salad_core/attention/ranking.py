@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import logging
 from typing import TYPE_CHECKING, Callable, Optional, Sequence
 
 import numpy as np
@@ -42,6 +43,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from salad_core.pipeline import EditOutput
 
     from .inpaint import Inpaint
+
+log = logging.getLogger(__name__)
 
 __all__ = ["MIN_FRAMES", "TextMotionScorer", "caption_tokens", "scoring_window", "isolate_parts", "candidate_specs",
            "ranked_inpaint", "candidate_seam_ratios", "pick_candidate", "choose_candidate", "ranked_edit"]
@@ -367,11 +370,14 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
         raise ValueError(f"the evaluator reads {dim}-d features; the pipeline's {skeleton} motions cannot be ranked "
                          "with it")
     specs = candidate_specs(edits, inpaint, k)
+    log.info("in-painting: %d candidates (region seeds %d..%d), the best kept", k, inpaint.seed, inpaint.seed + k - 1)
     outputs = [run(specs[0])]
     if len(outputs[0].edited) != 1:
         raise ValueError(f"Inpaint(candidates={k}) ranks the candidates of one motion; the edit has "
                          f"{len(outputs[0].edited)}: edit them one at a time")
-    outputs += [run(s) for s in specs[1:]]
+    for i, s in enumerate(specs[1:], start=2):
+        log.info("in-painting candidate %d of %d", i, k)
+        outputs.append(run(s))
     ratios = candidate_seam_ratios(outputs, inpaint)
     best, scores, window = choose_candidate(outputs, inpaint, scorer, inverted=inverted, skeleton=skeleton,
                                             seam_ratios=ratios)
