@@ -135,6 +135,7 @@ class TextMotionScorer:
         if isinstance(min_frames, bool) or not isinstance(min_frames, int) or min_frames < self.unit:
             raise ValueError(f"min_frames={min_frames!r} must be an int >= the evaluator's {self.unit} frames per code")
         self.min_frames = min_frames
+        self._texts: dict[str, np.ndarray] = {}     # prompt -> embedding: every candidate of an edit has the same one
 
     @property
     def source(self) -> str:
@@ -142,8 +143,13 @@ class TextMotionScorer:
         return str(getattr(self.evaluator, "source", type(self.evaluator).__name__))
 
     def text_embedding(self, text: str) -> np.ndarray:
-        """``(C,)`` float64 embedding of a prompt (:func:`caption_tokens`)."""
-        return self.evaluator.caption_embeddings([caption_tokens(text)])[0].double().cpu().numpy()
+        """``(C,)`` float64 embedding of a prompt (:func:`caption_tokens`), computed once per prompt (read-only)."""
+        emb = self._texts.get(text)
+        if emb is None:
+            emb = self.evaluator.caption_embeddings([caption_tokens(text)])[0].double().cpu().numpy()
+            emb.setflags(write=False)
+            self._texts[text] = emb
+        return emb
 
     def motion_embedding(self, features: np.ndarray, span: Optional[tuple[int, int]] = None) -> np.ndarray:
         """``(C,)`` float64 embedding of ``features`` ``(N, D)`` (de-normalised HumanML3D features) over
