@@ -887,11 +887,16 @@ class SaladPipeline:
         solver = solver or self.solver
         scheduler = make_scheduler(self.diffusion, solver)
         mask = self.frame_mask(lengths, noise.shape[1])
+        target_ctx = self.denoiser.prepare_text(text_tgt.features, text_tgt.mask)
+        inpaint = next((e for e in edits if e.role == "latent"), None)
+        prior = (None if inpaint is None or inpaint.prior == "none" else
+                 self._inpaint_prior(inpaint, text_tgt, null, lengths, noise.shape[1], guidance, int(num_steps),
+                                     solver))
         run = edit_latents(self.denoiser, scheduler, controller,
                            source=self.denoiser.prepare_text(text_src.features, text_src.mask),
-                           target=self.denoiser.prepare_text(text_tgt.features, text_tgt.mask),
-                           null=null_schedule, noise=noise, frame_mask=mask, guidance_scale=guidance,
-                           num_steps=int(num_steps), corrections=corrections, progress=progress)
+                           target=target_ctx, null=null_schedule, noise=noise, frame_mask=mask,
+                           guidance_scale=guidance, num_steps=int(num_steps), corrections=corrections,
+                           progress=progress, region_prior=prior)
         generation_rows = (2 if guidance.cfg else 1) * len(prompts) * int(num_steps)
         settings = dict(_guidance_settings(guidance), num_steps=int(num_steps), solver=solver, weights=self.source,
                         **self._output_settings())
@@ -920,6 +925,37 @@ class SaladPipeline:
 
             result = ground_edit(self, result)
         return result
+
+    def _inpaint_prior(self, inpaint, target: TextBatch, null: TextBatch, lengths: Sequence[int], latent_frames: int,
+                       guidance: Guidance, num_steps: int, solver: str) -> torch.Tensor:
+        """``Inpaint(prior="prompt")``'s pasted latents ``(B, N', P, Dz)``: per
+        motion, the target prompt sampled alone over :meth:`Inpaint.prior_window
+        <salad_core.attention.inpaint.Inpaint.prior_window>` (noise of the in-painting's seed, the edited branch's
+        guidance weight, the edit's solver and steps, the pipeline's null text), its latents placed at the region's
+        latent frames and parts (zero elsewhere)."""
+        import dataclasses
+
+        from salad_core.attention.edits import seeded_noise
+
+        scale = inpaint.edited_guidance
+        prior_guidance = guidance if scale is None else dataclasses.replace(guidance, scale=float(scale))
+        uncond = self.denoiser.prepare_text(null.features[:1], null.mask[:1])
+        out = torch.zeros(len(lengths), latent_frames, *self.latent_shape)
+        for b, length in enumerate(lengths):
+            s, e, frames, c = inpaint.prior_window(int(length), self.skeleton.min_length)
+            n_lat = frames // self.skeleton.unit_length
+            z0 = seeded_noise(inpaint.seed + b, (1, n_lat, *self.latent_shape))
+            cond = self.denoiser.prepare_text(target.features[b:b + 1], target.mask[b:b + 1])
+            z = denoise(self.denoiser, make_scheduler(self.diffusion, solver), cond, uncond, z0,
+                        self.frame_mask([frames], n_lat), guidance_scale=prior_guidance, num_steps=num_steps)
+            out[b, s:e] = z[0, c:c + (e - s)]
+        from salad_core.skeleton import PART_NAMES
+
+        chosen = inpaint.parts or PART_NAMES
+        out[:, :, [i for i, part in enumerate(PART_NAMES) if part not in chosen]] = 0.0
+        log.debug("in-painting prior: %s sampled from the target over %s latent frames", inpaint.describe(),
+                  [inpaint.prior_window(int(n), self.skeleton.min_length)[:2] for n in lengths])
+        return out
 
     def _from_inversion(self, inversion: Inversion, source: str | Sequence[str] | None,
                         lengths: int | Sequence[int] | None, noise: torch.Tensor | None,

@@ -50,6 +50,21 @@ def test_measuring_stages_get_the_weights_data_and_settings(tmp_path, recorder):
     assert len(log.read_text().splitlines()) == 7                     # nothing ran again
 
 
+def test_ship_rule_stages_get_the_weights_and_run_the_flight_interval_on_the_ten_seed_benchmark(tmp_path, recorder):
+    fake, log = recorder
+    out = tmp_path / "out"
+    res = _run(out, "physics10", "sides", "stretch", python=str(fake), WEIGHTS="/w", THREADS="1")
+    assert res.returncode == 0, res.stderr
+    assert log.read_text().splitlines() == [
+        f"-m salad_core.cli eval --physics --seeds 10 --no-salad --data /data/corpus --threads 1 --keymotion /w "
+        f"--out {out}/physics10",
+        f"lab/scripts/keymotion/keymotion_flight_bootstrap.py {out}/physics10/physics.json",
+        f"lab/scripts/keymotion/keymotion_side_generation.py --weights /w --seeds 6 --out {out}/sides.json",
+        f"lab/scripts/keymotion/keymotion_time_stretch_probe.py --other candidate=/w --salad --json {out}/stretch.json",
+    ]
+    assert all((out / f"{name}.done").is_file() for name in ("physics10", "sides", "stretch"))
+
+
 def test_data_and_run_are_required(tmp_path, recorder):
     fake, log = recorder
     res = _run(tmp_path / "o", "physics", python=str(fake), DATA="")

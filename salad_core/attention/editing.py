@@ -299,7 +299,8 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
                  noise: torch.Tensor, frame_mask: torch.Tensor | None = None,
                  guidance_scale: "float | Guidance" = 7.5,
                  num_steps: int = 50, corrections: torch.Tensor | None = None, progress: bool = False,
-                 generator: torch.Generator | None = None, edited_noise: torch.Tensor | None = None) -> EditRun:
+                 generator: torch.Generator | None = None, edited_noise: torch.Tensor | None = None,
+                 region_prior: torch.Tensor | None = None) -> EditRun:
     """Sample the source and the edited motion latents together (see the module docstring).
 
     Parameters
@@ -329,6 +330,12 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
         ``(B, N', P, Dz)`` the edited sample's own initial noise. Default: the source's ``noise``, or,
         when an edit asks for its own (:attr:`EditSpec.edited_seed
         <salad_core.attention.edits.EditSpec.edited_seed>`), :func:`seeded_noise` of that seed.
+    region_prior : torch.Tensor, optional
+        ``(B, N', P, Dz)`` clean latents pasted into the in-painting region for the steps before
+        :meth:`Inpaint.prior_release <salad_core.attention.inpaint.Inpaint.prior_release>` (``Inpaint(prior="prompt")``):
+        there the region's latents are ``sqrt(a_t) prior + sqrt(1 - a_t) eps`` at each step's level ``t`` (``eps``: the
+        edited branch's initial noise), the kept region the source's as always. Needs an :class:`Inpaint` and the
+        scheduler's ``alphas_cumprod``.
 
     Returns
     -------
@@ -383,6 +390,20 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
             if corrections is not None or edited_corrections is not None:
                 base_c = edited_corrections if edited_corrections is not None else corrections
                 edited_corrections = base_c * (1.0 - fresh)
+    release = 0
+    if region_prior is not None:
+        if inpaint is None:
+            raise ValueError("region_prior pastes latents into an in-painting region: the edits have no Inpaint")
+        if tuple(region_prior.shape) != tuple(noise.shape):
+            raise ValueError(f"region_prior must have the noise's shape {tuple(noise.shape)}, got "
+                             f"{tuple(region_prior.shape)}")
+        if not hasattr(scheduler, "alphas_cumprod") or float(scheduler.init_noise_sigma) != 1.0:
+            raise ValueError(f"Inpaint(prior='prompt') noises the pasted motion by the forward process and needs a "
+                             f"variance-preserving scheduler (alphas_cumprod, unscaled inputs: DDIM, DPM-Solver++), "
+                             f"got {type(scheduler).__name__}")
+        release = inpaint.prior_release(num_steps)
+        if release > 0 and edited_noise is None:
+            edited_noise = noise.clone()
     own_noise = edited_noise is not None and prediction.edited
     # both branches start from the same noise (Algorithm 1, line 4) and take the same corrections,
     # unless the edited sample has its own noise: then the corrections are the source's alone (a
@@ -394,9 +415,25 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
     elif corrections is not None:
         corrections = (torch.cat([corrections, torch.zeros_like(corrections)], 1) if own_noise
                        else corrections.repeat(1, k, 1, 1, 1))
+    pasted = None
+    if release > 0:
+        # paste, then harmonise: the region follows the prior's forward-noised latents until step `release`
+        scheduler.set_timesteps(num_steps)
+        eps = edited_noise.to(noise)
+        prior = region_prior.to(noise)
+
+        def pasted(level: int) -> torch.Tensor:
+            """The region's latents at the level of the sampler's step ``level`` (its input)."""
+            a = float(scheduler.alphas_cumprod[int(scheduler.timesteps[level])])
+            return a ** 0.5 * prior + (1.0 - a) ** 0.5 * eps
+
+        edited_noise = region * pasted(0) + (1.0 - region) * eps
+        latents = torch.cat([noise, edited_noise])
     if inpaint is not None or take is not None:
         def hook(info, z: torch.Tensor) -> torch.Tensor:
             src, ed = z[:b], z[b:]
+            if pasted is not None and info.index + 1 < release:
+                ed = region * pasted(info.index + 1) + (1.0 - region) * ed
             if take is not None:
                 # the other parts: the source branch's latents of this step; the mirrored parts: the mirror's
                 # inversion trajectory (the latents after step i are trajectory[i + 1])

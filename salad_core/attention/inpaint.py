@@ -58,12 +58,15 @@ from .edits import EditKernel, EditSpec, _window, seeded_noise
 if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
 
-__all__ = ["Inpaint", "INPAINT_GROUPS", "MATCHED_MAX_RHO", "NOISE_MODES", "PARTS_RESAMPLE", "SCORE_MODES",
+__all__ = ["Inpaint", "INPAINT_GROUPS", "MATCHED_MAX_RHO", "NOISE_MODES", "PARTS_RESAMPLE", "PRIOR_MODES", "SCORE_MODES",
            "SEAM_BOUND", "SPAN_CANDIDATES", "SPAN_GUIDANCE",
            "ar1_noise", "inpaint_parts", "matched_noise", "noise_statistics", "parse_inpaint"]
 
 #: What :class:`Inpaint`'s regenerated region starts from (see :attr:`Inpaint.noise`).
 NOISE_MODES = ("auto", "fresh", "source", "matched")
+
+#: What :class:`Inpaint`'s regenerated region is drawn towards in the first steps (see :attr:`Inpaint.prior`).
+PRIOR_MODES = ("none", "prompt")
 
 #: The largest lag-1 frame correlation :func:`matched_noise` gives the region's noise.
 MATCHED_MAX_RHO = 0.95
@@ -338,6 +341,8 @@ class Inpaint(EditSpec):
     candidates: Union[int, str] = "auto"
     score: str = "auto"
     seam_bound: Union[float, str, None] = "auto"
+    prior: str = "none"
+    prior_strength: float = 0.5
 
     def __post_init__(self) -> None:
         if self.noise not in NOISE_MODES:
@@ -358,6 +363,13 @@ class Inpaint(EditSpec):
                                           or self.candidates < 1):
             raise ValueError(f"Inpaint.candidates={self.candidates!r} must be an int >= 1 (edits to run and rank; 1: one "
                              "edit) or 'auto'")
+        if not isinstance(self.prior, str) or self.prior not in PRIOR_MODES:
+            raise ValueError(f"Inpaint.prior={self.prior!r}; allowed: {PRIOR_MODES}")
+        ps = self.prior_strength
+        if isinstance(ps, bool) or not isinstance(ps, (int, float)) or not 0 < ps <= 1:
+            raise ValueError(f"Inpaint.prior_strength={ps!r} must be a number in (0, 1] (the share of the steps in "
+                             "which the region is free of the prompt's pasted motion)")
+        object.__setattr__(self, "prior_strength", float(ps))
         if not isinstance(self.score, str) or self.score not in SCORE_MODES:
             raise ValueError(f"Inpaint.score={self.score!r}; allowed: {SCORE_MODES}")
         if self.seam_bound is not None and self.seam_bound != "auto":
@@ -503,6 +515,26 @@ class Inpaint(EditSpec):
         if self.seam_bound == "auto":
             return SEAM_BOUND if inverted else None
         return self.seam_bound
+
+    def prior_release(self, num_steps: int) -> int:
+        """The first step (of ``num_steps``) in which the region is free of the pasted prior (:attr:`prior`): the
+        latents after steps ``0 .. release - 2`` are set to the prior's at that level, step ``release - 1``'s output
+        as well, so step ``release`` starts from the prior noised to its own level; 0 without a prior."""
+        if self.prior == "none":
+            return 0
+        return int(round((1.0 - self.prior_strength) * int(num_steps)))
+
+    def prior_window(self, num_frames: int, min_frames: int) -> tuple[int, int, int, int]:
+        """Where the pasted prior comes from and goes, for a motion of ``num_frames`` frames: ``(s, e, frames, c)``,
+        the region's latent frames ``[s, e)``, the prior motion's length in motion frames (the span's, at least
+        ``min_frames`` rounded up to whole latent frames; the whole motion for body parts alone) and the prior's
+        first latent frame that goes to ``s`` (its middle ``e - s`` latent frames are pasted)."""
+        s, e = self.latent_span(num_frames)
+        if self.frames is None:
+            return s, e, num_frames, 0
+        unit = self.unit_length
+        n_prior = max(e - s, math.ceil(min_frames / unit))
+        return s, e, n_prior * unit, (n_prior - (e - s)) // 2
 
     def resampling(self, fraction: float, index: int, num_steps: int, passes: int) -> bool:
         """Whether the sampler resamples after step ``index`` (of ``num_steps``; ``fraction`` = index / num_steps)

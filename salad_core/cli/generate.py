@@ -378,6 +378,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 INPAINT_NOISE = ("auto", "fresh", "source", "matched")
 #: ``--inpaint-score`` choices: :data:`salad_core.attention.inpaint.SCORE_MODES` (spelled out likewise).
 INPAINT_SCORE = ("auto", "whole", "parts")
+#: ``--inpaint-prior`` choices: :data:`salad_core.attention.inpaint.PRIOR_MODES` (spelled out likewise).
+INPAINT_PRIOR = ("none", "prompt")
 
 
 def _edit_args(p: argparse.ArgumentParser) -> None:
@@ -442,6 +444,13 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
                         "is at most B times the source's own 95th percentile (none within: the smoothest; e.g. 1.5); "
                         "'off': by the evaluator alone; default 'auto': 1.5 for a frame span of a given take, off "
                         "otherwise. Body parts alone have no seam")
+    p.add_argument("--inpaint-prior", choices=INPAINT_PRIOR, default=None,
+                   help="'prompt': paste, then harmonise: the target prompt is first sampled alone (the span's length, "
+                        "or the whole motion for body parts) and the region starts from it, noised, for the first "
+                        "steps; default 'none': the region is denoised from noise")
+    p.add_argument("--inpaint-prior-strength", type=float, default=None, metavar="S",
+                   help="with --inpaint-prior prompt: the share of the steps (0 < S <= 1) in which the region is free "
+                        "to fit the kept motion (smaller keeps more of the pasted motion; default 0.5)")
     p.add_argument("--no-composite", action="store_true",
                    help="keep what the decoder makes of the kept parts instead of taking them from the source's "
                         "decoding (--inpaint, --mirror-take; the decoder lets edited parts move kept ones a few cm)")
@@ -504,7 +513,7 @@ def _inpaint_seam_bound(text: str):
 def _inpaint_options(args: argparse.Namespace) -> dict:
     """The ``--inpaint-*`` options that were given (the others keep :class:`Inpaint`'s defaults)."""
     out = {name: getattr(args, f"inpaint_{name}") for name in ("smooth", "smooth_window", "resample", "jump", "noise",
-                                                               "candidates", "score")
+                                                               "candidates", "score", "prior", "prior_strength")
            if getattr(args, f"inpaint_{name}", None) is not None}
     if getattr(args, "inpaint_guidance", None) is not None:
         out["guidance"] = _inpaint_guidance(args.inpaint_guidance)

@@ -251,7 +251,7 @@ def tuning_grid() -> dict[str, dict]:
     the sampling (the region's noise, the edited branch's guidance, RePaint resampling) crossed with the composite
     (off; fade 8; fade 8 plus the least-squares seam smoothing with strength / window); and the region's noise
     matched to the source's inverted noise (``noise="matched"``) with the chosen composite only."""
-    base = dict(noise="fresh", guidance=None, resample=1, jump=1, candidates=1, score="whole", seam_bound=None)
+    base = dict(noise="fresh", guidance=None, resample=1, jump=1, candidates=1, score="whole", seam_bound=None, prior="none")
     sampling = {"source noise": dict(base, noise="source"),
                 "fresh": dict(base),
                 "fresh g7.5": dict(base, guidance=7.5),
@@ -283,6 +283,14 @@ def tuning_grid() -> dict[str, dict]:
               # frame spans: ranked by distance among the candidates whose seams are within 1.5x (Inpaint.seam_bound)
               "fresh g7.5 best of 4 seam-aware": dict(base, guidance=7.5, candidates=4, seam_bound=1.5),
               "fresh g7.5 best of 8 seam-aware": dict(base, guidance=7.5, candidates=8, seam_bound=1.5)}
+    # paste, then harmonise: the region starts from the target prompt sampled alone (Inpaint.prior="prompt")
+    for strength in (0.5, 0.7):
+        prior = dict(prior="prompt", prior_strength=strength)
+        ranked.update({f"fresh prior {strength}": dict(base, **prior),
+                       f"fresh resample 3 jump 5 prior {strength}": dict(base, resample=3, jump=5, **prior),
+                       f"fresh g7.5 prior {strength}": dict(base, guidance=7.5, **prior),
+                       f"fresh g7.5 prior {strength} best of 8 seam-aware": dict(base, guidance=7.5, candidates=8,
+                                                                                  seam_bound=1.5, **prior)})
     chosen = "fade 8 smooth 100/8"
     grid.update({f"{s} | {chosen}": dict(skw, **post[chosen]) for s, skw in {**matched, **ranked}.items()})
     return grid

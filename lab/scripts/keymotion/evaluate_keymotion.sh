@@ -4,7 +4,9 @@
 #
 # Usage: bash lab/scripts/keymotion/evaluate_keymotion.sh OUT_DIR [STAGE...]
 #   OUT_DIR   results folder, outside the repository (e.g. ~/salad-runs/v3/measure/keymotion)
-#   STAGE     any of: export guidance physics infill diversity t2m t2m_shipped card (default: all, in that order)
+#   STAGE     any of: export guidance physics infill diversity t2m t2m_shipped card (default: all, in that order), and
+#             the stages of KeyMotion v2's ship rule (lab/docs/keymotion.md, last section; not in the default list):
+#             physics10 sides stretch
 #     export     the run's best checkpoints -> OUT_DIR/weights (fp16, salad_core.keymotion.export: runs.json too;
 #                GUIDANCE, e.g. 5 or 7.5@0-0.5, is the default guidance stored in keymotion.json)
 #     guidance   lab/scripts/keymotion/keymotion_guidance_bench.py over SETTINGS, with SALAD as the reference -> guidance.json
@@ -15,6 +17,10 @@
 #                T2M_ARGS, default 5 replications x 256 samples, no MultiModality, 50 steps, w 7.5) -> t2m/
 #     t2m_shipped  the same for the shipped KeyMotion -> t2m_shipped/ (Table 1's rows side by side)
 #     card       lab/scripts/keymotion/keymotion_card_figures.py --eval (reconstruction, generations, quick T2M) -> card.json
+#     physics10  salad eval --physics --seeds 10 with --keymotion WEIGHTS alone, then keymotion_flight_bootstrap.py
+#                (the jump prompts' flight fit with a 95 % interval) -> physics10/, physics10_flight.txt
+#     sides      keymotion_side_generation.py: the named-side checks on 6 seeds -> sides.json
+#     stretch    keymotion_time_stretch_probe.py with the shipped SALAD: peak speeds at 40 / 120 / 196 frames -> stretch.json
 # Environment:
 #   DATA      procedural corpus the run trained on (its test split, references; required)
 #   RUN       the KeyMotion training root (kf_vae/, pst/, mmae/; required by the export stage)
@@ -70,4 +76,11 @@ has t2m_shipped && stage t2m_shipped "$PY" -m salad_core.cli eval "${EVAL_ARGS[@
     --name "KeyMotion (shipped)" --out "$OUT/t2m_shipped"
 has card && stage card "$PY" lab/scripts/keymotion/keymotion_card_figures.py --data "$DATA" --weights "$WEIGHTS" --eval \
     --renders "$OUT/renders" --out "$OUT/card.json"
+has physics10 && stage physics10 bash -c '"$1" -m salad_core.cli eval --physics --seeds 10 --no-salad --data "$2" \
+    --threads "$3" --keymotion "$4" --out "$5/physics10" && "$1" lab/scripts/keymotion/keymotion_flight_bootstrap.py \
+    "$5/physics10/physics.json" | tee "$5/physics10_flight.txt"' _ "$PY" "$DATA" "$THREADS" "$WEIGHTS" "$OUT"
+has sides && stage sides "$PY" lab/scripts/keymotion/keymotion_side_generation.py --weights "$WEIGHTS" --seeds 6 \
+    --out "$OUT/sides.json"
+has stretch && stage stretch "$PY" lab/scripts/keymotion/keymotion_time_stretch_probe.py --other "candidate=$WEIGHTS" \
+    --salad --json "$OUT/stretch.json"
 echo "results in $OUT"
