@@ -889,9 +889,11 @@ class SaladPipeline:
         mask = self.frame_mask(lengths, noise.shape[1])
         target_ctx = self.denoiser.prepare_text(text_tgt.features, text_tgt.mask)
         inpaint = next((e for e in edits if e.role == "latent"), None)
-        prior = (None if inpaint is None or inpaint.prior == "none" else
+        inverted = inversion is not None
+        # a prior released at the first step would only be noise: not sampled
+        prior = (None if inpaint is None or inpaint.prior_release(int(num_steps), inverted) == 0 else
                  self._inpaint_prior(inpaint, text_tgt, null, lengths, noise.shape[1], guidance, int(num_steps),
-                                     solver))
+                                     solver, inverted))
         run = edit_latents(self.denoiser, scheduler, controller,
                            source=self.denoiser.prepare_text(text_src.features, text_src.mask),
                            target=target_ctx, null=null_schedule, noise=noise, frame_mask=mask,
@@ -900,6 +902,10 @@ class SaladPipeline:
         generation_rows = (2 if guidance.cfg else 1) * len(prompts) * int(num_steps)
         settings = dict(_guidance_settings(guidance), num_steps=int(num_steps), solver=solver, weights=self.source,
                         **self._output_settings())
+        if prior is not None:
+            settings["inpaint_prior"] = {"mode": "prompt", "strength": inpaint.prior_strength_for(inverted),
+                                         "release_step": inpaint.prior_release(int(num_steps), inverted),
+                                         "forward_rows": (2 if guidance.cfg else 1) * len(prompts) * int(num_steps)}
         # an edit that gives the edited sample its own noise (ExampleBased) reports that noise and its seeds
         own_seed = next((e.edited_seed for e in edits if e.edited_seed is not None), None)
         edited_noise, edited_seeds = ((noise, seeds) if run.edited_noise is None else
@@ -927,7 +933,7 @@ class SaladPipeline:
         return result
 
     def _inpaint_prior(self, inpaint, target: TextBatch, null: TextBatch, lengths: Sequence[int], latent_frames: int,
-                       guidance: Guidance, num_steps: int, solver: str) -> torch.Tensor:
+                       guidance: Guidance, num_steps: int, solver: str, inverted: bool = False) -> torch.Tensor:
         """``Inpaint(prior="prompt")``'s pasted latents ``(B, N', P, Dz)``: per
         motion, the target prompt sampled alone over :meth:`Inpaint.prior_window
         <salad_core.attention.inpaint.Inpaint.prior_window>` (noise of the in-painting's seed, the edited branch's

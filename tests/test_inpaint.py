@@ -290,8 +290,8 @@ def test_inverted_take_regions_start_from_fresh_noise_and_kept_parts_are_composi
     inv = pipe.invert(sample_features[:FRAMES], "a person walks forward and turns around", num_steps=STEPS)
     target = "a man waves his right hand"
     out = pipe.edit(inversion=inv, target=target, edits=[Inpaint(parts="arms")], ground=False)
-    old = pipe.edit(inversion=inv, target=target, edits=[Inpaint(parts="arms", noise="source", composite=False)],
-                    ground=False)
+    old = pipe.edit(inversion=inv, target=target, edits=[Inpaint(parts="arms", noise="source", composite=False,
+                                                                  prior="none")], ground=False)
     arms = [PART_NAMES.index("left arm"), PART_NAMES.index("right arm")]
     kept = [p for p in range(7) if p not in arms]
     z, z_old = out.edited.noise, old.edited.noise
@@ -427,8 +427,9 @@ def test_inpaint_new_options():
     # motion; none for a span or a generated source; a number is used as it is
     from salad_core.attention.inpaint import PARTS_RESAMPLE
 
-    arms = Inpaint(parts="arms")
+    arms = Inpaint(parts="arms", prior="none")
     assert arms.passes_for(True) == PARTS_RESAMPLE > 1 and arms.passes_for(False) == 1
+    assert Inpaint(parts="arms").passes_for(True) == 1          # the default pastes a prior there instead
     assert Inpaint(frames=(8, 24)).passes_for(True) == 1 and Inpaint(parts="arms", frames=(8, 24)).passes_for(True) == 1
     assert Inpaint(parts="arms", resample=1).passes_for(True) == 1 and r.passes_for(True) == r.passes_for(False) == 2
     assert [i for i in range(10) if arms.resampling(i / 10, i, 10, arms.passes_for(True))] == [4]
@@ -473,9 +474,13 @@ def test_resampling_changes_the_region_and_not_the_kept_latents(pipe):
 
     inv = pipe.invert(plain.source.features[0, :FRAMES], SOURCE, num_steps=6)
     take = dict(target="a man waves his right hand", inversion=inv, ground=False)
-    auto = pipe.edit(edits=[Inpaint(parts="arms", composite=False)], **take)
-    once = pipe.edit(edits=[Inpaint(parts="arms", composite=False, resample=1)], **take)
+    auto = pipe.edit(edits=[Inpaint(parts="arms", composite=False, prior="none")], **take)
+    once = pipe.edit(edits=[Inpaint(parts="arms", composite=False, resample=1, prior="none")], **take)
     assert auto.settings["forward_rows"] == once.settings["forward_rows"] + 4 * (PARTS_RESAMPLE - 1) * 5
+    # with the default pasted prior (prior="auto") an inverted take's parts are not resampled
+    pasted = pipe.edit(edits=[Inpaint(parts="arms", composite=False)], **take)
+    assert pasted.settings["forward_rows"] == once.settings["forward_rows"]
+    assert pasted.settings["inpaint_prior"]["mode"] == "prompt"
 
 
 @needs_weights
@@ -634,7 +639,8 @@ def test_matched_noise_on_a_generated_source_changes_only_the_region(pipe):
 def test_matched_noise_of_an_inverted_take_follows_the_takes_noise(pipe, sample_features):
     inv = pipe.invert(sample_features[:FRAMES], "a person walks forward and turns around", num_steps=STEPS)
     out = pipe.edit(inversion=inv, target="a man waves his right hand",
-                    edits=[Inpaint(parts="arms", noise="matched", resample=1)], ground=False)
+                    edits=[Inpaint(parts="arms", noise="matched", resample=1, prior="none")],
+                    ground=False)
     arms = [PART_NAMES.index("left arm"), PART_NAMES.index("right arm")]
     kept = [p for p in range(7) if p not in arms]
     z = out.edited.noise

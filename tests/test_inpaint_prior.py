@@ -22,7 +22,7 @@ needs_weights = pytest.mark.skipif(not (default_weights_dir() / "pipeline.json")
 
 # ------------------------------------------------------------------------------ the spec
 @pytest.mark.parametrize("kwargs, match", [
-    (dict(prior="generated"), r"Inpaint.prior='generated'; allowed: \('none', 'prompt'\)"),
+    (dict(prior="generated"), r"Inpaint.prior='generated'; allowed: \('auto', 'none', 'prompt'\)"),
     (dict(prior="prompt", prior_strength=0), r"prior_strength=0 must be a number in \(0, 1\]"),
     (dict(prior="prompt", prior_strength=1.5), r"prior_strength=1.5 must be a number in \(0, 1\]"),
     (dict(prior="prompt", prior_strength=True), r"prior_strength=True must be a number"),
@@ -33,12 +33,29 @@ def test_bad_prior_options_are_refused_by_name(kwargs, match):
 
 
 def test_prior_release_is_the_first_free_step():
-    assert PRIOR_MODES == ("none", "prompt")
-    assert Inpaint(frames=(16, 32)).prior_release(50) == 0                       # no prior: free from the start
+    assert PRIOR_MODES == ("auto", "none", "prompt")
+    assert Inpaint(frames=(16, 32), prior="none").prior_release(50) == 0         # no prior: free from the start
     assert Inpaint(frames=(16, 32), prior="prompt", prior_strength=0.5).prior_release(50) == 25
     assert Inpaint(frames=(16, 32), prior="prompt", prior_strength=0.7).prior_release(50) == 15
     assert Inpaint(frames=(16, 32), prior="prompt", prior_strength=1.0).prior_release(50) == 0
     assert Inpaint(frames=(16, 32), prior="prompt", prior_strength=0.5).prior_release(8) == 4
+
+
+def test_auto_prior_pastes_where_it_was_chosen():
+    """``prior="auto"``: the prompt's sample for body parts of an inverted take (instead of RePaint's resampling) and
+    for a frame span of a generated source; nothing for an inverted take's span or a generated source's parts."""
+    from salad_core.attention.inpaint import PARTS_RESAMPLE, PRIOR_STRENGTH
+
+    parts, span = Inpaint(parts="arms"), Inpaint(frames=(16, 32))
+    assert parts.prior_for(inverted=True) == "prompt" and parts.passes_for(inverted=True) == 1
+    assert parts.prior_for(inverted=False) == "none" and parts.passes_for(inverted=False) == 1
+    assert span.prior_for(inverted=False) == "prompt" and span.prior_for(inverted=True) == "none"
+    assert PRIOR_STRENGTH == 0.5 and span.prior_strength_for(False) == 0.5
+    assert span.prior_release(50, inverted=False) == 25 and span.prior_release(50, inverted=True) == 0
+    # without the prior an inverted take's parts are resampled as before; a given mode is kept everywhere
+    assert Inpaint(parts="arms", prior="none").passes_for(inverted=True) == PARTS_RESAMPLE
+    assert Inpaint(frames=(16, 32), prior="prompt").prior_for(inverted=True) == "prompt"
+    assert Inpaint(parts="arms", prior="none").prior_for(inverted=True) == "none"
 
 
 def test_prior_window_pads_a_short_span_to_the_shortest_clip_and_pastes_its_middle():
@@ -64,7 +81,7 @@ def test_prior_flags_reach_the_spec():
     def spec(*extra):
         return _edit_specs(cli.build_parser().parse_args(flags + list(extra)))[0]
 
-    assert spec().prior == "none" and spec().prior_strength == 0.5
+    assert spec().prior == "auto" and spec().prior_strength == "auto"
     got = spec("--inpaint-prior", "prompt", "--inpaint-prior-strength", "0.7")
     assert got.prior == "prompt" and got.prior_strength == 0.7
     with pytest.raises(UserError, match=r"--inpaint @12:28: Inpaint.prior_strength=2.0 must be a number in \(0, 1\]"):
@@ -89,7 +106,7 @@ def _region(shape, s, e):
 def test_pasted_prior_draws_the_region_towards_the_prompt_alone_and_keeps_the_rest(pipe):
     kw = dict(target=TARGET, lengths=FRAMES, seed=0, num_steps=STEPS)
     span = dict(frames=(16, 48), composite=False, blend=0, guidance=None, noise="fresh")
-    plain = pipe.edit(SOURCE, edits=[Inpaint(**span)], **kw)
+    plain = pipe.edit(SOURCE, edits=[Inpaint(**span, prior="none")], **kw)
     strong = pipe.edit(SOURCE, edits=[Inpaint(**span, prior="prompt", prior_strength=0.25)], **kw)
     weak = pipe.edit(SOURCE, edits=[Inpaint(**span, prior="prompt", prior_strength=0.75)], **kw)
     free = pipe.edit(SOURCE, edits=[Inpaint(**span, prior="prompt", prior_strength=1.0)], **kw)
@@ -100,6 +117,13 @@ def test_pasted_prior_draws_the_region_towards_the_prompt_alone_and_keeps_the_re
         torch.testing.assert_close(out.edited.latents[~region], out.source.latents[~region], atol=0, rtol=0)
     # a prior released at the first step is only noise: the plain edit
     torch.testing.assert_close(free.edited.latents, plain.edited.latents, atol=0, rtol=0)
+    # the settings say what was pasted and until which step; the auto prior of a generated span is the same edit
+    assert strong.settings["inpaint_prior"] == strong.edited.settings["inpaint_prior"] == {
+        "mode": "prompt", "strength": 0.25, "release_step": 6, "forward_rows": 2 * STEPS}
+    assert "inpaint_prior" not in plain.settings and "inpaint_prior" not in free.settings
+    auto = pipe.edit(SOURCE, edits=[Inpaint(**span)], **kw)
+    half = pipe.edit(SOURCE, edits=[Inpaint(**span, prior="prompt", prior_strength=0.5)], **kw)
+    torch.testing.assert_close(auto.edited.latents, half.edited.latents, atol=0, rtol=0)
     # what was pasted: the target sampled alone over the span (32 frames, padded to the 40-frame shortest clip)
     inp = Inpaint(**span, prior="prompt")
     text, null = pipe.encode_text([TARGET])
@@ -120,7 +144,7 @@ def test_prior_of_body_parts_pastes_the_whole_motions_parts(pipe):
     kw = dict(target="a man waves his right hand", lengths=FRAMES, seed=0, num_steps=STEPS)
     arms = dict(parts="arms", composite=False, noise="fresh", resample=1)
     # the plain edit from another seed (from the same seed its region starts from the prior's own noise)
-    plain = pipe.edit(SOURCE, edits=[Inpaint(**arms, seed=1)], **kw)
+    plain = pipe.edit(SOURCE, edits=[Inpaint(**arms, seed=1, prior="none")], **kw)
     pasted = pipe.edit(SOURCE, edits=[Inpaint(**arms, prior="prompt", prior_strength=0.25)], **kw)
     text, null = pipe.encode_text(["a man waves his right hand"])
     prior = pipe._inpaint_prior(Inpaint(**arms, prior="prompt"), text, null, [FRAMES], FRAMES // 4,

@@ -401,7 +401,7 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
             raise ValueError(f"Inpaint(prior='prompt') noises the pasted motion by the forward process and needs a "
                              f"variance-preserving scheduler (alphas_cumprod, unscaled inputs: DDIM, DPM-Solver++), "
                              f"got {type(scheduler).__name__}")
-        release = inpaint.prior_release(num_steps)
+        release = inpaint.prior_release(num_steps, corrections is not None)
         if release > 0 and edited_noise is None:
             edited_noise = noise.clone()
     own_noise = edited_noise is not None and prediction.edited

@@ -28,9 +28,17 @@ after it keep their global place and facing (``composite=True``, :mod:`salad_cor
 decoder's convolutions mix neighbouring parts and frames, and the features integrate the root's velocities); the
 span's frames next to each seam are then smoothed by a small least-squares jerk penalty (``smooth``); a frame span's
 edited branch is guided with :data:`SPAN_GUIDANCE` (``guidance="auto"``: a short span otherwise tended not to do
-what the prompt says); body parts alone of an inverted take are sampled with RePaint's resampling (``resample="auto"``:
-each ``jump`` of 5 steps denoised 3 times, re-noising the region in between, so that the region harmonises with the
-kept parts; generated sources were not measured for it and are sampled once).
+what the prompt says); body parts alone of an inverted take were sampled with RePaint's resampling (``resample``: each
+``jump`` of 5 steps denoised 3 times, re-noising the region in between, so that the region harmonises with the kept
+parts; now only with ``prior="none"``, the pasted prior below having replaced it).
+
+Body parts of an inverted take and a frame span of a generated source are pasted, then harmonised (``prior="auto"``,
+:meth:`Inpaint.prior_for`): the target prompt is first sampled alone (over the span, or the whole motion) and, for the
+first half of the steps, the region's latents are that sample's, noised to each step's level, so that the region
+enters the free steps already doing what the prompt says (on 24 validation clips: an inverted take's arms passed the
+prompt's check in 22 against 18 with RePaint's resampling, which it replaces there, at 0.56 times the time; a
+generated source's span in 20 against 16). A frame span of an inverted take is not pasted: each candidate passed
+more often with the prior (80 % against 53 % of the candidates), but the ranking below chose worse among them.
 
 A frame span of an inverted take is regenerated :data:`SPAN_CANDIDATES` times, from that many seeds of the region's
 fresh noise, and among the candidates whose seams are smooth (``seam_bound="auto"``: seam jerk within
@@ -58,7 +66,8 @@ from .edits import EditKernel, EditSpec, _window, seeded_noise
 if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
 
-__all__ = ["Inpaint", "INPAINT_GROUPS", "MATCHED_MAX_RHO", "NOISE_MODES", "PARTS_RESAMPLE", "PRIOR_MODES", "SCORE_MODES",
+__all__ = ["Inpaint", "INPAINT_GROUPS", "MATCHED_MAX_RHO", "NOISE_MODES", "PARTS_RESAMPLE", "PRIOR_MODES", "PRIOR_STRENGTH",
+           "SCORE_MODES",
            "SEAM_BOUND", "SPAN_CANDIDATES", "SPAN_GUIDANCE",
            "ar1_noise", "inpaint_parts", "matched_noise", "noise_statistics", "parse_inpaint"]
 
@@ -66,7 +75,10 @@ __all__ = ["Inpaint", "INPAINT_GROUPS", "MATCHED_MAX_RHO", "NOISE_MODES", "PARTS
 NOISE_MODES = ("auto", "fresh", "source", "matched")
 
 #: What :class:`Inpaint`'s regenerated region is drawn towards in the first steps (see :attr:`Inpaint.prior`).
-PRIOR_MODES = ("none", "prompt")
+PRIOR_MODES = ("auto", "none", "prompt")
+
+#: The share of the steps in which the pasted prior's region is free (``Inpaint(prior_strength="auto")``).
+PRIOR_STRENGTH = 0.5
 
 #: The largest lag-1 frame correlation :func:`matched_noise` gives the region's noise.
 MATCHED_MAX_RHO = 0.95
@@ -290,8 +302,8 @@ class Inpaint(EditSpec):
         times; between the passes the merged latents are noised back by the forward process (the kept region
         from the source's trajectory, the region with fresh noise), so that the region is denoised again in
         the context of the kept one it has already met. 1: off (one pass); ``"auto"`` (default):
-        :data:`PARTS_RESAMPLE` passes when body parts alone of an inverted motion are regenerated, off for a frame
-        span and for a generated source (:meth:`passes_for`). Costs about ``resample`` times the forward passes;
+        :data:`PARTS_RESAMPLE` passes when body parts alone of an inverted motion are regenerated without a prior
+        (``prior="none"``), off for a frame span, for a generated source and with a prior (:meth:`passes_for`). Costs about ``resample`` times the forward passes;
         needs the DDIM sampler (``"auto"``
         resamples with DDIM only, a number refuses other solvers).
     jump : int
@@ -319,6 +331,23 @@ class Inpaint(EditSpec):
         (:func:`~salad_core.attention.ranking.pick_candidate`). None: by distance alone. Body parts alone have no
         seam: their ranking is by distance whatever the bound. ``"auto"`` (default): :data:`SEAM_BOUND` (1.5) when a
         frame span of an inverted motion is regenerated, where it was chosen; None otherwise (:meth:`seam_bound_for`).
+    prior : ``"auto"``, ``"none"`` or ``"prompt"``
+        ``"prompt"``: paste, then harmonise (SDEdit, Meng et al., ICLR 2022, in the region only). Before the edit, the
+        target prompt alone is sampled (a motion of the span's length for a frame span, at least the skeleton's
+        shortest clip and then its middle latent frames; the motion's whole length for body parts alone; the edited
+        branch's guidance, the edit's solver and steps, noise :func:`~salad_core.attention.edits.seeded_noise` of
+        :attr:`seed`). For the first ``1 - prior_strength`` of the steps the region's latents are that motion's
+        latents noised by the forward process to each step's level (with the region's own noise), so the region
+        enters the free steps already doing what the prompt says and the rest of the loop fits it to the kept
+        context; ``settings["inpaint_prior"]`` records it. ``"none"``: the region is denoised from noise alone.
+        ``"auto"`` (default): ``"prompt"`` for body parts alone of an inverted motion (where it replaces
+        :attr:`resample`'s passes) and for a frame span of a generated source, where it was chosen; ``"none"``
+        otherwise (:meth:`prior_for`).
+    prior_strength : float or ``"auto"``
+        With a prior: the share of the steps, ending at the last, in which the region is free (in ``(0, 1]``; 1 frees
+        it from the first step, when the pasted motion would be only noise, so nothing is sampled). Smaller keeps
+        more of the pasted motion, larger fits it more to the kept context. ``"auto"`` (default):
+        :data:`PRIOR_STRENGTH` (0.5; 0.7 was measured too).
     """
 
     role: ClassVar[str] = "latent"
@@ -341,8 +370,8 @@ class Inpaint(EditSpec):
     candidates: Union[int, str] = "auto"
     score: str = "auto"
     seam_bound: Union[float, str, None] = "auto"
-    prior: str = "none"
-    prior_strength: float = 0.5
+    prior: str = "auto"
+    prior_strength: Union[float, str] = "auto"
 
     def __post_init__(self) -> None:
         if self.noise not in NOISE_MODES:
@@ -366,10 +395,11 @@ class Inpaint(EditSpec):
         if not isinstance(self.prior, str) or self.prior not in PRIOR_MODES:
             raise ValueError(f"Inpaint.prior={self.prior!r}; allowed: {PRIOR_MODES}")
         ps = self.prior_strength
-        if isinstance(ps, bool) or not isinstance(ps, (int, float)) or not 0 < ps <= 1:
-            raise ValueError(f"Inpaint.prior_strength={ps!r} must be a number in (0, 1] (the share of the steps in "
-                             "which the region is free of the prompt's pasted motion)")
-        object.__setattr__(self, "prior_strength", float(ps))
+        if ps != "auto":
+            if isinstance(ps, bool) or not isinstance(ps, (int, float)) or not 0 < ps <= 1:
+                raise ValueError(f"Inpaint.prior_strength={ps!r} must be a number in (0, 1] (the share of the steps "
+                                 "in which the region is free of the prompt's pasted motion) or 'auto'")
+            object.__setattr__(self, "prior_strength", float(ps))
         if not isinstance(self.score, str) or self.score not in SCORE_MODES:
             raise ValueError(f"Inpaint.score={self.score!r}; allowed: {SCORE_MODES}")
         if self.seam_bound is not None and self.seam_bound != "auto":
@@ -481,10 +511,11 @@ class Inpaint(EditSpec):
 
     def passes_for(self, inverted: bool) -> int:
         """Times each :attr:`jump` of steps is denoised (:attr:`resample`; ``"auto"`` resolved: :data:`PARTS_RESAMPLE`
-        when body parts alone of an inverted motion are regenerated, where it was chosen; 1 for a frame span and for
-        a generated source). ``inverted``: the edit is of an inversion."""
+        when body parts alone of an inverted motion are regenerated without a pasted prior (:meth:`prior_for`), where
+        it was chosen; 1 for a frame span, for a generated source and with a prior, which replaced it for an inverted
+        motion's parts). ``inverted``: the edit is of an inversion."""
         if self.resample == "auto":
-            return PARTS_RESAMPLE if (self.frames is None and inverted) else 1
+            return PARTS_RESAMPLE if (self.frames is None and inverted and self.prior_for(inverted) == "none") else 1
         return int(self.resample)
 
     def candidates_for(self, inverted: bool, motions: int = 1) -> int:
@@ -516,13 +547,27 @@ class Inpaint(EditSpec):
             return SEAM_BOUND if inverted else None
         return self.seam_bound
 
-    def prior_release(self, num_steps: int) -> int:
-        """The first step (of ``num_steps``) in which the region is free of the pasted prior (:attr:`prior`): the
+    def prior_for(self, inverted: bool) -> str:
+        """``"prompt"`` or ``"none"`` (:attr:`prior`; ``"auto"`` resolved: ``"prompt"`` for body parts alone of an
+        inverted motion and for a frame span of a generated source, where it was chosen; ``"none"`` otherwise).
+        ``inverted``: the edit is of an inversion."""
+        if self.prior == "auto":
+            parts_of_a_take = self.frames is None and inverted
+            span_of_a_generation = self.frames is not None and not inverted
+            return "prompt" if (parts_of_a_take or span_of_a_generation) else "none"
+        return self.prior
+
+    def prior_strength_for(self, inverted: bool) -> float:
+        """:attr:`prior_strength` (``"auto"`` resolved: :data:`PRIOR_STRENGTH`). ``inverted``: as :meth:`prior_for`."""
+        return PRIOR_STRENGTH if self.prior_strength == "auto" else float(self.prior_strength)
+
+    def prior_release(self, num_steps: int, inverted: bool = False) -> int:
+        """The first step (of ``num_steps``) in which the region is free of the pasted prior (:meth:`prior_for`): the
         latents after steps ``0 .. release - 2`` are set to the prior's at that level, step ``release - 1``'s output
         as well, so step ``release`` starts from the prior noised to its own level; 0 without a prior."""
-        if self.prior == "none":
+        if self.prior_for(inverted) == "none":
             return 0
-        return int(round((1.0 - self.prior_strength) * int(num_steps)))
+        return int(round((1.0 - self.prior_strength_for(inverted)) * int(num_steps)))
 
     def prior_window(self, num_frames: int, min_frames: int) -> tuple[int, int, int, int]:
         """Where the pasted prior comes from and goes, for a motion of ``num_frames`` frames: ``(s, e, frames, c)``,

@@ -379,7 +379,7 @@ INPAINT_NOISE = ("auto", "fresh", "source", "matched")
 #: ``--inpaint-score`` choices: :data:`salad_core.attention.inpaint.SCORE_MODES` (spelled out likewise).
 INPAINT_SCORE = ("auto", "whole", "parts")
 #: ``--inpaint-prior`` choices: :data:`salad_core.attention.inpaint.PRIOR_MODES` (spelled out likewise).
-INPAINT_PRIOR = ("none", "prompt")
+INPAINT_PRIOR = ("auto", "none", "prompt")
 
 
 def _edit_args(p: argparse.ArgumentParser) -> None:
@@ -447,7 +447,8 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inpaint-prior", choices=INPAINT_PRIOR, default=None,
                    help="'prompt': paste, then harmonise: the target prompt is first sampled alone (the span's length, "
                         "or the whole motion for body parts) and the region starts from it, noised, for the first "
-                        "steps; default 'none': the region is denoised from noise")
+                        "steps; 'none': the region is denoised from noise; default 'auto': 'prompt' for body parts of a "
+                        "given take (--motion, salad invert) and for a frame span of a generated source")
     p.add_argument("--inpaint-prior-strength", type=float, default=None, metavar="S",
                    help="with --inpaint-prior prompt: the share of the steps (0 < S <= 1) in which the region is free "
                         "to fit the kept motion (smaller keeps more of the pasted motion; default 0.5)")

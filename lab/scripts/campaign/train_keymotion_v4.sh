@@ -6,8 +6,9 @@
 # Usage: bash lab/scripts/campaign/train_keymotion_v4.sh [--dry-run] [OUT]     (default OUT: ~/salad-runs/km_v4)
 #   RESUME=1      continue interrupted stages (Ctrl-C writes a checkpoint); a finished stage is skipped
 #   CORPUS=DIR    corpus 2.7 built before (default: built into OUT/corpus27)
-#   THREADS=N     torch threads (default 2)
-# Stages: keyframe VAE (30,000 steps, about 1 hour on 2 threads), PST (60,000 steps, about 3 hours on 2 threads), the
+#   THREADS=N     torch threads (default 1: on 2 threads with another process beside it the run crawls, 1.0 against
+#                 5.0 steps/s; alone, 1 thread is as fast as 2: lab/docs/keymotion.md)
+# Stages: keyframe VAE (30,000 steps, about 1.5 hours on 1 thread), PST (60,000 steps, 3.5-6 hours on 1 thread), the
 # pipeline folder OUT/pipe. Why: lab/docs/keymotion.md, "A one-action prompt asked for longer is slowed down".
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
@@ -16,7 +17,7 @@ if [ "${1:-}" = "--dry-run" ]; then DRY=1; shift; fi
 OUT=${1:-$HOME/salad-runs/km_v4}
 PY=${PYTHON:-.venv/bin/python}
 RESUME=${RESUME:+--resume}
-THREADS=${THREADS:-2}
+THREADS=${THREADS:-1}
 RECIPE=lab/configs/keymotion-v4-absolute.json
 run() { if [ "$DRY" = 1 ]; then printf "%q " "$@"; echo; else echo "+ $*"; "$@"; fi; }
 done_stage() { [ -f "$1/train_state.json" ] && "$PY" -c 'import json, sys; d = json.load(open(sys.argv[1] + "/train_state.json")); sys.exit(0 if d["step"] >= int(sys.argv[2]) else 1)' "$1" "$2"; }

@@ -237,7 +237,8 @@ def tuning_takes(n: int, frames: int) -> list[dict]:
 
 #: Settings compared on the held-out cases: the latent in-painting alone (SALAD 0.3, before issue 67's levers: every
 #: option that changed since spelled out) and :class:`Inpaint`'s defaults.
-CONFIGS = {"latent": dict(noise="source", composite=False, guidance=None, resample=1, smooth=0.0), "default": {}}
+CONFIGS = {"latent": dict(noise="source", composite=False, guidance=None, resample=1, smooth=0.0, prior="none"),
+           "default": {}}
 
 #: Inpaint options that act after decoding only (the composite): settings that differ only in these share one
 #: sampling run per case.
@@ -289,6 +290,7 @@ def tuning_grid() -> dict[str, dict]:
         ranked.update({f"fresh prior {strength}": dict(base, **prior),
                        f"fresh resample 3 jump 5 prior {strength}": dict(base, resample=3, jump=5, **prior),
                        f"fresh g7.5 prior {strength}": dict(base, guidance=7.5, **prior),
+                       f"source noise g7.5 prior {strength}": dict(base, noise="source", guidance=7.5, **prior),
                        f"fresh g7.5 prior {strength} best of 8 seam-aware": dict(base, guidance=7.5, candidates=8,
                                                                                   seam_bound=1.5, **prior)})
     chosen = "fade 8 smooth 100/8"
