@@ -403,7 +403,10 @@ def edit_latents(denoiser: Denoiser, scheduler, controller: EditController, *, s
                              f"got {type(scheduler).__name__}")
         release = inpaint.prior_release(num_steps, corrections is not None)
         if release > 0 and edited_noise is None:
+            # the region gets its own start; the edited branch keeps the source's noise and corrections elsewhere
             edited_noise = noise.clone()
+            if corrections is not None and edited_corrections is None:
+                edited_corrections = corrections
     own_noise = edited_noise is not None and prediction.edited
     # both branches start from the same noise (Algorithm 1, line 4) and take the same corrections,
     # unless the edited sample has its own noise: then the corrections are the source's alone (a
