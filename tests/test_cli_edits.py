@@ -12,10 +12,8 @@ import numpy as np
 import pytest
 
 from salad_core import cli
-from salad_core.pipeline import default_weights_dir
+from _weights import needs_weights
 
-needs_weights = pytest.mark.skipif(not (default_weights_dir() / "pipeline.json").is_file(),
-                                   reason="needs the shipped weights")
 pytestmark = [pytest.mark.usefixtures("single_thread")]
 
 SOURCE = "a person walks forward while waving his right hand"

@@ -12,12 +12,10 @@ import pytest
 
 from salad_core import cli
 from salad_core.attention import CaptureConfig
-from salad_core.pipeline import default_weights_dir
 from test_explorer_html import _embedded, _full_reference
+from _weights import needs_weights
 
 pytestmark = [pytest.mark.usefixtures("single_thread")]
-needs_weights = pytest.mark.skipif(not (default_weights_dir() / "pipeline.json").is_file(),
-                                   reason="needs the shipped weights")
 
 PROMPTS = ["a person walks and waves", "a man jumps forward"]
 LENGTH, STEPS, SEED = 24, 4, 2

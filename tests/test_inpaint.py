@@ -9,15 +9,13 @@ import torch
 from salad_core.attention import Inpaint, Refine, Reweight, parse_inpaint
 from salad_core.attention.edits import seeded_noise, validate_edits
 from salad_core.attention.inpaint import MATCHED_MAX_RHO, NOISE_MODES, matched_noise, noise_statistics
-from salad_core.pipeline import default_weights_dir
 from salad_core.skeleton import PART_NAMES, get_skeleton
+from _weights import needs_weights
 
 STEPS = 10
 FRAMES = 48
 SOURCE = "a person walks forward"
 
-needs_weights = pytest.mark.skipif(not (default_weights_dir() / "pipeline.json").is_file(),
-                                   reason="needs the shipped SALAD weights (salad_core/weights/salad)")
 
 
 # ------------------------------------------------------------------------------ the spec

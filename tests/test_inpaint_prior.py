@@ -9,15 +9,13 @@ import torch
 from salad_core.attention import Inpaint
 from salad_core.attention.editing import edit_latents
 from salad_core.attention.inpaint import PRIOR_MODES
-from salad_core.pipeline import default_weights_dir
+from _weights import needs_weights
 
 STEPS = 8
 FRAMES = 64
 SOURCE = "a person walks forward"
 TARGET = "a person jumps"
 
-needs_weights = pytest.mark.skipif(not (default_weights_dir() / "pipeline.json").is_file(),
-                                   reason="needs the shipped SALAD weights (salad_core/weights/salad)")
 
 
 # ------------------------------------------------------------------------------ the spec

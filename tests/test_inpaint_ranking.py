@@ -19,15 +19,14 @@ from salad_core.attention.inpaint import SCORE_MODES, SEAM_BOUND, SPAN_CANDIDATE
 from salad_core.attention.ranking import (MIN_FRAMES, TextMotionScorer, candidate_seam_ratios, candidate_specs,
                                           caption_tokens, isolate_parts, pick_candidate, ranked_edit, scoring_window)
 from salad_core.eval.train_evaluator import default_evaluator_dir
-from salad_core.pipeline import EditOutput, MotionOutput, default_weights_dir
+from salad_core.pipeline import EditOutput, MotionOutput
+from _weights import needs_weights
 
 STEPS = 10
 FRAMES = 48
 SOURCE = "a person walks forward"
 WAVE = "a man waves his right hand"
 
-needs_weights = pytest.mark.skipif(not (default_weights_dir() / "pipeline.json").is_file(),
-                                   reason="needs the shipped SALAD weights (salad_core/weights/salad)")
 needs_evaluator = pytest.mark.skipif(not (default_evaluator_dir() / "evaluator.json").is_file(),
                                      reason="needs the shipped evaluator (salad_core/weights/evaluator)")
 

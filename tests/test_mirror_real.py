@@ -12,15 +12,13 @@ from salad_core.attention.grounding import (asks_to_leave_floor, ground_features
 from salad_core.attention.mirror_take import (MirrorTake, invert_mirror, mirror_prompt, mirror_take_edits,
                                               mirror_take_mask)
 from salad_core.motion import features_to_joints, mirror_features
-from salad_core.pipeline import default_weights_dir
 from salad_core.skeleton import PART_NAMES, get_skeleton
+from _weights import needs_weights
 
 PIPE_SEED = 3
 STEPS = 5
 PROMPT = "a person kicks with the right leg"
 
-needs_weights = pytest.mark.skipif(not (default_weights_dir() / "pipeline.json").is_file(),
-                                   reason="needs the shipped SALAD weights (salad_core/weights/salad)")
 
 
 # ------------------------------------------------------------------------------ the spec
