@@ -889,11 +889,11 @@ class SaladPipeline:
         mask = self.frame_mask(lengths, noise.shape[1])
         target_ctx = self.denoiser.prepare_text(text_tgt.features, text_tgt.mask)
         inpaint = next((e for e in edits if e.role == "latent"), None)
-        inverted = inversion is not None
+        release = 0 if inpaint is None else inpaint.prior_release(int(num_steps), inversion is not None)
         # a prior released at the first step would only be noise: not sampled
-        prior = (None if inpaint is None or inpaint.prior_release(int(num_steps), inverted) == 0 else
+        prior = (None if release == 0 else
                  self._inpaint_prior(inpaint, text_tgt, null, lengths, noise.shape[1], guidance, int(num_steps),
-                                     solver, inverted))
+                                     solver))
         run = edit_latents(self.denoiser, scheduler, controller,
                            source=self.denoiser.prepare_text(text_src.features, text_src.mask),
                            target=target_ctx, null=null_schedule, noise=noise, frame_mask=mask,
@@ -903,9 +903,8 @@ class SaladPipeline:
         settings = dict(_guidance_settings(guidance), num_steps=int(num_steps), solver=solver, weights=self.source,
                         **self._output_settings())
         if prior is not None:
-            settings["inpaint_prior"] = {"mode": "prompt", "strength": inpaint.prior_strength_for(inverted),
-                                         "release_step": inpaint.prior_release(int(num_steps), inverted),
-                                         "forward_rows": (2 if guidance.cfg else 1) * len(prompts) * int(num_steps)}
+            settings["inpaint_prior"] = {"mode": "prompt", "strength": inpaint.resolved_prior_strength,
+                                         "release_step": release, "forward_rows": generation_rows}
         # an edit that gives the edited sample its own noise (ExampleBased) reports that noise and its seeds
         own_seed = next((e.edited_seed for e in edits if e.edited_seed is not None), None)
         edited_noise, edited_seeds = ((noise, seeds) if run.edited_noise is None else
@@ -933,34 +932,30 @@ class SaladPipeline:
         return result
 
     def _inpaint_prior(self, inpaint, target: TextBatch, null: TextBatch, lengths: Sequence[int], latent_frames: int,
-                       guidance: Guidance, num_steps: int, solver: str, inverted: bool = False) -> torch.Tensor:
-        """``Inpaint(prior="prompt")``'s pasted latents ``(B, N', P, Dz)``: per
-        motion, the target prompt sampled alone over :meth:`Inpaint.prior_window
-        <salad_core.attention.inpaint.Inpaint.prior_window>` (noise of the in-painting's seed, the edited branch's
-        guidance weight, the edit's solver and steps, the pipeline's null text), its latents placed at the region's
-        latent frames and parts (zero elsewhere)."""
+                       guidance: Guidance, num_steps: int, solver: str) -> torch.Tensor:
+        """``Inpaint(prior="prompt")``'s pasted latents ``(B, N', P, Dz)``: the target prompts sampled alone over
+        :meth:`Inpaint.prior_window <salad_core.attention.inpaint.Inpaint.prior_window>` (noise of the in-painting's
+        seed as :meth:`make_noise` draws it, the edited branch's guidance weight, the edit's solver and steps, the
+        pipeline's null text), their latents placed at the region's latent frames and parts (zero elsewhere)."""
         import dataclasses
 
-        from salad_core.attention.edits import seeded_noise
+        from salad_core.skeleton import PART_NAMES
 
         scale = inpaint.edited_guidance
         prior_guidance = guidance if scale is None else dataclasses.replace(guidance, scale=float(scale))
+        windows = [inpaint.prior_window(int(n), self.skeleton.min_length) for n in lengths]
+        frames = [w[2] for w in windows]
+        n_lat = max(frames) // self.skeleton.unit_length
+        noise = self.make_noise([inpaint.seed + b for b in range(len(lengths))], n_lat)
         uncond = self.denoiser.prepare_text(null.features[:1], null.mask[:1])
+        alone = self._denoise_in_chunks(target, uncond, noise, frames, prior_guidance, num_steps, solver, False)
         out = torch.zeros(len(lengths), latent_frames, *self.latent_shape)
-        for b, length in enumerate(lengths):
-            s, e, frames, c = inpaint.prior_window(int(length), self.skeleton.min_length)
-            n_lat = frames // self.skeleton.unit_length
-            z0 = seeded_noise(inpaint.seed + b, (1, n_lat, *self.latent_shape))
-            cond = self.denoiser.prepare_text(target.features[b:b + 1], target.mask[b:b + 1])
-            z = denoise(self.denoiser, make_scheduler(self.diffusion, solver), cond, uncond, z0,
-                        self.frame_mask([frames], n_lat), guidance_scale=prior_guidance, num_steps=num_steps)
-            out[b, s:e] = z[0, c:c + (e - s)]
-        from salad_core.skeleton import PART_NAMES
-
+        for b, (s, e, _, c) in enumerate(windows):
+            out[b, s:e] = alone[b, c:c + (e - s)]
         chosen = inpaint.parts or PART_NAMES
         out[:, :, [i for i, part in enumerate(PART_NAMES) if part not in chosen]] = 0.0
-        log.debug("in-painting prior: %s sampled from the target over %s latent frames", inpaint.describe(),
-                  [inpaint.prior_window(int(n), self.skeleton.min_length)[:2] for n in lengths])
+        log.debug("in-painting prior: %s sampled from the target over latent frames %s", inpaint.describe(),
+                  [w[:2] for w in windows])
         return out
 
     def _from_inversion(self, inversion: Inversion, source: str | Sequence[str] | None,

@@ -48,7 +48,7 @@ def test_auto_prior_pastes_where_it_was_chosen():
     assert parts.prior_for(inverted=True) == "prompt" and parts.passes_for(inverted=True) == 1
     assert parts.prior_for(inverted=False) == "none" and parts.passes_for(inverted=False) == 1
     assert span.prior_for(inverted=False) == "prompt" and span.prior_for(inverted=True) == "none"
-    assert PRIOR_STRENGTH == 0.5 and span.prior_strength_for(False) == 0.5
+    assert PRIOR_STRENGTH == 0.5 and span.resolved_prior_strength == 0.5
     assert span.prior_release(50, inverted=False) == 25 and span.prior_release(50, inverted=True) == 0
     # without the prior an inverted take's parts are resampled as before; a given mode is kept everywhere
     assert Inpaint(parts="arms", prior="none").passes_for(inverted=True) == PARTS_RESAMPLE

@@ -66,9 +66,8 @@ from .edits import EditKernel, EditSpec, _window, seeded_noise
 if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
 
-__all__ = ["Inpaint", "INPAINT_GROUPS", "MATCHED_MAX_RHO", "NOISE_MODES", "PARTS_RESAMPLE", "PRIOR_MODES", "PRIOR_STRENGTH",
-           "SCORE_MODES",
-           "SEAM_BOUND", "SPAN_CANDIDATES", "SPAN_GUIDANCE",
+__all__ = ["Inpaint", "INPAINT_GROUPS", "MATCHED_MAX_RHO", "NOISE_MODES", "PARTS_RESAMPLE", "PRIOR_MODES",
+           "PRIOR_STRENGTH", "SCORE_MODES", "SEAM_BOUND", "SPAN_CANDIDATES", "SPAN_GUIDANCE",
            "ar1_noise", "inpaint_parts", "matched_noise", "noise_statistics", "parse_inpaint"]
 
 #: What :class:`Inpaint`'s regenerated region starts from (see :attr:`Inpaint.noise`).
@@ -303,9 +302,9 @@ class Inpaint(EditSpec):
         from the source's trajectory, the region with fresh noise), so that the region is denoised again in
         the context of the kept one it has already met. 1: off (one pass); ``"auto"`` (default):
         :data:`PARTS_RESAMPLE` passes when body parts alone of an inverted motion are regenerated without a prior
-        (``prior="none"``), off for a frame span, for a generated source and with a prior (:meth:`passes_for`). Costs about ``resample`` times the forward passes;
-        needs the DDIM sampler (``"auto"``
-        resamples with DDIM only, a number refuses other solvers).
+        (``prior="none"``), off for a frame span, for a generated source and with a prior (:meth:`passes_for`).
+        Costs about ``resample`` times the forward passes; needs the DDIM sampler (``"auto"`` resamples with DDIM
+        only, a number refuses other solvers).
     jump : int
         Sampler steps per resampling jump (default 5).
     candidates : int or ``"auto"``
@@ -557,8 +556,9 @@ class Inpaint(EditSpec):
             return "prompt" if (parts_of_a_take or span_of_a_generation) else "none"
         return self.prior
 
-    def prior_strength_for(self, inverted: bool) -> float:
-        """:attr:`prior_strength` (``"auto"`` resolved: :data:`PRIOR_STRENGTH`). ``inverted``: as :meth:`prior_for`."""
+    @property
+    def resolved_prior_strength(self) -> float:
+        """:attr:`prior_strength` (``"auto"`` resolved: :data:`PRIOR_STRENGTH`)."""
         return PRIOR_STRENGTH if self.prior_strength == "auto" else float(self.prior_strength)
 
     def prior_release(self, num_steps: int, inverted: bool = False) -> int:
@@ -567,7 +567,7 @@ class Inpaint(EditSpec):
         as well, so step ``release`` starts from the prior noised to its own level; 0 without a prior."""
         if self.prior_for(inverted) == "none":
             return 0
-        return int(round((1.0 - self.prior_strength_for(inverted)) * int(num_steps)))
+        return int(round((1.0 - self.resolved_prior_strength) * int(num_steps)))
 
     def prior_window(self, num_frames: int, min_frames: int) -> tuple[int, int, int, int]:
         """Where the pasted prior comes from and goes, for a motion of ``num_frames`` frames: ``(s, e, frames, c)``,
