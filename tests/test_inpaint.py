@@ -243,6 +243,57 @@ def test_composite_of_a_frame_span_keeps_the_kept_frames_in_place(sample_feature
     np.testing.assert_allclose(composite_features(f, g, sw, root="source"), composite_features(f, g, sw, root="edit"))
 
 
+def _yaw_fit_residual(a: np.ndarray, b: np.ndarray) -> float:
+    """Largest distance (m) left after the best rotation about the vertical plus translation maps joints ``a``
+    ``(N, J, 3)`` onto ``b``: 0 when ``b`` is ``a`` turned and moved bodily."""
+    pa, pb = a.reshape(-1, 3), b.reshape(-1, 3)
+    ca, cb = pa.mean(0), pb.mean(0)
+    x, y = pa - ca, pb - cb
+    # rotation about y: maximise sum over points of (x_xz . R y_xz)
+    sxx = (x[:, 0] * y[:, 0] + x[:, 2] * y[:, 2]).sum()
+    sxz = (x[:, 0] * y[:, 2] - x[:, 2] * y[:, 0]).sum()
+    t = np.arctan2(sxz, sxx)
+    c, s = np.cos(t), np.sin(t)
+    r = np.stack([c * x[:, 0] - s * x[:, 2], x[:, 1], s * x[:, 0] + c * x[:, 2]], -1)
+    return float(np.linalg.norm(r - y, axis=-1).max())
+
+
+def test_root_auto_follows_a_span_that_turned_and_holds_one_that_did_not(sample_features):
+    """``root="auto"``: the kept frames after a span that turned more than TURN_FOLLOW_DEG beyond the source follow
+    it (as ``"edit"``); after a span that did not they keep the source's place (as ``"source"``); after two spans,
+    the first turned and the second not, the last kept frames are the source's turned and moved bodily."""
+    from salad_core.attention.composite import (TURN_FOLLOW_DEG, composite_features, followed_turns, frame_weights,
+                                                regenerated_runs)
+    from salad_core.motion import features_to_joints
+
+    f = sample_features[:80].astype(np.float64)
+    turned = _edited_like(f, 1)                          # 0.1 rad a frame more: about 180 degrees over 32 frames
+    straight = f + np.random.default_rng(2).normal(scale=0.02, size=f.shape) * (np.arange(f.shape[1]) < f.shape[1] - 4)
+    straight[:, 0] = f[:, 0] + 0.001                     # 0.002 rad a frame more: about 4 degrees over the span
+    w = np.repeat(frame_weights(80, (24, 56), fade=4)[:, None], 22, 1)
+    assert regenerated_runs(w[:, 0]) == [(24, 56)]
+    out_t = composite_features(f, turned, w, root="edit")
+    assert followed_turns(out_t, f, w[:, 0]) == [(24, 56)]
+    assert followed_turns(composite_features(f, straight, w, root="edit"), f, w[:, 0]) == []
+    np.testing.assert_allclose(composite_features(f, turned, w, root="auto"), out_t)
+    np.testing.assert_allclose(composite_features(f, straight, w, root="auto"),
+                               composite_features(f, straight, w, root="source"))
+    with pytest.raises(ValueError, match="root"):
+        composite_features(f, turned, w, root="follow")
+    assert 0 < TURN_FOLLOW_DEG < 90
+    # two spans: [16, 32) turns (followed), [48, 64) does not (corrected towards the turned source path)
+    two = turned.copy()
+    two[40:] = straight[40:]
+    w2 = np.repeat(np.maximum(frame_weights(80, (16, 32), fade=4), frame_weights(80, (48, 64), fade=4))[:, None],
+                   22, 1)
+    out2 = composite_features(f, two, w2, root="auto")
+    assert followed_turns(composite_features(f, two, w2, root="edit"), f, w2[:, 0]) == [(16, 32)]
+    j_src, j_auto = features_to_joints(f), features_to_joints(out2)
+    assert _yaw_fit_residual(j_src[64:], j_auto[64:]) < 1e-6          # the source's last frames, turned and moved
+    assert _yaw_fit_residual(j_src[32:48], j_auto[32:48]) < 1e-6      # and the kept frames between the spans
+    assert np.abs(j_src[64:] - j_auto[64:]).max() > 0.1               # ... which did move
+
+
 def test_composite_seam_is_smoother_with_a_fade(sample_features):
     """Cross-fading a span's seams in feature space: the largest jerk near the seams falls as the fade widens."""
     from salad_core.attention.composite import composite_features, frame_weights
@@ -328,6 +379,23 @@ def test_inverted_take_span_keeps_the_frames_after_it_in_place(pipe, sample_feat
     assert glob(src, free.edited.joints[0], slice(33, None)) > glob(src, ed, slice(33, None))
     with pytest.raises(ValueError, match="Inpaint.guidance"):
         Inpaint(frames=(16, 32), guidance=0.5)
+
+
+@needs_weights
+def test_root_auto_records_the_followed_turns_and_equals_its_choice(pipe, sample_features):
+    """``Inpaint(root="auto")`` through ``pipe.edit``: the composite records, per motion, the spans whose turn the
+    kept frames follow, and the edit equals the one made with the root mode that record implies."""
+    inv = pipe.invert(sample_features[:FRAMES], "a person walks forward and turns around", num_steps=STEPS)
+    outs = {root: pipe.edit(inversion=inv, target="a person turns left", ground=False,
+                            edits=[Inpaint(frames=(16, 32), guidance=7.5, root=root, candidates=1, prior="none")])
+            for root in ("auto", "source", "edit")}
+    rec = outs["auto"].settings["composite"]
+    assert "followed_turns" in rec and len(rec["followed_turns"]) == 1
+    assert "followed_turns" not in outs["source"].settings["composite"]
+    same = "edit" if rec["followed_turns"][0] else "source"
+    np.testing.assert_allclose(outs["auto"].edited.joints[0], outs[same].edited.joints[0], atol=1e-5)
+    for span in rec["followed_turns"][0]:
+        assert 16 <= span[0] < span[1] <= 32
 
 
 # --------------------------------------------------------------------- seam smoothing, resampling, span guidance

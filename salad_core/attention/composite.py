@@ -19,7 +19,10 @@ What. After decoding both branches, the edited motion's features are re-assemble
 * **root** (frame spans): with ``root="source"`` the root velocities of a regenerated span that has kept frames after
   it are corrected by a smooth (Hann-window) offset so that the span ends at the source's heading and position;
   every kept frame then keeps its global position and facing (a span that turns keeps the turn inside the span and
-  turns back before the kept frames; ``root="edit"`` lets the kept frames follow the span's turn instead);
+  turns back before the kept frames; ``root="edit"`` lets the kept frames follow the span's turn instead;
+  ``root="auto"`` decides per span: the kept frames follow a span that turned more than :data:`TURN_FOLLOW_DEG`
+  beyond what the source turned over the same frames (a middle span asked to turn keeps its turn) and keep their
+  place after any other);
 * the seams of a frame span are cross-faded over ``fade`` frames inside the span (``w`` ramps
   ``d / (fade + 1)`` with the distance ``d`` to the kept frame), kept frames are exactly the source's;
 * **seam smoothing** (``smooth > 0``, :func:`smooth_seam_features`): a linear cross-fade of two different motions
@@ -41,11 +44,16 @@ import numpy as np
 
 from salad_core.skeleton import PART_NAMES, get_skeleton
 
-__all__ = ["ROOT_MODES", "part_joint_weights", "frame_weights", "seams", "smooth_columns", "smooth_seam_features",
+__all__ = ["ROOT_MODES", "TURN_FOLLOW_DEG", "regenerated_runs", "followed_turns", "part_joint_weights", "frame_weights", "seams", "smooth_columns", "smooth_seam_features",
            "frame_jerk", "seam_jerk", "seam_jerk_ratio", "composite_features", "composite_output", "composite_specs"]
 
 #: How the root of a regenerated frame span is handled (see the module docstring).
-ROOT_MODES = ("source", "edit")
+ROOT_MODES = ("source", "edit", "auto")
+
+#: ``root="auto"``: a regenerated run whose heading change differs from the source's over the same frames by more
+#: than this (degrees; an eighth of a turn, more than a gait's heading wobble) turned on purpose, and the kept frames
+#: after it follow it; below it they keep the source's place and facing.
+TURN_FOLLOW_DEG = 45.0
 
 
 def part_joint_weights(parts: Sequence[str], skeleton="humanml3d") -> np.ndarray:
@@ -236,13 +244,16 @@ def _world_to_local(half: np.ndarray, wx: np.ndarray, wz: np.ndarray) -> tuple[n
     return c * wx + s * wz, -s * wx + c * wz
 
 
-def _fix_root(out: np.ndarray, source: np.ndarray, w_root: np.ndarray) -> np.ndarray:
-    """Correct the root velocities of each regenerated run of frames that has kept frames after it, so that the
-    first kept frame after it has the source's heading and position (a Hann-window offset over the run's rows)."""
-    f = out.copy()
-    n = len(f)
-    regen = w_root > 0
-    runs, t = [], 0
+def _turn_deg(f: np.ndarray, s: int, e: int) -> float:
+    """Heading change (degrees, positive to the left) of features ``f`` from frame ``s`` to frame ``e``."""
+    half, _ = _root_state(f)
+    return float(np.degrees(2 * (half[e] - half[s])))
+
+
+def regenerated_runs(w_root: np.ndarray) -> list[tuple[int, int]]:
+    """``[(s, e), ...]``: the runs of frames with ``w_root > 0`` (``(N,)``) that have a kept frame after them."""
+    regen = np.asarray(w_root) > 0
+    n, runs, t = len(regen), [], 0
     while t < n:
         if regen[t]:
             s = t
@@ -252,8 +263,37 @@ def _fix_root(out: np.ndarray, source: np.ndarray, w_root: np.ndarray) -> np.nda
                 runs.append((s, t))
         else:
             t += 1
+    return runs
+
+
+def followed_turns(out: np.ndarray, source: np.ndarray, w_root: np.ndarray,
+                   limit: float = TURN_FOLLOW_DEG) -> list[tuple[int, int]]:
+    """The regenerated runs (:func:`regenerated_runs`) of the composite ``out`` ``(N, D)`` whose heading change
+    differs from ``source``'s over the same frames by more than ``limit`` degrees: the spans ``root="auto"`` lets
+    the kept frames after them follow."""
+    return [(s, e) for s, e in regenerated_runs(w_root)
+            if abs(_turn_deg(out, s, e) - _turn_deg(source, s, e)) > limit]
+
+
+def _fix_root(out: np.ndarray, source: np.ndarray, w_root: np.ndarray,
+              skip: Sequence[tuple[int, int]] = ()) -> np.ndarray:
+    """Correct the root velocities of each regenerated run of frames that has kept frames after it, so that the
+    first kept frame after it has the source's heading and position (a Hann-window offset over the run's rows).
+    Runs in ``skip`` are left as they are, and so are the kept frames after them (they follow the run); the runs
+    after a skipped one are corrected towards the source's path turned and moved with it."""
+    f = out.copy()
     src_half, src_xz = _root_state(source)
-    for s, e in runs:
+    for s, e in regenerated_runs(w_root):
+        if (s, e) in skip:
+            # the source's path from here on, turned and moved to where the followed run ends
+            half, xz = _root_state(f)
+            rot = 2 * (half[e] - src_half[e])
+            c, sn = np.cos(rot), np.sin(rot)
+            rel = src_xz - src_xz[e]
+            # _root_state's world steps turn by +2*half as (c*vx - s*vz, s*vx + c*vz)
+            src_xz = xz[e] + np.stack([c * rel[:, 0] - sn * rel[:, 1], sn * rel[:, 0] + c * rel[:, 1]], -1)
+            src_half = src_half + (half[e] - src_half[e])
+            continue
         # rows s-1 .. e-1 move the root into frames s .. e; the offsets go on rows s .. e-1 (frame s keeps its place)
         rows = np.arange(s, e)
         if len(rows) == 0:
@@ -284,8 +324,10 @@ def composite_features(source: np.ndarray, edited: np.ndarray, weights: np.ndarr
         Per frame and joint, 1 where the edit's features are used, 0 where the source's are, in between a blend.
     rejoin : bool
         Hang each regenerated limb from the source's kept parent joint (see the module docstring).
-    root : ``"source"`` or ``"edit"``
-        ``"source"``: a regenerated span followed by kept frames ends at the source's root heading and position.
+    root : ``"source"``, ``"edit"`` or ``"auto"``
+        ``"source"``: a regenerated span followed by kept frames ends at the source's root heading and position;
+        ``"edit"``: the kept frames follow the span; ``"auto"``: they follow a span that turned more than
+        :data:`TURN_FOLLOW_DEG` beyond the source (:func:`followed_turns`), else as ``"source"``.
     smooth, smooth_window : float, int
         Jerk penalty and window (regenerated frames next to each inner seam) of :func:`smooth_seam_features`,
         applied after the cross-fade and before the root correction (0: off).
@@ -312,8 +354,9 @@ def composite_features(source: np.ndarray, edited: np.ndarray, weights: np.ndarr
     out = (1.0 - cw) * src + cw * ed
     if smooth > 0 and smooth_window > 0:
         out = smooth_seam_features(out, w, smooth_window, smooth, sk)
-    if root == "source" and (w[:, 0] < 1).any() and (w[:, 0] > 0).any():
-        out = _fix_root(out, src, w[:, 0])
+    if root != "edit" and (w[:, 0] < 1).any() and (w[:, 0] > 0).any():
+        skip = followed_turns(out, src, w[:, 0]) if root == "auto" else []
+        out = _fix_root(out, src, w[:, 0], skip)
     return out.astype(np.asarray(edited).dtype, copy=False)
 
 
@@ -404,6 +447,7 @@ def composite_output(pipe, output, edits=None):
     changed = False
     smooth, window = _smoothing(specs)
     smoothed: list[str | None] = []
+    followed: list[list[list[int]]] = []
     for b, n in enumerate(ed.lengths):
         w = np.ones((n, sk.num_joints))
         roots = set()
@@ -412,10 +456,13 @@ def composite_output(pipe, output, edits=None):
             roots.add(getattr(spec, "root", "source"))
         if (w >= 1).all():
             smoothed.append(None)
+            followed.append([])
             continue
         args = (np.asarray(src.features[b, :n]), np.asarray(ed.features[b, :n]), w, sk)
-        root = "edit" if "edit" in roots else "source"
+        root = "edit" if "edit" in roots else "auto" if "auto" in roots else "source"
         f = composite_features(*args, root=root)
+        followed.append([[s, e] for s, e in followed_turns(composite_features(*args, root="edit"), args[0], w[:, 0])]
+                        if root == "auto" else [])
         j = recover_joints(f, pipe.recovery, sk)
         cuts = seams((w > 0).any(1))
         state = None
@@ -432,6 +479,8 @@ def composite_output(pipe, output, edits=None):
     if not changed:          # every weight 1 (MirrorTake("all"), Inpaint(parts="all") ...): nothing is kept
         return output
     record = {"edits": [type(s).__name__ for s in specs]}
+    if any(getattr(s, "root", "source") == "auto" for s in specs):
+        record["followed_turns"] = followed      # per motion: the spans whose turn the kept frames follow
     if smooth > 0:
         record["seam_smoothing"] = smoothed
     settings = dict(ed.settings)

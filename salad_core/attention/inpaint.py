@@ -285,9 +285,12 @@ class Inpaint(EditSpec):
         strongly with a larger one); None: the motion's (the inversion's); ``"auto"`` (default): :data:`SPAN_GUIDANCE`
         when a frame span is regenerated, the motion's for body parts alone (:attr:`edited_guidance`). The kept region
         is the source's anyway.
-    root : ``"source"`` or ``"edit"``
+    root : ``"source"``, ``"edit"`` or ``"auto"``
         With ``composite``: ``"source"`` corrects a regenerated span's root velocities so that the kept frames
-        after it keep their global position and facing; ``"edit"`` lets them follow the span's turn and travel.
+        after it keep their global position and facing; ``"edit"`` lets them follow the span's turn and travel;
+        ``"auto"`` lets them follow a span that turned more than
+        :data:`~salad_core.attention.composite.TURN_FOLLOW_DEG` beyond the source over the same frames (a middle
+        span asked to turn keeps its turn) and keeps them in place after any other.
     smooth : float
         With ``composite``: weight of the jerk penalty of the least-squares seam smoothing
         (:func:`~salad_core.attention.composite.smooth_seam_features`) of a frame span (default 100; 0: off). It is

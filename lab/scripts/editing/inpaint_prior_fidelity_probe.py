@@ -1,5 +1,8 @@
 """Probe: rank a take's span candidates with the pasted prior by how much of the pasted motion they keep.
 
+Two fidelities: the root-relative joint distance (the pose), and the heights above the floor of the pelvis and feet
+(:func:`vertical_fidelity_cm`: flight and contacts, which the root-relative distance cannot see).
+
 With ``Inpaint(prior="prompt")`` each candidate of a frame span of an inverted take passes the prompt's check far
 more often than without (lab/docs/editing.md, "Paste, then harmonise"), but the T2M evaluator's distance ranks them
 badly. This probe asks whether a score that does not need the evaluator, the candidate's *prior fidelity* (the
@@ -46,6 +49,19 @@ def fidelity_cm(edited: np.ndarray, prior: np.ndarray, span: tuple[int, int], of
     return float(np.linalg.norm(a - b, axis=-1).mean() * 100)
 
 
+def vertical_fidelity_cm(edited: np.ndarray, prior: np.ndarray, span: tuple[int, int], offset: int,
+                         joints: tuple[int, ...]) -> float:
+    """Mean distance (cm) between the heights above the floor of ``joints`` (the pelvis and the feet: what reads
+    flight and contacts) over the edit's span ``edited[span]`` ``(N, J, 3)`` and the prior's frames
+    ``prior[offset : offset + len(span)]``. Each motion's floor is its own lowest foot joint over all its frames
+    (``joints[1:]``), so a motion lifted or sunk bodily reads 0; the root-relative :func:`fidelity_cm` cannot see a
+    pelvis that no longer rises."""
+    feet = list(joints[1:])
+    a = edited[span[0]:span[1], list(joints), 1] - edited[:, feet, 1].min()
+    b = prior[offset:offset + len(a), list(joints), 1] - prior[:, feet, 1].min()
+    return float(np.abs(a - b).mean() * 100)
+
+
 def rankings(cands: list[dict], bound: float = 1.5) -> dict[str, int]:
     """The candidate each rule picks (index): by fidelity / evaluator distance among the smooth ones (seam ratio at
     most ``bound``; none: the smoothest), seed 0."""
@@ -54,7 +70,9 @@ def rankings(cands: list[dict], bound: float = 1.5) -> dict[str, int]:
     return {"seed 0": 0,
             "most faithful among smooth": min(pool, key=lambda i: cands[i]["fidelity_cm"]),
             "least faithful among smooth": max(pool, key=lambda i: cands[i]["fidelity_cm"]),
-            "evaluator's closest among smooth": min(pool, key=lambda i: cands[i]["distance"])}
+            "evaluator's closest among smooth": min(pool, key=lambda i: cands[i]["distance"]),
+            "vertically most faithful among smooth": min(pool, key=lambda i: cands[i]["vertical_cm"]),
+            "vertically least faithful among smooth": max(pool, key=lambda i: cands[i]["vertical_cm"])}
 
 
 def main() -> None:
@@ -91,6 +109,8 @@ def main() -> None:
             regen = (s * 4, e * 4)
             cands.append({"seed": seed, "check_span": bool(row["check_span"]), "seam_ratio": row["seam_jerk_ratio"],
                           "fidelity_cm": fidelity_cm(out.edited.joints[0], alone.joints[0], regen, c * 4),
+                          "vertical_cm": vertical_fidelity_cm(out.edited.joints[0], alone.joints[0], regen, c * 4,
+                                                              (0, *sk.contact_joints)),
                           "_out": out})
         best, dists, _ = choose_candidate([c.pop("_out") for c in cands], Inpaint(frames=span, candidates=len(cands)),
                                           scorer, inverted=True, skeleton=sk.name)

@@ -295,6 +295,9 @@ def tuning_grid() -> dict[str, dict]:
                                                                                   seam_bound=1.5, **prior)})
     chosen = "fade 8 smooth 100/8"
     grid.update({f"{s} | {chosen}": dict(skw, **post[chosen]) for s, skw in {**matched, **ranked}.items()})
+    # root="auto": the kept frames after a span that turned follow it (composite.TURN_FOLLOW_DEG)
+    grid.update({f"{name} root auto": dict(kw, root="auto") for name, kw in list(grid.items())
+                 if name.endswith(f"| {chosen}")})
     return grid
 
 
