@@ -154,6 +154,11 @@ class EditOutput:
         Guidance scale, steps, solver, weights, ``probe``, the inversion method if any, and the
         cost: ``forward_rows`` and ``cost_vs_generation`` (forward rows relative to one plain
         CFG generation of the source).
+    prior : MotionOutput or None
+        With ``Inpaint(prior="prompt")``: the target prompts sampled alone, whose latents were pasted into the
+        region (its ``lengths`` are the prior clips' own; ``settings["inpaint_prior"]["windows"]`` says which of its
+        latent frames went where, :meth:`Inpaint.prior_window
+        <salad_core.attention.inpaint.Inpaint.prior_window>`); None otherwise.
     """
 
     source: MotionOutput
@@ -161,6 +166,7 @@ class EditOutput:
     noise: torch.Tensor
     edits: tuple[EditSpec, ...]
     settings: dict = field(default_factory=dict)
+    prior: MotionOutput | None = None
 
 
 def validate_lengths(lengths: int | Sequence[int] | None, n: int, skeleton: Skeleton,
@@ -890,10 +896,10 @@ class SaladPipeline:
         target_ctx = self.denoiser.prepare_text(text_tgt.features, text_tgt.mask)
         inpaint = next((e for e in edits if e.role == "latent"), None)
         release = 0 if inpaint is None else inpaint.prior_release(int(num_steps), inversion is not None)
-        # a prior released at the first step would only be noise: not sampled
-        prior = (None if release == 0 else
-                 self._inpaint_prior(inpaint, text_tgt, null, lengths, noise.shape[1], guidance, int(num_steps),
-                                     solver))
+        prior = alone = None
+        if release > 0:       # a prior released at the first step would only be noise: not sampled
+            prior, alone = self._inpaint_prior(inpaint, text_tgt, null, lengths, noise.shape[1], guidance,
+                                               int(num_steps), solver)
         run = edit_latents(self.denoiser, scheduler, controller,
                            source=self.denoiser.prepare_text(text_src.features, text_src.mask),
                            target=target_ctx, null=null_schedule, noise=noise, frame_mask=mask,
@@ -904,7 +910,8 @@ class SaladPipeline:
                         **self._output_settings())
         if prior is not None:
             settings["inpaint_prior"] = {"mode": "prompt", "strength": inpaint.resolved_prior_strength,
-                                         "release_step": release, "forward_rows": generation_rows}
+                                         "release_step": release, "forward_rows": generation_rows,
+                                         "windows": [list(w) for w in alone.settings["windows"]]}
         # an edit that gives the edited sample its own noise (ExampleBased) reports that noise and its seeds
         own_seed = next((e.edited_seed for e in edits if e.edited_seed is not None), None)
         edited_noise, edited_seeds = ((noise, seeds) if run.edited_noise is None else
@@ -919,7 +926,7 @@ class SaladPipeline:
         settings.update(probe=bool(probe), forward_rows=run.rows, probe_steps=run.probe_steps,
                         cost_vs_generation=run.rows / generation_rows,
                         inversion=None if inversion is None else inversion.method)
-        result = EditOutput(out[0], out[1], noise, edits, settings)
+        result = EditOutput(out[0], out[1], noise, edits, settings, prior=alone)
         # edits that keep parts or frames (MirrorTake, Inpaint with composite=True) take them from the source's
         # decoded features: the decoder's convolutions would otherwise let the edited tokens move them
         from salad_core.attention.composite import composite_output
@@ -932,11 +939,13 @@ class SaladPipeline:
         return result
 
     def _inpaint_prior(self, inpaint, target: TextBatch, null: TextBatch, lengths: Sequence[int], latent_frames: int,
-                       guidance: Guidance, num_steps: int, solver: str) -> torch.Tensor:
-        """``Inpaint(prior="prompt")``'s pasted latents ``(B, N', P, Dz)``: the target prompts sampled alone over
-        :meth:`Inpaint.prior_window <salad_core.attention.inpaint.Inpaint.prior_window>` (noise of the in-painting's
-        seed as :meth:`make_noise` draws it, the edited branch's guidance weight, the edit's solver and steps, the
-        pipeline's null text), their latents placed at the region's latent frames and parts (zero elsewhere)."""
+                       guidance: Guidance, num_steps: int, solver: str) -> tuple[torch.Tensor, MotionOutput]:
+        """``Inpaint(prior="prompt")``'s pasted latents ``(B, N', P, Dz)`` and the prior motions themselves: the
+        target prompts sampled alone over :meth:`Inpaint.prior_window
+        <salad_core.attention.inpaint.Inpaint.prior_window>` (noise of the in-painting's seed as :meth:`make_noise`
+        draws it, the edited branch's guidance weight, the edit's solver and steps, the pipeline's null text), their
+        latents placed at the region's latent frames and parts (zero elsewhere); the decoded prior
+        (:class:`MotionOutput`, ``settings["windows"]``: each motion's ``(s, e, frames, c)``)."""
         import dataclasses
 
         from salad_core.skeleton import PART_NAMES
@@ -956,7 +965,12 @@ class SaladPipeline:
         out[:, :, [i for i, part in enumerate(PART_NAMES) if part not in chosen]] = 0.0
         log.debug("in-painting prior: %s sampled from the target over latent frames %s", inpaint.describe(),
                   [w[:2] for w in windows])
-        return out
+        feats, joints = self.decode(alone, frames)
+        seeds = [inpaint.seed + b for b in range(len(lengths))]
+        prior = MotionOutput(feats, joints, list(target.prompts), list(frames), alone, noise, seeds, None,
+                             {**_guidance_settings(prior_guidance), "num_steps": int(num_steps), "solver": solver,
+                              "windows": [tuple(int(v) for v in w) for w in windows], **self._output_settings()})
+        return out, prior
 
     def _from_inversion(self, inversion: Inversion, source: str | Sequence[str] | None,
                         lengths: int | Sequence[int] | None, noise: torch.Tensor | None,

@@ -117,15 +117,22 @@ def test_pasted_prior_draws_the_region_towards_the_prompt_alone_and_keeps_the_re
     torch.testing.assert_close(free.edited.latents, plain.edited.latents, atol=0, rtol=0)
     # the settings say what was pasted and until which step; the auto prior of a generated span is the same edit
     assert strong.settings["inpaint_prior"] == strong.edited.settings["inpaint_prior"] == {
-        "mode": "prompt", "strength": 0.25, "release_step": 6, "forward_rows": 2 * STEPS}
+        "mode": "prompt", "strength": 0.25, "release_step": 6, "forward_rows": 2 * STEPS,
+        "windows": [[4, 12, 40, 1]]}     # latent frames 4..12 <- the 40-frame prior's latent frames 1..9
     assert "inpaint_prior" not in plain.settings and "inpaint_prior" not in free.settings
+    assert plain.prior is None and free.prior is None
+    # the pasted motion itself comes with the edit: the target alone, 40 frames, decoded
+    assert strong.prior.texts == [TARGET] and strong.prior.lengths == [40] and strong.prior.joints[0].shape == (40, 22, 3)
     auto = pipe.edit(SOURCE, edits=[Inpaint(**span)], **kw)
     half = pipe.edit(SOURCE, edits=[Inpaint(**span, prior="prompt", prior_strength=0.5)], **kw)
     torch.testing.assert_close(auto.edited.latents, half.edited.latents, atol=0, rtol=0)
     # what was pasted: the target sampled alone over the span (32 frames, padded to the 40-frame shortest clip)
     inp = Inpaint(**span, prior="prompt")
     text, null = pipe.encode_text([TARGET])
-    prior = pipe._inpaint_prior(inp, text, null, [FRAMES], FRAMES // 4, pipe.resolve_guidance(None), STEPS, "ddim")
+    prior, alone = pipe._inpaint_prior(inp, text, null, [FRAMES], FRAMES // 4, pipe.resolve_guidance(None), STEPS,
+                                       "ddim")
+    torch.testing.assert_close(prior[region], alone.latents[:, 1:9].reshape(prior[region].shape), atol=0, rtol=0)
+    torch.testing.assert_close(alone.latents, strong.prior.latents, atol=0, rtol=0)
     assert tuple(prior.shape) == tuple(plain.edited.latents.shape)
     assert prior[~region].abs().max() == 0 and prior[region].abs().mean() > 0.1
 
@@ -145,8 +152,8 @@ def test_prior_of_body_parts_pastes_the_whole_motions_parts(pipe):
     plain = pipe.edit(SOURCE, edits=[Inpaint(**arms, seed=1, prior="none")], **kw)
     pasted = pipe.edit(SOURCE, edits=[Inpaint(**arms, prior="prompt", prior_strength=0.25)], **kw)
     text, null = pipe.encode_text(["a man waves his right hand"])
-    prior = pipe._inpaint_prior(Inpaint(**arms, prior="prompt"), text, null, [FRAMES], FRAMES // 4,
-                                pipe.resolve_guidance(None), STEPS, "ddim")
+    prior, _ = pipe._inpaint_prior(Inpaint(**arms, prior="prompt"), text, null, [FRAMES], FRAMES // 4,
+                                   pipe.resolve_guidance(None), STEPS, "ddim")
     from salad_core.skeleton import PART_NAMES
 
     part = [PART_NAMES.index("left arm"), PART_NAMES.index("right arm")]
@@ -164,10 +171,12 @@ def test_prior_with_candidates_pastes_each_seeds_own_sample(pipe):
     """Each candidate seed samples its own prior, so ranked candidates differ in what was pasted."""
     text, null = pipe.encode_text([TARGET])
     g = pipe.resolve_guidance(None)
-    a = pipe._inpaint_prior(Inpaint(frames=(16, 48), prior="prompt", seed=0), text, null, [FRAMES], 16, g, 4, "ddim")
-    b = pipe._inpaint_prior(Inpaint(frames=(16, 48), prior="prompt", seed=1), text, null, [FRAMES], 16, g, 4, "ddim")
-    again = pipe._inpaint_prior(Inpaint(frames=(16, 48), prior="prompt", seed=0), text, null, [FRAMES], 16, g, 4,
-                                "ddim")
+    a, _ = pipe._inpaint_prior(Inpaint(frames=(16, 48), prior="prompt", seed=0), text, null, [FRAMES], 16, g, 4,
+                               "ddim")
+    b, _ = pipe._inpaint_prior(Inpaint(frames=(16, 48), prior="prompt", seed=1), text, null, [FRAMES], 16, g, 4,
+                               "ddim")
+    again, _ = pipe._inpaint_prior(Inpaint(frames=(16, 48), prior="prompt", seed=0), text, null, [FRAMES], 16, g, 4,
+                                   "ddim")
     torch.testing.assert_close(a, again, atol=0, rtol=0)
     assert (a - b).abs().mean() > 0.1
 

@@ -205,7 +205,7 @@ def test_ranked_edit_refusals():
 # ------------------------------------------------------------------------------ scoring the regenerated parts alone
 @pytest.mark.parametrize("score", ["best", "PARTS", 1, None])
 def test_bad_score_modes_are_refused(score):
-    with pytest.raises(ValueError, match=r"Inpaint.score=.*; allowed: \('auto', 'whole', 'parts'\)"):
+    with pytest.raises(ValueError, match=r"Inpaint.score=.*; allowed: \('auto', 'whole', 'parts', 'prior'\)"):
         Inpaint(parts="arms", score=score)
 
 
@@ -494,6 +494,74 @@ def test_ranked_edit_of_a_span_keeps_the_closest_smooth_candidate_and_records_th
     np.testing.assert_array_equal(out.edited.joints[0], _span_output(*_CANDIDATES[chosen]).edited.joints[0])
 
 
+# ------------------------------------------------------------------------------ ranking by the pasted prior's heights
+def _prior_output(pelvis_off: float, step: float, n: int = 60, prior: str = "prompt") -> EditOutput:
+    """One motion of ``n`` frames (22 joints, the pelvis 0.9 m above feet on the floor) whose span [20, 40) was
+    pasted from a 40-frame prior (windows: latent frames 5..10 <- the prior's 0..5); the edit has a seam step of
+    ``step`` at frame 20, and the prior's pasted frames are the edit's heights with its pelvis ``pelvis_off`` lower."""
+    t = np.arange(n, dtype=np.float64)
+    src = np.zeros((n, 22, 3))
+    src[:, :, 0] = _C * t[:, None] ** 3 / 6
+    src[:, 0, 1] = 0.9
+    ed = _stepped(src, 20, step)
+    pri = ed[20:60].copy()
+    pri[20:, :, 1] -= step                                 # its frames not pasted stand on 0: its floor is the edit's
+    pri[:20, 0, 1] -= pelvis_off
+    z = torch.zeros(1, n // 4, 7, 4)
+    feats = np.zeros((1, n, 263), dtype=np.float32)
+    source = MotionOutput(feats, [src], [WAVE], [n], z, z, [0])
+    edited = MotionOutput(feats, [ed], [WAVE], [n], z, z, [0])
+    if prior == "none":
+        return EditOutput(source, edited, z, (), {})
+    alone = MotionOutput(np.zeros((1, 40, 263), np.float32), [pri], [WAVE], [40], z[:, :10], z[:, :10], [0])
+    return EditOutput(source, edited, z, (), {"inpaint_prior": {"windows": [[5, 10, 40, 0]]}}, prior=alone)
+
+
+def test_prior_height_distance_reads_the_pelvis_and_feet_heights_over_the_pasted_frames():
+    spec = Inpaint(frames=(20, 40), prior="prompt")
+    assert ranking.prior_height_cm(_prior_output(0.0, 0.01), spec) == pytest.approx(0.0, abs=1e-9)
+    # the prior's pelvis 10 cm lower on every pasted frame: 10 cm on 1 of the 5 joints read
+    assert ranking.prior_height_cm(_prior_output(0.10, 0.0), spec) == pytest.approx(2.0)
+    with pytest.raises(ValueError, match="pasted no prior"):
+        ranking.prior_height_cm(_prior_output(0.0, 0.0, prior="none"), spec)
+    with pytest.raises(ValueError, match="score='prior'.*prior='none' pastes none"):
+        Inpaint(frames=(20, 40), prior="none", score="prior")
+    assert Inpaint(frames=(20, 40), score="prior").score_for(True) == "prior"
+
+
+#: seed -> (the prior's pelvis offset: distance offset * 100 / 5 cm, seam step): seed 0 follows the prior exactly
+#: with a sharp seam, seed 1 is the closest smooth one, seed 3 the smoothest.
+_PRIOR_CANDIDATES = {0: (0.0, 0.01), 1: (0.10, 0.0002), 2: (0.30, 0.0001), 3: (0.5, 0.0)}
+
+
+@pytest.mark.parametrize("bound", [1.5, 1e-9])
+def test_ranked_edit_by_the_prior_keeps_the_closest_smooth_candidate_or_falls_back_without_the_prior(bound):
+    spec = Inpaint(frames=(20, 40), candidates=4, prior="prompt", prior_strength=0.7, score="prior", seam_bound=bound)
+    seen = []
+
+    def run(specs):
+        seen.append((specs[0].seed, specs[0].prior, specs[0].score))
+        off, step = _PRIOR_CANDIDATES[specs[0].seed]
+        if specs[0].prior == "none":                   # the fallback's candidates: ranked by the (stub) evaluator
+            return _span_output(*_CANDIDATES[specs[0].seed])
+        return _prior_output(off, step)
+
+    out = ranked_edit(run, [spec], inverted=True, skeleton="humanml3d", scorer=_StubScorer())
+    rec = out.settings["inpaint_candidates"]
+    assert rec["score"] == "prior" and rec["evaluator"] is None
+    np.testing.assert_allclose(rec["distances"], [0.0, 2.0, 6.0, 10.0], atol=1e-9)
+    assert rec["frames"] == [20, 40]
+    if bound == 1.5:
+        assert seen == [(s, "prompt", "prior") for s in range(4)] and "fallback" not in rec
+        assert rec["chosen"] == 1 and out.edits[0].seed == 1 and out.edits[0].prior == "prompt"
+    else:       # no candidate within the bound: the four again without the prior, by the evaluator (the smoothest)
+        assert seen == [(s, "prompt", "prior") for s in range(4)] + [(s, "none", "whole") for s in range(4)]
+        fb = rec["fallback"]
+        assert fb["distances"] == [0.0, 0.5, 1.0, 2.0] and fb["evaluator"] == "stub" and fb["chosen"] == 3
+        assert rec["seed"] == 3 and out.edits[0].seed == 3 and out.edits[0].prior == "none"
+        np.testing.assert_array_equal(out.edited.joints[0], _span_output(*_CANDIDATES[3]).edited.joints[0])
+
+
 def test_a_seam_bound_does_not_change_a_body_part_ranking():
     """Body parts have no seam: the same candidates (whose joints would give the span's seam ratios) rank the same
     with any bound, and no seam ratio is recorded."""
@@ -623,3 +691,17 @@ def test_ranking_a_generated_sources_own_noise_is_refused_before_sampling(pipe, 
     monkeypatch.setattr(type(pipe), "decode", lambda *a, **k: pytest.fail("sampled"))
     with pytest.raises(ValueError, match="noise='auto' the region of a generated motion starts from the source's own"):
         pipe.edit(SOURCE, target=WAVE, edits=[Inpaint(parts="arms", candidates=2)], lengths=FRAMES, num_steps=2)
+
+
+@needs_weights
+def test_ranking_by_the_prior_on_an_inverted_take_scores_what_was_pasted(pipe, inversion):
+    """``score="prior"`` through ``pipe.edit``: two candidates, each with its own seed's pasted prior; the chosen
+    edit carries its prior, and its recorded distance is :func:`prior_height_cm` of it (no evaluator involved)."""
+    spec = Inpaint(frames=(16, 32), candidates=2, prior="prompt", prior_strength=0.7, score="prior", seam_bound=None)
+    out = pipe.edit(inversion=inversion, target="a person jumps", edits=[spec])
+    rec = out.settings["inpaint_candidates"]
+    assert rec["score"] == "prior" and rec["evaluator"] is None and "fallback" not in rec
+    assert out.prior is not None and out.prior.texts == ["a person jumps"] and out.prior.seeds == [rec["seed"]]
+    assert rec["distances"][rec["chosen"]] == pytest.approx(ranking.prior_height_cm(out, out.edits[0]), abs=1e-6)
+    assert rec["distances"][rec["chosen"]] == min(rec["distances"]) and len(set(rec["distances"])) == 2
+    assert out.settings["inpaint_prior"]["windows"] == [[4, 8, 40, 3]]

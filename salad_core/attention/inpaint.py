@@ -92,7 +92,7 @@ PARTS_RESAMPLE = 3
 SPAN_CANDIDATES = 8
 
 #: How :class:`Inpaint`'s candidates are scored (see :attr:`Inpaint.score`).
-SCORE_MODES = ("auto", "whole", "parts")
+SCORE_MODES = ("auto", "whole", "parts", "prior")
 
 #: The seam bound of ``Inpaint(seam_bound="auto")`` when a frame span of an inverted motion is regenerated: a seam's
 #: jerk at most 1.5 times the source's own 95th percentile (:func:`~salad_core.attention.composite.seam_jerk_ratio`).
@@ -318,13 +318,18 @@ class Inpaint(EditSpec):
         that starts from the seed's noise (:meth:`fresh_noise`) and one motion per edit. ``"auto"`` (default):
         :data:`SPAN_CANDIDATES` when a frame span of one inverted motion is regenerated from fresh noise, where it
         was chosen; 1 otherwise (:meth:`candidates_for`).
-    score : ``"auto"``, ``"whole"`` or ``"parts"``
+    score : ``"auto"``, ``"whole"``, ``"parts"`` or ``"prior"``
         What the evaluator scores of each candidate (with ``candidates`` > 1). ``"whole"``: the edited motion as it
         is (over the regenerated frames, see :func:`~salad_core.attention.ranking.scoring_window`); ``"parts"``: the
         edited motion with the kept body parts held still, so that only the regenerated :attr:`parts` move
-        (:func:`~salad_core.attention.ranking.isolate_parts`; needs ``parts`` that keep some part); ``"auto"``
-        (default): ``"whole"`` for every edit (:meth:`score_for`; on procedural validation clips the parts alone
-        did not rank an arms edit's candidates better than the whole motion).
+        (:func:`~salad_core.attention.ranking.isolate_parts`; needs ``parts`` that keep some part); ``"prior"``:
+        not the evaluator but the distance between the heights above the floor of the pelvis and the feet over the
+        region and those of the pasted prior (:func:`~salad_core.attention.ranking.prior_height_cm`: the candidate
+        whose flight and foot contacts follow the prompt sampled alone most closely; needs a pasted prior,
+        :attr:`prior`), and when no candidate's seams are within :attr:`seam_bound` the candidates are drawn again
+        without the prior and ranked by the evaluator (:func:`~salad_core.attention.ranking.ranked_edit`);
+        ``"auto"`` (default): ``"whole"`` for every edit (:meth:`score_for`; on procedural validation clips the
+        parts alone did not rank an arms edit's candidates better than the whole motion).
     seam_bound : float, ``"auto"`` or None
         With ``candidates`` > 1 and a frame span: rank by the evaluator's distance only the candidates whose seams
         are smooth, those whose :func:`~salad_core.attention.composite.seam_jerk_ratio` (the largest jerk of the
@@ -446,6 +451,9 @@ class Inpaint(EditSpec):
         if self.parts == PART_NAMES and self.frames is None:
             raise ValueError("Inpaint(parts='all') without frames keeps nothing: that is a plain generation of the "
                              "target; name fewer parts or a frame span")
+        if self.score == "prior" and self.prior == "none":
+            raise ValueError("Inpaint(score='prior') ranks the candidates by how closely they follow the pasted "
+                             "prior's heights, but prior='none' pastes none; give prior='prompt' (or 'auto')")
         if self.score == "parts" and self.parts in (None, PART_NAMES):
             raise ValueError("Inpaint(score='parts') scores the regenerated body parts with the kept ones held still, "
                              "but this Inpaint regenerates every part; name the parts (e.g. parts='arms') or give "
@@ -532,8 +540,9 @@ class Inpaint(EditSpec):
     def score_for(self, inverted: bool) -> str:
         """What the candidates' scorer reads (:attr:`score`; ``"auto"`` resolved, ``"whole"`` for every edit):
         ``"whole"`` (the edited motion) or ``"parts"`` (the regenerated parts alone,
-        :func:`~salad_core.attention.ranking.isolate_parts`). ``inverted``: the edit is of an inversion (as for
-        :meth:`candidates_for`)."""
+        :func:`~salad_core.attention.ranking.isolate_parts`) for the evaluator, or ``"prior"`` (the heights'
+        distance to the pasted prior, :func:`~salad_core.attention.ranking.prior_height_cm`). ``inverted``: the edit
+        is of an inversion (as for :meth:`candidates_for`)."""
         if self.score == "auto":
             return "whole"
         return self.score

@@ -46,7 +46,8 @@ if TYPE_CHECKING:  # pragma: no cover
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MIN_FRAMES", "TextMotionScorer", "caption_tokens", "scoring_window", "isolate_parts", "candidate_specs",
+__all__ = ["MIN_FRAMES", "TextMotionScorer", "caption_tokens", "scoring_window", "isolate_parts", "prior_height_cm",
+           "candidate_specs",
            "ranked_inpaint", "candidate_seam_ratios", "pick_candidate", "choose_candidate", "ranked_edit"]
 
 #: The shortest window the scorer embeds (motion frames): the evaluator's training clips are at least this long
@@ -244,6 +245,40 @@ def isolate_parts(features: np.ndarray, parts, skeleton="humanml3d") -> np.ndarr
 
 
 # ------------------------------------------------------------------------------------------- the candidates
+def prior_height_cm(output: "EditOutput", inpaint: "Inpaint", skeleton="humanml3d") -> float:
+    """How far an edit's region strays from its pasted prior in what reads flight and contacts: the mean distance
+    (cm) between the heights above the floor of the pelvis and the four foot joints of ``output``'s edited motion
+    (its first motion) over the regenerated latent frames, and those of the prior (``output.prior``, the target
+    sampled alone) over the frames that were pasted there (``settings["inpaint_prior"]["windows"]``). Each motion's
+    floor is its own lowest foot joint over all its frames, so a motion lifted or sunk bodily reads 0. The
+    root-relative pose cannot see a pelvis that no longer rises; on procedural validation clips the candidates that
+    kept the pasted poses most closely were the ones whose jumps failed, and those that kept its heights the ones
+    that passed (lab/docs/editing.md).
+
+    Raises
+    ------
+    ValueError
+        ``output`` has no pasted prior (``Inpaint(prior="prompt")`` pastes one).
+    """
+    from salad_core.skeleton import get_skeleton
+
+    record = output.settings.get("inpaint_prior")
+    if output.prior is None or not record or "windows" not in record:
+        raise ValueError("this edit pasted no prior (Inpaint(prior='prompt') pastes one): there is nothing to follow; "
+                         "score the candidates with score='whole'")
+    sk = get_skeleton(skeleton)
+    s, e, frames, c = record["windows"][0]
+    unit = inpaint.unit_length
+    feet = list(sk.contact_joints)
+    joints = [0, *feet]
+    n = int(output.edited.lengths[0])
+    ed = np.asarray(output.edited.joints[0])[:n]
+    pr = np.asarray(output.prior.joints[0])[:int(frames)]
+    a = ed[s * unit:e * unit][:, joints, 1] - ed[:, feet, 1].min()
+    b = pr[c * unit:c * unit + len(a)][:, joints, 1] - pr[:, feet, 1].min()
+    return float(np.abs(a - b).mean() * 100)
+
+
 def ranked_inpaint(edits: Sequence, inverted: bool, motions: int = 1) -> Optional["Inpaint"]:
     """The edits' :class:`~salad_core.attention.inpaint.Inpaint` if it runs more than one candidate
     (:meth:`~salad_core.attention.inpaint.Inpaint.candidates_for`; ``inverted``: the edit is of an inversion of
@@ -308,18 +343,24 @@ def choose_candidate(outputs: Sequence["EditOutput"], inpaint: "Inpaint", scorer
     the distances of every candidate's edited motion to its target prompt over the scored ``window`` (motion frames,
     :func:`scoring_window` of ``inpaint``'s regenerated span); the first of equal ones wins. What is scored:
     ``inpaint.score_for(inverted)``, the edited motion (``"whole"``) or :func:`isolate_parts` of it with
-    ``inpaint``'s regenerated parts (``"parts"``; ``skeleton``: the features' skeleton). With a seam bound
+    ``inpaint``'s regenerated parts (``"parts"``; ``skeleton``: the features' skeleton), or, without the evaluator,
+    :func:`prior_height_cm` over the regenerated latent frames (``"prior"``). With a seam bound
     (``inpaint.seam_bound_for(inverted)``, frame spans only) the index is :func:`pick_candidate`'s among the
     candidates' ``seam_ratios`` (default: :func:`candidate_seam_ratios` of ``outputs``)."""
-    isolated = inpaint.score_for(inverted) == "parts"
+    mode = inpaint.score_for(inverted)
     scores, window = [], None
     for out in outputs:
         ed = out.edited
         n = int(ed.lengths[0])
         span = inpaint.frame_span(n)
+        if mode == "prior":
+            s, e = inpaint.latent_span(n)
+            window = (s * inpaint.unit_length, e * inpaint.unit_length)
+            scores.append(prior_height_cm(out, inpaint, skeleton))
+            continue
         window = scorer.window(n, span)
         feats = np.asarray(ed.features[0, :n])
-        if isolated:
+        if mode == "parts":
             feats = isolate_parts(feats, inpaint.parts, skeleton)
         scores.append(scorer.distance(feats, ed.texts[0], span))
     bound = inpaint.seam_bound_for(inverted)
@@ -339,6 +380,10 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
     :meth:`~salad_core.attention.inpaint.Inpaint.score_for`), the evaluator, each candidate's seam ratio
     (``"seam_ratios"``, :func:`candidate_seam_ratios`; None for body parts alone) and the seam bound the ranking used
     (``"seam_bound"``, :meth:`~salad_core.attention.inpaint.Inpaint.seam_bound_for`; None: by distance alone).
+    With ``score="prior"`` the distances are :func:`prior_height_cm`'s (``"evaluator"`` None), and when no candidate's
+    seam ratio is within the bound the ``K`` candidates are run again without the prior and ranked by the evaluator:
+    ``"fallback"`` records that ranking (its distances, seam ratios and chosen index; ``"seed"`` is then its
+    chosen seed, ``"chosen"`` stays the index the pasted candidates' ranking gave).
 
     Parameters
     ----------
@@ -387,9 +432,24 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
     ratios = candidate_seam_ratios(outputs, inpaint)
     best, scores, window = choose_candidate(outputs, inpaint, scorer, inverted=inverted, skeleton=skeleton,
                                             seam_ratios=ratios)
+    mode, bound = inpaint.score_for(inverted), inpaint.seam_bound_for(inverted)
     record = {"seeds": [inpaint.seed + i for i in range(k)], "distances": scores, "chosen": best,
-              "seed": inpaint.seed + best, "frames": list(window), "score": inpaint.score_for(inverted),
-              "evaluator": scorer.source, "seam_ratios": ratios, "seam_bound": inpaint.seam_bound_for(inverted)}
+              "seed": inpaint.seed + best, "frames": list(window), "score": mode,
+              "evaluator": None if mode == "prior" else scorer.source, "seam_ratios": ratios, "seam_bound": bound}
+    if mode == "prior" and ratios is not None and bound is not None and min(ratios) > bound:
+        # no pasted candidate joins its context smoothly: the candidates without the prior, by the evaluator
+        plain = dataclasses.replace(inpaint, prior="none", score="whole")
+        plain_specs = candidate_specs(tuple(plain if e is inpaint else e for e in edits), plain, k)
+        log.info("in-painting: no candidate's seams within %.2fx; %d candidates without the prior", bound, k)
+        plain_outputs = [run(s) for s in plain_specs]
+        plain_ratios = candidate_seam_ratios(plain_outputs, plain)
+        best, plain_scores, plain_window = choose_candidate(plain_outputs, plain, scorer, inverted=inverted,
+                                                            skeleton=skeleton, seam_ratios=plain_ratios)
+        record["fallback"] = {"reason": f"no candidate's seam ratio within {bound}", "prior": "none",
+                              "score": "whole", "evaluator": scorer.source, "distances": plain_scores,
+                              "seam_ratios": plain_ratios, "chosen": best, "frames": list(plain_window)}
+        outputs, specs = plain_outputs, plain_specs
+        record["seed"] = inpaint.seed + best
     out = outputs[best]
     edited = dataclasses.replace(out.edited, settings={**out.edited.settings, "inpaint_candidates": record})
     return dataclasses.replace(out, edited=edited, edits=specs[best],

@@ -295,6 +295,11 @@ def tuning_grid() -> dict[str, dict]:
                                                                                   seam_bound=1.5, **prior)})
     chosen = "fade 8 smooth 100/8"
     grid.update({f"{s} | {chosen}": dict(skw, **post[chosen]) for s, skw in {**matched, **ranked}.items()})
+    # the pasted prior's candidates ranked by their pelvis and feet heights against the prior, falling back to the
+    # candidates without the prior when none is smooth (Inpaint(score="prior"); run through pipe.edit itself)
+    grid["fresh g7.5 prior 0.7 best of 8 seam-aware scored by prior heights | fade 8 smooth 100/8"] = dict(
+        base, guidance=7.5, prior="prompt", prior_strength=0.7, candidates=8, seam_bound=1.5, score="prior",
+        product=True, **post[chosen])
     # root="auto": the kept frames after a span that turned follow it (composite.TURN_FOLLOW_DEG)
     grid.update({f"{name} root auto": dict(kw, root="auto") for name, kw in list(grid.items())
                  if name.endswith(f"| {chosen}")})
@@ -399,6 +404,19 @@ def main() -> None:
         groups: dict[tuple, list] = {}
         inverted = "inversion" in kw
         for config, ckw in configs.items():
+            if ckw.get("product"):       # the edit exactly as pipe.edit makes it (ranking and fallback inside)
+                inp = make(**{k: v for k, v in ckw.items() if k != "product"})
+                t = time.perf_counter()
+                out = pipe.edit(target=target, edits=[inp], num_steps=None if inverted else args.steps, **kw)
+                seconds = time.perf_counter() - t
+                rec = out.settings.get("inpaint_candidates")
+                ranking = None
+                if rec is not None:
+                    ranking = dict(candidates=len(rec["seeds"]), chosen=rec["chosen"], distances=rec["distances"],
+                                   score=rec["score"], seam_ratios=rec["seam_ratios"], seam_bound=rec["seam_bound"],
+                                   fallback=rec.get("fallback"))
+                record(kind, name, blend, config, out.edits[0], target, out, seconds, ranking)
+                continue
             samp, post, rank = split_config(ckw)
             groups.setdefault(tuple(sorted(samp.items())), []).append((config, post, rank))
         for samp, members in groups.items():
