@@ -259,22 +259,28 @@ def _yaw_fit_residual(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def test_root_auto_follows_a_span_that_turned_and_holds_one_that_did_not(sample_features):
-    """``root="auto"``: the kept frames after a span that turned more than TURN_FOLLOW_DEG beyond the source follow
-    it (as ``"edit"``); after a span that did not they keep the source's place (as ``"source"``); after two spans,
+    """``root="auto"``: the kept frames after a span that turned on its own, more than TURN_FOLLOW_DEG and that much
+    beyond the source, follow it (as ``"edit"``); after a span that did not (also one that stayed straight where the
+    take turned) they keep the source's place (as ``"source"``); after two spans,
     the first turned and the second not, the last kept frames are the source's turned and moved bodily."""
-    from salad_core.attention.composite import (TURN_FOLLOW_DEG, composite_features, followed_turns, frame_weights,
-                                                regenerated_runs)
+    from salad_core.attention.composite import (TURN_FOLLOW_DEG, _turn_deg, composite_features, followed_turns,
+                                                frame_weights, regenerated_runs)
     from salad_core.motion import features_to_joints
 
     f = sample_features[:80].astype(np.float64)
-    turned = _edited_like(f, 1)                          # 0.1 rad a frame more: about 180 degrees over 32 frames
+    assert -100 < _turn_deg(f, 24, 56) < -70             # the take turns right over [24, 56) (about 85 degrees)
     straight = f + np.random.default_rng(2).normal(scale=0.02, size=f.shape) * (np.arange(f.shape[1]) < f.shape[1] - 4)
     straight[:, 0] = f[:, 0] + 0.001                     # 0.002 rad a frame more: about 4 degrees over the span
+    turned = straight.copy()
+    turned[:, 0] = 0.05                                  # a steady left turn: 0.1 rad a frame, about 180 degrees
+    flat = straight.copy()
+    flat[:, 0] = 0.0                                     # no turn at all where the take turns: not followed
     w = np.repeat(frame_weights(80, (24, 56), fade=4)[:, None], 22, 1)
     assert regenerated_runs(w[:, 0]) == [(24, 56)]
     out_t = composite_features(f, turned, w, root="edit")
     assert followed_turns(out_t, f, w[:, 0]) == [(24, 56)]
     assert followed_turns(composite_features(f, straight, w, root="edit"), f, w[:, 0]) == []
+    assert followed_turns(composite_features(f, flat, w, root="edit"), f, w[:, 0]) == []     # 85 beyond, 0 own
     np.testing.assert_allclose(composite_features(f, turned, w, root="auto"), out_t)
     np.testing.assert_allclose(composite_features(f, straight, w, root="auto"),
                                composite_features(f, straight, w, root="source"))
@@ -322,8 +328,9 @@ def test_inpaint_composite_options():
     assert (legs.sum(1) == 8).all()                      # every frame: the 8 leg joints (hips to feet)
     with pytest.raises(ValueError, match="Inpaint.noise"):
         Inpaint(parts="arms", noise="white")
-    with pytest.raises(ValueError, match="Inpaint.root"):
+    with pytest.raises(ValueError, match=r"Inpaint.root='world'; allowed: \('source', 'edit', 'auto'\)"):
         Inpaint(parts="arms", root="world")
+    assert Inpaint(frames=(8, 24)).root == "auto"          # the kept frames follow a span that turned on its own
     with pytest.raises(ValueError, match="Inpaint.fade"):
         Inpaint(parts="arms", fade=-1)
     assert Inpaint(parts="arms").fresh_noise(True) and not Inpaint(parts="arms").fresh_noise(False)
@@ -365,8 +372,9 @@ def test_inverted_take_regions_start_from_fresh_noise_and_kept_parts_are_composi
 
 @needs_weights
 def test_inverted_take_span_keeps_the_frames_after_it_in_place(pipe, sample_features):
-    """A regenerated middle span of a take that turns: with ``root="source"`` (default) the frames after the span
-    keep their global place and facing; the seams are cross-faded; the edited branch's guidance is settable."""
+    """A regenerated middle span of a take that turns: with ``root="source"`` (and ``"auto"``, the default, for a
+    span that does not turn on its own) the frames after the span keep their global place and facing; the seams are
+    cross-faded; the edited branch's guidance is settable."""
     inv = pipe.invert(sample_features[:FRAMES], "a person walks forward and turns around", num_steps=STEPS)
     out = pipe.edit(inversion=inv, target="a person jumps", ground=False,
                     edits=[Inpaint(frames=(16, 32), guidance=7.5, candidates=1)])

@@ -20,9 +20,9 @@ What. After decoding both branches, the edited motion's features are re-assemble
   it are corrected by a smooth (Hann-window) offset so that the span ends at the source's heading and position;
   every kept frame then keeps its global position and facing (a span that turns keeps the turn inside the span and
   turns back before the kept frames; ``root="edit"`` lets the kept frames follow the span's turn instead;
-  ``root="auto"`` decides per span: the kept frames follow a span that turned more than :data:`TURN_FOLLOW_DEG`
-  beyond what the source turned over the same frames (a middle span asked to turn keeps its turn) and keep their
-  place after any other);
+  ``root="auto"`` decides per span: the kept frames follow a span that turned on its own, more than
+  :data:`TURN_FOLLOW_DEG` and that much beyond what the source turned over the same frames (a middle span asked to
+  turn keeps its turn), and keep their place after any other);
 * the seams of a frame span are cross-faded over ``fade`` frames inside the span (``w`` ramps
   ``d / (fade + 1)`` with the distance ``d`` to the kept frame), kept frames are exactly the source's;
 * **seam smoothing** (``smooth > 0``, :func:`smooth_seam_features`): a linear cross-fade of two different motions
@@ -50,9 +50,9 @@ __all__ = ["ROOT_MODES", "TURN_FOLLOW_DEG", "regenerated_runs", "followed_turns"
 #: How the root of a regenerated frame span is handled (see the module docstring).
 ROOT_MODES = ("source", "edit", "auto")
 
-#: ``root="auto"``: a regenerated run whose heading change differs from the source's over the same frames by more
-#: than this (degrees; an eighth of a turn, more than a gait's heading wobble) turned on purpose, and the kept frames
-#: after it follow it; below it they keep the source's place and facing.
+#: ``root="auto"``: a regenerated run that turns by more than this (degrees; an eighth of a turn, more than a gait's
+#: heading wobble) and by more than this beyond what the source turned over the same frames turned on purpose, and
+#: the kept frames after it follow it; otherwise they keep the source's place and facing.
 TURN_FOLLOW_DEG = 45.0
 
 
@@ -268,11 +268,16 @@ def regenerated_runs(w_root: np.ndarray) -> list[tuple[int, int]]:
 
 def followed_turns(out: np.ndarray, source: np.ndarray, w_root: np.ndarray,
                    limit: float = TURN_FOLLOW_DEG) -> list[tuple[int, int]]:
-    """The regenerated runs (:func:`regenerated_runs`) of the composite ``out`` ``(N, D)`` whose heading change
-    differs from ``source``'s over the same frames by more than ``limit`` degrees: the spans ``root="auto"`` lets
-    the kept frames after them follow."""
-    return [(s, e) for s, e in regenerated_runs(w_root)
-            if abs(_turn_deg(out, s, e) - _turn_deg(source, s, e)) > limit]
+    """The regenerated runs (:func:`regenerated_runs`) of the composite ``out`` ``(N, D)`` that turned on their own:
+    their heading change exceeds ``limit`` degrees and differs from ``source``'s over the same frames by more than
+    ``limit``: the spans ``root="auto"`` lets the kept frames after them follow. (A span that does not turn where
+    the source did, a jump in place of a walk's turn, keeps the rest of the take in place.)"""
+    runs = []
+    for s, e in regenerated_runs(w_root):
+        turn = _turn_deg(out, s, e)
+        if abs(turn) > limit and abs(turn - _turn_deg(source, s, e)) > limit:
+            runs.append((s, e))
+    return runs
 
 
 def _fix_root(out: np.ndarray, source: np.ndarray, w_root: np.ndarray,

@@ -24,7 +24,8 @@ default: editing an inversion, the region starts from fresh white noise (``noise
 not white and holds the take's own motion there, so the region tended to regenerate the take: a real take's arms
 waved in 2 of 8 cases); after decoding, the kept parts / frames are taken from the source's decoded features and
 the seams cross-faded over ``fade`` frames in feature space, with the root of a span corrected so that the frames
-after it keep their global place and facing (``composite=True``, :mod:`salad_core.attention.composite`: the VAE
+after it keep their global place and facing, unless the span turned on its own (``root="auto"``: a middle span asked
+to turn keeps its turn and the rest of the take follows it) (``composite=True``, :mod:`salad_core.attention.composite`: the VAE
 decoder's convolutions mix neighbouring parts and frames, and the features integrate the root's velocities); the
 span's frames next to each seam are then smoothed by a small least-squares jerk penalty (``smooth``); a frame span's
 edited branch is guided with :data:`SPAN_GUIDANCE` (``guidance="auto"``: a short span otherwise tended not to do
@@ -288,9 +289,12 @@ class Inpaint(EditSpec):
     root : ``"source"``, ``"edit"`` or ``"auto"``
         With ``composite``: ``"source"`` corrects a regenerated span's root velocities so that the kept frames
         after it keep their global position and facing; ``"edit"`` lets them follow the span's turn and travel;
-        ``"auto"`` lets them follow a span that turned more than
-        :data:`~salad_core.attention.composite.TURN_FOLLOW_DEG` beyond the source over the same frames (a middle
-        span asked to turn keeps its turn) and keeps them in place after any other.
+        ``"auto"`` (default) lets them follow a span that turned on its own, more than
+        :data:`~salad_core.attention.composite.TURN_FOLLOW_DEG` and that much beyond the source over the same frames
+        (a middle span asked to turn keeps its turn), and keeps them in place after any other
+        (:func:`~salad_core.attention.composite.followed_turns`; on 24 validation spans of generated motions the
+        span's check rose from 20 to 23, the three middle "turns left" spans that ``"source"`` turned back now
+        turning, every other edit unchanged; on 24 validation jump spans of inverted takes it changed nothing).
     smooth : float
         With ``composite``: weight of the jerk penalty of the least-squares seam smoothing
         (:func:`~salad_core.attention.composite.smooth_seam_features`) of a frame span (default 100; 0: off). It is
@@ -368,7 +372,7 @@ class Inpaint(EditSpec):
     seed: int = 0
     composite: bool = True
     fade: int = 8
-    root: str = "source"
+    root: str = "auto"
     guidance: Union[float, str, None] = "auto"
     smooth: float = 100.0
     smooth_window: int = 8

@@ -406,11 +406,11 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
                         "legs@40:80, @40:80, all@:40")
     p.add_argument("--inpaint-blend", type=int, default=1, metavar="N",
                    help="latent frames over which an in-painted span fades into the kept frames (default 1)")
-    p.add_argument("--inpaint-root", choices=["source", "edit", "auto"], default="source",
-                   help="after an in-painted span: 'source' (default) keeps the later frames where the take has "
-                        "them (a turn in the span is turned back), 'edit' lets them follow the span's path, 'auto' "
-                        "lets them follow a span that turned (more than 45 degrees beyond the take) and keeps them "
-                        "in place after any other")
+    p.add_argument("--inpaint-root", choices=["source", "edit", "auto"], default="auto",
+                   help="after an in-painted span: 'source' keeps the later frames where the take has them (a turn "
+                        "in the span is turned back), 'edit' lets them follow the span's path, 'auto' (default) "
+                        "lets them follow a span that turned on its own (more than 45 degrees, and that much beyond "
+                        "the take) and keeps them in place after any other")
     p.add_argument("--inpaint-fade", type=int, default=8, metavar="N",
                    help="frames over which an in-painted span's seams are cross-faded in the features (default 8)")
     p.add_argument("--inpaint-smooth", type=float, default=None, metavar="LAMBDA",

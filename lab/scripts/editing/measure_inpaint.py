@@ -226,7 +226,8 @@ def tuning_takes(n: int, frames: int) -> list[dict]:
 
     from _measure_common import annotated_clips
 
-    root = heldout_corpus(Path(tempfile.mkdtemp()) / "val", max(3 * n, 30), split="val")
+    # the val split has 200 motions (the clips are taken in id order, so a larger n keeps the first ones)
+    root = heldout_corpus(Path(tempfile.mkdtemp()) / "val", min(max(3 * n, 30), 200), split="val")
     out = []
     for cid, doc, feats in annotated_clips(root, "val", max_frames=frames, min_frames=48, mirrors=False):
         out.append({"id": cid, "features": feats, "prompt": doc["captions"][0]["caption"]})
