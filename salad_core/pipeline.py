@@ -909,7 +909,8 @@ class SaladPipeline:
         settings = dict(_guidance_settings(guidance), num_steps=int(num_steps), solver=solver, weights=self.source,
                         **self._output_settings())
         if prior is not None:
-            settings["inpaint_prior"] = {"mode": "prompt", "strength": inpaint.resolved_prior_strength,
+            settings["inpaint_prior"] = {"mode": "prompt",
+                                         "strength": inpaint.prior_strength_for(inversion is not None),
                                          "release_step": release, "forward_rows": generation_rows,
                                          "windows": [list(w) for w in alone.settings["windows"]]}
         # an edit that gives the edited sample its own noise (ExampleBased) reports that noise and its seeds

@@ -40,16 +40,20 @@ def test_prior_release_is_the_first_free_step():
 
 
 def test_auto_prior_pastes_where_it_was_chosen():
-    """``prior="auto"``: the prompt's sample for body parts of an inverted take (instead of RePaint's resampling) and
-    for a frame span of a generated source; nothing for an inverted take's span or a generated source's parts."""
-    from salad_core.attention.inpaint import PARTS_RESAMPLE, PRIOR_STRENGTH
+    """``prior="auto"``: the prompt's sample for body parts of an inverted take (instead of RePaint's resampling), for
+    its frame spans and for a frame span of a generated source; nothing for a generated source's parts."""
+    from salad_core.attention.inpaint import PARTS_RESAMPLE, PRIOR_STRENGTH, SPAN_PRIOR_STRENGTH
 
     parts, span = Inpaint(parts="arms"), Inpaint(frames=(16, 32))
     assert parts.prior_for(inverted=True) == "prompt" and parts.passes_for(inverted=True) == 1
     assert parts.prior_for(inverted=False) == "none" and parts.passes_for(inverted=False) == 1
-    assert span.prior_for(inverted=False) == "prompt" and span.prior_for(inverted=True) == "none"
-    assert PRIOR_STRENGTH == 0.5 and span.resolved_prior_strength == 0.5
-    assert span.prior_release(50, inverted=False) == 25 and span.prior_release(50, inverted=True) == 0
+    assert span.prior_for(inverted=False) == "prompt" and span.prior_for(inverted=True) == "prompt"
+    # held longer for an inverted take's span (its candidates are ranked by how closely they follow it)
+    assert PRIOR_STRENGTH == 0.5 and SPAN_PRIOR_STRENGTH == 0.7
+    assert span.prior_strength_for(False) == 0.5 and span.prior_strength_for(True) == 0.7
+    assert parts.prior_strength_for(True) == 0.5
+    assert Inpaint(frames=(16, 32), prior_strength=0.6).prior_strength_for(True) == 0.6
+    assert span.prior_release(50, inverted=False) == 25 and span.prior_release(50, inverted=True) == 15
     # without the prior an inverted take's parts are resampled as before; a given mode is kept everywhere
     assert Inpaint(parts="arms", prior="none").passes_for(inverted=True) == PARTS_RESAMPLE
     assert Inpaint(frames=(16, 32), prior="prompt").prior_for(inverted=True) == "prompt"
@@ -122,7 +126,8 @@ def test_pasted_prior_draws_the_region_towards_the_prompt_alone_and_keeps_the_re
     assert "inpaint_prior" not in plain.settings and "inpaint_prior" not in free.settings
     assert plain.prior is None and free.prior is None
     # the pasted motion itself comes with the edit: the target alone, 40 frames, decoded
-    assert strong.prior.texts == [TARGET] and strong.prior.lengths == [40] and strong.prior.joints[0].shape == (40, 22, 3)
+    assert strong.prior.texts == [TARGET] and strong.prior.lengths == [40]
+    assert strong.prior.joints[0].shape == (40, 22, 3)
     auto = pipe.edit(SOURCE, edits=[Inpaint(**span)], **kw)
     half = pipe.edit(SOURCE, edits=[Inpaint(**span, prior="prompt", prior_strength=0.5)], **kw)
     torch.testing.assert_close(auto.edited.latents, half.edited.latents, atol=0, rtol=0)

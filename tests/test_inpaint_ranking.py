@@ -217,8 +217,11 @@ def test_parts_scoring_needs_kept_parts_and_auto_scores_the_whole_motion():
     assert Inpaint(parts="arms", score="parts").score_for(True) == "parts"
     assert Inpaint(parts="legs", frames=(8, 24), score="parts").score_for(False) == "parts"
     assert Inpaint(parts="arms", score="whole").score_for(True) == "whole"
-    for spec in (Inpaint(parts="arms"), Inpaint(frames=(8, 24)), Inpaint(parts="arms", frames=(8, 24))):
-        assert spec.score == "auto" and spec.score_for(True) == spec.score_for(False) == "whole"
+    assert Inpaint(parts="arms").score_for(True) == Inpaint(parts="arms").score_for(False) == "whole"
+    for spec in (Inpaint(frames=(8, 24)), Inpaint(parts="arms", frames=(8, 24))):
+        # a span of an inverted take: by the pasted prior's heights; a generated source's span: the evaluator
+        assert spec.score == "auto" and spec.score_for(True) == "prior" and spec.score_for(False) == "whole"
+        assert dataclasses.replace(spec, prior="none").score_for(True) == "whole"
     # the candidates of a ranked edit keep the scoring mode
     spec = Inpaint(parts="arms", candidates=2, score="parts")
     assert [s[0].score for s in candidate_specs([spec], spec, 2)] == ["parts", "parts"]
@@ -483,7 +486,7 @@ def _ratio(step: float) -> float:
 def test_ranked_edit_of_a_span_keeps_the_closest_smooth_candidate_and_records_the_seams(bound, chosen):
     ratios = [_ratio(step) for _, step in _CANDIDATES.values()]
     assert ratios[0] > 1.5 >= ratios[1] > ratios[2] > ratios[3] == pytest.approx(1.0)  # what the table means
-    spec = Inpaint(frames=(20, 40), candidates=4, seam_bound=bound)
+    spec = Inpaint(frames=(20, 40), candidates=4, seam_bound=bound, prior="none")     # ranked by the evaluator
     run, seen = _run_candidates(_CANDIDATES)
     out = ranked_edit(run, [spec], inverted=True, skeleton="humanml3d", scorer=_StubScorer())
     rec = out.settings["inpaint_candidates"]
@@ -634,7 +637,8 @@ def test_one_candidate_is_one_edit_from_the_seed_and_never_ranks(pipe, inversion
     np.testing.assert_array_equal(one.edited.features, plain.edited.features)
     torch.testing.assert_close(one.edited.latents, plain.edited.latents, atol=0, rtol=0)
     assert "inpaint_candidates" not in one.settings and one.settings == plain.settings
-    span = pipe.edit(inversion=inversion, target="a person jumps", edits=[Inpaint(frames=(16, 32), candidates=1)])
+    span = pipe.edit(inversion=inversion, target="a person jumps",
+                     edits=[Inpaint(frames=(16, 32), candidates=1, prior="none")])
     assert runs == [1, 1] and "inpaint_candidates" not in span.settings
     z = span.edited.noise                                               # the span's latent frames 4..7: seed 0's
     torch.testing.assert_close(z[:, 4:8], seeded_noise(0, z.shape)[:, 4:8], atol=0, rtol=0)
@@ -668,7 +672,11 @@ def test_best_of_k_is_the_best_of_the_k_seeds_run_one_by_one(pipe, inversion, ca
     if spec.score == "parts":                                          # the arms alone, the rest held still
         scored = [isolate_parts(f, spec.parts) for f in scored]
     assert rec["score"] == spec.score_for(bool(kw))
-    mine = [scorer.distance(f, target, span) for f in scored]
+    if rec["score"] == "prior":     # an inverted take's span: each candidate against its own pasted sample
+        mine = [ranking.prior_height_cm(s, spec) for s in singles]
+        assert all(s.prior.seeds == [spec.seed + i] for i, s in enumerate(singles))
+    else:
+        mine = [scorer.distance(f, target, span) for f in scored]
     assert len(set(mine)) == k                                         # the seeds give different motions
     np.testing.assert_allclose(rec["distances"], mine, rtol=1e-6)
     if spec.frames is None:
@@ -680,10 +688,18 @@ def test_best_of_k_is_the_best_of_the_k_seeds_run_one_by_one(pipe, inversion, ca
     bound = spec.seam_bound_for(bool(kw))
     assert rec["seam_bound"] == bound
     best = pick_candidate(mine, rec["seam_ratios"], bound)
-    assert rec["chosen"] == best and rec["seed"] == spec.seed + best and out.edits[0].seed == spec.seed + best
+    assert rec["chosen"] == best
+    if rec["score"] == "prior" and min(rec["seam_ratios"]) > bound:    # none smooth: the candidates without prior
+        fb = rec["fallback"]
+        assert out.edits[0].prior == "none" and rec["seed"] == spec.seed + fb["chosen"] == out.edits[0].seed
+        assert len(fb["distances"]) == k and out.prior is None
+        return
+    assert "fallback" not in rec
+    assert rec["seed"] == spec.seed + best and out.edits[0].seed == spec.seed + best
     np.testing.assert_array_equal(out.edited.features, singles[best].edited.features)
     np.testing.assert_array_equal(out.source.features, singles[0].source.features)
-    assert rec["frames"] == list(scorer.window(FRAMES, span))
+    # scored frames: the evaluator's window, or the regenerated latent frames for the prior's heights
+    assert rec["frames"] == (list(span) if rec["score"] == "prior" else list(scorer.window(FRAMES, span)))
 
 
 @needs_weights

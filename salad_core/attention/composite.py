@@ -44,7 +44,8 @@ import numpy as np
 
 from salad_core.skeleton import PART_NAMES, get_skeleton
 
-__all__ = ["ROOT_MODES", "TURN_FOLLOW_DEG", "regenerated_runs", "followed_turns", "part_joint_weights", "frame_weights", "seams", "smooth_columns", "smooth_seam_features",
+__all__ = ["ROOT_MODES", "TURN_FOLLOW_DEG", "regenerated_runs", "followed_turns", "part_joint_weights",
+           "frame_weights", "seams", "smooth_columns", "smooth_seam_features",
            "frame_jerk", "seam_jerk", "seam_jerk_ratio", "composite_features", "composite_output", "composite_specs"]
 
 #: How the root of a regenerated frame span is handled (see the module docstring).

@@ -25,30 +25,34 @@ not white and holds the take's own motion there, so the region tended to regener
 waved in 2 of 8 cases); after decoding, the kept parts / frames are taken from the source's decoded features and
 the seams cross-faded over ``fade`` frames in feature space, with the root of a span corrected so that the frames
 after it keep their global place and facing, unless the span turned on its own (``root="auto"``: a middle span asked
-to turn keeps its turn and the rest of the take follows it) (``composite=True``, :mod:`salad_core.attention.composite`: the VAE
-decoder's convolutions mix neighbouring parts and frames, and the features integrate the root's velocities); the
-span's frames next to each seam are then smoothed by a small least-squares jerk penalty (``smooth``); a frame span's
-edited branch is guided with :data:`SPAN_GUIDANCE` (``guidance="auto"``: a short span otherwise tended not to do
-what the prompt says); body parts alone of an inverted take were sampled with RePaint's resampling (``resample``: each
-``jump`` of 5 steps denoised 3 times, re-noising the region in between, so that the region harmonises with the kept
-parts; now only with ``prior="none"``, the pasted prior below having replaced it).
+to turn keeps its turn and the rest of the take follows it) (``composite=True``,
+:mod:`salad_core.attention.composite`: the VAE decoder's convolutions mix neighbouring parts and frames, and the
+features integrate the root's velocities); the span's frames next to each seam are then smoothed by a small
+least-squares jerk penalty (``smooth``); a frame span's edited branch is guided with :data:`SPAN_GUIDANCE`
+(``guidance="auto"``: a short span otherwise tended not to do what the prompt says); body parts alone of an inverted
+take were sampled with RePaint's resampling (``resample``: each ``jump`` of 5 steps denoised 3 times, re-noising the
+region in between, so that the region harmonises with the kept parts; now only with ``prior="none"``, the pasted
+prior below having replaced it).
 
-Body parts of an inverted take and a frame span of a generated source are pasted, then harmonised (``prior="auto"``,
-:meth:`Inpaint.prior_for`): the target prompt is first sampled alone (over the span, or the whole motion) and, for the
-first half of the steps, the region's latents are that sample's, noised to each step's level, so that the region
-enters the free steps already doing what the prompt says (on 24 validation clips: an inverted take's arms passed the
-prompt's check in 22 against 18 with RePaint's resampling, which it replaces there, at 0.56 times the time; a
-generated source's span in 20 against 16). A frame span of an inverted take is not pasted: each candidate passed
-more often with the prior (80 % against 53 % of the candidates), but the ranking below chose worse among them.
+The region is pasted, then harmonised (``prior="auto"``, :meth:`Inpaint.prior_for`) for every edit of an inverted take
+and for a frame span of a generated source: the target prompt is first sampled alone (over the span, or the whole
+motion) and, for the first half of the steps (the first 30 % for a span of a take), the region's latents are that
+sample's, noised to each step's level, so that the region enters the free steps already doing what the prompt says
+(on 24 validation clips: an inverted take's arms passed the prompt's check in 22 against 18 with RePaint's
+resampling, which it replaces there, at 0.56 times the time; a generated source's span in 20 against 16).
 
-A frame span of an inverted take is regenerated :data:`SPAN_CANDIDATES` times, from that many seeds of the region's
-fresh noise, and among the candidates whose seams are smooth (``seam_bound="auto"``: seam jerk within
-:data:`SEAM_BOUND` times the source's own 95th percentile; none: the smoothest) the one the T2M evaluator finds closest
-to the target prompt is kept (``candidates="auto"``, :mod:`salad_core.attention.ranking`: on 24 validation clips the
-span's check rose from 11 of 24 with one candidate to 20, with the seams within 1.5x in 22, at 8 times the cost; the
-best of 8 by the evaluator alone passed 21 but its seams only 18, the evaluator's distance not seeing seams). Body
-parts alone are sampled once: ranking their resampled edits lowered the check, 18 -> 12 of 24, and scoring the
-regenerated parts alone, the kept ones held still (``score="parts"``), ranked them no better: 10 of 24.
+A frame span of an inverted take is regenerated :data:`SPAN_CANDIDATES` times, from that many seeds (each with its
+own pasted sample), and among the candidates whose seams are smooth (``seam_bound="auto"``: seam jerk within
+:data:`SEAM_BOUND` times the source's own 95th percentile) the one whose pelvis and feet heights follow its pasted
+sample most closely is kept (``score="auto"`` -> ``"prior"``, :func:`~salad_core.attention.ranking.prior_height_cm`:
+what reads flight and foot contacts); when no candidate's seams are smooth, 8 candidates without the prior are run
+and the one the T2M evaluator finds closest to the prompt is kept (:mod:`salad_core.attention.ranking`). On 24 new
+validation clips this passed the span's check in 23 against 21 for the previous default (8 candidates without the
+prior ranked by the evaluator, which had raised it from 11 of 24 with one candidate), every seam smooth in both, at
+1.5 times its time; the evaluator's own ranking of the pasted candidates had chosen worse (16 of 24), as had their
+closeness in pose (12). Body parts alone are sampled once: ranking their resampled edits lowered the check, 18 -> 12
+of 24, and scoring the regenerated parts alone, the kept ones held still (``score="parts"``), ranked them no better:
+10 of 24.
 
 :func:`parse_inpaint` reads the command line's ``PARTS[@START:END]`` notation.
 """
@@ -68,7 +72,7 @@ if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
 
 __all__ = ["Inpaint", "INPAINT_GROUPS", "MATCHED_MAX_RHO", "NOISE_MODES", "PARTS_RESAMPLE", "PRIOR_MODES",
-           "PRIOR_STRENGTH", "SCORE_MODES", "SEAM_BOUND", "SPAN_CANDIDATES", "SPAN_GUIDANCE",
+           "PRIOR_STRENGTH", "SCORE_MODES", "SEAM_BOUND", "SPAN_CANDIDATES", "SPAN_GUIDANCE", "SPAN_PRIOR_STRENGTH",
            "ar1_noise", "inpaint_parts", "matched_noise", "noise_statistics", "parse_inpaint"]
 
 #: What :class:`Inpaint`'s regenerated region starts from (see :attr:`Inpaint.noise`).
@@ -79,6 +83,10 @@ PRIOR_MODES = ("auto", "none", "prompt")
 
 #: The share of the steps in which the pasted prior's region is free (``Inpaint(prior_strength="auto")``).
 PRIOR_STRENGTH = 0.5
+
+#: ``prior_strength="auto"`` for a frame span of an inverted motion: its candidates are ranked by how closely they
+#: follow the pasted motion (``score="prior"``), and a longer-held prior gave more candidates that do what it does.
+SPAN_PRIOR_STRENGTH = 0.7
 
 #: The largest lag-1 frame correlation :func:`matched_noise` gives the region's noise.
 MATCHED_MAX_RHO = 0.95
@@ -350,15 +358,17 @@ class Inpaint(EditSpec):
         :attr:`seed`). For the first ``1 - prior_strength`` of the steps the region's latents are that motion's
         latents noised by the forward process to each step's level (with the region's own noise), so the region
         enters the free steps already doing what the prompt says and the rest of the loop fits it to the kept
-        context; ``settings["inpaint_prior"]`` records it. ``"none"``: the region is denoised from noise alone.
-        ``"auto"`` (default): ``"prompt"`` for body parts alone of an inverted motion (where it replaces
-        :attr:`resample`'s passes) and for a frame span of a generated source, where it was chosen; ``"none"``
-        otherwise (:meth:`prior_for`).
+        context; ``settings["inpaint_prior"]`` records it and the edit's ``prior`` holds the pasted motion.
+        ``"none"``: the region is denoised from noise alone. ``"auto"`` (default): ``"prompt"`` for an inverted
+        motion (body parts alone, where it replaces :attr:`resample`'s passes, and frame spans, whose candidates are
+        then ranked by ``score="prior"``) and for a frame span of a generated source, where it was chosen;
+        ``"none"`` for body parts alone of a generated source (:meth:`prior_for`).
     prior_strength : float or ``"auto"``
         With a prior: the share of the steps, ending at the last, in which the region is free (in ``(0, 1]``; 1 frees
         it from the first step, when the pasted motion would be only noise, so nothing is sampled). Smaller keeps
         more of the pasted motion, larger fits it more to the kept context. ``"auto"`` (default):
-        :data:`PRIOR_STRENGTH` (0.5; 0.7 was measured too).
+        :data:`SPAN_PRIOR_STRENGTH` (0.7) for a frame span of an inverted motion, :data:`PRIOR_STRENGTH` (0.5)
+        otherwise (:meth:`prior_strength_for`; both were measured on each).
     """
 
     role: ClassVar[str] = "latent"
@@ -542,13 +552,15 @@ class Inpaint(EditSpec):
         return int(self.candidates)
 
     def score_for(self, inverted: bool) -> str:
-        """What the candidates' scorer reads (:attr:`score`; ``"auto"`` resolved, ``"whole"`` for every edit):
+        """What the candidates' scorer reads (:attr:`score`; ``"auto"`` resolved: ``"prior"`` for a frame span of an
+        inverted motion with a pasted prior, where it was chosen, ``"whole"`` for every other edit):
         ``"whole"`` (the edited motion) or ``"parts"`` (the regenerated parts alone,
         :func:`~salad_core.attention.ranking.isolate_parts`) for the evaluator, or ``"prior"`` (the heights'
         distance to the pasted prior, :func:`~salad_core.attention.ranking.prior_height_cm`). ``inverted``: the edit
         is of an inversion (as for :meth:`candidates_for`)."""
         if self.score == "auto":
-            return "whole"
+            ranked_span = self.frames is not None and inverted and self.prior_for(inverted) == "prompt"
+            return "prior" if ranked_span else "whole"
         return self.score
 
     def seam_bound_for(self, inverted: bool) -> Optional[float]:
@@ -563,19 +575,20 @@ class Inpaint(EditSpec):
         return self.seam_bound
 
     def prior_for(self, inverted: bool) -> str:
-        """``"prompt"`` or ``"none"`` (:attr:`prior`; ``"auto"`` resolved: ``"prompt"`` for body parts alone of an
-        inverted motion and for a frame span of a generated source, where it was chosen; ``"none"`` otherwise).
-        ``inverted``: the edit is of an inversion."""
+        """``"prompt"`` or ``"none"`` (:attr:`prior`; ``"auto"`` resolved: ``"prompt"`` for an inverted motion (body
+        parts and frame spans) and for a frame span of a generated source, where it was chosen; ``"none"`` for body
+        parts alone of a generated source). ``inverted``: the edit is of an inversion."""
         if self.prior == "auto":
-            parts_of_a_take = self.frames is None and inverted
-            span_of_a_generation = self.frames is not None and not inverted
-            return "prompt" if (parts_of_a_take or span_of_a_generation) else "none"
+            parts_of_a_generation = self.frames is None and not inverted
+            return "none" if parts_of_a_generation else "prompt"
         return self.prior
 
-    @property
-    def resolved_prior_strength(self) -> float:
-        """:attr:`prior_strength` (``"auto"`` resolved: :data:`PRIOR_STRENGTH`)."""
-        return PRIOR_STRENGTH if self.prior_strength == "auto" else float(self.prior_strength)
+    def prior_strength_for(self, inverted: bool) -> float:
+        """:attr:`prior_strength` (``"auto"`` resolved: :data:`SPAN_PRIOR_STRENGTH` for a frame span of an inverted
+        motion, :data:`PRIOR_STRENGTH` otherwise). ``inverted``: the edit is of an inversion."""
+        if self.prior_strength == "auto":
+            return SPAN_PRIOR_STRENGTH if (self.frames is not None and inverted) else PRIOR_STRENGTH
+        return float(self.prior_strength)
 
     def prior_release(self, num_steps: int, inverted: bool = False) -> int:
         """The first step (of ``num_steps``) in which the region is free of the pasted prior (:meth:`prior_for`): the
@@ -583,7 +596,7 @@ class Inpaint(EditSpec):
         as well, so step ``release`` starts from the prior noised to its own level; 0 without a prior."""
         if self.prior_for(inverted) == "none":
             return 0
-        return int(round((1.0 - self.resolved_prior_strength) * int(num_steps)))
+        return int(round((1.0 - self.prior_strength_for(inverted)) * int(num_steps)))
 
     def prior_window(self, num_frames: int, min_frames: int) -> tuple[int, int, int, int]:
         """Where the pasted prior comes from and goes, for a motion of ``num_frames`` frames: ``(s, e, frames, c)``,
