@@ -301,6 +301,10 @@ def tuning_grid() -> dict[str, dict]:
     grid["fresh g7.5 prior 0.7 best of 8 seam-aware scored by prior heights | fade 8 smooth 100/8"] = dict(
         base, guidance=7.5, prior="prompt", prior_strength=0.7, candidates=8, seam_bound=1.5, score="prior",
         product=True, **post[chosen])
+    # a generated source's span: its own noise, pasted (0.5), the best of 4 pasted samples by the heights
+    grid["source noise g7.5 prior 0.5 best of 4 seam-aware scored by prior heights | fade 8 smooth 100/8"] = dict(
+        base, noise="source", guidance=7.5, prior="prompt", prior_strength=0.5, candidates=4, seam_bound=1.5,
+        score="prior", **post[chosen])
     # root="auto": the kept frames after a span that turned follow it (composite.TURN_FOLLOW_DEG)
     grid.update({f"{name} root auto": dict(kw, root="auto") for name, kw in list(grid.items())
                  if name.endswith(f"| {chosen}")})
@@ -368,6 +372,9 @@ def main() -> None:
     ap.add_argument("--tuning-generated", action="store_true",
                     help="instead: the validation set of generated frame spans (TUNING_SPAN_SOURCES at TUNING_SEED, "
                          "the held-out span prompts and spans) over GENERATED_SPAN_ROWS")
+    ap.add_argument("--generated-seeds", type=int, nargs="+", default=[TUNING_SEED], metavar="SEED",
+                    help="with --tuning-generated: the sources' seeds (default TUNING_SEED; other seeds give new "
+                         "validation spans of the same sources)")
     ap.add_argument("--grid", default=None,
                     help="comma-separated tuning_grid() names to run: with --tuning instead of all of them, with "
                          "--tuning-generated instead of GENERATED_SPAN_ROWS, on the held-out cases instead of CONFIGS "
@@ -482,7 +489,7 @@ def main() -> None:
         real_cases("tuning", takes, grid, blends, only=args.only)
     elif args.tuning_generated:
         grid = select_grid(args.grid or ",".join(GENERATED_SPAN_ROWS), ap.error)
-        generated_spans("tuning-gen/frames", TUNING_SPAN_SOURCES, (TUNING_SEED,), grid)
+        generated_spans("tuning-gen/frames", TUNING_SPAN_SOURCES, tuple(args.generated_seeds), grid)
     else:
         configs = select_grid(args.grid, ap.error) if args.grid else CONFIGS
         if not args.skip_generated:
