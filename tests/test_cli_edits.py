@@ -250,6 +250,9 @@ def test_invert_records_the_inpaint_noise_mode(tmp_path, sample_dir):
     assert ranked["seam_bound"] == SEAM_BOUND
     assert ranked["chosen"] == pick_candidate(ranked["distances"], ranked["seam_ratios"], SEAM_BOUND)
     assert f"seed={ranked['seed']}," in edits[0] and ranked["seed"] == ranked["seeds"][ranked["chosen"]]
+    # what was pasted (the prompt alone, held for 30 % of the steps) and whether the kept frames follow a turn
+    assert edit["inpaint_prior"]["mode"] == "prompt" and edit["inpaint_prior"]["strength"] == 0.7
+    assert edit["composite"]["edits"] == ["Inpaint"] and edit["composite"]["followed_turns"] in ([[]], [[12, 28]])
 
 
 def test_invert_mirror_take_all_gives_the_takes_mirror_image(tmp_path, sample_dir):

@@ -946,6 +946,9 @@ def cmd_invert(args: argparse.Namespace) -> int:
     if specs and "inpaint_candidates" in result.settings:    # Inpaint(candidates=K): every candidate's score
         report["edit"]["inpaint_candidates"] = result.settings["inpaint_candidates"]
         report["edit"]["edits"] = [repr(e) for e in result.edits]       # the chosen candidate's (its seed)
+    for key in ("inpaint_prior", "composite"):     # what was pasted; the kept frames' source (followed turns)
+        if specs and key in result.settings:
+            report["edit"][key] = result.settings[key]
     if vs_take is not None:
         report["errors_vs_take"] = vs_take
     if loaded.bvh is not None:
