@@ -721,3 +721,19 @@ def test_ranking_by_the_prior_on_an_inverted_take_scores_what_was_pasted(pipe, i
     assert rec["distances"][rec["chosen"]] == pytest.approx(ranking.prior_height_cm(out, out.edits[0]), abs=1e-6)
     assert rec["distances"][rec["chosen"]] == min(rec["distances"]) and len(set(rec["distances"])) == 2
     assert out.settings["inpaint_prior"]["windows"] == [[4, 8, 40, 3]]
+
+
+def test_a_region_from_the_sources_own_noise_has_no_fallback_and_keeps_the_smoothest_pasted_candidate():
+    """A generated source's span from its own noise (``noise="source"``) with pasted candidates: when none is smooth
+    there are no candidates without the prior to fall back to (they would be alike); the smoothest pasted one stays."""
+    spec = Inpaint(frames=(20, 40), candidates=4, noise="source", prior="prompt", score="prior", seam_bound=1e-9)
+    seen = []
+
+    def run(specs):
+        seen.append(specs[0].prior)
+        return _prior_output(*_PRIOR_CANDIDATES[specs[0].seed])
+
+    out = ranked_edit(run, [spec], inverted=False, skeleton="humanml3d", scorer=_StubScorer())
+    rec = out.settings["inpaint_candidates"]
+    assert seen == ["prompt"] * 4 and "fallback" not in rec
+    assert rec["chosen"] == 3 and out.edits[0].seed == 3                 # seed 3: the smoothest (no seam step)

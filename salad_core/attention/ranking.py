@@ -381,7 +381,8 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
     (``"seam_ratios"``, :func:`candidate_seam_ratios`; None for body parts alone) and the seam bound the ranking used
     (``"seam_bound"``, :meth:`~salad_core.attention.inpaint.Inpaint.seam_bound_for`; None: by distance alone).
     With ``score="prior"`` the distances are :func:`prior_height_cm`'s (``"evaluator"`` None), and when no candidate's
-    seam ratio is within the bound the ``K`` candidates are run again without the prior and ranked by the evaluator:
+    seam ratio is within the bound (and the region starts from fresh noise, :meth:`~salad_core.attention.inpaint.
+    Inpaint.fresh_noise`) the ``K`` candidates are run again without the prior and ranked by the evaluator:
     ``"fallback"`` records that ranking (its distances, seam ratios and chosen index; ``"seed"`` is then its
     chosen seed, ``"chosen"`` stays the index the pasted candidates' ranking gave).
 
@@ -436,8 +437,10 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
     record = {"seeds": [inpaint.seed + i for i in range(k)], "distances": scores, "chosen": best,
               "seed": inpaint.seed + best, "frames": list(window), "score": mode,
               "evaluator": None if mode == "prior" else scorer.source, "seam_ratios": ratios, "seam_bound": bound}
-    if mode == "prior" and ratios is not None and bound is not None and min(ratios) > bound:
-        # no pasted candidate joins its context smoothly: the candidates without the prior, by the evaluator
+    if (mode == "prior" and ratios is not None and bound is not None and min(ratios) > bound
+            and inpaint.fresh_noise(inverted)):
+        # no pasted candidate joins its context smoothly: the candidates without the prior, by the evaluator (a
+        # region from the source's own noise has no other candidates: the smoothest pasted one is kept)
         plain = dataclasses.replace(inpaint, prior="none", score="whole")
         plain_specs = candidate_specs(tuple(plain if e is inpaint else e for e in edits), plain, k)
         log.info("in-painting: no candidate's seams within %.2fx; %d candidates without the prior", bound, k)
