@@ -410,10 +410,11 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
         raise ValueError(f"Inpaint(candidates={k}) ranks the candidates of one motion; the edit has {motions}: edit "
                          "them one at a time")
     if not inpaint.fresh_noise(inverted) and inpaint.prior_for(inverted) == "none":
+        kind = "given" if inverted else "generated"
         raise ValueError(f"Inpaint(candidates={k}) draws the region's noise from {k} seeds, but with "
-                         f"noise={inpaint.noise!r} the region of a {'given' if inverted else 'generated'} motion starts "
-                         "from the source's own noise and no prior is pasted, so the candidates would be alike; give "
-                         "noise='fresh' (or 'matched'), or prior='prompt' (each candidate pastes its own seed's sample)")
+                         f"noise={inpaint.noise!r} the region of a {kind} motion starts from the source's own noise "
+                         "and no prior is pasted, so the candidates would be alike; give noise='fresh' (or "
+                         "'matched'), or prior='prompt' (each candidate pastes its own seed's sample)")
     scorer = TextMotionScorer() if scorer is None else scorer
     dim = scorer.evaluator.config.dim_pose
     from salad_core.skeleton import get_skeleton
