@@ -432,16 +432,16 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
                    help="guidance weight of the in-painted region's branch: a number, 'auto' (default: 7.5 for a "
                         "frame span, the motion's own for body parts alone) or 'motion' (the motion's own)")
     p.add_argument("--inpaint-candidates", type=int, default=None, metavar="K",
-                   help="run the in-painting K times, the region's noise from K seeds (0 .. K-1), and keep the edit "
-                        "the text-motion evaluator finds closest to --target (K times the cost; 1: one edit; default: "
-                        "8 for a frame span of a given take, 1 otherwise). Needs fresh noise in the region: the "
-                        "default for a given take (--motion, salad invert), --inpaint-noise fresh for a generated "
-                        "motion")
+                   help="run the in-painting K times, the region's noise (and pasted prior) from K seeds (0 .. K-1), "
+                        "and keep the best by --inpaint-score (K times the cost; 1: one edit; default: 8 for a frame "
+                        "span of a given take, 1 otherwise). Needs fresh noise in the region (the default for a given "
+                        "take: --motion, salad invert) or a pasted prior")
     p.add_argument("--inpaint-score", choices=INPAINT_SCORE, default=None,
                    help="what the evaluator scores of each in-painting candidate: 'whole' the edited motion, 'parts' "
                         "the regenerated body parts with the kept ones held still (needs --inpaint PARTS); 'prior': "
-                        "no evaluator, the pelvis and feet heights against the pasted prior (needs --inpaint-prior "
-                        "prompt; none smooth: the candidates again without it); default 'auto': the whole motion")
+                        "no evaluator, the pelvis and feet heights against the pasted prior (needs a pasted prior; "
+                        "none smooth: the candidates again without it); default 'auto': 'prior' for a frame span of a "
+                        "given take, the whole motion otherwise")
     p.add_argument("--inpaint-seam-bound", default=None, metavar="B|auto|off",
                    help="rank a frame span's in-painting candidates by the evaluator only among those whose seam jerk "
                         "is at most B times the source's own 95th percentile (none within: the smoothest; e.g. 1.5); "
@@ -450,11 +450,12 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inpaint-prior", choices=INPAINT_PRIOR, default=None,
                    help="'prompt': paste, then harmonise: the target prompt is first sampled alone (the span's length, "
                         "or the whole motion for body parts) and the region starts from it, noised, for the first "
-                        "steps; 'none': the region is denoised from noise; default 'auto': 'prompt' for body parts of a "
-                        "given take (--motion, salad invert) and for a frame span of a generated source")
+                        "steps; 'none': the region is denoised from noise; default 'auto': 'prompt' for every edit of "
+                        "a given take (--motion, salad invert) and for a frame span of a generated source")
     p.add_argument("--inpaint-prior-strength", type=float, default=None, metavar="S",
                    help="with --inpaint-prior prompt: the share of the steps (0 < S <= 1) in which the region is free "
-                        "to fit the kept motion (smaller keeps more of the pasted motion; default 0.5)")
+                        "to fit the kept motion (smaller keeps more of the pasted motion; default 0.7 for a frame span "
+                        "of a given take, 0.5 otherwise)")
     p.add_argument("--no-composite", action="store_true",
                    help="keep what the decoder makes of the kept parts instead of taking them from the source's "
                         "decoding (--inpaint, --mirror-take; the decoder lets edited parts move kept ones a few cm)")
