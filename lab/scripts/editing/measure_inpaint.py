@@ -24,7 +24,9 @@ Measured per case (joints: the pipeline's ``out.joints``, metres -> cm):
 - ``kept_cm``: root-aligned MPJPE between source and edit over what is kept (the other parts' joints, all
   frames; or every joint over the kept frames); ``kept_pose_cm`` the same after turning each pose to face
   +z (the heading of the kept frames after a regenerated span follows from the span's turning: a
-  relative-feature motion integrates it);
+  relative-feature motion integrates it); ``kept_segment_cm`` (frame spans) the global distance after moving
+  each run of kept frames bodily onto the take's (:func:`segment_aligned_cm`: the frames after a span whose turn
+  they follow, ``Inpaint(root="auto")``, are the take's own turned whole);
 - ``edited_cm``: the same over the regenerated joints / frames (it must be far from 0);
 - ``seam_jerk_ratio`` (frame spans): the largest jerk (third difference of the joint positions, mean
   over joints, m/s^3) within 4 frames of an inner seam over the source's own 95th percentile of jerk
@@ -112,6 +114,35 @@ def facing(joints: np.ndarray, sk) -> np.ndarray:
     return out
 
 
+def segment_aligned_cm(src: np.ndarray, ed: np.ndarray, frames) -> float:
+    """Mean joint distance (cm) between ``src`` and ``ed`` ``(N, J, 3)`` over ``frames``, each contiguous run of them
+    first moved bodily onto the source's (one rotation about the vertical and one translation per run, least squares):
+    how far the kept frames are from the take's own when the frames after a span that turned may follow its turn
+    (``Inpaint(root="auto")``); unlike the per-frame root alignment it keeps every within-run turn and travel."""
+    frames = sorted(frames)
+    if not frames:
+        return float("nan")
+    runs, cur = [], [frames[0]]
+    for f in frames[1:]:
+        if f == cur[-1] + 1:
+            cur.append(f)
+        else:
+            runs.append(cur)
+            cur = [f]
+    runs.append(cur)
+    total, count = 0.0, 0
+    for run in runs:
+        a, b = ed[run].reshape(-1, 3), src[run].reshape(-1, 3)
+        ca, cb = a.mean(0), b.mean(0)
+        x, y = a - ca, b - cb
+        t = np.arctan2((x[:, 0] * y[:, 2] - x[:, 2] * y[:, 0]).sum(), (x[:, 0] * y[:, 0] + x[:, 2] * y[:, 2]).sum())
+        c, sn = np.cos(t), np.sin(t)
+        r = np.stack([c * x[:, 0] - sn * x[:, 2], x[:, 1], sn * x[:, 0] + c * x[:, 2]], -1)
+        total += float(np.linalg.norm(r - y, axis=-1).sum())
+        count += len(r)
+    return total / count * 100
+
+
 def dist_cm(a: np.ndarray, b: np.ndarray, frames, joints) -> float:
     if not len(frames) or not len(joints):
         return float("nan")
@@ -150,6 +181,8 @@ def measure(pipe, out, inp: Inpaint, target: str, sk) -> dict:
         allj = list(range(len(jt)))
         kept, kept_pose = dist_cm(ra_s, ra_e, kept_f, allj), dist_cm(fa_s, fa_e, kept_f, allj)
     row = {"kept_cm": kept, "kept_pose_cm": kept_pose, "edited_cm": dist_cm(fa_s, fa_e, regen_f, regen_j)}
+    if inp.frames is not None:      # the kept runs moved bodily onto the take's (a followed turn turns them whole)
+        row["kept_segment_cm"] = segment_aligned_cm(src, ed, kept_f)
     if span is not None:        # the product's seam measure (m/s^3 for the record: per frame^3 times fps^3)
         cuts = [b for b in span if 0 < b < n]
         row["seam_jerk"] = seam_jerk(ed, cuts) * sk.fps ** 3
@@ -177,6 +210,9 @@ def summarize(rows: list[dict]) -> dict:
            "kept_cm_max": max((r["kept_cm"] for r in rows), default=float("nan")),
            "kept_pose_cm": mean(r["kept_pose_cm"] for r in rows),
            "kept_within_2cm": mean(float(r["kept_cm"] <= 2.0) for r in rows),
+           **({"kept_segment_within_2cm": mean(float(r["kept_segment_cm"] <= 2.0) for r in rows
+                                               if "kept_segment_cm" in r)}
+              if any("kept_segment_cm" in r for r in rows) else {}),
            "edited_cm": mean(r["edited_cm"] for r in rows),
            "check_pass": mean(float(r["check"]) for r in rows),
            "check_pass_fresh": mean(float(r["check"]) for r in fresh), "fresh_cases": len(fresh),
@@ -514,7 +550,8 @@ def main() -> None:
                         sub = [r for r in sel if ("turns" in r["target"]) == keep]
                         if sub and len(sub) < len(sel):
                             summary[f"{kind} {config} blend={blend} ({tag})"] = summarize(sub)
-    cols = ("cases", "kept_cm", "kept_cm_max", "kept_pose_cm", "kept_within_2cm", "edited_cm", "seam_jerk_ratio",
+    cols = ("cases", "kept_cm", "kept_cm_max", "kept_pose_cm", "kept_within_2cm", "kept_segment_within_2cm",
+            "edited_cm", "seam_jerk_ratio",
             "seam_within_1.5x", "target_check_pass", "check_pass", "check_span_pass", "check_pass_fresh", "fresh_cases",
             "seconds", "any_candidate_pass", "random_candidate_pass", "first_candidate_pass", "chosen_not_first",
             "seam_fallback")
