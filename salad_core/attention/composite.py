@@ -342,6 +342,15 @@ def composite_features(source: np.ndarray, edited: np.ndarray, weights: np.ndarr
     -------
     ndarray ``(N, D)``, the dtype of ``edited``.
     """
+    return _composite_features(source, edited, weights, skeleton, rejoin=rejoin, root=root, smooth=smooth,
+                               smooth_window=smooth_window)[0]
+
+
+def _composite_features(source: np.ndarray, edited: np.ndarray, weights: np.ndarray, skeleton="humanml3d", *,
+                        rejoin: bool = True, root: str = "source", smooth: float = 0.0,
+                        smooth_window: int = 0) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """:func:`composite_features` and the regenerated runs whose turn the kept frames follow
+    (:func:`followed_turns`; ``root="auto"`` only, else empty)."""
     sk = get_skeleton(skeleton)
     if root not in ROOT_MODES:
         raise ValueError(f"root={root!r}; allowed: {ROOT_MODES}")
@@ -363,7 +372,9 @@ def composite_features(source: np.ndarray, edited: np.ndarray, weights: np.ndarr
     if root != "edit" and (w[:, 0] < 1).any() and (w[:, 0] > 0).any():
         skip = followed_turns(out, src, w[:, 0]) if root == "auto" else []
         out = _fix_root(out, src, w[:, 0], skip)
-    return out.astype(np.asarray(edited).dtype, copy=False)
+    else:
+        skip = []
+    return out.astype(np.asarray(edited).dtype, copy=False), skip
 
 
 def composite_specs(edits) -> list:
@@ -466,19 +477,18 @@ def composite_output(pipe, output, edits=None):
             continue
         args = (np.asarray(src.features[b, :n]), np.asarray(ed.features[b, :n]), w, sk)
         root = "edit" if "edit" in roots else "auto" if "auto" in roots else "source"
-        f = composite_features(*args, root=root)
-        followed.append([[s, e] for s, e in followed_turns(composite_features(*args, root="edit"), args[0], w[:, 0])]
-                        if root == "auto" else [])
+        f, turns = _composite_features(*args, root=root)
         j = recover_joints(f, pipe.recovery, sk)
         cuts = seams((w > 0).any(1))
         state = None
         if smooth > 0 and window > 0 and cuts:
-            fs = composite_features(*args, root=root, smooth=smooth, smooth_window=window)
+            fs, turns_s = _composite_features(*args, root=root, smooth=smooth, smooth_window=window)
             js = recover_joints(fs, pipe.recovery, sk)
             state = "plain"
             if seam_jerk(js, cuts) <= seam_jerk(j, cuts):
-                f, j, state = fs, js, "smoothed"
+                f, j, turns, state = fs, js, turns_s, "smoothed"
         smoothed.append(state)
+        followed.append([[s, e] for s, e in turns])
         feats[b, :n] = f
         joints[b] = j.astype(np.float32)
         changed = True
