@@ -838,11 +838,12 @@ class SaladPipeline:
                             f"{type(inversion).__name__} {inversion!r:.60}")
         from salad_core.attention.ranking import ranked_edit, ranked_inpaint
 
+        inverted = inversion is not None
         motions = 1 if inversion is None else len(inversion.prompts)
-        if ranked_inpaint(edits, inversion is not None, motions) is not None:   # Inpaint.candidates: K edits, the best
+        if ranked_inpaint(edits, inverted, motions) is not None:   # Inpaint.candidates: K edits, the best
             return ranked_edit(lambda specs: self.edit(source, target, specs, lengths, seed, guidance_scale, num_steps,
                                                        solver, noise, inversion, capture_attention, probe, progress,
-                                                       ground), edits, inverted=inversion is not None, motions=motions,
+                                                       ground), edits, inverted=inverted, motions=motions,
                                skeleton=self.skeleton.name)
         solver = _check_solver(solver)
         null_schedule = corrections = None
@@ -895,7 +896,7 @@ class SaladPipeline:
         mask = self.frame_mask(lengths, noise.shape[1])
         target_ctx = self.denoiser.prepare_text(text_tgt.features, text_tgt.mask)
         inpaint = next((e for e in edits if e.role == "latent"), None)
-        release = 0 if inpaint is None else inpaint.prior_release(int(num_steps), inversion is not None)
+        release = 0 if inpaint is None else inpaint.prior_release(int(num_steps), inverted)
         prior = alone = None
         if release > 0:       # a prior released at the first step would only be noise: not sampled
             prior, alone = self._inpaint_prior(inpaint, text_tgt, null, lengths, noise.shape[1], guidance,
@@ -910,7 +911,7 @@ class SaladPipeline:
                         **self._output_settings())
         if prior is not None:
             settings["inpaint_prior"] = {"mode": "prompt",
-                                         "strength": inpaint.prior_strength_for(inversion is not None),
+                                         "strength": inpaint.prior_strength_for(inverted),
                                          "release_step": release, "forward_rows": generation_rows,
                                          "windows": [list(w) for w in alone.settings["windows"]]}
         # an edit that gives the edited sample its own noise (ExampleBased) reports that noise and its seeds
@@ -933,7 +934,7 @@ class SaladPipeline:
         from salad_core.attention.composite import composite_output
 
         result = composite_output(self, result)
-        if (inversion is not None) if ground is None else bool(ground):
+        if inverted if ground is None else bool(ground):
             from salad_core.attention.grounding import ground_edit
 
             result = ground_edit(self, result)

@@ -532,6 +532,26 @@ def test_prior_height_distance_reads_the_pelvis_and_feet_heights_over_the_pasted
     assert Inpaint(frames=(20, 40), score="prior").score_for(True) == "prior"
 
 
+def test_height_distance_reads_a_pelvis_that_no_longer_rises_and_ignores_a_bodily_lift():
+    joints = (0, 7, 10, 8, 11)                      # pelvis, left ankle / toe, right ankle / toe (humanml3d)
+    rng = np.random.default_rng(1)
+    prior = rng.normal(size=(40, 22, 3))
+    prior[:, 1:, 1] = np.abs(prior[:, 1:, 1])       # feet at or above 0: the prior's floor is its lowest foot joint
+    edited = rng.normal(size=(120, 22, 3))
+    edited[:, list(joints[1:]), 1] = 0.3            # outside the span the feet stand at 0.3 m: the floor
+    edited[40:56] = prior[8:24] + np.array([0.0, 0.3 - prior[:, list(joints[1:]), 1].min(), 0.0])
+    # the same heights above each motion's own floor: 0, whatever the horizontal or vertical offset
+    assert ranking.height_distance_cm(edited, prior, (40, 56), 8) == pytest.approx(0.0, abs=1e-9)
+    # the pelvis 20 cm lower on every span frame (a flattened jump): 20 cm on 1 of the 5 joints
+    edited[40:56, 0, 1] -= 0.20
+    assert ranking.height_distance_cm(edited, prior, (40, 56), 8) == pytest.approx(4.0)
+    # the root-relative pose distance would see the lowered pelvis as every other joint moved up instead
+    rel = (edited[40:56] - edited[40:56, :1]) - (prior[8:24] - prior[8:24, :1])
+    assert np.linalg.norm(rel, axis=-1).mean() * 100 > 10
+    with pytest.raises(ValueError, match="one length"):
+        ranking.height_distance_cm(edited, prior, (40, 80), 8)      # 40 span frames, 32 prior frames left
+
+
 #: seed -> (the prior's pelvis offset: distance offset * 100 / 5 cm, seam step): seed 0 follows the prior exactly
 #: with a sharp seam, seed 1 is the closest smooth one, seed 3 the smoothest.
 _PRIOR_CANDIDATES = {0: (0.0, 0.01), 1: (0.10, 0.0002), 2: (0.30, 0.0001), 3: (0.5, 0.0)}

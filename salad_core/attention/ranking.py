@@ -260,22 +260,32 @@ def prior_height_cm(output: "EditOutput", inpaint: "Inpaint", skeleton="humanml3
     ValueError
         ``output`` has no pasted prior (``Inpaint(prior="prompt")`` pastes one).
     """
-    from salad_core.skeleton import get_skeleton
-
     record = output.settings.get("inpaint_prior")
     if output.prior is None or not record or "windows" not in record:
         raise ValueError("this edit pasted no prior (Inpaint(prior='prompt') pastes one): there is nothing to follow; "
                          "score the candidates with score='whole'")
-    sk = get_skeleton(skeleton)
     s, e, frames, c = record["windows"][0]
     unit = inpaint.unit_length
-    feet = list(sk.contact_joints)
-    joints = [0, *feet]
     n = int(output.edited.lengths[0])
-    ed = np.asarray(output.edited.joints[0])[:n]
-    pr = np.asarray(output.prior.joints[0])[:int(frames)]
-    a = ed[s * unit:e * unit][:, joints, 1] - ed[:, feet, 1].min()
-    b = pr[c * unit:c * unit + len(a)][:, joints, 1] - pr[:, feet, 1].min()
+    return height_distance_cm(np.asarray(output.edited.joints[0])[:n], np.asarray(output.prior.joints[0])[:int(frames)],
+                              (s * unit, e * unit), c * unit, skeleton)
+
+
+def height_distance_cm(edited: np.ndarray, prior: np.ndarray, span: tuple[int, int], offset: int,
+                       skeleton="humanml3d") -> float:
+    """Mean distance (cm) between the heights above the floor of the pelvis and the skeleton's foot contact joints
+    over ``edited[span[0]:span[1]]`` and ``prior[offset : offset + span length]`` (``(N, J, 3)`` and ``(M, J, 3)``
+    joint positions, metres, y up). Each motion's floor is its own lowest foot joint over all its frames, so a
+    motion lifted or sunk bodily reads 0 (:func:`prior_height_cm` reads an edit and its pasted prior with it)."""
+    from salad_core.skeleton import get_skeleton
+
+    feet = list(get_skeleton(skeleton).contact_joints)
+    joints = [0, *feet]
+    a = edited[span[0]:span[1]][:, joints, 1] - edited[:, feet, 1].min()
+    b = prior[offset:offset + len(a)][:, joints, 1] - prior[:, feet, 1].min()
+    if len(a) == 0 or len(b) != len(a):
+        raise ValueError(f"span {span} of {len(edited)} edited frames against prior frames {offset}.. of {len(prior)}: "
+                         "the two windows must be non-empty and of one length")
     return float(np.abs(a - b).mean() * 100)
 
 

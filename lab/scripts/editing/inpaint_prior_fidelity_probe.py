@@ -1,7 +1,7 @@
 """Probe: rank a take's span candidates with the pasted prior by how much of the pasted motion they keep.
 
 Two fidelities: the root-relative joint distance (the pose), and the heights above the floor of the pelvis and feet
-(:func:`vertical_fidelity_cm`: flight and contacts, which the root-relative distance cannot see).
+(:func:`salad_core.attention.ranking.height_distance_cm`: flight and contacts, which the root-relative distance cannot see).
 
 With ``Inpaint(prior="prompt")`` each candidate of a frame span of an inverted take passes the prompt's check far
 more often than without (lab/docs/editing.md, "Paste, then harmonise"), but the T2M evaluator's distance ranks them
@@ -30,7 +30,7 @@ import numpy as np
 from salad_core.attention import Inpaint
 from salad_core.attention.composite import composite_output, seam_jerk_ratio
 from salad_core.attention.grounding import ground_edit
-from salad_core.attention.ranking import TextMotionScorer, choose_candidate
+from salad_core.attention.ranking import TextMotionScorer, choose_candidate, height_distance_cm
 from salad_core.pipeline import SaladPipeline
 from salad_core.skeleton import get_skeleton
 
@@ -47,19 +47,6 @@ def fidelity_cm(edited: np.ndarray, prior: np.ndarray, span: tuple[int, int], of
     b = prior[offset:offset + len(a)]
     a, b = a - a[:, :1], b - b[:, :1]
     return float(np.linalg.norm(a - b, axis=-1).mean() * 100)
-
-
-def vertical_fidelity_cm(edited: np.ndarray, prior: np.ndarray, span: tuple[int, int], offset: int,
-                         joints: tuple[int, ...]) -> float:
-    """Mean distance (cm) between the heights above the floor of ``joints`` (the pelvis and the feet: what reads
-    flight and contacts) over the edit's span ``edited[span]`` ``(N, J, 3)`` and the prior's frames
-    ``prior[offset : offset + len(span)]``. Each motion's floor is its own lowest foot joint over all its frames
-    (``joints[1:]``), so a motion lifted or sunk bodily reads 0; the root-relative :func:`fidelity_cm` cannot see a
-    pelvis that no longer rises."""
-    feet = list(joints[1:])
-    a = edited[span[0]:span[1], list(joints), 1] - edited[:, feet, 1].min()
-    b = prior[offset:offset + len(a), list(joints), 1] - prior[:, feet, 1].min()
-    return float(np.abs(a - b).mean() * 100)
 
 
 def rankings(cands: list[dict], bound: float = 1.5) -> dict[str, int]:
@@ -104,13 +91,13 @@ def main() -> None:
                             ground=False)
             out = ground_edit(pipe, composite_output(pipe, raw, [inp]))
             s, e, frames, c = inp.prior_window(m, sk.min_length)
-            alone = pipe(TARGET, lengths=frames, seed=seed, guidance_scale=7.5, num_steps=args.steps, solver="ddim")
+            alone = raw.prior       # the pasted sample: TARGET alone from the region's seed, the edit's guidance
             row = measure(pipe, out, inp, TARGET, sk)
             regen = (s * 4, e * 4)
             cands.append({"seed": seed, "check_span": bool(row["check_span"]), "seam_ratio": row["seam_jerk_ratio"],
                           "fidelity_cm": fidelity_cm(out.edited.joints[0], alone.joints[0], regen, c * 4),
-                          "vertical_cm": vertical_fidelity_cm(out.edited.joints[0], alone.joints[0], regen, c * 4,
-                                                              (0, *sk.contact_joints)),
+                          "vertical_cm": height_distance_cm(out.edited.joints[0], alone.joints[0][:frames], regen,
+                                                            c * 4, sk.name),
                           "_out": out})
         best, dists, _ = choose_candidate([c.pop("_out") for c in cands], Inpaint(frames=span, candidates=len(cands)),
                                           scorer, inverted=True, skeleton=sk.name)
