@@ -131,8 +131,8 @@ def test_a_keymotion_batch_over_the_chunk_size_equals_one_piece(keymotion, monke
     np.testing.assert_allclose(chunked.latents, whole.latents, atol=1e-5)
     np.testing.assert_allclose(chunked.features, whole.features, atol=1e-5)
     np.testing.assert_array_equal(np.stack(chunked.keyframes), np.stack(whole.keyframes))
-    for a, b in zip(chunked.joints, whole.joints):
-        np.testing.assert_allclose(a, b, atol=1e-5)
+    for a, b in zip(chunked.joints, whole.joints):     # the root's path integrates the features' float32 noise
+        np.testing.assert_allclose(a, b, atol=1e-4)     # over the frames: 0.1 mm (seen 4.5e-5 m on an AMD EPYC)
     assert not chunked.features[0, 40:].any() and not chunked.features[3, 56:].any()
 
 

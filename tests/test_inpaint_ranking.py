@@ -205,7 +205,7 @@ def test_ranked_edit_refusals():
 # ------------------------------------------------------------------------------ scoring the regenerated parts alone
 @pytest.mark.parametrize("score", ["best", "PARTS", 1, None])
 def test_bad_score_modes_are_refused(score):
-    with pytest.raises(ValueError, match=r"Inpaint.score=.*; allowed: \('auto', 'whole', 'parts', 'prior'\)"):
+    with pytest.raises(ValueError, match=r"Inpaint.score=.*; allowed: \('auto', 'whole', 'parts', 'prior', 'first_smooth'\)"):
         Inpaint(parts="arms", score=score)
 
 
@@ -757,3 +757,46 @@ def test_a_region_from_the_sources_own_noise_has_no_fallback_and_keeps_the_smoot
     rec = out.settings["inpaint_candidates"]
     assert seen == ["prompt"] * 4 and "fallback" not in rec
     assert rec["chosen"] == 3 and out.edits[0].seed == 3                 # seed 3: the smoothest (no seam step)
+
+
+# ------------------------------------------------------------------------------ the first smooth candidate
+def test_first_smooth_index_takes_the_first_within_the_bound_else_the_smoothest():
+    assert ranking.first_smooth_index([2.0, 1.4, 1.0], 1.5) == 1        # the first smooth, not the smoothest
+    assert ranking.first_smooth_index([1.2, 1.0], 1.5) == 0
+    assert ranking.first_smooth_index([3.0, 2.0, 2.5], 1.5) == 1        # none smooth: the smallest ratio
+    with pytest.raises(ValueError, match="one seam ratio per candidate"):
+        ranking.first_smooth_index([], 1.5)
+
+
+def test_first_smooth_needs_a_seam_and_a_bound_and_resolves_its_bound_for_a_generated_source():
+    with pytest.raises(ValueError, match="has no seam"):
+        Inpaint(parts="arms", score="first_smooth")
+    with pytest.raises(ValueError, match="seam_bound=None sets no bound"):
+        Inpaint(frames=(20, 40), score="first_smooth", seam_bound=None)
+    spec = Inpaint(frames=(20, 40), candidates=4, score="first_smooth")
+    assert spec.seam_bound_for(False) == SEAM_BOUND and spec.seam_bound_for(True) == SEAM_BOUND
+    assert spec.score_for(False) == "first_smooth"
+
+
+@pytest.mark.parametrize("table, run_seeds, chosen", [
+    ({0: (2.0, 0.0), 1: (2.0, 0.01), 2: (2.0, 0.0), 3: (2.0, 0.0)}, [0], 0),           # seed 0 smooth: nothing more
+    ({0: (2.0, 0.01), 1: (2.0, 0.01), 2: (9.0, 0.0002), 3: (0.0, 0.0)}, [0, 1, 2], 2),  # stops at the first smooth
+    ({0: (2.0, 0.01), 1: (2.0, 0.02), 2: (2.0, 0.005), 3: (2.0, 0.008)}, [0, 1, 2, 3], 2),  # none: the smoothest
+])
+def test_ranked_edit_first_smooth_runs_candidates_until_one_joins_smoothly(table, run_seeds, chosen):
+    """``score="first_smooth"``: candidates run one at a time, the first within the bound ends the run; no evaluator
+    is loaded or asked (the stub scorer would fail if it were), the record holds the seeds run and their seams."""
+    spec = Inpaint(frames=(20, 40), candidates=4, noise="source", prior="prompt", score="first_smooth")
+    run, seen = _run_candidates(table)
+
+    class _NoScorer:
+        def __getattr__(self, name):
+            raise AssertionError(f"first_smooth asked the evaluator for {name}")
+
+    out = ranked_edit(run, [spec], inverted=False, skeleton="humanml3d", scorer=_NoScorer())
+    rec = out.settings["inpaint_candidates"]
+    assert seen == run_seeds and rec["seeds"] == run_seeds and rec["evaluator"] is None
+    np.testing.assert_allclose(rec["seam_ratios"], [_ratio(table[s][1]) for s in run_seeds], rtol=1e-12)
+    assert rec["distances"] == rec["seam_ratios"] and rec["score"] == "first_smooth"
+    assert rec["chosen"] == chosen and out.edits[0].seed == chosen
+    np.testing.assert_array_equal(out.edited.joints[0], _span_output(*table[chosen]).edited.joints[0])

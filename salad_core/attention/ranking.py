@@ -346,6 +346,22 @@ def pick_candidate(distances: Sequence[float], seam_ratios: Optional[Sequence[fl
     return int(np.argmin(np.where(smooth, d, np.inf)))
 
 
+def first_smooth_index(seam_ratios: Sequence[float], bound: float) -> int:
+    """``Inpaint(score="first_smooth")``'s pick: the index of the first candidate (in seed order) whose seam ratio is at
+    most ``bound``; when none is, the smallest ratio (the first of equal ones).
+
+    Raises
+    ------
+    ValueError
+        No seam ratio (a body-part edit has no seam).
+    """
+    r = np.asarray(seam_ratios if seam_ratios is not None else [], np.float64)
+    if r.ndim != 1 or len(r) == 0:
+        raise ValueError(f"first_smooth_index needs one seam ratio per candidate, got {seam_ratios!r}")
+    smooth = np.flatnonzero(r <= bound)
+    return int(smooth[0]) if len(smooth) else int(np.argmin(r))
+
+
 def choose_candidate(outputs: Sequence["EditOutput"], inpaint: "Inpaint", scorer: TextMotionScorer, *,
                      inverted: bool = True, skeleton="humanml3d",
                      seam_ratios: Optional[Sequence[float]] = None) -> tuple[int, list[float], tuple[int, int]]:
@@ -358,6 +374,12 @@ def choose_candidate(outputs: Sequence["EditOutput"], inpaint: "Inpaint", scorer
     (``inpaint.seam_bound_for(inverted)``, frame spans only) the index is :func:`pick_candidate`'s among the
     candidates' ``seam_ratios`` (default: :func:`candidate_seam_ratios` of ``outputs``)."""
     mode = inpaint.score_for(inverted)
+    bound = inpaint.seam_bound_for(inverted)
+    if mode == "first_smooth":      # no score: the seams alone, the first smooth candidate in seed order
+        ratios = list(candidate_seam_ratios(outputs, inpaint) if seam_ratios is None else seam_ratios)
+        n = int(outputs[0].edited.lengths[0])
+        s, e = inpaint.latent_span(n)
+        return first_smooth_index(ratios, bound), ratios, (s * inpaint.unit_length, e * inpaint.unit_length)
     scores, window = [], None
     for out in outputs:
         ed = out.edited
@@ -373,7 +395,6 @@ def choose_candidate(outputs: Sequence["EditOutput"], inpaint: "Inpaint", scorer
         if mode == "parts":
             feats = isolate_parts(feats, inpaint.parts, skeleton)
         scores.append(scorer.distance(feats, ed.texts[0], span))
-    bound = inpaint.seam_bound_for(inverted)
     if bound is not None and seam_ratios is None:
         seam_ratios = candidate_seam_ratios(outputs, inpaint)
     return pick_candidate(scores, seam_ratios, bound), scores, window
@@ -394,7 +415,9 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
     seam ratio is within the bound (and the region starts from fresh noise, :meth:`~salad_core.attention.inpaint.
     Inpaint.fresh_noise`) the ``K`` candidates are run again without the prior and ranked by the evaluator:
     ``"fallback"`` records that ranking (its distances, seam ratios and chosen index; ``"seed"`` is then its
-    chosen seed, ``"chosen"`` stays the index the pasted candidates' ranking gave).
+    chosen seed, ``"chosen"`` stays the index the pasted candidates' ranking gave). With ``score="first_smooth"`` the
+    candidates are run one at a time and the first whose seam ratio is within the bound ends the run
+    (:func:`first_smooth_index`; no evaluator, ``"distances"`` are the seam ratios, ``"seeds"`` those run).
 
     Parameters
     ----------
@@ -425,29 +448,33 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
                          f"noise={inpaint.noise!r} the region of a {kind} motion starts from the source's own noise "
                          "and no prior is pasted, so the candidates would be alike; give noise='fresh' (or "
                          "'matched'), or prior='prompt' (each candidate pastes its own seed's sample)")
-    scorer = TextMotionScorer() if scorer is None else scorer
-    dim = scorer.evaluator.config.dim_pose
-    from salad_core.skeleton import get_skeleton
+    if inpaint.score_for(inverted) != "first_smooth":      # the seams alone need no evaluator
+        scorer = TextMotionScorer() if scorer is None else scorer
+        dim = scorer.evaluator.config.dim_pose
+        from salad_core.skeleton import get_skeleton
 
-    if get_skeleton(skeleton).feature_dim != dim:
-        raise ValueError(f"the evaluator reads {dim}-d features; the pipeline's {skeleton} motions cannot be ranked "
-                         "with it")
+        if get_skeleton(skeleton).feature_dim != dim:
+            raise ValueError(f"the evaluator reads {dim}-d features; the pipeline's {skeleton} motions cannot be "
+                             "ranked with it")
     specs = candidate_specs(edits, inpaint, k)
     log.info("in-painting: %d candidates (region seeds %d..%d), the best kept", k, inpaint.seed, inpaint.seed + k - 1)
     outputs = [run(specs[0])]
     if len(outputs[0].edited) != 1:
         raise ValueError(f"Inpaint(candidates={k}) ranks the candidates of one motion; the edit has "
                          f"{len(outputs[0].edited)}: edit them one at a time")
+    mode, bound = inpaint.score_for(inverted), inpaint.seam_bound_for(inverted)
     for i, s in enumerate(specs[1:], start=2):
+        if mode == "first_smooth" and candidate_seam_ratios(outputs[-1:], inpaint)[0] <= bound:
+            break       # the last candidate joins its context smoothly: the rest are not run
         log.info("in-painting candidate %d of %d", i, k)
         outputs.append(run(s))
     ratios = candidate_seam_ratios(outputs, inpaint)
     best, scores, window = choose_candidate(outputs, inpaint, scorer, inverted=inverted, skeleton=skeleton,
                                             seam_ratios=ratios)
-    mode, bound = inpaint.score_for(inverted), inpaint.seam_bound_for(inverted)
-    record = {"seeds": [inpaint.seed + i for i in range(k)], "distances": scores, "chosen": best,
+    record = {"seeds": [inpaint.seed + i for i in range(len(outputs))], "distances": scores, "chosen": best,
               "seed": inpaint.seed + best, "frames": list(window), "score": mode,
-              "evaluator": None if mode == "prior" else scorer.source, "seam_ratios": ratios, "seam_bound": bound}
+              "evaluator": None if mode in ("prior", "first_smooth") else scorer.source, "seam_ratios": ratios,
+              "seam_bound": bound}
     if (mode == "prior" and ratios is not None and bound is not None and min(ratios) > bound
             and inpaint.fresh_noise(inverted)):
         # no pasted candidate joins its context smoothly: the candidates without the prior, by the evaluator (a

@@ -377,7 +377,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 #: ``--inpaint-noise`` choices: :data:`salad_core.attention.inpaint.NOISE_MODES` (spelled out to keep the parser light).
 INPAINT_NOISE = ("auto", "fresh", "source", "matched")
 #: ``--inpaint-score`` choices: :data:`salad_core.attention.inpaint.SCORE_MODES` (spelled out likewise).
-INPAINT_SCORE = ("auto", "whole", "parts", "prior")
+INPAINT_SCORE = ("auto", "whole", "parts", "prior", "first_smooth")
 #: ``--inpaint-prior`` choices: :data:`salad_core.attention.inpaint.PRIOR_MODES` (spelled out likewise).
 INPAINT_PRIOR = ("auto", "none", "prompt")
 
@@ -440,8 +440,10 @@ def _edit_args(p: argparse.ArgumentParser) -> None:
                    help="what the evaluator scores of each in-painting candidate: 'whole' the edited motion, 'parts' "
                         "the regenerated body parts with the kept ones held still (needs --inpaint PARTS); 'prior': "
                         "no evaluator, the pelvis and feet heights against the pasted prior (needs a pasted prior; "
-                        "none smooth: the candidates again without it); default 'auto': 'prior' for a frame span of a "
-                        "given take, the whole motion otherwise")
+                        "none smooth: the candidates again without it); 'first_smooth': no score, the candidates "
+                        "run one at a time until one's seams are within --inpaint-seam-bound (default 1.5; a frame "
+                        "span only); default 'auto': 'prior' for a frame span of a given take, the whole motion "
+                        "otherwise")
     p.add_argument("--inpaint-seam-bound", default=None, metavar="B|auto|off",
                    help="rank a frame span's in-painting candidates by the evaluator only among those whose seam jerk "
                         "is at most B times the source's own 95th percentile (none within: the smoothest; e.g. 1.5); "

@@ -341,6 +341,10 @@ def tuning_grid() -> dict[str, dict]:
     grid["source noise g7.5 prior 0.5 best of 4 seam-aware scored by prior heights | fade 8 smooth 100/8"] = dict(
         base, noise="source", guidance=7.5, prior="prompt", prior_strength=0.5, candidates=4, seam_bound=1.5,
         score="prior", **post[chosen])
+    # a generated source's span: seed 0, and only when its seams are rough the next seeds until one joins smoothly
+    grid["source noise g7.5 prior 0.5 first smooth of 4 | fade 8 smooth 100/8"] = dict(
+        base, noise="source", guidance=7.5, prior="prompt", prior_strength=0.5, candidates=4, seam_bound=1.5,
+        score="first_smooth", **post[chosen])
     # root="auto": the kept frames after a span that turned follow it (composite.TURN_FOLLOW_DEG)
     grid.update({f"{name} root auto": dict(kw, root="auto") for name, kw in list(grid.items())
                  if name.endswith(f"| {chosen}")})
@@ -493,6 +497,9 @@ def main() -> None:
                                    score=ranked.score_for(inverted), candidate_checks=checks, seam_ratios=ratios,
                                    seam_bound=ranked.seam_bound_for(inverted))
                     outs = [outs[best]]
+                    if ranked.score_for(inverted) == "first_smooth":     # the product stops at the first smooth one
+                        k = best + 1 if ratios[best] <= ranked.seam_bound_for(inverted) else k
+                        ranking["candidates_run"] = k
                 record(kind, name, blend, config, inp, target, outs[0], sum(seconds[:k]), ranking)
 
     def real_cases(kind, takes, configs, blends, only=None):
