@@ -457,14 +457,20 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
             raise ValueError(f"the evaluator reads {dim}-d features; the pipeline's {skeleton} motions cannot be "
                              "ranked with it")
     specs = candidate_specs(edits, inpaint, k)
-    log.info("in-painting: %d candidates (region seeds %d..%d), the best kept", k, inpaint.seed, inpaint.seed + k - 1)
+    mode, bound = inpaint.score_for(inverted), inpaint.seam_bound_for(inverted)
+    if mode == "first_smooth":
+        log.info("in-painting: up to %d candidates (region seeds %d..%d), the first whose seams are within %.2fx kept",
+                 k, inpaint.seed, inpaint.seed + k - 1, bound)
+    else:
+        log.info("in-painting: %d candidates (region seeds %d..%d), the best kept", k, inpaint.seed,
+                 inpaint.seed + k - 1)
     outputs = [run(specs[0])]
     if len(outputs[0].edited) != 1:
         raise ValueError(f"Inpaint(candidates={k}) ranks the candidates of one motion; the edit has "
                          f"{len(outputs[0].edited)}: edit them one at a time")
-    mode, bound = inpaint.score_for(inverted), inpaint.seam_bound_for(inverted)
     for i, s in enumerate(specs[1:], start=2):
         if mode == "first_smooth" and candidate_seam_ratios(outputs[-1:], inpaint)[0] <= bound:
+            log.info("in-painting: candidate %d joins smoothly; the rest not run", i - 1)
             break       # the last candidate joins its context smoothly: the rest are not run
         log.info("in-painting candidate %d of %d", i, k)
         outputs.append(run(s))
