@@ -542,3 +542,23 @@ def test_generate_with_keymotion_refuses_what_it_cannot_do(tiny_weights, tmp_pat
     code = cli.main(["-q", "generate", "a person walks", "--keymotion", str(tmp_path / "nowhere"),
                      "--out", str(tmp_path / "c")])
     assert code == 2 and "nowhere" in _one_line_error(capsys) and not (tmp_path / "c").exists()
+
+
+def test_edit_writes_a_report_of_what_was_run(tiny_weights, tmp_path):
+    """``edit.json``: the prompts, the edits as run, the seed and the edit's settings, so an edit can be re-run and
+    its in-painting candidate found again."""
+    import json
+
+    out = tmp_path / "edit"
+    code = cli.main(["-q", "edit", "a man raises his right hand high", "--reweight", "high=-1", "--length", "40",
+                     "--steps", "3", "--seed", "5", "--weights", str(tiny_weights), "--out", str(out)])
+    assert code == 0
+    report = json.loads((out / "edit.json").read_text())
+    assert report["source"] == report["target"] == "a man raises his right hand high"
+    assert report["label"] == "Reweight(high=-1)" and report["seed"] == 5 and report["frames"] == 40
+    assert report["motion"] is None and report["inversion"] is None
+    assert len(report["edits"]) == 1 and report["edits"][0].startswith("Reweight(")
+    assert report["settings"]["num_steps"] == 3
+    # a second run into the same folder refuses to overwrite it without --force
+    assert cli.main(["-q", "edit", "a man raises his right hand high", "--reweight", "high=-1", "--length", "40",
+                     "--steps", "3", "--weights", str(tiny_weights), "--out", str(out)]) == 2

@@ -725,7 +725,7 @@ def cmd_edit(args: argparse.Namespace) -> int:
     html = bool(getattr(args, "html", False))
     figures = _edit_figure_names("", "source", edited=True) if attention else []
     pages = [EDIT_PAGE] if html else []
-    _outputs(out, names + ["source_vs_edited.gif"] + figures + pages, args.force, write=False)
+    _outputs(out, names + ["source_vs_edited.gif", EDIT_REPORT] + figures + pages, args.force, write=False)
     capture = _full_capture() if html else attention
     pipe = _load_pipeline(args.weights)
     _note_unknown_words(args, pipe, [args.source] + [args.target] * bool(args.target), ["source", "target"])
@@ -761,12 +761,29 @@ def cmd_edit(args: argparse.Namespace) -> int:
             _note(args, f"no attention figure ({_no_figure_reason(dst, 0)})", kind="warning")
     if html:
         files += _edit_page(args, out, pages[0], src, dst, specs, label)
+    import json
+
+    from salad_core.io import atomic_write_text
+
+    report = {"source": src.texts[0], "target": dst.texts[0], "label": label,
+              "edits": [repr(e) for e in result.edits],       # as run: with candidates, the kept one's (its seed)
+              "frames": int(n), "seed": None if features is not None else args.seed,
+              "motion": None if features is None else str(args.motion),
+              "inversion": None if features is None else {"method": inv.method, "num_steps": inv.num_steps,
+                                                          "errors": _errors_cm(inv.errors, pipe.skeleton)},
+              "settings": result.settings}
+    (report_path,) = _outputs(out, [EDIT_REPORT], args.force)
+    files.append(atomic_write_text(report_path, json.dumps(report, indent=2, default=str) + "\n"))
     print(f"{src.texts[0]!r} -> {dst.texts[0]!r} with {label}: " + ", ".join(str(f) for f in files))
     return 0
 
 
 #: The explorer page of ``salad edit --html``: the source and its edit side by side.
 EDIT_PAGE = "source_vs_edited_explorer.html"
+#: ``salad edit``'s record of what was run: the prompts, the edits as run (an in-painting's kept candidate), the seed or
+#: the given take and its inversion, and the edit's settings (guidance, steps, ``inpaint_candidates``, ``inpaint_prior``,
+#: ``composite``, ``grounding``, ...).
+EDIT_REPORT = "edit.json"
 
 
 def _edit_page(args: argparse.Namespace, out: Path, name: str, src, dst, specs, label: str) -> list[Path]:
