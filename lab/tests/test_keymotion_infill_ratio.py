@@ -89,3 +89,22 @@ def test_words_keep_only_the_named_captions_and_refuse_none(tiny_procedural_corp
     assert ir.main(["--data", str(tiny_procedural_corpus), "--words", "walk", "--limit", "2", "--ratios", "0.2",
                     "--fixed", "--out", str(out)]) == 0
     assert json.loads(out.read_text())["ratio 0.2"]["windows"] >= 1
+
+
+def test_contact_transitions_mark_the_frames_where_a_foot_lands_or_lifts():
+    c = np.zeros((8, 4))
+    c[2:5, 0] = 1                               # the left heel down over frames 2-4, up again at 5
+    c[6:, 3] = 1                                # the right toe down from frame 6
+    assert np.flatnonzero(ir.contact_transitions(c)).tolist() == [2, 5, 6]
+
+
+def test_contact_mdo_keyframes_is_mdo_at_weight_0_and_takes_the_events_when_they_are_worth_more():
+    from salad_core.keymotion.selection import mdo_keyframes
+
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.normal(size=(60, 5)), axis=0)
+    events = np.zeros(60, dtype=bool)
+    events[[11, 23, 37]] = True
+    np.testing.assert_array_equal(ir.contact_mdo_keyframes(x, 8, events, 0.0), mdo_keyframes(x, 8))
+    chosen = ir.contact_mdo_keyframes(x, 8, events, 100.0)
+    assert {11, 23, 37} <= set(chosen.tolist()) and chosen[0] == 0 and chosen[-1] == 59 and len(chosen) == 8

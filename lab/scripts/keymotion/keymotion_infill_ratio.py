@@ -45,13 +45,45 @@ def root_aligned_error(pred: np.ndarray, true: np.ndarray) -> np.ndarray:
     return np.linalg.norm((pred - pred[:, :1]) - (true - true[:, :1]), axis=-1).mean(-1)
 
 
+def contact_transitions(contacts: np.ndarray) -> np.ndarray:
+    """``(N,)`` bool: frames at which any of the 4 foot-contact channels ``contacts (N, 4)`` (0 / 1, denormalised)
+    switches from the frame before (a foot lands or lifts); frame 0 never."""
+    on = np.asarray(contacts) > 0.5
+    out = np.zeros(len(on), dtype=bool)
+    out[1:] = (on[1:] != on[:-1]).any(-1)
+    return out
+
+
+def contact_mdo_keyframes(x: np.ndarray, k: int, events: np.ndarray, weight: float = 1.0) -> np.ndarray:
+    """MDO keyframes of ``x (N, D)`` that prefer foot-contact events: the exact DP of
+    :func:`salad_core.keymotion.selection.mdo_keyframes` with each chosen frame in ``events (N,)`` earning ``weight``
+    times the mean distance between MDO's own consecutive keyframes (so one event is worth about one average segment).
+    Frames 0 and N-1 are always chosen; ``weight`` 0 is MDO."""
+    from salad_core.keymotion.selection import _check, _dp, mdo_keyframes
+
+    x = _check(x, k)
+    sq = (x * x).sum(1)
+    dist = np.sqrt(np.maximum(sq[:, None] + sq[None, :] - 2.0 * x @ x.T, 0.0))
+    base = mdo_keyframes(x, k)
+    seg = float(np.mean([dist[a, b] for a, b in zip(base[:-1], base[1:])]))
+    bonus = weight * seg * np.asarray(events, dtype=np.float64)
+    return _dp(dist + bonus[None, :], k, maximise=True)
+
+
 @torch.no_grad()
-def infill_joints(pipe: KeyMotionPipeline, x: np.ndarray, caption: str, k: int) -> dict[str, np.ndarray]:
+def infill_joints(pipe: KeyMotionPipeline, x: np.ndarray, caption: str, k: int,
+                  contact_weight: float = 0.0) -> dict[str, np.ndarray]:
     """Joints ``(N, J, 3)`` (m) of a window ``x (N, D)`` (normalised features): ``"true"``, and its in-filling from
     its ``k`` MDO keyframes by the MMAE (``"mmae"``) and by linear interpolation (``"lerp"``), read from the position
-    features; and the MMAE's in-filling through the skeleton fit (``"mmae_fit"``)."""
+    features; and the MMAE's in-filling through the skeleton fit (``"mmae_fit"``). ``contact_weight`` > 0: the
+    keyframes prefer foot-contact events (:func:`contact_mdo_keyframes`)."""
     n = len(x)
-    idx = torch.from_numpy(select_keyframes(x, k, "mdo").astype(np.int64))[None]
+    if contact_weight > 0:
+        den = pipe.mmae.norm.denormalize(torch.from_numpy(x).float()).numpy()
+        events = contact_transitions(den[:, pipe.skeleton.feature_slices["contacts"]])
+        idx = torch.from_numpy(contact_mdo_keyframes(x, k, events, contact_weight).astype(np.int64))[None]
+    else:
+        idx = torch.from_numpy(select_keyframes(x, k, "mdo").astype(np.int64))[None]
     xt = torch.from_numpy(x)[None]
     kf = gather_keyframes(xt, idx)
     tb = pipe.text_encoder.encode([caption])
@@ -89,6 +121,8 @@ def main(argv=None) -> int:
     ap.add_argument("--fixed", type=int, nargs="*", default=[20])
     ap.add_argument("--words", nargs="*", default=None,
                     help="keep only windows whose caption names one of these words (e.g. walk run jog)")
+    ap.add_argument("--contact-weight", type=float, default=0.0,
+                    help="keyframes that prefer foot-contact events (contact_mdo_keyframes; 0: the paper's MDO)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
@@ -120,7 +154,7 @@ def main(argv=None) -> int:
             kk = max(2, int(round(r * n))) if r is not None else k
             if kk > n:
                 continue
-            j, row = infill_joints(pipe, x, item["caption"], kk), errs[name]
+            j, row = infill_joints(pipe, x, item["caption"], kk, args.contact_weight), errs[name]
             row["mmae"].append(root_aligned_error(j["mmae"], j["true"]))
             row["lerp"].append(root_aligned_error(j["lerp"], j["true"]))
             row["ratio"].append(kk / n)
