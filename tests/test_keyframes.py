@@ -95,3 +95,33 @@ def test_nan_rejected():
     x = np.zeros((10, 3)); x[4, 1] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         select_keyframes(x, 3)
+
+
+def test_feature_distances_and_optimal_path_are_mdo_and_take_any_pair_score():
+    from salad_core.keymotion.selection import feature_distances, mdo_keyframes, optimal_keyframe_path
+
+    x = np.random.default_rng(7).normal(size=(9, 4))
+    d = feature_distances(x)
+    assert d.shape == (9, 9) and np.allclose(d, d.T) and np.allclose(np.diag(d), 0.0, atol=1e-6)
+    assert d[2, 5] == pytest.approx(_dist(x, 2, 5), abs=1e-9)
+    np.testing.assert_array_equal(optimal_keyframe_path(d, 4), mdo_keyframes(x, 4))
+    # a per-frame bonus on the chosen frame j: brute force over the same total
+    bonus = np.zeros(9); bonus[3] = 10.0
+    got = optimal_keyframe_path(d + bonus[None, :], 4)
+    best, best_idx = _brute(x, 4, lambda x_, a, b: _dist(x_, a, b) + bonus[b], maximise=True)
+    np.testing.assert_array_equal(got, best_idx)
+    assert 3 in got
+    # minimising reads the same DP: the smallest interpolation error is MIEO's
+    np.testing.assert_array_equal(optimal_keyframe_path(interpolation_errors(x), 4, maximise=False),
+                                  select_keyframes(x, 4, "mieo"))
+
+
+@pytest.mark.parametrize("score, k, msg", [
+    (np.zeros((4, 3)), 2, "square"), (np.full((4, 4), np.nan), 2, "NaN"), (np.zeros((4, 4)), 5, "only 4 frames"),
+    (np.zeros((4, 4)), 1, "k must be"),
+])
+def test_optimal_keyframe_path_errors(score, k, msg):
+    from salad_core.keymotion.selection import optimal_keyframe_path
+
+    with pytest.raises(ValueError, match=msg):
+        optimal_keyframe_path(score, k)

@@ -448,7 +448,8 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
                          f"noise={inpaint.noise!r} the region of a {kind} motion starts from the source's own noise "
                          "and no prior is pasted, so the candidates would be alike; give noise='fresh' (or "
                          "'matched'), or prior='prompt' (each candidate pastes its own seed's sample)")
-    if inpaint.score_for(inverted) != "first_smooth":      # the seams alone need no evaluator
+    mode, bound = inpaint.score_for(inverted), inpaint.seam_bound_for(inverted)
+    if mode != "first_smooth":      # the seams alone need no evaluator
         scorer = TextMotionScorer() if scorer is None else scorer
         dim = scorer.evaluator.config.dim_pose
         from salad_core.skeleton import get_skeleton
@@ -457,7 +458,6 @@ def ranked_edit(run: Callable[[tuple], "EditOutput"], edits: Sequence, *, invert
             raise ValueError(f"the evaluator reads {dim}-d features; the pipeline's {skeleton} motions cannot be "
                              "ranked with it")
     specs = candidate_specs(edits, inpaint, k)
-    mode, bound = inpaint.score_for(inverted), inpaint.seam_bound_for(inverted)
     if mode == "first_smooth":
         log.info("in-painting: up to %d candidates (region seeds %d..%d), the first whose seams are within %.2fx kept",
                  k, inpaint.seed, inpaint.seed + k - 1, bound)

@@ -20,22 +20,30 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["select_keyframes", "uniform_keyframes", "mdo_keyframes", "mieo_keyframes",
-           "interpolation_errors", "KEYFRAME_METHODS"]
+           "interpolation_errors", "feature_distances", "optimal_keyframe_path", "KEYFRAME_METHODS"]
 
 KEYFRAME_METHODS = ("mdo", "uniform", "mieo")
 
 
-def _check(features: np.ndarray, k: int) -> np.ndarray:
+def _features(features: np.ndarray) -> np.ndarray:
     x = np.asarray(features, dtype=np.float64)
     if x.ndim != 2:
         raise ValueError(f"features must have shape (N, D), got {x.shape}")
     if not np.isfinite(x).all():
         raise ValueError("features contain NaN or infinite values")
-    n = x.shape[0]
+    return x
+
+
+def _check_k(k: int, n: int) -> None:
     if not isinstance(k, (int, np.integer)) or k < 2:
         raise ValueError(f"k must be an integer >= 2 (first and last frame), got {k!r}")
     if k > n:
         raise ValueError(f"k={k} keyframes requested from a motion of only {n} frames")
+
+
+def _check(features: np.ndarray, k: int) -> np.ndarray:
+    x = _features(features)
+    _check_k(k, x.shape[0])
     return x
 
 
@@ -72,12 +80,44 @@ def _dp(score: np.ndarray, k: int, maximise: bool) -> np.ndarray:
     return _backtrack(back, n, k)
 
 
+def optimal_keyframe_path(score: np.ndarray, k: int, maximise: bool = True) -> np.ndarray:
+    """The exact DP behind MDO and MIEO for any pair score: the sorted indices (length ``k``, first 0, last N-1)
+    of the path through exactly ``k`` frames whose consecutive pairs ``(i, j)`` have the largest (``maximise``) or
+    smallest total ``score[i, j]``; ``score`` is ``(N, N)`` and only its upper triangle (i < j) is read. How a
+    selection with an extra per-frame term is built (e.g. MDO's distances plus a bonus on chosen frames ``j``,
+    ``feature_distances(x) + bonus[None, :]``).
+
+    Raises
+    ------
+    ValueError
+        ``score`` is not square, holds NaN, or ``k`` is not an integer in ``[2, N]``.
+    """
+    s = np.asarray(score, dtype=np.float64)
+    if s.ndim != 2 or s.shape[0] != s.shape[1]:
+        raise ValueError(f"score must be a square (N, N) matrix, got shape {s.shape}")
+    if np.isnan(s).any():
+        raise ValueError("score contains NaN")
+    _check_k(k, s.shape[0])
+    return _dp(s, k, maximise=maximise)
+
+
+def feature_distances(features: np.ndarray) -> np.ndarray:
+    """Euclidean distances ``(N, N)`` between the frames of ``features (N, D)``: MDO's pair score.
+
+    Raises
+    ------
+    ValueError
+        ``features`` is not 2-D or holds NaN or infinite values.
+    """
+    x = _features(features)
+    sq = (x * x).sum(1)
+    return np.sqrt(np.maximum(sq[:, None] + sq[None, :] - 2.0 * x @ x.T, 0.0))
+
+
 def mdo_keyframes(features: np.ndarray, k: int) -> np.ndarray:
     """Maximum-Distance-Optimal keyframes of ``features (N, D)`` (sorted indices, length ``k``)."""
     x = _check(features, k)
-    sq = (x * x).sum(1)
-    dist = np.sqrt(np.maximum(sq[:, None] + sq[None, :] - 2.0 * x @ x.T, 0.0))  # (N, N)
-    return _dp(dist, k, maximise=True)
+    return _dp(feature_distances(x), k, maximise=True)
 
 
 def interpolation_errors(features: np.ndarray) -> np.ndarray:

@@ -59,15 +59,13 @@ def contact_mdo_keyframes(x: np.ndarray, k: int, events: np.ndarray, weight: flo
     :func:`salad_core.keymotion.selection.mdo_keyframes` with each chosen frame in ``events (N,)`` earning ``weight``
     times the mean distance between MDO's own consecutive keyframes (so one event is worth about one average segment).
     Frames 0 and N-1 are always chosen; ``weight`` 0 is MDO."""
-    from salad_core.keymotion.selection import _check, _dp, mdo_keyframes
+    from salad_core.keymotion.selection import feature_distances, optimal_keyframe_path
 
-    x = _check(x, k)
-    sq = (x * x).sum(1)
-    dist = np.sqrt(np.maximum(sq[:, None] + sq[None, :] - 2.0 * x @ x.T, 0.0))
-    base = mdo_keyframes(x, k)
-    seg = float(np.mean([dist[a, b] for a, b in zip(base[:-1], base[1:])]))
+    dist = feature_distances(x)
+    base = optimal_keyframe_path(dist, k)  # MDO
+    seg = float(np.mean(dist[base[:-1], base[1:]]))
     bonus = weight * seg * np.asarray(events, dtype=np.float64)
-    return _dp(dist + bonus[None, :], k, maximise=True)
+    return optimal_keyframe_path(dist + bonus[None, :], k)
 
 
 @torch.no_grad()
