@@ -15,6 +15,11 @@ guidance 1) that ``SaladPipeline.from_pretrained(DIR)`` samples correctly by def
     python lab/scripts/salad/distill_realtime.py --out RUN --export salad_core/weights/salad_realtime  # export only
     python lab/scripts/salad/distill_realtime.py --time --threads 1            # teacher DDIM-50 vs the student's steps
 
+Cost on this project's 2-core CPU: about 700 latent-run frames a second on one thread (11 s a step at the default
+batch 64 of 196-frame windows, 2.7 s at batch 16), so 20,000 steps at batch 64 take days; the campaign's recipe is
+``lab/scripts/campaign/distill_realtime_0.4.sh`` (batch 16, 8,000 steps). An interrupted run (Ctrl-C) exits 130 and
+exports nothing.
+
 CORPUS must be the corpus the teacher was trained on (the shipped weights: the procedural corpus of their model
 card). ``--teacher DIR`` distils another pipeline folder (default: the shipped weights). ``--time`` needs no corpus:
 it times one 196-frame motion at batch 1 with the teacher's sampler (its folder's solver, 50 steps, its guidance) and
@@ -68,14 +73,17 @@ def _overrides(args: argparse.Namespace) -> dict:
     return {k: v for k, v in pairs.items() if v is not None}
 
 
-def train(args: argparse.Namespace, text_encoder=None) -> None:
+def train(args: argparse.Namespace, text_encoder=None) -> bool:
+    """Train (or continue) the run ``--out``; False when it was interrupted (Ctrl-C: a checkpoint is written)."""
     from salad_core.train.consistency import ConsistencyTrainConfig, train_consistency
 
     config = ConsistencyTrainConfig(teacher=args.teacher, max_steps=args.steps, num_threads=args.threads,
                                     **_overrides(args))
     res = train_consistency(args.data, args.out, config, text_encoder, resume=args.resume)
     print(json.dumps({"run": str(res.out_dir), "step": res.step, "last_loss": res.last_loss,
-                      "best_val": res.best_val, "steps_per_s": round(res.steps_per_s, 4), "threads": res.threads}))
+                      "best_val": res.best_val, "steps_per_s": round(res.steps_per_s, 4), "threads": res.threads,
+                      "interrupted": bool(res.interrupted)}))
+    return not res.interrupted
 
 
 def export(args: argparse.Namespace, text_encoder=None) -> None:
@@ -173,8 +181,9 @@ def main(argv: list[str] | None = None, *, text_encoder=None) -> int:
     if args.out is None:
         print("--out RUN is required to train or export", file=sys.stderr)
         return 2
-    if args.data is not None:
-        train(args, text_encoder)
+    if args.data is not None and not train(args, text_encoder):
+        print("interrupted: continue with --resume (nothing exported)", file=sys.stderr)
+        return 130
     if args.export is not None:
         export(args, text_encoder)
     return 0
