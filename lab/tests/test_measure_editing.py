@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from salad_core.skeleton import PART_NAMES
 
@@ -130,3 +131,60 @@ def test_real_edit_measures_read_sides_and_what_is_kept(sample_joints):
     assert script.mirror_edits("legs", (), (0.0, 1.0)) == [Mirror("legs")]
     assert script.mirror_edits("arms", ("temporal",), (0.0, 0.5)) == [
         Mirror("arms"), MirrorSelfAttention("arms", steps=(0.0, 0.5), kinds=("temporal",))]
+
+
+
+def test_localisation_of_a_student_from_the_teachers_inverted_noise(pipe, tmp_path, monkeypatch):
+    """``--student``: the student generates from the teacher's inverted noise (at the clip's length) with its own
+    sampler, and its rows' localisation is read from that generation's maps; the teacher's side is unchanged."""
+    import copy
+
+    from _lab import load_script
+
+    from salad_core.attention.measure import localisation
+    from salad_core.data.procedural import build_corpus
+    from salad_core.pipeline import SaladPipeline
+    from salad_core.sampling import Guidance
+
+    script = load_script("measure_editing")
+    build_corpus(tmp_path / "corpus", size=40, progress=False)
+    pipe.save_pretrained(tmp_path / "weights")
+    lcm = SaladPipeline(pipe.vae, copy.deepcopy(pipe.denoiser), pipe.text_encoder, pipe.mean, pipe.std,
+                        diffusion=pipe.diffusion, solver="lcm", guidance=Guidance(1.0), recovery=pipe.recovery,
+                        latent_stats=pipe.latent_stats, num_steps=2)
+    lcm.save_pretrained(tmp_path / "lcm")
+    base = ["--data", str(tmp_path / "corpus"), "--weights", str(tmp_path / "weights"), "--quick", "--sections", "a"]
+    alone = script.main(base)["localisation"]
+    both = script.main(base + ["--student", str(tmp_path / "lcm")])["localisation"]
+    assert both["summary"]["lift"] == pytest.approx(alone["summary"]["lift"])      # the teacher's side unchanged
+    assert "student_lift" not in alone["summary"]
+    summary = both["summary"]
+    assert summary["student_lift_ratio"] == pytest.approx(summary["student_lift"] / summary["lift"])
+    assert all(0 <= r["student_share"] <= 1 and r["student_mpjpe"] > 0 for r in both["phrases"])
+
+    # what the student is given and what is read: a spy around it and around the teacher's inversion
+    inversions, calls = [], []
+    invert = pipe.invert
+
+    def spy_invert(*a, **k):
+        inversions.append(invert(*a, **k))
+        return inversions[-1]
+
+    class Spy:
+        def __call__(self, prompt, **kw):
+            calls.append((prompt, kw))
+            return lcm(prompt, **kw)
+
+    monkeypatch.setattr(pipe, "invert", spy_invert)
+    args = script.parse_args(base)
+    args.guidance = float(pipe.guidance.scale)
+    clips = script.read_corpus(tmp_path / "corpus", "test", 1, pipe.skeleton.max_length)
+    res = script.measure_localisation(pipe, clips, args, Spy())
+    (prompt, kw), = calls
+    assert prompt == clips[0]["annotation"]["captions"][0]["caption"]
+    assert torch.equal(kw["noise"], inversions[0].noise) and kw["lengths"] == list(inversions[0].lengths)
+    again = lcm(prompt, lengths=kw["lengths"], noise=kw["noise"], capture_attention=True)   # the LCM draws are seeded
+    ph = next(p for p in clips[0]["annotation"]["captions"][0]["phrases"] if p["frames"][0] < len(clips[0]["features"]))
+    frames = (ph["frames"][0], min(ph["frames"][1], len(clips[0]["features"])))
+    want = localisation(again.attention.word_map(0, tuple(ph["words"])), ph["parts"], frames, pipe.skeleton.unit_length)
+    assert res["phrases"][0]["student_lift"] == pytest.approx(want["lift"])

@@ -12,7 +12,10 @@ with ``annotations/``). Prints, with the numbers also returned / written as JSON
 
 (a) localisation: each test motion is inverted under its first caption and regenerated with the
     cross-attention recorded; for every annotated action phrase, the share of its words'
-    attention on its annotated body parts and frames, against chance (a uniform map);
+    attention on its annotated body parts and frames, against chance (a uniform map); with
+    ``--student DIR`` (a few-step student, e.g. the real-time weights) the same for the student's
+    generation from the teacher's inverted noise, whose first consistency step lands on the
+    teacher's ODE solution (``student_lift_ratio``: its lift over the teacher's);
 (b) mirroring: ``Mirror("all")`` on prompts that name a side; the left/right activity ratio of
     the arms and legs before and after (it should flip), and how close the edit is to the mirror
     image of the source (``--mirror-self-attention temporal skeletal``: with ``MirrorSelfAttention``);
@@ -89,7 +92,9 @@ def _all_captions(root: Path, split: str) -> list[str]:
 
 
 # ------------------------------------------------------------------------------ sections
-def measure_localisation(pipe, clips, args) -> dict:
+def measure_localisation(pipe, clips, args, student=None) -> dict:
+    """Section (a) for ``pipe``, and for ``student`` (a pipeline over the same VAE latents) when given: each row
+    has ``share``/``lift``/``mpjpe`` and, with a student, ``student_share``/``student_lift``/``student_mpjpe``."""
     rows = []
     for clip in clips:
         cap = clip["annotation"]["captions"][0]
@@ -98,16 +103,29 @@ def measure_localisation(pipe, clips, args) -> dict:
         rec = pipe.reconstruct(inv, capture_attention=CaptureConfig())
         maps = rec.attention
         n = len(clip["features"])
-        err = mpjpe(rec.joints[0], features_to_joints(clip["features"], pipe.skeleton))
+        true = features_to_joints(clip["features"], pipe.skeleton)
+        err = mpjpe(rec.joints[0], true)
+        if student is not None:
+            srec = student(cap["caption"], lengths=list(inv.lengths), noise=inv.noise, capture_attention=CaptureConfig())
+            s_maps, s_err = srec.attention, mpjpe(srec.joints[0], true)
         for ph in cap["phrases"]:
             if ph["frames"][0] >= n:
                 continue
             frames = (ph["frames"][0], min(ph["frames"][1], n))
             loc = localisation(maps.word_map(0, tuple(ph["words"])), ph["parts"], frames, pipe.skeleton.unit_length)
-            rows.append({"id": clip["id"], "phrase": ph["text"], "parts": ph["parts"], "mpjpe": err, **loc})
-    summary = {k: mean(r[k] for r in rows) for k in ("share", "chance", "lift", "part_share", "part_chance",
-                                                      "frame_share", "frame_chance", "mpjpe")}
+            row = {"id": clip["id"], "phrase": ph["text"], "parts": ph["parts"], "mpjpe": err, **loc}
+            if student is not None:
+                s_loc = localisation(s_maps.word_map(0, tuple(ph["words"])), ph["parts"], frames,
+                                     pipe.skeleton.unit_length)
+                row.update(student_share=s_loc["share"], student_lift=s_loc["lift"], student_mpjpe=s_err)
+            rows.append(row)
+    keys = ("share", "chance", "lift", "part_share", "part_chance", "frame_share", "frame_chance", "mpjpe")
+    if student is not None:
+        keys += ("student_share", "student_lift", "student_mpjpe")
+    summary = {k: mean(r[k] for r in rows) for k in keys}
     summary["above_chance"] = mean(float(r["share"] > r["chance"]) for r in rows)
+    if student is not None:
+        summary["student_lift_ratio"] = summary["student_lift"] / summary["lift"]
     return {"summary": summary, "phrases": rows}
 
 
@@ -283,6 +301,9 @@ def parse_args(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", required=True, type=Path, help="procedural corpus folder (build_corpus)")
     ap.add_argument("--weights", type=Path, default=None, help="pipeline folder (default: the shipped weights)")
+    ap.add_argument("--student", type=Path, default=None,
+                    help="(a): also a few-step student's pipeline folder (e.g. the real-time weights), from the "
+                         "teacher's inverted noise, with its own sampler")
     ap.add_argument("--split", default="test")
     ap.add_argument("--n", type=int, default=12, help="motions / prompts per section")
     ap.add_argument("--steps", type=int, default=50)
@@ -339,7 +360,13 @@ def main(argv=None) -> dict:
           f"w = {args.guidance}")
     results: dict = {"settings": run_settings(args, skip=("iterations_for",))}
     if "a" in args.sections:
-        results["localisation"] = measure_localisation(pipe, clips, args)
+        student = None
+        if args.student is not None:
+            student = SaladPipeline.from_pretrained(args.student, text_encoder=pipe.text_encoder)
+            if student.denoiser.config.latent_dim != pipe.denoiser.config.latent_dim:
+                raise SystemExit(f"--student {args.student}: its latents ({student.denoiser.config.latent_dim}-d) "
+                                 f"are not the teacher's ({pipe.denoiser.config.latent_dim}-d)")
+        results["localisation"] = measure_localisation(pipe, clips, args, student)
         _print_table("(a) localisation: attention share on the annotated parts x frames (vs chance)",
                      results["localisation"]["summary"])
     if "b" in args.sections:
